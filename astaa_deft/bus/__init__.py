@@ -1,0 +1,1 @@
+"""Everything that touches the live Zenoh bus: session configs, the launcher, the proxy."""

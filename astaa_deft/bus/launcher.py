@@ -1,0 +1,207 @@
+"""Start the spec's modules as subprocesses, watch them, and stop exactly them.
+
+Each module runs in its own process group (so its children go with it) and
+gets SIGTERM if the tool dies without cleaning up (Linux parent-death signal),
+so no run leaves orphans. Only the process groups started here are signalled.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping
+
+from ..errors import InputError, Problem
+from ..spec.model import Module, Spec
+from .processes import die_with_parent, signal_group, tail
+
+
+
+@dataclass(frozen=True)
+class ProcessExit:
+    module: str
+    pid: int
+    returncode: int
+    signal: str | None  # e.g. "SIGKILL" when killed by a signal
+    time_ns: int  # wall clock, ns since the epoch
+    during_shutdown: bool
+    stderr_tail: str = ""
+
+    @property
+    def abnormal(self) -> bool:
+        return not self.during_shutdown and self.returncode != 0
+
+    def describe(self) -> str:
+        how = f"killed by {self.signal}" if self.signal else f"exit code {self.returncode}"
+        return f"module '{self.module}' (pid {self.pid}) {how}"
+
+
+@dataclass
+class RunningModule:
+    module: Module
+    process: subprocess.Popen
+    log_path: Path
+    started_ns: int
+    exit: ProcessExit | None = None
+
+
+@dataclass
+class Launcher:
+    """Launch the spec's modules with the given per-module Zenoh config files."""
+
+    spec: Spec
+    run_dir: Path
+    config_files: Mapping[str, Path]
+    params: Mapping[str, str] = field(default_factory=dict)
+    channel_seen: Callable[[str], bool] = lambda _name: False
+    on_exit: Callable[[ProcessExit], None] = lambda _exit: None
+
+    def __post_init__(self) -> None:
+        self.running: dict[str, RunningModule] = {}
+        self.exits: "queue.Queue[ProcessExit]" = queue.Queue()
+        self._stopping = threading.Event()
+
+    # -- start ---------------------------------------------------------------
+    def start(self, on_ready: Callable[[str], None] = lambda _m: None) -> None:
+        """Start every module in spec order, each after the previous one is ready."""
+        try:
+            for module in self.spec.modules:
+                self._start_one(module)
+                self._wait_ready(module)
+                on_ready(module.name)
+        except BaseException:
+            self.stop()
+            raise
+
+    def placeholders(self, module: Module) -> dict[str, str]:
+        spec_dir = self.spec.path.parent if self.spec.path else Path.cwd()
+        values = dict(self.spec.params)
+        values.update(self.params)
+        values.update(
+            python=sys.executable,
+            zenoh_config=str(self.config_files[module.name]),
+            module=module.name,
+            run_dir=str(self.run_dir),
+            spec_dir=str(spec_dir),
+        )
+        return values
+
+    def _start_one(self, module: Module) -> None:
+        values = self.placeholders(module)
+        argv = [part.format_map(values) for part in module.command]
+        env = dict(os.environ)
+        env.update({k: v.format_map(values) for k, v in module.env.items()})
+        config = str(self.config_files[module.name])
+        env["ZENOH_CONFIG"] = config
+        env["ZENOH_SESSION_CONFIG_URI"] = config  # ROS 2 rmw_zenoh
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        log_path = self.run_dir / f"{module.name}.log"
+        log = open(log_path, "wb")
+        try:
+            process = subprocess.Popen(
+                argv,
+                cwd=str(module.cwd) if module.cwd else None,
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,  # own process group: stop takes its children too
+                preexec_fn=die_with_parent,
+            )
+        except FileNotFoundError:
+            raise InputError(Problem(
+                str(self.spec.path or "<spec>"), None, None,
+                f"module '{module.name}': command '{argv[0]}' not found",
+                "install it or fix 'command' in the spec",
+            )) from None
+        except PermissionError:
+            raise InputError(Problem(
+                str(self.spec.path or "<spec>"), None, None,
+                f"module '{module.name}': command '{argv[0]}' is not executable", "chmod +x it or fix 'command'",
+            )) from None
+        finally:
+            log.close()
+        running = RunningModule(module, process, log_path, time.time_ns())
+        self.running[module.name] = running
+        threading.Thread(target=self._watch, args=(running,), name=f"watch-{module.name}", daemon=True).start()
+
+    def _wait_ready(self, module: Module) -> None:
+        ready = module.ready
+        deadline = time.monotonic() + ready.timeout
+        if ready.channel is None:
+            end = time.monotonic() + (ready.delay or 0.0)
+            while time.monotonic() < end:
+                self._raise_if_exited(module)
+                time.sleep(0.02)
+            self._raise_if_exited(module)
+            return
+        while not self.channel_seen(ready.channel):
+            self._raise_if_exited(module)
+            if time.monotonic() > deadline:
+                raise InputError(Problem(
+                    str(self.spec.path or "<spec>"), None, None,
+                    f"module '{module.name}' not ready: no message on '{ready.channel}' within {ready.timeout:g} s",
+                    f"check {self.running[module.name].log_path} or raise 'ready.timeout'",
+                ))
+            time.sleep(0.02)
+
+    def _raise_if_exited(self, module: Module) -> None:
+        running = self.running[module.name]
+        code = running.process.poll()
+        if code is not None:
+            log_tail = tail(running.log_path)
+            raise InputError(Problem(
+                str(self.spec.path or "<spec>"), None, None,
+                f"module '{module.name}' exited with code {code} while starting" + (f":\n{log_tail}" if log_tail else ""),
+                f"run its command by hand to see why (log: {running.log_path})",
+            ))
+
+    # -- watch ---------------------------------------------------------------
+    def _watch(self, running: RunningModule) -> None:
+        code = running.process.wait()
+        sig = signal.Signals(-code).name if code < 0 and -code in signal.valid_signals() else None
+        event = ProcessExit(
+            module=running.module.name,
+            pid=running.process.pid,
+            returncode=code,
+            signal=sig,
+            time_ns=time.time_ns(),
+            during_shutdown=self._stopping.is_set(),
+            stderr_tail=tail(running.log_path) if code != 0 else "",
+        )
+        running.exit = event
+        self.exits.put(event)
+        self.on_exit(event)
+
+    def alive(self) -> list[str]:
+        return [name for name, r in self.running.items() if r.process.poll() is None]
+
+    def pids(self) -> dict[str, int]:
+        return {name: r.process.pid for name, r in self.running.items()}
+
+    # -- stop ----------------------------------------------------------------
+    def stop(self, grace: float = 5.0) -> None:
+        """SIGTERM each module's process group, SIGKILL whatever is left after `grace` s."""
+        self._stopping.set()
+        for r in reversed(list(self.running.values())):
+            signal_group(r.process, signal.SIGTERM)
+        deadline = time.monotonic() + grace
+        for r in self.running.values():
+            try:
+                r.process.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+        for r in self.running.values():
+            # The group may outlive its leader (a module's own children): kill it whole.
+            signal_group(r.process, signal.SIGKILL)
+            try:
+                r.process.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                pass

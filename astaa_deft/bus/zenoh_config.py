@@ -1,0 +1,88 @@
+"""Zenoh session configurations the tool hands out and opens.
+
+Every config built here has multicast scouting off and, unless the caller
+passes other endpoints, only 127.0.0.1 endpoints: the tool must never talk to
+anything but the machine it runs on unless a spec says so.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+from typing import Any, Iterable
+
+import zenoh
+
+LOOPBACK = "127.0.0.1"
+
+
+def free_port(host: str = LOOPBACK) -> int:
+    """A TCP port that was free a moment ago (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        return sock.getsockname()[1]
+
+
+def loopback_endpoint(port: int | None = None) -> str:
+    return f"tcp/{LOOPBACK}:{port if port is not None else free_port()}"
+
+
+def config_dict(
+    *,
+    mode: str = "peer",
+    listen: Iterable[str] = (),
+    connect: Iterable[str] = (),
+    namespace: str | None = None,
+    gossip: bool = False,
+    timestamping: bool = False,
+) -> dict[str, Any]:
+    """A minimal Zenoh JSON5-compatible config as a plain dict."""
+    cfg: dict[str, Any] = {
+        "mode": mode,
+        "scouting": {
+            "multicast": {"enabled": False},
+            "gossip": {"enabled": gossip},
+        },
+        "listen": {"endpoints": list(listen)},
+        "connect": {"endpoints": list(connect)},
+    }
+    if timestamping:
+        cfg["timestamping"] = {"enabled": True}
+    if namespace:
+        cfg["namespace"] = namespace
+    return cfg
+
+
+def to_zenoh(cfg: dict[str, Any], base_file: Path | None = None) -> zenoh.Config:
+    """Build a zenoh.Config from a dict, optionally on top of the user's JSON5 file.
+
+    Our keys win over the user's file only where we set them; multicast
+    scouting is always forced off.
+    """
+    conf = zenoh.Config.from_file(str(base_file)) if base_file else zenoh.Config()
+    for key, value in _flatten(cfg):
+        conf.insert_json5(key, json.dumps(value))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+def write_config_file(cfg: dict[str, Any], path: Path) -> Path:
+    """Write a config as JSON (valid JSON5) for a module to load."""
+    path.write_text(json.dumps(cfg, indent=2) + "\n")
+    return path
+
+
+def open_session(cfg: dict[str, Any], base_file: Path | None = None) -> zenoh.Session:
+    return zenoh.open(to_zenoh(cfg, base_file))
+
+
+def _flatten(cfg: dict[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
+    # insert_json5 on whole sub-objects would replace the user's sibling keys;
+    # descend to leaves (lists are leaves) so only what we set is overwritten.
+    for key, value in cfg.items():
+        path = f"{prefix}/{key}" if prefix else key
+        if isinstance(value, dict):
+            yield from _flatten(value, path)
+        else:
+            yield path, value

@@ -1,0 +1,118 @@
+"""The `astaa-deft` command line: parse arguments, call one command module.
+
+Exit codes: 0 ok, 1 a finding (a test failed, a module crashed), 2 usage or
+input error (printed as one line per problem, never a traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import InputError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="astaa-deft",
+        description="Test robot software on its own Zenoh bus: record, replay, intercept.",
+    )
+    p.add_argument("--version", action="version", version=f"astaa-deft {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    # spec
+    spec = sub.add_parser("spec", help="work with SUT specs").add_subparsers(dest="spec_command", metavar="ACTION")
+    spec.required = True
+    check = spec.add_parser("check", help="validate a SUT spec")
+    check.add_argument("file", type=Path)
+    check.set_defaults(func=lambda a: _cmd("spec_check").run(a.file))
+
+    # proxy
+    proxy = sub.add_parser("proxy", help="run the SUT through the proxy and record the bus")
+    proxy.add_argument("--spec", type=Path, required=True, help="the SUT spec (YAML)")
+    proxy.add_argument("--record", type=Path, help="write the MCAP test log here")
+    proxy.add_argument("--passive", action="store_true",
+                       help="observe only (no man in the middle): adds nothing to the SUT's message path")
+    proxy.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
+    proxy.add_argument("--launch", action=argparse.BooleanOptionalAction, default=True,
+                       help="start the spec's modules (default) or attach to a running SUT (--no-launch)")
+    proxy.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a spec param used in module commands")
+    proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here")
+    proxy.set_defaults(func=_proxy)
+
+    # log
+    log = sub.add_parser("log", help="inspect test logs").add_subparsers(dest="log_command", metavar="ACTION")
+    log.required = True
+    info = log.add_parser("info", help="channels, counts, rates, events of a log")
+    info.add_argument("file", type=Path)
+    info.set_defaults(func=lambda a: _cmd("log_info").run(a.file))
+
+    # demo
+    demo = sub.add_parser("demo", help="run the bundled autonomous-driving demo through the proxy")
+    _demo_args(demo)
+    demo.set_defaults(func=_demo)
+    demo_sub = demo.add_subparsers(dest="demo_command", metavar="ACTION")
+    demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy")
+    _demo_args(demo_run)
+    demo_run.set_defaults(func=_demo)
+    return p
+
+
+def _demo_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
+    p.add_argument("--duration", type=_positive, help="stop after S seconds (default: the scenario's time limit)")
+    p.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off")
+    p.add_argument("--passive", action="store_true", help="observe only, no star")
+    p.add_argument("--record", type=Path, help="where to write the log (default: astaa-deft-demo/SCENARIO.mcap)")
+
+
+def _proxy(a: argparse.Namespace) -> int:
+    from .commands import console, proxy
+    from .spec.loader import load_spec
+
+    spec = load_spec(a.spec)
+    return proxy.run(spec, a.record, a.passive, a.duration, a.launch, console.parse_params(a.param),
+                     sys.argv, a.run_dir)
+
+
+def _demo(a: argparse.Namespace) -> int:
+    from .commands import demo
+
+    return demo.run(a.scenario, a.duration, not a.no_defects, a.passive, a.record, sys.argv)
+
+
+def _cmd(name: str):
+    import importlib
+
+    return importlib.import_module(f".commands.{name}", __package__)
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"'{text}' must be a positive number of seconds")
+    return value
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except InputError as exc:
+        for problem in exc.problems:
+            print(f"astaa-deft: error: {problem}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("astaa-deft: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,112 @@
+"""Terminal output and Ctrl-C handling shared by the long-running commands."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from typing import Callable, Iterable
+
+from ..errors import InputError
+
+
+class StopSignal:
+    """Turn SIGINT/SIGTERM into an Event so the main thread shuts down cleanly."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.received: str | None = None
+        self._old: dict = {}
+
+    def __enter__(self) -> "StopSignal":
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, _frame) -> None:
+        self.received = signal.Signals(signum).name
+        self.event.set()
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def parse_params(items: Iterable[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise InputError(f"--param '{item}': write it as KEY=VALUE")
+        out[key] = value
+    return out
+
+
+class StatusLine:
+    """A one-line live status on a terminal; silent when output is not a terminal."""
+
+    def __init__(self, render: Callable[[], str], period: float = 1.0, stream=sys.stderr):
+        self.render = render
+        self.period = period
+        self.stream = stream
+        self.enabled = stream.isatty()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> "StatusLine":
+        if self.enabled:
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period):
+            self.stream.write("\r\033[K" + self.render())
+            self.stream.flush()
+
+    def clear(self) -> None:
+        if self.enabled:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        if self.enabled:
+            self._thread.join()
+            self.clear()
+
+
+class RateMeter:
+    """Messages per second per channel between two calls."""
+
+    def __init__(self, counts: Callable[[], dict[str, int]]):
+        self.counts = counts
+        self._last = counts()
+        self._last_t = time.monotonic()
+
+    def rates(self) -> dict[str, float]:
+        now, t = self.counts(), time.monotonic()
+        dt = max(t - self._last_t, 1e-6)
+        out = {k: (v - self._last.get(k, 0)) / dt for k, v in now.items()}
+        self._last, self._last_t = now, t
+        return out
+
+
+def say(message: str) -> None:
+    print(message, flush=True)
+
+
+def format_event(event: dict) -> str | None:
+    kind = event.get("kind")
+    if kind == "process_exit":
+        if event.get("during_shutdown"):
+            return None
+        how = f"killed by {event['signal']}" if event.get("signal") else f"exit code {event.get('returncode')}"
+        text = f"!! module '{event.get('module')}' {how}"
+        tail = (event.get("stderr_tail") or "").strip().splitlines()
+        if tail:
+            text += "\n   " + "\n   ".join(tail[-5:])
+        return text
+    if kind == "undeclared_key":
+        return f"-- undeclared key '{event.get('key')}' from '{event.get('module')}': {event.get('note')}"
+    return None

@@ -1,0 +1,87 @@
+"""`astaa-deft proxy`: run the SUT through the star (or watch it passively) and record it."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from ..bus.run import BusRun, RunOptions
+from ..spec.model import Spec
+from .console import RateMeter, StatusLine, StopSignal, format_event, say
+
+
+@dataclass
+class Outcome:
+    reason: str  # "duration", "signal", "all modules exited", "stopped"
+    seconds: float
+    counts: dict[str, int]
+    recorded: dict[str, int]
+    crashes: list
+
+
+def run_bus(spec: Spec, options: RunOptions, duration: float | None,
+            until: Callable[[BusRun], str | None] = lambda run: None,
+            on_start: Callable[[BusRun], None] = lambda run: None, verbose: bool = True) -> Outcome:
+    """Run until `duration`, Ctrl-C/SIGTERM, every module gone, or `until` names a reason."""
+
+    def on_event(event: dict) -> None:
+        text = format_event(event)
+        if text and verbose:
+            status.clear()
+            say(text)
+
+    with StopSignal() as stop:
+        run = BusRun(spec, options, on_event=on_event)
+        meter = RateMeter(run.counts)
+        status = StatusLine(lambda: _status(run, meter, t0))
+        t0 = time.monotonic()
+        with run, status:
+            t0 = time.monotonic()
+            on_start(run)
+            reason = "stopped"
+            while True:
+                if stop.event.wait(0.05):
+                    reason = f"signal {stop.received}"
+                    break
+                if duration is not None and time.monotonic() - t0 >= duration:
+                    reason = "duration"
+                    break
+                if options.launch and run.launcher is not None and not run.alive():
+                    reason = "all modules exited"
+                    break
+                custom = until(run)
+                if custom:
+                    reason = custom
+                    break
+            seconds = time.monotonic() - t0
+            counts = run.counts()
+        return Outcome(reason, seconds, counts, run.recorded, run.crashed())
+
+
+def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
+    rates = meter.rates()
+    parts = [f"{name} {rate:.0f}/s" for name, rate in rates.items()]
+    crashes = len(run.crashed())
+    return f"[{time.monotonic() - t0:6.1f} s] " + " | ".join(parts) + (f" | crashes {crashes}" if crashes else "")
+
+
+def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, launch: bool,
+        params: dict[str, str], command_line: list[str], run_dir: Path | None) -> int:
+    options = RunOptions(mode="passive" if passive else "star", launch=launch, record=record, params=params,
+                         command_line=command_line, run_dir=run_dir)
+    say(f"astaa-deft proxy: spec '{spec.name}', {'passive' if passive else 'star'} mode"
+        + (f", recording to {record}" if record else "") + " — Ctrl-C to stop")
+    outcome = run_bus(spec, options, duration)
+    say(f"stopped ({outcome.reason}) after {outcome.seconds:.1f} s")
+    for name, n in outcome.counts.items():
+        rec = f", recorded {outcome.recorded.get(name, 0)}" if record else ""
+        say(f"  {name:20} {n:8d} messages{rec}")
+    if record:
+        say(f"log: {record}  (astaa-deft log info {record})")
+    if outcome.crashes:
+        for c in outcome.crashes:
+            say(f"crashed: {c.describe()}")
+        return 1
+    return 0

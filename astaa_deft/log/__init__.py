@@ -1,0 +1,1 @@
+"""MCAP test logs: what the recorder writes and every later stage reads."""

@@ -1,0 +1,23 @@
+"""Names inside a test log, in one place so writer and readers agree.
+
+A bus message is logged on a topic equal to its Zenoh key; everything the
+tool adds lives under ``/astaa/``.
+"""
+
+EVENTS_TOPIC = "/astaa/events"  # process exits, undeclared keys, run start/stop, later mutations and verdicts
+FLAGS_TOPIC = "/astaa/flags"  # a bus message the recorder could not decode (logged raw on its own topic)
+ORIGINAL_PREFIX = "/astaa/original/"  # the message before a mutation, by key
+
+SPEC_ATTACHMENT = "spec.yaml"
+RUN_METADATA = "astaa-deft.run"
+PROFILE = "astaa-deft"
+
+EVENT_SCHEMA = {
+    "type": "object",
+    "title": "astaa_deft.Event",
+    "properties": {
+        "kind": {"type": "string"},
+        "time_ns": {"type": "integer"},
+    },
+    "required": ["kind"],
+}

@@ -1,0 +1,73 @@
+"""What `astaa-deft log info` shows: pure functions over a read log."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+from . import layout
+from .reader import LogContents
+
+
+@dataclass(frozen=True)
+class TopicStats:
+    topic: str
+    channel: str
+    count: int
+    rate_hz: float
+    first_ns: int
+    last_ns: int
+
+
+def topic_stats(log: LogContents) -> list[TopicStats]:
+    by_topic: dict[str, list[int]] = {}
+    for m in log.messages:
+        by_topic.setdefault(m.topic, []).append(m.log_time)
+    out = []
+    for topic, info in log.channels.items():
+        times = by_topic.get(topic, [])
+        span = (times[-1] - times[0]) / 1e9 if len(times) > 1 else 0.0
+        rate = (len(times) - 1) / span if span > 0 else 0.0
+        out.append(TopicStats(topic, info.metadata.get("channel", ""), len(times), rate,
+                              times[0] if times else 0, times[-1] if times else 0))
+    return out
+
+
+def format_info(log: LogContents) -> str:
+    lines = [f"log: {log.path}"]
+    lines.append("finished cleanly: " + ("yes" if log.finished else "NO (truncated; complete chunks read)"))
+    run = log.metadata.get(layout.RUN_METADATA, {})
+    if run:
+        lines.append(f"run: spec {run.get('spec', '?')}, mode {run.get('mode', '?')}")
+        if run.get("command_line"):
+            lines.append(f"command: {run['command_line']}")
+    bus = [m for m in log.messages if not m.topic.startswith("/astaa/")]
+    if bus:
+        start, end = bus[0].log_time, max(m.log_time for m in bus)
+        lines.append(f"time span: {(end - start) / 1e9:.2f} s, {len(bus)} bus messages")
+    lines.append("")
+    lines.append(f"{'topic':44} {'channel':16} {'count':>7} {'rate/s':>8}")
+    for s in topic_stats(log):
+        if s.topic.startswith("/astaa/"):
+            continue
+        lines.append(f"{s.topic:44} {s.channel:16} {s.count:7d} {s.rate_hz:8.1f}")
+    events = log.events()
+    kinds = Counter(e.get("kind") for e in events)
+    lines.append("")
+    lines.append("events: " + (", ".join(f"{k} ×{n}" for k, n in sorted(kinds.items())) or "none"))
+    for e in events:
+        if e.get("kind") == "process_exit" and e.get("abnormal"):
+            how = f"signal {e['signal']}" if e.get("signal") else f"exit code {e.get('returncode')}"
+            lines.append(f"  crash: module '{e.get('module')}' ({how})")
+        elif e.get("kind") == "undeclared_key":
+            lines.append(f"  undeclared key '{e.get('key')}' from module '{e.get('module')}'")
+    flags = log.flags()
+    if flags:
+        per = Counter(f.get("channel") for f in flags)
+        lines.append("undecodable payloads (forwarded untouched): "
+                     + ", ".join(f"{c} ×{n}" for c, n in sorted(per.items())))
+    if log.attachments:
+        lines.append("attachments: " + ", ".join(sorted(log.attachments)))
+    for w in log.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)

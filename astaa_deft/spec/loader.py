@@ -1,0 +1,557 @@
+"""Load a SUT spec (YAML) into validated ``Spec`` objects.
+
+All problems found are reported together, each with file, line, column and a
+fix; the caller gets either a fully cross-checked Spec or an InputError.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+import string
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError, did_you_mean
+from ..yamlsource import Node, Source
+from .model import (
+    SCALAR_KINDS,
+    Channel,
+    FieldType,
+    MessageType,
+    Module,
+    Readiness,
+    Spec,
+    ZenohSection,
+)
+
+NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
+TYPE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.]*$")
+FIELD_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no DSL
+BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
+ENCODINGS = ("json", "cbor")
+
+TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner")
+REQUIRED_TOP = ("name", "modules", "channels")
+
+
+def load_spec(path: Path | str) -> Spec:
+    path = Path(path)
+    src = Source.from_file(path)
+    return _SpecBuilder(src, path).build()
+
+
+def load_spec_text(text: str, name: str = "<spec>", base_dir: Path | None = None) -> Spec:
+    fake_path = (base_dir or Path.cwd()) / name
+    return _SpecBuilder(Source(text, name), fake_path, from_file=False).build()
+
+
+class _SpecBuilder:
+    def __init__(self, src: Source, path: Path, from_file: bool = True):
+        self.src = src
+        self.path = path
+        self.from_file = from_file
+        self.base_dir = path.parent
+        # (channel name, node) of every readiness channel, checked once channels are known
+        self._ready_channels: list[tuple[str | None, Node | None]] = []
+
+    # -- entry -------------------------------------------------------------
+    def build(self) -> Spec:
+        root = self.src.parse()
+        if not root.is_map:
+            self.src.at(root, "the spec must be a mapping of sections", "start with 'name:', 'modules:', 'channels:'")
+            self.src.raise_if_problems()
+        self.keys(root, TOP_KEYS, REQUIRED_TOP, "the spec")
+        v = root.value
+        name = self.name_of(v["name"], "spec name") if "name" in v else "spec"
+        params = self.params(v.get("params"))
+        zenoh = self.zenoh(v.get("zenoh"))
+        types = self.types(v.get("types"))
+        modules = self.modules(v.get("modules"), params)
+        channels = self.channels(v.get("channels"), modules, types)
+        brittle = self.brittle(v.get("brittle"), types)
+        invariants = self.reserved_list(v.get("invariants"), "invariants")
+        planner = self.reserved_map(v.get("planner"), "planner")
+        self.src.raise_if_problems()
+        return Spec(
+            name=name,
+            path=self.path if self.from_file else None,
+            zenoh=zenoh,
+            modules=tuple(modules),
+            channels=tuple(channels),
+            types=types,
+            brittle=tuple(brittle),
+            params=params,
+            invariants=tuple(invariants),
+            planner=planner,
+            source_text=self.src.text,
+        )
+
+    # -- generic checks ----------------------------------------------------
+    def keys(self, node: Node, allowed: tuple[str, ...], required: tuple[str, ...], what: str) -> bool:
+        """Report unknown and missing keys of a mapping; False if it is not a mapping."""
+        if not node.is_map:
+            self.src.at(node, f"{what} must be a mapping", f"write it as 'key: value' lines ({', '.join(allowed)})")
+            return False
+        for key in node.value:
+            if key not in allowed:
+                hint = did_you_mean(key, allowed) or f"allowed keys: {', '.join(allowed)}"
+                self.src.at_key(node, key, f"unknown key '{key}' in {what}", hint)
+        for key in required:
+            if key not in node.value:
+                self.src.at(node, f"{what} lacks '{key}'", f"add '{key}: …'")
+        return True
+
+    def expect(self, node: Node, kinds: tuple[type, ...], what: str, fix: str) -> bool:
+        ok = isinstance(node.value, kinds) and not (bool not in kinds and isinstance(node.value, bool))
+        if not ok:
+            self.src.at(node, f"{what} must be {fix}, not {_describe(node.value)}", f"write {what} as {fix}")
+        return ok
+
+    def name_of(self, node: Node, what: str) -> str:
+        if not self.expect(node, (str,), what, "a string"):
+            return "?"
+        if not NAME_RE.match(node.value):
+            self.src.at(node, f"{what} '{node.value}' has characters other than letters, digits, '_' and '-'",
+                        "rename it (it becomes part of Zenoh keys and file names)")
+        return node.value
+
+    def list_of_maps(self, node: Node | None, what: str, required: bool) -> list[Node]:
+        if node is None:
+            return []
+        if not node.is_list:
+            self.src.at(node, f"'{what}' must be a list", f"write each entry as '- name: …' under '{what}:'")
+            return []
+        if required and not node.value:
+            self.src.at(node, f"'{what}' is empty", f"declare at least one entry under '{what}'")
+        return node.value
+
+    # -- sections ----------------------------------------------------------
+    def params(self, node: Node | None) -> dict[str, str]:
+        if node is None:
+            return {}
+        if not node.is_map:
+            self.src.at(node, "'params' must be a mapping", "write 'params:' then 'key: value' lines")
+            return {}
+        out = {}
+        for key, value in node.items():
+            if not FIELD_NAME_RE.match(key):
+                self.src.at_key(node, key, f"param name '{key}' is not an identifier", "use letters, digits and '_'")
+            if key in BUILTIN_PLACEHOLDERS:
+                self.src.at_key(node, key, f"param '{key}' shadows a built-in placeholder", "rename it")
+            if value.is_map or value.is_list or value.value is None:
+                self.src.at(value, f"param '{key}' must be a scalar", "give a string or number")
+                continue
+            out[key] = value.value if isinstance(value.value, str) else _scalar_text(value.value)
+        return out
+
+    def zenoh(self, node: Node | None) -> ZenohSection:
+        if node is None:
+            return ZenohSection()
+        if not self.keys(node, ("endpoints", "connect", "config"), (), "'zenoh'"):
+            return ZenohSection()
+        endpoints = ZenohSection().endpoints
+        if "endpoints" in node.value:
+            ep_node = node.value["endpoints"]
+            if not ep_node.is_list or not ep_node.value:
+                self.src.at(ep_node, "'zenoh.endpoints' must be a non-empty list", 'e.g. ["tcp/127.0.0.1:0"]')
+            else:
+                endpoints = tuple(self.endpoint(item) for item in ep_node.value)
+        connect: tuple[str, ...] = ()
+        if "connect" in node.value:
+            cn = node.value["connect"]
+            if not cn.is_list:
+                self.src.at(cn, "'zenoh.connect' must be a list", 'e.g. ["tcp/127.0.0.1:7447"]')
+            else:
+                connect = tuple(self.endpoint(item) for item in cn.value)
+        config = None
+        if "config" in node.value:
+            cnode = node.value["config"]
+            if self.expect(cnode, (str,), "'zenoh.config'", "a path to a JSON5 file"):
+                config = (self.base_dir / cnode.value)
+                if self.from_file and not config.is_file():
+                    self.src.at(cnode, f"Zenoh config file '{config}' does not exist",
+                                "give a path relative to the spec file")
+        return ZenohSection(endpoints=endpoints, connect=connect, config_file=config)
+
+    def endpoint(self, node: Node) -> str:
+        if not self.expect(node, (str,), "an endpoint", 'a string like "tcp/127.0.0.1:0"'):
+            return ""
+        m = re.match(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/(.+)$", node.value)
+        if not m:
+            self.src.at(node, f"endpoint '{node.value}' is not a Zenoh locator",
+                        'write it as "tcp/HOST:PORT" (port 0 picks a free port)')
+        return node.value
+
+    def modules(self, node: Node | None, params: dict[str, str]) -> list[Module]:
+        out: list[Module] = []
+        seen: set[str] = set()
+        for item in self.list_of_maps(node, "modules", required=True):
+            if not self.keys(item, ("name", "command", "env", "cwd", "ready"), ("name", "command"), "a module"):
+                continue
+            v = item.value
+            name = self.name_of(v["name"], "module name") if "name" in v else "?"
+            if name in seen:
+                self.src.at(v["name"], f"module '{name}' is declared twice", "give each module a unique name")
+            seen.add(name)
+            command = self.command(v.get("command"), name, params)
+            env = self.env(v.get("env"), params)
+            cwd = None
+            if "cwd" in v and self.expect(v["cwd"], (str,), "'cwd'", "a directory path"):
+                cwd = self.base_dir / v["cwd"].value
+                if self.from_file and not cwd.is_dir():
+                    self.src.at(v["cwd"], f"directory '{cwd}' does not exist", "give a path relative to the spec file")
+            ready = self.ready(v.get("ready"))
+            out.append(Module(name=name, command=command, env=env, cwd=cwd, ready=ready))
+        return out
+
+    def command(self, node: Node | None, module: str, params: dict[str, str]) -> tuple[str, ...]:
+        if node is None:
+            return ()
+        if isinstance(node.value, str):
+            try:
+                parts = shlex.split(node.value)
+            except ValueError as exc:
+                self.src.at(node, f"command of '{module}' cannot be split: {exc}", "balance the quotes")
+                return ()
+            part_nodes = [node] * len(parts)
+        elif node.is_list:
+            part_nodes = node.value
+            parts = []
+            for p in part_nodes:
+                if p.is_map or p.is_list or p.value is None:
+                    self.src.at(p, "a command argument must be a string", "quote it")
+                    parts.append("")
+                else:
+                    parts.append(p.value if isinstance(p.value, str) else _scalar_text(p.value))
+        else:
+            self.src.at(node, f"command of '{module}' must be a list or a string", 'e.g. ["{python}", "-m", "pkg.mod"]')
+            return ()
+        if not parts:
+            self.src.at(node, f"command of '{module}' is empty", "name the program to run")
+        for part, pnode in zip(parts, part_nodes):
+            self.placeholders(part, pnode, params)
+        return tuple(parts)
+
+    def env(self, node: Node | None, params: dict[str, str]) -> dict[str, str]:
+        if node is None:
+            return {}
+        if not node.is_map:
+            self.src.at(node, "'env' must be a mapping", "write 'NAME: value' lines")
+            return {}
+        out = {}
+        for key, value in node.items():
+            if value.is_map or value.is_list or value.value is None:
+                self.src.at(value, f"env value '{key}' must be a scalar", "quote it")
+                continue
+            text = value.value if isinstance(value.value, str) else _scalar_text(value.value)
+            self.placeholders(text, value, params)
+            out[key] = text
+        return out
+
+    def placeholders(self, text: str, node: Node, params: dict[str, str]) -> None:
+        known = BUILTIN_PLACEHOLDERS + tuple(params)
+        try:
+            fields = [f for _, f, _, _ in string.Formatter().parse(text) if f is not None]
+        except ValueError as exc:
+            self.src.at(node, f"bad placeholder in '{text}': {exc}", "write a literal brace as '{{' or '}}'")
+            return
+        for f in fields:
+            if f not in known:
+                hint = did_you_mean(f, known) or f"known placeholders: {', '.join(known)}"
+                self.src.at(node, f"unknown placeholder '{{{f}}}'", hint + " (or declare it under 'params')")
+
+    def ready(self, node: Node | None) -> Readiness:
+        if node is None:
+            return Readiness(delay=0.0)
+        if not self.keys(node, ("channel", "delay", "timeout"), (), "'ready'"):
+            return Readiness(delay=0.0)
+        v = node.value
+        if ("channel" in v) == ("delay" in v):
+            self.src.at(node, "'ready' needs exactly one of 'channel' or 'delay'", "e.g. 'ready: {delay: 0.5}'")
+        channel = v["channel"].value if "channel" in v and self.expect(v["channel"], (str,), "'ready.channel'", "a channel name") else None
+        delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0)
+        timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True)
+        self._ready_channels.append((channel, v.get("channel")))
+        return Readiness(channel=channel, delay=delay if delay is not None else (None if channel else 0.0),
+                         timeout=timeout if timeout is not None else 20.0)
+
+    def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False) -> float | None:
+        if node is None:
+            return None
+        if not self.expect(node, (int, float), what, "a number"):
+            return None
+        value = float(node.value)
+        if value != value or value in (float("inf"), float("-inf")):
+            self.src.at(node, f"{what} must be finite", "give a finite number")
+            return None
+        if minimum is not None and (value < minimum or (strictly and value == minimum)):
+            self.src.at(node, f"{what} must be {'>' if strictly else '≥'} {minimum:g}", "give a larger value")
+            return None
+        return value
+
+    def channels(self, node: Node | None, modules: list[Module], types: dict[str, MessageType]) -> list[Channel]:
+        out: list[Channel] = []
+        names: set[str] = set()
+        keys: dict[str, str] = {}
+        module_names = [m.name for m in modules]
+        for item in self.list_of_maps(node, "channels", required=True):
+            allowed = ("name", "key", "producer", "consumers", "type", "encoding")
+            if not self.keys(item, allowed, ("name", "key", "producer", "type"), "a channel"):
+                continue
+            v = item.value
+            name = self.name_of(v["name"], "channel name") if "name" in v else "?"
+            if name in names:
+                self.src.at(v["name"], f"channel '{name}' is declared twice", "give each channel a unique name")
+            names.add(name)
+            key = ""
+            if "key" in v and self.expect(v["key"], (str,), "'key'", "a Zenoh key"):
+                key = v["key"].value
+                if not KEY_RE.match(key) or key.startswith("/") or key.endswith("/") or "//" in key:
+                    self.src.at(v["key"], f"key '{key}' is not a concrete Zenoh key",
+                                "use '/'-separated chunks without wildcards (*, **), '$', '?', '#' or spaces")
+                elif key in keys:
+                    self.src.at(v["key"], f"key '{key}' is already used by channel '{keys[key]}'",
+                                "give each channel its own key")
+                keys[key] = name
+            producer = ""
+            if "producer" in v and self.expect(v["producer"], (str,), "'producer'", "a module name"):
+                producer = v["producer"].value
+                self.module_ref(v["producer"], producer, module_names)
+            consumers: list[str] = []
+            if "consumers" in v:
+                cnode = v["consumers"]
+                if not cnode.is_list:
+                    self.src.at(cnode, "'consumers' must be a list of module names", "e.g. [planning, control]")
+                else:
+                    for c in cnode.value:
+                        if self.expect(c, (str,), "a consumer", "a module name"):
+                            self.module_ref(c, c.value, module_names)
+                            if c.value == producer:
+                                self.src.at(c, f"module '{producer}' consumes its own channel '{name}'",
+                                            "remove it from consumers (a module hears its own messages anyway)")
+                            consumers.append(c.value)
+            type_name = ""
+            if "type" in v and self.expect(v["type"], (str,), "'type'", "a type name"):
+                type_name = v["type"].value
+                if type_name not in types:
+                    hint = did_you_mean(type_name, types) or "declare it under 'types'"
+                    self.src.at(v["type"], f"unknown message type '{type_name}'", hint)
+            encoding = "json"
+            if "encoding" in v and self.expect(v["encoding"], (str,), "'encoding'", "an encoding name"):
+                encoding = v["encoding"].value
+                if encoding not in ENCODINGS:
+                    hint = did_you_mean(encoding, ENCODINGS) or f"supported: {', '.join(ENCODINGS)}"
+                    self.src.at(v["encoding"], f"unknown encoding '{encoding}'", hint)
+            out.append(Channel(name, key, producer, tuple(consumers), type_name, encoding))
+        for channel, cnode in self._ready_channels:
+            if channel is not None and channel not in names:
+                hint = did_you_mean(channel, names) or "name a channel declared under 'channels'"
+                self.src.at(cnode, f"readiness channel '{channel}' is not declared", hint)
+        return out
+
+    def module_ref(self, node: Node, name: str, module_names: list[str]) -> None:
+        if name not in module_names:
+            hint = did_you_mean(name, module_names) or f"modules: {', '.join(module_names)}"
+            self.src.at(node, f"unknown module '{name}'", hint)
+
+    # -- types -------------------------------------------------------------
+    def types(self, node: Node | None) -> dict[str, MessageType]:
+        if node is None:
+            return {}
+        if not node.is_map:
+            self.src.at(node, "'types' must be a mapping of type names to fields", "see docs/spec.md")
+            return {}
+        names = list(node.value)
+        out: dict[str, MessageType] = {}
+        for tname, tnode in node.items():
+            if not TYPE_NAME_RE.match(tname):
+                self.src.at_key(node, tname, f"type name '{tname}' is not an identifier", "use letters, digits, '_', '.'")
+            if tname in SCALAR_KINDS or tname in ("enum", "array", "struct"):
+                self.src.at_key(node, tname, f"type name '{tname}' is a built-in kind", "rename it")
+            if not tnode.is_map or not tnode.value:
+                self.src.at(tnode, f"type '{tname}' must map field names to field types", "e.g. 'x: float64'")
+                continue
+            fields = {}
+            for fname, fnode in tnode.items():
+                if not FIELD_NAME_RE.match(fname):
+                    self.src.at_key(tnode, fname, f"field name '{fname}' is not an identifier",
+                                    "use letters, digits and '_' (field paths use '.' and '[]')")
+                fields[fname] = self.field_type(fnode, names, f"{tname}.{fname}")
+            out[tname] = MessageType(tname, fields)
+        self.check_recursion(out, node)
+        return out
+
+    def field_type(self, node: Node, type_names: list[str], where: str) -> FieldType:
+        if isinstance(node.value, str):
+            return self.type_expr(node.value, node, type_names, where)
+        if not node.is_map:
+            self.src.at(node, f"field '{where}' has no type", "write a type name, 'T[]', {enum: […]} or {array: T}")
+            return FieldType("string")
+        v = node.value
+        forms = [k for k in ("type", "enum", "array") if k in v]
+        allowed = ("type", "enum", "array", "min", "max", "min_length", "max_length")
+        self.keys(node, allowed, (), f"field '{where}'")
+        if len(forms) != 1:
+            self.src.at(node, f"field '{where}' needs exactly one of 'type', 'enum', 'array'",
+                        "e.g. {type: float64, min: 0} or {enum: [a, b]} or {array: Point}")
+            return FieldType("string")
+        minimum = self.number(v.get("min"), f"'{where}.min'")
+        maximum = self.number(v.get("max"), f"'{where}.max'")
+        min_len = self.length(v.get("min_length"), where)
+        max_len = self.length(v.get("max_length"), where)
+        if minimum is not None and maximum is not None and minimum > maximum:
+            self.src.at(v["min"], f"'{where}': min {minimum:g} > max {maximum:g}", "swap them")
+        if min_len is not None and max_len is not None and min_len > max_len:
+            self.src.at(v["min_length"], f"'{where}': min_length > max_length", "swap them")
+        form = forms[0]
+        if form == "enum":
+            enode = v["enum"]
+            if not enode.is_list or not enode.value:
+                self.src.at(enode, f"enum of '{where}' must be a non-empty list", "e.g. {enum: [red, yellow, green]}")
+                return FieldType("string")
+            values = tuple(e.plain() for e in enode.value)
+            if len(set(map(repr, values))) != len(values):
+                self.src.at(enode, f"enum of '{where}' repeats a value", "list each value once")
+            return FieldType("enum", values=values)
+        if form == "array":
+            anode = v["array"]
+            items = self.field_type(anode, type_names, f"{where}[]")
+            return FieldType("array", items=items, min_length=min_len, max_length=max_len)
+        tnode = v["type"]
+        if not isinstance(tnode.value, str):
+            self.src.at(tnode, f"'type' of '{where}' must be a type name", "e.g. float64")
+            return FieldType("string")
+        base = self.type_expr(tnode.value, tnode, type_names, where)
+        if (minimum is not None or maximum is not None) and base.kind not in SCALAR_KINDS[:10] + ("time",):
+            self.src.at(node, f"'min'/'max' on '{where}' need a numeric type, not {base.describe()}", "remove them")
+        if base.kind == "array":
+            return FieldType("array", items=base.items, min_length=min_len, max_length=max_len)
+        if min_len is not None or max_len is not None:
+            self.src.at(node, f"'min_length'/'max_length' on '{where}' need an array type", "use {array: T, …}")
+        return FieldType(base.kind, ref=base.ref, values=base.values, items=base.items,
+                         minimum=minimum, maximum=maximum)
+
+    def type_expr(self, text: str, node: Node, type_names: list[str], where: str) -> FieldType:
+        text = text.strip()
+        if text.endswith("[]"):
+            return FieldType("array", items=self.type_expr(text[:-2], node, type_names, where + "[]"))
+        if text in SCALAR_KINDS:
+            return FieldType(text)
+        if text in type_names:
+            return FieldType("struct", ref=text)
+        hint = did_you_mean(text, list(SCALAR_KINDS) + type_names) or (
+            "use a scalar kind (" + ", ".join(SCALAR_KINDS) + ") or a declared type")
+        self.src.at(node, f"field '{where}' has unknown type '{text}'", hint)
+        return FieldType("string")
+
+    def length(self, node: Node | None, where: str) -> int | None:
+        if node is None:
+            return None
+        if not isinstance(node.value, int) or isinstance(node.value, bool) or node.value < 0:
+            self.src.at(node, f"length bound of '{where}' must be a whole number ≥ 0", "e.g. max_length: 64")
+            return None
+        return node.value
+
+    def check_recursion(self, types: dict[str, MessageType], node: Node) -> None:
+        # A struct that contains itself without an array in between can never
+        # be a finite message.
+        def refs(ft: FieldType) -> list[str]:
+            return [ft.ref] if ft.kind == "struct" and ft.ref else []
+
+        for start in types:
+            stack, seen = [start], set()
+            while stack:
+                cur = stack.pop()
+                for ft in types.get(cur, MessageType(cur, {})).fields.values():
+                    for r in refs(ft):
+                        if r == start:
+                            self.src.at_key(node, start, f"type '{start}' contains itself", "break the cycle with an array")
+                            stack = []
+                            break
+                        if r not in seen:
+                            seen.add(r)
+                            stack.append(r)
+
+    # -- brittle and reserved sections ------------------------------------
+    def brittle(self, node: Node | None, types: dict[str, MessageType]) -> list[str]:
+        if node is None:
+            return []
+        if not node.is_list:
+            self.src.at(node, "'brittle' must be a list of 'Type.field' entries", "e.g. [Header.stamp, Header.seq]")
+            return []
+        out = []
+        for item in node.value:
+            if not self.expect(item, (str,), "a brittle entry", "'Type.field.path'"):
+                continue
+            type_name, _, path = item.value.partition(".")
+            if type_name not in types:
+                hint = did_you_mean(type_name, types) or "start with a type declared under 'types'"
+                self.src.at(item, f"brittle entry '{item.value}' names unknown type '{type_name}'", hint)
+                continue
+            if not path:
+                self.src.at(item, f"brittle entry '{item.value}' names no field", f"e.g. {type_name}.stamp")
+                continue
+            problem = _path_problem(types, type_name, path)
+            if problem:
+                self.src.at(item, f"brittle entry '{item.value}': {problem[0]}", problem[1])
+            out.append(item.value)
+        return out
+
+    def reserved_list(self, node: Node | None, what: str) -> list[Any]:
+        if node is None:
+            return []
+        if not node.is_list:
+            self.src.at(node, f"'{what}' must be a list", f"write each entry as '- …' under '{what}:'")
+            return []
+        return [n.plain() for n in node.value]
+
+    def reserved_map(self, node: Node | None, what: str) -> dict[str, Any] | None:
+        if node is None or node.value is None:
+            return None
+        if not node.is_map:
+            self.src.at(node, f"'{what}' must be a mapping", f"write 'key: value' lines under '{what}:'")
+            return None
+        return node.plain()
+
+
+def _path_problem(types: dict[str, MessageType], type_name: str, path: str) -> tuple[str, str] | None:
+    """Why `path` does not exist in `type_name`, or None (plain dotted names, `[]`/`[*]` skipped)."""
+    current = types[type_name]
+    segments = re.sub(r"\[[^\]]*\]", "", path).split(".")
+    for i, seg in enumerate(segments):
+        if seg not in current.fields:
+            return (f"'{current.name}' has no field '{seg}'",
+                    did_you_mean(seg, current.fields) or f"fields: {', '.join(current.fields)}")
+        ft = current.fields[seg]
+        while ft.kind == "array" and ft.items is not None:
+            ft = ft.items
+        if i < len(segments) - 1:
+            if ft.kind != "struct" or ft.ref not in types:
+                return (f"'{seg}' is a {ft.describe()}, it has no fields", "stop the path here")
+            current = types[ft.ref]
+    return None
+
+
+def _scalar_text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if value is None:
+        return "empty"
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    return f"{type(value).__name__} {value!r}"
+
+
+def resolve_placeholders(text: str, values: dict[str, str]) -> str:
+    return text.format_map(values)
+

@@ -1,0 +1,125 @@
+"""Typed, validated objects a SUT spec loads into (see docs/spec.md).
+
+Pure data: no I/O, no Zenoh. The loader in ``astaa_deft.spec.loader`` builds
+these and guarantees every cross reference in them resolves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+FLOAT_KINDS = ("float32", "float64")
+INT_KINDS = ("int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64")
+# time: seconds as a float (a header stamp); bytes: raw bytes (base64 in JSON).
+SCALAR_KINDS = FLOAT_KINDS + INT_KINDS + ("bool", "string", "time", "bytes")
+
+INT_RANGES: dict[str, tuple[int, int]] = {
+    kind: ((-(2 ** (bits - 1)), 2 ** (bits - 1) - 1) if kind[0] == "i" else (0, 2**bits - 1))
+    for kind, bits in (
+        ("int8", 8), ("int16", 16), ("int32", 32), ("int64", 64),
+        ("uint8", 8), ("uint16", 16), ("uint32", 32), ("uint64", 64),
+    )
+}
+
+
+@dataclass(frozen=True)
+class FieldType:
+    """The declared type of one field.
+
+    ``kind`` is a scalar kind, ``"enum"``, ``"struct"`` (``ref`` names the
+    message type) or ``"array"`` (``items`` is the element type).
+    """
+
+    kind: str
+    ref: str | None = None
+    values: tuple[Any, ...] = ()
+    items: "FieldType | None" = None
+    min_length: int | None = None
+    max_length: int | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+
+    @property
+    def is_leaf(self) -> bool:
+        return self.kind not in ("struct", "array")
+
+    def describe(self) -> str:
+        if self.kind == "struct":
+            return str(self.ref)
+        if self.kind == "array":
+            assert self.items is not None
+            return f"{self.items.describe()}[]"
+        if self.kind == "enum":
+            return "enum(" + ", ".join(map(str, self.values)) + ")"
+        return self.kind
+
+
+@dataclass(frozen=True)
+class MessageType:
+    name: str
+    fields: Mapping[str, FieldType]
+
+
+@dataclass(frozen=True)
+class ZenohSection:
+    # Endpoints the tool listens on; port 0 means "pick a free port at start".
+    endpoints: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    # Where an already running SUT can be reached (`proxy --no-launch`); empty: nowhere.
+    connect: tuple[str, ...] = ()
+    config_file: Path | None = None
+
+
+@dataclass(frozen=True)
+class Readiness:
+    channel: str | None = None  # ready once this channel carried a message
+    delay: float | None = None  # or simply after this many seconds
+    timeout: float = 20.0
+
+
+@dataclass(frozen=True)
+class Module:
+    name: str
+    command: tuple[str, ...]
+    env: Mapping[str, str] = field(default_factory=dict)
+    cwd: Path | None = None
+    ready: Readiness = Readiness(delay=0.0)
+
+
+@dataclass(frozen=True)
+class Channel:
+    name: str
+    key: str
+    producer: str
+    consumers: tuple[str, ...]
+    type: str
+    encoding: str = "json"
+
+
+@dataclass(frozen=True)
+class Spec:
+    name: str
+    path: Path | None
+    zenoh: ZenohSection
+    modules: tuple[Module, ...]
+    channels: tuple[Channel, ...]
+    types: Mapping[str, MessageType]
+    brittle: tuple[str, ...] = ()
+    params: Mapping[str, str] = field(default_factory=dict)
+    # Sections owned by later stages; kept raw until those stages validate them.
+    invariants: tuple[Any, ...] = ()
+    planner: Mapping[str, Any] | None = None
+    source_text: str = ""
+
+    def module(self, name: str) -> Module:
+        return next(m for m in self.modules if m.name == name)
+
+    def channel(self, name: str) -> Channel:
+        return next(c for c in self.channels if c.name == name)
+
+    def channel_for_key(self, key: str) -> Channel | None:
+        return next((c for c in self.channels if c.key == key), None)
+
+    def message_type(self, channel: str) -> MessageType:
+        return self.types[self.channel(channel).type]
