@@ -23,6 +23,7 @@ ap.add_argument("--garbage-every", type=int, default=0, help="every N-th payload
 ap.add_argument("--extra-key", default="", help="also publish each message on this (undeclared) key")
 ap.add_argument("--crash-after", type=int, default=0, help="exit with code 3 after N messages")
 ap.add_argument("--spawn-child", action="store_true", help="start a sleeping child (tests process-group cleanup)")
+ap.add_argument("rest", nargs="*", help="ignored (lets a spec pass an empty optional flag)")
 args = ap.parse_args()
 
 stop = threading.Event()
@@ -32,7 +33,8 @@ signal.signal(signal.SIGINT, lambda *_: stop.set())
 if args.spawn_child:
     import subprocess
 
-    subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    print(f"talker: child pid {child.pid}", flush=True)
 
 session = zenoh.open(zenoh.Config.from_env())
 pub = session.declare_publisher(args.key, congestion_control=zenoh.CongestionControl.BLOCK)

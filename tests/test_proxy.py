@@ -1,0 +1,172 @@
+"""The proxy end to end: real subprocess modules, real Zenoh on loopback, real MCAP.
+
+The SUT is tests/sut: a talker and listeners that import nothing from
+astaa-deft and find Zenoh only through zenoh.Config.from_env().
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.log.reader import read_log
+from proxy_helpers import ECHO_SPEC, SUT_DIR, alive, proxy_cmd, received, run_proxy, started_pids
+
+
+def test_sut_scripts_are_third_party_style():
+    for script in ("talker.py", "listener.py"):
+        text = (SUT_DIR / script).read_text()
+        assert "astaa_deft" not in text and "Config.from_env()" in text
+
+
+def test_star_delivers_byte_identical_records_and_isolates(tmp_path):
+    run_dir, log = tmp_path / "run", tmp_path / "run.mcap"
+    res = run_proxy(ECHO_SPEC, "--record", str(log), "--duration", "3", "--run-dir", str(run_dir),
+                    "--param", "count=300", "--param", "garbage_every=25", "--param", "extra_key=test/extra")
+    assert res.returncode == 0, res.stdout + res.stderr
+
+    got = received(run_dir / "listener.out")
+    data = [(p, a) for k, p, a in got if k == "test/data"]
+    assert len(data) == 300
+    # Payloads and attachments arrive exactly as sent, in order — garbage included.
+    for i, (payload, att) in enumerate(data, start=1):
+        assert bytes.fromhex(att) == f"seq={i}".encode()
+        if i % 25 == 0:
+            assert payload == b"\xff\x00not json" + bytes([i % 256])
+        else:
+            assert json.loads(payload)["header"]["seq"] == i
+    # The outsider listens on the same key but is no declared consumer: star mode keeps it out.
+    assert [k for k, _, _ in received(run_dir / "outsider.out") if k == "test/data"] == []
+
+    contents = read_log(log)
+    assert contents.finished and not contents.warnings
+    logged = contents.on("test/data")
+    assert [m.data for m in logged] == [p for p, _ in data]  # log count and bytes = what the consumer got
+    flags = contents.flags()
+    assert len(flags) == 300 // 25 and {f["channel"] for f in flags} == {"data"}
+    assert all(f["kind"] == "undecodable" for f in flags)
+    # The undeclared key is forwarded (catch-all), reported once, and logged.
+    assert sum(1 for k, _, _ in got if k == "test/extra") == 300
+    assert len(contents.events("undeclared_key")) == 1
+    assert len(contents.on("test/extra")) == 300
+    # The log is self-contained: spec attached, channel typed with a JSON schema.
+    assert b"name: echo" in contents.attachments["spec.yaml"]
+    assert contents.channels["test/data"].schema_name == "Sample"
+    assert contents.channels["test/data"].metadata["producer"] == "talker"
+
+
+def test_passive_mode_observes_without_routing(tmp_path):
+    run_dir, log = tmp_path / "run", tmp_path / "run.mcap"
+    res = run_proxy(ECHO_SPEC, "--passive", "--record", str(log), "--duration", "3", "--run-dir", str(run_dir),
+                    "--param", "count=300")
+    assert res.returncode == 0, res.stdout + res.stderr
+    data = [p for k, p, _ in received(run_dir / "listener.out") if k == "test/data"]
+    assert len(data) == 300
+    # No star: the outsider hears the talker directly, as on the plain bus.
+    assert len([k for k, _, _ in received(run_dir / "outsider.out") if k == "test/data"]) == 300
+    contents = read_log(log)
+    assert [m.data for m in contents.on("test/data")] == data
+    configs = [json.loads(p.read_text()) for p in run_dir.glob("zenoh-*.json5")]
+    assert configs and all("namespace" not in c and c["mode"] == "peer" for c in configs)
+
+
+def test_module_crash_is_an_event_others_keep_running_exit_1_no_orphans(tmp_path):
+    run_dir, log = tmp_path / "run", tmp_path / "run.mcap"
+    res = run_proxy(ECHO_SPEC, "--record", str(log), "--duration", "4", "--run-dir", str(run_dir),
+                    "--param", "count=1000", "--param", "rate=100", "--param", "crash_after=50",
+                    "--param", "spawn_child=--spawn-child")
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert "module 'talker' exit code 3" in res.stdout
+    assert "simulated crash" in res.stdout
+    contents = read_log(log)
+    exits = contents.events("process_exit")
+    crash = [e for e in exits if e["module"] == "talker"]
+    assert len(crash) == 1 and crash[0]["abnormal"] and crash[0]["returncode"] == 3
+    # The others kept running until the end of the run: their exits came at shutdown.
+    others = [e for e in exits if e["module"] != "talker"]
+    assert {e["module"] for e in others} == {"listener", "outsider", "bystander"}
+    assert all(e["during_shutdown"] for e in others)
+    assert min(e["time_ns"] for e in others) - crash[0]["time_ns"] > 2e9
+    # No orphans: every process we started is gone, the talker's own child too.
+    pids = list(started_pids(run_dir).values())
+    child = re.search(r"child pid (\d+)", (run_dir / "talker.log").read_text())
+    assert child
+    pids.append(int(child.group(1)))
+    time.sleep(0.2)
+    assert [p for p in pids if alive(p)] == []
+
+
+def test_kill_9_of_proxy_keeps_the_log_readable(tmp_path):
+    run_dir, log = tmp_path / "run", tmp_path / "run.mcap"
+    proc = subprocess.Popen(proxy_cmd(ECHO_SPEC, "--record", str(log), "--run-dir", str(run_dir),
+                                      "--param", "count=100000", "--param", "rate=1000"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and len(received(run_dir / "listener.out")) < 1500:
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    pids = started_pids(run_dir)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and any(alive(p) for p in pids.values()):
+        time.sleep(0.1)
+    assert [m for m, p in pids.items() if alive(p)] == [], "modules outlived a killed proxy"
+    time.sleep(1.0)  # the recorder finishes on its parent-death signal
+    delivered = {json.loads(p)["header"]["seq"] for k, p, _ in received(run_dir / "listener.out")
+                 if k == "test/data"}
+    contents = read_log(log)  # must not raise
+    recorded = {json.loads(m.data)["header"]["seq"] for m in contents.on("test/data")}
+    recovered = len(delivered & recorded) / len(delivered)
+    print(f"kill -9 of the proxy: {len(delivered)} delivered, {recovered:.2%} of them in the log")
+    assert len(delivered) >= 1500
+    assert recovered >= 0.99
+
+
+def test_unwritable_log_path_is_one_clear_error(tmp_path):
+    res = run_proxy(ECHO_SPEC, "--record", str(tmp_path / "missing" / "x.mcap"), "--duration", "1",
+                    "--run-dir", str(tmp_path / "run"))
+    assert res.returncode == 2
+    assert "Traceback" not in res.stderr
+    assert "log path folder" in res.stderr and "does not exist" in res.stderr
+    assert not (tmp_path / "run" / "processes.json").exists()  # nothing was started
+
+
+def test_port_in_use_is_one_clear_error(tmp_path):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        spec = tmp_path / "sut.yaml"
+        spec.write_text(ECHO_SPEC.read_text().replace("name: echo\n", f"name: echo\nzenoh:\n  endpoints: [\"tcp/127.0.0.1:{port}\"]\n")
+                        .replace("{spec_dir}", str(SUT_DIR)))
+        res = run_proxy(spec, "--duration", "1", "--run-dir", str(tmp_path / "run"))
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "Traceback" not in res.stderr
+    assert f"127.0.0.1:{port}" in res.stderr and "port may be in use" in res.stderr
+    assert not (tmp_path / "run" / "processes.json").exists()
+
+
+def test_missing_module_command_is_one_clear_error_and_stops_the_others(tmp_path):
+    spec = tmp_path / "sut.yaml"
+    spec.write_text(ECHO_SPEC.read_text().replace('command: ["{python}", "-c", "import time; time.sleep(600)"]',
+                                                  'command: ["no-such-program-xyz"]')
+                    .replace("{spec_dir}", str(SUT_DIR)))
+    run_dir = tmp_path / "run"
+    res = run_proxy(spec, "--duration", "5", "--run-dir", str(run_dir))
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "Traceback" not in res.stderr
+    assert "module 'bystander': command 'no-such-program-xyz' not found" in res.stderr
+    pids = started_pids(run_dir)
+    assert set(pids) == {"listener", "outsider", "talker"}
+    assert [m for m, p in pids.items() if alive(p)] == []
