@@ -106,7 +106,8 @@ def test_module_crash_is_an_event_others_keep_running_exit_1_no_orphans(tmp_path
 def test_kill_9_of_proxy_keeps_the_log_readable(tmp_path):
     run_dir, log = tmp_path / "run", tmp_path / "run.mcap"
     proc = subprocess.Popen(proxy_cmd(ECHO_SPEC, "--record", str(log), "--run-dir", str(run_dir),
-                                      "--param", "count=100000", "--param", "rate=1000"),
+                                      "--param", "count=100000", "--param", "rate=1000",
+                                      "--param", "spawn_child=--spawn-child"),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 30
@@ -118,11 +119,14 @@ def test_kill_9_of_proxy_keeps_the_log_readable(tmp_path):
         if proc.poll() is None:
             proc.kill()
     pids = started_pids(run_dir)
+    child = re.search(r"child pid (\d+)", (run_dir / "talker.log").read_text())
+    assert child
+    pids["talker's child"] = int(child.group(1))
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline and any(alive(p) for p in pids.values()):
         time.sleep(0.1)
     assert [m for m, p in pids.items() if alive(p)] == [], "modules outlived a killed proxy"
-    time.sleep(1.0)  # the recorder finishes on its parent-death signal
+    time.sleep(1.0)  # the recorder finishes the log on its parent-death signal
     delivered = {json.loads(p)["header"]["seq"] for k, p, _ in received(run_dir / "listener.out")
                  if k == "test/data"}
     contents = read_log(log)  # must not raise

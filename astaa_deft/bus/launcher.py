@@ -1,12 +1,13 @@
 """Start the spec's modules as subprocesses, watch them, and stop exactly them.
 
-Each module runs in its own process group (so its children go with it) and
-gets SIGTERM if the tool dies without cleaning up (Linux parent-death signal),
-so no run leaves orphans. Only the process groups started here are signalled.
+Each module runs in its own process group, so its children go with it; a
+reaper process ends those groups if the tool dies without cleaning up, so no
+run leaves orphans. Only the process groups started here are signalled.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import queue
 import signal
@@ -20,7 +21,7 @@ from typing import Callable, Mapping
 
 from ..errors import InputError, Problem
 from ..spec.model import Module, Spec
-from .processes import die_with_parent, signal_group, tail
+from .processes import signal_group, tail
 
 
 
@@ -67,10 +68,13 @@ class Launcher:
         self.running: dict[str, RunningModule] = {}
         self.exits: "queue.Queue[ProcessExit]" = queue.Queue()
         self._stopping = threading.Event()
+        self._reaper: subprocess.Popen | None = None
 
     # -- start ---------------------------------------------------------------
     def start(self, on_ready: Callable[[str], None] = lambda _m: None) -> None:
         """Start every module in spec order, each after the previous one is ready."""
+        self._reaper = subprocess.Popen([sys.executable, "-m", "astaa_deft.bus.reaper"], stdin=subprocess.PIPE,
+                                        stdout=subprocess.DEVNULL, start_new_session=True, text=True)
         try:
             for module in self.spec.modules:
                 self._start_one(module)
@@ -112,8 +116,7 @@ class Launcher:
                 stdin=subprocess.DEVNULL,
                 stdout=log,
                 stderr=subprocess.STDOUT,
-                start_new_session=True,  # own process group: stop takes its children too
-                preexec_fn=die_with_parent,
+                start_new_session=True,  # own process group: stop (or the reaper) takes its children too
             )
         except FileNotFoundError:
             raise InputError(Problem(
@@ -130,6 +133,9 @@ class Launcher:
             log.close()
         running = RunningModule(module, process, log_path, time.time_ns())
         self.running[module.name] = running
+        self._tell_reaper(str(process.pid))
+        # What we started, by id, for whoever has to check or clean up after us.
+        (self.run_dir / "processes.json").write_text(json.dumps(self.pids(), indent=1))
         threading.Thread(target=self._watch, args=(running,), name=f"watch-{module.name}", daemon=True).start()
 
     def _wait_ready(self, module: Module) -> None:
@@ -204,4 +210,20 @@ class Launcher:
             try:
                 r.process.wait(timeout=2.0)
             except subprocess.TimeoutExpired:
+                pass
+        if self._reaper is not None:
+            self._tell_reaper("done")
+            try:
+                self._reaper.stdin.close()
+                self._reaper.wait(timeout=5.0)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+            self._reaper = None
+
+    def _tell_reaper(self, line: str) -> None:
+        if self._reaper is not None and self._reaper.stdin is not None:
+            try:
+                self._reaper.stdin.write(line + "\n")
+                self._reaper.stdin.flush()
+            except OSError:
                 pass

@@ -12,6 +12,7 @@ Started by the tool as ``python -m astaa_deft.log.recorder ARGS``; prints
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import queue
 import signal
@@ -31,6 +32,7 @@ from . import layout
 from .writer import LogWriter
 
 _STOP = object()
+SHUTDOWN_LIMIT_SECONDS = 20.0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -88,15 +90,18 @@ def main(argv: list[str] | None = None) -> int:
     print("ready", flush=True)
 
     stop.wait()
-    # Order matters: stop callbacks first, then write what is queued, then finish.
+    # A recorder must never outlive its run, whatever Zenoh does at shutdown.
+    threading.Timer(SHUTDOWN_LIMIT_SECONDS, os._exit, args=(3,)).start()
+    # Order matters: no more callbacks, write what is queued, finish the file;
+    # only then close the session (which may wait on a peer that is gone).
     for sub in subscribers:
         sub.undeclare()
-    session.close()
     q.put(_STOP)
     write_thread.join()
     writer.finish()
     print(json.dumps({"recorded": counts}), flush=True)
-    return 0
+    session.close()
+    os._exit(0)  # the shutdown timer is a non-daemon thread
 
 
 def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int]) -> None:
