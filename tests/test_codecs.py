@@ -19,7 +19,7 @@ from astaa_deft.fields import FieldPath, get, set_field
 JSON = get_codec("json")
 CBOR = get_codec("cbor")
 CODECS = [JSON, CBOR]
-FAST = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 # ---------------------------------------------------------------- strategies
 
@@ -243,7 +243,7 @@ JSONISH = st.text(alphabet='{}[]":,.0123456789eE+-NaInfitylsrun \\u', max_size=4
 
 
 @pytest.mark.parametrize("codec", CODECS, ids=lambda c: c.name)
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(payload=st.binary(max_size=64) | JSONISH)
 def test_arbitrary_bytes_decode_to_a_message_or_a_decode_error(codec, payload):
     try:

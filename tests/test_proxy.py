@@ -74,7 +74,7 @@ def test_passive_mode_observes_without_routing(tmp_path):
     contents = read_log(log)
     assert [m.data for m in contents.on("test/data")] == data
     configs = [json.loads(p.read_text()) for p in run_dir.glob("zenoh-*.json5")]
-    assert configs and all("namespace" not in c and c["mode"] == "peer" for c in configs)
+    assert configs and all("namespace" not in c and c["mode"] == "client" for c in configs)
 
 
 def test_module_crash_is_an_event_others_keep_running_exit_1_no_orphans(tmp_path):

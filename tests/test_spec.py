@@ -85,7 +85,7 @@ MALFORMED = [
     ("min above max", "min: -10, max: 10", "min: 10, max: -10", "min 10 > max -10", 22),
     ("empty enum", "{enum: [idle, run]}", "{enum: []}", "enum of 'Sample.mode' must be a non-empty list", 26),
     ("bad length bound", "max_length: 8", "max_length: -3", "length bound of 'Sample.points' must be a whole number", 25),
-    ("brittle unknown field", "Header.seq]", "Header.sequence]", "'Header' has no field 'sequence' — did you mean 'seq'?", 28),
+    ("brittle unknown field", "Header.seq]", "Header.sequence]", "Header has no field 'sequence' (it has: seq, stamp)", 28),
     ("bad encoding", "type: Sample\n", "type: Sample\n    encoding: jsn\n", "unknown encoding 'jsn' — did you mean 'json'?", 16),
     ("duplicate channel key", "producer: talker", "producer: talker\n    key: mini/other", "duplicate key 'key'", 14),
     ("readiness channel unknown", "{channel: data,", "{channel: dta,", "readiness channel 'dta' is not declared — did you mean 'data'?", 6),

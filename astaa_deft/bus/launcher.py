@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import queue
 import signal
 import subprocess
@@ -140,20 +141,26 @@ class Launcher:
 
     def _wait_ready(self, module: Module) -> None:
         ready = module.ready
-        deadline = time.monotonic() + ready.timeout
-        if ready.channel is None:
+        if ready.channel is None and ready.log is None:
             end = time.monotonic() + (ready.delay or 0.0)
             while time.monotonic() < end:
                 self._raise_if_exited(module)
                 time.sleep(0.02)
             self._raise_if_exited(module)
             return
-        while not self.channel_seen(ready.channel):
+        if ready.channel is not None:
+            is_ready, what = (lambda: self.channel_seen(ready.channel)), f"no message on '{ready.channel}'"
+        else:
+            pattern = re.compile(ready.log)
+            log_path = self.running[module.name].log_path
+            is_ready, what = (lambda: _log_matches(log_path, pattern)), f"no output line matching '{ready.log}'"
+        deadline = time.monotonic() + ready.timeout
+        while not is_ready():
             self._raise_if_exited(module)
             if time.monotonic() > deadline:
                 raise InputError(Problem(
                     str(self.spec.path or "<spec>"), None, None,
-                    f"module '{module.name}' not ready: no message on '{ready.channel}' within {ready.timeout:g} s",
+                    f"module '{module.name}' not ready: {what} within {ready.timeout:g} s",
                     f"check {self.running[module.name].log_path} or raise 'ready.timeout'",
                 ))
             time.sleep(0.02)
@@ -227,3 +234,11 @@ class Launcher:
                 self._reaper.stdin.flush()
             except OSError:
                 pass
+
+
+def _log_matches(path: Path, pattern: "re.Pattern[str]") -> bool:
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return False
+    return any(pattern.search(line) for line in text.splitlines())

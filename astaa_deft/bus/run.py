@@ -29,7 +29,7 @@ from .observer import ChannelCounter
 from .processes import die_with_parent, stop_process, tail
 from .proxy import StarProxy
 
-RECORDER_READY_TIMEOUT = 20.0
+HELPER_READY_TIMEOUT = 20.0
 DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the recorder
 
 
@@ -62,6 +62,9 @@ class BusRun:
         self._tmp: tempfile.TemporaryDirectory | None = None
         self._events_pub: zenoh.Publisher | None = None
         self._lock = threading.Lock()
+        self._helpers: list[subprocess.Popen] = []  # recorder, bus router: ours to stop
+        self._helper_output: dict[int, tuple[threading.Thread, list[str]]] = {}
+        self.bus_endpoints: list[str] = []
 
     # -- lifecycle ---------------------------------------------------------
     def __enter__(self) -> "BusRun":
@@ -86,9 +89,23 @@ class BusRun:
         if opts.record is not None:
             _check_writable(opts.record)
         listen = [_concrete(ep) for ep in self.spec.zenoh.endpoints]
-        connect = [] if opts.launch else list(self.spec.zenoh.connect)
-        self.tool_endpoint = listen[0]
-        self.session = self._open(topology.tool_config(opts.mode, listen, connect), listen)
+        if not opts.launch:
+            # Attach to a running SUT: the user's own router or peers, as a client.
+            self.bus_endpoints = list(self.spec.zenoh.connect)
+            if not self.bus_endpoints:
+                raise InputError(Problem(str(self.spec.path or "<spec>"), None, None,
+                                         "--no-launch needs to know where the running SUT is",
+                                         "list its router under 'zenoh: connect: [...]' in the spec"))
+            tool_cfg = zc.config_dict(mode="client", connect=self.bus_endpoints)
+        elif opts.mode == "star":
+            self.bus_endpoints = listen[:1]
+            tool_cfg = zc.config_dict(mode="router", listen=listen)
+        else:
+            self.bus_endpoints = listen[:1]
+            self.bus_router = self._spawn_ready("router", [sys.executable, "-m", "astaa_deft.bus.router",
+                                                          *[a for ep in listen for a in ("--listen", ep)]])
+            tool_cfg = zc.config_dict(mode="client", connect=self.bus_endpoints)
+        self.session = self._open(tool_cfg, listen)
         self._events_pub = self.session.declare_publisher(topology.EVENTS_KEY)
         self.started_ns = time.time_ns()
         if opts.mode == "star":
@@ -96,12 +113,11 @@ class BusRun:
             self.proxy.start()
         else:
             self.counter = ChannelCounter(self.session, self.spec, opts.mode)
-        observers = [self.tool_endpoint]
         if opts.record is not None:
-            observers.append(self._start_recorder(opts.record, connect))
+            self._start_recorder(opts.record)
         self.event("run_started", mode=opts.mode, spec=self.spec.name, command_line=opts.command_line)
         if opts.launch:
-            self._launch(observers)
+            self._launch()
 
     def _open(self, cfg: dict, listen: list[str]) -> zenoh.Session:
         try:
@@ -114,11 +130,8 @@ class BusRun:
                 "the port may be in use: set 'zenoh.endpoints' to another port, or port 0 for a free one",
             )) from None
 
-    def _launch(self, observers: list[str]) -> None:
-        configs = topology.module_configs(self.spec, self.options.mode, observers[0])
-        if self.options.mode == "passive":
-            for cfg in configs.values():  # the recorder listens too: modules connect to it directly
-                cfg["connect"]["endpoints"] = observers[1:] + cfg["connect"]["endpoints"]
+    def _launch(self) -> None:
+        configs = topology.module_configs(self.spec, self.options.mode, self.bus_endpoints[0])
         files = {
             name: zc.write_config_file(cfg, self.run_dir / f"zenoh-{name}.json5") for name, cfg in configs.items()
         }
@@ -127,41 +140,41 @@ class BusRun:
                                  on_exit=self._process_exited)
         self.launcher.start()
 
-    def _start_recorder(self, path: Path, connect: list[str]) -> str:
+    def _start_recorder(self, path: Path) -> None:
+        meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
+                "started_ns": str(self.started_ns)}
         args = [sys.executable, "-m", "astaa_deft.log.recorder", "--spec", str(self.spec.path),
-                "--out", str(path), "--mode", self.options.mode,
-                "--meta", json.dumps({"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
-                                      "started_ns": str(self.started_ns)})]
-        own = ""
-        if self.options.mode == "star":
-            args += ["--connect", self.tool_endpoint]
-        else:
-            own = zc.loopback_endpoint()
-            args += ["--listen", own, "--connect", self.tool_endpoint]
-            for ep in connect:
-                args += ["--connect", ep]
-        self._recorder_log = self.run_dir / "recorder.log"
-        with open(self._recorder_log, "wb") as err:
-            self.recorder = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL,
-                                             start_new_session=True, preexec_fn=die_with_parent, text=True)
+                "--out", str(path), "--mode", self.options.mode, "--meta", json.dumps(meta)]
+        for ep in self.bus_endpoints:
+            args += ["--connect", ep]
+        self.recorder = self._spawn_ready("recorder", args, error_file=path)
+
+    def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None) -> subprocess.Popen:
+        """Start one of the tool's own helper processes and wait for its 'ready' line."""
+        log_path = self.run_dir / f"{name}.log"
+        with open(log_path, "wb") as err:
+            proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL,
+                                    start_new_session=True, preexec_fn=die_with_parent, text=True)
+        self._helpers.append(proc)
         ready = threading.Event()
         lines: list[str] = []
 
         def read() -> None:
-            assert self.recorder is not None and self.recorder.stdout is not None
-            for line in self.recorder.stdout:
+            assert proc.stdout is not None
+            for line in proc.stdout:
                 lines.append(line.strip())
                 if line.strip() == "ready":
                     ready.set()
             ready.set()
 
-        self._recorder_reader = threading.Thread(target=read, daemon=True)
-        self._recorder_reader.start()
-        self._recorder_lines = lines
-        if not ready.wait(RECORDER_READY_TIMEOUT) or "ready" not in lines:
-            raise InputError(Problem(str(path), None, None, "the recorder did not start:\n" + tail(self._recorder_log),
-                                     "check that the log path is writable"))
-        return own or self.tool_endpoint
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        self._helper_output[proc.pid] = (reader, lines)
+        if not ready.wait(HELPER_READY_TIMEOUT) or "ready" not in lines:
+            raise InputError(Problem(str(error_file or self.spec.path), None, None,
+                                     f"the {name} did not start:\n{tail(log_path)}",
+                                     "see the message above" + (" (is the log path writable?)" if error_file else "")))
+        return proc
 
     def stop(self) -> None:
         if self.launcher is not None:
@@ -171,8 +184,9 @@ class BusRun:
             time.sleep(DRAIN_SECONDS)
         if self.recorder is not None:
             stop_process(self.recorder, grace=30.0)
-            self._recorder_reader.join(timeout=5.0)
-            for line in self._recorder_lines:
+            reader, lines = self._helper_output[self.recorder.pid]
+            reader.join(timeout=5.0)
+            for line in lines:
                 if line.startswith("{"):
                     self.recorded = json.loads(line).get("recorded", {})
             self.recorder = None
@@ -182,6 +196,9 @@ class BusRun:
         if self.session is not None:
             self.session.close()
             self.session = None
+        for proc in self._helpers:  # the bus router last: everyone else has let go of it
+            stop_process(proc, grace=5.0)
+        self._helpers = []
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None

@@ -5,9 +5,13 @@ Pure logic from the spec and the chosen mode; no Zenoh calls here.
 Star mode: every module is a Zenoh client of the tool's router and lives in
 its own namespace ``sut/<module>``; a producer's ``k`` reaches the bus as
 ``sut/<producer>/k`` and only the proxy's republish to ``sut/<consumer>/k``
-reaches a consumer. Passive mode: modules are peers meshed directly with
-each other (each connects to every module started before it), so the tool
-is just one more subscriber, off the message path.
+reaches a consumer. Passive mode: modules are clients of a plain Zenoh router
+running in a process of its own (the part zenohd plays in a deployment), and
+the tool is just one more client subscriber, off the message path.
+
+(A full peer-to-peer mesh was tried for passive mode and dropped: a peer's
+link to another sometimes came up only on the 1 s connect retry, so a module
+missed the first second of traffic.)
 """
 
 from __future__ import annotations
@@ -48,26 +52,15 @@ def star_routes(spec: Spec) -> list[Route]:
     ]
 
 
-def module_configs(spec: Spec, mode: str, tool_endpoint: str) -> dict[str, dict[str, Any]]:
-    """The Zenoh config each module gets, by module name."""
-    configs: dict[str, dict[str, Any]] = {}
-    if mode == "star":
-        for m in spec.modules:
-            configs[m.name] = zc.config_dict(mode="client", connect=[tool_endpoint], namespace=module_namespace(m.name))
-        return configs
-    if mode == "passive":
-        earlier: list[str] = [tool_endpoint]
-        for m in spec.modules:
-            own = zc.loopback_endpoint()
-            configs[m.name] = zc.config_dict(mode="peer", listen=[own], connect=list(earlier))
-            earlier.append(own)
-        return configs
-    raise ValueError(f"unknown mode {mode!r}")
-
-
-def tool_config(mode: str, listen: list[str], connect: list[str] = ()) -> dict[str, Any]:
-    """The tool's own session: a router in star mode (modules are its clients), else a peer."""
-    return zc.config_dict(mode="router" if mode == "star" else "peer", listen=listen, connect=list(connect))
+def module_configs(spec: Spec, mode: str, bus_endpoint: str) -> dict[str, dict[str, Any]]:
+    """The Zenoh config each module gets, by module name: a client of the bus."""
+    if mode not in ("star", "passive"):
+        raise ValueError(f"unknown mode {mode!r}")
+    return {
+        m.name: zc.config_dict(mode="client", connect=[bus_endpoint],
+                               namespace=module_namespace(m.name) if mode == "star" else None)
+        for m in spec.modules
+    }
 
 
 def recorded_keys(spec: Spec, mode: str) -> list[tuple[str, Channel]]:

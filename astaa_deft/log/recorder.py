@@ -38,9 +38,8 @@ SHUTDOWN_LIMIT_SECONDS = 20.0
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astaa-deft-recorder")
     ap.add_argument("--spec", required=True, type=Path)
-    ap.add_argument("--mode", choices=("star", "passive", "attach"), required=True)
-    ap.add_argument("--connect", action="append", default=[])
-    ap.add_argument("--listen", action="append", default=[])
+    ap.add_argument("--mode", choices=("star", "passive"), required=True)
+    ap.add_argument("--connect", action="append", required=True, help="the bus to record (a router or peer)")
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--meta", default="{}", help="JSON object stored as run metadata")
     ap.add_argument("--chunk-size", type=int, default=64 * 1024)
@@ -58,13 +57,9 @@ def main(argv: list[str] | None = None) -> int:
     q: "queue.SimpleQueue" = queue.SimpleQueue()
     counts: dict[str, int] = {}
 
-    mode = "peer" if args.mode == "passive" else "client"
-    if args.mode == "attach":
-        mode = "peer"
-    session = zc.open_session(zc.config_dict(mode=mode, listen=args.listen, connect=args.connect))
+    session = zc.open_session(zc.config_dict(mode="client", connect=args.connect))
     subscribers = []
-    key_mode = "star" if args.mode == "star" else "passive"
-    for key_expr, channel in topology.recorded_keys(spec, key_mode):
+    for key_expr, channel in topology.recorded_keys(spec, args.mode):
         cid = writer.bus_channel(channel)
         codec = get_codec(channel.encoding)
         counts[channel.name] = 0

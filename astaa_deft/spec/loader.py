@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, did_you_mean
+from ..fields import FieldPathError, check_brittle_pattern
 from ..yamlsource import Node, Source
 from .model import (
     SCALAR_KINDS,
@@ -26,7 +27,7 @@ from .model import (
 )
 
 NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
-TYPE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.]*$")
+TYPE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 FIELD_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no DSL
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
@@ -265,16 +266,26 @@ class _SpecBuilder:
     def ready(self, node: Node | None) -> Readiness:
         if node is None:
             return Readiness(delay=0.0)
-        if not self.keys(node, ("channel", "delay", "timeout"), (), "'ready'"):
+        if not self.keys(node, ("channel", "log", "delay", "timeout"), (), "'ready'"):
             return Readiness(delay=0.0)
         v = node.value
-        if ("channel" in v) == ("delay" in v):
-            self.src.at(node, "'ready' needs exactly one of 'channel' or 'delay'", "e.g. 'ready: {delay: 0.5}'")
-        channel = v["channel"].value if "channel" in v and self.expect(v["channel"], (str,), "'ready.channel'", "a channel name") else None
+        if sum(k in v for k in ("channel", "log", "delay")) != 1:
+            self.src.at(node, "'ready' needs exactly one of 'channel', 'log' or 'delay'",
+                        "e.g. 'ready: {channel: pose}', 'ready: {log: \"listening\"}' or 'ready: {delay: 0.5}'")
+        channel = None
+        if "channel" in v and self.expect(v["channel"], (str,), "'ready.channel'", "a channel name"):
+            channel = v["channel"].value
+            self._ready_channels.append((channel, v["channel"]))
+        log = None
+        if "log" in v and self.expect(v["log"], (str,), "'ready.log'", "a regular expression"):
+            log = v["log"].value
+            try:
+                re.compile(log)
+            except re.error as exc:
+                self.src.at(v["log"], f"'ready.log' is not a valid regular expression: {exc}", "fix or quote it")
         delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0)
         timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True)
-        self._ready_channels.append((channel, v.get("channel")))
-        return Readiness(channel=channel, delay=delay if delay is not None else (None if channel else 0.0),
+        return Readiness(channel=channel, log=log, delay=delay if delay is not None else (None if channel or log else 0.0),
                          timeout=timeout if timeout is not None else 20.0)
 
     def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False) -> float | None:
@@ -367,7 +378,7 @@ class _SpecBuilder:
         out: dict[str, MessageType] = {}
         for tname, tnode in node.items():
             if not TYPE_NAME_RE.match(tname):
-                self.src.at_key(node, tname, f"type name '{tname}' is not an identifier", "use letters, digits, '_', '.'")
+                self.src.at_key(node, tname, f"type name '{tname}' is not an identifier", "use letters, digits and '_'")
             if tname in SCALAR_KINDS or tname in ("enum", "array", "struct"):
                 self.src.at_key(node, tname, f"type name '{tname}' is a built-in kind", "rename it")
             if not tnode.is_map or not tnode.value:
@@ -485,17 +496,12 @@ class _SpecBuilder:
         for item in node.value:
             if not self.expect(item, (str,), "a brittle entry", "'Type.field.path'"):
                 continue
-            type_name, _, path = item.value.partition(".")
-            if type_name not in types:
-                hint = did_you_mean(type_name, types) or "start with a type declared under 'types'"
-                self.src.at(item, f"brittle entry '{item.value}' names unknown type '{type_name}'", hint)
+            try:
+                check_brittle_pattern(types, item.value)
+            except FieldPathError as exc:
+                self.src.report(item.line, item.column + (exc.position or 0), str(exc),
+                                "write 'TypeName.field.path' with a type and fields declared under 'types'")
                 continue
-            if not path:
-                self.src.at(item, f"brittle entry '{item.value}' names no field", f"e.g. {type_name}.stamp")
-                continue
-            problem = _path_problem(types, type_name, path)
-            if problem:
-                self.src.at(item, f"brittle entry '{item.value}': {problem[0]}", problem[1])
             out.append(item.value)
         return out
 
@@ -514,24 +520,6 @@ class _SpecBuilder:
             self.src.at(node, f"'{what}' must be a mapping", f"write 'key: value' lines under '{what}:'")
             return None
         return node.plain()
-
-
-def _path_problem(types: dict[str, MessageType], type_name: str, path: str) -> tuple[str, str] | None:
-    """Why `path` does not exist in `type_name`, or None (plain dotted names, `[]`/`[*]` skipped)."""
-    current = types[type_name]
-    segments = re.sub(r"\[[^\]]*\]", "", path).split(".")
-    for i, seg in enumerate(segments):
-        if seg not in current.fields:
-            return (f"'{current.name}' has no field '{seg}'",
-                    did_you_mean(seg, current.fields) or f"fields: {', '.join(current.fields)}")
-        ft = current.fields[seg]
-        while ft.kind == "array" and ft.items is not None:
-            ft = ft.items
-        if i < len(segments) - 1:
-            if ft.kind != "struct" or ft.ref not in types:
-                return (f"'{seg}' is a {ft.describe()}, it has no fields", "stop the path here")
-            current = types[ft.ref]
-    return None
 
 
 def _scalar_text(value: Any) -> str:

@@ -74,6 +74,7 @@ class ZenohSection:
 @dataclass(frozen=True)
 class Readiness:
     channel: str | None = None  # ready once this channel carried a message
+    log: str | None = None  # or once the module printed a line matching this regex
     delay: float | None = None  # or simply after this many seconds
     timeout: float = 20.0
 

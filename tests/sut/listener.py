@@ -30,6 +30,7 @@ def on_sample(sample):
 
 session = zenoh.open(zenoh.Config.from_env())
 subs = [session.declare_subscriber(k, on_sample) for k in args.key]
+print("listener: subscribed", flush=True)
 stop.wait()
 for s in subs:
     s.undeclare()

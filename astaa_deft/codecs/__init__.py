@@ -1,0 +1,50 @@
+"""Message codecs by name: a channel's ``encoding`` in the spec picks one.
+
+Codec names are also MCAP well-known message encodings ("json", "cbor"), so
+a recorder can use ``codec.name`` as the channel's ``message_encoding``.
+"""
+
+from __future__ import annotations
+
+from .base import Codec, CodecError, DecodeError, EncodeError, same_value
+from .cbor_codec import CborCodec
+from .json_codec import JsonCodec
+
+__all__ = [
+    "Codec", "CodecError", "DecodeError", "EncodeError", "UnknownCodecError",
+    "available_codecs", "get_codec", "register_codec", "same_value",
+]
+
+
+class UnknownCodecError(KeyError):
+    """No codec has that name; the message lists the known ones."""
+
+    def __str__(self) -> str:  # KeyError would show the message in quotes
+        return str(self.args[0])
+
+
+_REGISTRY: dict[str, Codec] = {}
+
+
+def register_codec(codec: Codec, *, replace: bool = False) -> None:
+    """Make ``codec`` available under ``codec.name``; refuses to shadow one unless ``replace``."""
+    if codec.name in _REGISTRY and not replace:
+        raise ValueError(f"a codec named {codec.name!r} is already registered")
+    _REGISTRY[codec.name] = codec
+
+
+def get_codec(name: str) -> Codec:
+    """The codec called ``name`` (codecs are stateless and shared)."""
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        known = ", ".join(available_codecs())
+        raise UnknownCodecError(f"unknown encoding {name!r}; known encodings: {known}") from None
+
+
+def available_codecs() -> tuple[str, ...]:
+    return tuple(sorted(_REGISTRY))
+
+
+register_codec(JsonCodec())
+register_codec(CborCodec())

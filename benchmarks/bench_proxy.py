@@ -1,0 +1,119 @@
+"""Proxy speed, measured in one run: direct Zenoh vs the star vs star + recorder.
+
+    python benchmarks/bench_proxy.py [--quick]
+
+Every figure comes from real processes on loopback: a source and a sink that
+import nothing from astaa-deft, wired either directly (peer to peer) or by
+the tool (`BusRun`, as `astaa-deft proxy` does). Prints absolute figures and
+the ratios the targets are stated in; asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from astaa_deft.bus import zenoh_config as zc
+from astaa_deft.bus.processes import stop_process
+from astaa_deft.bus.run import BusRun, RunOptions
+from astaa_deft.spec.loader import load_spec
+
+SUT = Path(__file__).parent / "sut"
+SPEC = load_spec(SUT / "bench.yaml")
+RESULT_TIMEOUT = 120.0
+
+
+def wait_result(path: Path) -> dict:
+    deadline = time.monotonic() + RESULT_TIMEOUT
+    while time.monotonic() < deadline:
+        if path.exists():
+            return json.loads(path.read_text())
+        time.sleep(0.05)
+    raise RuntimeError(f"no result at {path}")
+
+
+def run_direct(params: dict[str, str]) -> dict:
+    """Source and sink as plain Zenoh peers, connected to each other: no tool at all."""
+    with tempfile.TemporaryDirectory() as tmp:
+        run_dir = Path(tmp)
+        ep = zc.loopback_endpoint()
+        cfgs = {"sink": zc.config_dict(mode="peer", listen=[ep]),
+                "source": zc.config_dict(mode="peer", connect=[ep])}
+        procs = []
+        try:
+            for module in SPEC.modules:
+                cfg = zc.write_config_file(cfgs[module.name], run_dir / f"{module.name}.json5")
+                values = {**SPEC.params, **params, "python": sys.executable, "spec_dir": str(SUT),
+                          "run_dir": str(run_dir), "zenoh_config": str(cfg), "module": module.name}
+                argv = [a.format_map(values) for a in module.command]
+                procs.append(subprocess.Popen(argv, env={**os.environ, "ZENOH_CONFIG": str(cfg)},
+                                              start_new_session=True))
+                time.sleep(0.5)
+            return wait_result(run_dir / "sink.json")
+        finally:
+            for p in procs:
+                stop_process(p, grace=3.0)
+
+
+def run_tool(params: dict[str, str], mode: str, record: bool) -> tuple[dict, dict]:
+    with tempfile.TemporaryDirectory() as tmp:
+        run_dir = Path(tmp)
+        options = RunOptions(mode=mode, params=params, run_dir=run_dir,
+                             record=run_dir / "bench.mcap" if record else None)
+        with BusRun(SPEC, options) as run:
+            result = wait_result(run_dir / "sink.json")
+        return result, run.recorded
+
+
+def fmt_rate(r: dict) -> str:
+    return f"{r['rate']:9,.0f} msg/s ({r['received']:,} received)"
+
+
+def throughput(size: int, count: int) -> None:
+    params = {"size": str(size), "count": str(count), "rate": "0", "latency": ""}
+    direct = run_direct(params)
+    star, _ = run_tool(params, "star", record=False)
+    star_rec, recorded = run_tool(params, "star", record=True)
+    print(f"\nthroughput, {size} B messages, {count:,} sent")
+    print(f"  direct pub → sub     {fmt_rate(direct)}")
+    print(f"  star                 {fmt_rate(star)}   ratio {star['rate'] / direct['rate']:.2f}× direct")
+    print(f"  star + recorder      {fmt_rate(star_rec)}   ratio {star_rec['rate'] / direct['rate']:.2f}× direct")
+    print(f"  loss: sent {count:,}, delivered {star_rec['received']:,}, recorded {recorded.get('data', 0):,}")
+
+
+def latency(count: int) -> None:
+    params = {"size": "200", "count": str(count), "rate": "1000", "latency": "--latency"}
+    direct = run_direct(params)
+    star, _ = run_tool(params, "star", record=False)
+    star_rec, _ = run_tool(params, "star", record=True)
+    passive, _ = run_tool(params, "passive", record=False)
+    passive_rec, _ = run_tool(params, "passive", record=True)
+    print(f"\nlatency at 1 kHz, 200 B, {count:,} messages (one way, µs)")
+    rows = [("direct", direct), ("star", star), ("star + recorder", star_rec),
+            ("passive observer", passive), ("passive + recorder", passive_rec)]
+    for name, r in rows:
+        print(f"  {name:20} p50 {r['p50_us']:8.1f}   p99 {r['p99_us']:8.1f}")
+    print(f"  star added p50: {(star['p50_us'] - direct['p50_us']) / 1000:.3f} ms; "
+          f"star p99 / direct p99: {star['p99_us'] / direct['p99_us']:.2f}×")
+    print(f"  passive + recorder vs direct: p50 {passive_rec['p50_us'] / direct['p50_us']:.2f}×, "
+          f"p99 {passive_rec['p99_us'] / direct['p99_us']:.2f}×")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="fewer messages (a smoke run)")
+    args = ap.parse_args()
+    scale = 0.1 if args.quick else 1.0
+    throughput(200, int(100_000 * scale))
+    throughput(20_000, int(20_000 * scale))
+    latency(int(5_000 * scale))
+
+
+if __name__ == "__main__":
+    main()
