@@ -16,7 +16,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import zenoh
 
@@ -27,7 +27,8 @@ from . import zenoh_config as zc
 from .launcher import Launcher, ProcessExit
 from .observer import ChannelCounter
 from .processes import die_with_parent, stop_process, tail
-from .proxy import StarProxy
+from .interception import InterceptionBridge
+from .proxy import StarProxy, plain_forwarder
 
 HELPER_READY_TIMEOUT = 20.0
 DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the recorder
@@ -41,6 +42,7 @@ class RunOptions:
     params: dict[str, str] = field(default_factory=dict)
     command_line: list[str] = field(default_factory=list)
     run_dir: Path | None = None  # module logs and configs; a temp dir if None
+    interceptor: Any = None  # an ASTAA test case engine (star mode only)
 
 
 class BusRun:
@@ -65,6 +67,7 @@ class BusRun:
         self._helpers: list[subprocess.Popen] = []  # recorder, bus router: ours to stop
         self._helper_output: dict[int, tuple[threading.Thread, list[str]]] = {}
         self.bus_endpoints: list[str] = []
+        self.interception: InterceptionBridge | None = None
 
     # -- lifecycle ---------------------------------------------------------
     def __enter__(self) -> "BusRun":
@@ -80,6 +83,8 @@ class BusRun:
 
     def start(self) -> None:
         opts = self.options
+        if opts.interceptor is not None and opts.mode != "star":
+            raise InputError("a policy needs the star: interception cannot run with --passive")
         if opts.run_dir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix=f"astaa-deft-{self.spec.name}-")
             self.run_dir = Path(self._tmp.name)
@@ -109,8 +114,16 @@ class BusRun:
         self._events_pub = self.session.declare_publisher(topology.EVENTS_KEY)
         self.started_ns = time.time_ns()
         if opts.mode == "star":
-            self.proxy = StarProxy(self.session, self.spec, on_undeclared=self._undeclared)
+            make_forwarder = plain_forwarder
+            if opts.interceptor is not None:
+                self.interception = InterceptionBridge(self.session, opts.interceptor, time.monotonic(),
+                                                       on_mutation=self._mutated)
+                make_forwarder = self.interception.make_forwarder
+            self.proxy = StarProxy(self.session, self.spec, on_undeclared=self._undeclared,
+                                   make_forwarder=make_forwarder)
             self.proxy.start()
+            if self.interception is not None:
+                self.interception.start()
         else:
             self.counter = ChannelCounter(self.session, self.spec, opts.mode)
         if opts.record is not None:
@@ -147,6 +160,9 @@ class BusRun:
                 "--out", str(path), "--mode", self.options.mode, "--meta", json.dumps(meta)]
         for ep in self.bus_endpoints:
             args += ["--connect", ep]
+        if self.interception is not None:
+            for name in sorted(self.interception.targets):
+                args += ["--intercepted", name]
         self.recorder = self._spawn_ready("recorder", args, error_file=path)
 
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None) -> subprocess.Popen:
@@ -177,6 +193,8 @@ class BusRun:
         return proc
 
     def stop(self) -> None:
+        if self.interception is not None:
+            self.interception.stop()  # release held and delayed messages while consumers still listen
         if self.launcher is not None:
             self.launcher.stop()
         if self.session is not None and (self.launcher is not None or self.recorder is not None):
@@ -238,6 +256,9 @@ class BusRun:
         self.event("process_exit", module=exit_.module, pid=exit_.pid, returncode=exit_.returncode,
                    signal=exit_.signal, during_shutdown=exit_.during_shutdown, abnormal=exit_.abnormal,
                    stderr_tail=exit_.stderr_tail)
+
+    def _mutated(self, event: dict) -> None:
+        self.on_event({"kind": "mutation", **event})
 
     def _undeclared(self, module: str, key: str) -> None:
         self.event("undeclared_key", module=module, key=key,

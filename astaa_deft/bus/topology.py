@@ -25,7 +25,18 @@ from . import zenoh_config as zc
 STAR_PREFIX = "sut"
 TOOL_PREFIX = "astaa-deft"
 EVENTS_KEY = f"{TOOL_PREFIX}/events"
+MUTATIONS_KEY = f"{TOOL_PREFIX}/mutations"
 UNDECLARED_PREFIX = f"{TOOL_PREFIX}/undeclared"
+DELIVERED_PREFIX = f"{TOOL_PREFIX}/delivered"  # what an intercepted channel's consumers got
+ORIGINAL_PREFIX = f"{TOOL_PREFIX}/original"  # what its producer sent, when it differs
+
+
+def delivered_key(key: str) -> str:
+    return f"{DELIVERED_PREFIX}/{key}"
+
+
+def original_key(key: str) -> str:
+    return f"{ORIGINAL_PREFIX}/{key}"
 
 
 def module_namespace(module: str) -> str:

@@ -7,6 +7,7 @@ tool adds lives under ``/astaa/``.
 EVENTS_TOPIC = "/astaa/events"  # process exits, undeclared keys, run start/stop, later mutations and verdicts
 FLAGS_TOPIC = "/astaa/flags"  # a bus message the recorder could not decode (logged raw on its own topic)
 ORIGINAL_PREFIX = "/astaa/original/"  # the message before a mutation, by key
+MUTATIONS_TOPIC = "/astaa/mutations"  # what the interceptor did: test case, policy, action, fields, old → new
 
 SPEC_ATTACHMENT = "spec.yaml"
 RUN_METADATA = "astaa-deft.run"

@@ -43,6 +43,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--meta", default="{}", help="JSON object stored as run metadata")
     ap.add_argument("--chunk-size", type=int, default=64 * 1024)
+    ap.add_argument("--intercepted", action="append", default=[],
+                    help="a channel the proxy may alter: record what it delivered, and the originals")
     args = ap.parse_args(argv)
 
     stop = threading.Event()
@@ -67,7 +69,23 @@ def main(argv: list[str] | None = None) -> int:
         def on_sample(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name) -> None:
             q.put((time.time_ns(), cid, codec, name, sample.payload.to_bytes(), sample.timestamp))
 
-        subscribers.append(session.declare_subscriber(key_expr, on_sample))
+        if channel.name in args.intercepted:
+            original_cid = writer.bus_channel(channel, topic=layout.ORIGINAL_PREFIX + channel.key)
+
+            def on_original(sample: zenoh.Sample, cid=original_cid) -> None:
+                q.put((time.time_ns(), cid, None, None, sample.payload.to_bytes(), sample.timestamp))
+
+            subscribers.append(session.declare_subscriber(topology.delivered_key(channel.key), on_sample))
+            subscribers.append(session.declare_subscriber(topology.original_key(channel.key), on_original))
+        else:
+            subscribers.append(session.declare_subscriber(key_expr, on_sample))
+
+    mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
+
+    def on_mutation(sample: zenoh.Sample) -> None:
+        q.put((time.time_ns(), mutations_cid, None, None, sample.payload.to_bytes(), None))
+
+    subscribers.append(session.declare_subscriber(topology.MUTATIONS_KEY, on_mutation))
 
     def on_tool_event(sample: zenoh.Sample) -> None:
         q.put((time.time_ns(), writer.events_channel, None, None, sample.payload.to_bytes(), None))

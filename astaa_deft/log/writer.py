@@ -37,8 +37,8 @@ class LogWriter:
         self._topics: dict[str, int] = {}
         self._sequences: dict[int, int] = {}
         self._finished = False
-        self.events_channel = self._tool_channel(layout.EVENTS_TOPIC)
-        self.flags_channel = self._tool_channel(layout.FLAGS_TOPIC)
+        self.events_channel = self.tool_channel(layout.EVENTS_TOPIC)
+        self.flags_channel = self.tool_channel(layout.FLAGS_TOPIC)
 
     # -- channels ----------------------------------------------------------
     def bus_channel(self, channel: Channel, topic: str | None = None) -> int:
@@ -72,7 +72,7 @@ class LogWriter:
         self._topics[key] = cid
         return cid
 
-    def _tool_channel(self, topic: str) -> int:
+    def tool_channel(self, topic: str) -> int:
         schema_id = self._schema("astaa_deft.Event", layout.EVENT_SCHEMA)
         cid = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
         self._topics[topic] = cid
