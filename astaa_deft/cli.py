@@ -51,6 +51,19 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("file", type=Path)
     info.set_defaults(func=lambda a: _cmd("log_info").run(a.file))
 
+    # extract
+    ext = sub.add_parser("extract", help="DeFT: turn a recorded run into deterministic planner module tests")
+    ext.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy")
+    ext.add_argument("--spec", type=Path, required=True)
+    ext.add_argument("-o", "--out", type=Path, required=True, help="directory for the module tests")
+    ext.add_argument("--threshold", type=float, help="accept a frame within this distance, m (default: the spec's)")
+    ext.add_argument("--process", action="store_true",
+                     help="replay with the planner's own process in lock-step (needs planner.replay.command)")
+    ext.add_argument("--ground-truth", metavar="FIELD",
+                     help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
+    ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
+                                                         a.ground_truth))
+
     # demo
     demo = sub.add_parser("demo", help="run the bundled autonomous-driving demo through the proxy")
     _demo_args(demo)

@@ -155,7 +155,8 @@ class BusRun:
 
     def _start_recorder(self, path: Path) -> None:
         meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
-                "started_ns": str(self.started_ns)}
+                "started_ns": str(self.started_ns),
+                "params": json.dumps({**self.spec.params, **self.options.params}, sort_keys=True)}
         args = [sys.executable, "-m", "astaa_deft.log.recorder", "--spec", str(self.spec.path),
                 "--out", str(path), "--mode", self.options.mode, "--meta", json.dumps(meta)]
         for ep in self.bus_endpoints:

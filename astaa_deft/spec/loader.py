@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, did_you_mean
+from ..deft.config import build_planner
 from ..fields import FieldPathError, check_brittle_pattern
 from ..yamlsource import Node, Source
 from .model import (
@@ -73,7 +74,7 @@ class _SpecBuilder:
         channels = self.channels(v.get("channels"), modules, types)
         brittle = self.brittle(v.get("brittle"), types)
         invariants = self.reserved_list(v.get("invariants"), "invariants")
-        planner = self.reserved_map(v.get("planner"), "planner")
+        planner = build_planner(self.src, v.get("planner"), types, channels, modules)
         self.src.raise_if_problems()
         return Spec(
             name=name,
@@ -512,14 +513,6 @@ class _SpecBuilder:
             self.src.at(node, f"'{what}' must be a list", f"write each entry as '- …' under '{what}:'")
             return []
         return [n.plain() for n in node.value]
-
-    def reserved_map(self, node: Node | None, what: str) -> dict[str, Any] | None:
-        if node is None or node.value is None:
-            return None
-        if not node.is_map:
-            self.src.at(node, f"'{what}' must be a mapping", f"write 'key: value' lines under '{what}:'")
-            return None
-        return node.plain()
 
 
 def _scalar_text(value: Any) -> str:

@@ -110,7 +110,7 @@ class Spec:
     params: Mapping[str, str] = field(default_factory=dict)
     # Sections owned by later stages; kept raw until those stages validate them.
     invariants: tuple[Any, ...] = ()
-    planner: Mapping[str, Any] | None = None
+    planner: Any = None  # astaa_deft.deft.config.PlannerSpec, when the spec names a planner
     source_text: str = ""
 
     def module(self, name: str) -> Module:

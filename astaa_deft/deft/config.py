@@ -1,0 +1,196 @@
+"""The spec's `planner:` section: which module plans, on what, and how to replay it.
+
+Validated with located errors like the rest of the spec; the loader calls
+``build_planner`` with the section's YAML node.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+from ..errors import did_you_mean
+from ..fields import FieldPathError, type_at
+from ..spec.model import Channel, MessageType, Module
+from ..yamlsource import Node, Source
+
+FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
+PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
+
+
+@dataclass(frozen=True)
+class TrajectoryLayout:
+    points: str = "points"  # field path of the array of points in the output message
+    x: str = "x"
+    y: str = "y"
+    t: str = "t"
+    time: str = "absolute"  # "absolute" (the bus clock, s) or "relative" to `stamp`
+    stamp: str = "header.stamp"
+
+
+@dataclass(frozen=True)
+class PlannerSpec:
+    module: str
+    inputs: tuple[str, ...]  # channel names, the trigger among them
+    trigger: str
+    output: str
+    trajectory: TrajectoryLayout
+    factory: str | None = None  # "package.module:Name": in-process replay
+    factory_args: Mapping[str, str] = field(default_factory=dict)  # {placeholders} from params
+    command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
+    threshold: float = 0.0  # metres: the validator's acceptance
+    lookback_ms: float = 20.0  # candidate frame times this far before the trigger (delivery jitter)
+
+
+KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms")
+REPLAY_KEYS = ("factory", "args", "command")
+TRAJ_KEYS = ("points", "x", "y", "t", "time", "stamp")
+
+
+def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageType],
+                  channels: Sequence[Channel], modules: Sequence[Module]) -> PlannerSpec | None:
+    if node is None or node.value is None:
+        return None
+    if not node.is_map:
+        src.at(node, "'planner' must be a mapping", "see docs/deft.md")
+        return None
+    for key in node.value:
+        if key not in KEYS:
+            src.at_key(node, key, f"unknown key '{key}' in 'planner'", did_you_mean(key, KEYS) or f"allowed: {', '.join(KEYS)}")
+    for key in ("module", "inputs", "trigger", "output", "replay"):
+        if key not in node.value:
+            src.at(node, f"'planner' lacks '{key}'", f"add '{key}: …' (see docs/deft.md)")
+    v = node.value
+    by_name = {c.name: c for c in channels}
+    module_names = [m.name for m in modules]
+
+    def text(key: str) -> str:
+        n = v.get(key)
+        if n is None:
+            return ""
+        if not isinstance(n.value, str):
+            src.at(n, f"'planner.{key}' must be a string", "")
+            return ""
+        return n.value
+
+    def channel_ref(n: Node, what: str) -> str:
+        name = n.value if isinstance(n.value, str) else ""
+        if name not in by_name:
+            src.at(n, f"{what} '{n.value}' is not a declared channel", did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
+        return name
+
+    module = text("module")
+    if module and module not in module_names:
+        src.at(v["module"], f"planner module '{module}' is not declared", did_you_mean(module, module_names) or "")
+    inputs: list[str] = []
+    if "inputs" in v:
+        if not v["inputs"].is_list or not v["inputs"].value:
+            src.at(v["inputs"], "'planner.inputs' must be a non-empty list of channel names", "e.g. [routing, localization, prediction]")
+        else:
+            inputs = [channel_ref(n, "planner input") for n in v["inputs"].value]
+    trigger = channel_ref(v["trigger"], "planner trigger") if "trigger" in v else ""
+    if trigger and inputs and trigger not in inputs:
+        src.at(v["trigger"], f"the trigger '{trigger}' is not among the planner's inputs", "add it to 'inputs'")
+    output = channel_ref(v["output"], "planner output") if "output" in v else ""
+    if module and module_names:
+        for name in inputs:
+            ch = by_name.get(name)
+            if ch is not None and module not in ch.consumers:
+                src.at(v["inputs"], f"channel '{name}' does not list '{module}' among its consumers", "add it, or drop the input")
+        ch = by_name.get(output)
+        if ch is not None and ch.producer != module:
+            src.at(v["output"], f"channel '{output}' is produced by '{ch.producer}', not '{module}'", "name the planner's output")
+
+    layout = _trajectory(src, v.get("trajectory"), types, by_name.get(output))
+    factory, args, command = _replay(src, v.get("replay"))
+    threshold = _number(src, v.get("threshold"), "planner.threshold", 0.0)
+    lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 20.0)
+    return PlannerSpec(module, tuple(inputs), trigger, output, layout, factory, args, command, threshold, lookback)
+
+
+def _trajectory(src: Source, node: Node | None, types: Mapping[str, MessageType],
+                output: Channel | None) -> TrajectoryLayout:
+    if node is None:
+        layout = TrajectoryLayout()
+    elif not node.is_map:
+        src.at(node, "'planner.trajectory' must be a mapping", "e.g. {points: points, x: x, y: y, t: t}")
+        return TrajectoryLayout()
+    else:
+        for key in node.value:
+            if key not in TRAJ_KEYS:
+                src.at_key(node, key, f"unknown key '{key}' in 'planner.trajectory'", did_you_mean(key, TRAJ_KEYS) or "")
+        values = {k: n.value for k, n in node.items() if k in TRAJ_KEYS and isinstance(n.value, str)}
+        layout = TrajectoryLayout(**values)
+        if layout.time not in ("absolute", "relative"):
+            src.at(node.value["time"], f"'time' must be 'absolute' or 'relative', not '{layout.time}'", "")
+    if output is None or output.type not in types:
+        return layout
+    where = node if node is not None else None
+    try:
+        points = type_at(types, output.type, layout.points)
+        if points.kind != "array" or points.items is None or points.items.kind != "struct":
+            raise FieldPathError(f"'{layout.points}' is not an array of points", text=layout.points, position=0)
+        for sub in (layout.x, layout.y, layout.t):
+            type_at(types, points.items.ref, sub)
+        if layout.time == "relative":
+            type_at(types, output.type, layout.stamp)
+    except FieldPathError as exc:
+        line, col = (where.line, where.column) if where is not None else (1, 1)
+        src.report(line, col, f"planner trajectory layout does not fit type '{output.type}': {exc}",
+                   "set 'planner.trajectory' {points, x, y, t} to the output's field paths")
+    return layout
+
+
+def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str], tuple[str, ...]]:
+    if node is None:
+        return None, {}, ()
+    if not node.is_map:
+        src.at(node, "'planner.replay' must be a mapping", "{factory: pkg.mod:Name} or {command: [...]}")
+        return None, {}, ()
+    for key in node.value:
+        if key not in REPLAY_KEYS:
+            src.at_key(node, key, f"unknown key '{key}' in 'planner.replay'", did_you_mean(key, REPLAY_KEYS) or "")
+    v = node.value
+    if ("factory" in v) == ("command" in v):
+        src.at(node, "'planner.replay' needs exactly one of 'factory' or 'command'",
+               "factory: in-process (pkg.module:Name); command: the planner's own process, fed over Zenoh")
+    factory = None
+    if "factory" in v:
+        factory = v["factory"].value
+        if not isinstance(factory, str) or not FACTORY_RE.match(factory):
+            src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", "e.g. mystack.planner:Planner")
+            factory = None
+    args: dict[str, str] = {}
+    if "args" in v:
+        if not v["args"].is_map:
+            src.at(v["args"], "'replay.args' must be a mapping of keyword arguments", "e.g. {defects: '{defects}'}")
+        else:
+            args = {k: str(n.value) for k, n in v["args"].items()}
+    command: tuple[str, ...] = ()
+    if "command" in v:
+        c = v["command"]
+        if c.is_list and c.value and all(isinstance(n.value, str) for n in c.value):
+            command = tuple(n.value for n in c.value)
+        else:
+            src.at(c, "'replay.command' must be a non-empty list of strings", 'e.g. ["{python}", "-m", "mystack.planner"]')
+    return factory, args, command
+
+
+def _number(src: Source, node: Node | None, what: str, default: float) -> float:
+    if node is None:
+        return default
+    if isinstance(node.value, bool) or not isinstance(node.value, (int, float)) or node.value < 0:
+        src.at(node, f"'{what}' must be a number ≥ 0", "")
+        return default
+    return float(node.value)
+
+
+def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str, Any]:
+    """Placeholders filled from the run's params; 'true'/'on' style words become booleans."""
+    out: dict[str, Any] = {}
+    for key, value in args.items():
+        text = value.format_map(dict(params))
+        low = text.lower()
+        out[key] = True if low in ("true", "on", "yes") else False if low in ("false", "off", "no") else text
+    return out

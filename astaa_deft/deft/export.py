@@ -1,0 +1,71 @@
+"""Write extracted frames as a self-contained module test suite.
+
+DIR/frames.mcap holds each input message used by any frame (once) and each
+expected output; DIR/deft.json (the manifest) names, per frame, which
+messages form it, plus everything replay needs: the spec text, the planner
+factory and the run's params. `pytest DIR` runs the suite through the
+plugin in `astaa_deft.deft.pytest_plugin`; the original log is not needed.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from ..log.writer import LogWriter
+from ..spec.model import Spec
+from .extract import ExtractedFrame
+
+MANIFEST = "deft.json"
+FRAMES = "frames.mcap"
+VERSION = 1
+
+
+def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[str, str], out_dir: Path,
+                 oracles: Sequence[Mapping[str, Any]] = ()) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cfg = spec.planner
+    writer = LogWriter(out_dir / FRAMES, spec)
+    channel_ids = {name: writer.bus_channel(spec.channel(name)) for name in list(cfg.inputs) + [cfg.output]}
+    written: dict[tuple[str, int, bytes], int] = {}
+    counts: dict[str, int] = {name: 0 for name in channel_ids}
+
+    def put(name: str, msg) -> int:
+        key = (name, msg.log_time, msg.data)
+        if key not in written:
+            writer.message(channel_ids[name], msg.log_time, msg.data, msg.publish_time)
+            written[key] = counts[name]
+            counts[name] += 1
+        return written[key]
+
+    entries = []
+    for f in frames:
+        entries.append({
+            "index": f.index,
+            "inputs": {name: put(name, msg) for name, msg in sorted(f.inputs.items())},
+            "output": put(cfg.output, f.output),
+            "frame_time_ns": f.frame_time,
+            "trigger_time_ns": f.trigger_time,
+            "output_time_ns": f.output.log_time,
+            "recorded_distance": f.comparison.distance,
+        })
+    writer.finish()
+    manifest = {
+        "version": VERSION,
+        "spec_name": spec.name,
+        "spec_yaml": spec.source_text,
+        "params": dict(params),
+        "threshold": cfg.threshold,
+        "frames": entries,
+        "oracles": list(oracles),
+    }
+    path = out_dir / MANIFEST
+    path.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")
+    return path
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)

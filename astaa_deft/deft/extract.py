@@ -1,0 +1,177 @@
+"""Extraction: from a recorded log to validated frames, replaying the planner in order."""
+
+from __future__ import annotations
+
+import copy
+import json
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from ..codecs import get_codec
+from ..codecs.base import DecodeError
+from ..errors import InputError, Problem
+from ..log.reader import LogContents, LoggedMessage
+from ..spec.model import Spec
+from .config import PlannerSpec
+from .frames import Stream, candidates
+from .replay import ReplayPlanner, trajectory_points
+from .validator import Comparison, compare
+
+
+@dataclass
+class ExtractedFrame:
+    index: int  # 0-based, in output order
+    output: LoggedMessage
+    trigger_time: int
+    frame_time: int
+    inputs: dict[str, LoggedMessage]  # channel → the message used
+    comparison: Comparison
+    accepted: bool
+    candidates_tried: int
+    exact: bool  # the replayed output message equals the recorded one, field for field
+
+
+@dataclass
+class Extraction:
+    frames: list[ExtractedFrame] = field(default_factory=list)
+    skipped: list[tuple[int, str]] = field(default_factory=list)  # (output index, why)
+    outputs: int = 0
+    reconstruction_seconds: float = 0.0  # candidate search + decoding, planner time excluded
+    planner_seconds: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+
+    def accepted_at(self, threshold: float) -> int:
+        return sum(1 for f in self.frames if f.comparison.distance <= threshold)
+
+
+def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str, list[LoggedMessage]]:
+    out: dict[str, list[LoggedMessage]] = {}
+    for name in names:
+        key = spec.channel(name).key
+        if key not in log.channels:
+            raise InputError(Problem(str(log.path), None, None,
+                                     f"the log has no channel '{name}' (key '{key}')",
+                                     "record the run with this spec, or check that the log belongs to it"))
+        out[name] = sorted(log.on(key), key=lambda m: m.log_time)
+    return out
+
+
+def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
+            progress: Callable[[int, int], None] = lambda done, total: None) -> Extraction:
+    cfg: PlannerSpec = spec.planner
+    streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
+    outputs = streams_msgs.pop(cfg.output)
+    streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
+    codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
+    decoded: dict[tuple[str, int], Any] = {}
+
+    def decode(name: str, idx: int) -> Any:
+        k = (name, idx)
+        if k not in decoded:
+            try:
+                decoded[k] = codecs[name].decode(streams_msgs[name][idx].data)
+            except DecodeError:
+                decoded[k] = None
+        return decoded[k]
+
+    result = Extraction(outputs=len(outputs))
+    previous: dict[str, int] = {}
+    lookback = int(cfg.lookback_ms * 1e6)
+    for out_index, output in enumerate(outputs):
+        t0 = time.perf_counter()
+        options = candidates(streams, cfg.trigger, output.log_time, previous, lookback)
+        try:
+            expected = codecs[cfg.output].decode(output.data)
+        except DecodeError as exc:
+            expected = None
+            result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
+        expected_points = trajectory_points(expected, cfg.trajectory)
+        result.reconstruction_seconds += time.perf_counter() - t0
+        if not options:
+            result.skipped.append((out_index, "an input had no message yet"))
+            progress(out_index + 1, len(outputs))
+            continue
+        if not planner.can_snapshot:
+            options = options[:1]
+        # Several candidates: each must start from the same planner state.
+        t1 = time.perf_counter()
+        start_state = planner.snapshot() if len(options) > 1 else None
+        result.planner_seconds += time.perf_counter() - t1
+        best = None  # (comparison, candidate, replayed, state after it or None if current, tries)
+        for tries, cand in enumerate(options, start=1):
+            t0 = time.perf_counter()
+            frame = {name: decode(name, idx) for name, idx in cand.choice.items()}
+            result.reconstruction_seconds += time.perf_counter() - t0
+            if any(v is None for v in frame.values()):
+                continue
+            t1 = time.perf_counter()
+            if tries > 1 and start_state is not None:
+                planner.restore(copy.deepcopy(start_state))
+            try:
+                replayed = planner.step(frame)
+            except Exception as exc:  # the planner under test may crash on a frame: that is data
+                replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+            cmp = compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+            if cmp.within(cfg.threshold):
+                best = (cmp, cand, replayed, None, tries)
+                result.planner_seconds += time.perf_counter() - t1
+                break
+            if best is None or cmp.distance < best[0].distance:
+                state = planner.snapshot() if start_state is not None else None
+                best = (cmp, cand, replayed, state, tries)
+            result.planner_seconds += time.perf_counter() - t1
+        if best is None:
+            result.skipped.append((out_index, "no candidate frame decodes"))
+            continue
+        cmp, cand, replayed, state, _ = best
+        if state is not None:
+            planner.restore(state)  # carry on from the state the kept frame produced
+        tries = len(options) if not cmp.within(cfg.threshold) else best[4]
+        previous = dict(cand.choice)
+        result.frames.append(ExtractedFrame(
+            index=len(result.frames),
+            output=output,
+            trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]],
+            frame_time=cand.frame_time,
+            inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
+            comparison=cmp,
+            accepted=cmp.within(cfg.threshold),
+            candidates_tried=tries,
+            exact=_same(replayed, expected),
+        ))
+        progress(out_index + 1, len(outputs))
+    return result
+
+
+def _same(a: Any, b: Any) -> bool:
+    return json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
+
+
+def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "debug.inputs") -> tuple[int, int]:
+    """(frames whose chosen inputs match the planner's own debug record, frames checked).
+
+    Evaluation only: reads the demo planner's debug block naming the header
+    sequence numbers of the inputs it used.
+    """
+    from ..fields import get
+
+    codec = get_codec(spec.channel(spec.planner.output).encoding)
+    exact = checked = 0
+    for f in extraction.frames:
+        try:
+            truth = get(codec.decode(f.output.data), debug_path)
+        except DecodeError:
+            continue
+        if not truth or not isinstance(truth[0][1], Mapping):
+            continue
+        checked += 1
+        used = {}
+        for name, msg in f.inputs.items():
+            try:
+                used[name] = get_codec(spec.channel(name).encoding).decode(msg.data)["header"]["seq"]
+            except (DecodeError, KeyError, TypeError):
+                used[name] = None
+        if all(used.get(name) == seq for name, seq in truth[0][1].items()):
+            exact += 1
+    return exact, checked

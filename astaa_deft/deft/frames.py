@@ -1,0 +1,94 @@
+"""Frame reconstruction: which input messages did the planner consume for an output?
+
+Pure logic over time-sorted message streams (times are the recorder's
+receive times, ns). For an output logged at t_P:
+
+- the trigger is the newest trigger-channel message at or before t_P;
+- the frame time t_F lies between the trigger (t_T) and t_P; each other
+  input is the newest message at or before t_F, never older than the one
+  used in the previous frame (per channel); a channel's lone message is
+  reused for every frame;
+- each distinct frame that some t_F yields is a candidate; they are ordered
+  by likelihood: t_F = t_T first (planners snapshot inputs when triggered),
+  then later t_F in time order, then t_F just before messages the recorder
+  logged up to `lookback` before the trigger (the planner may have received
+  them after the trigger: delivery jitter).
+
+Everything is bisection over sorted arrays: a frame costs microseconds.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+
+@dataclass(frozen=True)
+class Stream:
+    """One channel's messages in receive order: times (ns) ascending."""
+
+    channel: str
+    times: Sequence[int]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    frame_time: int
+    choice: Mapping[str, int]  # channel → index into its stream (trigger included)
+
+
+def newest_at_or_before(times: Sequence[int], t: int) -> int:
+    """Index of the newest message at or before t, or -1."""
+    return bisect_right(times, t) - 1
+
+
+def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_f: int,
+             previous: Mapping[str, int]) -> dict[str, int] | None:
+    """The frame at time t_F; None if some input has had no message yet."""
+    choice = {trigger: trigger_index}
+    for name, stream in streams.items():
+        if name == trigger:
+            continue
+        idx = newest_at_or_before(stream.times, t_f)
+        idx = max(idx, previous.get(name, -1))  # never older than in the previous frame
+        if idx < 0:
+            if len(stream.times) == 1:
+                idx = 0  # a lone message (sent once, e.g. a route) is the only one there is
+            else:
+                return None
+        choice[name] = idx
+    return choice
+
+
+def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
+               lookback_ns: int) -> list[Candidate]:
+    """Distinct candidate frames for an output at t_P, most likely first."""
+    trig = streams[trigger]
+    t_index = newest_at_or_before(trig.times, t_p)
+    if t_index < 0:
+        return []
+    t_t = trig.times[t_index]
+    later: set[int] = set()
+    earlier: set[int] = set()
+    for name, stream in streams.items():
+        if name == trigger:
+            continue
+        times = stream.times
+        lo, hi = bisect_right(times, t_t), bisect_right(times, t_p)
+        later.update(times[lo:hi])
+        lo_back = bisect_right(times, t_t - lookback_ns - 1)
+        # "Just before" each message logged shortly before (or with) the trigger.
+        earlier.update(t - 1 for t in times[lo_back:lo])
+    order = [t_t] + sorted(later) + sorted(earlier, reverse=True)
+    out: list[Candidate] = []
+    seen: set[tuple] = set()
+    for t_f in order:
+        choice = frame_at(streams, trigger, t_index, t_f, previous)
+        if choice is None:
+            continue
+        key = tuple(sorted(choice.items()))
+        if key not in seen:
+            seen.add(key)
+            out.append(Candidate(t_f, choice))
+    return out

@@ -1,0 +1,84 @@
+"""pytest plugin: `pytest DIR` runs an exported DeFT suite (DIR/deft.json).
+
+Registered through the `pytest11` entry point, so any environment with
+astaa-deft installed runs extracted module tests with plain pytest. One test
+per frame, in order; a failure shows where the replayed trajectory left the
+recorded one.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from .export import MANIFEST
+
+
+def pytest_collect_file(file_path, parent):
+    if file_path.name == MANIFEST:
+        return DeftSuiteFile.from_parent(parent, path=file_path)
+    return None
+
+
+class DeftSuiteFile(pytest.File):
+    def collect(self):
+        from .suite import Suite
+
+        self.suite = Suite(self.path.parent)
+        for position, entry in enumerate(self.suite.frames):
+            yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", position=position)
+        for n, oracle in enumerate(self.suite.manifest.get("oracles", [])):
+            yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", oracle=oracle)
+
+
+class FrameMismatch(Exception):
+    pass
+
+
+class FrameTest(pytest.Item):
+    def __init__(self, *, position: int, **kwargs):
+        super().__init__(**kwargs)
+        self.position = position
+
+    def runtest(self) -> None:
+        suite = self.parent.suite
+        result = suite.results()[self.position]
+        if result.error or not result.comparison.within(suite.threshold):
+            raise FrameMismatch(result)
+
+    def repr_failure(self, excinfo, style=None):
+        if not isinstance(excinfo.value, FrameMismatch):
+            return super().repr_failure(excinfo)
+        r = excinfo.value.args[0]
+        lines = [f"frame {r.index}: the planner's output changed"]
+        if r.error:
+            lines.append(f"  the planner raised {r.error}")
+        c = r.comparison
+        lines.append(f"  distance {c.distance:.6g} m (threshold {self.parent.suite.threshold:g} m), "
+                     f"largest point error {c.max_error:.6g} m over {c.points} points ({c.how})")
+        lines.append(f"  {'t':>10} {'recorded x,y':>24} {'replayed x,y':>24}")
+        for i in range(min(6, max(len(r.expected), len(r.replayed)))):
+            e = r.expected[i] if i < len(r.expected) else None
+            p = r.replayed[i] if i < len(r.replayed) else None
+            t = (e or p)[2]
+            fmt = lambda q: f"{q[0]:11.4f},{q[1]:11.4f}" if q else f"{'—':>23}"  # noqa: E731
+            lines.append(f"  {t:10.3f} {fmt(e):>24} {fmt(p):>24}")
+        return "\n".join(lines)
+
+    def reportinfo(self):
+        return self.path, None, f"DeFT {self.name}"
+
+
+class OracleTest(pytest.Item):
+    def __init__(self, *, oracle: dict, **kwargs):
+        super().__init__(**kwargs)
+        self.oracle = oracle
+
+    def runtest(self) -> None:
+        from .oracle import check_oracle
+
+        problem = check_oracle(self.parent.suite, self.oracle)
+        if problem:
+            raise AssertionError(problem)
+
+    def reportinfo(self):
+        return self.path, None, f"DeFT oracle {self.name}"

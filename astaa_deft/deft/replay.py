@@ -1,0 +1,174 @@
+"""Run the planner alone on frames: in-process (a factory) or its own process (lock-step over Zenoh).
+
+Both take a frame as {channel name: decoded message} and return the decoded
+output message. In-process planners can be snapshotted (deep copy), which is
+what lets extraction try several candidate frames from the same state.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+import json
+import queue
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Mapping, Protocol
+
+from ..bus import zenoh_config as zc
+from ..bus.processes import stop_process, tail
+from ..errors import InputError, Problem
+from ..fields import get
+from ..spec.model import Spec
+from .config import PlannerSpec, TrajectoryLayout, resolve_args
+from .validator import Point
+
+OUTPUT_TIMEOUT = 10.0
+
+
+class ReplayPlanner(Protocol):
+    can_snapshot: bool
+
+    def step(self, frame: Mapping[str, dict]) -> dict: ...
+    def snapshot(self) -> Any: ...
+    def restore(self, snap: Any) -> None: ...
+    def close(self) -> None: ...
+
+
+def load_factory(path: str) -> Any:
+    module_name, _, attr = path.partition(":")
+    try:
+        return getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(Problem("<spec>", None, None, f"planner factory '{path}' cannot be loaded: {exc}",
+                                 "check 'planner.replay.factory' and that its package is installed")) from None
+
+
+class InProcessPlanner:
+    can_snapshot = True
+
+    def __init__(self, factory: str, kwargs: Mapping[str, Any]):
+        self.factory = factory
+        self.obj = load_factory(factory)(**kwargs)
+        if not callable(getattr(self.obj, "step", None)):
+            raise InputError(f"planner factory '{factory}' returned an object without a step(frame) method")
+
+    def step(self, frame: Mapping[str, dict]) -> dict:
+        return self.obj.step(frame)
+
+    def snapshot(self) -> Any:
+        return copy.deepcopy(self.obj)
+
+    def restore(self, snap: Any) -> None:
+        self.obj = snap
+
+    def close(self) -> None:
+        pass
+
+
+class LockstepPlanner:
+    """The planner's own process on a private Zenoh router, one frame at a time.
+
+    For each frame: publish the non-trigger inputs, then the trigger, then wait
+    for one output. Its state lives in the process, so no snapshots: only the
+    most likely candidate frame can be tried.
+    """
+
+    can_snapshot = False
+
+    def __init__(self, spec: Spec, planner: PlannerSpec, params: Mapping[str, str]):
+        import zenoh
+
+        self.spec, self.planner = spec, planner
+        self._dir = tempfile.TemporaryDirectory(prefix="astaa-deft-replay-")
+        run_dir = Path(self._dir.name)
+        endpoint = zc.loopback_endpoint()
+        self.session = zc.open_session(zc.config_dict(mode="router", listen=[endpoint]))
+        config = zc.write_config_file(zc.config_dict(mode="client", connect=[endpoint]), run_dir / "zenoh.json5")
+        values = {**spec.params, **params, "python": sys.executable, "zenoh_config": str(config),
+                  "module": planner.module, "run_dir": str(run_dir),
+                  "spec_dir": str(spec.path.parent if spec.path else Path.cwd())}
+        argv = [part.format_map(values) for part in planner.command]
+        self.log_path = run_dir / "planner.log"
+        self.outputs: "queue.Queue[bytes]" = queue.Queue()
+        out_key = spec.channel(planner.output).key
+        self._sub = self.session.declare_subscriber(out_key, lambda s: self.outputs.put(s.payload.to_bytes()))
+        self._pubs = {name: self.session.declare_publisher(spec.channel(name).key,
+                                                           congestion_control=zenoh.CongestionControl.BLOCK)
+                      for name in planner.inputs}
+        with open(self.log_path, "wb") as log:
+            self.proc = subprocess.Popen(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
+                                         stderr=subprocess.STDOUT, start_new_session=True)
+        self._wait_connected()
+
+    def _wait_connected(self) -> None:
+        deadline = time.monotonic() + 20.0
+        trigger_pub = self._pubs[self.planner.trigger]
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise InputError(f"the planner process exited while starting:\n{tail(self.log_path)}")
+            if trigger_pub.matching_status.matching:
+                time.sleep(0.3)  # its other subscriptions follow the first within moments
+                return
+            time.sleep(0.05)
+        raise InputError("the planner process never subscribed to its trigger channel")
+
+    def step(self, frame: Mapping[str, dict]) -> dict:
+        for name, message in frame.items():
+            if name != self.planner.trigger:
+                self._pubs[name].put(json.dumps(message))
+        self._pubs[self.planner.trigger].put(json.dumps(frame[self.planner.trigger]))
+        try:
+            return json.loads(self.outputs.get(timeout=OUTPUT_TIMEOUT))
+        except queue.Empty:
+            raise InputError(f"the planner process gave no output within {OUTPUT_TIMEOUT:g} s:\n"
+                             f"{tail(self.log_path)}") from None
+
+    def snapshot(self) -> Any:
+        raise NotImplementedError
+
+    def restore(self, snap: Any) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        stop_process(self.proc, grace=5.0)
+        self._sub.undeclare()
+        self.session.close()
+        self._dir.cleanup()
+
+
+def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False) -> ReplayPlanner:
+    planner: PlannerSpec = spec.planner
+    if planner.factory and not (prefer_process and planner.command):
+        return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}))
+    return LockstepPlanner(spec, planner, params)
+
+
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout) -> list[Point]:
+    """(x, y, t absolute) of each planned point, per the spec's layout."""
+    if not isinstance(message, Mapping):
+        return []
+    found = get(message, layout.points)
+    if not found or not isinstance(found[0][1], list):
+        return []
+    offset = 0.0
+    if layout.time == "relative":
+        stamp = get(message, layout.stamp)
+        offset = float(stamp[0][1]) if stamp else 0.0
+    out = []
+    for point in found[0][1]:
+        try:
+            x, y, t = (float(get(point, p)[0][1]) for p in (layout.x, layout.y, layout.t))
+        except (IndexError, TypeError, ValueError):
+            continue
+        out.append((x, y, t + offset))
+    return out
+
+
+def _env() -> dict[str, str]:
+    import os
+
+    return dict(os.environ)

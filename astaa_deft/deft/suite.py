@@ -1,0 +1,67 @@
+"""Load an exported module test suite and replay it (used by the pytest plugin)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..codecs import get_codec
+from ..log.reader import read_log
+from ..spec.loader import load_spec_text
+from ..spec.model import Spec
+from .export import FRAMES, MANIFEST
+from .replay import make_planner, trajectory_points
+from .validator import Comparison, Point, compare
+
+
+@dataclass
+class FrameResult:
+    index: int
+    comparison: Comparison
+    replayed: list[Point]
+    expected: list[Point]
+    error: str | None = None
+
+
+class Suite:
+    def __init__(self, directory: Path):
+        self.directory = directory
+        self.manifest = json.loads((directory / MANIFEST).read_text())
+        self.spec: Spec = load_spec_text(self.manifest["spec_yaml"], name=f"{self.manifest['spec_name']} (embedded)",
+                                         base_dir=directory)
+        self.threshold = float(self.manifest["threshold"])
+        self._results: list[FrameResult] | None = None
+
+    @property
+    def frames(self) -> list[dict]:
+        return self.manifest["frames"]
+
+    def results(self) -> list[FrameResult]:
+        """Replay every frame once, in order (the planner keeps state across frames)."""
+        if self._results is not None:
+            return self._results
+        log = read_log(self.directory / FRAMES)
+        cfg = self.spec.planner
+        by_channel: dict[str, list[Any]] = {}
+        for name in list(cfg.inputs) + [cfg.output]:
+            codec = get_codec(self.spec.channel(name).encoding)
+            by_channel[name] = [codec.decode(m.data) for m in log.on(self.spec.channel(name).key)]
+        planner = make_planner(self.spec, self.manifest["params"])
+        results = []
+        try:
+            for entry in self.frames:
+                frame = {name: by_channel[name][i] for name, i in entry["inputs"].items()}
+                expected = trajectory_points(by_channel[cfg.output][entry["output"]], cfg.trajectory)
+                error = None
+                try:
+                    replayed_msg = planner.step(frame)
+                except Exception as exc:  # the planner under test crashing is a test failure, not ours
+                    replayed_msg, error = None, f"{type(exc).__name__}: {exc}"
+                replayed = trajectory_points(replayed_msg, cfg.trajectory)
+                results.append(FrameResult(entry["index"], compare(replayed, expected), replayed, expected, error))
+        finally:
+            planner.close()
+        self._results = results
+        return results

@@ -1,0 +1,67 @@
+"""Does a replayed trajectory match the recorded one?
+
+The replayed trajectory is interpolated (linearly, in x and y) onto the
+recorded trajectory's timestamps over the span both cover; the result is the
+lock-step Euclidean distance √Σ(dx²+dy²) over those points and the largest
+single point error. Edge cases are decided here, once:
+
+- both empty: a match (distance 0);
+- one empty, the other not: no match (distance ∞);
+- a single recorded or replayed point, or no overlap in time: the first
+  points are compared;
+- replayed times not strictly increasing: compared index by index over the
+  shorter length (interpolation would be meaningless).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+Point = tuple[float, float, float]  # x, y, t (absolute seconds)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    distance: float  # lock-step Euclidean distance, m
+    max_error: float  # largest single point error, m
+    points: int  # how many points were compared
+    how: str  # "interpolated", "first point", "index", "both empty", "one empty"
+
+    def within(self, threshold: float) -> bool:
+        return self.distance <= threshold
+
+
+def compare(replayed: Sequence[Point], recorded: Sequence[Point]) -> Comparison:
+    if not replayed and not recorded:
+        return Comparison(0.0, 0.0, 0, "both empty")
+    if not replayed or not recorded:
+        return Comparison(math.inf, math.inf, 0, "one empty")
+    rep = np.asarray(replayed, dtype=float)
+    rec = np.asarray(recorded, dtype=float)
+    if not (np.isfinite(rep).all() and np.isfinite(rec).all()):
+        exact = rep.shape == rec.shape and bool(np.array_equal(rep, rec, equal_nan=True))
+        return Comparison(0.0 if exact else math.inf, 0.0 if exact else math.inf, len(rec), "non-finite")
+    if len(rep) == 1 or len(rec) == 1:
+        return _points(rep[:1], rec[:1], "first point")
+    if not np.all(np.diff(rep[:, 2]) > 0):
+        n = min(len(rep), len(rec))
+        return _points(rep[:n], rec[:n], "index")
+    start, end = max(rep[0, 2], rec[0, 2]), min(rep[-1, 2], rec[-1, 2])
+    inside = rec[(rec[:, 2] >= start) & (rec[:, 2] <= end)]
+    if len(inside) == 0:
+        return _points(rep[:1], rec[:1], "first point")
+    x = np.interp(inside[:, 2], rep[:, 2], rep[:, 0])
+    y = np.interp(inside[:, 2], rep[:, 2], rep[:, 1])
+    return _errors(np.hypot(x - inside[:, 0], y - inside[:, 1]), "interpolated")
+
+
+def _points(a: np.ndarray, b: np.ndarray, how: str) -> Comparison:
+    return _errors(np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]), how)
+
+
+def _errors(d: np.ndarray, how: str) -> Comparison:
+    return Comparison(float(math.sqrt(float(np.sum(d * d)))), float(np.max(d)), int(len(d)), how)

@@ -1,0 +1,69 @@
+"""DeFT frame reconstruction heuristics, on crafted message streams (times in ms → ns)."""
+
+from __future__ import annotations
+
+from astaa_deft.deft.frames import Stream, candidates, frame_at, newest_at_or_before
+
+MS = 1_000_000
+
+
+def streams(**times_ms):
+    return {name: Stream(name, [int(t * MS) for t in ts]) for name, ts in times_ms.items()}
+
+
+def test_newest_at_or_before():
+    times = [10, 20, 30]
+    assert newest_at_or_before(times, 5) == -1
+    assert newest_at_or_before(times, 20) == 1
+    assert newest_at_or_before(times, 29) == 1
+    assert newest_at_or_before(times, 99) == 2
+
+
+def test_trigger_bound_first_candidate_is_the_snapshot_at_the_trigger():
+    s = streams(trigger=[100, 200], pose=[90, 110, 190, 205, 215], route=[5])
+    c = candidates(s, "trigger", t_p=int(220 * MS), previous={}, lookback_ns=0)
+    # The trigger is the newest at or before the output; the first frame time is the trigger's.
+    assert c[0].choice["trigger"] == 1
+    assert c[0].frame_time == 200 * MS
+    assert c[0].choice["pose"] == 2  # newest pose at or before 200 ms (190)
+
+
+def test_later_candidates_follow_in_time_order_and_stay_before_the_output():
+    s = streams(trigger=[100, 200], pose=[90, 110, 190, 205, 215, 230], route=[5])
+    c = candidates(s, "trigger", t_p=int(220 * MS), previous={}, lookback_ns=0)
+    assert [x.choice["pose"] for x in c] == [2, 3, 4]  # 190, then 205, then 215 — never 230 (after t_P)
+    assert [x.frame_time for x in c] == [200 * MS, 205 * MS, 215 * MS]
+
+
+def test_monotonic_per_channel():
+    s = streams(trigger=[100, 200], pose=[90, 150, 190])
+    # The previous frame already used pose #2 (190 ms): a frame may not go back to #1.
+    c = candidates(s, "trigger", t_p=int(120 * MS), previous={"pose": 2}, lookback_ns=0)
+    assert c[0].choice["pose"] == 2
+
+
+def test_lone_message_is_reused_even_if_logged_after_the_frame_time():
+    s = streams(trigger=[100], pose=[90], route=[150])
+    c = candidates(s, "trigger", t_p=int(160 * MS), previous={}, lookback_ns=0)
+    assert c[0].choice["route"] == 0
+
+
+def test_no_candidate_while_an_input_has_no_message():
+    s = streams(trigger=[100], pose=[150, 160])
+    assert candidates(s, "trigger", t_p=int(120 * MS), previous={}, lookback_ns=0) == []
+    assert frame_at(s, "trigger", 0, 120 * MS, {}) is None
+
+
+def test_lookback_candidates_come_last_newest_first():
+    # pose #1 was logged 2 ms before the trigger: the planner may not have had it yet.
+    s = streams(trigger=[100], pose=[80, 98, 105])
+    c = candidates(s, "trigger", t_p=int(110 * MS), previous={}, lookback_ns=10 * MS)
+    assert [x.choice["pose"] for x in c] == [1, 2, 0]  # at trigger, later, then just before #1
+
+
+def test_candidates_are_distinct_message_sets():
+    s = streams(trigger=[100], pose=[90, 101, 102], speed=[95, 101])
+    c = candidates(s, "trigger", t_p=int(110 * MS), previous={}, lookback_ns=0)
+    sets = [tuple(sorted(x.choice.items())) for x in c]
+    assert len(sets) == len(set(sets))
+    assert len(c) == 3  # at 100, at 101 (pose #1 and speed #1 together), at 102
