@@ -2,8 +2,9 @@
 
 Channels the test case can touch get an intercepting forwarder; every other
 channel keeps the proxy's zero-copy path. For intercepted channels the proxy
-also tells the recorder what it delivered, what the original was, and what it
-did, on the tool's own keys, so the log holds each affected message three ways.
+tells the recorder, in one message per delivery on the tool's own key, what
+it delivered (the payload), and in the attachment what the original was and
+what it did — one message, so the three records can never be mismatched.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import Any, Callable, Protocol
 import zenoh
 
 from .proxy import BLOCK, REMOTE, LiveRoute, plain_forwarder
-from .topology import MUTATIONS_KEY, delivered_key, original_key
+from .topology import intercept_record, intercepted_key
 
 TICK_SECONDS = 0.01
 
@@ -52,8 +53,7 @@ class InterceptionBridge:
         self._order = itertools.count()
         self._routes: dict[str, LiveRoute] = {}
         self._last_meta: dict[str, tuple] = {}
-        self._record_pubs: dict[str, tuple[zenoh.Publisher, zenoh.Publisher]] = {}
-        self._mutations_pub = session.declare_publisher(MUTATIONS_KEY)
+        self._record_pubs: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick_loop, name="interception-ticks", daemon=True)
         self.mutations = 0
@@ -65,10 +65,8 @@ class InterceptionBridge:
             return plain_forwarder(live)
         self._routes[name] = live
         key = live.route.channel.key
-        self._record_pubs[name] = (
-            self.session.declare_publisher(delivered_key(key), congestion_control=BLOCK, allowed_destination=REMOTE),
-            self.session.declare_publisher(original_key(key), congestion_control=BLOCK, allowed_destination=REMOTE),
-        )
+        self._record_pubs[name] = self.session.declare_publisher(
+            intercepted_key(key), congestion_control=BLOCK, allowed_destination=REMOTE)
         consumers = tuple(c for c, _ in live.publishers)
 
         def forward(sample: zenoh.Sample) -> None:
@@ -128,15 +126,13 @@ class InterceptionBridge:
         for consumer, pub in live.publishers:
             if consumer in wanted:
                 pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
-        delivered_pub, original_pub = self._record_pubs[live.route.channel.name]
-        delivered_pub.put(payload, encoding=encoding)
+        record = None
         if d.event is not None:
             self.mutations += 1
             body = d.event.to_json()
-            if d.original is not None:
-                original_pub.put(d.original, encoding=encoding)
-            self._mutations_pub.put(json.dumps(body, default=str))
+            record = json.dumps(intercept_record(body, d.original, delivered=bool(d.consumers)), default=str)
             self.on_mutation(body)
+        self._record_pubs[live.route.channel.name].put(payload, encoding=encoding, attachment=record)
 
     def _tick_loop(self) -> None:
         while not self._stop.wait(TICK_SECONDS):

@@ -16,6 +16,8 @@ missed the first second of traffic.)
 
 from __future__ import annotations
 
+import base64
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,18 +27,24 @@ from . import zenoh_config as zc
 STAR_PREFIX = "sut"
 TOOL_PREFIX = "astaa-deft"
 EVENTS_KEY = f"{TOOL_PREFIX}/events"
-MUTATIONS_KEY = f"{TOOL_PREFIX}/mutations"
 UNDECLARED_PREFIX = f"{TOOL_PREFIX}/undeclared"
-DELIVERED_PREFIX = f"{TOOL_PREFIX}/delivered"  # what an intercepted channel's consumers got
-ORIGINAL_PREFIX = f"{TOOL_PREFIX}/original"  # what its producer sent, when it differs
+INTERCEPTED_PREFIX = f"{TOOL_PREFIX}/intercepted"  # per delivery on an intercepted channel, for the recorder
 
 
-def delivered_key(key: str) -> str:
-    return f"{DELIVERED_PREFIX}/{key}"
+def intercepted_key(key: str) -> str:
+    return f"{INTERCEPTED_PREFIX}/{key}"
 
 
-def original_key(key: str) -> str:
-    return f"{ORIGINAL_PREFIX}/{key}"
+def intercept_record(event: dict, original: bytes | None, delivered: bool) -> dict:
+    """The attachment of an intercepted delivery: what was done, to what, and whether anything was delivered."""
+    return {"event": event, "delivered": delivered,
+            "original": base64.b64encode(original).decode() if original is not None else None}
+
+
+def read_intercept_record(attachment: bytes) -> tuple[dict, bytes | None, bool]:
+    body = json.loads(attachment)
+    original = base64.b64decode(body["original"]) if body.get("original") is not None else None
+    return body["event"], original, bool(body.get("delivered", True))
 
 
 def module_namespace(module: str) -> str:

@@ -24,6 +24,7 @@ from pathlib import Path
 import zenoh
 
 from ..bus import topology
+from ..bus.topology import read_intercept_record
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
@@ -72,20 +73,17 @@ def main(argv: list[str] | None = None) -> int:
         if channel.name in args.intercepted:
             original_cid = writer.bus_channel(channel, topic=layout.ORIGINAL_PREFIX + channel.key)
 
-            def on_original(sample: zenoh.Sample, cid=original_cid) -> None:
-                q.put((time.time_ns(), cid, None, None, sample.payload.to_bytes(), sample.timestamp))
+            def on_intercepted(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name,
+                               original_cid=original_cid) -> None:
+                att = sample.attachment.to_bytes() if sample.attachment is not None else None
+                q.put((time.time_ns(), ("intercepted", cid, original_cid, att), codec, name,
+                       sample.payload.to_bytes(), sample.timestamp))
 
-            subscribers.append(session.declare_subscriber(topology.delivered_key(channel.key), on_sample))
-            subscribers.append(session.declare_subscriber(topology.original_key(channel.key), on_original))
+            subscribers.append(session.declare_subscriber(topology.intercepted_key(channel.key), on_intercepted))
         else:
             subscribers.append(session.declare_subscriber(key_expr, on_sample))
 
     mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
-
-    def on_mutation(sample: zenoh.Sample) -> None:
-        q.put((time.time_ns(), mutations_cid, None, None, sample.payload.to_bytes(), None))
-
-    subscribers.append(session.declare_subscriber(topology.MUTATIONS_KEY, on_mutation))
 
     def on_tool_event(sample: zenoh.Sample) -> None:
         q.put((time.time_ns(), writer.events_channel, None, None, sample.payload.to_bytes(), None))
@@ -98,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     subscribers.append(session.declare_subscriber(topology.EVENTS_KEY, on_tool_event))
     subscribers.append(session.declare_subscriber(f"{topology.UNDECLARED_PREFIX}/**", on_undeclared))
 
-    write_thread = threading.Thread(target=_drain, args=(q, writer, counts), daemon=True)
+    write_thread = threading.Thread(target=_drain, args=(q, writer, counts, mutations_cid), daemon=True)
     write_thread.start()
     print("ready", flush=True)
 
@@ -117,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     os._exit(0)  # the shutdown timer is a non-daemon thread
 
 
-def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int]) -> None:
+def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int) -> None:
     undeclared_ids: dict[str, int] = {}
     while True:
         item = q.get()
@@ -125,6 +123,13 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int]) ->
             return
         log_time, cid, codec, name, data, ts = item
         publish_time = ts.get_time_as_ntp64().as_nanos() if ts is not None else log_time
+        if isinstance(cid, tuple) and cid[0] == "intercepted":
+            _, cid, original_cid, attachment = cid
+            if attachment is not None:  # the proxy changed something: log it three ways
+                if _write_intercepted(writer, cid, original_cid, mutations_cid, attachment, log_time, data,
+                                      publish_time):
+                    counts[name] += 1
+                continue
         if isinstance(cid, tuple):  # an undeclared key the proxy forwarded
             _, key, encoding = cid
             if key not in undeclared_ids:
@@ -140,6 +145,17 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int]) ->
         except DecodeError as exc:
             writer.event("undecodable", time_ns=log_time, channel_id=writer.flags_channel,
                          channel=name, sequence=seq, reason=str(exc), size=len(data))
+
+
+def _write_intercepted(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, attachment: bytes,
+                       log_time: int, data: bytes, publish_time: int) -> bool:
+    """Original, delivered message and mutation event, cross-referenced; True if something was delivered."""
+    event, original, delivered = read_intercept_record(attachment)
+    original_seq = writer.message(original_cid, log_time, original, publish_time) if original is not None else None
+    delivered_seq = writer.message(cid, log_time, data, publish_time) if delivered else None
+    body = {**event, "original_sequence": original_seq, "delivered_sequence": delivered_seq}
+    writer.message(mutations_cid, log_time, json.dumps(body, default=str).encode())
+    return delivered
 
 
 if __name__ == "__main__":
