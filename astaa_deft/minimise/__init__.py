@@ -1,0 +1,34 @@
+"""Minimise a failing run to the few mutations, frames or fields that cause it.
+
+The engine (:mod:`.ddmin`) knows nothing of runs: it takes items and a tester.
+"""
+
+from astaa_deft.minimise.ddmin import (
+    Config,
+    DDResult,
+    FailsWithoutItems,
+    GroupResult,
+    MinimiseError,
+    NotReproducible,
+    Outcome,
+    OutcomeCache,
+    Tester,
+    TestResult,
+    ddmin,
+    minimise_groups,
+)
+
+__all__ = [
+    "Config",
+    "DDResult",
+    "FailsWithoutItems",
+    "GroupResult",
+    "MinimiseError",
+    "NotReproducible",
+    "Outcome",
+    "OutcomeCache",
+    "TestResult",
+    "Tester",
+    "ddmin",
+    "minimise_groups",
+]
