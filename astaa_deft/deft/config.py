@@ -25,8 +25,24 @@ class TrajectoryLayout:
     x: str = "x"
     y: str = "y"
     t: str = "t"
+    heading: str = "heading"  # used by the collision oracle only
     time: str = "absolute"  # "absolute" (the bus clock, s) or "relative" to `stamp`
     stamp: str = "header.stamp"
+
+
+@dataclass(frozen=True)
+class CollisionOracle:
+    """A planned pose that, reached at its planned time, overlaps an obstacle as predicted in that frame."""
+
+    ego_length: float
+    ego_width: float
+    channel: str  # the input holding predicted obstacles
+    array: str = "obstacles"
+    length: str = "length"
+    width: str = "width"
+    id: str = "id"
+    trajectory: str = "trajectory"  # each obstacle's predicted poses: {t, x, y, heading}
+    margin: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -41,11 +57,14 @@ class PlannerSpec:
     command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
     threshold: float = 0.0  # metres: the validator's acceptance
     lookback_ms: float = 20.0  # candidate frame times this far before the trigger (delivery jitter)
+    collision: CollisionOracle | None = None
 
 
-KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms")
+KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms", "oracle")
 REPLAY_KEYS = ("factory", "args", "command")
-TRAJ_KEYS = ("points", "x", "y", "t", "time", "stamp")
+TRAJ_KEYS = ("points", "x", "y", "t", "heading", "time", "stamp")
+COLLISION_KEYS = ("ego", "obstacles", "margin")
+OBSTACLE_KEYS = ("channel", "array", "length", "width", "id", "trajectory")
 
 
 def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageType],
@@ -106,7 +125,45 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     factory, args, command = _replay(src, v.get("replay"))
     threshold = _number(src, v.get("threshold"), "planner.threshold", 0.0)
     lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 20.0)
-    return PlannerSpec(module, tuple(inputs), trigger, output, layout, factory, args, command, threshold, lookback)
+    collision = _oracle(src, v.get("oracle"), inputs)
+    return PlannerSpec(module, tuple(inputs), trigger, output, layout, factory, args, command, threshold, lookback,
+                       collision)
+
+
+def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracle | None:
+    if node is None:
+        return None
+    if not node.is_map or set(node.value) - {"collision"}:
+        src.at(node, "'planner.oracle' takes one key, 'collision'", "see docs/deft.md")
+        return None
+    c = node.value.get("collision")
+    if c is None or not c.is_map:
+        src.at(node, "'planner.oracle.collision' must be a mapping", "{ego: {length, width}, obstacles: {channel, …}}")
+        return None
+    for key in c.value:
+        if key not in COLLISION_KEYS:
+            src.at_key(c, key, f"unknown key '{key}' in the collision oracle", did_you_mean(key, COLLISION_KEYS) or "")
+    ego, obstacles = c.value.get("ego"), c.value.get("obstacles")
+    if ego is None or obstacles is None or not ego.is_map or not obstacles.is_map:
+        src.at(c, "the collision oracle needs 'ego: {length, width}' and 'obstacles: {channel, …}'", "")
+        return None
+    length = _number(src, ego.value.get("length"), "oracle ego length", 0.0)
+    width = _number(src, ego.value.get("width"), "oracle ego width", 0.0)
+    if length <= 0 or width <= 0:
+        src.at(ego, "the ego's 'length' and 'width' must be positive numbers (m)", "e.g. {length: 4.6, width: 1.9}")
+    fields = {}
+    for key, n in obstacles.items():
+        if key not in OBSTACLE_KEYS:
+            src.at_key(obstacles, key, f"unknown key '{key}' in the oracle's obstacles",
+                       did_you_mean(key, OBSTACLE_KEYS) or "")
+        elif isinstance(n.value, str):
+            fields[key] = n.value
+    channel = fields.pop("channel", "")
+    if channel not in inputs:
+        src.at(obstacles, f"the oracle's obstacle channel '{channel}' is not a planner input",
+               "name the input that carries predicted obstacles")
+    margin = _number(src, c.value.get("margin"), "oracle margin", 0.0)
+    return CollisionOracle(length, width, channel, margin=margin, **fields)
 
 
 def _trajectory(src: Source, node: Node | None, types: Mapping[str, MessageType],

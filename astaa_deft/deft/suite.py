@@ -23,6 +23,7 @@ class FrameResult:
     replayed: list[Point]
     expected: list[Point]
     error: str | None = None
+    message: Any = None  # the replayed output message
 
 
 class Suite:
@@ -33,6 +34,7 @@ class Suite:
                                          base_dir=directory)
         self.threshold = float(self.manifest["threshold"])
         self._results: list[FrameResult] | None = None
+        self._by_channel: dict[str, list[Any]] | None = None
 
     @property
     def frames(self) -> list[dict]:
@@ -42,12 +44,8 @@ class Suite:
         """Replay every frame once, in order (the planner keeps state across frames)."""
         if self._results is not None:
             return self._results
-        log = read_log(self.directory / FRAMES)
         cfg = self.spec.planner
-        by_channel: dict[str, list[Any]] = {}
-        for name in list(cfg.inputs) + [cfg.output]:
-            codec = get_codec(self.spec.channel(name).encoding)
-            by_channel[name] = [codec.decode(m.data) for m in log.on(self.spec.channel(name).key)]
+        by_channel = self._messages()
         planner = make_planner(self.spec, self.manifest["params"])
         results = []
         try:
@@ -60,8 +58,22 @@ class Suite:
                 except Exception as exc:  # the planner under test crashing is a test failure, not ours
                     replayed_msg, error = None, f"{type(exc).__name__}: {exc}"
                 replayed = trajectory_points(replayed_msg, cfg.trajectory)
-                results.append(FrameResult(entry["index"], compare(replayed, expected), replayed, expected, error))
+                results.append(FrameResult(entry["index"], compare(replayed, expected), replayed, expected, error,
+                                           replayed_msg))
         finally:
             planner.close()
         self._results = results
         return results
+
+    def _messages(self) -> dict[str, list[Any]]:
+        if self._by_channel is None:
+            log = read_log(self.directory / FRAMES)
+            cfg = self.spec.planner
+            self._by_channel = {}
+            for name in list(cfg.inputs) + [cfg.output]:
+                codec = get_codec(self.spec.channel(name).encoding)
+                self._by_channel[name] = [codec.decode(m.data) for m in log.on(self.spec.channel(name).key)]
+        return self._by_channel
+
+    def decoded(self, channel: str, index: int) -> Any:
+        return self._messages()[channel][index]
