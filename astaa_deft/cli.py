@@ -42,7 +42,15 @@ def build_parser() -> argparse.ArgumentParser:
     proxy.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                        help="override a spec param used in module commands")
     proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here")
+    proxy.add_argument("--stop-on-violation", action="store_true", help="end the run at the first broken invariant")
     proxy.set_defaults(func=_proxy)
+
+    # check
+    chk = sub.add_parser("check", help="evaluate the spec's invariants over a recorded log (exit 1 on a finding)")
+    chk.add_argument("log", type=Path, help="the MCAP test log")
+    chk.add_argument("--spec", type=Path, help="the SUT spec (default: the one stored in the log)")
+    chk.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    chk.set_defaults(func=lambda a: _cmd("check").run(a.log, a.spec, as_json=a.json))
 
     # log
     log = sub.add_parser("log", help="inspect test logs").add_subparsers(dest="log_command", metavar="ACTION")
@@ -89,7 +97,7 @@ def _proxy(a: argparse.Namespace) -> int:
 
     spec = load_spec(a.spec)
     return proxy.run(spec, a.record, a.passive, a.duration, a.launch, console.parse_params(a.param),
-                     sys.argv, a.run_dir)
+                     sys.argv, a.run_dir, stop_on_violation=a.stop_on_violation)
 
 
 def _demo(a: argparse.Namespace) -> int:

@@ -57,6 +57,7 @@ class InterceptionBridge:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick_loop, name="interception-ticks", daemon=True)
         self.mutations = 0
+        self.on_delivered: Callable[[str, bytes], None] = lambda channel, payload: None  # e.g. online monitors
 
     # -- wiring ------------------------------------------------------------
     def make_forwarder(self, live: LiveRoute) -> Callable[[zenoh.Sample], None]:
@@ -132,7 +133,10 @@ class InterceptionBridge:
             body = d.event.to_json()
             record = json.dumps(intercept_record(body, d.original, delivered=bool(d.consumers)), default=str)
             self.on_mutation(body)
-        self._record_pubs[live.route.channel.name].put(payload, encoding=encoding, attachment=record)
+        name = live.route.channel.name
+        self._record_pubs[name].put(payload, encoding=encoding, attachment=record)
+        if d.consumers:
+            self.on_delivered(name, payload if isinstance(payload, bytes) else payload.to_bytes())
 
     def _tick_loop(self) -> None:
         while not self._stop.wait(TICK_SECONDS):

@@ -24,6 +24,7 @@ from ..errors import InputError, Problem
 from ..spec.model import Spec
 from . import topology
 from . import zenoh_config as zc
+from ..monitor.online import OnlineMonitors
 from .launcher import Launcher, ProcessExit
 from .observer import ChannelCounter
 from .processes import die_with_parent, stop_process, tail
@@ -43,6 +44,7 @@ class RunOptions:
     command_line: list[str] = field(default_factory=list)
     run_dir: Path | None = None  # module logs and configs; a temp dir if None
     interceptor: Any = None  # an ASTAA test case engine (star mode only)
+    stop_on_violation: bool = False
 
 
 class BusRun:
@@ -68,6 +70,10 @@ class BusRun:
         self._helper_output: dict[int, tuple[threading.Thread, list[str]]] = {}
         self.bus_endpoints: list[str] = []
         self.interception: InterceptionBridge | None = None
+        self.monitors: OnlineMonitors | None = None
+        self.verdict = None  # the CRASH-scale verdict, once stopped
+        self.violations: list[dict] = []
+        self.stop_requested = threading.Event()  # --stop-on-violation
 
     # -- lifecycle ---------------------------------------------------------
     def __enter__(self) -> "BusRun":
@@ -128,7 +134,13 @@ class BusRun:
             self.counter = ChannelCounter(self.session, self.spec, opts.mode)
         if opts.record is not None:
             self._start_recorder(opts.record)
-        self.event("run_started", mode=opts.mode, spec=self.spec.name, command_line=opts.command_line)
+        started = self.event("run_started", mode=opts.mode, spec=self.spec.name, command_line=opts.command_line)
+        self.monitors = OnlineMonitors(self.spec, started["time_ns"], self._violated)
+        intercepted = self.interception.targets if self.interception is not None else set()
+        self.monitors.subscribe(self.session, [(k, ch.name) for k, ch in topology.recorded_keys(self.spec, opts.mode)
+                                               if ch.name not in intercepted])
+        if self.interception is not None:
+            self.interception.on_delivered = self.monitors.feed
         if opts.launch:
             self._launch()
 
@@ -196,8 +208,13 @@ class BusRun:
     def stop(self) -> None:
         if self.interception is not None:
             self.interception.stop()  # release held and delayed messages while consumers still listen
+        stopping = self.event("run_stopping") if self.monitors is not None else None
         if self.launcher is not None:
             self.launcher.stop()
+        if self.monitors is not None and stopping is not None:
+            self.verdict = self.monitors.finish(stopping["time_ns"])
+            self.event("verdict", **self.verdict.to_json())
+            self.monitors = None
         if self.session is not None and (self.launcher is not None or self.recorder is not None):
             self.event("run_stopped")
             time.sleep(DRAIN_SECONDS)
@@ -252,8 +269,17 @@ class BusRun:
         self.on_event(body)
         return body
 
+    def _violated(self, violation) -> None:
+        body = self.event("violation", **violation.to_json())
+        self.violations.append(body)
+        if self.options.stop_on_violation:
+            self.stop_requested.set()
+
     def _process_exited(self, exit_: ProcessExit) -> None:
         self.exits.append(exit_)
+        if self.monitors is not None:
+            self.monitors.process_exit(exit_.module, exit_.returncode, exit_.signal, exit_.time_ns,
+                                       exit_.during_shutdown, exit_.stderr_tail)
         self.event("process_exit", module=exit_.module, pid=exit_.pid, returncode=exit_.returncode,
                    signal=exit_.signal, during_shutdown=exit_.during_shutdown, abnormal=exit_.abnormal,
                    stderr_tail=exit_.stderr_tail)

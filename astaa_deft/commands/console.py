@@ -107,6 +107,20 @@ def format_event(event: dict) -> str | None:
         if tail:
             text += "\n   " + "\n   ".join(tail[-5:])
         return text
+    if kind == "violation":
+        from ..monitor.violation import Violation, format_violation
+
+        return format_violation(Violation.from_json(event))
+    if kind == "mutation":
+        fields = ", ".join(f"{c.get('path')}: {_short(c.get('old'))} → {_short(c.get('new'))}"
+                           for c in event.get("fields", []) if isinstance(c, dict))
+        return (f"~~ {event.get('action')} on '{event.get('channel')}' #{event.get('message_index')}"
+                f" (policy {event.get('policy')})" + (f": {fields}" if fields else ""))
     if kind == "undeclared_key":
         return f"-- undeclared key '{event.get('key')}' from '{event.get('module')}': {event.get('note')}"
     return None
+
+
+def _short(value, limit: int = 40) -> str:
+    text = value if isinstance(value, str) else repr(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"

@@ -9,16 +9,20 @@ from typing import Callable
 
 from ..bus.run import BusRun, RunOptions
 from ..spec.model import Spec
+from ..monitor.verdict import format_verdict
 from .console import RateMeter, StatusLine, StopSignal, format_event, say
 
 
 @dataclass
 class Outcome:
-    reason: str  # "duration", "signal", "all modules exited", "stopped"
+    reason: str  # "duration", "signal", "all modules exited", "violation", "stopped"
     seconds: float
     counts: dict[str, int]
     recorded: dict[str, int]
     crashes: list
+    verdict: object = None  # astaa_deft.monitor.verdict.Verdict
+    violations: list = None
+    mutations: int = 0
 
 
 def run_bus(spec: Spec, options: RunOptions, duration: float | None,
@@ -48,6 +52,9 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
                 if duration is not None and time.monotonic() - t0 >= duration:
                     reason = "duration"
                     break
+                if run.stop_requested.is_set():
+                    reason = "violation (--stop-on-violation)"
+                    break
                 if options.launch and run.launcher is not None and not run.alive():
                     reason = "all modules exited"
                     break
@@ -57,7 +64,8 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
                     break
             seconds = time.monotonic() - t0
             counts = run.counts()
-        return Outcome(reason, seconds, counts, run.recorded, run.crashed())
+        return Outcome(reason, seconds, counts, run.recorded, run.crashed(), run.verdict, run.violations,
+                       run.interception.mutations if run.interception is not None else 0)
 
 
 def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
@@ -68,9 +76,11 @@ def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
 
 
 def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, launch: bool,
-        params: dict[str, str], command_line: list[str], run_dir: Path | None) -> int:
+        params: dict[str, str], command_line: list[str], run_dir: Path | None,
+        stop_on_violation: bool = False, interceptor=None) -> int:
     options = RunOptions(mode="passive" if passive else "star", launch=launch, record=record, params=params,
-                         command_line=command_line, run_dir=run_dir)
+                         command_line=command_line, run_dir=run_dir, stop_on_violation=stop_on_violation,
+                         interceptor=interceptor)
     say(f"astaa-deft proxy: spec '{spec.name}', {'passive' if passive else 'star'} mode"
         + (f", recording to {record}" if record else "") + " — Ctrl-C to stop")
     outcome = run_bus(spec, options, duration)
@@ -78,10 +88,13 @@ def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, 
     for name, n in outcome.counts.items():
         rec = f", recorded {outcome.recorded.get(name, 0)}" if record else ""
         say(f"  {name:20} {n:8d} messages{rec}")
+    if interceptor is not None:
+        say(f"mutations applied: {outcome.mutations}")
     if record:
         say(f"log: {record}  (astaa-deft log info {record})")
-    if outcome.crashes:
-        for c in outcome.crashes:
-            say(f"crashed: {c.describe()}")
-        return 1
-    return 0
+    for c in outcome.crashes:
+        say(f"crashed: {c.describe()}")
+    if outcome.verdict is not None:
+        say(format_verdict(outcome.verdict))
+        return 0 if outcome.verdict.klass == "Pass" else 1
+    return 1 if outcome.crashes else 0

@@ -61,6 +61,15 @@ def format_info(log: LogContents) -> str:
             lines.append(f"  crash: module '{e.get('module')}' ({how})")
         elif e.get("kind") == "undeclared_key":
             lines.append(f"  undeclared key '{e.get('key')}' from module '{e.get('module')}'")
+    violations = Counter(e.get("invariant") for e in events if e.get("kind") == "violation")
+    if violations:
+        lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
+    verdicts = [e for e in events if e.get("kind") == "verdict"]
+    if verdicts:
+        from ..monitor.verdict import format_verdict
+
+        start = next((e["time_ns"] for e in events if e.get("kind") == "run_started"), None)
+        lines.append(format_verdict(verdicts[-1], start))
     flags = log.flags()
     if flags:
         per = Counter(f.get("channel") for f in flags)

@@ -15,6 +15,7 @@ from typing import Any
 from ..errors import InputError, did_you_mean
 from ..deft.config import build_planner
 from ..fields import FieldPathError, check_brittle_pattern
+from ..monitor.invariants import build_invariants
 from ..yamlsource import Node, Source
 from .model import (
     SCALAR_KINDS,
@@ -73,7 +74,7 @@ class _SpecBuilder:
         modules = self.modules(v.get("modules"), params)
         channels = self.channels(v.get("channels"), modules, types)
         brittle = self.brittle(v.get("brittle"), types)
-        invariants = self.reserved_list(v.get("invariants"), "invariants")
+        invariants = build_invariants(self.src, v.get("invariants"), types, channels, [m.name for m in modules])
         planner = build_planner(self.src, v.get("planner"), types, channels, modules)
         self.src.raise_if_problems()
         return Spec(
@@ -505,14 +506,6 @@ class _SpecBuilder:
                 continue
             out.append(item.value)
         return out
-
-    def reserved_list(self, node: Node | None, what: str) -> list[Any]:
-        if node is None:
-            return []
-        if not node.is_list:
-            self.src.at(node, f"'{what}' must be a list", f"write each entry as '- …' under '{what}:'")
-            return []
-        return [n.plain() for n in node.value]
 
 
 def _scalar_text(value: Any) -> str:

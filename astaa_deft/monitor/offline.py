@@ -1,0 +1,142 @@
+"""Offline checking: the spec's invariants over a recorded log.
+
+The log is replayed into the same ``MonitorSet`` the proxy uses online:
+
+* bus messages of the channels invariants read, decoded with the channel's
+  codec (an undecodable payload is passed as ``None``, as online), in
+  log-time order, with ``seq`` = the message's sequence number on its
+  channel in the log (the recorder numbers them from 1);
+* ``process_exit`` events at their ``time_ns``;
+* a tick at every message time, then ``finish`` at the end of the run.
+
+The run's start is its ``run_started`` event (the time the online monitors
+counted from); its end is the ``run_stopping`` event if the tool logged one
+(the moment it began shutting the SUT down, when online monitoring
+stopped), else the last bus message. Messages after the end are shutdown
+noise and are not judged.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+from ..codecs import Codec, get_codec
+from ..codecs.base import DecodeError
+from ..log import layout
+from ..log.reader import LogContents
+from ..spec.model import Spec
+from .monitorset import MonitorSet
+from .verdict import Verdict
+from .violation import Violation
+
+START_EVENT = "run_started"
+STOP_EVENT = "run_stopping"
+VIOLATION_EVENT = "violation"
+VERDICT_EVENT = "verdict"
+
+
+@dataclass
+class CheckResult:
+    violations: list[Violation]
+    verdict: Verdict
+    start_ns: int
+    end_ns: int
+    messages: int  # bus messages given to the monitors
+    stats: dict[str, dict[str, int]]
+    seconds: float  # time spent evaluating (decoding included, reading the file not)
+    online_verdict: dict | None = None  # the verdict the proxy logged during the run, if any
+    online_violations: list[dict] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict.klass == "Pass"
+
+
+def check_log(log: LogContents, spec: Spec) -> CheckResult:
+    events = log.events()
+    start_ns = _start(log, events)
+    end_ns = _end(log, events)
+    monitors = MonitorSet(spec, start_ns)
+    wanted = monitors.channels()
+    routes = _routes(log, spec, wanted)
+    exits = sorted((e for e in events if e.get("kind") == "process_exit"), key=lambda e: e.get("time_ns", 0))
+
+    clock = time.perf_counter()
+    exit_index = 0
+    for message in sorted((m for m in log.messages if m.topic in routes), key=lambda m: m.log_time):
+        if message.log_time > end_ns:
+            break
+        while exit_index < len(exits) and exits[exit_index].get("time_ns", 0) <= message.log_time:
+            _feed_exit(monitors, exits[exit_index])
+            exit_index += 1
+        channel, codec = routes[message.topic]
+        try:
+            value = codec.decode(message.data)
+        except DecodeError:
+            value = None
+        monitors.on_tick(message.log_time)
+        monitors.on_message(channel, message.log_time, value, message.sequence)
+    for exit_event in exits[exit_index:]:
+        _feed_exit(monitors, exit_event)
+    monitors.finish(end_ns)
+    seconds = time.perf_counter() - clock
+
+    extra = [e for e in events if e.get("kind") == "bus_lost"]
+    online = [e for e in events if e.get("kind") == VERDICT_EVENT]
+    return CheckResult(
+        violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(extra),
+        start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,
+        online_verdict=online[-1] if online else None,
+        online_violations=[e for e in events if e.get("kind") == VIOLATION_EVENT],
+        warnings=list(log.warnings) + monitors.warnings,
+    )
+
+
+def _routes(log: LogContents, spec: Spec, wanted: set[str]) -> dict[str, tuple[str, Codec]]:
+    """Log topic -> (channel name, codec) for the channels the invariants read."""
+    out = {}
+    for topic, info in log.channels.items():
+        if topic.startswith("/astaa/"):
+            continue
+        name = info.metadata.get("channel")
+        if name is None:
+            declared = spec.channel_for_key(topic)
+            name = declared.name if declared else None
+        if name in wanted:
+            out[topic] = (name, get_codec(spec.channel(name).encoding))
+    return out
+
+
+def _start(log: LogContents, events: list[dict]) -> int:
+    started = [e["time_ns"] for e in events if e.get("kind") == START_EVENT and "time_ns" in e]
+    if started:
+        return int(started[0])
+    bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
+    return min(bus) if bus else 0
+
+
+def _end(log: LogContents, events: list[dict]) -> int:
+    stopping = [e["time_ns"] for e in events if e.get("kind") == STOP_EVENT and "time_ns" in e]
+    if stopping:
+        return int(stopping[0])
+    bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
+    return max(bus) if bus else _start(log, events)
+
+
+def _feed_exit(monitors: MonitorSet, event: dict) -> None:
+    monitors.on_process_exit(
+        module=str(event.get("module")), returncode=int(event.get("returncode") or 0), signal=event.get("signal"),
+        time_ns=int(event.get("time_ns", 0)), during_shutdown=bool(event.get("during_shutdown")),
+        stderr_tail=str(event.get("stderr_tail") or ""))
+
+
+def spec_from_log(log: LogContents, name: str) -> Spec | None:
+    """The spec the run was recorded with (attached to the log), or None."""
+    from ..spec.loader import load_spec_text
+
+    text = log.attachments.get(layout.SPEC_ATTACHMENT)
+    if text is None:
+        return None
+    return load_spec_text(text.decode("utf-8"), name=name)
