@@ -1,45 +1,69 @@
-"""Oriented rectangles in the plane and whether they overlap (separating axis test).
+"""Oriented rectangles on the ground plane and how far apart two of them are.
 
-Shared by the collision monitor and the DeFT collision oracle: vehicles and
-obstacles are boxes given by centre, heading, length and width.
+Shared by the collision monitor and the DeFT collision oracle.
+
+The separating axis theorem: two convex polygons are disjoint exactly when
+their projections onto one of their edge normals are disjoint. For two
+rectangles that is four axes; the largest gap over those axes is positive
+when they are apart (a lower bound of their distance) and, when they
+overlap, minus the smallest push that would separate them.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from dataclasses import dataclass
 
 
-class Box(NamedTuple):
+@dataclass(frozen=True)
+class Box:
+    """A footprint: centre (x, y), heading in radians from the x axis, length along it, width across."""
+
     x: float
     y: float
-    heading: float  # rad
+    heading: float
     length: float
     width: float
 
-    def corners(self) -> list[tuple[float, float]]:
-        c, s = math.cos(self.heading), math.sin(self.heading)
-        hl, hw = self.length / 2.0, self.width / 2.0
-        return [(self.x + dx * c - dy * s, self.y + dx * s + dy * c)
-                for dx, dy in ((hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw))]
-
     def grown(self, margin: float) -> "Box":
-        return self._replace(length=self.length + 2 * margin, width=self.width + 2 * margin)
+        """The box with ``margin`` added on every side."""
+        return Box(self.x, self.y, self.heading, self.length + 2 * margin, self.width + 2 * margin)
+
+    @property
+    def radius(self) -> float:
+        return 0.5 * math.hypot(self.length, self.width)
 
 
-def overlap(a: Box, b: Box) -> bool:
-    """True if the two boxes intersect (touching counts)."""
-    if math.hypot(a.x - b.x, a.y - b.y) > (math.hypot(a.length, a.width) + math.hypot(b.length, b.width)) / 2:
-        return False  # cheap reject: bounding circles apart
-    ca, cb = a.corners(), b.corners()
-    for box in (a, b):
-        for angle in (box.heading, box.heading + math.pi / 2):
-            ax, ay = math.cos(angle), math.sin(angle)
-            pa = [x * ax + y * ay for x, y in ca]
-            pb = [x * ax + y * ay for x, y in cb]
-            if max(pa) < min(pb) or max(pb) < min(pa):
-                return False
-    return True
+def overlap(a: Box, b: Box) -> float:
+    """How deep ``a`` and ``b`` overlap (metres, > 0), or 0.0 when they do not (touching included)."""
+    if math.hypot(b.x - a.x, b.y - a.y) >= a.radius + b.radius:  # bounding circles apart: skip the axes
+        return 0.0
+    return max(0.0, -separation(a, b))
+
+
+def separation(a: Box, b: Box) -> float:
+    """The largest gap between the boxes' projections on their four axes (metres).
+
+    > 0: apart by at least that much; <= 0: touching, or overlapping by that much.
+    """
+    dx, dy = b.x - a.x, b.y - a.y
+    best = -math.inf
+    a_axes = _axes(a.heading)
+    b_axes = _axes(b.heading)
+    for ux, uy in a_axes + b_axes:
+        gap = abs(dx * ux + dy * uy) - _half_extent(a, a_axes, ux, uy) - _half_extent(b, b_axes, ux, uy)
+        best = max(best, gap)
+    return best
+
+
+def _axes(heading: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    c, s = math.cos(heading), math.sin(heading)
+    return (c, s), (-s, c)
+
+
+def _half_extent(box: Box, axes: tuple[tuple[float, float], tuple[float, float]], ux: float, uy: float) -> float:
+    (lx, ly), (wx, wy) = axes
+    return 0.5 * box.length * abs(lx * ux + ly * uy) + 0.5 * box.width * abs(wx * ux + wy * uy)
 
 
 def interpolate_pose(poses: list[tuple[float, float, float, float]], t: float) -> tuple[float, float, float] | None:

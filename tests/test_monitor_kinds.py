@@ -18,7 +18,7 @@ from monitor_helpers import (
 )
 
 from astaa_deft.monitor import check_log
-from astaa_deft.monitor.geometry import Box, overlap, separation
+from astaa_deft.geometry import Box, overlap, separation
 
 
 def check(tmp_path, invariants: str, write) -> list:

@@ -65,7 +65,7 @@ def first_collision(plan: Sequence[Pose], obstacles_msg: Mapping[str, Any] | Non
         ego = Box(x, y, heading, oracle.ego_length, oracle.ego_width).grown(oracle.margin)
         for ident, poses, (length, width) in tracks:
             pose = interpolate_pose(poses, t)
-            if pose is not None and overlap(ego, Box(pose[0], pose[1], pose[2], length, width)):
+            if pose is not None and overlap(ego, Box(pose[0], pose[1], pose[2], length, width)) > 0:
                 return {"t": t, "obstacle": ident, "x": x, "y": y}
     return None
 

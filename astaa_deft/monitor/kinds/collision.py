@@ -38,7 +38,7 @@ from ...spec.model import FieldType
 from ...yamlsource import Node
 from ..base import NO_VIOLATIONS, EpisodeGate, Invariant, Monitor, MonitorContext
 from ..expression import RUNTIME_ERRORS, follow
-from ..geometry import Box, overlap
+from ...geometry import Box, overlap
 from ..spec_reader import InvariantReader
 from ..violation import Violation, json_safe
 
