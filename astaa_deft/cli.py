@@ -43,7 +43,32 @@ def build_parser() -> argparse.ArgumentParser:
                        help="override a spec param used in module commands")
     proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here")
     proxy.add_argument("--stop-on-violation", action="store_true", help="end the run at the first broken invariant")
+    proxy.add_argument("--policy", type=Path, help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages")
+    proxy.add_argument("--dictionary", type=Path, action="append", default=[],
+                       help="an exceptional-value dictionary on top of the default one (repeatable)")
     proxy.set_defaults(func=_proxy)
+
+    # generate
+    gen = sub.add_parser("generate", help="write ASTAA test cases drawn from a spec and the dictionary")
+    gen.add_argument("--spec", type=Path, required=True)
+    gen.add_argument("--count", type=int, required=True)
+    gen.add_argument("--seed", type=int, required=True)
+    gen.add_argument("-o", "--out", type=Path, required=True)
+    gen.add_argument("--duration", type=_positive, default=30.0, help="windows fall inside this many seconds")
+    gen.add_argument("--include-brittle", action="store_true", help="also target timestamps, sequence numbers…")
+    gen.add_argument("--dictionary", type=Path, action="append", default=[])
+    gen.set_defaults(func=lambda a: _cmd("generate").run(a.spec, a.count, a.seed, a.out, a.duration,
+                                                          a.include_brittle, a.dictionary))
+
+    # policy
+    pol = sub.add_parser("policy", help="work with ASTAA test cases").add_subparsers(dest="policy_command",
+                                                                                     metavar="ACTION")
+    pol.required = True
+    pc = pol.add_parser("check", help="validate test case files (or directories of them)")
+    pc.add_argument("files", type=Path, nargs="+")
+    pc.add_argument("--spec", type=Path, help="also check channels, fields and values against this spec")
+    pc.add_argument("--dictionary", type=Path, action="append", default=[])
+    pc.set_defaults(func=lambda a: _cmd("policy_check").run(a.files, a.spec, a.dictionary))
 
     # check
     chk = sub.add_parser("check", help="evaluate the spec's invariants over a recorded log (exit 1 on a finding)")
@@ -96,8 +121,13 @@ def _proxy(a: argparse.Namespace) -> int:
     from .spec.loader import load_spec
 
     spec = load_spec(a.spec)
+    interceptor = None
+    if a.policy is not None:
+        from .intercept import load_interceptor
+
+        interceptor = load_interceptor(a.policy, spec, a.dictionary)
     return proxy.run(spec, a.record, a.passive, a.duration, a.launch, console.parse_params(a.param),
-                     sys.argv, a.run_dir, stop_on_violation=a.stop_on_violation)
+                     sys.argv, a.run_dir, stop_on_violation=a.stop_on_violation, interceptor=interceptor)
 
 
 def _demo(a: argparse.Namespace) -> int:

@@ -45,7 +45,7 @@ class InterceptionBridge:
                  on_mutation: Callable[[dict], None] = lambda event: None):
         self.session = session
         self.interceptor = interceptor
-        self.start = start_monotonic
+        self.t0 = start_monotonic
         self.on_mutation = on_mutation
         self.targets = interceptor.channels()
         self._lock = threading.Lock()  # the interceptor sees one call at a time
@@ -76,7 +76,7 @@ class InterceptionBridge:
             payload = sample.payload.to_bytes()
             with self._lock:
                 self._last_meta[name] = meta
-                now = time.monotonic() - self.start
+                now = time.monotonic() - self.t0
                 deliveries = self.interceptor.on_message(name, consumers, payload, now)
                 self._dispatch(live, deliveries, meta, now, sample)
 
@@ -90,7 +90,7 @@ class InterceptionBridge:
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
         with self._lock:
-            now = time.monotonic() - self.start
+            now = time.monotonic() - self.t0
             for d in self.interceptor.flush(now):
                 self._dispatch_unbound(d, now, force=True)
             while self._heap:
@@ -141,7 +141,7 @@ class InterceptionBridge:
     def _tick_loop(self) -> None:
         while not self._stop.wait(TICK_SECONDS):
             with self._lock:
-                now = time.monotonic() - self.start
+                now = time.monotonic() - self.t0
                 for d in self.interceptor.on_tick(now):
                     self._dispatch_unbound(d, now)
                 while self._heap and self._heap[0][0] <= now:

@@ -1,0 +1,308 @@
+"""The action interface, and what the engine hands to the proxy.
+
+An action module defines two classes:
+
+* an ``ActionConfig`` subclass: the action as written in a test case (frozen,
+  comparable), read from and written back to its XML element, checked
+  against the spec;
+* an ``ActionRuntime`` subclass: its state during one run, created by
+  ``ActionConfig.start``. The engine feeds it the messages its policy
+  selected (``apply``), every real message on its channels
+  (``after_message``), clock ticks (``on_tick``) and the end of the run
+  (``flush``); each returns the ``Pending`` deliveries it releases.
+
+The package ``astaa_deft.intercept.actions`` finds every ``ActionConfig``
+subclass in its modules, so adding an action is adding a module here (and
+its element in ``policies/testcase.xsd``).
+"""
+
+from __future__ import annotations
+
+import base64
+import copy
+import json
+import math
+import random
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field, replace
+from decimal import Decimal
+from typing import TYPE_CHECKING, Any, Callable, ClassVar
+
+from ...codecs import Codec, EncodeError
+
+if TYPE_CHECKING:
+    from lxml import etree
+
+    from ...spec.model import Channel, Spec
+    from ..dictionary import Dictionary
+    from ..testcase import ActionChecker, Policy
+
+
+# ---------------------------------------------------------------- what the proxy gets
+
+@dataclass(frozen=True)
+class FieldChange:
+    path: str  # concrete: points[2].v, never a wildcard
+    old: Any
+    new: Any
+
+    def to_json(self) -> dict:
+        return {"path": self.path, "old": to_tagged(self.old), "new": to_tagged(self.new)}
+
+
+@dataclass(frozen=True)
+class MutationEvent:
+    """What one policy (or a stack of policies, see ``combine_events``) did to one message."""
+
+    testcase: str
+    policy: str
+    action: str
+    channel: str
+    consumers: tuple[str, ...]
+    message_index: int  # 1-based index of the real message on its channel
+    time: float  # seconds since run start, when the real message arrived
+    fields: tuple[FieldChange, ...] = ()
+    detail: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        """Plain JSON types only; exceptional values are tagged (see ``to_tagged``)."""
+        return {
+            "testcase": self.testcase, "policy": self.policy, "action": self.action,
+            "channel": self.channel, "consumers": list(self.consumers),
+            "message_index": self.message_index, "time": self.time,
+            "fields": [change.to_json() for change in self.fields],
+            "detail": to_tagged(self.detail),
+        }
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """Deliver ``payload`` to ``consumers`` at ``at`` (seconds since run start).
+
+    ``original`` is the real payload this delivery was made from when it
+    differs from it, is extra, or is a held-back real message delivered
+    later (None: the message just received, untouched: forward it as is).
+    ``consumers == ()`` carries only an event: what was dropped.
+    """
+
+    consumers: tuple[str, ...]
+    payload: bytes
+    at: float
+    original: bytes | None = None
+    event: MutationEvent | None = None
+
+
+def combine_events(events: list[MutationEvent]) -> MutationEvent | None:
+    """One event for a delivery that several policies acted on (they stack in document order).
+
+    ``policy`` and ``action`` join the parts with '+', ``fields`` are
+    concatenated, and ``detail.steps`` keeps each part's own detail.
+    """
+    if not events:
+        return None
+    if len(events) == 1:
+        return events[0]
+    first, last = events[0], events[-1]
+    steps = [{"policy": e.policy, "action": e.action, "detail": e.detail} for e in events]
+    return MutationEvent(
+        testcase=first.testcase, policy="+".join(e.policy for e in events),
+        action="+".join(e.action for e in events), channel=first.channel, consumers=last.consumers,
+        message_index=first.message_index, time=first.time,
+        fields=tuple(change for e in events for change in e.fields), detail={"steps": steps})
+
+
+# ---------------------------------------------------------------- JSON for exceptional values
+
+# A value JSON cannot hold exactly becomes a one-key object naming its kind.
+# A real object with exactly one of these keys is wrapped in {"object": ...},
+# so a reader never mistakes message data for a tag.
+TAGS = ("float", "base64", "str_escaped", "object")
+
+
+def to_tagged(value: Any) -> Any:
+    """``value`` as strict JSON data (RFC 8259, valid UTF-8), losslessly.
+
+    NaN/inf -> {"float": "nan" | "inf" | "-inf"}; bytes -> {"base64": ...};
+    a string with lone surrogates -> {"str_escaped": its JSON escape text}.
+    """
+    kind = type(value)
+    if kind is float and not math.isfinite(value):
+        return {"float": "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")}
+    if kind is bytes:
+        return {"base64": base64.b64encode(value).decode("ascii")}
+    if kind is str:
+        try:
+            value.encode("utf-8")
+            return value
+        except UnicodeEncodeError:
+            return {"str_escaped": json.dumps(value)[1:-1]}
+    if kind is list or kind is tuple:
+        return [to_tagged(item) for item in value]
+    if kind is dict:
+        tagged = {str(k): to_tagged(v) for k, v in value.items()}
+        return {"object": tagged} if len(tagged) == 1 and next(iter(tagged)) in TAGS else tagged
+    return value
+
+
+def from_tagged(value: Any) -> Any:
+    """The inverse of ``to_tagged``."""
+    if type(value) is list:
+        return [from_tagged(item) for item in value]
+    if type(value) is not dict:
+        return value
+    if len(value) == 1:
+        (tag, inner), = value.items()
+        if tag == "float":
+            return float(inner)
+        if tag == "base64":
+            return base64.b64decode(inner)
+        if tag == "str_escaped":
+            return json.loads(f'"{inner}"')
+        if tag == "object":
+            return {k: from_tagged(v) for k, v in inner.items()}
+    return {k: from_tagged(v) for k, v in value.items()}
+
+
+# ---------------------------------------------------------------- in flight inside the engine
+
+class Pending:
+    """A delivery being built: the policies of a message act on these in turn.
+
+    ``message`` holds the decoded message once an action changed fields
+    (``payload`` is then stale until ``materialize``), so stacked ``set``
+    policies decode and encode once in all.
+    """
+
+    __slots__ = ("consumers", "payload", "source", "at", "codec", "extra", "deferred", "events", "message")
+
+    def __init__(self, consumers: tuple[str, ...], payload: bytes, at: float, codec: Codec, *,
+                 source: bytes | None = None, extra: bool = False):
+        self.consumers = consumers
+        self.payload: bytes | None = payload
+        self.source = payload if source is None else source  # the real payload it comes from
+        self.at = at
+        self.codec = codec
+        self.extra = extra  # not the real message itself (a duplicate, an injection)
+        # Held back (delay, reorder): it goes out with a later call, not as "the message
+        # just received", so its delivery names its payload even when unchanged.
+        self.deferred = False
+        self.events: list[MutationEvent] = []
+        self.message: dict | None = None
+
+    def copy_for(self, consumers: tuple[str, ...], *, extra: bool | None = None) -> Pending:
+        twin = Pending(consumers, self.payload, self.at, self.codec,  # type: ignore[arg-type]
+                       source=self.source, extra=self.extra if extra is None else extra)
+        twin.deferred = self.deferred
+        twin.events = list(self.events)
+        twin.message = copy.deepcopy(self.message)
+        return twin
+
+    def materialize(self) -> bytes:
+        """The payload, encoding the changed message first if needed (EncodeError passes through)."""
+        if self.message is not None:
+            self.payload = self.codec.encode(self.message)
+            self.message = None
+        assert self.payload is not None
+        return self.payload
+
+    def to_delivery(self) -> Delivery:
+        event = combine_events(self.events)
+        if not self.consumers:  # dropped: only the event travels
+            return Delivery((), self.source, self.at, original=self.source, event=event)
+        try:
+            payload = self.materialize()
+        except EncodeError as exc:
+            # Values are carries()-checked before they are set, so this is a last
+            # resort: deliver the real payload and say why.
+            self.message = None
+            payload = self.payload = self.source
+            if event is not None:
+                event = replace(event, detail={**event.detail, "skipped": f"unencodable: {exc}"})
+        untouched = not self.extra and not self.deferred and payload is self.source
+        return Delivery(self.consumers, payload, self.at, original=None if untouched else self.source, event=event)
+
+
+# ---------------------------------------------------------------- the interface
+
+@dataclass
+class MessageInfo:
+    """The real message a runtime is acting on."""
+
+    channel: str
+    index: int  # 1-based, on its channel
+    now: float
+    codec: Codec
+    previous_message: Callable[[], dict]  # the previous real message, decoded; raises NotApplicable
+
+
+@dataclass
+class PolicyContext:
+    """What an action's runtime gets to work with during one run."""
+
+    testcase: str  # its id
+    where: str  # its file (or id), for error messages
+    policy: Policy
+    spec: Spec
+    dictionary: Dictionary
+    channels: tuple[Channel, ...]  # the channels the policy targets
+    consumers: dict[str, tuple[str, ...]]  # per channel: the consumers the policy affects
+    rng: random.Random  # the action's own randomness (selection has its own)
+    # For actions that create messages (interleave): the policy's window as
+    # (start, end) seconds since run start, None until its anchor message came;
+    # and its selection applied to a slot (channel, time) instead of a real message.
+    window_bounds: Callable[[], tuple[float, float] | None]
+    select_slot: Callable[[str, float], bool]
+
+    def event(self, action: str, info: MessageInfo, consumers: tuple[str, ...],
+              fields: tuple[FieldChange, ...] = (), **detail: Any) -> MutationEvent:
+        return MutationEvent(self.testcase, self.policy.id, action, info.channel, consumers,
+                             info.index, info.now, fields, detail)
+
+
+class ActionConfig(ABC):
+    """An action as written in a test case. Subclasses are frozen dataclasses."""
+
+    name: ClassVar[str]  # its XML element name
+
+    @classmethod
+    @abstractmethod
+    def from_xml(cls, element: etree._Element, checker: ActionChecker) -> ActionConfig:
+        """Read the (schema-valid) element; report semantic problems through ``checker``."""
+
+    @abstractmethod
+    def write_xml(self, element: etree._Element) -> None:
+        """Fill in the attributes and children of this action's (empty) element."""
+
+    def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
+        """Check against the spec and dictionary (``checker`` has both); default: nothing to check."""
+
+    @abstractmethod
+    def start(self, context: PolicyContext) -> ActionRuntime:
+        """A fresh runtime for one run."""
+
+
+class ActionRuntime:
+    """Base of action runtimes; every hook has a do-nothing default."""
+
+    # False for actions that never rewrite the real message they are offered (interleave).
+    acts_on_messages: ClassVar[bool] = True
+
+    def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
+        """What becomes of ``item`` (already narrowed to the affected consumers)."""
+        return [item]
+
+    def after_message(self, info: MessageInfo, payload: bytes) -> list[Pending]:
+        """Called after every real message on the policy's channels; may release held items."""
+        return []
+
+    def on_tick(self, now: float) -> list[Pending]:
+        return []
+
+    def flush(self, now: float) -> list[Pending]:
+        return []
+
+
+def decimal_text(value: float) -> str:
+    """A number as an XML Schema decimal: positional (no exponent), shortest round-trip digits."""
+    text = format(Decimal(repr(float(value))), "f")
+    return text.removesuffix(".0")

@@ -1,0 +1,178 @@
+"""Generate ASTAA test cases from a SUT spec and the dictionary.
+
+Each test case holds one ``set`` policy on one channel, drawn from the
+spec's channels, their leaf fields and the dictionary values of each
+field's declared type. The mix follows what ASTAA's bugs needed
+(Hutchison et al., ICSE-SEIP 2018, Fig. 3): 42 % one bad value in one
+field of one message, 22 % several fields of one message, only 8 %
+repeated injection. Normalised over those 72 %, about 58 % of test cases
+mutate one field of one message, 31 % several fields of one message and
+11 % one field over many messages.
+
+Windows are random inside the scenario's duration (rounded to 0.1 s so
+the files read well). Brittle fields (the spec's list, plus stamps and
+sequence numbers in header-like structs) are left alone unless asked:
+mutating them mostly tests the middleware's bookkeeping, not the robot.
+
+Deterministic: the same spec, dictionary, count, seed and duration give
+byte-identical files.
+"""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from ..codecs import get_codec
+from ..errors import InputError, Problem
+from ..fields import FieldPath, is_brittle, leaf_fields, type_at
+from ..spec.model import Channel, Spec
+from .actions.set import Assignment, Set
+from .dictionary import Dictionary, Entry, FieldSite, field_site
+from .testcase import Policy, Selection, TestCase, Window
+
+# (shape, weight in % of the bugs ASTAA found that needed it)
+SHAPES = (("single", 42), ("multi_field", 22), ("repeated", 8))
+# Field names that are bookkeeping when they sit in a header-like struct.
+HEADER_BOOKKEEPING = frozenset({"stamp", "timestamp", "seq", "sequence", "frame_id"})
+MAX_FIELDS_PER_MESSAGE = 4
+
+
+@dataclass(frozen=True)
+class Target:
+    """A field generation may mutate, with the dictionary values its channel can carry."""
+
+    channel: Channel
+    path: FieldPath
+    site: FieldSite
+    values: tuple[Entry, ...]
+
+
+def generate(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
+             include_brittle: bool = False) -> list[TestCase]:
+    """``count`` test cases; InputError if the spec offers no field to mutate."""
+    by_channel = _targets_by_channel(spec, dictionary, include_brittle)
+    if not by_channel:
+        raise InputError(Problem(str(spec.path or spec.name), None, None,
+                                 "no field to mutate: every channel lacks consumers or non-brittle leaf fields",
+                                 "use --include-brittle, or give channels consumers and typed fields"))
+    width = max(4, len(str(count)))
+    return [_testcase(f"tc-{number:0{width}d}", random.Random(f"{seed}/{number}"), by_channel, duration)
+            for number in range(1, count + 1)]
+
+
+def write_testcases(testcases: Sequence[TestCase], directory: Path) -> list[Path]:
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for testcase in testcases:
+        path = directory / f"{testcase.id}.xml"
+        path.write_bytes(testcase.to_xml())
+        paths.append(path)
+    return paths
+
+
+# ---------------------------------------------------------------- what may be mutated
+
+def mutation_targets(spec: Spec, dictionary: Dictionary, include_brittle: bool = False) -> list[Target]:
+    """Every (channel, leaf field) with at least one usable dictionary value, in spec order."""
+    targets = []
+    for channel in spec.channels:
+        if not channel.consumers:  # nobody would receive the mutation
+            continue
+        codec = get_codec(channel.encoding)
+        for path, _field_type in leaf_fields(spec.types, channel.type):
+            if not include_brittle and is_generation_brittle(spec, channel.type, path):
+                continue
+            site = field_site(spec.types, channel.type, path)
+            usable, _skipped = dictionary.usable(site, codec)
+            if usable:
+                targets.append(Target(channel, path, site, tuple(usable)))
+    return targets
+
+
+def is_generation_brittle(spec: Spec, type_name: str, path: FieldPath) -> bool:
+    """The spec's brittle fields, plus stamps and sequence numbers of header-like structs.
+
+    Header-like: a struct whose field name or type name contains "header"
+    (``header.stamp``, ``meta.seq`` where ``meta`` is a ``Header``), or the
+    message type itself when its name does.
+    """
+    if is_brittle(spec.types, type_name, path, spec.brittle):
+        return True
+    segments = path.segments
+    for index, segment in enumerate(segments):
+        if type(segment) is not str or segment.lower() not in HEADER_BOOKKEEPING:
+            continue
+        owner_type = type_name if index == 0 else type_at(spec.types, type_name, FieldPath(segments[:index])).ref
+        owner_name = next((s for s in reversed(segments[:index]) if type(s) is str), "")
+        if "header" in str(owner_type).lower() or "header" in owner_name.lower():
+            return True
+    return False
+
+
+def _targets_by_channel(spec: Spec, dictionary: Dictionary, include_brittle: bool) -> dict[str, list[Target]]:
+    grouped: dict[str, list[Target]] = {}
+    for target in mutation_targets(spec, dictionary, include_brittle):
+        grouped.setdefault(target.channel.name, []).append(target)
+    return grouped
+
+
+# ---------------------------------------------------------------- drawing one test case
+
+def _testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]],
+              duration: float) -> TestCase:
+    shape = rng.choices([name for name, _ in SHAPES], weights=[weight for _, weight in SHAPES])[0]
+    channel = rng.choice(sorted(by_channel))  # channels equally likely, whatever their field count
+    targets = by_channel[channel]
+    if shape == "multi_field":
+        chosen = _disjoint_sample(rng, targets, rng.randint(2, MAX_FIELDS_PER_MESSAGE))
+    else:
+        chosen = [rng.choice(targets)]
+    assignments = tuple(Assignment(str(t.path), rng.choice(t.values).ref) for t in chosen)
+    start = round(rng.uniform(0.0, duration * 0.8), 1)
+    if shape == "repeated":
+        end = min(round(start + rng.uniform(1.0, 5.0), 1), duration)
+        selection = rng.choice([Selection(), Selection(every=rng.choice([2, 5, 10])),
+                                Selection(probability=rng.choice([0.1, 0.25, 0.5]))])
+    else:  # one message: the first one in the window
+        end = duration
+        selection = Selection(limit=1)
+    window = Window(start, max(end, round(start + 0.1, 1)))
+    policy = Policy("p1", Set(assignments), channels=(channel,), window=window, selection=selection)
+    return TestCase(testcase_id, rng.getrandbits(32), _describe(shape, channel, assignments, window, selection),
+                    (policy,))
+
+
+def _disjoint_sample(rng: random.Random, targets: list[Target], wanted: int) -> list[Target]:
+    """Up to ``wanted`` targets, none inside another (``points`` and ``points[*].v`` would collide)."""
+    chosen: list[Target] = []
+    for target in rng.sample(targets, len(targets)):
+        if not any(_overlaps(target.path, other.path) for other in chosen):
+            chosen.append(target)
+        if len(chosen) == wanted:
+            break
+    return sorted(chosen, key=targets.index)  # declaration order reads better
+
+
+def _overlaps(a: FieldPath, b: FieldPath) -> bool:
+    shorter, longer = sorted((a.segments, b.segments), key=len)
+    return longer[:len(shorter)] == shorter
+
+
+def _describe(shape: str, channel: str, assignments: Sequence[Assignment], window: Window,
+              selection: Selection) -> str:
+    values = ", ".join(f"{a.path} = {a.value}" for a in assignments)
+    if shape == "repeated":
+        which = ("every message" if selection == Selection() else
+                 f"every {_ordinal(selection.every)} message" if selection.every != 1 else
+                 f"messages with probability {selection.probability}")
+        return f"repeated: {channel}: {values} on {which} from {window.start} s to {window.end} s"
+    fields = "one field" if len(assignments) == 1 else f"{len(assignments)} fields"
+    return f"{fields} of one message: {channel}: {values}, first message after {window.start} s"
+
+
+def _ordinal(number: int) -> str:
+    suffix = "th" if 10 <= number % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(number % 10, "th")
+    return f"{number}{suffix}"

@@ -1,0 +1,469 @@
+"""ASTAA test cases: XML files of interception policies, read safely and checked.
+
+Reading a test case goes through four gates, each reporting every problem
+with file, line, column and a fix (``InputError``):
+
+1. hostile input is refused before any XML parser sees it: anything but
+   UTF-8, a DOCTYPE or ENTITY declaration (billion laughs, external
+   entities), an oversized file;
+2. lxml parses with entity resolution, DTD loading and network access off;
+3. the XSD (``astaa_deft/data/policies/testcase.xsd``) checks the shape;
+4. names, field paths and values are checked against the SUT spec (when
+   given) and the dictionary, with "did you mean" suggestions.
+
+``TestCase.to_xml()`` writes a test case back (generation, minimisation);
+reading its output gives an equal ``TestCase``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Sequence
+
+from lxml import etree
+
+from ..errors import InputError, Problem, did_you_mean
+from ..spec.model import Channel, Spec
+from .actions import ACTIONS
+from .actions.base import ActionConfig, decimal_text
+from .dictionary import Dictionary, load_dictionary
+
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "data" / "policies" / "testcase.xsd"
+MAX_FILE_BYTES = 10 * 1024 * 1024
+DOCS = "docs/policies.md"
+
+
+# ---------------------------------------------------------------- the model
+
+@dataclass(frozen=True)
+class Window:
+    """[start, end) in seconds since the run started, or since the arrival of
+    message ``anchor_message`` (1-based) on ``anchor_channel`` when given."""
+
+    start: float = 0.0
+    end: float | None = None
+    anchor_channel: str | None = None
+    anchor_message: int | None = None
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Inside the window: every ``every``-th message, then each with ``probability``, at most ``limit``."""
+
+    every: int = 1
+    probability: float = 1.0
+    limit: int | None = None
+
+
+@dataclass(frozen=True)
+class Policy:
+    id: str
+    action: ActionConfig
+    channels: tuple[str, ...] = ()  # either channels...
+    message_type: str | None = None  # ...or every channel carrying this type
+    consumers: tuple[str, ...] = ()  # empty: every consumer of the channel
+    window: Window = Window()
+    selection: Selection = Selection()
+    line: int | None = field(default=None, compare=False)
+
+    def target_channels(self, spec: Spec) -> tuple[Channel, ...]:
+        if self.message_type is not None:
+            return tuple(c for c in spec.channels if c.type == self.message_type)
+        return tuple(c for c in spec.channels if c.name in self.channels)
+
+
+@dataclass(frozen=True)
+class TestCase:
+    __test__ = False  # not a pytest test class
+
+    id: str
+    seed: int
+    description: str
+    policies: tuple[Policy, ...]
+    source: str | None = field(default=None, compare=False)  # where it was read from
+
+    def to_xml(self) -> bytes:
+        return _write(self)
+
+
+# ---------------------------------------------------------------- reading
+
+def load_testcase(path: Path | str, spec: Spec | None = None, dictionary: Dictionary | None = None) -> TestCase:
+    """Read and check a test case file (see the module doc). Without ``spec``,
+    channel, consumer and field names are not checked."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise _error(str(path), 1, 1, f"file larger than {MAX_FILE_BYTES // (1024 * 1024)} MB",
+                         "a test case is a few kilobytes; check the file")
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(Problem(str(path), None, None, "file not found", "check the path")) from None
+    except IsADirectoryError:
+        raise InputError(Problem(str(path), None, None, "is a directory", "give an XML test case file")) from None
+    except OSError as exc:
+        raise InputError(Problem(str(path), None, None, f"cannot read: {exc.strerror}", "")) from None
+    return parse_testcase(data, str(path), spec, dictionary)
+
+
+def parse_testcase(data: bytes, name: str = "<testcase>", spec: Spec | None = None,
+                   dictionary: Dictionary | None = None) -> TestCase:
+    text = _safe_text(data, name)
+    root = _parse_xml(data, name)
+    checker = Checker(name, text, spec, _default_dictionary() if dictionary is None else dictionary)
+    _validate_schema(root, checker)
+    checker.raise_if_problems()
+    testcase = _build(root, checker)
+    checker.raise_if_problems()
+    return testcase
+
+
+@lru_cache(maxsize=1)
+def _default_dictionary() -> Dictionary:
+    return load_dictionary()
+
+
+def _error(name: str, line: int | None, column: int | None, message: str, fix: str) -> InputError:
+    return InputError(Problem(name, line, column, message, fix))
+
+
+_ENCODING_DECL = re.compile(rb"""^<\?xml[^>]*?\bencoding\s*=\s*["']([A-Za-z0-9._-]+)["']""")
+# Declarations that make a parser expand or fetch things; refused outright.
+_DANGEROUS = re.compile(r"<!\s*(DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)", re.IGNORECASE)
+
+
+def _safe_text(data: bytes, name: str) -> str:
+    """The file as text, after refusing what could make a parser expand or fetch anything."""
+    if len(data) > MAX_FILE_BYTES:
+        raise _error(name, 1, 1, f"larger than {MAX_FILE_BYTES // (1024 * 1024)} MB", "check the file")
+    declared = _ENCODING_DECL.match(data.removeprefix(b"\xef\xbb\xbf"))
+    if declared and declared.group(1).lower().replace(b"_", b"-") not in (b"utf-8", b"utf8", b"us-ascii", b"ascii"):
+        raise _error(name, 1, declared.start(1) + 1, f"encoding {declared.group(1).decode()} is not supported",
+                     'save the file as UTF-8 and write encoding="UTF-8"')
+    try:
+        text = data.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise _error(name, line, exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1,
+                     "not valid UTF-8 (test cases are UTF-8 text)", "save the file as UTF-8") from None
+    danger = _DANGEROUS.search(text)
+    if danger:
+        line, column = _line_col(text, danger.start())
+        raise _error(name, line, column,
+                     f"<!{danger.group(1).upper()} declarations are refused (they enable entity expansion "
+                     "and external entities)", "remove the DOCTYPE; test cases need no DTD or entities")
+    return text
+
+
+def _hardened_parser() -> etree.XMLParser:
+    # Belt and braces: _safe_text already refused DTDs. No entity expansion, no
+    # DTD loading, no network, default size limits (no huge_tree).
+    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, dtd_validation=False,
+                           huge_tree=False, attribute_defaults=False, remove_comments=True, remove_pis=True)
+
+
+def _parse_xml(data: bytes, name: str) -> etree._Element:
+    try:
+        root = etree.fromstring(data, _hardened_parser())
+    except etree.XMLSyntaxError as exc:
+        line, column = exc.position if exc.position else (exc.lineno, None)
+        message = re.sub(r", line \d+, column \d+$", "", exc.msg or str(exc))
+        raise _error(name, line or 1, column or 1, f"not well-formed XML: {message}",
+                     "fix the XML syntax here") from None
+    docinfo = root.getroottree().docinfo
+    if docinfo.internalDTD is not None or docinfo.externalDTD is not None or docinfo.doctype:
+        raise _error(name, 1, 1, "DOCTYPE declarations are refused", "remove the DOCTYPE")
+    return root
+
+
+@lru_cache(maxsize=1)
+def _schema() -> etree.XMLSchema:
+    return etree.XMLSchema(etree.parse(str(SCHEMA_PATH), _hardened_parser()))
+
+
+# Hints for the schema's own types, keyed by the type name libxml2 quotes.
+_TYPE_FIXES = {
+    "Seconds": "seconds as a plain decimal from 0, e.g. 2.5 (no exponent, NaN or INF)",
+    "Milliseconds": "milliseconds as a plain decimal above 0, e.g. 200",
+    "Probability": "a plain decimal above 0 and at most 1, e.g. 0.25",
+    "Fraction": "a plain decimal from 0 to below 1, e.g. 0.5",
+    "Rate": "messages per second as a plain decimal above 0 and at most 1000, e.g. 20",
+    "Count": "a whole number from 1, e.g. 3",
+    "Copies": "a whole number from 1 to 100",
+    "Seed": "a whole number from 0 to 2^64-1",
+    "Id": "letters, digits, '_', '.' and '-' only",
+    "Name": "a channel, type or module name from the spec: letters, digits, '_' and '-'",
+}
+
+
+# The schema type of each attribute, for messages that only name the attribute (facets).
+_ATTRIBUTE_TYPES = {
+    "from": "Seconds", "to": "Seconds", "ms": "Milliseconds", "max-hold-ms": "Milliseconds",
+    "probability": "Probability", "keep": "Fraction", "rate": "Rate", "every": "Count", "limit": "Count",
+    "message": "Count", "bytes": "Count", "copies": "Copies", "seed": "Seed", "id": "Id", "channel": "Name",
+}
+_POLICY_ORDER = ("a policy holds, in this order: <channel> (one or more) or <type>, <consumer>*, "
+                 f"<window>?, <select>?, then exactly one action; see {DOCS}")
+
+
+def _validate_schema(root: etree._Element, checker: Checker) -> None:
+    schema = _schema()
+    if schema.validate(root.getroottree()):
+        return
+    for entry in schema.error_log:
+        message = entry.message
+        attribute = re.search(r"attribute '([^']+)'", message)
+        element = _element_at(root, entry.path)
+        line, column = (checker.locate(element, attribute.group(1) if attribute else None)
+                        if element is not None else (entry.line, checker.first_column(entry.line)))
+        parent = element.getparent() if element is not None else None
+        in_policy = parent is not None and parent.tag == "policy"
+        checker.report_at(line, column, message.rstrip("."),
+                          _schema_fix(message, attribute.group(1) if attribute else None, in_policy))
+
+
+def _element_at(root: etree._Element, path: str | None) -> etree._Element | None:
+    if not path:
+        return None
+    try:
+        found = root.getroottree().xpath(path)
+    except etree.XPathError:
+        return None
+    return found[0] if found and isinstance(found[0], etree._Element) else None
+
+
+def _schema_fix(message: str, attribute: str | None, in_policy: bool) -> str:
+    typed = re.search(r"atomic type '(\w+)'", message)
+    type_name = typed.group(1) if typed else _ATTRIBUTE_TYPES.get(attribute or "")
+    if type_name in _TYPE_FIXES and "is not allowed" not in message:
+        return _TYPE_FIXES[type_name]
+    if "is not expected" in message:
+        return _POLICY_ORDER if in_policy else f"remove it or move it where it belongs; see {DOCS}"
+    missing = re.search(r"Missing child element\(s\)\. Expected is (.*)", message)
+    if missing:
+        names = [f"<{name}>" for name in re.findall(r"[\w:-]+", missing.group(1))]
+        return f"add {' or '.join(names)}; see {DOCS}"
+    if "Duplicate key-sequence" in message:
+        return "give every policy of a test case its own id"
+    if "is not allowed" in message or "is required but missing" in message:
+        return f"see the element's attributes in {DOCS}"
+    return f"see {DOCS}"
+
+
+# ---------------------------------------------------------------- locating and reporting
+
+class Checker:
+    """Reports problems at the place of an element or attribute in the source text.
+
+    lxml knows an element's line (where its start tag ends) but not columns,
+    so the start tag and attribute are looked up in the text.
+    """
+
+    def __init__(self, name: str, text: str, spec: Spec | None, dictionary: Dictionary):
+        self.name = name
+        self.text = text
+        self.spec = spec
+        self.dictionary = dictionary
+        self.problems: list[Problem] = []
+        self._line_ends = [m.start() for m in re.finditer("\n", text)] + [len(text)]
+
+    def report(self, element: etree._Element, message: str, fix: str = "", *,
+               attribute: str | None = None, offset: int = 0) -> None:
+        """A problem at ``element`` (its ``attribute``'s value, ``offset`` chars into it, when given)."""
+        line, column = self.locate(element, attribute, offset)
+        self.report_at(line, column, message, fix)
+
+    def report_at(self, line: int | None, column: int | None, message: str, fix: str = "") -> None:
+        self.problems.append(Problem(self.name, line, column, message, fix))
+
+    def raise_if_problems(self) -> None:
+        if self.problems:
+            unique = list(dict.fromkeys(self.problems))
+            raise InputError(sorted(unique, key=lambda p: (p.line or 0, p.column or 0)))
+
+    def locate(self, element: etree._Element, attribute: str | None = None, offset: int = 0) -> tuple[int, int]:
+        line = element.sourceline or 1
+        limit = self._line_ends[min(line, len(self._line_ends)) - 1]
+        tag = etree.QName(element).localname
+        start = self._tag_start(f"{element.prefix}:{tag}" if element.prefix else tag, limit)
+        if start is None:
+            return line, 1
+        position = start
+        if attribute is not None:
+            tag_end = self.text.find(">", start)
+            found = re.compile(rf"\s{re.escape(attribute)}\s*=\s*[\"']").search(self.text, start, tag_end)
+            if found:
+                position = found.end() + offset
+        return _line_col(self.text, position)
+
+    def first_column(self, line: int) -> int:
+        """The column of the first non-blank character of ``line`` (1 if none)."""
+        start = self._line_ends[line - 2] + 1 if 1 < line <= len(self._line_ends) else 0
+        text = self.text[start:self._line_ends[min(line, len(self._line_ends)) - 1]]
+        return len(text) - len(text.lstrip()) + 1
+
+    def _tag_start(self, tag: str, limit: int) -> int | None:
+        """The last ``<tag`` that starts before ``limit`` (the end of the line its start tag ends on)."""
+        pattern = re.compile(rf"<{re.escape(tag)}[\s/>]")
+        start = None
+        for match in pattern.finditer(self.text, 0, min(limit + 1, len(self.text))):
+            start = match.start()
+        return start
+
+
+def _line_col(text: str, position: int) -> tuple[int, int]:
+    line = text.count("\n", 0, position) + 1
+    return line, position - (text.rfind("\n", 0, position) + 1) + 1
+
+
+# ---------------------------------------------------------------- building the model
+
+def _build(root: etree._Element, checker: Checker) -> TestCase:
+    description = root.find("description")
+    policies = tuple(_policy(element, checker) for element in root.iterfind("policy"))
+    return TestCase(id=root.get("id"), seed=int(root.get("seed")),
+                    description=(description.text or "").strip(), policies=policies, source=checker.name)
+
+
+def _policy(element: etree._Element, checker: Checker) -> Policy:
+    action_element = next(child for child in element if child.tag in ACTIONS)
+    action_checker = ActionChecker(checker, action_element)
+    action = ACTIONS[action_element.tag].from_xml(action_element, action_checker)
+    type_element = element.find("type")
+    policy = Policy(
+        id=element.get("id"), action=action,
+        channels=tuple(_text(child) for child in element.iterfind("channel")),
+        message_type=_text(type_element) if type_element is not None else None,
+        consumers=tuple(_text(child) for child in element.iterfind("consumer")),
+        window=_window(element.find("window"), checker),
+        selection=_selection(element.find("select")),
+        line=element.sourceline)
+    channels = _check_targets(policy, element, checker)
+    action.check(policy, channels, action_checker)
+    return policy
+
+
+def _text(element: etree._Element) -> str:
+    return (element.text or "").strip()
+
+
+def _window(element: etree._Element | None, checker: Checker) -> Window:
+    if element is None:
+        return Window()
+    start = float(element.get("from", "0"))
+    end = float(element.get("to")) if element.get("to") is not None else None
+    if end is not None and end <= start:
+        checker.report(element, f"the window ends ({decimal_text(end)} s) before it starts ({decimal_text(start)} s)",
+                       "make 'to' larger than 'from'", attribute="to")
+    after = element.find("after")
+    if after is None:
+        return Window(start, end)
+    return Window(start, end, after.get("channel"), int(after.get("message")))
+
+
+def _selection(element: etree._Element | None) -> Selection:
+    if element is None:
+        return Selection()
+    limit = element.get("limit")
+    return Selection(every=int(element.get("every", "1")), probability=float(element.get("probability", "1")),
+                     limit=int(limit) if limit is not None else None)
+
+
+def _check_targets(policy: Policy, element: etree._Element, checker: Checker) -> tuple[Channel, ...]:
+    """Check the policy's channels, type, consumers and window anchor; its target channels."""
+    spec = checker.spec
+    if spec is None:
+        return ()
+    names = [c.name for c in spec.channels]
+    for child in element.iterfind("channel"):
+        if _text(child) not in names:
+            _unknown(checker, child, "channel", _text(child), names)
+    type_element = element.find("type")
+    if type_element is not None:
+        carried = sorted({c.type for c in spec.channels})
+        if policy.message_type not in spec.types:
+            _unknown(checker, type_element, "message type", policy.message_type, list(spec.types))
+        elif policy.message_type not in carried:
+            checker.report(type_element, f"no channel carries type '{policy.message_type}'",
+                           "types carried by channels: " + ", ".join(carried))
+    channels = policy.target_channels(spec)
+    consumers = sorted({m for c in channels for m in c.consumers})
+    for child in element.iterfind("consumer"):
+        if _text(child) not in consumers:
+            what = ", ".join(c.name for c in channels) or "the targeted channels"
+            hint = did_you_mean(_text(child), consumers)
+            checker.report(child, f"'{_text(child)}' does not consume {what}" + (f"; {hint}" if hint else ""),
+                           "consumers there: " + (", ".join(consumers) or "none"))
+    after = element.find("window/after")
+    if after is not None and after.get("channel") not in names:
+        _unknown(checker, after, "channel", after.get("channel"), names, attribute="channel")
+    return channels
+
+
+def _unknown(checker: Checker, element: etree._Element, what: str, name: str | None, known: Sequence[str],
+             attribute: str | None = None) -> None:
+    hint = did_you_mean(str(name), known)
+    shown = ", ".join(list(known)[:12]) + (", ..." if len(known) > 12 else "")
+    checker.report(element, f"unknown {what} '{name}'" + (f"; {hint}" if hint else ""),
+                   f"the spec's {what}s: {shown}" if known else "the spec declares none", attribute=attribute)
+
+
+class ActionChecker:
+    """What an action's ``from_xml`` and ``check`` get: the spec (None when not
+    checking names), the dictionary, its element, and ``report``, which
+    defaults to the action's element."""
+
+    def __init__(self, checker: Checker, element: etree._Element):
+        self._checker = checker
+        self.element = element
+        self.spec = checker.spec
+        self.dictionary = checker.dictionary
+
+    def report(self, element: etree._Element | None, message: str, fix: str = "", *,
+               attribute: str | None = None, offset: int = 0) -> None:
+        self._checker.report(self.element if element is None else element, message, fix,
+                             attribute=attribute, offset=offset)
+
+
+# ---------------------------------------------------------------- writing
+
+def _write(testcase: TestCase) -> bytes:
+    root = etree.Element("testcase", id=testcase.id, seed=str(testcase.seed))
+    etree.SubElement(root, "description").text = testcase.description
+    for policy in testcase.policies:
+        element = etree.SubElement(root, "policy", id=policy.id)
+        for channel in policy.channels:
+            etree.SubElement(element, "channel").text = channel
+        if policy.message_type is not None:
+            etree.SubElement(element, "type").text = policy.message_type
+        for consumer in policy.consumers:
+            etree.SubElement(element, "consumer").text = consumer
+        _write_window(element, policy.window)
+        _write_selection(element, policy.selection)
+        policy.action.write_xml(etree.SubElement(element, policy.action.name))
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + etree.tostring(root, encoding="UTF-8", pretty_print=True)
+
+
+def _write_window(parent: etree._Element, window: Window) -> None:
+    if window == Window():
+        return
+    element = etree.SubElement(parent, "window", {"from": decimal_text(window.start)})
+    if window.end is not None:
+        element.set("to", decimal_text(window.end))
+    if window.anchor_channel is not None:
+        etree.SubElement(element, "after", channel=window.anchor_channel, message=str(window.anchor_message))
+
+
+def _write_selection(parent: etree._Element, selection: Selection) -> None:
+    if selection == Selection():
+        return
+    element = etree.SubElement(parent, "select")
+    if selection.every != 1:
+        element.set("every", str(selection.every))
+    if selection.probability != 1.0:
+        element.set("probability", decimal_text(selection.probability))
+    if selection.limit is not None:
+        element.set("limit", str(selection.limit))

@@ -1,0 +1,141 @@
+"""Test case generation: deterministic, valid against the spec, weighted like
+ASTAA's findings, never touching brittle fields unless asked."""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.codecs import get_codec
+from astaa_deft.commands import generate as generate_command
+from astaa_deft.errors import InputError
+from astaa_deft.fields import FieldPath
+from astaa_deft.intercept import load_dictionary, load_testcase
+from astaa_deft.intercept.dictionary import wire_value
+from astaa_deft.intercept.generate import generate, is_generation_brittle, mutation_targets, write_testcases
+from astaa_deft.spec.loader import load_spec, load_spec_text
+
+ROOT = Path(__file__).resolve().parent.parent
+SPEC_PATH = ROOT / "tests" / "data" / "intercept_sut.yaml"
+SPEC = load_spec(SPEC_PATH)
+DICTIONARY = load_dictionary()
+
+# Every field generation must leave alone by default in intercept_sut.yaml:
+# header bookkeeping found by name (Trajectory.header, Scan.meta: a Header)
+# and the spec's own brittle list (Trajectory.debug_note).
+BRITTLE = {
+    ("trajectory", "header.seq"), ("trajectory", "header.stamp"), ("trajectory", "header.frame_id"),
+    ("trajectory", "debug_note"),
+    ("scan", "meta.seq"), ("scan", "meta.stamp"), ("scan", "meta.frame_id"),
+}
+
+
+def assignments(testcases):
+    for testcase in testcases:
+        for policy in testcase.policies:
+            for assignment in policy.action.fields:
+                yield policy.channels[0], assignment
+
+
+def test_same_seed_same_bytes_other_seed_other_cases():
+    first = [t.to_xml() for t in generate(SPEC, DICTIONARY, 30, seed=42)]
+    assert first == [t.to_xml() for t in generate(SPEC, DICTIONARY, 30, seed=42)]
+    assert first != [t.to_xml() for t in generate(SPEC, DICTIONARY, 30, seed=43)]
+    # A case does not depend on how many were asked for.
+    assert first[:10] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 10, seed=42)]
+
+
+def test_brittle_fields_are_recognised():
+    def brittle(channel: str, path: str) -> bool:
+        return is_generation_brittle(SPEC, SPEC.channel(channel).type, FieldPath.parse(path))
+
+    assert all(brittle(channel, path) for channel, path in BRITTLE)
+    assert not brittle("odometry", "stamp")  # a top-level stamp outside any header is a real input
+    assert not brittle("trajectory", "points[*].v")
+    assert not brittle("scan", "ranges")
+
+
+def test_never_brittle_by_default_and_only_when_asked():
+    touched = {(channel, a.path) for channel, a in assignments(generate(SPEC, DICTIONARY, 400, seed=1))}
+    assert not touched & BRITTLE
+    assert "status" not in {channel for channel, _ in touched}  # no consumers: nobody to test
+    with_brittle = {(channel, a.path)
+                    for channel, a in assignments(generate(SPEC, DICTIONARY, 400, seed=1, include_brittle=True))}
+    assert with_brittle & BRITTLE
+
+
+def test_shapes_follow_astaa_findings():
+    """42 : 22 : 8 of bugs -> ~58 % one field of one message, ~31 % several fields, ~11 % repeated."""
+    shapes = Counter()
+    for testcase in generate(SPEC, DICTIONARY, 1000, seed=7):
+        [policy] = testcase.policies
+        if policy.selection.limit is None:
+            shapes["repeated"] += 1
+        else:
+            assert policy.selection.limit == 1
+            shapes["single" if len(policy.action.fields) == 1 else "multi"] += 1
+    # multi_field draws on a channel with one usable field degrade to single, hence the ranges.
+    assert 520 <= shapes["single"] <= 680
+    assert 230 <= shapes["multi"] <= 360
+    assert 80 <= shapes["repeated"] <= 150
+
+
+def test_windows_fit_the_duration_and_cases_validate(tmp_path):
+    testcases = generate(SPEC, DICTIONARY, 60, seed=5, duration=12.0)
+    for testcase in testcases:
+        [policy] = testcase.policies
+        assert 0.0 <= policy.window.start < policy.window.end <= 12.0
+    paths = write_testcases(testcases, tmp_path / "out")
+    assert [p.name for p in paths[:2]] == ["tc-0001.xml", "tc-0002.xml"]
+    for path, testcase in zip(paths, testcases, strict=True):
+        assert load_testcase(path, SPEC, DICTIONARY) == testcase
+
+
+def test_multi_field_cases_never_overlap():
+    for testcase in generate(SPEC, DICTIONARY, 300, seed=11):
+        paths = [FieldPath.parse(a.path).segments for a in testcase.policies[0].action.fields]
+        for i, a in enumerate(paths):
+            for b in paths[i + 1:]:
+                shorter, longer = sorted((a, b), key=len)
+                assert longer[:len(shorter)] != shorter
+
+
+def test_values_fit_the_field_and_the_channel_encoding():
+    targets = mutation_targets(SPEC, DICTIONARY)
+    assert targets
+    for target in targets:
+        codec = get_codec(target.channel.encoding)
+        for entry in target.values:
+            assert entry.problem(target.site) is None
+            if not entry.is_dynamic:
+                assert codec.carries(wire_value(entry.static_value(target.site), target.site.field_type, codec)) is None
+    # The lone surrogate is generated for JSON strings, never for the CBOR scan.
+    lone = {channel for channel, a in assignments(generate(SPEC, DICTIONARY, 500, seed=3))
+            if a.value == "dict:string.lone_surrogate"}
+    assert lone == {"trajectory"}
+
+
+def test_a_spec_with_nothing_to_mutate_is_an_input_error():
+    spec = load_spec_text(
+        "name: n\nmodules: [{name: a, command: x}, {name: b, command: x}]\n"
+        "channels: [{name: c, key: k, producer: a, consumers: [b], type: H}]\n"
+        "types: {Header: {seq: uint64, stamp: time}, H: {header: Header}}\n")
+    with pytest.raises(InputError, match="no field to mutate") as caught:
+        generate(spec, DICTIONARY, 3, seed=1)
+    assert "--include-brittle" in caught.value.problems[0].fix
+    assert len(generate(spec, DICTIONARY, 3, seed=1, include_brittle=True)) == 3
+
+
+def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
+    out = tmp_path / "cases"
+    assert generate_command.run(SPEC_PATH, 25, 9, out, duration=20.0) == 0
+    files = sorted(out.glob("tc-*.xml"))
+    assert len(files) == 25
+    assert "wrote 25 test cases" in capsys.readouterr().out
+    assert [f.read_bytes() for f in files] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 25, 9, 20.0)]
+    with pytest.raises(InputError, match="already holds 25 test case"):
+        generate_command.run(SPEC_PATH, 5, 9, out)
+    with pytest.raises(InputError, match="at least 1"):
+        generate_command.run(SPEC_PATH, 0, 9, tmp_path / "other")
