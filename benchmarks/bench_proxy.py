@@ -22,10 +22,13 @@ from pathlib import Path
 from astaa_deft.bus import zenoh_config as zc
 from astaa_deft.bus.processes import stop_process
 from astaa_deft.bus.run import BusRun, RunOptions
+from astaa_deft.intercept import load_interceptor
 from astaa_deft.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
 SPEC = load_spec(SUT / "bench.yaml")
+MONITORED = load_spec(SUT / "bench_monitored.yaml")
+SET_POLICY = SUT / "set_every_message.xml"
 RESULT_TIMEOUT = 120.0
 
 
@@ -61,12 +64,14 @@ def run_direct(params: dict[str, str]) -> dict:
                 stop_process(p, grace=3.0)
 
 
-def run_tool(params: dict[str, str], mode: str, record: bool) -> tuple[dict, dict]:
+def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy: Path | None = None
+             ) -> tuple[dict, dict]:
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp)
-        options = RunOptions(mode=mode, params=params, run_dir=run_dir,
+        interceptor = load_interceptor(policy, spec) if policy is not None else None
+        options = RunOptions(mode=mode, params=params, run_dir=run_dir, interceptor=interceptor,
                              record=run_dir / "bench.mcap" if record else None)
-        with BusRun(SPEC, options) as run:
+        with BusRun(spec, options) as run:
             result = wait_result(run_dir / "sink.json")
         return result, run.recorded
 
@@ -105,6 +110,25 @@ def latency(count: int) -> None:
           f"p99 {passive_rec['p99_us'] / direct['p99_us']:.2f}×")
 
 
+def interception(count: int) -> None:
+    params = {"size": "200", "count": str(count), "rate": "0", "latency": ""}
+    plain, _ = run_tool(params, "star", record=False)
+    mutated, _ = run_tool(params, "star", record=False, policy=SET_POLICY)
+    print(f"\ninterception throughput, 200 B JSON, {count:,} sent")
+    print(f"  star passthrough     {fmt_rate(plain)}")
+    print(f"  star + set on every  {fmt_rate(mutated)}   ratio {mutated['rate'] / plain['rate']:.2f}× passthrough")
+    lat = {"size": "200", "count": str(count // 20), "rate": "1000", "latency": "--latency"}
+    plain_l, _ = run_tool(lat, "star", record=False)
+    mutated_l, _ = run_tool(lat, "star", record=False, policy=SET_POLICY)
+    monitored_l, _ = run_tool(lat, "star", record=False, spec=MONITORED)
+    print(f"latency at 1 kHz (µs)   p50      p99")
+    for name, r in (("star", plain_l), ("star + set", mutated_l), ("star + monitors", monitored_l)):
+        print(f"  {name:18} {r['p50_us']:8.1f} {r['p99_us']:8.1f}")
+    print(f"  added by mutation: p50 {(mutated_l['p50_us'] - plain_l['p50_us']) / 1000:.3f} ms; "
+          f"online monitors (bound + expression): p50 {monitored_l['p50_us'] / plain_l['p50_us']:.2f}×, "
+          f"p99 {monitored_l['p99_us'] / plain_l['p99_us']:.2f}× star")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer messages (a smoke run)")
@@ -113,6 +137,7 @@ def main() -> None:
     throughput(200, int(100_000 * scale))
     throughput(20_000, int(20_000 * scale))
     latency(int(5_000 * scale))
+    interception(int(50_000 * scale))
 
 
 if __name__ == "__main__":

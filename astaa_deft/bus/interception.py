@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import json
 import threading
 import time
 from typing import Any, Callable, Protocol
@@ -131,7 +130,7 @@ class InterceptionBridge:
         if d.event is not None:
             self.mutations += 1
             body = d.event.to_json()
-            record = json.dumps(intercept_record(body, d.original, delivered=bool(d.consumers)), default=str)
+            record = intercept_record(body, d.original, delivered=bool(d.consumers))
             self.on_mutation(body)
         name = live.route.channel.name
         self._record_pubs[name].put(payload, encoding=encoding, attachment=record)

@@ -34,9 +34,7 @@ def on_sample(sample):
     state["n"] += 1
     state["last"] = now
     if args.latency:
-        raw = sample.payload.to_bytes()
-        start = raw.index(b'"stamp": ') + 9
-        latencies.append((now - int(raw[start:raw.index(b"}", start)])) / 1000.0)
+        latencies.append((now - json.loads(sample.payload.to_bytes())["header"]["stamp"]) / 1000.0)
     if state["n"] >= args.count:
         done.set()
 

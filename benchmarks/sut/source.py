@@ -26,14 +26,14 @@ signal.signal(signal.SIGTERM, lambda *_: stop.set())
 session = zenoh.open(zenoh.Config.from_env())
 pub = session.declare_publisher(args.key, congestion_control=zenoh.CongestionControl.BLOCK)
 time.sleep(args.start_delay)
-template = json.dumps({"header": {"seq": 0, "stamp": 0}, "pad": ""})
+template = json.dumps({"header": {"seq": 0, "stamp": 0}, "value": 0.5, "pad": ""})
 pad = "x" * max(0, args.size - len(template) - 30)
 period = 1.0 / args.rate if args.rate else 0.0
 next_t = time.monotonic()
 for i in range(1, args.count + 1):
     if stop.is_set():
         break
-    body = '{"header": {"seq": %d, "stamp": %d}, "pad": "%s"}' % (i, time.time_ns(), pad)
+    body = '{"header": {"seq": %d, "stamp": %d}, "value": 0.5, "pad": "%s"}' % (i, time.time_ns(), pad)
     pub.put(body.encode())
     if period:
         next_t += period
