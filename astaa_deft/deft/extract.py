@@ -37,7 +37,8 @@ class Extraction:
     frames: list[ExtractedFrame] = field(default_factory=list)
     skipped: list[tuple[int, str]] = field(default_factory=list)  # (output index, why)
     outputs: int = 0
-    reconstruction_seconds: float = 0.0  # candidate search + decoding, planner time excluded
+    reconstruction_seconds: float = 0.0  # candidate search + decoding the chosen inputs
+    validation_seconds: float = 0.0  # reading the recorded and replayed trajectories, comparing them
     planner_seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
 
@@ -81,13 +82,15 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
         options = candidates(streams, cfg.trigger, output.log_time, previous, lookback)
+        t1 = time.perf_counter()
+        result.reconstruction_seconds += t1 - t0
         try:
             expected = codecs[cfg.output].decode(output.data)
         except DecodeError as exc:
             expected = None
             result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
         expected_points = trajectory_points(expected, cfg.trajectory)
-        result.reconstruction_seconds += time.perf_counter() - t0
+        result.validation_seconds += time.perf_counter() - t1
         if not options:
             result.skipped.append((out_index, "an input had no message yet"))
             progress(out_index + 1, len(outputs))
@@ -112,10 +115,13 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
                 replayed = planner.step(frame)
             except Exception as exc:  # the planner under test may crash on a frame: that is data
                 replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+            t2 = time.perf_counter()
+            result.planner_seconds += t2 - t1
             cmp = compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+            t1 = time.perf_counter()
+            result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
                 best = (cmp, cand, replayed, None, tries)
-                result.planner_seconds += time.perf_counter() - t1
                 break
             if best is None or cmp.distance < best[0].distance:
                 state = planner.snapshot() if start_state is not None else None

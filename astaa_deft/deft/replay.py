@@ -147,6 +147,20 @@ def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = F
     return LockstepPlanner(spec, planner, params)
 
 
+def _getter(path: str):
+    """A fast reader for a field path: plain keys are indexed directly (the common case)."""
+    if path.replace("_", "").isalnum():
+        return lambda value: value[path]
+
+    def slow(value):
+        found = get(value, path)
+        if not found:
+            raise KeyError(path)
+        return found[0][1]
+
+    return slow
+
+
 def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout) -> list[Point]:
     """(x, y, t absolute) of each planned point, per the spec's layout."""
     if not isinstance(message, Mapping):
@@ -158,13 +172,13 @@ def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayou
     if layout.time == "relative":
         stamp = get(message, layout.stamp)
         offset = float(stamp[0][1]) if stamp else 0.0
+    gx, gy, gt = _getter(layout.x), _getter(layout.y), _getter(layout.t)
     out = []
     for point in found[0][1]:
         try:
-            x, y, t = (float(get(point, p)[0][1]) for p in (layout.x, layout.y, layout.t))
-        except (IndexError, TypeError, ValueError):
+            out.append((float(gx(point)), float(gy(point)), float(gt(point)) + offset))
+        except (KeyError, IndexError, TypeError, ValueError):
             continue
-        out.append((x, y, t + offset))
     return out
 
 
