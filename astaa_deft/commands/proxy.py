@@ -13,6 +13,9 @@ from ..monitor.verdict import format_verdict
 from .console import RateMeter, StatusLine, StopSignal, format_event, say
 
 
+MUTATIONS_SHOWN = 3
+
+
 @dataclass
 class Outcome:
     reason: str  # "duration", "signal", "all modules exited", "violation", "stopped"
@@ -30,7 +33,16 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             on_start: Callable[[BusRun], None] = lambda run: None, verbose: bool = True) -> Outcome:
     """Run until `duration`, Ctrl-C/SIGTERM, every module gone, or `until` names a reason."""
 
+    shown: dict[str, int] = {}
+
     def on_event(event: dict) -> None:
+        if event.get("kind") == "mutation":  # a policy may fire at 50 Hz: show the first few of each
+            policy = str(event.get("policy"))
+            shown[policy] = shown.get(policy, 0) + 1
+            if shown[policy] > MUTATIONS_SHOWN:
+                if shown[policy] == MUTATIONS_SHOWN + 1 and verbose:
+                    say(f"~~ (further mutations of policy {policy} are in the log, not shown)")
+                return
         text = format_event(event)
         if text and verbose:
             status.clear()
