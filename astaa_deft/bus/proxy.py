@@ -18,6 +18,7 @@ from .topology import STAR_PREFIX, UNDECLARED_PREFIX, Route, module_namespace, s
 
 BLOCK = zenoh.CongestionControl.BLOCK
 REMOTE = zenoh.Locality.REMOTE
+FIFO_CAPACITY = 16384  # samples waiting per route; when full, Zenoh holds back the sender (no loss)
 
 
 class LiveRoute:
@@ -48,10 +49,14 @@ def plain_forwarder(live: LiveRoute) -> Callable[[zenoh.Sample], None]:
 class StarProxy:
     """Forward every declared channel, plus a catch-all for undeclared keys.
 
-    Each declared channel gets its own subscriber whose callback closes over
-    its publishers (measured: ~25 % less CPU per message than one wildcard
-    subscriber dispatching on the key). `make_forwarder` is where a later
-    stage (interception) substitutes its own callback for a route.
+    Each declared channel has its own subscriber, whose samples queue in a
+    Zenoh FIFO channel (native side) and are forwarded by a thread of its
+    own, and so does the catch-all. Measured against Python callbacks run on
+    Zenoh's threads (one wildcard subscriber dispatching on the key, or one
+    callback subscriber per channel plus a wildcard catch-all): about 30 %
+    less CPU per message and 1.3–1.6× the throughput, the catch-all included.
+    Order is kept per channel. `make_forwarder` is where a later stage
+    (interception) substitutes its own function for a route.
     """
 
     def __init__(self, session: zenoh.Session, spec: Spec,
@@ -65,21 +70,38 @@ class StarProxy:
         self._undeclared_pubs: dict[str, list[zenoh.Publisher]] = {}
         self._lock = threading.Lock()
         self._subscribers: list[zenoh.Subscriber] = []
+        self._threads: list[threading.Thread] = []
         self.undeclared_count = 0
 
     def start(self) -> None:
         for route in star_routes(self.spec):
             live = LiveRoute(route, [(consumer, self._publisher(key)) for consumer, key in route.destinations])
             self.routes[route.source] = live
-            self._subscribers.append(self.session.declare_subscriber(route.source, self.make_forwarder(live)))
+            self._pump(route.source, self.make_forwarder(live), f"fwd-{route.channel.name}")
         # allowed_origin=REMOTE keeps our own republished copies out of the catch-all.
-        self._subscribers.append(self.session.declare_subscriber(
-            f"{STAR_PREFIX}/**", self._catch_all, allowed_origin=REMOTE))
+        self._pump(f"{STAR_PREFIX}/**", self._catch_all, "fwd-catch-all", allowed_origin=REMOTE)
+
+    def _pump(self, key_expr: str, handle: Callable[[zenoh.Sample], None], name: str, **options) -> None:
+        sub = self.session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(FIFO_CAPACITY), **options)
+        self._subscribers.append(sub)
+
+        def run() -> None:
+            try:
+                for sample in sub:  # ends when the subscriber is undeclared
+                    handle(sample)
+            except zenoh.ZError:
+                pass
+
+        thread = threading.Thread(target=run, name=name, daemon=True)
+        thread.start()
+        self._threads.append(thread)
 
     def stop(self) -> None:
         for sub in self._subscribers:
             sub.undeclare()
-        self._subscribers = []
+        for thread in self._threads:
+            thread.join(timeout=2.0)
+        self._subscribers, self._threads = [], []
 
     def counts(self) -> dict[str, int]:
         return {live.route.channel.name: live.count for live in self.routes.values()}
