@@ -209,8 +209,8 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
         if key not in REPLAY_KEYS:
             src.at_key(node, key, f"unknown key '{key}' in 'planner.replay'", did_you_mean(key, REPLAY_KEYS) or "")
     v = node.value
-    if ("factory" in v) == ("command" in v):
-        src.at(node, "'planner.replay' needs exactly one of 'factory' or 'command'",
+    if "factory" not in v and "command" not in v:
+        src.at(node, "'planner.replay' needs 'factory', 'command' or both",
                "factory: in-process (pkg.module:Name); command: the planner's own process, fed over Zenoh")
     factory = None
     if "factory" in v:

@@ -27,6 +27,7 @@ from .config import PlannerSpec, TrajectoryLayout, resolve_args
 from .validator import Point
 
 OUTPUT_TIMEOUT = 10.0
+SETTLE_SECONDS = 0.01
 
 
 class ReplayPlanner(Protocol):
@@ -102,6 +103,7 @@ class LockstepPlanner:
         with open(self.log_path, "wb") as log:
             self.proc = subprocess.Popen(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
                                          stderr=subprocess.STDOUT, start_new_session=True)
+        self._sent: dict[str, dict] = {}
         self._wait_connected()
 
     def _wait_connected(self) -> None:
@@ -117,9 +119,16 @@ class LockstepPlanner:
         raise InputError("the planner process never subscribed to its trigger channel")
 
     def step(self, frame: Mapping[str, dict]) -> dict:
+        changed = False
         for name, message in frame.items():
-            if name != self.planner.trigger:
+            if name != self.planner.trigger and self._sent.get(name) != message:
                 self._pubs[name].put(json.dumps(message))
+                self._sent[name] = message
+                changed = True
+        if changed:
+            # A module may take each key's messages on a thread of its own: let the inputs
+            # land before the trigger, or it plans on the previous ones.
+            time.sleep(SETTLE_SECONDS)
         self._pubs[self.planner.trigger].put(json.dumps(frame[self.planner.trigger]))
         try:
             return json.loads(self.outputs.get(timeout=OUTPUT_TIMEOUT))
