@@ -121,13 +121,18 @@ def _proxy(a: argparse.Namespace) -> int:
     from .spec.loader import load_spec
 
     spec = load_spec(a.spec)
-    interceptor = None
+    interceptor, attachments = None, {}
     if a.policy is not None:
         from .intercept import load_interceptor
+        from .log import layout
 
         interceptor = load_interceptor(a.policy, spec, a.dictionary)
+        attachments[layout.POLICY_ATTACHMENT] = a.policy
+        for n, path in enumerate(a.dictionary, start=1):
+            attachments[layout.DICTIONARY_ATTACHMENT.format(n=n)] = path
     return proxy.run(spec, a.record, a.passive, a.duration, a.launch, console.parse_params(a.param),
-                     sys.argv, a.run_dir, stop_on_violation=a.stop_on_violation, interceptor=interceptor)
+                     sys.argv, a.run_dir, stop_on_violation=a.stop_on_violation, interceptor=interceptor,
+                     attachments=attachments)
 
 
 def _demo(a: argparse.Namespace) -> int:

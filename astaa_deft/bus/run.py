@@ -45,6 +45,7 @@ class RunOptions:
     run_dir: Path | None = None  # module logs and configs; a temp dir if None
     interceptor: Any = None  # an ASTAA test case engine (star mode only)
     stop_on_violation: bool = False
+    attachments: dict[str, Path] = field(default_factory=dict)  # name in the log → file (policy, dictionaries)
 
 
 class BusRun:
@@ -176,6 +177,8 @@ class BusRun:
         if self.interception is not None:
             for name in sorted(self.interception.targets):
                 args += ["--intercepted", name]
+        for name, file in self.options.attachments.items():
+            args += ["--attach", f"{name}={file}"]
         self.recorder = self._spawn_ready("recorder", args, error_file=path)
 
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None) -> subprocess.Popen:

@@ -89,10 +89,10 @@ def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
 
 def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, launch: bool,
         params: dict[str, str], command_line: list[str], run_dir: Path | None,
-        stop_on_violation: bool = False, interceptor=None) -> int:
+        stop_on_violation: bool = False, interceptor=None, attachments: dict | None = None) -> int:
     options = RunOptions(mode="passive" if passive else "star", launch=launch, record=record, params=params,
                          command_line=command_line, run_dir=run_dir, stop_on_violation=stop_on_violation,
-                         interceptor=interceptor)
+                         interceptor=interceptor, attachments=attachments or {})
     say(f"astaa-deft proxy: spec '{spec.name}', {'passive' if passive else 'star'} mode"
         + (f", recording to {record}" if record else "") + " — Ctrl-C to stop")
     outcome = run_bus(spec, options, duration)

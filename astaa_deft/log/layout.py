@@ -10,6 +10,8 @@ ORIGINAL_PREFIX = "/astaa/original/"  # the message before a mutation, by key
 MUTATIONS_TOPIC = "/astaa/mutations"  # what the interceptor did: test case, policy, action, fields, old → new
 
 SPEC_ATTACHMENT = "spec.yaml"
+POLICY_ATTACHMENT = "policy.xml"  # the ASTAA test case applied during the run, if any
+DICTIONARY_ATTACHMENT = "dictionary-{n}.yaml"  # user dictionaries on top of the default one
 RUN_METADATA = "astaa-deft.run"
 PROFILE = "astaa-deft"
 

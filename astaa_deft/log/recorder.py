@@ -44,6 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--meta", default="{}", help="JSON object stored as run metadata")
     ap.add_argument("--chunk-size", type=int, default=64 * 1024)
+    ap.add_argument("--attach", action="append", default=[], metavar="NAME=PATH",
+                    help="store this file in the log as an attachment (policy, dictionaries)")
     ap.add_argument("--intercepted", action="append", default=[],
                     help="a channel the proxy may alter: record what it delivered, and the originals")
     args = ap.parse_args(argv)
@@ -55,6 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     spec = load_spec(args.spec)
     writer = LogWriter(args.out, spec, chunk_size=args.chunk_size)
     writer.attachment(layout.SPEC_ATTACHMENT, spec.source_text.encode(), "application/yaml")
+    for item in args.attach:
+        name, _, path = item.partition("=")
+        media = "application/xml" if name.endswith(".xml") else "application/yaml"
+        writer.attachment(name, Path(path).read_bytes(), media)
     writer.metadata(layout.RUN_METADATA, {**json.loads(args.meta), "mode": args.mode})
 
     q: "queue.SimpleQueue" = queue.SimpleQueue()
