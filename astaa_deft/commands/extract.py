@@ -9,6 +9,7 @@ from pathlib import Path
 from ..deft.config import PAPER_THRESHOLDS
 from ..deft.export import export_suite
 from ..deft.extract import Extraction, extract, ground_truth_rate
+from ..deft.oracle import oracle_entries
 from ..deft.replay import make_planner
 from ..errors import InputError, Problem
 from ..log import layout
@@ -76,8 +77,14 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]
-    manifest = export_suite(accepted, spec, params, out_dir)
+    collisions = [e["time_ns"] for e in log.events("violation") if e.get("invariant_kind") == "collision"]
+    kept = {f.index for f in accepted}
+    oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept]
+    manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles)
     say(summary_table(ex))
+    if collisions:
+        say(f"collision observed in the run: {len(oracles)} frame(s) planned into a predicted obstacle "
+            f"beforehand → oracle tests that fail while the planner still does so")
     if ground_truth:
         exact, checked = ground_truth_rate(ex, spec, ground_truth)
         say(f"ground truth ({ground_truth}): {exact}/{checked} frames used exactly the planner's inputs"
