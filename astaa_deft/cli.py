@@ -98,9 +98,11 @@ def build_parser() -> argparse.ArgumentParser:
                                                          a.ground_truth))
 
     # demo
-    demo = sub.add_parser("demo", help="run the bundled autonomous-driving demo through the proxy")
-    _demo_args(demo)
-    demo.set_defaults(func=_demo)
+    demo = sub.add_parser("demo", help="the bundled driving stack through the whole tool: record, DeFT tests, "
+                                       "live interception, minimisation")
+    demo.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
+    demo.add_argument("--out", type=Path, default=Path("astaa-deft-demo"), help="where everything is written")
+    demo.set_defaults(func=lambda a: _cmd("demo").run_all(a.scenario, a.out, sys.argv))
     demo_sub = demo.add_subparsers(dest="demo_command", metavar="ACTION")
     demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy")
     _demo_args(demo_run)

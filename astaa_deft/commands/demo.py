@@ -1,24 +1,44 @@
-"""`astaa-deft demo`: the bundled driving stack, through the proxy, recorded and summarised."""
+"""`astaa-deft demo`: the bundled driving stack through the whole tool.
+
+`demo run` drives one scenario through the star proxy, records it and
+summarises the run. `demo` alone runs the main job end to end:
+1. record a clean run through the proxy, with online monitors and a verdict;
+2. DeFT: extract deterministic planner tests from that log and run them with pytest;
+3. ASTAA: replay the scenario with a test case that rewrites live messages
+   (a NaN speed limit in routing) and show what changed and what broke;
+4. minimise that failure down to the mutation that causes it.
+Everything lands in ./astaa-deft-demo/ (or --out).
+"""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import threading
 from importlib import resources
 from pathlib import Path
 
 from ..bus.run import RunOptions
+from ..intercept import load_interceptor
+from ..log import layout
 from ..log.reader import read_log
 from ..log.summary import format_info
+from ..monitor.verdict import format_verdict
 from ..spec.loader import load_spec
 from .console import say
-from .proxy import run_bus
+from .proxy import Outcome, run_bus
 
 DEFAULT_TIME_LIMIT = 40.0
+DEMO_POLICY = "demo_nan_speed_limit.xml"
 
 
 def demo_spec_path() -> Path:
     return Path(str(resources.files("astaa_deft") / "data" / "specs" / "demo_av.yaml"))
+
+
+def demo_policy_path(name: str = DEMO_POLICY) -> Path:
+    return Path(str(resources.files("astaa_deft") / "data" / "policies" / "examples" / name))
 
 
 class StatusWatch:
@@ -50,23 +70,24 @@ class StatusWatch:
         return None
 
 
-def run(scenario: str, duration: float | None, defects: bool, passive: bool, record: Path | None,
-        command_line: list[str]) -> int:
+def drive(scenario: str, defects: bool, passive: bool, record: Path, command_line: list[str],
+          duration: float | None = None, policy: Path | None = None, stop_on_violation: bool = False,
+          ) -> tuple[Outcome, StatusWatch]:
+    """One scenario through the proxy, recorded; stops at the goal, a collision or the time limit."""
     spec = load_spec(demo_spec_path())
-    if record is None:
-        record = Path("astaa-deft-demo") / f"{Path(scenario).stem}.mcap"
-        record.parent.mkdir(parents=True, exist_ok=True)
     params = {"scenario": scenario, "defects": "on" if defects else "off"}
+    interceptor = load_interceptor(policy, spec) if policy is not None else None
     options = RunOptions(mode="passive" if passive else "star", record=record, params=params,
-                         command_line=command_line)
+                         command_line=command_line, interceptor=interceptor, stop_on_violation=stop_on_violation,
+                         attachments={layout.POLICY_ATTACHMENT: policy} if policy is not None else {})
     watch = StatusWatch()
-    say(f"demo: scenario '{scenario}', defects {'on' if defects else 'off'}, "
-        f"{'passive' if passive else 'star'} proxy, log {record}")
     outcome = run_bus(spec, options, duration or DEFAULT_TIME_LIMIT, until=watch.finished,
                       on_start=lambda r: r.subscribe("status", watch.on_sample))
+    return outcome, watch
+
+
+def summarise(outcome: Outcome, watch: StatusWatch) -> None:
     st = watch.latest
-    say("")
-    say("== summary ==")
     say(f"stopped: {outcome.reason} after {outcome.seconds:.1f} s wall, sim time {st.get('sim_time', 0):.1f} s")
     say(f"goal reached: {'yes' if watch.goal else 'no'}")
     if watch.collision is not None:
@@ -74,9 +95,86 @@ def run(scenario: str, duration: float | None, defects: bool, passive: bool, rec
             f"at sim time {watch.collision.get('sim_time', 0):.1f} s")
     else:
         say("collision: no")
-    for c in outcome.crashes:
-        say(f"crash: {c.describe()}")
+    if outcome.mutations:
+        say(f"mutations applied: {outcome.mutations}")
+    if outcome.verdict is not None:
+        say(format_verdict(outcome.verdict))
+
+
+def run(scenario: str, duration: float | None, defects: bool, passive: bool, record: Path | None,
+        command_line: list[str]) -> int:
+    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well."""
+    if record is None:
+        record = Path("astaa-deft-demo") / f"{Path(scenario).stem}.mcap"
+        record.parent.mkdir(parents=True, exist_ok=True)
+    say(f"demo: scenario '{scenario}', defects {'on' if defects else 'off'}, "
+        f"{'passive' if passive else 'star'} proxy, log {record}")
+    outcome, watch = drive(scenario, defects, passive, record, command_line, duration)
+    say("")
+    say("== summary ==")
+    summarise(outcome, watch)
     say("")
     say(format_info(read_log(record)))
     ok = watch.goal and watch.collision is None and not outcome.crashes
     return 0 if ok else 1
+
+
+def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
+    """`demo`: record, extract DeFT tests and run them, intercept live, minimise. 0 if every step did its job."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = out_dir.resolve()
+    spec_path = demo_spec_path()
+    problems: list[str] = []
+
+    say(f"== 1/4 record: the demo stack drives '{scenario}' through the star proxy ==")
+    clean_log = out_dir / "clean.mcap"
+    outcome, watch = drive(scenario, True, False, clean_log, command_line)
+    summarise(outcome, watch)
+    if not watch.goal or outcome.verdict is None or outcome.verdict.klass != "Pass":
+        problems.append("the clean run did not reach its goal with a Pass verdict")
+
+    say("")
+    say("== 2/4 DeFT: deterministic planner tests from that record ==")
+    tests_dir = out_dir / "planner-tests"
+    from .extract import run as extract
+
+    extract(clean_log, spec_path, tests_dir, threshold=None, process=False, ground_truth="debug.inputs")
+    say(f"$ pytest {tests_dir.relative_to(Path.cwd()) if tests_dir.is_relative_to(Path.cwd()) else tests_dir}")
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
+                            capture_output=True, text=True, cwd=out_dir)
+    say(result.stdout.strip().splitlines()[-1] if result.stdout.strip() else result.stderr.strip())
+    if result.returncode != 0:
+        problems.append("the extracted planner tests did not pass")
+
+    say("")
+    policy = demo_policy_path()
+    say(f"== 3/4 ASTAA: the same scenario with live messages rewritten ({policy.name}) ==")
+    say(policy.read_text().split("<description>")[1].split("</description>")[0].strip())
+    attack_log = out_dir / "intercepted.mcap"
+    outcome, watch = drive(scenario, True, False, attack_log, command_line, policy=policy, duration=20.0)
+    summarise(outcome, watch)
+    if outcome.verdict is None or outcome.verdict.klass == "Pass":
+        problems.append("the interception did not make any invariant break")
+
+    say("")
+    say("== 4/4 minimise: which mutations cause that failure? ==")
+    minimised = minimise_step(attack_log, spec_path, out_dir / "minimised")
+    if minimised is not None and minimised != 0:
+        problems.append("minimisation did not reproduce the failure")
+
+    say("")
+    say(f"everything is in {out_dir}/: clean.mcap, planner-tests/, intercepted.mcap"
+        + (", minimised/" if minimised is not None else ""))
+    say(f"look inside a log: astaa-deft log info {attack_log}")
+    for p in problems:
+        say(f"demo problem: {p}")
+    return 1 if problems else 0
+
+
+def minimise_step(log: Path, spec: Path, out_dir: Path) -> int | None:
+    try:
+        from . import minimise
+    except ImportError:
+        say("(minimisation is not available in this build)")
+        return None
+    return minimise.run(log, spec, None, out_dir, repeats=1, parallel=2, live_only=False)

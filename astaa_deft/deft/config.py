@@ -57,10 +57,14 @@ class PlannerSpec:
     command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
     threshold: float = 0.0  # metres: the validator's acceptance
     lookback_ms: float = 20.0  # candidate frame times this far before the trigger (delivery jitter)
+    # The recorder's receive times can lag the planner's by a little (its own
+    # scheduling): a trigger logged up to this long after the output is still a candidate.
+    skew_ms: float = 5.0
     collision: CollisionOracle | None = None
 
 
-KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms", "oracle")
+KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms", "skew_ms",
+        "oracle")
 REPLAY_KEYS = ("factory", "args", "command")
 TRAJ_KEYS = ("points", "x", "y", "t", "heading", "time", "stamp")
 COLLISION_KEYS = ("ego", "obstacles", "margin")
@@ -125,9 +129,10 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     factory, args, command = _replay(src, v.get("replay"))
     threshold = _number(src, v.get("threshold"), "planner.threshold", 0.0)
     lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 20.0)
+    skew = _number(src, v.get("skew_ms"), "planner.skew_ms", 5.0)
     collision = _oracle(src, v.get("oracle"), inputs)
     return PlannerSpec(module, tuple(inputs), trigger, output, layout, factory, args, command, threshold, lookback,
-                       collision)
+                       skew, collision)
 
 
 def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracle | None:

@@ -79,9 +79,10 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
     result = Extraction(outputs=len(outputs))
     previous: dict[str, int] = {}
     lookback = int(cfg.lookback_ms * 1e6)
+    skew = int(cfg.skew_ms * 1e6)
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
-        options = candidates(streams, cfg.trigger, output.log_time, previous, lookback)
+        options = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback)
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
         try:

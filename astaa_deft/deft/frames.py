@@ -3,7 +3,10 @@
 Pure logic over time-sorted message streams (times are the recorder's
 receive times, ns). For an output logged at t_P:
 
-- the trigger is the newest trigger-channel message at or before t_P;
+- the trigger is a trigger-channel message at or before t_P and after the
+  previous frame's trigger: the newest one first (a planner that keeps up),
+  then the oldest not yet used (a planner that lags behind its triggers
+  answers them in order), then the ones between;
 - the frame time t_F lies between the trigger (t_T) and t_P; each other
   input is the newest message at or before t_F, never older than the one
   used in the previous frame (per channel); a channel's lone message is
@@ -65,10 +68,25 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                lookback_ns: int) -> list[Candidate]:
     """Distinct candidate frames for an output at t_P, most likely first."""
     trig = streams[trigger]
-    t_index = newest_at_or_before(trig.times, t_p)
-    if t_index < 0:
+    newest = newest_at_or_before(trig.times, t_p)
+    if newest < 0:
         return []
-    t_t = trig.times[t_index]
+    oldest = previous.get(trigger, newest - 1) + 1
+    order_of_triggers = [newest] + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))
+    out: list[Candidate] = []
+    seen: set[tuple] = set()
+    for t_index in order_of_triggers:
+        for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns):
+            key = tuple(sorted(cand.choice.items()))
+            if key not in seen:
+                seen.add(key)
+                out.append(cand)
+    return out
+
+
+def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p: int,
+                 previous: Mapping[str, int], lookback_ns: int) -> list[Candidate]:
+    t_t = streams[trigger].times[t_index]
     later: set[int] = set()
     earlier: set[int] = set()
     for name, stream in streams.items():
@@ -80,15 +98,9 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
         lo_back = bisect_right(times, t_t - lookback_ns - 1)
         # "Just before" each message logged shortly before (or with) the trigger.
         earlier.update(t - 1 for t in times[lo_back:lo])
-    order = [t_t] + sorted(later) + sorted(earlier, reverse=True)
-    out: list[Candidate] = []
-    seen: set[tuple] = set()
-    for t_f in order:
+    out = []
+    for t_f in [t_t] + sorted(later) + sorted(earlier, reverse=True):
         choice = frame_at(streams, trigger, t_index, t_f, previous)
-        if choice is None:
-            continue
-        key = tuple(sorted(choice.items()))
-        if key not in seen:
-            seen.add(key)
+        if choice is not None:
             out.append(Candidate(t_f, choice))
     return out
