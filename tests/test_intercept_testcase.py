@@ -300,11 +300,17 @@ def test_accepted_values_for_a_float_field(value):
     parse_testcase(xml.encode(), "v.xml", ECHO)
 
 
-def test_shipped_examples_are_valid(capsys):
-    files = sorted(EXAMPLES.glob("*.xml"))
+@pytest.mark.parametrize("prefix,spec", [("echo_", ROOT / "tests" / "sut" / "echo.yaml"),
+                                         ("demo_", ROOT / "specs" / "demo_av.yaml")])
+def test_shipped_examples_are_valid(capsys, prefix, spec):
+    files = sorted(EXAMPLES.glob(f"{prefix}*.xml"))
     assert files
-    assert policy_check.run(files, ROOT / "tests" / "sut" / "echo.yaml") == 0
+    assert policy_check.run(files, spec) == 0
     assert capsys.readouterr().out.count(": ok") == len(files)
+
+
+def test_every_shipped_example_is_checked():
+    assert {p.name[:5] for p in EXAMPLES.glob("*.xml")} == {"echo_", "demo_"}
 
 
 def test_policy_check_command_reports_every_bad_file(tmp_path):
