@@ -1,0 +1,62 @@
+"""Monitors on the demo, live: clean runs give no violation at all; each
+seeded defect, triggered by its example test case through the proxy (the
+demo modules unchanged), gets its CRASH class and invariant; and `check` on
+the log agrees with the verdict given online.
+
+Clean runs repeat ASTAA_DEFT_REPEATS times per scenario: once in the default
+run (and CI), 5 times for the acceptance figure:
+`ASTAA_DEFT_REPEATS=5 pytest tests/test_demo_verdicts.py`."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from astaa_deft.commands.demo import demo_policy_path, demo_spec_path, drive
+from astaa_deft.log.reader import read_log
+from astaa_deft.monitor import check_log
+from astaa_deft.spec.loader import load_spec
+
+REPEATS = int(os.environ.get("ASTAA_DEFT_REPEATS", "1"))
+CLEAN = ["lane_follow", "static_obstacle", "cut_in", "red_light"]
+
+DEFECTS = [
+    # (example test case, CRASH class, the invariant that must catch it)
+    ("demo_nan_speed_limit.xml", "Silent", {"planned_speed", "speed_limit"}),
+    ("demo_huge_heading.xml", "Restart", {"control_alive"}),
+    ("demo_empty_trajectory.xml", "Abort", {"modules_alive"}),
+    ("demo_time_backwards.xml", "Silent", {"finite_command"}),
+]
+
+
+def agree_offline(log_path):
+    result = check_log(read_log(log_path), load_spec(demo_spec_path()))
+    return result
+
+
+@pytest.mark.parametrize("repeat", range(REPEATS))
+@pytest.mark.parametrize("scenario", CLEAN)
+def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
+    log = tmp_path / "run.mcap"
+    outcome, watch = drive(scenario, defects=False, passive=False, record=log, command_line=[])
+    assert watch.goal and watch.collision is None
+    assert outcome.violations == [], [v["invariant"] for v in outcome.violations]
+    assert outcome.verdict.klass == "Pass"
+    offline = agree_offline(log)
+    assert offline.verdict.klass == "Pass" and offline.violations == []
+
+
+@pytest.mark.parametrize("policy,klass,invariants", DEFECTS, ids=[d[0][5:-4] for d in DEFECTS])
+def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass, invariants):
+    log = tmp_path / "run.mcap"
+    outcome, _ = drive("lane_follow", defects=True, passive=False, record=log, command_line=[],
+                       policy=demo_policy_path(policy), duration=9.0)
+    assert outcome.mutations >= 1
+    assert outcome.verdict.klass == klass, outcome.verdict.summary
+    assert outcome.verdict.first.invariant in invariants
+    # Online and offline verdicts agree on the same run.
+    offline = agree_offline(log)
+    assert offline.verdict.klass == outcome.verdict.klass
+    assert offline.verdict.first.invariant == outcome.verdict.first.invariant
+    assert sorted(v.invariant for v in offline.violations) == sorted(v["invariant"] for v in outcome.violations)
