@@ -93,9 +93,15 @@ def module_configs(spec: Spec, mode: str, bus_endpoint: str) -> dict[str, dict[s
 
 
 def recorded_keys(spec: Spec, mode: str) -> list[tuple[str, Channel]]:
-    """(key expression to subscribe, channel) for every declared channel."""
+    """(key expression to subscribe, channel) for every declared channel: where it is delivered.
+
+    In the star that is the proxy's copy for the channel's first consumer, so
+    log times and the order across channels are those a consumer saw (DeFT
+    reconstructs a consumer's frames from them); a channel nobody consumes is
+    taken where its producer publishes it.
+    """
     if mode == "star":
-        return [(r.source, r.channel) for r in star_routes(spec)]
+        return [(r.destinations[0][1] if r.destinations else r.source, r.channel) for r in star_routes(spec)]
     return [(ch.key, ch) for ch in spec.channels]
 
 

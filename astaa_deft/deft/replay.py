@@ -8,6 +8,8 @@ what lets extraction try several candidate frames from the same state.
 from __future__ import annotations
 
 import copy
+import statistics
+from collections import deque
 import importlib
 import json
 import queue
@@ -28,6 +30,7 @@ from .validator import Point
 
 OUTPUT_TIMEOUT = 10.0
 SETTLE_SECONDS = 0.01
+SETTLE_MAX = 0.2
 
 
 class ReplayPlanner(Protocol):
@@ -104,6 +107,7 @@ class LockstepPlanner:
             self.proc = subprocess.Popen(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
                                          stderr=subprocess.STDOUT, start_new_session=True)
         self._sent: dict[str, dict] = {}
+        self._latencies: deque[float] = deque([0.0], maxlen=10)
         self._wait_connected()
 
     def _wait_connected(self) -> None:
@@ -127,11 +131,15 @@ class LockstepPlanner:
                 changed = True
         if changed:
             # A module may take each key's messages on a thread of its own: let the inputs
-            # land before the trigger, or it plans on the previous ones.
-            time.sleep(SETTLE_SECONDS)
+            # land before the trigger, or it plans on the previous ones. The busier the
+            # module (the longer it takes to answer), the longer the wait.
+            time.sleep(min(SETTLE_MAX, max(SETTLE_SECONDS, 2.0 * statistics.median(self._latencies))))
+        sent = time.monotonic()
         self._pubs[self.planner.trigger].put(json.dumps(frame[self.planner.trigger]))
         try:
-            return json.loads(self.outputs.get(timeout=OUTPUT_TIMEOUT))
+            output = json.loads(self.outputs.get(timeout=OUTPUT_TIMEOUT))
+            self._latencies.append(time.monotonic() - sent)
+            return output
         except queue.Empty:
             raise InputError(f"the planner process gave no output within {OUTPUT_TIMEOUT:g} s:\n"
                              f"{tail(self.log_path)}") from None

@@ -1,0 +1,279 @@
+"""`astaa-deft minimise RUN.mcap --spec SUT.yaml [--invariant NAME] -o DIR`: the few mutations that cause a failure.
+
+Reads an intercepted run that failed, finds the failure (the named
+invariant's first violation, else the run's first), and minimises the run's
+mutations to those the failure needs — with the planner replay when the
+failure is in the planner's output, else with whole-system re-runs
+(docs/minimise.md). The minimal test case is then run live ``confirm``
+times to check it reproduces the failure through the proxy.
+
+Exit codes: 0 minimised and reproduced; 1 a finding without a clean
+minimal reproduction (the failure does not reproduce, is flaky, or does not
+need the mutations), with the report; 2 bad input (InputError).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable
+
+from ..errors import InputError, Problem
+from ..intercept.testcase import TestCase, parse_testcase
+from ..log import layout
+from ..log.reader import read_log
+from ..minimise.ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
+from ..minimise.deft_tester import (
+    DeftTester,
+    ReplayModel,
+    ReplayPool,
+    default_setup,
+    load_spec_for,
+    run_params,
+)
+from ..minimise.live_tester import MARGIN_SECONDS, LiveTester
+from ..minimise.mutations import read_mutations
+from ..minimise.output import (
+    MINIMAL_MCAP,
+    TESTS_DIR,
+    copy_log,
+    format_summary,
+    prepare_directory,
+    summary,
+    write_module_tests,
+    write_replay_log,
+    write_summary,
+    write_testcase_file,
+)
+from ..minimise.restrict import restricted_testcase
+from ..minimise.stages import (
+    Failure,
+    Minimisation,
+    choose_tester,
+    find_failure,
+    minimise_live,
+    minimise_replay,
+)
+from ..monitor import with_typed_invariants
+from .console import say as print_line
+
+FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure not reproducible
+
+
+def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: Path, repeats: int = 1,
+        parallel: int = 2, live_only: bool = False, *, confirm: int = 3, max_tests: int | None = None,
+        live_fallback: bool = True, verbose: bool = True) -> int:
+    if repeats < 1:
+        raise InputError(Problem("--repeats", None, None, f"{repeats} runs per test", "give at least 1"))
+    if parallel < 1:
+        raise InputError(Problem("--parallel", None, None, f"{parallel} workers", "give at least 1"))
+    if confirm < 0:
+        raise InputError(Problem("--confirm", None, None, f"{confirm} runs", "give 0 (no live check) or more"))
+    say: Callable[[str], None] = print_line if verbose else (lambda line: None)
+    started = time.monotonic()
+    log = read_log(log_path)
+    for warning in log.warnings:
+        say(f"warning: {warning}")
+    spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None))
+    recorded_with = log.metadata.get(layout.RUN_METADATA, {}).get("spec")
+    if recorded_with and recorded_with != spec.name:
+        raise InputError(Problem(str(log_path), None, None,
+                                 f"this log was recorded with spec '{recorded_with}', not '{spec.name}'",
+                                 "pass the spec the run used"))
+    mlog = read_mutations(log, spec)
+    if not mlog.mutations:
+        reason = ("it was not recorded with a policy (astaa-deft proxy --policy …)"
+                  if layout.MUTATIONS_TOPIC not in log.channels
+                  else f"its {mlog.noop} mutation event(s) changed nothing")
+        raise InputError(Problem(str(log_path), None, None, f"the log holds no mutations: {reason}",
+                                 "minimise a run that was intercepted"))
+    failure = find_failure(log, spec, invariant)
+    prepare_directory(out_dir)
+    tester_kind, why = choose_tester(spec, failure, live_only)
+    params = {**spec.params, **run_params(log)}
+    original = _original_testcase(log)
+    say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
+    say(f"tester: {tester_kind} ({why})")
+
+    result: Minimisation | None = None
+    model: ReplayModel | None = None
+    replays = replay_hits = 0
+    notes: list[str] = []
+    if tester_kind == "replay":
+        setup = default_setup(log_path, spec_path, failure.invariant)
+        workers = max(1, min(parallel, os.cpu_count() or 1))
+        with ReplayPool(setup, workers=workers) as pool:
+            say(f"planner replay: {pool.workers} worker process(es), one replay of the run in "
+                f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
+            tester = DeftTester(pool)
+            model = ReplayModel(setup, baseline=False)
+            try:
+                result = minimise_replay(tester, model, failure, pool.workers, say, max_tests)
+            except NotReproducible as exc:
+                if not live_fallback:
+                    return _replay_not_reproducible(out_dir, failure, exc, started, log_path)
+                note = f"the planner replay does not reproduce the failure ({exc}); whole-system re-runs instead"
+                say(f"note: {note}")
+                notes.append(note)
+                tester_kind, why, model = "live", "the replay does not reproduce it", None
+            except FailsWithoutItems as exc:
+                return _no_mutation_needed(out_dir, failure, exc, started, log_path)
+            replays, replay_hits = tester.runs, tester.hits
+
+    live = LiveTester(spec, params, failure.invariant, failure.module, failure_at=failure.at, repeats=repeats,
+                      original=original, testcase_id=f"minimal-{_id(original)}",
+                      progress=(lambda line: say(f"  {line}")))
+    if tester_kind == "live":
+        full, repeats_used = _reproduce(live, mlog.mutations, failure, repeats, say)
+        if full is None:
+            return _not_reproducible(out_dir, failure, started, log_path, notes, live)
+        live.repeats = repeats_used
+        try:
+            result = minimise_live(live, mlog.mutations, failure, full, say, max_tests)
+        except FailsWithoutItems as exc:
+            return _no_mutation_needed(out_dir, failure, exc, started, log_path)
+    assert result is not None
+    result.notes[:0] = notes
+
+    testcase = restricted_testcase(
+        result.chosen, testcase_id=f"minimal-{_id(original)}", original=original,
+        description=(f"minimised from {log_path.name}: {len(result.kept)} of {len(result.mutations)} mutations; "
+                     f"fails {failure.invariant}"))
+    xml = write_testcase_file(out_dir, testcase, spec)
+    files = {"test case": xml}
+    confirmation, confirm_log = _confirm(live, testcase, xml, result, confirm, say)
+    if result.tester == "replay" and model is not None:
+        files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
+        files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
+    elif confirm_log is not None:
+        files["log"] = copy_log(confirm_log, out_dir)
+    if confirm_log is not None:
+        confirm_log.unlink(missing_ok=True)
+    verdict, code = _verdict(result, confirmation)
+    body = summary(result, log=log_path, why=why, seconds=time.monotonic() - started, confirm=confirmation,
+                   verdict=verdict, files={**files, "summary": out_dir / "summary.json"},
+                   replay_tests=replays, replay_hits=replay_hits)
+    write_summary(out_dir, body)
+    print_line(format_summary(body))
+    return code
+
+
+def _id(original: TestCase | None) -> str:
+    return original.id if original is not None else "run"
+
+
+def _original_testcase(log) -> TestCase | None:
+    """The logged test case (rates and modes events do not record); None if absent or unreadable."""
+    data = log.attachments.get(layout.POLICY_ATTACHMENT)
+    if data is None:
+        return None
+    try:
+        return parse_testcase(data, layout.POLICY_ATTACHMENT)
+    except InputError:
+        return None
+
+
+def _reproduce(live: LiveTester, mutations, failure: Failure, repeats: int,
+               say: Callable[[str], None]) -> tuple[TestResult | None, int]:
+    """Re-run the full set of mutations: (its result, runs per test from now on); None if it never fails.
+
+    ``repeats`` runs first; if none fails, up to FLAKY_CHECK_RUNS in all
+    before giving up. A failure in some runs only is flaky: later tests then
+    run at least FLAKY_CHECK_RUNS times each.
+    """
+    chosen = [(m, None) for m in mutations]
+    testcase = live.testcase(chosen)
+    horizon = max([failure.at] + [m.at for m in mutations]) + MARGIN_SECONDS
+    say(f"reproducing the failure live with all {len(mutations)} mutations pinned")
+    runs = []
+    while len(runs) < repeats or (len(runs) < FLAKY_CHECK_RUNS and not any(r.failed for r in runs)):
+        runs.append(live.run(testcase, horizon))
+        say(f"  run {len(runs)}: " + ("fail" if runs[-1].failed else "pass" if runs[-1].failed is False
+                                      else f"could not tell ({runs[-1].detail})") + f" ({runs[-1].seconds:.1f} s)")
+    told = [r for r in runs if r.failed is not None]
+    fails = [r for r in told if r.failed]
+    if not fails:
+        return None, repeats
+    rate = len(fails) / len(told)
+    per_test = repeats
+    if rate < 1.0:
+        per_test = max(repeats, FLAKY_CHECK_RUNS)
+        say(f"flaky: the full test case failed in {len(fails)} of {len(told)} runs; "
+            f"each test now runs {per_test} times and fails if any run fails")
+    return TestResult(Outcome.FAIL, fails[0].detail, rate), per_test
+
+
+def _confirm(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, runs: int,
+             say: Callable[[str], None]) -> tuple[dict, Path | None]:
+    """Run the minimal test case live ``runs`` times: its failure rate, and a log of a failing run."""
+    if runs == 0:
+        return {"runs": 0, "failures": 0, "rate": None}, None
+    horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
+    say(f"confirming {xml.name} live through the proxy ({runs} run(s))")
+    scratch = Path(tempfile.mkdtemp(prefix="astaa-deft-confirm-"))
+    kept: Path | None = None
+    outcomes = []
+    for n in range(runs):
+        record = scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None
+        outcome = live.run(testcase, horizon, record=record, policy_file=xml)
+        outcomes.append(outcome)
+        say(f"  run {n + 1}: " + ("fail" if outcome.failed else "pass" if outcome.failed is False
+                                  else f"could not tell ({outcome.detail})") + f" ({outcome.seconds:.1f} s)")
+        if record is not None:
+            if kept is None and (outcome.failed or n == runs - 1):
+                kept = record
+            elif record != kept:
+                record.unlink(missing_ok=True)
+    told = [o for o in outcomes if o.failed is not None]
+    failures = sum(1 for o in told if o.failed)
+    body = {"runs": len(told), "failures": failures, "rate": failures / len(told) if told else None,
+            "seconds": round(sum(o.seconds for o in outcomes), 3),
+            "details": sorted({o.detail for o in told if o.failed})[:3]}
+    return body, kept
+
+
+def _verdict(result: Minimisation, confirmation: dict) -> tuple[str, int]:
+    rate = confirmation.get("rate")
+    if not confirmation.get("runs"):
+        if result.tester == "replay":
+            return "minimised; reproduced in the planner replay (not run live: --confirm 0)", 0
+        return "minimised (not confirmed live: --confirm 0)", 0
+    if rate == 1.0:
+        return "minimised and reproduced live in every run", 0
+    if rate:
+        return (f"flaky: the minimal test case fails in {confirmation['failures']} of {confirmation['runs']} "
+                f"live runs ({rate:.0%})"), 1
+    if result.tester == "replay":
+        return ("minimised in the planner replay, but the minimal test case did not reproduce the failure live "
+                "(the replay is open-loop: see docs/minimise.md)"), 1
+    return "the minimal test case did not reproduce the failure in its confirmation runs", 1
+
+
+def _no_mutation_needed(out_dir: Path, failure: Failure, exc: Exception, started: float, log_path: Path) -> int:
+    message = f"the failure happens without any of the mutations ({exc}): nothing to minimise"
+    print_line(f"minimise: {message}")
+    write_summary(out_dir, {"log": str(log_path), "failure": failure.__dict__, "verdict": message,
+                            "seconds": round(time.monotonic() - started, 3)})
+    return 1
+
+
+def _replay_not_reproducible(out_dir: Path, failure: Failure, exc: Exception, started: float,
+                             log_path: Path) -> int:
+    message = (f"the failure ({failure.invariant}) does not reproduce in the planner replay: {exc} "
+               f"(whole-system re-runs were not tried: --no-live-fallback)")
+    print_line(f"minimise: {message}")
+    write_summary(out_dir, {"log": str(log_path), "failure": failure.__dict__, "verdict": message,
+                            "seconds": round(time.monotonic() - started, 3)})
+    return 1
+
+
+def _not_reproducible(out_dir: Path, failure: Failure, started: float, log_path: Path, notes: list[str],
+                      live: LiveTester) -> int:
+    message = (f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
+               f"test case: nothing to minimise (a rare flaky failure? try --repeats N)")
+    print_line(f"minimise: {message}")
+    write_summary(out_dir, {"log": str(log_path), "failure": failure.__dict__, "verdict": message,
+                            "notes": notes, "seconds": round(time.monotonic() - started, 3)})
+    return 1

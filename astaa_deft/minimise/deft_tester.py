@@ -1,0 +1,654 @@
+"""The replay tester: does a subset of mutations still break the invariant in a planner replay?
+
+For a failing invariant that reads only the planner's output, a whole-system
+re-run is not needed: the planner is deterministic on its own (docs/deft.md).
+A test of a subset of mutations
+
+1. rebuilds the planner's input streams with those mutations applied and
+   every other one reverted (:class:`~.mutations.ReceivedStreams`);
+2. takes, for every recorded planner output, its most likely frame — the
+   first candidate of :func:`astaa_deft.deft.frames.candidates`, with the
+   same never-older-than-the-previous-frame rule as extraction (the output
+   times are the recorded ones: the replay is open-loop);
+3. replays the planner (``planner.replay.factory``, in-process) over the
+   frames in order and feeds its outputs, at the recorded outputs' times, to
+   a :class:`~astaa_deft.monitor.MonitorSet` holding only that invariant;
+4. answers FAIL at the first violation, PASS if none.
+
+Cost. The replay of the run with every mutation reverted (the baseline) is
+done once per process, keeping a planner snapshot every few frames. A test
+replays only where its subset makes a difference: from the first frame it
+changes until the planner is back in the baseline's state (the effect of a
+mutation usually dies out within a few frames), and stops at the first
+violation. Decoded messages are cached by origin. The answer is
+deterministic, so a subset is tested once (:class:`DeftTester` caches by
+subset, on top of ddmin's own cache).
+
+Safety. Replays run in worker processes (:class:`ReplayPool`): a planner
+that hangs is killed after a per-test timeout and the test answers
+UNRESOLVED (a hang is another failure than the invariant being minimised),
+so ddmin does not reduce towards it; a planner that raises answers
+UNRESOLVED too — the real module may never have let such an input reach the
+planner (the demo's planning module drops malformed messages before
+planning), so a replay crash says nothing about the invariant. Frames whose
+inputs do not decode are not used: an undecodable input is dropped, as a
+module's deserialiser would.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import pickle
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from ..bus.processes import die_with_parent, stop_process
+from ..codecs import get_codec
+from ..codecs.base import DecodeError
+from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before
+from ..deft.replay import make_planner
+from ..errors import InputError, Problem
+from ..log import layout
+from ..log.reader import LoggedMessage, read_log
+from ..monitor import MonitorSet, format_violation, with_typed_invariants
+from ..monitor.offline import spec_from_log
+from ..spec.model import Spec
+from .ddmin import Outcome, TestResult
+from .mutations import (
+    Delivered,
+    FieldSelection,
+    ReceivedStreams,
+    read_mutations,
+    sent_stream,
+)
+
+SNAPSHOTS = 400  # planner snapshots kept along the baseline replay (at most)
+MIN_TEST_TIMEOUT = 20.0  # s: a test that takes longer than this (and 10x the baseline) is a hang
+WORKER_START_TIMEOUT = 300.0  # s: loading the log and replaying the baseline once
+PARALLEL_PAYS_SECONDS = 0.3  # a second worker only when one replay takes at least this long
+
+
+@dataclass(frozen=True)
+class Job:
+    """One test: the kept mutations (number → field selection) and, for stage 2, the frames replayed.
+
+    ``frames`` None: every output's frame, continuing from the baseline's
+    snapshots. A tuple of output indices: only those frames, in order, from a
+    fresh planner (the scaffolding search).
+    """
+
+    kept: tuple[tuple[int, FieldSelection], ...]
+    frames: tuple[int, ...] | None = None
+
+    @classmethod
+    def of(cls, kept: Mapping[int, FieldSelection], frames: Sequence[int] | None = None) -> Job:
+        return cls(tuple(sorted(kept.items())), None if frames is None else tuple(sorted(frames)))
+
+
+@dataclass(frozen=True)
+class ReplayAnswer:
+    result: TestResult
+    failing_output: int | None = None  # index of the output whose replay broke the invariant
+
+
+@dataclass(frozen=True)
+class ReplaySetup:
+    """What a worker needs to build its own :class:`ReplayModel` (plain, picklable data)."""
+
+    log_path: str
+    spec_path: str | None  # None: the spec stored in the log
+    invariant: str
+
+
+@dataclass(frozen=True)
+class Frame:
+    output: int  # index into the recorded outputs
+    inputs: tuple[tuple[str, Delivered], ...]
+    frame_time_ns: int
+    trigger_time_ns: int
+
+    @property
+    def key(self) -> tuple:
+        return tuple(d.key for _, d in self.inputs)
+
+
+def load_spec_for(log, spec_path: str | None) -> Spec:
+    if spec_path is not None:
+        from ..spec.loader import load_spec
+
+        return load_spec(spec_path)
+    spec = spec_from_log(log, f"{log.path}:{layout.SPEC_ATTACHMENT}")
+    if spec is None:
+        raise InputError(Problem(str(log.path), None, None, "the log holds no spec",
+                                 "give the SUT spec with --spec sut.yaml"))
+    return spec
+
+
+def run_params(log) -> dict[str, str]:
+    """The params the run was recorded with: the replayed planner must be built the same way."""
+    try:
+        return json.loads(log.metadata.get(layout.RUN_METADATA, {}).get("params", "{}"))
+    except ValueError:
+        return {}
+
+
+def replayable(spec: Spec, invariant_name: str) -> str | None:
+    """None if the replay can judge this invariant, else why not (the live tester is used then)."""
+    cfg = spec.planner
+    if cfg is None:
+        return "the spec has no 'planner' section"
+    if not cfg.factory:
+        return "the planner has no in-process replay ('planner.replay.factory')"
+    spec = with_typed_invariants(spec)
+    invariant = next((i for i in spec.invariants if i.name == invariant_name), None)
+    if invariant is None:
+        return f"'{invariant_name}' is not an invariant of the spec"
+    if invariant.kind in ("process", "deadline"):
+        return f"'{invariant_name}' is a {invariant.kind} invariant: timing and processes are not replayed"
+    channels = MonitorSet(replace(spec, invariants=(invariant,)), 0).channels()
+    if channels != {cfg.output}:
+        return (f"'{invariant_name}' reads {', '.join(sorted(channels)) or 'no channel'}, "
+                f"not only the planner's output '{cfg.output}'")
+    return None
+
+
+class ReplayModel:
+    """A run's planner replay with any subset of its mutations, in this process.
+
+    ``baseline=False`` skips the baseline replay: enough for :meth:`frames`
+    and :meth:`replay` (what the orchestrating process needs), not for :meth:`run`.
+    """
+
+    def __init__(self, setup: ReplaySetup, baseline: bool = True):
+        log = read_log(setup.log_path)
+        spec = with_typed_invariants(load_spec_for(log, setup.spec_path))
+        why_not = replayable(spec, setup.invariant)
+        if why_not:
+            raise InputError(why_not)
+        self.spec = spec
+        self.cfg = spec.planner
+        self.params = {**spec.params, **run_params(log)}
+        invariant = next(i for i in spec.invariants if i.name == setup.invariant)
+        self.judged = replace(spec, invariants=(invariant,))
+        self.mlog = read_mutations(log, spec)
+        self.streams = ReceivedStreams(self.mlog, self.cfg.module, self.cfg.inputs)
+        missing = [name for name in self.cfg.inputs if not self.streams.has(name)]
+        if missing:
+            raise InputError(Problem(str(log.path), None, None,
+                                     f"the log has no messages on the planner's input(s) {', '.join(missing)}",
+                                     "record the run with this spec"))
+        self.outputs: list[LoggedMessage] = sent_stream(self.mlog, log, self.cfg.output)
+        self.start_ns = self.mlog.start_ns
+        stopping = [e["time_ns"] for e in log.events("run_stopping") if "time_ns" in e]
+        self.end_ns = int(stopping[0]) if stopping else max((m.log_time for m in self.outputs), default=self.start_ns)
+        self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
+        self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
+        self._decoded: dict[Any, Any] = {}
+        self.baseline_seconds = 0.0
+        if baseline:
+            self._baseline()
+
+    # -- frames ------------------------------------------------------------
+    def decode(self, channel: str, delivered: Delivered) -> Any:
+        if delivered.key not in self._decoded:
+            try:
+                self._decoded[delivered.key] = self._codecs[channel].decode(delivered.data)
+            except DecodeError:
+                self._decoded[delivered.key] = None
+        return self._decoded[delivered.key]
+
+    def frames(self, kept: Mapping[int, FieldSelection]) -> list[Frame | None]:
+        """The most likely frame of every recorded output (None where an input had no message yet)."""
+        built = self.streams.build(kept)
+        usable = {name: [d for d in stream if self.decode(name, d) is not None] for name, stream in built.items()}
+        streams = {name: Stream(name, [d.time_ns for d in msgs]) for name, msgs in usable.items()}
+        trigger = self.cfg.trigger
+        trigger_times = streams[trigger].times
+        previous: dict[str, int] = {}
+        out: list[Frame | None] = []
+        for index, output in enumerate(self.outputs):
+            t_index = newest_at_or_before(trigger_times, output.log_time)
+            if t_index < 0:
+                out.append(None)
+                continue
+            t_t = trigger_times[t_index]
+            choice = frame_at(streams, trigger, t_index, t_t, previous)
+            frame_time = t_t
+            if choice is None:  # the trigger time does not work: the candidate search decides
+                options = candidates(streams, trigger, output.log_time, previous, self.lookback_ns)
+                if not options:
+                    out.append(None)
+                    continue
+                choice, frame_time = dict(options[0].choice), options[0].frame_time
+            previous = choice
+            out.append(Frame(index, tuple((name, usable[name][i]) for name, i in sorted(choice.items())),
+                             frame_time, t_t))
+        return out
+
+    def frame_message(self, frame: Frame) -> dict[str, Any]:
+        return {name: self.decode(name, d) for name, d in frame.inputs}
+
+    # -- replay ------------------------------------------------------------
+    def fresh_planner(self):
+        return make_planner(self.spec, self.params)
+
+    def _baseline(self) -> None:
+        """Replay with every mutation reverted, once: the snapshots and outputs tests start from.
+
+        Snapshots are pickled: restoring one is a ``pickle.loads``, and two
+        planner states are the same when their pickles are (see :meth:`run`).
+        A planner that cannot be pickled is deep-copied instead, without that check.
+        """
+        started = time.perf_counter()
+        self.base_frames = self.frames({})
+        self.base_keys = [f.key if f else None for f in self.base_frames]
+        stride = max(1, len(self.base_frames) // SNAPSHOTS)
+        planner = self.fresh_planner()
+        self.snapshots: dict[int, Any] = {}
+        self._pickled = True
+        self.base_outputs: list[Any] = []
+        self.base_error: str | None = None
+        self.base_error_frame: int | None = None
+        for k, frame in enumerate(self.base_frames):
+            if k % stride == 0:
+                self.snapshots[k] = self._snapshot(planner)
+            if frame is None:
+                self.base_outputs.append(None)
+                continue
+            try:
+                self.base_outputs.append(planner.step(self.frame_message(frame)))
+            except Exception as exc:  # judged by the tests that reach it
+                self.base_error = f"output {k}'s frame: {type(exc).__name__}: {exc}"
+                self.base_error_frame = k
+                self.base_outputs.extend([None] * (len(self.base_frames) - k - 1))
+                break
+        planner.close()
+        self.baseline_seconds = time.perf_counter() - started
+
+    def _snapshot(self, planner) -> Any:
+        state = planner.snapshot()
+        if self._pickled:
+            try:
+                return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception:  # not picklable: deep copies, and no convergence check
+                self._pickled = False
+                self.snapshots = {k: pickle.loads(v) for k, v in self.snapshots.items()}
+        return state
+
+    def _restore(self, k: int):
+        """A planner in the baseline's state just before output ``k``'s frame."""
+        s = max(i for i in self.snapshots if i <= k)
+        planner = self.fresh_planner()
+        state = self.snapshots[s]
+        planner.restore(pickle.loads(state) if self._pickled else copy.deepcopy(state))
+        for i in range(s, k):  # only when snapshots are sparser than frames
+            if self.base_frames[i] is not None:
+                planner.step(self.frame_message(self.base_frames[i]))
+        return planner
+
+    def _converged(self, planner, k: int) -> bool:
+        """Is ``planner`` in the state the baseline was in before output ``k``'s frame?"""
+        if not self._pickled or k not in self.snapshots or not planner.can_snapshot:
+            return False
+        try:
+            return pickle.dumps(planner.snapshot(), protocol=pickle.HIGHEST_PROTOCOL) == self.snapshots[k]
+        except Exception:
+            return False
+
+    def run(self, job: Job) -> ReplayAnswer:
+        """The test of one job (module doc).
+
+        Stage-1 and stage-3 jobs follow the baseline: where a frame's inputs
+        are the baseline's and the planner is in the baseline's state, the
+        output is the baseline's and nothing is replayed. The planner runs
+        from the first frame the subset changes until its state is the
+        baseline's again (same pickle) on a frame with unchanged inputs — a
+        mutation's effect usually dies out within a few frames — and again
+        at the next change.
+        """
+        kept = dict(job.kept)
+        frames = self.frames(kept)
+        monitors = self._monitors()
+        if job.frames is not None:
+            chosen = [frames[i] for i in job.frames if i < len(frames) and frames[i] is not None]
+            return self._judge(self.fresh_planner(), chosen, monitors)
+        planner = None  # None: in step with the baseline, whose outputs are known
+        try:
+            for k, frame in enumerate(frames):
+                unchanged = (frame.key if frame is not None else None) == self.base_keys[k]
+                if planner is not None and unchanged and self._converged(planner, k):
+                    planner.close()
+                    planner = None
+                if planner is None and unchanged:
+                    if frame is None:
+                        continue
+                    if self.base_error_frame is not None and k >= self.base_error_frame:
+                        return ReplayAnswer(TestResult(Outcome.UNRESOLVED,
+                                                       f"the planner raised on {self.base_error}"))
+                    found = self._feed(monitors, frame, self.base_outputs[k])
+                    if found:
+                        return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output)
+                    continue
+                if planner is None:
+                    planner = self._restore(k)
+                if frame is None:
+                    continue
+                answer = self._step(planner, monitors, frame)
+                if answer is not None:
+                    return answer
+        finally:
+            if planner is not None:
+                planner.close()
+        return self._finish(monitors)
+
+    def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, Any, str | None]]:
+        """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
+        planner = self.fresh_planner()
+        out = []
+        try:
+            for frame in frames:
+                try:
+                    out.append((frame, planner.step(self.frame_message(frame)), None))
+                except Exception as exc:
+                    out.append((frame, None, f"{type(exc).__name__}: {exc}"))
+                    break
+        finally:
+            planner.close()
+        return out
+
+    def _monitors(self) -> MonitorSet:
+        return MonitorSet(self.judged, self.start_ns)
+
+    def _feed(self, monitors: MonitorSet, frame: Frame, message: Any) -> str | None:
+        output = self.outputs[frame.output]
+        monitors.on_tick(output.log_time)
+        found = monitors.on_message(self.cfg.output, output.log_time, message, output.sequence)
+        if found:
+            return f"{format_violation(found[0], self.start_ns)} (output {frame.output})"
+        return None
+
+    def _judge(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
+        """Replay ``frames`` in order on ``planner`` and judge every output."""
+        try:
+            for frame in frames:
+                answer = self._step(planner, monitors, frame)
+                if answer is not None:
+                    return answer
+        finally:
+            planner.close()
+        return self._finish(monitors)
+
+    def _step(self, planner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
+        """One replayed output, judged: an answer if it decides the test, else None."""
+        try:
+            message = planner.step(self.frame_message(frame))
+        except Exception as exc:
+            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"the planner raised {type(exc).__name__}: {exc} "
+                                                               f"on output {frame.output}'s frame"))
+        found = self._feed(monitors, frame, message)
+        return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output) if found else None
+
+    def _finish(self, monitors: MonitorSet) -> ReplayAnswer:
+        found = monitors.finish(self.end_ns)
+        if found:
+            return ReplayAnswer(TestResult(Outcome.FAIL, format_violation(found[0], self.start_ns)))
+        return ReplayAnswer(TestResult(Outcome.PASS))
+
+
+# ---------------------------------------------------------------- worker processes
+
+
+def _worker_main(argv: Sequence[str]) -> int:
+    """A worker process: build the model once, then answer jobs until told to stop (None).
+
+    Started as ``python -m astaa_deft.minimise.deft_tester READ_FD WRITE_FD``
+    (not through ``multiprocessing``'s spawn, which re-runs the caller's main
+    script: a benchmark or notebook without a ``__main__`` guard would fork
+    itself over and over).
+    """
+    from multiprocessing.connection import Connection
+
+    jobs, answers = Connection(int(argv[0]), writable=False), Connection(int(argv[1]), readable=False)
+    setup = jobs.recv()
+    try:
+        model = ReplayModel(setup)
+    except InputError as exc:
+        answers.send(("error", "\n".join(str(p) for p in exc.problems)))
+        return 2
+    except Exception as exc:  # reported by the parent as a clear error, not a traceback
+        answers.send(("error", f"{type(exc).__name__}: {exc}"))
+        return 2
+    answers.send(("ready", model.baseline_seconds))
+    while True:
+        try:
+            job = jobs.recv()
+        except EOFError:
+            return 0
+        if job is None:
+            return 0
+        answers.send(model.run(job))
+
+
+class _Worker:
+    """One worker process of ours, and the two pipes to it."""
+
+    def __init__(self, setup: ReplaySetup):
+        from multiprocessing.connection import Connection
+
+        job_read, job_write = os.pipe()
+        answer_read, answer_write = os.pipe()
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "astaa_deft.minimise.deft_tester", str(job_read), str(answer_write)],
+            pass_fds=(job_read, answer_write), stdin=subprocess.DEVNULL, start_new_session=True,
+            preexec_fn=die_with_parent)
+        os.close(job_read)
+        os.close(answer_write)
+        self.jobs = Connection(job_write, readable=False)
+        self.answers = Connection(answer_read, writable=False)
+        self.jobs.send(setup)
+
+    def wait_ready(self, timeout: float) -> float:
+        if not self.answers.poll(timeout):
+            self.kill()
+            raise InputError(f"the replay worker did not start within {timeout:g} s")
+        try:
+            kind, value = self.answers.recv()
+        except EOFError:
+            self.kill()
+            raise InputError("the replay worker exited while loading the log") from None
+        if kind == "error":
+            self.kill()
+            raise InputError(value)
+        return float(value)
+
+    def kill(self) -> None:
+        """End this worker now (a hung planner does not get to finish its frame)."""
+        stop_process(self.process, grace=0.0, sig=signal.SIGKILL)
+        self._close()
+
+    def stop(self) -> None:
+        try:
+            self.jobs.send(None)
+        except (OSError, ValueError):
+            pass
+        try:
+            self.process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            stop_process(self.process, grace=2.0)
+        self._close()
+
+    def _close(self) -> None:
+        for conn in (self.jobs, self.answers):
+            try:
+                conn.close()
+            except OSError:
+                pass
+
+
+class ReplayPool:
+    """Replays in worker processes, with a per-test timeout a hanging planner cannot escape.
+
+    Not ``concurrent.futures.ProcessPoolExecutor``: a task there cannot be
+    timed out (the hung worker keeps its slot until the pool is torn down).
+    Here each worker is a process of our own; a test that overruns its
+    timeout kills just that worker and a fresh one takes its place.
+    ``run`` is thread-safe: ddmin's threads share the workers.
+    """
+
+    def __init__(self, setup: ReplaySetup, workers: int = 2, timeout: float | None = None):
+        self.setup = setup
+        self._idle: "queue.Queue[_Worker]" = queue.Queue()
+        self._all: list[_Worker] = []
+        self._lock = threading.Lock()
+        self.timeouts = 0
+        self.workers = 0
+        try:
+            # All at once (loading and the baseline replay take seconds); the extra
+            # ones are let go if a replay turns out too short for parallel tests to pay.
+            started = [self._spawn() for _ in range(max(1, workers))]
+            self.baseline_seconds = started[0].wait_ready(WORKER_START_TIMEOUT)
+            self.timeout = timeout if timeout is not None else max(MIN_TEST_TIMEOUT, 10 * self.baseline_seconds)
+            self._idle.put(started[0])
+            self.workers = 1
+            if self.baseline_seconds >= PARALLEL_PAYS_SECONDS:
+                for worker in started[1:]:
+                    worker.wait_ready(WORKER_START_TIMEOUT)
+                    self._idle.put(worker)
+                    self.workers += 1
+            else:
+                for worker in started[1:]:
+                    self._retire(worker)
+        except BaseException:
+            self.close()
+            raise
+
+    def _retire(self, worker: _Worker) -> None:
+        worker.kill()
+        with self._lock:
+            self._all.remove(worker)
+
+    def _spawn(self) -> _Worker:
+        worker = _Worker(self.setup)
+        with self._lock:
+            self._all.append(worker)
+        return worker
+
+    def run(self, job: Job) -> ReplayAnswer:
+        worker = self._idle.get()
+        try:
+            worker.jobs.send(job)
+            if worker.answers.poll(self.timeout):
+                answer = worker.answers.recv()
+                self._idle.put(worker)
+                return answer
+            why = f"the replay took over {self.timeout:.0f} s (a hanging planner?): stopped"
+            self.timeouts += 1
+        except (EOFError, OSError) as exc:
+            why = f"the replay worker died ({type(exc).__name__})"
+        self._replace(worker)
+        return ReplayAnswer(TestResult(Outcome.UNRESOLVED, why))
+
+    def _replace(self, worker: _Worker) -> None:
+        self._retire(worker)
+        fresh = self._spawn()
+        fresh.wait_ready(WORKER_START_TIMEOUT)
+        self._idle.put(fresh)
+
+    def close(self) -> None:
+        with self._lock:
+            workers, self._all = list(self._all), []
+        for worker in workers:
+            worker.stop()
+
+    def __enter__(self) -> ReplayPool:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class DeftTester:
+    """Jobs to answers through a pool, each distinct job run once (the replay is deterministic)."""
+
+    def __init__(self, pool: ReplayPool):
+        self.pool = pool
+        self._cache: dict[Job, ReplayAnswer] = {}
+        self._lock = threading.Lock()
+        self.runs = 0
+        self.hits = 0
+
+    def answer(self, job: Job) -> ReplayAnswer:
+        with self._lock:
+            if job in self._cache:
+                self.hits += 1
+                return self._cache[job]
+        answer = self.pool.run(job)
+        with self._lock:
+            self.runs += 1
+            if answer.result.outcome is not Outcome.UNRESOLVED or "died" not in answer.result.detail:
+                self._cache[job] = answer
+        return answer
+
+    def __call__(self, job: Job) -> TestResult:
+        return self.answer(job).result
+
+
+def default_setup(log_path: Path, spec_path: Path | None, invariant: str) -> ReplaySetup:
+    return ReplaySetup(str(log_path), str(spec_path) if spec_path is not None else None, invariant)
+
+
+# ---------------------------------------------------------------- the module tests' oracle
+
+
+ORACLE_KIND = "invariant"
+
+
+def oracle_entry(invariant: str, frame: int, start_ns: int) -> dict:
+    """The manifest entry of a module test that fails while the replayed outputs break ``invariant``."""
+    return {"kind": ORACLE_KIND, "invariant": invariant, "frame": frame, "start_ns": start_ns}
+
+
+def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
+    """Run by the pytest plugin for an ``invariant`` oracle: why the test fails, or None.
+
+    The invariant is judged, as the replay tester judges it, over the
+    suite's replayed outputs in frame order at their recorded times; a
+    frame the planner raised on is left to its frame test.
+    """
+    spec = with_typed_invariants(suite.spec)
+    invariant = next((i for i in spec.invariants if i.name == entry["invariant"]), None)
+    if invariant is None:
+        return f"the suite's spec has no invariant '{entry['invariant']}'"
+    monitors = MonitorSet(replace(spec, invariants=(invariant,)), int(entry.get("start_ns", 0)))
+    output = spec.planner.output
+    last = int(entry.get("start_ns", 0))
+    for number, (frame, result) in enumerate(zip(suite.frames, suite.results()), start=1):
+        if result.error is not None:
+            continue
+        last = int(frame["output_time_ns"])
+        monitors.on_tick(last)
+        found = monitors.on_message(output, last, result.message, number)
+        if found:
+            return (f"frame {frame['index']}: the planner's output breaks invariant '{invariant.name}': "
+                    f"{found[0].detail}")
+    found = monitors.finish(last)
+    if found:
+        return f"the planner's outputs break invariant '{invariant.name}': {found[0].detail}"
+    return None
+
+
+if __name__ == "__main__":
+    # Run as a worker: the module's own copy under its real name, so the
+    # classes pickled back to the parent are the ones it knows.
+    from astaa_deft.minimise import deft_tester as _real
+
+    sys.exit(_real._worker_main(sys.argv[1:]))

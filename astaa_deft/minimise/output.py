@@ -1,0 +1,241 @@
+"""What a minimisation leaves in its output directory, and the summary it prints.
+
+    DIR/minimal.xml    the minimal test case: pinned policies that replay live through the proxy
+    DIR/minimal.mcap   replay: the kept frames' inputs with the minimal mutations applied, the
+                       planner's replayed outputs and the mutation events (`astaa-deft check` shows
+                       the failure); live: the log of a confirming run
+    DIR/tests/         replay only: DeFT module tests over the kept frames (`pytest DIR/tests`) with
+                       an invariant oracle that fails while the planner still breaks the invariant
+    DIR/summary.json   tests run, cache hits, seconds, before → after per stage, the culprit, rates
+
+The module tests are frame tests with an infinite threshold — they only ask
+that the planner steps through the scaffolding frames without raising — and
+one oracle test that carries the verdict, so a fixed planner passes the
+whole suite even though its outputs change.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+from ..codecs import get_codec
+from ..deft.export import export_suite
+from ..deft.extract import ExtractedFrame
+from ..deft.validator import Comparison
+from ..errors import InputError, Problem
+from ..intercept.testcase import TestCase, load_testcase
+from ..log import layout
+from ..log.reader import LoggedMessage
+from ..log.writer import LogWriter
+from .deft_tester import Frame, ReplayModel, oracle_entry
+from .stages import Minimisation
+
+MINIMAL_XML = "minimal.xml"
+MINIMAL_MCAP = "minimal.mcap"
+TESTS_DIR = "tests"
+SUMMARY_JSON = "summary.json"
+
+
+def prepare_directory(out_dir: Path) -> None:
+    """A new or empty directory, or one holding an earlier minimisation (replaced)."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(Problem(str(out_dir), None, None, "exists and is not a directory",
+                                 "give a new or empty directory with -o"))
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / SUMMARY_JSON).exists():
+        raise InputError(Problem(str(out_dir), None, None, "is not empty (and holds no earlier minimisation)",
+                                 "give a new or empty directory with -o"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name in (MINIMAL_XML, MINIMAL_MCAP, SUMMARY_JSON):
+        (out_dir / name).unlink(missing_ok=True)
+    shutil.rmtree(out_dir / TESTS_DIR, ignore_errors=True)
+
+
+def write_testcase_file(out_dir: Path, testcase: TestCase, spec) -> Path:
+    """DIR/minimal.xml, read back with the spec: what we write must pass ``policy check``."""
+    path = out_dir / MINIMAL_XML
+    path.write_bytes(testcase.to_xml())
+    load_testcase(path, spec)  # an InputError here is a bug in restrict.py, reported as such
+    return path
+
+
+def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, policy_file: Path) -> Path:
+    """DIR/minimal.mcap for the replay path (module doc)."""
+    spec, cfg = model.spec, model.spec.planner
+    frames = _kept_frames(model, result)
+    replayed = model.replay(frames)
+    writer = LogWriter(path, spec)
+    try:
+        writer.attachment(layout.SPEC_ATTACHMENT, spec.source_text.encode(), "application/yaml")
+        writer.attachment(layout.POLICY_ATTACHMENT, policy_file.read_bytes(), "application/xml")
+        writer.metadata(layout.RUN_METADATA, {"spec": spec.name, "mode": "replay",
+                                              "params": json.dumps(model.params, sort_keys=True),
+                                              "command_line": "astaa-deft minimise"})
+        topics: dict[str, int] = {}
+
+        def topic(channel: str, original: bool = False) -> int:
+            key = spec.channel(channel).key
+            name = layout.ORIGINAL_PREFIX + key if original else key
+            if name not in topics:
+                topics[name] = writer.bus_channel(spec.channel(channel), topic=name)
+            return topics[name]
+
+        records: list[tuple[int, int, bytes, Any]] = []  # (time, MCAP channel, data, what it is)
+        seen: set[Any] = set()
+        for frame in frames:
+            for name, delivered in frame.inputs:
+                if delivered.key not in seen:
+                    seen.add(delivered.key)
+                    records.append((delivered.time_ns, topic(name), delivered.data, delivered.key))
+        codec = get_codec(spec.channel(cfg.output).encoding)
+        for frame, message, _ in replayed:
+            if message is not None:
+                output = model.outputs[frame.output]
+                records.append((output.log_time, topic(cfg.output), codec.encode(message), ("output", frame.output)))
+        chosen = result.chosen
+        for mutation, selection in chosen:
+            records.append((mutation.original_time_ns, topic(mutation.channel, original=True), mutation.original,
+                            ("original-of", mutation.number)))
+            key = ("mutation", mutation.number, _normal(selection, mutation))
+            data = mutation.payload(selection, spec.channel(mutation.channel).encoding)
+            if data is not None and key not in seen and mutation.delivered_time_ns is not None:
+                seen.add(key)
+                records.append((mutation.delivered_time_ns, topic(mutation.channel), data, key))
+        sequences: dict[Any, int] = {}
+        writer.event("run_started", time_ns=model.start_ns, mode="replay", spec=spec.name)
+        for time_ns, channel_id, data, what in sorted(records, key=lambda r: r[0]):
+            sequences[what] = writer.message(channel_id, time_ns, data)
+        events = writer.tool_channel(layout.MUTATIONS_TOPIC)
+        for mutation, selection in chosen:
+            fields = mutation.fields if selection is None else tuple(mutation.fields[i] for i in selection)
+            body = {**mutation.event, "consumers": list(mutation.consumers),
+                    "fields": [change.to_json() for change in fields],
+                    "original_sequence": sequences.get(("original-of", mutation.number)),
+                    "delivered_sequence": sequences.get(("mutation", mutation.number, _normal(selection, mutation)))}
+            writer.message(events, mutation.original_time_ns, json.dumps(body, default=str).encode())
+        end = max((r[0] for r in records), default=model.start_ns) + 1
+        writer.event("run_stopping", time_ns=end)
+    finally:
+        writer.finish()
+    return path
+
+
+def write_module_tests(directory: Path, model: ReplayModel, result: Minimisation) -> Path:
+    """DIR/tests: the kept frames as a DeFT suite whose oracle fails on the culprit (module doc)."""
+    spec, cfg = model.spec, model.spec.planner
+    codec = get_codec(spec.channel(cfg.output).encoding)
+    out_key = spec.channel(cfg.output).key
+    extracted = []
+    for frame, message, error in model.replay(_kept_frames(model, result)):
+        if error is not None:
+            break
+        output = model.outputs[frame.output]
+        extracted.append(ExtractedFrame(
+            index=len(extracted),
+            output=LoggedMessage(out_key, output.log_time, output.publish_time, 0, codec.encode(message)),
+            trigger_time=frame.trigger_time_ns, frame_time=frame.frame_time_ns,
+            inputs={name: LoggedMessage(spec.channel(name).key, d.time_ns, d.time_ns, 0, d.data)
+                    for name, d in frame.inputs},
+            comparison=Comparison(0.0, 0.0, 0, "replayed"), accepted=True, candidates_tried=1, exact=True))
+    smoke = replace(spec, planner=replace(cfg, threshold=math.inf))
+    oracle = oracle_entry(result.failure.invariant, extracted[-1].index if extracted else 0, model.start_ns)
+    return export_suite(extracted, smoke, model.params, directory, oracles=[oracle])
+
+
+def _kept_frames(model: ReplayModel, result: Minimisation) -> list[Frame]:
+    frames = model.frames(result.kept)
+    return [frames[i] for i in result.frames if i < len(frames) and frames[i] is not None]
+
+
+def _normal(selection, mutation):
+    if selection is None or len(selection) == len(mutation.fields):
+        return None
+    return tuple(sorted(selection))
+
+
+def copy_log(source: Path, out_dir: Path) -> Path:
+    target = out_dir / MINIMAL_MCAP
+    shutil.copyfile(source, target)
+    return target
+
+
+# ---------------------------------------------------------------- the summary
+
+
+def summary(result: Minimisation, *, log: Path, why: str, seconds: float, confirm: Mapping[str, Any],
+            verdict: str, files: Mapping[str, Path], replay_tests: int = 0, replay_hits: int = 0) -> dict:
+    """Everything summary.json holds (and the console shows)."""
+    stages = [asdict(s) for s in result.stages]
+    kept_mutations = result.chosen
+    out: dict[str, Any] = {
+        "log": str(log),
+        "failure": asdict(result.failure),
+        "tester": result.tester,
+        "why": why,
+        "verdict": verdict,
+        "stages": stages,
+        "tests_run": sum(s.tests_run for s in result.stages),
+        "cache_hits": sum(s.cache_hits for s in result.stages) + replay_hits,
+        "seconds": round(seconds, 3),
+        "mutations": {"before": len(result.mutations), "after": len(kept_mutations)},
+        "fields": {"before": sum(len(m.fields) for m in result.mutations), "after": result.fields_count()},
+        "culprit": [m.describe(s) for m, s in kept_mutations],
+        "culprit_events": [{"number": m.number, "channel": m.channel, "message_index": m.message_index,
+                            "action": m.action, "consumers": list(m.consumers),
+                            "fields": [m.fields[i].to_json() for i in (range(len(m.fields)) if s is None else s)]}
+                           for m, s in kept_mutations],
+        "detail": result.detail,
+        "confirmation": dict(confirm),
+        "notes": list(result.notes),
+        "files": {k: str(v) for k, v in files.items()},
+    }
+    if result.tester == "replay":
+        out["frames"] = {"before": result.outputs_replayed, "after": len(result.frames)}
+        out["replays"] = replay_tests
+    else:
+        out["failure_rate_while_minimising"] = result.failure_rate
+    return out
+
+
+def write_summary(out_dir: Path, body: Mapping[str, Any]) -> Path:
+    path = out_dir / SUMMARY_JSON
+    path.write_text(json.dumps(body, indent=1, default=str, allow_nan=False) + "\n")
+    return path
+
+
+def format_summary(body: Mapping[str, Any]) -> str:
+    """The console's summary: one line per stage, the culprit in words, the verdict."""
+    lines = [f"failure: {_failure_text(body['failure'])}", f"tester: {body['tester']} ({body['why']})"]
+    for s in body["stages"]:
+        state = "" if s["complete"] else " (stopped by --max-tests)"
+        note = f"; {s['note']}" if s["note"] else ""
+        lines.append(f"  {s['name']:<12} {s['unit']:<9} {s['before']:>5} → {s['after']:<4} "
+                     f"{s['tests_run']:>4} tests, {s['cache_hits']:>3} cache hits, {s['seconds']:6.1f} s{state}{note}")
+    parts = [f"mutations {body['mutations']['before']} → {body['mutations']['after']}"]
+    if "frames" in body:
+        parts.append(f"frames {body['frames']['before']} → {body['frames']['after']}")
+    parts.append(f"fields {body['fields']['before']} → {body['fields']['after']}")
+    lines.append(f"minimised: {', '.join(parts)}; {body['tests_run']} tests, {body['cache_hits']} cache hits, "
+                 f"{body['seconds']:.1f} s")
+    lines.append("culprit:" if len(body["culprit"]) == 1 else f"culprits ({len(body['culprit'])}):")
+    lines.extend(f"  {text}" for text in body["culprit"])
+    for note in body["notes"]:
+        lines.append(f"note: {note}")
+    confirm = body["confirmation"]
+    if confirm.get("runs"):
+        lines.append(f"live confirmation of {MINIMAL_XML}: failed in {confirm['failures']} of {confirm['runs']} "
+                     f"run(s) (rate {confirm['rate']:.0%})")
+    lines.append(f"verdict: {body['verdict']}")
+    for name, path in body["files"].items():
+        lines.append(f"  {name}: {path}")
+    return "\n".join(lines)
+
+
+def _failure_text(failure: Mapping[str, Any]) -> str:
+    where = f" on '{failure['channel']}'" if failure.get("channel") else (
+        f" (module '{failure['module']}')" if failure.get("module") else "")
+    return f"{failure['invariant']} ({failure['kind']}){where} at +{failure['at']:.2f} s: {failure['detail']}"
