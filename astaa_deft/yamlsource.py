@@ -121,3 +121,16 @@ def _scalar(node: yaml.Node) -> Any:
     if not isinstance(node, yaml.ScalarNode):
         return f"<{node.tag}>"
     return _constructor.construct_object(node, deep=True)
+
+
+def describe_value(value: Any) -> str:
+    """How an error message names a YAML value of the wrong kind."""
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if value is None:
+        return "empty"
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    return f"{type(value).__name__} {value!r}"

@@ -18,30 +18,14 @@ from ..geometry import Box, interpolate_pose, overlap
 from ..spec.model import Spec
 from .config import CollisionOracle, TrajectoryLayout
 from .extract import Extraction
+from .replay import trajectory_points
 
 Pose = tuple[float, float, float, float]  # t, x, y, heading
 
 
 def planned_poses(message: Mapping[str, Any] | None, layout: TrajectoryLayout) -> list[Pose]:
-    if not isinstance(message, Mapping):
-        return []
-    found = get(message, layout.points)
-    if not found or not isinstance(found[0][1], list):
-        return []
-    offset = 0.0
-    if layout.time == "relative":
-        stamp = get(message, layout.stamp)
-        offset = float(stamp[0][1]) if stamp else 0.0
-    out = []
-    for p in found[0][1]:
-        try:
-            t, x, y = (float(get(p, f)[0][1]) for f in (layout.t, layout.x, layout.y))
-            heading_found = get(p, layout.heading)
-            heading = float(heading_found[0][1]) if heading_found else 0.0
-        except (IndexError, TypeError, ValueError):
-            continue
-        out.append((t + offset, x, y, heading))
-    return out
+    """(t, x, y, heading) of each planned point (heading 0 where the layout's field is missing)."""
+    return [(t, x, y, heading) for x, y, t, heading in trajectory_points(message, layout, with_heading=True)]
 
 
 def first_collision(plan: Sequence[Pose], obstacles_msg: Mapping[str, Any] | None,

@@ -178,8 +178,9 @@ def _getter(path: str):
     return slow
 
 
-def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout) -> list[Point]:
-    """(x, y, t absolute) of each planned point, per the spec's layout."""
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+                      with_heading: bool = False) -> list[Point] | list[tuple[float, float, float, float]]:
+    """(x, y, t absolute) of each planned point, per the spec's layout; (x, y, t, heading) with_heading."""
     if not isinstance(message, Mapping):
         return []
     found = get(message, layout.points)
@@ -189,13 +190,21 @@ def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayou
     if layout.time == "relative":
         stamp = get(message, layout.stamp)
         offset = float(stamp[0][1]) if stamp else 0.0
-    gx, gy, gt = _getter(layout.x), _getter(layout.y), _getter(layout.t)
-    out = []
+    gx, gy, gt, gh = _getter(layout.x), _getter(layout.y), _getter(layout.t), _getter(layout.heading)
+    out: list = []
     for point in found[0][1]:
         try:
-            out.append((float(gx(point)), float(gy(point)), float(gt(point)) + offset))
+            xyt = (float(gx(point)), float(gy(point)), float(gt(point)) + offset)
         except (KeyError, IndexError, TypeError, ValueError):
             continue
+        if with_heading:
+            try:
+                heading = float(gh(point))
+            except (KeyError, IndexError, TypeError, ValueError):
+                heading = 0.0
+            out.append((*xyt, heading))
+        else:
+            out.append(xyt)
     return out
 
 

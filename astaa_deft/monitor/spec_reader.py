@@ -14,7 +14,7 @@ from typing import Any, Mapping, Sequence
 from ..errors import did_you_mean
 from ..fields import FieldPath, FieldPathError, type_at
 from ..spec.model import Channel, FieldType, MessageType
-from ..yamlsource import Node, Source
+from ..yamlsource import Node, Source, describe_value
 from .expression import (
     CompiledExpression,
     ExpressionError,
@@ -97,7 +97,7 @@ class InvariantReader:
             return None
         value = node.value
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            self.problem(node, f"{what} must be a finite number, not {_describe(value)}",
+            self.problem(node, f"{what} must be a finite number, not {describe_value(value)}",
                          f"e.g. {what.strip(chr(39))}: 0.5")
             return None
         if positive and value <= 0:
@@ -112,7 +112,7 @@ class InvariantReader:
         if node is None:
             return None
         if not isinstance(node.value, bool):
-            self.problem(node, f"{what} must be true or false, not {_describe(node.value)}", f"write {what}: true")
+            self.problem(node, f"{what} must be true or false, not {describe_value(node.value)}", f"write {what}: true")
             return None
         return node.value
 
@@ -120,7 +120,7 @@ class InvariantReader:
         if node is None:
             return None
         if not isinstance(node.value, str) or node.value not in choices:
-            shown = node.value if isinstance(node.value, str) else _describe(node.value)
+            shown = node.value if isinstance(node.value, str) else describe_value(node.value)
             hint = (did_you_mean(shown, choices) if isinstance(node.value, str) else "") or \
                 f"one of: {', '.join(choices)}"
             self.problem(node, f"{what} must be one of {', '.join(choices)}, not '{shown}'", hint)
@@ -196,18 +196,6 @@ class InvariantReader:
             return self.number(node, what, positive=True)
         found = self.field(node, type_name, what, kinds=("number",), relative_to=relative_to)
         return found[0] if found else None
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return "a list"
-    if value is None:
-        return "empty"
-    if isinstance(value, bool):
-        return f"the boolean {str(value).lower()}"
-    return f"{type(value).__name__} {value!r}"
 
 
 def _kind_words(kinds: Sequence[str]) -> list[str]:

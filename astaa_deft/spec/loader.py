@@ -16,7 +16,7 @@ from ..errors import InputError, did_you_mean
 from ..deft.config import build_planner
 from ..fields import FieldPathError, check_brittle_pattern
 from ..monitor.invariants import build_invariants
-from ..yamlsource import Node, Source
+from ..yamlsource import Node, Source, describe_value
 from .model import (
     SCALAR_KINDS,
     Channel,
@@ -109,7 +109,7 @@ class _SpecBuilder:
     def expect(self, node: Node, kinds: tuple[type, ...], what: str, fix: str) -> bool:
         ok = isinstance(node.value, kinds) and not (bool not in kinds and isinstance(node.value, bool))
         if not ok:
-            self.src.at(node, f"{what} must be {fix}, not {_describe(node.value)}", f"write {what} as {fix}")
+            self.src.at(node, f"{what} must be {fix}, not {describe_value(node.value)}", f"write {what} as {fix}")
         return ok
 
     def name_of(self, node: Node, what: str) -> str:
@@ -513,19 +513,4 @@ def _scalar_text(value: Any) -> str:
         return "true" if value else "false"
     return str(value)
 
-
-def _describe(value: Any) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return "a list"
-    if value is None:
-        return "empty"
-    if isinstance(value, bool):
-        return f"the boolean {str(value).lower()}"
-    return f"{type(value).__name__} {value!r}"
-
-
-def resolve_placeholders(text: str, values: dict[str, str]) -> str:
-    return text.format_map(values)
 
