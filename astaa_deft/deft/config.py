@@ -56,7 +56,7 @@ class PlannerSpec:
     factory_args: Mapping[str, str] = field(default_factory=dict)  # {placeholders} from params
     command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
     threshold: float = 0.0  # metres: the validator's acceptance
-    lookback_ms: float = 20.0  # candidate frame times this far before the trigger (delivery jitter)
+    lookback_ms: float = 100.0  # candidate frame times this far before the trigger (delivery jitter, load)
     # The recorder's receive times can lag the planner's by a little (its own
     # scheduling): a trigger logged up to this long after the output is still a candidate.
     skew_ms: float = 5.0
@@ -128,7 +128,7 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     layout = _trajectory(src, v.get("trajectory"), types, by_name.get(output))
     factory, args, command = _replay(src, v.get("replay"))
     threshold = _number(src, v.get("threshold"), "planner.threshold", 0.0)
-    lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 20.0)
+    lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 100.0)
     skew = _number(src, v.get("skew_ms"), "planner.skew_ms", 5.0)
     collision = _oracle(src, v.get("oracle"), inputs)
     return PlannerSpec(module, tuple(inputs), trigger, output, layout, factory, args, command, threshold, lookback,

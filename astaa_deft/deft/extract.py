@@ -130,6 +130,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
             result.planner_seconds += time.perf_counter() - t1
         if best is None:
             result.skipped.append((out_index, "no candidate frame decodes"))
+            progress(out_index + 1, len(outputs))
             continue
         cmp, cand, replayed, state, _ = best
         if state is not None:

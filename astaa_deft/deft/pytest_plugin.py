@@ -68,6 +68,10 @@ class FrameTest(pytest.Item):
         return self.path, None, f"DeFT {self.name}"
 
 
+class OracleFailure(Exception):
+    pass
+
+
 class OracleTest(pytest.Item):
     def __init__(self, *, oracle: dict, **kwargs):
         super().__init__(**kwargs)
@@ -78,7 +82,12 @@ class OracleTest(pytest.Item):
 
         problem = check_oracle(self.parent.suite, self.oracle)
         if problem:
-            raise AssertionError(problem)
+            raise OracleFailure(problem)
+
+    def repr_failure(self, excinfo, style=None):
+        if isinstance(excinfo.value, OracleFailure):
+            return f"oracle {self.oracle.get('kind')}: {excinfo.value}"
+        return super().repr_failure(excinfo)
 
     def reportinfo(self):
         return self.path, None, f"DeFT oracle {self.name}"
