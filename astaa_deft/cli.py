@@ -97,6 +97,27 @@ def build_parser() -> argparse.ArgumentParser:
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
                                                          a.ground_truth))
 
+    # minimise
+    mini = sub.add_parser("minimise", aliases=["minimize"],
+                          help="delta-debug a failing intercepted run down to the mutations, frames and fields "
+                               "that cause it")
+    mini.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy --policy …")
+    mini.add_argument("--spec", type=Path, help="the SUT spec (default: the one stored in the log)")
+    mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation)")
+    mini.add_argument("-o", "--out", type=Path, required=True, help="directory for the minimised test case and tests")
+    mini.add_argument("--repeats", type=int, default=1, help="whole-SUT re-runs per test when no replay applies")
+    mini.add_argument("--parallel", type=int, default=2, help="tests run at once where the replay allows")
+    mini.add_argument("--live-only", action="store_true", help="always re-run the whole SUT (no module replay)")
+    mini.add_argument("--confirm", type=int, default=3, help="live re-runs of the final result, to report its rate")
+    mini.add_argument("--max-tests", type=int, help="stop after this many tests and keep the smallest failure")
+    mini.add_argument("--no-live-fallback", action="store_true",
+                      help="when the planner replay does not reproduce the failure, stop (exit 1) "
+                           "instead of re-running the SUT")
+    mini.set_defaults(func=lambda a: _cmd("minimise").run(a.log, a.spec, a.invariant, a.out, a.repeats,
+                                                          a.parallel, a.live_only, confirm=a.confirm,
+                                                          max_tests=a.max_tests,
+                                                          live_fallback=not a.no_live_fallback))
+
     # demo
     demo = sub.add_parser("demo", help="the bundled driving stack through the whole tool: record, DeFT tests, "
                                        "live interception, minimisation")

@@ -31,7 +31,12 @@ from astaa_deft.errors import InputError
 from astaa_deft.intercept import load_interceptor, load_testcase
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
-from astaa_deft.minimise.deft_tester import Job, ReplayPool, ReplaySetup, check_invariant_oracle
+from astaa_deft.minimise.deft_tester import (
+    Job,
+    ReplayPool,
+    ReplaySetup,
+    check_invariant_oracle,
+)
 from astaa_deft.minimise.mutations import ReceivedStreams, read_mutations, sent_stream
 from astaa_deft.monitor import check_log
 from astaa_deft.spec.loader import load_spec
@@ -55,7 +60,7 @@ NOISE = """
   <policy id="noise-traj"><channel>trajectory</channel><select every="4"/><set><field path="debug.inputs.routing" value="0"/></set></policy>
 """
 CULPRIT = """
-  <policy id="culprit"><channel>routing</channel><window from="2"/><select limit="1"/>
+  <policy id="culprit"><channel>routing</channel><window from="4"/><select limit="1"/>
     <set><field path="speed_limit" value="dict:float.nan"/></set></policy>
 """
 
@@ -190,7 +195,7 @@ def copy_log(source: Path, target: Path, keep=lambda channel, message: True,
 
 def test_an_invariant_that_never_broke_is_an_input_error(runs, tmp_path):
     with pytest.raises(InputError, match="never broke in this run"):
-        command.run(runs["failing"], SPEC_PATH, "speed_limit", tmp_path / "out", confirm=0)
+        command.run(runs["failing"], SPEC_PATH, "no_collision", tmp_path / "out", confirm=0)
 
 
 def test_a_log_without_mutations_is_an_input_error(runs, tmp_path):

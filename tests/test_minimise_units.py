@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from astaa_deft.bus.topology import intercept_record
 from astaa_deft.commands import minimise as command
 from astaa_deft.commands.demo import demo_spec_path
 from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
@@ -23,13 +24,18 @@ from astaa_deft.intercept.actions.base import FieldChange
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.recorder import _write_intercepted
-from astaa_deft.bus.topology import intercept_record
 from astaa_deft.log.writer import LogWriter
-from astaa_deft.minimise.ddmin import Outcome, TestResult
+from astaa_deft.minimise.ddmin import Outcome
 from astaa_deft.minimise.live_tester import LiveRun, LiveTester
-from astaa_deft.minimise.mutations import Mutation, ReceivedStreams, Step, read_mutations, sent_stream
+from astaa_deft.minimise.mutations import (
+    Mutation,
+    ReceivedStreams,
+    Step,
+    read_mutations,
+    sent_stream,
+)
 from astaa_deft.minimise.restrict import restricted_testcase, value_text
-from astaa_deft.minimise.stages import Minimisation, Failure
+from astaa_deft.minimise.stages import Failure, Minimisation
 from astaa_deft.spec.loader import load_spec
 
 SPEC = load_spec(demo_spec_path())
@@ -311,4 +317,7 @@ def test_verdicts_and_exit_codes():
     assert command._verdict(live, {"runs": 3, "failures": 0, "rate": 0.0})[1] == 1
     assert command._verdict(replay, {"runs": 0, "failures": 0, "rate": None})[1] == 0
     assert "open-loop" in command._verdict(replay, {"runs": 1, "failures": 0, "rate": 0.0})[0]
+    text, code = command._verdict(replay, {"requested": 2, "runs": 0, "failures": 0, "rate": None,
+                                           "details": ["the run did not start: port in use"]})
+    assert code == 1 and "port in use" in text
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import zenoh
 
 from ..spec.model import Spec
-from .topology import recorded_keys
+from .topology import observed_keys
 
 
 class ChannelCounter:
     def __init__(self, session: zenoh.Session, spec: Spec, mode: str):
         self._counts = {ch.name: 0 for ch in spec.channels}
         self._subs = []
-        for key_expr, channel in recorded_keys(spec, mode):
+        for key_expr, channel in observed_keys(spec, mode):
             self._subs.append(session.declare_subscriber(key_expr, self._counter(channel.name)))
 
     def _counter(self, name: str):

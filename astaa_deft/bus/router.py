@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import threading
+import time
 
 from . import zenoh_config as zc
 
@@ -23,12 +23,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astaa-deft-router")
     ap.add_argument("--listen", action="append", required=True)
     args = ap.parse_args(argv)
-    stop = threading.Event()
+    stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
     for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, lambda signum, _frame: stopping.append(signum))
     session = zc.open_session(zc.config_dict(mode="router", listen=args.listen))
     print("ready", flush=True)
-    stop.wait()
+    while not stopping:
+        time.sleep(0.05)
     session.close()
     return 0
 

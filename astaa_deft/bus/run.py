@@ -138,7 +138,7 @@ class BusRun:
         started = self.event("run_started", mode=opts.mode, spec=self.spec.name, command_line=opts.command_line)
         self.monitors = OnlineMonitors(self.spec, started["time_ns"], self._violated)
         intercepted = self.interception.targets if self.interception is not None else set()
-        self.monitors.subscribe(self.session, [(k, ch.name) for k, ch in topology.recorded_keys(self.spec, opts.mode)
+        self.monitors.subscribe(self.session, [(k, ch.name) for k, ch in topology.observed_keys(self.spec, opts.mode)
                                                if ch.name not in intercepted])
         if self.interception is not None:
             self.interception.on_delivered = self.monitors.feed
@@ -252,7 +252,7 @@ class BusRun:
 
     def subscribe(self, channel: str, callback: Callable[[zenoh.Sample], None]) -> None:
         """Watch a declared channel from the tool (as its producer published it)."""
-        key = dict((ch.name, k) for k, ch in topology.recorded_keys(self.spec, self.options.mode))[channel]
+        key = dict((ch.name, k) for k, ch in topology.observed_keys(self.spec, self.options.mode))[channel]
         assert self.session is not None
         self._subs.append(self.session.declare_subscriber(key, callback))
 

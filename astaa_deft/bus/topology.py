@@ -105,6 +105,17 @@ def recorded_keys(spec: Spec, mode: str) -> list[tuple[str, Channel]]:
     return [(ch.key, ch) for ch in spec.channels]
 
 
+def observed_keys(spec: Spec, mode: str) -> list[tuple[str, Channel]]:
+    """(key expression, channel) the tool's own session subscribes to: where producers publish.
+
+    Not the proxy's copies: its publishers deliver to remote sessions only
+    (so the catch-all never sees them), which keeps them from the tool too.
+    """
+    if mode == "star":
+        return [(r.source, r.channel) for r in star_routes(spec)]
+    return [(ch.key, ch) for ch in spec.channels]
+
+
 def split_star_key(full_key: str) -> tuple[str, str] | None:
     """'sut/<module>/<key>' → (module, key); None for anything else."""
     parts = full_key.split("/", 2)

@@ -15,7 +15,6 @@ class StopSignal:
     """Turn SIGINT/SIGTERM into an Event so the main thread shuts down cleanly."""
 
     def __init__(self) -> None:
-        self.event = threading.Event()
         self.received: str | None = None
         self._old: dict = {}
 
@@ -25,8 +24,12 @@ class StopSignal:
         return self
 
     def _handle(self, signum, _frame) -> None:
+        # Only a plain assignment here: a handler that takes a lock (Event.set) can
+        # deadlock against the main thread it interrupted.
         self.received = signal.Signals(signum).name
-        self.event.set()
+
+    def requested(self) -> bool:
+        return self.received is not None
 
     def __exit__(self, *exc) -> None:
         for sig, old in self._old.items():

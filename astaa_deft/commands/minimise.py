@@ -72,11 +72,24 @@ def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: 
     if confirm < 0:
         raise InputError(Problem("--confirm", None, None, f"{confirm} runs", "give 0 (no live check) or more"))
     say: Callable[[str], None] = print_line if verbose else (lambda line: None)
+    with tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as scratch:
+        return _run(log_path, spec_path, invariant, out_dir, repeats, parallel, live_only, confirm, max_tests,
+                    live_fallback, say, Path(scratch))
+
+
+def _run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: Path, repeats: int,
+         parallel: int, live_only: bool, confirm: int, max_tests: int | None, live_fallback: bool,
+         say: Callable[[str], None], scratch: Path) -> int:
     started = time.monotonic()
     log = read_log(log_path)
     for warning in log.warnings:
         say(f"warning: {warning}")
     spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None))
+    if spec.path is None:  # the log's own spec: live runs (their recorder) need it as a file
+        from ..spec.loader import load_spec
+
+        (scratch / "spec.yaml").write_text(spec.source_text)
+        spec = with_typed_invariants(load_spec(scratch / "spec.yaml"))
     recorded_with = log.metadata.get(layout.RUN_METADATA, {}).get("spec")
     if recorded_with and recorded_with != spec.name:
         raise InputError(Problem(str(log_path), None, None,
@@ -143,18 +156,17 @@ def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: 
                      f"fails {failure.invariant}"))
     xml = write_testcase_file(out_dir, testcase, spec)
     files = {"test case": xml}
-    confirmation, confirm_log = _confirm(live, testcase, xml, result, confirm, say)
+    confirmation, confirm_log = _confirm(live, testcase, xml, result, confirm, say, scratch)
     if result.tester == "replay" and model is not None:
         files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
         files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
     elif confirm_log is not None:
         files["log"] = copy_log(confirm_log, out_dir)
-    if confirm_log is not None:
-        confirm_log.unlink(missing_ok=True)
     verdict, code = _verdict(result, confirmation)
     body = summary(result, log=log_path, why=why, seconds=time.monotonic() - started, confirm=confirmation,
                    verdict=verdict, files={**files, "summary": out_dir / "summary.json"},
-                   replay_tests=replays, replay_hits=replay_hits)
+                   replay_tests=replays, replay_hits=replay_hits, live_runs=live.runs,
+                   live_seconds=live.run_seconds)
     write_summary(out_dir, body)
     print_line(format_summary(body))
     return code
@@ -206,13 +218,12 @@ def _reproduce(live: LiveTester, mutations, failure: Failure, repeats: int,
 
 
 def _confirm(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, runs: int,
-             say: Callable[[str], None]) -> tuple[dict, Path | None]:
+             say: Callable[[str], None], scratch: Path) -> tuple[dict, Path | None]:
     """Run the minimal test case live ``runs`` times: its failure rate, and a log of a failing run."""
     if runs == 0:
-        return {"runs": 0, "failures": 0, "rate": None}, None
+        return {"requested": 0, "runs": 0, "failures": 0, "rate": None}, None
     horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
     say(f"confirming {xml.name} live through the proxy ({runs} run(s))")
-    scratch = Path(tempfile.mkdtemp(prefix="astaa-deft-confirm-"))
     kept: Path | None = None
     outcomes = []
     for n in range(runs):
@@ -228,14 +239,16 @@ def _confirm(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisati
                 record.unlink(missing_ok=True)
     told = [o for o in outcomes if o.failed is not None]
     failures = sum(1 for o in told if o.failed)
-    body = {"runs": len(told), "failures": failures, "rate": failures / len(told) if told else None,
-            "seconds": round(sum(o.seconds for o in outcomes), 3),
-            "details": sorted({o.detail for o in told if o.failed})[:3]}
+    body = {"requested": runs, "runs": len(told), "failures": failures,
+            "rate": failures / len(told) if told else None, "seconds": round(sum(o.seconds for o in outcomes), 3),
+            "details": sorted({o.detail for o in outcomes if o.failed is not False})[:3]}
     return body, kept
 
 
 def _verdict(result: Minimisation, confirmation: dict) -> tuple[str, int]:
     rate = confirmation.get("rate")
+    if confirmation.get("requested") and not confirmation.get("runs"):
+        return f"minimised, but no confirmation run could tell: {'; '.join(confirmation['details'])}", 1
     if not confirmation.get("runs"):
         if result.tester == "replay":
             return "minimised; reproduced in the planner replay (not run live: --confirm 0)", 0

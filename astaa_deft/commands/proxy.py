@@ -58,7 +58,8 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             on_start(run)
             reason = "stopped"
             while True:
-                if stop.event.wait(0.05):
+                time.sleep(0.05)
+                if stop.requested():
                     reason = f"signal {stop.received}"
                     break
                 if duration is not None and time.monotonic() - t0 >= duration:

@@ -80,6 +80,10 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
 
 def check_oracle(suite, entry: Mapping[str, Any]) -> str | None:
     """Run by the pytest plugin: the reason the test fails, or None."""
+    if entry.get("kind") == "invariant":  # written by `astaa-deft minimise`
+        from ..minimise.deft_tester import check_invariant_oracle
+
+        return check_invariant_oracle(suite, entry)
     cfg = suite.spec.planner
     result = next(r for r in suite.results() if r.index == entry["frame"])
     frame_entry = next(e for e in suite.frames if e["index"] == entry["frame"])

@@ -50,9 +50,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="a channel the proxy may alter: record what it delivered, and the originals")
     args = ap.parse_args(argv)
 
-    stop = threading.Event()
+    stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
     for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, lambda signum, _frame: stopping.append(signum))
 
     spec = load_spec(args.spec)
     writer = LogWriter(args.out, spec, chunk_size=args.chunk_size)
@@ -106,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     write_thread.start()
     print("ready", flush=True)
 
-    stop.wait()
+    while not stopping:
+        time.sleep(0.05)
     # A recorder must never outlive its run, whatever Zenoh does at shutdown.
     threading.Timer(SHUTDOWN_LIMIT_SECONDS, os._exit, args=(3,)).start()
     # Order matters: no more callbacks, write what is queued, finish the file;

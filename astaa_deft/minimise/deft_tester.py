@@ -173,7 +173,7 @@ class ReplayModel:
         spec = with_typed_invariants(load_spec_for(log, setup.spec_path))
         why_not = replayable(spec, setup.invariant)
         if why_not:
-            raise InputError(why_not)
+            raise InputError(Problem(setup.log_path, None, None, f"no planner replay: {why_not}", "use --live-only"))
         self.spec = spec
         self.cfg = spec.planner
         self.params = {**spec.params, **run_params(log)}
@@ -422,10 +422,11 @@ def _worker_main(argv: Sequence[str]) -> int:
     try:
         model = ReplayModel(setup)
     except InputError as exc:
-        answers.send(("error", "\n".join(str(p) for p in exc.problems)))
+        answers.send(("error", exc.problems))
         return 2
     except Exception as exc:  # reported by the parent as a clear error, not a traceback
-        answers.send(("error", f"{type(exc).__name__}: {exc}"))
+        answers.send(("error", [Problem(setup.log_path, None, None, f"the planner replay cannot start: "
+                                                                    f"{type(exc).__name__}: {exc}")]))
         return 2
     answers.send(("ready", model.baseline_seconds))
     while True:
@@ -455,16 +456,19 @@ class _Worker:
         self.jobs = Connection(job_write, readable=False)
         self.answers = Connection(answer_read, writable=False)
         self.jobs.send(setup)
+        self.where = setup.log_path
 
     def wait_ready(self, timeout: float) -> float:
         if not self.answers.poll(timeout):
             self.kill()
-            raise InputError(f"the replay worker did not start within {timeout:g} s")
+            raise InputError(Problem(self.where, None, None, f"the planner replay did not start within {timeout:g} s",
+                                     "is the planner's baseline replay hanging?"))
         try:
             kind, value = self.answers.recv()
         except EOFError:
             self.kill()
-            raise InputError("the replay worker exited while loading the log") from None
+            raise InputError(Problem(self.where, None, None, "the planner replay's worker exited while loading the log",
+                                     "see its error output above")) from None
         if kind == "error":
             self.kill()
             raise InputError(value)

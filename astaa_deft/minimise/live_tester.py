@@ -6,13 +6,17 @@ of the whole closed loop can show it. A test then re-runs the SUT through
 the star proxy with the test case that pins exactly the subset
 (:func:`.restrict.restricted_testcase`), and watches the online monitors:
 
-* FAIL as soon as the failing invariant breaks again (same name; for a
-  process or deadline invariant also the same module) — or, for a crash no
-  invariant named, the same module exits abnormally; the run is stopped
-  there, so a failing test costs only the time to the failure;
-* PASS when the run reaches the horizon (the original failure's time, or
-  the last pinned mutation's, plus a margin) without it;
+* FAIL if the failing invariant breaks again (same name and, where the
+  violation names one, the same module) — or, for a crash no invariant
+  named, the same module exits abnormally;
+* PASS if the run reaches the horizon (the original failure's time, or the
+  last pinned mutation's, plus a margin) without it;
 * UNRESOLVED when the run cannot start.
+
+Each run is recorded and judged by the spec's monitors over its log, as
+``astaa-deft check`` judges it; the online monitors only end a run early
+once they see the failure (a crashed module ends it too), so a failing test
+costs little more than the time to the failure.
 
 Whole-system runs are not deterministic (message timing differs between
 runs), so each test runs ``repeats`` times and reports the failure rate;
@@ -36,6 +40,8 @@ from ..intercept.dictionary import load_dictionary
 from ..intercept.engine import Interceptor
 from ..intercept.testcase import TestCase
 from ..log import layout
+from ..log.reader import read_log
+from ..monitor.offline import CheckResult, check_log
 from ..monitor.verdict import IMPLICIT
 from ..spec.model import Spec
 from .ddmin import Outcome, TestResult
@@ -95,45 +101,62 @@ class LiveTester:
 
     def run(self, testcase: TestCase, horizon: float, record: Path | None = None,
             policy_file: Path | None = None) -> LiveRun:
-        """One whole-system run with ``testcase``: stopped at the failure or at ``horizon`` s."""
+        """One whole-system run with ``testcase``: stopped at the failure or at ``horizon`` s.
+
+        Every run is recorded and its verdict is the spec's monitors over
+        that log (``check``): the same judgement whatever the online monitors
+        could see. The online ones only stop a run early once they report the
+        failure (or the module crashes).
+        """
         started = time.monotonic()
         with tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as tmp:
-            attachments = {}
-            if record is not None:
-                policy_file = policy_file or write_testcase(testcase, Path(tmp) / "policy.xml")
-                attachments[layout.POLICY_ATTACHMENT] = policy_file
+            log_path = record or Path(tmp) / "run.mcap"
+            policy_file = policy_file or write_testcase(testcase, Path(tmp) / "policy.xml")
             interceptor = Interceptor(testcase, self.spec, self.dictionary) if testcase.policies else None
-            options = RunOptions(mode="star", interceptor=interceptor, record=record, params=self.params,
-                                 run_dir=Path(tmp) / "run", attachments=attachments,
+            options = RunOptions(mode="star", interceptor=interceptor, record=log_path, params=self.params,
+                                 run_dir=Path(tmp) / "run", attachments={layout.POLICY_ATTACHMENT: policy_file},
                                  command_line=["astaa-deft", "minimise"])
             bus = BusRun(self.spec, options)
+            self.runs += 1
             try:
                 with bus:
-                    while not self._failed(bus):
+                    while not self._seen_online(bus):
                         if (time.time_ns() - bus.started_ns) / 1e9 >= horizon:
                             break
                         if bus.launcher is not None and not bus.alive():
                             break
                         time.sleep(POLL_SECONDS)
             except InputError as exc:
-                self.runs += 1
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
             seconds = time.monotonic() - started
-            self.runs += 1
             self.run_seconds += seconds
-            detail = self._failed(bus)  # also what only the end of the run decided
+            try:
+                log = read_log(log_path)
+                result = check_log(log, self.spec)
+            except InputError as exc:
+                return LiveRun(None, f"the run's log cannot be judged: {exc}", seconds)
+            detail = self._matching(result, log.events("process_exit"))
             if detail:
                 return LiveRun(True, detail, seconds, record)
-            return LiveRun(False, bus.verdict.summary if bus.verdict is not None else "", seconds, record)
+            return LiveRun(False, result.verdict.summary, seconds, record)
 
-    def _failed(self, bus: BusRun) -> str:
-        """The matching failure seen so far in ``bus`` ('' if none)."""
-        if self.invariant == IMPLICIT:
-            for exit_ in bus.crashed():
-                if self.module is None or exit_.module == self.module:
-                    return f"{exit_.describe()}"
+    def _matching(self, result: CheckResult, exits: list[dict]) -> str:
+        """The failure being minimised among a run's findings ('' if it is not there)."""
+        if self.invariant == IMPLICIT:  # a crash no invariant named: the module's abnormal exit
+            for e in exits:
+                if (not e.get("during_shutdown") and (e.get("returncode") or e.get("signal"))
+                        and (self.module is None or e.get("module") == self.module)):
+                    how = f"killed by {e['signal']}" if e.get("signal") else f"exit code {e.get('returncode')}"
+                    return f"module '{e.get('module')}' {how}"
             return ""
-        for v in list(bus.violations):
-            if v.get("invariant") == self.invariant and (self.module is None or v.get("module") == self.module):
-                return f"{v.get('invariant')}: {v.get('detail')}"
+        for v in result.violations:
+            if v.invariant == self.invariant and (self.module is None or v.module == self.module):
+                return f"{v.invariant}: {v.detail}"
         return ""
+
+    def _seen_online(self, bus: BusRun) -> bool:
+        """Has the run visibly failed already (worth stopping it)?"""
+        if any(self.module is None or e.module == self.module for e in bus.crashed()):
+            return True
+        return any(v.get("invariant") == self.invariant and (self.module is None or v.get("module") == self.module)
+                   for v in list(bus.violations))

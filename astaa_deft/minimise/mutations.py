@@ -152,7 +152,8 @@ class MutationLog:
     mutations: list[Mutation]
     start_ns: int  # the run's start (its run_started event)
     noop: int = 0  # events that changed nothing (e.g. a set whose fields were all skipped)
-    # Per channel: untouched deliveries on the key topic (no event), in log order.
+    # Per channel: deliveries on the key topic without an event (all of them on a channel
+    # no policy touched), in log order.
     untouched: dict[str, list[LoggedMessage]] = field(default_factory=dict)
     # Per mutation number: the consumers of its real message that got an untouched copy.
     sibling_consumers: dict[int, tuple[str, ...]] = field(default_factory=dict)
@@ -165,7 +166,7 @@ class MutationLog:
 def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
     """The mutations of an intercepted run (InputError if the records do not fit together)."""
     events = [(m, json.loads(m.data)) for m in log.on(layout.MUTATIONS_TOPIC)]
-    start_ns = _start_ns(log)
+    start_ns = run_start_ns(log)
     by_topic: dict[str, dict[int, LoggedMessage]] = {}
 
     def message(topic: str, sequence: int | None) -> LoggedMessage | None:
@@ -222,8 +223,7 @@ def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
 
     untouched = {}
     for channel in spec.channels:
-        if channel.key in log.channels and (channel.name in delivered_seqs or
-                                            layout.ORIGINAL_PREFIX + channel.key in log.channels):
+        if channel.key in log.channels:
             skip = delivered_seqs.get(channel.name, set())
             untouched[channel.name] = [m for m in log.on(channel.key) if m.sequence not in skip]
     mutations, siblings = _assign_consumers(mutations, spec)
@@ -240,7 +240,8 @@ def _steps(event: Mapping[str, Any]) -> tuple[Step, ...]:
     return tuple(Step(p, a, part.get("detail") or {}) for p, a, part in zip(policies, actions, parts))
 
 
-def _start_ns(log: LogContents) -> int:
+def run_start_ns(log: LogContents) -> int:
+    """The run's start: its run_started event, else (an event lost to the recorder) its first bus message."""
     started = [e["time_ns"] for e in log.events("run_started") if "time_ns" in e]
     if started:
         return int(started[0])

@@ -167,7 +167,8 @@ def copy_log(source: Path, out_dir: Path) -> Path:
 
 
 def summary(result: Minimisation, *, log: Path, why: str, seconds: float, confirm: Mapping[str, Any],
-            verdict: str, files: Mapping[str, Path], replay_tests: int = 0, replay_hits: int = 0) -> dict:
+            verdict: str, files: Mapping[str, Path], replay_tests: int = 0, replay_hits: int = 0,
+            live_runs: int = 0, live_seconds: float = 0.0) -> dict:
     """Everything summary.json holds (and the console shows)."""
     stages = [asdict(s) for s in result.stages]
     kept_mutations = result.chosen
@@ -190,12 +191,14 @@ def summary(result: Minimisation, *, log: Path, why: str, seconds: float, confir
                            for m, s in kept_mutations],
         "detail": result.detail,
         "confirmation": dict(confirm),
+        "live_runs": live_runs,  # whole-system runs, the confirmation's included
+        "live_run_seconds": round(live_seconds, 3),
         "notes": list(result.notes),
         "files": {k: str(v) for k, v in files.items()},
     }
     if result.tester == "replay":
         out["frames"] = {"before": result.outputs_replayed, "after": len(result.frames)}
-        out["replays"] = replay_tests
+        out["replays"] = replay_tests  # planner replays actually run (speculative parallel ones included)
     else:
         out["failure_rate_while_minimising"] = result.failure_rate
     return out

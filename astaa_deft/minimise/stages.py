@@ -31,7 +31,7 @@ from ..spec.model import Spec
 from .ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
 from .deft_tester import DeftTester, Job, ReplayModel, replayable
 from .live_tester import LiveTester
-from .mutations import FieldSelection, Mutation
+from .mutations import FieldSelection, Mutation, run_start_ns
 
 
 @dataclass(frozen=True)
@@ -52,21 +52,20 @@ class Failure:
 
 
 def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure:
-    """The first violation of ``invariant`` (or the first of all) in the log (InputError if none)."""
-    start = [e["time_ns"] for e in log.events("run_started") if "time_ns" in e]
-    events = sorted(log.events("violation"), key=lambda e: e.get("time_ns", 0))
-    if not events:  # a log recorded without online monitors: judge it now
-        result = check_log(log, with_typed_invariants(spec))
-        events = [v.to_json() for v in result.violations]
-        if not result.passed and not events and result.verdict.first is not None:
-            events = [result.verdict.first.to_json()]
-        start = [result.start_ns]
-    for verdict in log.events("verdict"):  # a crash no invariant reported is in the verdict only
-        first = verdict.get("first")
-        if first and first.get("invariant") == IMPLICIT:
-            events.append(first)
+    """The first violation of ``invariant`` (or the first of all) in the log (InputError if none).
+
+    The log is judged again by the spec's monitors, as ``astaa-deft check``
+    does, rather than trusting the violation events the online monitors
+    logged: the testers judge their runs that way too, so the failure they
+    look for is the one found the same way.
+    """
+    start_ns = run_start_ns(log)
+    result = check_log(log, with_typed_invariants(spec))
+    events = [v.to_json() for v in result.violations]
+    first = result.verdict.first
+    if first is not None and first.invariant == IMPLICIT:  # a crash no invariant named: in the verdict only
+        events.append(first.to_json())
     events.sort(key=lambda e: e.get("time_ns", 0))
-    start_ns = start[0] if start else (events[0].get("time_ns", 0) if events else 0)
     if invariant is not None:
         chosen = [e for e in events if e.get("invariant") == invariant]
         if not chosen:
@@ -133,8 +132,9 @@ class Minimisation:
         by_number = {m.number: m for m in self.mutations}
         return [(by_number[n], selection) for n, selection in sorted(self.kept.items())]
 
-    def fields_count(self, kept: bool = True) -> int:
-        return sum(len(m.fields) if (s is None or not kept) else len(s) for m, s in self.chosen)
+    def fields_count(self) -> int:
+        """Field changes in the minimal mutations."""
+        return sum(len(m.fields) if s is None else len(s) for m, s in self.chosen)
 
 
 Say = Callable[[str], None]
@@ -164,8 +164,12 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
                                      note=f"{len(items)} reached the planner"))
     answer = tester.answer(Job.of(kept))
     failing = answer.failing_output
-    if answer.result.outcome is not Outcome.FAIL or failing is None:  # a violation only the end decides
+    if answer.result.outcome is not Outcome.FAIL or failing is None:
+        # A violation only the end of the run decides (a temporal invariant's future): no failing
+        # frame to build a history for; every frame stays.
         out.kept, out.detail = kept, answer.result.detail
+        out.frames = [i for i, frame in enumerate(model.frames(kept)) if frame is not None]
+        out.outputs_replayed = len(out.frames)
         return out
 
     # Stage 2: scaffolding frames.
