@@ -190,6 +190,13 @@ class ReplayModel:
         self.start_ns = self.mlog.start_ns
         stopping = [e["time_ns"] for e in log.events("run_stopping") if "time_ns" in e]
         self.end_ns = int(stopping[0]) if stopping else max((m.log_time for m in self.outputs), default=self.start_ns)
+        # Replay only up to the output that failed in the run. The frames after it carry the
+        # failure's own consequences (in closed loop the ego is already speeding), which would
+        # make the failure look independent of every mutation.
+        failed_at = _first_failure_ns(log, self.judged)
+        if failed_at is not None:
+            self.outputs = [m for m in self.outputs if m.log_time <= failed_at]
+            self.end_ns = min(self.end_ns, self.outputs[-1].log_time if self.outputs else failed_at)
         self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
         self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
         self._decoded: dict[Any, Any] = {}
@@ -656,3 +663,11 @@ if __name__ == "__main__":
     from astaa_deft.minimise import deft_tester as _real
 
     sys.exit(_real._worker_main(sys.argv[1:]))
+
+
+def _first_failure_ns(log, judged: Spec) -> int | None:
+    """When the run's recorded outputs first broke the judged invariant (None if they never did)."""
+    from ..monitor import check_log
+
+    found = check_log(log, judged).violations
+    return min(v.time_ns for v in found) if found else None
