@@ -40,7 +40,7 @@ from pathlib import Path
 
 from astaa_deft.bus.run import BusRun, RunOptions
 from astaa_deft.commands import minimise
-from astaa_deft.commands.demo import demo_spec_path
+from astaa_deft.commands.demo import demo_noise_policies, demo_spec_path
 from astaa_deft.intercept import load_interceptor
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
@@ -48,24 +48,7 @@ from astaa_deft.spec.loader import load_spec
 
 RECORD_SECONDS = 7.0
 
-# Benign for every defect: fields no module decides on (header.seq, yaw_rate, acceleration of
-# localization, command.trajectory_seq, trajectory.debug), a consumer-narrowed set, 30 ms
-# delays and duplicates of traffic lights, a few dropped commands.
-NOISE = """
-  <policy id="noise-yaw"><channel>localization</channel><window from="1"/><select every="9" limit="60"/>
-    <set><field path="yaw_rate" value="0.001"/></set></policy>
-  <policy id="noise-acc"><channel>localization</channel><consumer>planning</consumer><window from="1.1"/>
-    <select every="11" limit="40"/><set><field path="acceleration" value="0.125"/><field path="header.seq" value="7"/></set></policy>
-  <policy id="noise-tl"><channel>traffic_light</channel><select every="2"/><set><field path="header.seq" value="1"/></set></policy>
-  <policy id="noise-tl-delay"><channel>traffic_light</channel><select every="3"/><delay ms="30"/></policy>
-  <policy id="noise-tl-dup"><channel>traffic_light</channel><select every="4"/><duplicate/></policy>
-  <policy id="noise-pred"><channel>prediction</channel><select every="5"/><set><field path="header.seq" value="3"/></set></policy>
-  <policy id="noise-route"><channel>routing</channel><set><field path="header.seq" value="0"/></set></policy>
-  <policy id="noise-obs"><channel>obstacles</channel><select every="3"/><set><field path="header.seq" value="0"/></set></policy>
-  <policy id="noise-cmd"><channel>command</channel><select every="25"/><set><field path="trajectory_seq" value="0"/></set></policy>
-  <policy id="noise-cmd-drop"><channel>command</channel><select every="40"/><drop/></policy>
-  <policy id="noise-traj"><channel>trajectory</channel><select every="4"/><set><field path="debug.inputs.routing" value="0"/></set></policy>
-"""
+NOISE = demo_noise_policies()  # policies/examples/demo_noise.xml
 
 CULPRITS = {  # defect → (the policy triggering it once, the field it sets)
     1: ("""<policy id="culprit"><channel>routing</channel><window from="4"/><select limit="1"/>

@@ -42,6 +42,12 @@ def demo_policy_path(name: str = DEMO_POLICY) -> Path:
     return Path(str(resources.files("astaa_deft") / "data" / "policies" / "examples" / name))
 
 
+def demo_noise_policies() -> str:
+    """The <policy> elements of demo_noise.xml: benign mutations to hide a culprit among."""
+    text = demo_policy_path("demo_noise.xml").read_text()
+    return text[text.index("</description>") + len("</description>"):text.index("</testcase>")]
+
+
 class StatusWatch:
     """The simulator's latest status message, as the tool saw it (done: goal, collision or time limit)."""
 
