@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Iterator, Mapping, Sequence, Union
 
+from astaa_deft.errors import AstaaDeftError
 from astaa_deft.spec.model import FieldType, MessageType
 
 
@@ -49,7 +50,7 @@ _KEY = re.compile(r"[^.\[\]*\s]+")
 _INDEX = re.compile(r"\[(?:(\*)|(-?[1-9][0-9]*|0))\]")
 
 
-class FieldPathError(ValueError):
+class FieldPathError(AstaaDeftError, ValueError):
     """A path that does not parse, or does not exist in a declared type.
 
     ``text`` is the path as written and ``position`` the 0-based offset of

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Sequence
 from lxml import etree
 
 from ...codecs import DecodeError, get_codec
-from ...errors import InputError, Problem, did_you_mean
+from ...errors import AstaaDeftError, InputError, Problem, did_you_mean
 from ...fields import FieldPath, FieldPathError, get, set_field
 from ...spec.model import FLOAT_KINDS, INT_KINDS, Channel, FieldType
 from ..dictionary import (
@@ -106,7 +106,7 @@ def _report_value(checker: ActionChecker, element: etree._Element, problem: Valu
 
 # ---------------------------------------------------------------- typing values
 
-class ValueProblem(ValueError):
+class ValueProblem(AstaaDeftError, ValueError):
     def __init__(self, message: str, fix: str = ""):
         super().__init__(message)
         self.fix = fix
