@@ -21,6 +21,7 @@ from astaa_deft.commands import minimise as command
 from astaa_deft.commands.demo import demo_spec_path
 from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
 from astaa_deft.intercept.actions.base import FieldChange
+from astaa_deft.intercept.actions.set import value_text
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.recorder import _write_intercepted
@@ -34,7 +35,7 @@ from astaa_deft.minimise.mutations import (
     read_mutations,
     sent_stream,
 )
-from astaa_deft.minimise.restrict import restricted_testcase, value_text
+from astaa_deft.minimise.restrict import restricted_testcase
 from astaa_deft.minimise.stages import Failure, Minimisation
 from astaa_deft.spec.loader import load_spec
 

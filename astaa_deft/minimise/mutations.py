@@ -37,7 +37,8 @@ from ..codecs import get_codec
 from ..codecs.base import DecodeError, EncodeError
 from ..errors import InputError, Problem
 from ..fields import FieldPath, FieldPathError, set_field
-from ..intercept.actions.base import FieldChange, from_tagged
+from ..intercept.actions import ACTIONS
+from ..intercept.actions.base import ActionDetail, FieldChange, from_tagged
 from ..log import layout
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
@@ -45,8 +46,10 @@ from ..spec.model import Spec
 FieldSelection = tuple[int, ...] | None
 """Which of a mutation's field changes are kept: indices into ``Mutation.fields``, or None for all."""
 
-EXTRA_ACTIONS = frozenset({"duplicate", "interleave"})  # the event rides on an extra delivery
-DEFERRING_ACTIONS = frozenset({"delay", "reorder"})  # delivered later than the real message arrived
+# What each action is, from its own flags (intercept/actions/<name>.py).
+EXTRA_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.adds_delivery)  # rides on an extra delivery
+DEFERRING_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.defers)  # delivered after arrival
+FIELDS_INSEPARABLE = frozenset(name for name, action in ACTIONS.items() if not action.fields_separable)
 SIBLING_WINDOW_NS = 200_000_000  # an untouched copy of a split message is logged within this of its event
 
 
@@ -57,6 +60,12 @@ class Step:
     policy: str
     action: str
     detail: Mapping[str, Any]
+
+    @property
+    def record(self) -> ActionDetail | None:
+        """The detail as its action's typed record (None for an action this version does not know)."""
+        action = ACTIONS.get(self.action)
+        return action.detail_type.from_json(self.detail) if action is not None else None
 
 
 @dataclass(frozen=True)
@@ -102,7 +111,7 @@ class Mutation:
     @property
     def fields_reducible(self) -> bool:
         """Whether dropping some field changes still leaves a meaningful delivery (stage 3)."""
-        return len(self.fields) > 1 and not self.actions & {"corrupt", "drop"}
+        return len(self.fields) > 1 and not self.actions & FIELDS_INSEPARABLE
 
     def payload(self, selection: FieldSelection, codec_name: str) -> bytes | None:
         """What is delivered when only the ``selection`` of field changes is kept (None: dropped).
@@ -129,8 +138,7 @@ class Mutation:
         to = f" (to {', '.join(self.consumers)})" if self.consumers else ""
         chosen = self.fields if selection is None else tuple(self.fields[i] for i in selection)
         changes = "; ".join(f"{c.path}: {_short(c.old)} → {_short(c.new)}" for c in chosen)
-        details = [f"{k}={v}" for step in self.steps for k, v in step.detail.items()
-                   if k in ("delay_ms", "copies", "flipped_bytes", "truncated_to")]
+        details = [item for step in self.steps if step.record is not None for item in step.record.describe()]
         text = f"{self.action} on {self.channel} #{self.message_index}{to}"
         if changes:
             text += f": {changes}"

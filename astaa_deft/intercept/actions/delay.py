@@ -12,7 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import ActionConfig, ActionRuntime, MessageInfo, Pending, PolicyContext, decimal_text
+from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
+    decimal_text
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -21,8 +22,16 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class DelayDetail(ActionDetail):
+    shown: ClassVar[tuple[str, ...]] = ("delay_ms",)
+    delay_ms: float | None = None
+
+
+@dataclass(frozen=True)
 class Delay(ActionConfig):
     name: ClassVar[str] = "delay"
+    detail_type: ClassVar[type[ActionDetail]] = DelayDetail
+    defers: ClassVar[bool] = True
     ms: float
 
     @classmethod
@@ -35,6 +44,14 @@ class Delay(ActionConfig):
     def start(self, context: PolicyContext) -> ActionRuntime:
         return DelayRuntime(self, context)
 
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Delay | None:
+        """The logged delay (else the original policy's)."""
+        ms = DelayDetail.from_json(step.detail).delay_ms
+        if ms is None and isinstance(step.original, Delay):
+            ms = step.original.ms
+        return cls(float(ms)) if ms else None
+
 
 class DelayRuntime(ActionRuntime):
     def __init__(self, config: Delay, context: PolicyContext):
@@ -45,5 +62,5 @@ class DelayRuntime(ActionRuntime):
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         item.at += self.seconds  # delays of stacked policies add up
         item.deferred = True
-        item.events.append(self.context.event("delay", info, item.consumers, delay_ms=self.ms))
+        item.events.append(self.context.event("delay", info, item.consumers, **DelayDetail(self.ms).to_json()))
         return [item]
