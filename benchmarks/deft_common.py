@@ -19,10 +19,11 @@ from typing import Any, Sequence
 
 from astaa_deft.bus.run import RunOptions
 from astaa_deft.codecs import get_codec
-from astaa_deft.commands.demo import StatusWatch, demo_spec_path
+from astaa_deft.commands.demo import StatusWatch
 from astaa_deft.commands.proxy import run_bus
 from astaa_deft.deft.replay import trajectory_points
 from astaa_deft.deft.validator import Point, compare
+from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.log.reader import LogContents
 from astaa_deft.spec.loader import load_spec
 from astaa_deft.spec.model import Spec

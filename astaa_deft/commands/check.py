@@ -2,6 +2,7 @@
 
 Exit codes: 0 the run passes (CRASH class Pass), 1 it does not (a violation
 or a module exit), 2 bad input (raised as InputError, printed by the CLI).
+The work is :func:`astaa_deft.monitor.check.check_recorded_run`; this prints its result.
 """
 
 from __future__ import annotations
@@ -10,34 +11,21 @@ import json
 import sys
 from pathlib import Path
 
-from ..errors import InputError, Problem
-from ..log.reader import read_log
-from ..monitor import check_log, format_verdict, format_violation, with_typed_invariants
-from ..monitor.offline import CheckResult, spec_from_log
-from ..spec.model import Spec
+from ..monitor import format_verdict, format_violation
+from ..monitor.check import check_recorded_run
+from ..monitor.offline import CheckResult
 
 
 def run(log_path: Path, spec_path: Path | None = None, as_json: bool = False) -> int:
-    log = read_log(log_path)
-    spec: Spec | None
-    if spec_path is not None:
-        from ..spec.loader import load_spec
-
-        spec = load_spec(spec_path)
-    else:
-        spec = spec_from_log(log, f"{log_path}:spec.yaml")
-        if spec is None:
-            raise InputError(Problem(str(log_path), None, None, "the log holds no spec to check it against",
-                                     "give the SUT spec with --spec sut.yaml"))
-    spec = with_typed_invariants(spec)
-    result = check_log(log, spec)
+    checked = check_recorded_run(log_path, spec_path)
+    result = checked.result
     if as_json:
         print(json.dumps(_as_json(result), default=str))
     else:
-        _print(result, log_path, spec_path, len(spec.invariants))
+        _print(result, log_path, spec_path, len(checked.spec.invariants))
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    return 0 if result.passed else 1
+    return 0 if checked.passed else 1
 
 
 def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invariants: int) -> None:

@@ -17,10 +17,10 @@ import math
 import subprocess
 import sys
 import threading
-from importlib import resources
 from pathlib import Path
 
 from ..bus.run import RunOptions
+from ..demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
 from ..intercept import load_interceptor
 from ..log import layout
 from ..log.reader import read_log
@@ -31,21 +31,6 @@ from .console import say
 from .proxy import Outcome, run_bus
 
 DEFAULT_TIME_LIMIT = 40.0
-DEMO_POLICY = "demo_nan_speed_limit.xml"
-
-
-def demo_spec_path() -> Path:
-    return Path(str(resources.files("astaa_deft") / "data" / "specs" / "demo_av.yaml"))
-
-
-def demo_policy_path(name: str = DEMO_POLICY) -> Path:
-    return Path(str(resources.files("astaa_deft") / "data" / "policies" / "examples" / name))
-
-
-def demo_noise_policies() -> str:
-    """The <policy> elements of demo_noise.xml: benign mutations to hide a culprit among."""
-    text = demo_policy_path("demo_noise.xml").read_text()
-    return text[text.index("</description>") + len("</description>"):text.index("</testcase>")]
 
 
 class StatusWatch:
