@@ -43,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="override a spec param used in module commands")
     proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here")
     proxy.add_argument("--stop-on-violation", action="store_true", help="end the run at the first broken invariant")
-    proxy.add_argument("--policy", type=Path, help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages")
+    proxy.add_argument("--policy", type=Path,
+                       help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages")
     proxy.add_argument("--dictionary", type=Path, action="append", default=[],
                        help="an exceptional-value dictionary on top of the default one (repeatable)")
     proxy.set_defaults(func=_proxy)

@@ -14,7 +14,8 @@ from __future__ import annotations
 import difflib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar, Iterable
+from typing import ClassVar
+from collections.abc import Iterable
 
 
 class AstaaDeftError(Exception):
@@ -54,9 +55,8 @@ class InputError(AstaaDeftError):
     exit_code = 2
 
     def __init__(self, problems: Iterable[Problem] | Problem | str):
-        if isinstance(problems, (Problem, str)):
-            problems = [problems]
-        self.problems = [p if isinstance(p, Problem) else Problem("", None, None, p) for p in problems]
+        items: Iterable[Problem | str] = [problems] if isinstance(problems, (Problem, str)) else problems
+        self.problems = [p if isinstance(p, Problem) else Problem("", None, None, p) for p in items]
         super().__init__("\n".join(map(str, self.problems)))
 
     def user_lines(self) -> list[str]:

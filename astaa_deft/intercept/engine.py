@@ -22,7 +22,8 @@ import math
 import random
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 from ..codecs import Codec, DecodeError, get_codec
 from ..errors import InputError, Problem

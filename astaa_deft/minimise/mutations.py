@@ -47,7 +47,7 @@ FieldSelection = tuple[int, ...] | None
 """Which of a mutation's field changes are kept: indices into ``Mutation.fields``, or None for all."""
 
 # What each action is, from its own flags (intercept/actions/<name>.py).
-EXTRA_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.adds_delivery)  # rides on an extra delivery
+EXTRA_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.adds_delivery)  # on an extra delivery
 DEFERRING_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.defers)  # delivered after arrival
 FIELDS_INSEPARABLE = frozenset(name for name, action in ACTIONS.items() if not action.fields_separable)
 SIBLING_WINDOW_NS = 200_000_000  # an untouched copy of a split message is logged within this of its event
@@ -245,7 +245,9 @@ def _steps(event: Mapping[str, Any]) -> tuple[Step, ...]:
     if len(actions) == 1:
         return (Step(policies[0], actions[0], detail),)
     parts = detail.get("steps") or [{} for _ in actions]
-    return tuple(Step(p, a, part.get("detail") or {}) for p, a, part in zip(policies, actions, parts))
+    # Not strict: a damaged event's shorter list yields fewer steps, as it always has.
+    return tuple(Step(p, a, part.get("detail") or {})
+                 for p, a, part in zip(policies, actions, parts, strict=False))
 
 
 def run_start_ns(log: LogContents) -> int:

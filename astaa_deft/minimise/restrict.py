@@ -37,7 +37,7 @@ confirmation runs like any other.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 from ..intercept.actions import ACTIONS
 from ..intercept.actions.base import ActionConfig, PinnedStep

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 from ..errors import InputError, Problem
 from ..log.reader import LogContents
@@ -62,9 +62,9 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
     start_ns = run_start_ns(log)
     result = check_log(log, with_typed_invariants(spec))
     events = [v.to_json() for v in result.violations]
-    first = result.verdict.first
-    if first is not None and first.invariant == IMPLICIT:  # a crash no invariant named: in the verdict only
-        events.append(first.to_json())
+    deciding = result.verdict.first
+    if deciding is not None and deciding.invariant == IMPLICIT:  # a crash no invariant named: in the verdict only
+        events.append(deciding.to_json())
     events.sort(key=lambda e: e.get("time_ns", 0))
     if invariant is not None:
         chosen = [e for e in events if e.get("invariant") == invariant]
@@ -239,9 +239,9 @@ def _minimise_fields(kept: Mapping[int, FieldSelection], by_number: Mapping[int,
         return dict(kept), None
 
     def selection(subset: Sequence[tuple[int, int]]) -> dict[int, FieldSelection]:
-        chosen = {n: (None if n not in reducible else ()) for n in kept}
+        chosen: dict[int, FieldSelection] = {n: (None if n not in reducible else ()) for n in kept}
         for n, i in subset:
-            chosen[n] = (*chosen[n], i)  # type: ignore[misc]
+            chosen[n] = (*(chosen[n] or ()), i)  # a reducible mutation's selection starts as (), never None
         return chosen
 
     say(f"stage 3: {len(items)} field changes in {len(reducible)} mutation(s)")

@@ -32,7 +32,7 @@ from ..log.reader import LogContents, read_log
 from ..monitor import with_typed_invariants
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from .deft_tester import DeftTester, ReplayModel, ReplayPool, default_setup, load_spec_for, run_params
-from .live_tester import MARGIN_SECONDS, LiveTester
+from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
 from .mutations import Mutation, read_mutations
 from .output import (
     MINIMAL_MCAP,
@@ -224,7 +224,7 @@ def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure,
     testcase = live.testcase(chosen)
     horizon = max([failure.at] + [m.at for m in mutations]) + MARGIN_SECONDS
     say(f"reproducing the failure live with all {len(mutations)} mutations pinned")
-    runs = []
+    runs: list[LiveRun] = []
     while len(runs) < repeats or (len(runs) < FLAKY_CHECK_RUNS and not any(r.failed for r in runs)):
         runs.append(live.run(testcase, horizon))
         say(f"  run {len(runs)}: " + ("fail" if runs[-1].failed else "pass" if runs[-1].failed is False

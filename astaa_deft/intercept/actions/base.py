@@ -32,7 +32,8 @@ import random
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, fields, replace
 from decimal import Decimal
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
+from collections.abc import Callable, Mapping
 
 from ...codecs import Codec, EncodeError
 
@@ -339,7 +340,8 @@ class ActionConfig(ABC):
     def write_xml(self, element: etree._Element) -> None:
         """Fill in the attributes and children of this action's (empty) element."""
 
-    def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
+    def check(self, policy: Policy, channels: tuple[Channel, ...],  # noqa: B027 (a hook with a default)
+              checker: ActionChecker) -> None:
         """Check against the spec and dictionary (``checker`` has both); default: nothing to check."""
 
     @abstractmethod
@@ -381,6 +383,13 @@ class ActionRuntime:
 
     def flush(self, now: float) -> list[Pending]:
         return []
+
+
+def required(element: etree._Element, name: str) -> str:
+    """A required attribute of a schema-valid element (the schema guarantees it is there)."""
+    value = element.get(name)
+    assert isinstance(value, str), f"<{element.tag!s}> lacks '{name}' after schema validation"
+    return value
 
 
 def decimal_text(value: float) -> str:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
-    decimal_text
+    decimal_text, required
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -47,7 +47,7 @@ class Corrupt(ActionConfig):
     @classmethod
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Corrupt:
         count, keep = element.get("bytes"), element.get("keep")
-        return cls(element.get("mode"), int(count) if count is not None else None,
+        return cls(required(element, "mode"), int(count) if count is not None else None,
                    float(keep) if keep is not None else None)
 
     def write_xml(self, element: etree._Element) -> None:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
-    decimal_text
+    decimal_text, required
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -36,7 +36,7 @@ class Delay(ActionConfig):
 
     @classmethod
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Delay:
-        return cls(float(element.get("ms")))
+        return cls(float(required(element, "ms")))
 
     def write_xml(self, element: etree._Element) -> None:
         element.set("ms", decimal_text(self.ms))

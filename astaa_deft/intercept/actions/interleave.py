@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from ...codecs import DecodeError, get_codec
 from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
-    decimal_text
+    decimal_text, required
 from .set import Assignment, FieldPlan, FieldsDetail, apply_plans, check_assignments, literal_assignments, \
     plan_fields, read_assignments, write_assignments
 
@@ -46,7 +46,7 @@ class Interleave(ActionConfig):
 
     @classmethod
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Interleave:
-        return cls(float(element.get("rate")), read_assignments(element))
+        return cls(float(required(element, "rate")), read_assignments(element))
 
     def write_xml(self, element: etree._Element) -> None:
         element.set("rate", decimal_text(self.rate))

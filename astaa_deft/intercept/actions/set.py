@@ -28,7 +28,8 @@ import json
 import re
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any, ClassVar, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
+from collections.abc import Sequence
 
 from lxml import etree
 
@@ -41,7 +42,7 @@ from ..dictionary import (
     field_site, wire_value,
 )
 from .base import ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, \
-    PolicyContext
+    PolicyContext, required
 
 if TYPE_CHECKING:
     from ..testcase import ActionChecker, Policy
@@ -90,7 +91,8 @@ class FieldsDetail(ActionDetail):
 
 
 def read_assignments(element: etree._Element) -> tuple[Assignment, ...]:
-    return tuple(Assignment(child.get("path"), child.get("value")) for child in element.iterfind("field"))
+    return tuple(Assignment(required(child, "path"), required(child, "value"))
+                 for child in element.iterfind("field"))
 
 
 def write_assignments(element: etree._Element, assignments: Sequence[Assignment]) -> None:
