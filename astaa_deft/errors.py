@@ -12,10 +12,10 @@ traceback). Only :class:`InputError` (exit code 2) is meant for the user today.
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
-from collections.abc import Iterable
 
 
 class AstaaDeftError(Exception):

@@ -5,8 +5,8 @@ The work is :func:`astaa_deft.intercept.generate.generate_to_directory`; this pr
 
 from __future__ import annotations
 
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
 
 from ..intercept.generate import generate_to_directory
 

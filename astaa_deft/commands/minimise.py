@@ -10,8 +10,8 @@ need the mutations), with the report; 2 bad input (InputError).
 
 from __future__ import annotations
 
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 
 from ..minimise.workflow import MinimiseOptions, minimise_log
 from .console import say as print_line

@@ -10,10 +10,10 @@ with oracle tests for a collision the run saw, and returns what it found.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable
 
 from ..errors import InputError, Problem
 from ..log import layout

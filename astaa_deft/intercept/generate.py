@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import random
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Sequence
 
 from ..codecs import get_codec
 from ..errors import InputError, Problem

@@ -36,8 +36,8 @@ confirmation runs like any other.
 
 from __future__ import annotations
 
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
 
 from ..intercept.actions import ACTIONS
 from ..intercept.actions.base import ActionConfig, PinnedStep

@@ -20,8 +20,8 @@ judge it are decided here too (:func:`find_failure`, :func:`choose_tester`).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 from ..errors import InputError, Problem
 from ..log.reader import LogContents

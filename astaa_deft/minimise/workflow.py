@@ -20,10 +20,10 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable, Sequence
 
 from ..errors import InputError, Problem
 from ..intercept.testcase import TestCase, parse_testcase

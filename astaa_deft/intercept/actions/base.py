@@ -30,10 +30,10 @@ import json
 import math
 import random
 from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from decimal import Decimal
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
-from collections.abc import Callable, Mapping
 
 from ...codecs import Codec, EncodeError
 
