@@ -385,6 +385,7 @@ class _SpecBuilder:
                 self.src.at_key(node, tname, f"type name '{tname}' is a built-in kind", "rename it")
             if not tnode.is_map or not tnode.value:
                 self.src.at(tnode, f"type '{tname}' must map field names to field types", "e.g. 'x: float64'")
+                out[tname] = MessageType(tname, {})  # keep the name known: later references are not errors too
                 continue
             fields = {}
             for fname, fnode in tnode.items():
