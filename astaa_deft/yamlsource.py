@@ -56,13 +56,13 @@ class Source:
     @classmethod
     def from_file(cls, path: Path) -> "Source":
         try:
-            text = path.read_text(encoding="utf-8")
+            text = decode_utf8(path.read_bytes(), str(path))
         except FileNotFoundError:
             raise InputError(Problem(str(path), None, None, "file not found", "check the path")) from None
         except IsADirectoryError:
             raise InputError(Problem(str(path), None, None, "is a directory", "give a YAML file")) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(Problem(str(path), None, None, f"cannot read: {exc}", "")) from None
+        except OSError as exc:
+            raise InputError(Problem(str(path), None, None, f"cannot read: {exc.strerror or exc}", "")) from None
         return cls(text, str(path))
 
     def parse(self) -> Node:
@@ -185,6 +185,17 @@ _constructor = yaml.SafeLoader("")
 
 
 _NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+
+
+def decode_utf8(data: bytes, name: str) -> str:
+    """Text from bytes; a byte that is not UTF-8 is reported by line and column, not by offset."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise InputError(Problem(name, line, column, f"not UTF-8 text (byte 0x{data[exc.start]:02x})",
+                                 "save the file as UTF-8")) from None
 
 
 def describe_value(value: Any) -> str:
