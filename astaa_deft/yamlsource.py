@@ -7,6 +7,7 @@ nodes instead of plain dicts.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
@@ -168,6 +169,9 @@ class Source:
         if len(node.value) > MAX_SCALAR_DIGITS and node.tag in _NUMBER_TAGS:
             raise InputError(Problem(self.name, line, col, f"a number of {len(node.value):,} characters",
                                      "use a number of at most 100 digits"))
+        if node.style is None and node.tag == "tag:yaml.org,2002:str" and len(node.value) <= MAX_SCALAR_DIGITS \
+                and _EXPONENT_NUMBER.match(node.value):
+            return float(node.value)  # YAML 1.2 reads 1e3 as a number; PyYAML's 1.1 rules would make it text
         try:
             return _constructor.construct_object(node, deep=True)
         except (yaml.YAMLError, ValueError, OverflowError) as exc:
@@ -184,6 +188,7 @@ MAX_SCALAR_DIGITS = 100
 _constructor = yaml.SafeLoader("")
 
 
+_EXPONENT_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
 _NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
 
 

@@ -285,12 +285,13 @@ class _SpecBuilder:
                 re.compile(log)
             except re.error as exc:
                 self.src.at(v["log"], f"'ready.log' is not a valid regular expression: {exc}", "fix or quote it")
-        delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0)
-        timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True)
+        delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0, maximum=MAX_WAIT_S)
+        timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True, maximum=MAX_WAIT_S)
         return Readiness(channel=channel, log=log, delay=delay if delay is not None else (None if channel or log else 0.0),
                          timeout=timeout if timeout is not None else 20.0)
 
-    def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False) -> float | None:
+    def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False,
+               maximum: float | None = None) -> float | None:
         if node is None:
             return None
         if not self.expect(node, (int, float), what, "a number"):
@@ -301,6 +302,9 @@ class _SpecBuilder:
             return None
         if minimum is not None and (value < minimum or (strictly and value == minimum)):
             self.src.at(node, f"{what} must be {'>' if strictly else '≥'} {minimum:g}", "give a larger value")
+            return None
+        if maximum is not None and value > maximum:
+            self.src.at(node, f"{what} must be ≤ {maximum:g}", "give a smaller value")
             return None
         return value
 
@@ -507,6 +511,9 @@ class _SpecBuilder:
                 continue
             out.append(item.value)
         return out
+
+
+MAX_WAIT_S = 86_400.0  # a day: beyond it a wait is a typo, and timers overflow near 1e308
 
 
 def _scalar_text(value: Any) -> str:
