@@ -195,7 +195,7 @@ class _SpecBuilder:
                 continue
             v = item.value
             name = self.name_of(v["name"], "module name") if "name" in v else "?"
-            if name in seen:
+            if "name" in v and name in seen:
                 self.src.at(v["name"], f"module '{name}' is declared twice", "give each module a unique name")
             seen.add(name)
             command = self.command(v.get("command"), name, params)
@@ -319,7 +319,7 @@ class _SpecBuilder:
                 continue
             v = item.value
             name = self.name_of(v["name"], "channel name") if "name" in v else "?"
-            if name in names:
+            if "name" in v and name in names:
                 self.src.at(v["name"], f"channel '{name}' is declared twice", "give each channel a unique name")
             names.add(name)
             key = ""
