@@ -173,7 +173,44 @@ class MutationLog:
 
 def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
     """The mutations of an intercepted run (InputError if the records do not fit together)."""
-    events = [(m, json.loads(m.data)) for m in log.on(layout.MUTATIONS_TOPIC)]
+    events = [(m, _decode_event(log, n, m)) for n, m in enumerate(log.on(layout.MUTATIONS_TOPIC), start=1)]
+    try:
+        return _read_mutations(log, spec, events)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"a mutation event does not have the fields astaa-deft writes ({_what(exc)})",
+                                 "the log is damaged or was not written by astaa-deft proxy --policy")) from None
+
+
+def _decode_event(log: LogContents, number: int, record: LoggedMessage) -> dict:
+    """One record on the mutations topic as JSON, or an InputError that says which and where."""
+    where = f"mutation event {number} (log time {record.log_time / 1e9:.3f} s)"
+    try:
+        text = record.data.decode("utf-8")
+        body = json.loads(text)
+    except UnicodeDecodeError as exc:
+        raise InputError(Problem(str(log.path), None, None, f"{where} is not UTF-8 text (byte {exc.start})",
+                                 "the log is damaged; re-record the run")) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"{where} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}",
+                                 "the log is damaged; re-record the run")) from None
+    except RecursionError:
+        raise InputError(Problem(str(log.path), None, None, f"{where} is nested too deeply",
+                                 "the log is damaged; re-record the run")) from None
+    if not isinstance(body, dict):
+        raise InputError(Problem(str(log.path), None, None, f"{where} is not a JSON object",
+                                 "the log is damaged; re-record the run"))
+    return body
+
+
+def _what(exc: BaseException) -> str:
+    if isinstance(exc, KeyError):
+        return f"'{exc.args[0]}' is missing" if exc.args else "a key is missing"
+    return "a field has the wrong kind of value"
+
+
+def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessage, dict]]) -> MutationLog:
     start_ns = run_start_ns(log)
     by_topic: dict[str, dict[int, LoggedMessage]] = {}
 
