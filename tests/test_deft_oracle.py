@@ -56,15 +56,15 @@ def crafted_log(tmp_path: Path) -> tuple[Path, Path]:
     """10 planning cycles at 10 Hz; an obstacle stands at x = 15; the ego drives at 10 m/s from x = 0."""
     spec_path = tmp_path / "toy.yaml"
     spec_path.write_text(SPEC)
-    spec = load_spec(spec_path)
-    log_path = tmp_path / "toy.mcap"
-    w = LogWriter(log_path, spec)
-    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
-    sys.path.insert(0, str(SUT))
+    sys.path.insert(0, str(SUT))  # the spec's replay factory must be importable for the spec to load
     try:
+        spec = load_spec(spec_path)
         from toy_planner import ToyPlanner
     finally:
         sys.path.remove(str(SUT))
+    log_path = tmp_path / "toy.mcap"
+    w = LogWriter(log_path, spec)
+    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
 
     planner = ToyPlanner()
     t0 = 1_000_000_000
