@@ -105,7 +105,10 @@ class DaskPool:
     def done(self, timeout: float | None = None) -> Iterator[tuple[str, CaseOutcome]]:
         from dask.distributed import wait as dwait
 
-        result = dwait(list(self.futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        try:
+            result = dwait(list(self.futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # nothing finished yet (dask raises instead of returning an empty set)
+            return
         for future in result.done:
             case_id, payload = self.futures.pop(future)
             try:
