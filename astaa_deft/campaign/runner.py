@@ -11,16 +11,20 @@ else in the campaign package touches the bus.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
 
+from .. import fields
 from ..bus.run import BusRun, RunOptions
+from ..codecs import get_codec
 from ..errors import InputError
 from ..intercept.dictionary import Dictionary, load_dictionary
 from ..intercept.engine import Interceptor
 from ..intercept.testcase import TestCase
 from ..log import layout
+from ..monitor.kinds.bound import BoundInvariant
 from ..monitor.verdict import IMPLICIT
 from ..spec.model import Spec
 from .model import CaseOutcome, Finding
@@ -57,9 +61,11 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                          interceptor=interceptor, stop_on_violation=True, attachments=attachments)
     started = time.monotonic()
     bus = BusRun(isolated(spec), options)
+    watch = MarginWatch(spec)
     reason = "horizon"
     try:
         with bus:
+            watch.attach(bus)
             t0 = time.monotonic()
             while time.monotonic() - t0 < horizon:
                 if bus.stop_requested.is_set():
@@ -87,12 +93,54 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
             findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe()))
     mutations = bus.interception.mutations if bus.interception is not None else 0
     return CaseOutcome("done", verdict.klass, verdict.summary, findings, seconds, str(log_path), reason,
-                       mutations, margins=_margins(bus))
+                       mutations, margins=watch.margins(bus.violations))
 
 
-def _margins(bus: BusRun) -> dict[str, float]:
-    """How close each invariant came to breaking (0 = broke), where the monitors tell."""
-    out: dict[str, float] = {}
-    for v in bus.violations:
-        out[str(v.get("invariant"))] = 0.0
-    return {k: (0.0 if math.isnan(x) else x) for k, x in out.items()}
+class MarginWatch:
+    """How close each bound invariant came to breaking: the smallest distance of its field to min/max.
+
+    Normalised by the bound's range when it has both ends (so invariants
+    compare), 0 when a value is non-finite or out of bounds; every invariant
+    that broke gets 0. The guided strategy steers by these numbers.
+    """
+
+    def __init__(self, spec: Spec):
+        self.bounds = [inv for inv in getattr(spec, "invariants", ()) if isinstance(inv, BoundInvariant)
+                       and (inv.minimum is not None or inv.maximum is not None)]
+        self.spec = spec
+        self.closest: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def attach(self, bus: BusRun) -> None:
+        for inv in self.bounds:
+            codec = get_codec(self.spec.channel(inv.channel).encoding)
+            try:
+                bus.subscribe(inv.channel, lambda sample, inv=inv, codec=codec: self._seen(inv, codec, sample))
+            except KeyError:  # not observable in this mode
+                continue
+
+    def _seen(self, inv: BoundInvariant, codec, sample) -> None:
+        try:
+            values = [v for _, v in fields.get(codec.decode(sample.payload.to_bytes()), inv.field)]
+        except Exception:  # noqa: BLE001 - a payload the monitors will report; not ours to judge
+            return
+        span = (inv.maximum - inv.minimum) if inv.minimum is not None and inv.maximum is not None else 1.0
+        for value in values:
+            if not isinstance(value, (int, float)) or isinstance(value, bool):
+                continue
+            if not math.isfinite(value):
+                margin = 0.0
+            else:
+                ends = [value - inv.minimum if inv.minimum is not None else math.inf,
+                        inv.maximum - value if inv.maximum is not None else math.inf]
+                margin = max(0.0, min(ends)) / (span or 1.0)
+            with self._lock:
+                if margin < self.closest.get(inv.name, math.inf):
+                    self.closest[inv.name] = margin
+
+    def margins(self, violations: list[dict]) -> dict[str, float]:
+        with self._lock:
+            out = dict(self.closest)
+        for v in violations:
+            out[str(v.get("invariant"))] = 0.0
+        return out

@@ -176,7 +176,14 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
         problems.append("minimisation did not reproduce the failure")
 
     say("")
-    say(f"everything is in {out_dir}/: clean.mcap, planner-tests/, intercepted.mcap, minimised/")
+    say("== 5/5 fuzz: a short campaign finds defects on its own ==")
+    from ..campaign.demo_step import campaign_step
+
+    if campaign_step(spec_path, out_dir / "campaign", say) == 0:
+        problems.append("the campaign found no failure")
+
+    say("")
+    say(f"everything is in {out_dir}/: clean.mcap, planner-tests/, intercepted.mcap, minimised/, campaign/")
     say(f"look inside a log: astaa-deft log info {attack_log}")
     for p in problems:
         say(f"demo problem: {p}")
