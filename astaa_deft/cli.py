@@ -94,8 +94,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="replay with the planner's own process in lock-step (needs planner.replay.command)")
     ext.add_argument("--ground-truth", metavar="FIELD",
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
+    ext.add_argument("--jobs", type=int, metavar="N",
+                     help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
-                                                         a.ground_truth))
+                                                         a.ground_truth, jobs=a.jobs))
 
     # minimise
     mini = sub.add_parser("minimise", aliases=["minimize"],

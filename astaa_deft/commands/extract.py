@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
 from ..deft.config import PAPER_THRESHOLDS
 from ..deft.export import export_suite
-from ..deft.extract import Extraction, extract, ground_truth_rate
+from ..deft.extract import Extraction, extract, ground_truth_rate, near_miss_note
 from ..deft.oracle import oracle_entries
 from ..deft.replay import make_planner
 from ..errors import InputError, Problem
@@ -58,7 +59,7 @@ def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
 
 
 def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None, process: bool,
-        ground_truth: str | None) -> int:
+        ground_truth: str | None, jobs: int | None = None) -> int:
     spec = load_spec(spec_path)
     if spec.planner is None:
         raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
@@ -73,7 +74,7 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
     params = run_params(log, spec)
     planner = make_planner(spec, params, prefer_process=process)
     try:
-        ex = extract(log, spec, planner, progress=progress_bar)
+        ex = extract(log, spec, planner, progress=progress_bar, jobs=jobs or os.cpu_count() or 1)
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]
@@ -82,6 +83,9 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept]
     manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles)
     say(summary_table(ex))
+    note = near_miss_note(ex)
+    if note:
+        say(note)
     if collisions:
         say(f"collision observed in the run: {len(oracles)} frame(s) planned into a predicted obstacle "
             f"beforehand → oracle tests that fail while the planner still does so")
