@@ -107,3 +107,23 @@ def test_forked_candidates_reproduce_every_output_exactly(crafted, jobs):
     assert near_miss_note(ex) is None
     assert [f.candidates_tried for f in ex.frames][:2] == [1, 2]  # odd cycles needed the second candidate
     assert seen[-1] == (CYCLES, CYCLES)  # progress reached the caller from the replay process
+
+
+def test_factory_next_to_the_spec_is_found_without_pythonpath(tmp_path):
+    """Found 9: a planner module beside the spec is imported from the spec's directory."""
+    (tmp_path / "beside_spec_planner.py").write_text((SUT_DIR / "lossy_state_planner.py").read_text())
+    spec_path = tmp_path / "lossy.yaml"
+    spec_path.write_text(SPEC.replace("lossy_state_planner:LossyStatePlanner",
+                                      "beside_spec_planner:LossyStatePlanner"))
+    planner = make_planner(load_spec(spec_path), {})
+    assert type(planner.obj).__name__ == "LossyStatePlanner"
+
+
+def test_factory_nowhere_is_one_clear_error(tmp_path):
+    from astaa_deft.errors import InputError
+
+    spec_path = tmp_path / "lossy.yaml"
+    spec_path.write_text(SPEC.replace("lossy_state_planner:LossyStatePlanner", "no_such_planner_mod:P"))
+    with pytest.raises(InputError) as caught:
+        make_planner(load_spec(spec_path), {})
+    assert "spec's directory" in str(caught.value) and "PYTHONPATH" in str(caught.value)
