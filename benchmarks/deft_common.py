@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
-from astaa_deft.bus.run import RunOptions
+from astaa_deft.session import RunOptions
 from astaa_deft.codecs import get_codec
 from astaa_deft.commands.demo import StatusWatch, demo_spec_path
 from astaa_deft.commands.proxy import run_bus
@@ -62,7 +62,7 @@ def record_run(spec: Spec, scenario: str, path: Path, time_limit: float = RUN_TI
     outcome = run_bus(spec, options, time_limit, until=watch.finished,
                       on_start=lambda r: r.subscribe("status", watch.on_sample), verbose=False)
     wall = time.monotonic() - t0
-    return RunRecord(path, scenario, wall, outcome.seconds, outcome.reason, watch.collision is not None,
+    return RunRecord(path, scenario, wall, outcome.seconds, outcome.end_reason, watch.collision is not None,
                      (watch.collision or {}).get("collision_with"), float(watch.latest.get("sim_time", 0.0)),
                      watch.min_clearance, len(outcome.crashes))
 

@@ -20,15 +20,15 @@ import threading
 from importlib import resources
 from pathlib import Path
 
-from ..bus.run import RunOptions
 from ..intercept import load_interceptor
 from ..log import layout
 from ..log.reader import read_log
 from ..log.summary import format_info
 from ..monitor.verdict import format_verdict
+from ..session import RunOptions, RunResult
 from ..spec.loader import load_spec
 from .console import say
-from .proxy import Outcome, run_bus
+from .proxy import run_bus
 
 DEFAULT_TIME_LIMIT = 40.0
 DEMO_POLICY = "demo_nan_speed_limit.xml"
@@ -86,7 +86,7 @@ class StatusWatch:
 
 def drive(scenario: str, defects: bool, passive: bool, record: Path, command_line: list[str],
           duration: float | None = None, policy: Path | None = None, stop_on_violation: bool = False,
-          ) -> tuple[Outcome, StatusWatch]:
+          ) -> tuple[RunResult, StatusWatch]:
     """One scenario through the proxy, recorded; stops at the goal, a collision or the time limit."""
     spec = load_spec(demo_spec_path())
     params = {"scenario": scenario, "defects": "on" if defects else "off"}
@@ -100,9 +100,9 @@ def drive(scenario: str, defects: bool, passive: bool, record: Path, command_lin
     return outcome, watch
 
 
-def summarise(outcome: Outcome, watch: StatusWatch) -> None:
+def summarise(outcome: RunResult, watch: StatusWatch) -> None:
     st = watch.latest
-    say(f"stopped: {outcome.reason} after {outcome.seconds:.1f} s wall, sim time {st.get('sim_time', 0):.1f} s")
+    say(f"stopped: {outcome.end_reason} after {outcome.seconds:.1f} s wall, sim time {st.get('sim_time', 0):.1f} s")
     say(f"goal reached: {'yes' if watch.goal else 'no'}")
     if watch.collision is not None:
         say(f"collision: yes, with {watch.collision.get('collision_with', '?')} "
