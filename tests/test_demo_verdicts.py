@@ -41,7 +41,7 @@ def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
     log = tmp_path / "run.mcap"
     outcome, watch = drive(scenario, defects=False, passive=False, record=log, command_line=[])
     assert watch.goal and watch.collision is None
-    assert outcome.violations == [], [v.invariant for v in outcome.violations]
+    assert outcome.violations == (), [v.invariant for v in outcome.violations]
     assert outcome.verdict.klass == "Pass"
     offline = agree_offline(log)
     assert offline.verdict.klass == "Pass" and offline.violations == []

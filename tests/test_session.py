@@ -25,8 +25,10 @@ ALL_KINDS = [
     rec.VerdictRecord(7, "Hindering", "1 violation",
                       rec.ViolationRecord(6, "speed", "bound", "high", "Hindering", "too fast"), ("a reason",)),
     rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
-    rec.MutationRecord(9, "p1", "set", "data", 12, (rec.FieldChange("value", 1.0, "nan"),), (("seed", 3),)),
+    rec.MutationRecord(9, "p1", "set", "data", 12, (rec.FieldChange("value", 1.0, {"float": "nan"}),), "tc",
+                       ("listener",), 1.5, {"steps": []}, 4, 5),
     rec.ModuleLogLine(10, "talker", "stderr", "ERROR: boom"),
+    rec.FlagRecord(12, "data", 4, "not JSON", 11),
     rec.OtherEvent("bus_lost", 11, (("detail", "router gone"),)),
 ]
 
@@ -85,4 +87,4 @@ def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
         assert rec.RunStarted in kinds and rec.VerdictRecord in kinds
         logged = [rec.decode(e) for e in read_log(result.log).events()]
         assert any(isinstance(r, rec.RunEnd) and r.reason == "all delivered" for r in logged)
-        assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1  # the other session's events are not here
+        assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1, (name, [r for r in logged if not isinstance(r, rec.ProcessExitRecord)])  # the other session's events are not here

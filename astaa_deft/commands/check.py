@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, Problem
+from ..log import records as rec
 from ..log.reader import read_log
 from ..monitor import check_log, format_verdict, format_violation, with_typed_invariants
 from ..monitor.offline import CheckResult, spec_from_log
@@ -58,7 +59,7 @@ def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invarian
     print()
     print(format_verdict(result.verdict, result.start_ns))
     if result.online_verdict is not None:
-        online = result.online_verdict.get("class", "?")
+        online = result.online_verdict.klass
         agreement = "agrees" if online == result.verdict.klass else "DIFFERS from this check"
         print(f"online verdict recorded during the run: {online} ({agreement})")
 
@@ -72,5 +73,5 @@ def _as_json(result: CheckResult) -> dict:
         "seconds": result.seconds,
         "start_ns": result.start_ns,
         "end_ns": result.end_ns,
-        "online_verdict": result.online_verdict,
+        "online_verdict": rec.encode(result.online_verdict) if result.online_verdict is not None else None,
     }

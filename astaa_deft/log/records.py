@@ -113,25 +113,36 @@ class FieldChange:
 
 @dataclass(frozen=True)
 class MutationRecord:
-    """One message the interception changed (the original stays in the log's intercept record)."""
+    """What the interception did to one message (``policy``/``action`` joined by '+' when stacked).
+
+    Logged on the mutations topic (without kind/time_ns, with the sequence
+    numbers of the original and the delivered message in the log) and handed
+    to ``on_event`` live. Values in ``fields`` and ``detail`` are tagged JSON.
+    """
     time_ns: int
     policy: str
     action: str
     channel: str
-    message_index: int | None = None
+    message_index: int = 0  # 1-based index of the real message on its channel
     fields: tuple[FieldChange, ...] = ()
-    extra: tuple[tuple[str, Any], ...] = ()  # the engine's other keys, kept verbatim
+    testcase: str = ""
+    consumers: tuple[str, ...] = ()
+    time: float = 0.0  # seconds since the run's start, when the real message arrived
+    detail: Any = None
+    original_sequence: int | None = None
+    delivered_sequence: int | None = None
     kind = "mutation"
 
 
 @dataclass(frozen=True)
 class FlagRecord:
-    """A payload the tool could not decode (forwarded untouched)."""
+    """A payload the recorder could not decode (forwarded untouched; logged raw on the flags topic)."""
+    time_ns: int
     channel: str
-    time_ns: int = 0
-    detail: str = ""
-    extra: tuple[tuple[str, Any], ...] = ()
-    kind = "flag"
+    sequence: int | None = None
+    reason: str = ""
+    size: int = 0
+    kind = "undecodable"
 
 
 @dataclass(frozen=True)
@@ -156,7 +167,7 @@ Record = Union[RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, V
                UndeclaredKey, MutationRecord, FlagRecord, ModuleLogLine, OtherEvent]
 
 _SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, UndeclaredKey,
-                               ModuleLogLine, ViolationRecord)}
+                               ModuleLogLine, ViolationRecord, FlagRecord)}
 
 
 def encode(record: Record) -> dict:
@@ -168,13 +179,12 @@ def encode(record: Record) -> dict:
                 "first": _violation_body(record.first) if record.first else None,
                 "summary": record.summary, "reasons": list(record.reasons)}
     if isinstance(record, MutationRecord):
-        return {"kind": record.kind, "time_ns": record.time_ns, "policy": record.policy, "action": record.action,
-                "channel": record.channel, "message_index": record.message_index,
+        return {"kind": record.kind, "time_ns": record.time_ns, "testcase": record.testcase,
+                "policy": record.policy, "action": record.action, "channel": record.channel,
+                "consumers": list(record.consumers), "message_index": record.message_index, "time": record.time,
                 "fields": [{"path": c.path, "old": c.old, "new": c.new} for c in record.fields],
-                **dict(record.extra)}
-    if isinstance(record, FlagRecord):
-        return {"kind": record.kind, "channel": record.channel, "time_ns": record.time_ns,
-                "detail": record.detail, **dict(record.extra)}
+                "detail": record.detail, "original_sequence": record.original_sequence,
+                "delivered_sequence": record.delivered_sequence}
     body = {"kind": record.kind}
     for f in fields(record):
         value = getattr(record, f.name)
@@ -202,16 +212,7 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
                              _violation(first, time_ns) if isinstance(first, Mapping) else None,
                              tuple(str(r) for r in body.get("reasons") or ()))
     if kind == MutationRecord.kind:
-        known = {"kind", "time_ns", "policy", "action", "channel", "message_index", "fields"}
-        changes = tuple(FieldChange(str(c.get("path")), c.get("old"), c.get("new"))
-                        for c in body.get("fields") or () if isinstance(c, Mapping))
-        return MutationRecord(time_ns, str(body.get("policy")), str(body.get("action")), str(body.get("channel")),
-                              body.get("message_index"), changes,
-                              tuple((k, v) for k, v in body.items() if k not in known))
-    if kind == FlagRecord.kind or (not kind and "channel" in body):
-        known = {"kind", "time_ns", "channel", "detail"}
-        return FlagRecord(str(body.get("channel")), time_ns, str(body.get("detail", "")),
-                          tuple((k, v) for k, v in body.items() if k not in known))
+        return decode_mutation(body, time_ns)
     if kind == ViolationRecord.kind:
         return _violation(body, time_ns)
     cls = _SIMPLE.get(kind)
@@ -227,6 +228,23 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
         return cls(**values)
     except TypeError:  # a required field missing: keep the event, do not guess it
         return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+
+
+def decode_mutation(body: Mapping[str, Any], time_ns: int = 0) -> MutationRecord:
+    """A mutation as the interception and the recorder write it (the mutations topic has no 'kind')."""
+    changes = tuple(FieldChange(str(c.get("path")), c.get("old"), c.get("new"))
+                    for c in body.get("fields") or () if isinstance(c, Mapping))
+    time_s = body.get("time")
+    return MutationRecord(time_ns or _int(body.get("time_ns")), str(body.get("policy", "")),
+                          str(body.get("action", "")), str(body.get("channel", "")),
+                          _int(body.get("message_index")), changes, str(body.get("testcase", "")),
+                          tuple(str(c) for c in body.get("consumers") or ()),
+                          float(time_s) if isinstance(time_s, (int, float)) else 0.0, body.get("detail"),
+                          _opt_int(body.get("original_sequence")), _opt_int(body.get("delivered_sequence")))
+
+
+def _opt_int(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
 
 
 def _violation(body: Mapping[str, Any], time_ns: int) -> ViolationRecord:
