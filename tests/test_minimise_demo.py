@@ -219,6 +219,29 @@ def test_a_failure_the_mutations_do_not_cause_is_reported_not_minimised(runs, tm
     assert "does not reproduce" in json.loads((tmp_path / "out" / "summary.json").read_text())["verdict"]
 
 
+def test_minimisation_is_a_library_call_reporting_through_its_callback(runs, tmp_path, capsys):
+    """The same undone culprit through minimise_log: progress goes to the callback, nothing is printed."""
+    from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
+
+    log = read_log(runs["failing"])
+    [culprit] = [e for e in (json.loads(m.data) for m in log.on(layout.MUTATIONS_TOPIC)) if "culprit" in e["policy"]]
+    routing = SPEC.channel("routing").key
+    original = log.on(layout.ORIGINAL_PREFIX + routing)[culprit["original_sequence"] - 1].data
+    undone = copy_log(runs["failing"], tmp_path / "undone.mcap",
+                      lambda channel, message: not (channel.topic == layout.MUTATIONS_TOPIC
+                                                    and json.loads(message.data) == culprit),
+                      lambda channel, message: original if (channel.topic == routing and message.sequence
+                                                            == culprit["delivered_sequence"]) else message.data)
+    lines: list[str] = []
+    report = minimise_log(undone, tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, confirm=0,
+                                                                    live_fallback=False), progress=lines.append)
+    assert capsys.readouterr().out == ""
+    assert any(line.startswith("tester: replay") for line in lines)
+    assert not report.reproduced and not report.complete
+    assert "does not reproduce in the planner replay" in report.verdict
+    assert report.summary == json.loads((tmp_path / "out" / "summary.json").read_text())
+
+
 def test_the_cli_reports_bad_input_without_a_traceback(runs, tmp_path, capsys):
     from astaa_deft import cli
 

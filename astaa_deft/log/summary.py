@@ -34,9 +34,16 @@ def topic_stats(log: LogContents) -> list[TopicStats]:
     return out
 
 
-def format_info(log: LogContents) -> str:
+def format_info(log: LogContents, with_warnings: bool = True) -> str:
     lines = [f"log: {log.path}"]
-    lines.append("finished cleanly: " + ("yes" if log.finished else "NO (truncated; complete chunks read)"))
+    if log.intact:
+        state = "yes (every chunk CRC and index checked)"
+    elif log.truncated and len(log.damage) == 1:
+        state = f"NO (the file stops early; {log.describe_reading()})"
+    else:
+        state = f"NO — DAMAGED ({len(log.damage)} problem{'s' if len(log.damage) != 1 else ''} below; " \
+                f"{log.describe_reading()})"
+    lines.append("finished cleanly: " + state)
     run = log.metadata.get(layout.RUN_METADATA, {})
     if run:
         lines.append(f"run: spec {run.get('spec', '?')}, mode {run.get('mode', '?')}")
@@ -80,6 +87,6 @@ def format_info(log: LogContents) -> str:
                      + ", ".join(f"{c} ×{n}" for c, n in sorted(per.items())))
     if log.attachments:
         lines.append("attachments: " + ", ".join(sorted(log.attachments)))
-    for w in log.warnings:
+    for w in log.warnings if with_warnings else ():
         lines.append(f"warning: {w}")
     return "\n".join(lines)

@@ -31,6 +31,7 @@ class LogWriter:
             self._stream,
             chunk_size=chunk_size,
             compression=CompressionType.ZSTD if compression == "zstd" else CompressionType.NONE,
+            enable_data_crcs=True,  # the data section's CRC: damage outside chunks (headers, indexes) is detectable
         )
         self._writer.start(profile=layout.PROFILE, library=f"astaa-deft {__version__}")
         self._spec = spec

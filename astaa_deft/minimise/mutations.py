@@ -37,7 +37,8 @@ from ..codecs import get_codec
 from ..codecs.base import DecodeError, EncodeError
 from ..errors import InputError, Problem
 from ..fields import FieldPath, FieldPathError, set_field
-from ..intercept.actions.base import FieldChange, from_tagged
+from ..intercept.actions import ACTIONS
+from ..intercept.actions.base import ActionDetail, FieldChange, from_tagged
 from ..log import layout
 from ..log import records as rec
 from ..log.reader import LogContents, LoggedMessage
@@ -46,8 +47,10 @@ from ..spec.model import Spec
 FieldSelection = tuple[int, ...] | None
 """Which of a mutation's field changes are kept: indices into ``Mutation.fields``, or None for all."""
 
-EXTRA_ACTIONS = frozenset({"duplicate", "interleave"})  # the event rides on an extra delivery
-DEFERRING_ACTIONS = frozenset({"delay", "reorder"})  # delivered later than the real message arrived
+# What each action is, from its own flags (intercept/actions/<name>.py).
+EXTRA_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.adds_delivery)  # on an extra delivery
+DEFERRING_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.defers)  # delivered after arrival
+FIELDS_INSEPARABLE = frozenset(name for name, action in ACTIONS.items() if not action.fields_separable)
 SIBLING_WINDOW_NS = 200_000_000  # an untouched copy of a split message is logged within this of its event
 
 
@@ -58,6 +61,12 @@ class Step:
     policy: str
     action: str
     detail: Mapping[str, Any]
+
+    @property
+    def record(self) -> ActionDetail | None:
+        """The detail as its action's typed record (None for an action this version does not know)."""
+        action = ACTIONS.get(self.action)
+        return action.detail_type.from_json(self.detail) if action is not None else None
 
 
 @dataclass(frozen=True)
@@ -103,7 +112,7 @@ class Mutation:
     @property
     def fields_reducible(self) -> bool:
         """Whether dropping some field changes still leaves a meaningful delivery (stage 3)."""
-        return len(self.fields) > 1 and not self.actions & {"corrupt", "drop"}
+        return len(self.fields) > 1 and not self.actions & FIELDS_INSEPARABLE
 
     def payload(self, selection: FieldSelection, codec_name: str) -> bytes | None:
         """What is delivered when only the ``selection`` of field changes is kept (None: dropped).
@@ -130,8 +139,7 @@ class Mutation:
         to = f" (to {', '.join(self.consumers)})" if self.consumers else ""
         chosen = self.fields if selection is None else tuple(self.fields[i] for i in selection)
         changes = "; ".join(f"{c.path}: {_short(c.old)} → {_short(c.new)}" for c in chosen)
-        details = [f"{k}={v}" for step in self.steps for k, v in step.detail.items()
-                   if k in ("delay_ms", "copies", "flipped_bytes", "truncated_to")]
+        details = [item for step in self.steps if step.record is not None for item in step.record.describe()]
         text = f"{self.action} on {self.channel} #{self.message_index}{to}"
         if changes:
             text += f": {changes}"
@@ -166,7 +174,44 @@ class MutationLog:
 
 def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
     """The mutations of an intercepted run (InputError if the records do not fit together)."""
-    events = [(m, json.loads(m.data)) for m in log.on(layout.MUTATIONS_TOPIC)]  # (logged, raw body)
+    events = [(m, _decode_event(log, n, m)) for n, m in enumerate(log.on(layout.MUTATIONS_TOPIC), start=1)]
+    try:
+        return _read_mutations(log, spec, events)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"a mutation event does not have the fields astaa-deft writes ({_what(exc)})",
+                                 "the log is damaged or was not written by astaa-deft proxy --policy")) from None
+
+
+def _decode_event(log: LogContents, number: int, record: LoggedMessage) -> dict:
+    """One record on the mutations topic as JSON, or an InputError that says which and where."""
+    where = f"mutation event {number} (log time {record.log_time / 1e9:.3f} s)"
+    try:
+        text = record.data.decode("utf-8")
+        body = json.loads(text)
+    except UnicodeDecodeError as exc:
+        raise InputError(Problem(str(log.path), None, None, f"{where} is not UTF-8 text (byte {exc.start})",
+                                 "the log is damaged; re-record the run")) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"{where} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}",
+                                 "the log is damaged; re-record the run")) from None
+    except RecursionError:
+        raise InputError(Problem(str(log.path), None, None, f"{where} is nested too deeply",
+                                 "the log is damaged; re-record the run")) from None
+    if not isinstance(body, dict):
+        raise InputError(Problem(str(log.path), None, None, f"{where} is not a JSON object",
+                                 "the log is damaged; re-record the run"))
+    return body
+
+
+def _what(exc: BaseException) -> str:
+    if isinstance(exc, KeyError):
+        return f"'{exc.args[0]}' is missing" if exc.args else "a key is missing"
+    return "a field has the wrong kind of value"
+
+
+def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessage, dict]]) -> MutationLog:
     start_ns = run_start_ns(log)
     by_topic: dict[str, dict[int, LoggedMessage]] = {}
 
@@ -242,7 +287,9 @@ def _steps(event: rec.MutationRecord) -> tuple[Step, ...]:
     if len(actions) == 1:
         return (Step(policies[0], actions[0], detail),)
     parts = detail.get("steps") or [{} for _ in actions]
-    return tuple(Step(p, a, part.get("detail") or {}) for p, a, part in zip(policies, actions, parts))
+    # Not strict: a damaged event's shorter list yields fewer steps, as it always has.
+    return tuple(Step(p, a, part.get("detail") or {})
+                 for p, a, part in zip(policies, actions, parts, strict=False))
 
 
 def run_start_ns(log: LogContents) -> int:

@@ -20,8 +20,8 @@ judge it are decided here too (:func:`find_failure`, :func:`choose_tester`).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
 
 from ..errors import InputError, Problem
 from ..log.reader import LogContents
@@ -238,9 +238,9 @@ def _minimise_fields(kept: Mapping[int, FieldSelection], by_number: Mapping[int,
         return dict(kept), None
 
     def selection(subset: Sequence[tuple[int, int]]) -> dict[int, FieldSelection]:
-        chosen = {n: (None if n not in reducible else ()) for n in kept}
+        chosen: dict[int, FieldSelection] = {n: (None if n not in reducible else ()) for n in kept}
         for n, i in subset:
-            chosen[n] = (*chosen[n], i)  # type: ignore[misc]
+            chosen[n] = (*(chosen[n] or ()), i)  # a reducible mutation's selection starts as (), never None
         return chosen
 
     say(f"stage 3: {len(items)} field changes in {len(reducible)} mutation(s)")

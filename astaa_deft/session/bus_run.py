@@ -15,7 +15,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable
+from collections.abc import Callable
 
 import zenoh
 
@@ -67,7 +67,7 @@ class BusRun:
         self.recorder_finished = False  # the recorder reported its counts and exited cleanly
 
     # -- lifecycle ---------------------------------------------------------
-    def __enter__(self) -> "BusRun":
+    def __enter__(self) -> BusRun:
         try:
             self.start()
         except BaseException:
