@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .errors import InputError
+from .errors import AstaaDeftError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="override a spec param used in module commands")
     proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here")
     proxy.add_argument("--stop-on-violation", action="store_true", help="end the run at the first broken invariant")
-    proxy.add_argument("--policy", type=Path, help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages")
+    proxy.add_argument("--policy", type=Path,
+                       help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages")
     proxy.add_argument("--dictionary", type=Path, action="append", default=[],
                        help="an exceptional-value dictionary on top of the default one (repeatable)")
     proxy.set_defaults(func=_proxy)
@@ -94,8 +95,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="replay with the planner's own process in lock-step (needs planner.replay.command)")
     ext.add_argument("--ground-truth", metavar="FIELD",
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
+    ext.add_argument("--jobs", type=int, metavar="N",
+                     help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
-                                                         a.ground_truth))
+                                                         a.ground_truth, jobs=a.jobs))
 
     # minimise
     mini = sub.add_parser("minimise", aliases=["minimize"],
@@ -226,10 +229,12 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except InputError as exc:
-        for problem in exc.problems:
-            print(f"astaa-deft: error: {problem}", file=sys.stderr)
-        return 2
+    except AstaaDeftError as exc:
+        if exc.exit_code is None:  # an internal error escaping is a bug: keep its traceback
+            raise
+        for line in exc.user_lines():
+            print(f"astaa-deft: error: {line}", file=sys.stderr)
+        return exc.exit_code
     except KeyboardInterrupt:
         print("astaa-deft: interrupted", file=sys.stderr)
         return 130

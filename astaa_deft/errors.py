@@ -1,15 +1,32 @@
-"""User-facing errors: each names the file, the place and the fix.
+"""The tool's errors: one base class, and the user-facing one that names the file, the place and the fix.
 
-The CLI prints these without a traceback and exits 2; anything else escaping
-is a bug in the tool.
+Every exception class of the package derives from :class:`AstaaDeftError`,
+so a caller (the CLI, a campaign running thousands of sessions) can tell the
+tool's own errors from anything else with one ``except``. Each class says
+whether it is meant for the user (``exit_code`` set: printed as one line per
+problem, no traceback) or is internal (``exit_code`` None: it is caught
+inside the tool, and one escaping to the CLI is a bug, shown with its
+traceback). Only :class:`InputError` (exit code 2) is meant for the user today.
 """
 
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import ClassVar
+
+
+class AstaaDeftError(Exception):
+    """Base of every exception the tool raises on purpose."""
+
+    # The CLI's exit code when this escapes to it; None: internal, a bug if it escapes.
+    exit_code: ClassVar[int | None] = None
+
+    def user_lines(self) -> list[str]:
+        """What the CLI prints, one line each."""
+        return [str(self)]
 
 
 @dataclass(frozen=True)
@@ -32,14 +49,18 @@ class Problem:
         return text
 
 
-class InputError(Exception):
+class InputError(AstaaDeftError):
     """Bad user input (a spec, a policy, a dictionary, a log, a path): exit code 2."""
 
+    exit_code = 2
+
     def __init__(self, problems: Iterable[Problem] | Problem | str):
-        if isinstance(problems, (Problem, str)):
-            problems = [problems]
-        self.problems = [p if isinstance(p, Problem) else Problem("", None, None, p) for p in problems]
+        items: Iterable[Problem | str] = [problems] if isinstance(problems, (Problem, str)) else problems
+        self.problems = [p if isinstance(p, Problem) else Problem("", None, None, p) for p in items]
         super().__init__("\n".join(map(str, self.problems)))
+
+    def user_lines(self) -> list[str]:
+        return [str(problem) for problem in self.problems]
 
 
 def did_you_mean(word: str, choices: Iterable[str]) -> str:

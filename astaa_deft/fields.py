@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Iterator, Mapping, Sequence, Union
 
+from astaa_deft.errors import AstaaDeftError
 from astaa_deft.spec.model import FieldType, MessageType
 
 
@@ -49,7 +50,7 @@ _KEY = re.compile(r"[^.\[\]*\s]+")
 _INDEX = re.compile(r"\[(?:(\*)|(-?[1-9][0-9]*|0))\]")
 
 
-class FieldPathError(ValueError):
+class FieldPathError(AstaaDeftError, ValueError):
     """A path that does not parse, or does not exist in a declared type.
 
     ``text`` is the path as written and ``position`` the 0-based offset of
@@ -102,7 +103,7 @@ class FieldPath:
     @property
     def is_concrete(self) -> bool:
         """True if the path names exactly one place (no ``[*]``, no negative index)."""
-        return all(type(s) is str or (s is not WILDCARD and s >= 0) for s in self.segments)
+        return all(isinstance(s, str) or (isinstance(s, int) and s >= 0) for s in self.segments)
 
     def generalized(self) -> FieldPath:
         """Every index replaced by ``[*]``: ``obstacles[2].x`` -> ``obstacles[*].x``.
@@ -229,11 +230,11 @@ def _resolve(value: Any, segments: Sequence[Segment]) -> list[tuple[tuple[Segmen
 
 def _slots(node: Any, segment: Segment) -> list[Any]:
     """The concrete keys/indices of ``node`` that ``segment`` names (0 or more)."""
-    if type(segment) is str:
+    if isinstance(segment, str):
         return [segment] if type(node) is dict and segment in node else []
     if type(node) is not list:
         return []
-    if segment is WILDCARD:
+    if not isinstance(segment, int):  # the wildcard
         return list(range(len(node)))
     index = segment if segment >= 0 else len(node) + segment
     return [index] if 0 <= index < len(node) else []

@@ -31,19 +31,17 @@ reduced it to its one field.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
 import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.bus.run import BusRun, RunOptions
-from astaa_deft.commands import minimise
-from astaa_deft.commands.demo import demo_noise_policies, demo_spec_path
+from astaa_deft.demo.bundled import demo_noise_policies, demo_spec_path
+from astaa_deft.session import RunOptions, run_session
 from astaa_deft.intercept import load_interceptor
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
+from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
 from astaa_deft.spec.loader import load_spec
 
 RECORD_SECONDS = 7.0
@@ -75,10 +73,8 @@ def record(defect: int, directory: Path) -> Path:
     log = directory / f"defect{defect}.mcap"
     options = RunOptions(mode="star", interceptor=load_interceptor(policy, spec), record=log,
                          params={"scenario": "lane_follow", "defects": "on"}, run_dir=directory / f"run{defect}",
-                         attachments={layout.POLICY_ATTACHMENT: policy})
-    with BusRun(spec, options) as run:
-        while (time.time_ns() - run.started_ns) / 1e9 < RECORD_SECONDS:
-            time.sleep(0.05)
+                         attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=RECORD_SECONDS)
+    run_session(spec, options)
     return log
 
 
@@ -86,10 +82,9 @@ def measure(defect: int, directory: Path, confirm: int) -> dict:
     log = record(defect, directory)
     mutations = len(read_log(log).on(layout.MUTATIONS_TOPIC))
     out = directory / f"minimal{defect}"
-    quiet = io.StringIO()
     started = time.monotonic()
-    with contextlib.redirect_stdout(quiet):
-        code = minimise.run(log, demo_spec_path(), None, out, confirm=confirm, verbose=False)
+    report = minimise_log(log, out, MinimiseOptions(spec_path=demo_spec_path(), confirm=confirm))
+    code = 0 if report.reproduced else 1  # as `astaa-deft minimise` exits
     wall = time.monotonic() - started
     body = json.loads((out / "summary.json").read_text())
     events = body.get("culprit_events") or []

@@ -42,7 +42,7 @@ from deft_common import (PAPER_THRESHOLDS, RunRecord, collision_times_ns, demo_s
                          planning_outputs, quartiles, record_run, rerun_distances)
 
 from astaa_deft.codecs import get_codec  # noqa: E402
-from astaa_deft.commands.extract import run_params  # noqa: E402
+from astaa_deft.deft.workflow import run_params  # noqa: E402
 from astaa_deft.deft.export import export_suite  # noqa: E402
 from astaa_deft.deft.extract import Extraction, extract, ground_truth_rate  # noqa: E402
 from astaa_deft.deft.oracle import oracle_entries  # noqa: E402

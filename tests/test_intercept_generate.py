@@ -139,3 +139,13 @@ def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
         generate_command.run(SPEC_PATH, 5, 9, out)
     with pytest.raises(InputError, match="at least 1"):
         generate_command.run(SPEC_PATH, 0, 9, tmp_path / "other")
+
+
+def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
+    from astaa_deft.intercept.generate import generate_to_directory
+
+    report = generate_to_directory(SPEC_PATH, 6, 4, tmp_path / "cases", duration=10.0)
+    assert capsys.readouterr().out == ""
+    assert [p.name for p in report.paths] == [f"tc-{n:04d}.xml" for n in range(1, 7)]
+    assert sum(report.shapes.values()) == 6
+    assert [p.read_bytes() for p in report.paths] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 6, 4, 10.0)]

@@ -23,7 +23,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from astaa_deft.bus.run import BusRun, RunOptions
+from astaa_deft.session import RunOptions, run_session
 from astaa_deft.commands import minimise as command
 from astaa_deft.commands.demo import demo_noise_policies, demo_spec_path
 from astaa_deft.deft.suite import Suite
@@ -58,10 +58,8 @@ def record(directory: Path, name: str, policies: str, seconds: float) -> Path:
     log = directory / f"{name}.mcap"
     options = RunOptions(mode="star", interceptor=load_interceptor(policy, SPEC), record=log,
                          params={"scenario": "lane_follow", "defects": "on"}, run_dir=directory / f"run-{name}",
-                         attachments={layout.POLICY_ATTACHMENT: policy})
-    with BusRun(SPEC, options) as run:
-        while (time.time_ns() - run.started_ns) / 1e9 < seconds:
-            time.sleep(0.05)
+                         attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=seconds)
+    run_session(SPEC, options)
     return log
 
 
@@ -219,6 +217,29 @@ def test_a_failure_the_mutations_do_not_cause_is_reported_not_minimised(runs, tm
     out = capsys.readouterr().out
     assert "does not reproduce in the planner replay" in out and "Traceback" not in out
     assert "does not reproduce" in json.loads((tmp_path / "out" / "summary.json").read_text())["verdict"]
+
+
+def test_minimisation_is_a_library_call_reporting_through_its_callback(runs, tmp_path, capsys):
+    """The same undone culprit through minimise_log: progress goes to the callback, nothing is printed."""
+    from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
+
+    log = read_log(runs["failing"])
+    [culprit] = [e for e in (json.loads(m.data) for m in log.on(layout.MUTATIONS_TOPIC)) if "culprit" in e["policy"]]
+    routing = SPEC.channel("routing").key
+    original = log.on(layout.ORIGINAL_PREFIX + routing)[culprit["original_sequence"] - 1].data
+    undone = copy_log(runs["failing"], tmp_path / "undone.mcap",
+                      lambda channel, message: not (channel.topic == layout.MUTATIONS_TOPIC
+                                                    and json.loads(message.data) == culprit),
+                      lambda channel, message: original if (channel.topic == routing and message.sequence
+                                                            == culprit["delivered_sequence"]) else message.data)
+    lines: list[str] = []
+    report = minimise_log(undone, tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, confirm=0,
+                                                                    live_fallback=False), progress=lines.append)
+    assert capsys.readouterr().out == ""
+    assert any(line.startswith("tester: replay") for line in lines)
+    assert not report.reproduced and not report.complete
+    assert "does not reproduce in the planner replay" in report.verdict
+    assert report.summary == json.loads((tmp_path / "out" / "summary.json").read_text())
 
 
 def test_the_cli_reports_bad_input_without_a_traceback(runs, tmp_path, capsys):

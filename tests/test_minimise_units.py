@@ -17,10 +17,10 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.bus.topology import intercept_record
-from astaa_deft.commands import minimise as command
 from astaa_deft.commands.demo import demo_spec_path
 from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
 from astaa_deft.intercept.actions.base import FieldChange
+from astaa_deft.intercept.actions.set import value_text
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.recorder import _write_intercepted
@@ -34,7 +34,8 @@ from astaa_deft.minimise.mutations import (
     read_mutations,
     sent_stream,
 )
-from astaa_deft.minimise.restrict import restricted_testcase, value_text
+from astaa_deft.minimise.restrict import restricted_testcase
+from astaa_deft.minimise import workflow
 from astaa_deft.minimise.stages import Failure, Minimisation
 from astaa_deft.spec.loader import load_spec
 
@@ -296,14 +297,14 @@ def test_reproduction_check_tells_flaky_from_not_reproducible():
     m = mutation(0, (Step("p", "set", {}),), [FieldChange("heading", 0.0, 1e16)])
     failure = Failure("control_alive", "deadline", "control", "command", 3.0, "silent", "Restart")
     flaky = ScriptedTester([False, True, False])
-    result, per_test = command._reproduce(flaky, [m], failure, 1, lambda line: None)
+    result, per_test = workflow.reproduce(flaky, [m], failure, 1, lambda line: None)
     assert result.outcome is Outcome.FAIL and result.failure_rate == pytest.approx(0.5) and per_test == 3
     assert flaky.runs == 2  # it stopped at the first failure once it knew the full set fails
     never = ScriptedTester([False, False, False])
-    assert command._reproduce(never, [m], failure, 1, lambda line: None) == (None, 1)
+    assert workflow.reproduce(never, [m], failure, 1, lambda line: None) == (None, 1)
     assert never.runs == 3
     steady = ScriptedTester([True])
-    result, per_test = command._reproduce(steady, [m], failure, 1, lambda line: None)
+    result, per_test = workflow.reproduce(steady, [m], failure, 1, lambda line: None)
     assert result.failure_rate == 1.0 and per_test == 1
 
 
@@ -311,13 +312,16 @@ def test_verdicts_and_exit_codes():
     failure = Failure("x", "bound", None, "c", 1.0, "", "Silent")
     live = Minimisation("live", failure, [], {})
     replay = replace(live, tester="replay")
-    assert command._verdict(live, {"runs": 3, "failures": 3, "rate": 1.0})[1] == 0
-    text, code = command._verdict(live, {"runs": 3, "failures": 2, "rate": 2 / 3})
-    assert code == 1 and text.startswith("flaky") and "67%" in text
-    assert command._verdict(live, {"runs": 3, "failures": 0, "rate": 0.0})[1] == 1
-    assert command._verdict(replay, {"runs": 0, "failures": 0, "rate": None})[1] == 0
-    assert "open-loop" in command._verdict(replay, {"runs": 1, "failures": 0, "rate": 0.0})[0]
-    text, code = command._verdict(replay, {"requested": 2, "runs": 0, "failures": 0, "rate": None,
-                                           "details": ["the run did not start: port in use"]})
-    assert code == 1 and "port in use" in text
+    assert workflow.verdict(live, {"runs": 3, "failures": 3, "rate": 1.0})[1] is True
+    text, reproduced = workflow.verdict(live, {"runs": 3, "failures": 2, "rate": 2 / 3})
+    assert reproduced is False and text.startswith("flaky") and "67%" in text
+    assert workflow.verdict(live, {"runs": 3, "failures": 0, "rate": 0.0})[1] is False
+    assert workflow.verdict(replay, {"runs": 0, "failures": 0, "rate": None})[1] is True
+    assert "open-loop" in workflow.verdict(replay, {"runs": 1, "failures": 0, "rate": 0.0})[0]
+    text, reproduced = workflow.verdict(replay, {"requested": 2, "runs": 0, "failures": 0, "rate": None,
+                                                 "details": ["the run did not start: port in use"]})
+    assert reproduced is False and "port in use" in text
+    # The command's exit code is the report's: 0 only when the minimal test case stands.
+    report = workflow.MinimiseReport(False, text, {"verdict": text}, complete=False)
+    assert report.text() == f"minimise: {text}"
 

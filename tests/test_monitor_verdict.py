@@ -122,6 +122,16 @@ def test_check_input_errors(tmp_path):
     assert caught.value.problems[0].file == str(bad_spec) and caught.value.problems[0].line
 
 
+def test_the_offline_check_is_a_library_call_that_prints_nothing(tmp_path, capsys):
+    from astaa_deft.monitor.check import check_recorded_run
+
+    checked = check_recorded_run(write_run(tmp_path / "nan.mcap", nan_at=12))
+    assert capsys.readouterr().out == ""
+    assert checked.spec_from_log and not checked.passed and checked.result.verdict.klass == "Silent"
+    assert [v.invariant for v in checked.result.violations] == ["finite_cmd"]
+    assert len(checked.spec.invariants) == 2
+
+
 # ---------------------------------------------------------------- online and offline agree
 
 EVERY_KIND = """

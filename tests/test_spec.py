@@ -132,3 +132,13 @@ def test_cli_spec_check_exit_codes_and_no_traceback(tmp_path):
     assert res.returncode == 2
     assert "Traceback" not in res.stderr
     assert f"{bad}:15:11: unknown message type 'Sampel'" in res.stderr
+
+
+def test_entries_without_names_are_reported_not_a_traceback(tmp_path):
+    """Found by the generated specs: two unnamed channels (or modules) crashed the duplicate-name check."""
+    path = write(tmp_path, "name: x\nmodules: [{}, {}]\nchannels: [{}, {}]\n")
+    with pytest.raises(InputError) as err:
+        load_spec(path)
+    text = str(err.value)
+    assert "a channel lacks 'name'" in text and "a module lacks 'name'" in text
+    assert "declared twice" not in text

@@ -6,6 +6,7 @@ a recorder can use ``codec.name`` as the channel's ``message_encoding``.
 
 from __future__ import annotations
 
+from ..errors import AstaaDeftError
 from .base import Codec, CodecError, DecodeError, EncodeError, same_value
 from .cbor_codec import CborCodec
 from .json_codec import JsonCodec
@@ -16,7 +17,7 @@ __all__ = [
 ]
 
 
-class UnknownCodecError(KeyError):
+class UnknownCodecError(AstaaDeftError, KeyError):
     """No codec has that name; the message lists the known ones."""
 
     def __str__(self) -> str:  # KeyError would show the message in quotes

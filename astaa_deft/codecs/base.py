@@ -20,8 +20,10 @@ import math
 from abc import ABC, abstractmethod
 from typing import Any, Callable
 
+from ..errors import AstaaDeftError
 
-class CodecError(Exception):
+
+class CodecError(AstaaDeftError):
     """Base of the errors a codec raises; the message is a short reason."""
 
 

@@ -86,6 +86,8 @@ class _SchemaBuilder:
 
 
 def _integer(ftype: FieldType) -> dict[str, Any]:
+    low: float
+    high: float
     low, high = INT_RANGES[ftype.kind]
     # The width bounds what the field can hold; declared bounds can narrow it.
     if ftype.minimum is not None:

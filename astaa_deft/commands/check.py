@@ -1,7 +1,13 @@
 """`astaa-deft check RUN.mcap [--spec SUT.yaml]`: the spec's invariants over a recorded run.
 
 Exit codes: 0 the run passes (CRASH class Pass), 1 it does not (a violation
-or a module exit), 2 bad input (raised as InputError, printed by the CLI).
+or a module exit), 2 bad input (raised as InputError, printed by the CLI) —
+including a log that is damaged, stops early or holds nothing readable: a
+record that was not fully read cannot support a Pass, and findings next to
+damage may come from the damage rather than the SUT, so no verdict is given.
+A log that merely stops early (a killed writer) still reports its findings
+with exit 1: what was read is intact. The work is
+:func:`astaa_deft.monitor.check.check_recorded_run`; this prints its result.
 """
 
 from __future__ import annotations
@@ -11,36 +17,43 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, Problem
-from ..log.reader import read_log
-from ..monitor import check_log, format_verdict, format_violation, with_typed_invariants
-from ..monitor.offline import CheckResult, spec_from_log
-from ..spec.model import Spec
+from ..log import records as rec
+from ..log.reader import LogContents
+from ..monitor import format_verdict, format_violation
+from ..monitor.check import check_recorded_run
+from ..monitor.offline import CheckResult
 
 
 def run(log_path: Path, spec_path: Path | None = None, as_json: bool = False) -> int:
-    log = read_log(log_path)
-    spec: Spec | None
-    if spec_path is not None:
-        from ..spec.loader import load_spec
-
-        spec = load_spec(spec_path)
-    else:
-        spec = spec_from_log(log, f"{log_path}:spec.yaml")
-        if spec is None:
-            raise InputError(Problem(str(log_path), None, None, "the log holds no spec to check it against",
-                                     "give the SUT spec with --spec sut.yaml"))
-    spec = with_typed_invariants(spec)
-    result = check_log(log, spec)
+    checked = check_recorded_run(log_path, spec_path)
+    result, log = checked.result, checked.log
     if as_json:
-        print(json.dumps(_as_json(result), default=str))
+        print(json.dumps(_as_json(result, log), default=str))
     else:
-        _print(result, log_path, spec_path, len(spec.invariants))
+        _print(result, log_path, spec_path, len(checked.spec.invariants), show_pass=log.intact)
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    return 0 if result.passed else 1
+    if log.intact:
+        return 0 if result.passed else 1
+    if log.truncated and len(log.damage) == 1 and not result.passed:
+        return 1  # every finding comes from complete chunks before the cut
+    if not as_json:
+        print(_withheld(log, result))
+    raise InputError(Problem(str(log_path), None, None,
+                             "no verdict: the log is " + ("incomplete" if log.truncated else "damaged")
+                             + f" ({log.describe_reading()})",
+                             "re-record the run, or read what survives with: astaa-deft log info"))
 
 
-def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invariants: int) -> None:
+def _withheld(log: LogContents, result: CheckResult) -> str:
+    what = "stops early" if log.truncated and len(log.damage) == 1 else "is damaged"
+    if result.passed:
+        return f"verdict withheld: the log {what}, so the run was not fully observed and cannot Pass"
+    return (f"verdict withheld: the log {what}; the findings above were made on what could be read and may come "
+            f"from the damage rather than the system under test")
+
+
+def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invariants: int, show_pass: bool) -> None:
     against = str(spec_path) if spec_path else "the spec stored in the log"
     rate = result.messages / result.seconds if result.seconds > 0 else 0.0
     print(f"check: {log_path} against {against}: {invariants} invariant{'s' if invariants != 1 else ''}, "
@@ -56,21 +69,24 @@ def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invarian
         for name, counts in result.stats.items():
             print(f"{name:{width}}  {counts['evaluations']:8d}  {counts['violating']:8d}")
     print()
-    print(format_verdict(result.verdict, result.start_ns))
+    if show_pass or not result.passed:
+        print(format_verdict(result.verdict, result.start_ns))
     if result.online_verdict is not None:
-        online = result.online_verdict.get("class", "?")
+        online = result.online_verdict.klass
         agreement = "agrees" if online == result.verdict.klass else "DIFFERS from this check"
         print(f"online verdict recorded during the run: {online} ({agreement})")
 
 
-def _as_json(result: CheckResult) -> dict:
+def _as_json(result: CheckResult, log: LogContents) -> dict:
     return {
-        "verdict": result.verdict.to_json(),
+        "verdict": result.verdict.to_json() if log.intact or not result.passed else None,
         "violations": [v.to_json() for v in result.violations],
         "stats": result.stats,
         "messages": result.messages,
         "seconds": result.seconds,
         "start_ns": result.start_ns,
         "end_ns": result.end_ns,
-        "online_verdict": result.online_verdict,
+        "online_verdict": rec.encode(result.online_verdict) if result.online_verdict is not None else None,
+        "log": {"intact": log.intact, "truncated": log.truncated, "damage": log.damage,
+                "read": log.describe_reading()},
     }

@@ -1,36 +1,17 @@
-"""`astaa-deft extract run.mcap --spec sut.yaml -o DIR`: DeFT module tests from a recorded run."""
+"""`astaa-deft extract run.mcap --spec sut.yaml -o DIR`: DeFT module tests from a recorded run.
+
+The work is :func:`astaa_deft.deft.workflow.extract_module_tests`; this prints its report.
+"""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from ..deft.config import PAPER_THRESHOLDS
-from ..deft.export import export_suite
-from ..deft.extract import Extraction, extract, ground_truth_rate
-from ..deft.oracle import oracle_entries
-from ..deft.replay import make_planner
-from ..errors import InputError, Problem
-from ..log import layout
-from ..log.reader import read_log
-from ..spec.loader import load_spec
-from ..spec.model import Spec
+from ..deft.extract import Extraction, near_miss_note
+from ..deft.workflow import extract_module_tests
 from .console import say
-
-
-def run_params(log, spec: Spec) -> dict[str, str]:
-    """The params the run was recorded with (replay must build the same planner)."""
-    meta = log.metadata.get(layout.RUN_METADATA, {})
-    if meta.get("spec") and meta["spec"] != spec.name:
-        raise InputError(Problem(str(log.path), None, None,
-                                 f"this log was recorded with spec '{meta['spec']}', not '{spec.name}'",
-                                 "pass the spec the run used"))
-    try:
-        return json.loads(meta.get("params", "{}"))
-    except ValueError:
-        return {}
-
 
 def progress_bar(done: int, total: int) -> None:
     if not sys.stderr.isatty() or total == 0:
@@ -58,37 +39,20 @@ def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
 
 
 def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None, process: bool,
-        ground_truth: str | None) -> int:
-    spec = load_spec(spec_path)
-    if spec.planner is None:
-        raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
-                                 "describe the planning module under 'planner:' (see docs/deft.md)"))
-    if threshold is not None:
-        from dataclasses import replace
-
-        spec = replace(spec, planner=replace(spec.planner, threshold=threshold))
-    log = read_log(log_path)
-    for w in log.warnings:
-        say(f"warning: {w}")
-    params = run_params(log, spec)
-    planner = make_planner(spec, params, prefer_process=process)
-    try:
-        ex = extract(log, spec, planner, progress=progress_bar)
-    finally:
-        planner.close()
-    accepted = [f for f in ex.frames if f.accepted]
-    collisions = [e["time_ns"] for e in log.events("violation") if e.get("invariant_kind") == "collision"]
-    kept = {f.index for f in accepted}
-    oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept]
-    manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles)
-    say(summary_table(ex))
-    if collisions:
-        say(f"collision observed in the run: {len(oracles)} frame(s) planned into a predicted obstacle "
+        ground_truth: str | None, jobs: int | None = None) -> int:
+    report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=process,
+                                  ground_truth=ground_truth, jobs=jobs, progress=progress_bar, notice=say)
+    say(summary_table(report.extraction))
+    note = near_miss_note(report.extraction)
+    if note:
+        say(note)
+    if report.collision:
+        say(f"collision observed in the run: {report.oracles} frame(s) planned into a predicted obstacle "
             f"beforehand → oracle tests that fail while the planner still does so")
-    if ground_truth:
-        exact, checked = ground_truth_rate(ex, spec, ground_truth)
+    if report.ground_truth is not None:
+        exact, checked = report.ground_truth
         say(f"ground truth ({ground_truth}): {exact}/{checked} frames used exactly the planner's inputs"
             + (f" ({exact / checked:.1%})" if checked else ""))
-    say(f"{len(accepted)} module tests (θ = {spec.planner.threshold:g} m) written to {out_dir}; "
+    say(f"{report.accepted} module tests (θ = {report.spec.planner.threshold:g} m) written to {out_dir}; "
         f"run them with: pytest {out_dir}")
-    return 0 if manifest else 1
+    return 0 if report.manifest else 1

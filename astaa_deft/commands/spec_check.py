@@ -2,13 +2,44 @@
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
+from ..errors import InputError, Problem
 from ..spec.loader import load_spec
 
 
 def run(path: Path) -> int:
     spec = load_spec(path)
+    _check_factory(spec, path)
     print(f"{path}: ok — spec '{spec.name}': {len(spec.modules)} modules, {len(spec.channels)} channels, "
           f"{len(spec.types)} types")
     return 0
+
+
+def _check_factory(spec, path: Path) -> None:
+    """Import the planner replay factory the way replay loads it, so a wrong name fails here, not in extract."""
+    factory = spec.planner.factory if spec.planner is not None else None
+    if not factory:
+        return
+    module_name, _, attr = factory.partition(":")
+    line = _line_of(path, factory)
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # the user's module failing to import is their input problem
+        raise InputError(Problem(str(path), line, None, f"planner replay factory '{factory}' cannot be imported: "
+                                 f"{type(exc).__name__}: {exc}", "fix the module name or install it")) from None
+    if not callable(getattr(module, attr, None)):
+        raise InputError(Problem(str(path), line, None,
+                                 f"planner replay factory '{factory}': module '{module_name}' has no callable '{attr}'",
+                                 "name a class or function in that module"))
+
+
+def _line_of(path: Path, text: str) -> int | None:
+    try:
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+            if text in line:
+                return n
+    except (OSError, UnicodeDecodeError):
+        pass
+    return None

@@ -13,7 +13,7 @@ from typing import Any, Mapping, Sequence
 from ..errors import did_you_mean
 from ..fields import FieldPathError, type_at
 from ..spec.model import Channel, MessageType, Module
-from ..yamlsource import Node, Source
+from ..yamlsource import Node, Source, describe_value
 
 FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
@@ -161,8 +161,11 @@ def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracl
         if key not in OBSTACLE_KEYS:
             src.at_key(obstacles, key, f"unknown key '{key}' in the oracle's obstacles",
                        did_you_mean(key, OBSTACLE_KEYS) or "")
-        elif isinstance(n.value, str):
+        elif isinstance(n.value, str) and n.value:
             fields[key] = n.value
+        else:
+            src.at(n, f"the oracle's obstacles '{key}' must be a field path, not {describe_value(n.value)}",
+                   f"e.g. {key}: {key}")
     channel = fields.pop("channel", "")
     if channel not in inputs:
         src.at(obstacles, f"the oracle's obstacle channel '{channel}' is not a planner input",
@@ -223,6 +226,9 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
         if not isinstance(factory, str) or not FACTORY_RE.match(factory):
             src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", "e.g. mystack.planner:Planner")
             factory = None
+        elif not _module_found(factory.split(":")[0]):
+            src.at(v["factory"], f"factory module '{factory.split(':')[0]}' cannot be found on the Python path",
+                   "install the package that provides it, or fix the name")
     args: dict[str, str] = {}
     if "args" in v:
         if not v["args"].is_map:
@@ -256,3 +262,13 @@ def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str
         low = text.lower()
         out[key] = True if low in ("true", "on", "yes") else False if low in ("false", "off", "no") else text
     return out
+
+
+def _module_found(module: str) -> bool:
+    """Whether `import module` would find something, without running the module itself."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(module) is not None
+    except Exception:  # a parent package is missing or broken (any error its import raises)
+        return False

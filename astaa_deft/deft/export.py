@@ -19,6 +19,18 @@ from .extract import ExtractedFrame
 
 MANIFEST = "deft.json"
 FRAMES = "frames.mcap"
+PYTEST_INI = "pytest.ini"
+# The suite's own pytest configuration: pytest takes the first ini file found
+# from the suite's directory upwards, so this one shadows the settings of
+# whatever project the suite is written into (addopts that need plugins the
+# user has not installed, testpaths, markers) and the suite runs the same
+# anywhere.
+PYTEST_INI_TEXT = """\
+# Written by astaa-deft extract: keeps this suite independent of any enclosing project's pytest settings.
+[pytest]
+addopts =
+testpaths = .
+"""
 VERSION = 1
 
 
@@ -60,6 +72,7 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
         "frames": entries,
         "oracles": list(oracles),
     }
+    (out_dir / PYTEST_INI).write_text(PYTEST_INI_TEXT)
     path = out_dir / MANIFEST
     path.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")
     return path

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import pytest
 
+from ..errors import AstaaDeftError
 from .export import MANIFEST
 
 
@@ -30,7 +31,7 @@ class DeftSuiteFile(pytest.File):
             yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", oracle=oracle)
 
 
-class FrameMismatch(Exception):
+class FrameMismatch(AstaaDeftError):
     pass
 
 
@@ -68,7 +69,7 @@ class FrameTest(pytest.Item):
         return self.path, None, f"DeFT {self.name}"
 
 
-class OracleFailure(Exception):
+class OracleFailure(AstaaDeftError):
     pass
 
 

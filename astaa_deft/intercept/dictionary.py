@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from ..codecs import Codec
-from ..errors import did_you_mean
+from ..errors import AstaaDeftError, did_you_mean
 from ..fields import FieldPath, PathLike, as_path, type_at
 from ..spec.model import FLOAT_KINDS, INT_KINDS, INT_RANGES, FieldType, MessageType
 from ..yamlsource import Node, Source
@@ -54,11 +54,11 @@ _REF = re.compile(r"dict:([A-Za-z_][A-Za-z0-9_]*)\.([A-Za-z_][A-Za-z0-9_]*)")
 _MAX_REPEAT = 16 * 1024 * 1024  # a dictionary value is sent in a message: keep it sane
 
 
-class NotApplicable(Exception):
+class NotApplicable(AstaaDeftError):
     """A derive rule has no value for this field or message; the message is the reason."""
 
 
-class UnknownEntry(KeyError):
+class UnknownEntry(AstaaDeftError, KeyError):
     """No dictionary entry by that reference; the message says what was meant, if anything."""
 
     def __str__(self) -> str:  # KeyError would quote the message

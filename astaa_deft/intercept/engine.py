@@ -20,9 +20,10 @@ import heapq
 import itertools
 import math
 import random
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from ..codecs import Codec, DecodeError, get_codec
 from ..errors import InputError, Problem

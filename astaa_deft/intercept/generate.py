@@ -21,16 +21,18 @@ byte-identical files.
 from __future__ import annotations
 
 import random
+from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 from ..codecs import get_codec
 from ..errors import InputError, Problem
 from ..fields import FieldPath, is_brittle, leaf_fields, type_at
+from ..spec.loader import load_spec
 from ..spec.model import Channel, Spec
 from .actions.set import Assignment, Set
-from .dictionary import Dictionary, Entry, FieldSite, field_site
+from .dictionary import Dictionary, Entry, FieldSite, field_site, load_dictionary
 from .testcase import Policy, Selection, TestCase, Window
 
 # (shape, weight in % of the bugs ASTAA found that needed it)
@@ -71,6 +73,52 @@ def write_testcases(testcases: Sequence[TestCase], directory: Path) -> list[Path
         path.write_bytes(testcase.to_xml())
         paths.append(path)
     return paths
+
+
+# ---------------------------------------------------------------- the workflow behind `astaa-deft generate`
+
+@dataclass(frozen=True)
+class GenerateReport:
+    paths: list[Path]  # the test case files written, in order
+    shapes: Counter[str]  # test cases per shape: single, multi_field, repeated
+
+
+def generate_to_directory(spec_path: Path, count: int, seed: int, out_dir: Path, duration: float = 30.0,
+                          include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> GenerateReport:
+    """Write ``count`` test cases drawn from the spec and the dictionaries into a new or empty ``out_dir``.
+
+    InputError for a bad count or duration, an output directory holding test
+    cases already, or a spec or dictionary that does not load.
+    """
+    if count < 1:
+        raise InputError(Problem("--count", None, None, f"{count} test cases", "ask for at least 1"))
+    if not duration > 0:
+        raise InputError(Problem("--duration", None, None, f"{duration} s", "give a positive number of seconds"))
+    _check_output_directory(out_dir)
+    spec = load_spec(spec_path)
+    dictionary = load_dictionary(dictionaries)
+    testcases = generate(spec, dictionary, count, seed, duration, include_brittle)
+    paths = write_testcases(testcases, out_dir)
+    return GenerateReport(paths, Counter(_shape(testcase) for testcase in testcases))
+
+
+def _shape(testcase: TestCase) -> str:
+    [policy] = testcase.policies
+    if policy.selection.limit is None:
+        return "repeated"
+    return "multi_field" if len(getattr(policy.action, "fields", ())) > 1 else "single"
+
+
+def _check_output_directory(out_dir: Path) -> None:
+    """Refuse to mix with earlier test cases: a stale tc-0042.xml would be run as if it were new."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(Problem(str(out_dir), None, None, "exists and is not a directory",
+                                 "give a new or empty directory with -o"))
+    existing = sorted(out_dir.glob("tc-*.xml")) if out_dir.is_dir() else []
+    if existing:
+        raise InputError(Problem(str(out_dir), None, None,
+                                 f"already holds {len(existing)} test case file(s), e.g. {existing[0].name}",
+                                 "give a new or empty directory with -o, or delete them"))
 
 
 # ---------------------------------------------------------------- what may be mutated

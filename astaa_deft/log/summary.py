@@ -6,6 +6,7 @@ from collections import Counter
 from dataclasses import dataclass
 
 from . import layout
+from . import records as rec
 from .reader import LogContents
 
 
@@ -33,9 +34,16 @@ def topic_stats(log: LogContents) -> list[TopicStats]:
     return out
 
 
-def format_info(log: LogContents) -> str:
+def format_info(log: LogContents, with_warnings: bool = True) -> str:
     lines = [f"log: {log.path}"]
-    lines.append("finished cleanly: " + ("yes" if log.finished else "NO (truncated; complete chunks read)"))
+    if log.intact:
+        state = "yes (every chunk CRC and index checked)"
+    elif log.truncated and len(log.damage) == 1:
+        state = f"NO (the file stops early; {log.describe_reading()})"
+    else:
+        state = f"NO — DAMAGED ({len(log.damage)} problem{'s' if len(log.damage) != 1 else ''} below; " \
+                f"{log.describe_reading()})"
+    lines.append("finished cleanly: " + state)
     run = log.metadata.get(layout.RUN_METADATA, {})
     if run:
         lines.append(f"run: spec {run.get('spec', '?')}, mode {run.get('mode', '?')}")
@@ -51,32 +59,34 @@ def format_info(log: LogContents) -> str:
         if s.topic.startswith("/astaa/"):
             continue
         lines.append(f"{s.topic:44} {s.channel:16} {s.count:7d} {s.rate_hz:8.1f}")
-    events = log.events()
-    kinds = Counter(e.get("kind") for e in events)
+    events = [rec.decode(e, where=str(log.path)) for e in log.events()]
+    kinds = Counter(e.kind for e in events)
     lines.append("")
     lines.append("events: " + (", ".join(f"{k} ×{n}" for k, n in sorted(kinds.items())) or "none"))
     for e in events:
-        if e.get("kind") == "process_exit" and e.get("abnormal"):
-            how = f"signal {e['signal']}" if e.get("signal") else f"exit code {e.get('returncode')}"
-            lines.append(f"  crash: module '{e.get('module')}' ({how})")
-        elif e.get("kind") == "undeclared_key":
-            lines.append(f"  undeclared key '{e.get('key')}' from module '{e.get('module')}'")
-    violations = Counter(e.get("invariant") for e in events if e.get("kind") == "violation")
+        if isinstance(e, rec.ProcessExitRecord) and e.abnormal:
+            how = f"signal {e.signal}" if e.signal else f"exit code {e.returncode}"
+            lines.append(f"  crash: module '{e.module}' ({how})")
+        elif isinstance(e, rec.UndeclaredKey):
+            lines.append(f"  undeclared key '{e.key}' from module '{e.module}'")
+        elif isinstance(e, rec.RunEnd):
+            lines.append(f"  run ended: {e.reason}")
+    violations = Counter(e.invariant for e in events if isinstance(e, rec.ViolationRecord))
     if violations:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
-    verdicts = [e for e in events if e.get("kind") == "verdict"]
+    verdicts = [e for e in events if isinstance(e, rec.VerdictRecord)]
     if verdicts:
         from ..monitor.verdict import format_verdict
 
-        start = next((e["time_ns"] for e in events if e.get("kind") == "run_started"), None)
-        lines.append(format_verdict(verdicts[-1], start))
-    flags = log.flags()
+        start = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)
+        lines.append(format_verdict(rec.encode(verdicts[-1]), start))
+    flags = [rec.decode(f, where=str(log.path)) for f in log.flags()]
     if flags:
-        per = Counter(f.get("channel") for f in flags)
+        per = Counter(f.channel for f in flags if isinstance(f, rec.FlagRecord))
         lines.append("undecodable payloads (forwarded untouched): "
                      + ", ".join(f"{c} ×{n}" for c, n in sorted(per.items())))
     if log.attachments:
         lines.append("attachments: " + ", ".join(sorted(log.attachments)))
-    for w in log.warnings:
+    for w in log.warnings if with_warnings else ():
         lines.append(f"warning: {w}")
     return "\n".join(lines)

@@ -1,6 +1,8 @@
 """Minimise a failing run to the few mutations, frames or fields that cause it.
 
 The engine (:mod:`.ddmin`) knows nothing of runs: it takes items and a tester.
+The whole workflow is one call, :func:`.workflow.minimise_log` (not imported
+here: it brings the testers, the replay and the live session with it).
 """
 
 from astaa_deft.minimise.ddmin import (

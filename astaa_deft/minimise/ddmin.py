@@ -33,6 +33,8 @@ from concurrent.futures import FIRST_COMPLETED, Executor, Future, ThreadPoolExec
 from dataclasses import dataclass, field
 from typing import Callable, Generic, Hashable, Mapping, Sequence, TypeVar
 
+from ..errors import AstaaDeftError
+
 T = TypeVar("T")
 K = TypeVar("K", bound=Hashable)
 
@@ -68,7 +70,7 @@ Tester = Callable[[Sequence[T]], TestResult]
 """Gets a subset of the items, in their original order; must be thread-safe when ``parallel > 1``."""
 
 
-class MinimiseError(Exception):
+class MinimiseError(AstaaDeftError):
     """ddmin cannot start; the message says why, for the CLI to print."""
 
     def __init__(self, message: str, result: TestResult):
@@ -125,7 +127,7 @@ class DDResult(Generic[T]):
     results: dict[Config, TestResult] = field(default_factory=dict)
 
 
-class _OutOfBudget(Exception):
+class _OutOfBudget(AstaaDeftError):
     """max_tests is spent before a round could be decided."""
 
 

@@ -37,16 +37,20 @@ from ..codecs import get_codec
 from ..codecs.base import DecodeError, EncodeError
 from ..errors import InputError, Problem
 from ..fields import FieldPath, FieldPathError, set_field
-from ..intercept.actions.base import FieldChange, from_tagged
+from ..intercept.actions import ACTIONS
+from ..intercept.actions.base import ActionDetail, FieldChange, from_tagged
 from ..log import layout
+from ..log import records as rec
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 
 FieldSelection = tuple[int, ...] | None
 """Which of a mutation's field changes are kept: indices into ``Mutation.fields``, or None for all."""
 
-EXTRA_ACTIONS = frozenset({"duplicate", "interleave"})  # the event rides on an extra delivery
-DEFERRING_ACTIONS = frozenset({"delay", "reorder"})  # delivered later than the real message arrived
+# What each action is, from its own flags (intercept/actions/<name>.py).
+EXTRA_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.adds_delivery)  # on an extra delivery
+DEFERRING_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.defers)  # delivered after arrival
+FIELDS_INSEPARABLE = frozenset(name for name, action in ACTIONS.items() if not action.fields_separable)
 SIBLING_WINDOW_NS = 200_000_000  # an untouched copy of a split message is logged within this of its event
 
 
@@ -57,6 +61,12 @@ class Step:
     policy: str
     action: str
     detail: Mapping[str, Any]
+
+    @property
+    def record(self) -> ActionDetail | None:
+        """The detail as its action's typed record (None for an action this version does not know)."""
+        action = ACTIONS.get(self.action)
+        return action.detail_type.from_json(self.detail) if action is not None else None
 
 
 @dataclass(frozen=True)
@@ -102,7 +112,7 @@ class Mutation:
     @property
     def fields_reducible(self) -> bool:
         """Whether dropping some field changes still leaves a meaningful delivery (stage 3)."""
-        return len(self.fields) > 1 and not self.actions & {"corrupt", "drop"}
+        return len(self.fields) > 1 and not self.actions & FIELDS_INSEPARABLE
 
     def payload(self, selection: FieldSelection, codec_name: str) -> bytes | None:
         """What is delivered when only the ``selection`` of field changes is kept (None: dropped).
@@ -129,8 +139,7 @@ class Mutation:
         to = f" (to {', '.join(self.consumers)})" if self.consumers else ""
         chosen = self.fields if selection is None else tuple(self.fields[i] for i in selection)
         changes = "; ".join(f"{c.path}: {_short(c.old)} → {_short(c.new)}" for c in chosen)
-        details = [f"{k}={v}" for step in self.steps for k, v in step.detail.items()
-                   if k in ("delay_ms", "copies", "flipped_bytes", "truncated_to")]
+        details = [item for step in self.steps if step.record is not None for item in step.record.describe()]
         text = f"{self.action} on {self.channel} #{self.message_index}{to}"
         if changes:
             text += f": {changes}"
@@ -165,7 +174,44 @@ class MutationLog:
 
 def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
     """The mutations of an intercepted run (InputError if the records do not fit together)."""
-    events = [(m, json.loads(m.data)) for m in log.on(layout.MUTATIONS_TOPIC)]
+    events = [(m, _decode_event(log, n, m)) for n, m in enumerate(log.on(layout.MUTATIONS_TOPIC), start=1)]
+    try:
+        return _read_mutations(log, spec, events)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"a mutation event does not have the fields astaa-deft writes ({_what(exc)})",
+                                 "the log is damaged or was not written by astaa-deft proxy --policy")) from None
+
+
+def _decode_event(log: LogContents, number: int, record: LoggedMessage) -> dict:
+    """One record on the mutations topic as JSON, or an InputError that says which and where."""
+    where = f"mutation event {number} (log time {record.log_time / 1e9:.3f} s)"
+    try:
+        text = record.data.decode("utf-8")
+        body = json.loads(text)
+    except UnicodeDecodeError as exc:
+        raise InputError(Problem(str(log.path), None, None, f"{where} is not UTF-8 text (byte {exc.start})",
+                                 "the log is damaged; re-record the run")) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"{where} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}",
+                                 "the log is damaged; re-record the run")) from None
+    except RecursionError:
+        raise InputError(Problem(str(log.path), None, None, f"{where} is nested too deeply",
+                                 "the log is damaged; re-record the run")) from None
+    if not isinstance(body, dict):
+        raise InputError(Problem(str(log.path), None, None, f"{where} is not a JSON object",
+                                 "the log is damaged; re-record the run"))
+    return body
+
+
+def _what(exc: BaseException) -> str:
+    if isinstance(exc, KeyError):
+        return f"'{exc.args[0]}' is missing" if exc.args else "a key is missing"
+    return "a field has the wrong kind of value"
+
+
+def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessage, dict]]) -> MutationLog:
     start_ns = run_start_ns(log)
     by_topic: dict[str, dict[int, LoggedMessage]] = {}
 
@@ -182,43 +228,47 @@ def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
         return found
 
     known = {c.name: c for c in spec.channels}
-    raw: list[tuple[LoggedMessage, dict, LoggedMessage, LoggedMessage | None]] = []
+    raw: list[tuple[LoggedMessage, rec.MutationRecord, dict, LoggedMessage, LoggedMessage | None]] = []
     noop = 0
     delivered_seqs: dict[str, set[int]] = defaultdict(set)
-    for record, event in events:
-        channel = known.get(event.get("channel"))
+    for record, body in events:
+        if not isinstance(body, Mapping):
+            raise InputError(Problem(str(log.path), None, None, "a mutation event is not a JSON object",
+                                     "the log is damaged or was not written by astaa-deft"))
+        event = rec.decode_mutation(body, record.log_time)
+        channel = known.get(event.channel)
         if channel is None:
             raise InputError(Problem(str(log.path), None, None,
-                                     f"a mutation event names channel '{event.get('channel')}', "
+                                     f"a mutation event names channel '{event.channel}', "
                                      f"which spec '{spec.name}' does not declare",
                                      "give the spec the run was recorded with"))
-        if event.get("delivered_sequence") is not None:
-            delivered_seqs[channel.name].add(int(event["delivered_sequence"]))
-        original = message(layout.ORIGINAL_PREFIX + channel.key, event.get("original_sequence"))
+        if event.delivered_sequence is not None:
+            delivered_seqs[channel.name].add(event.delivered_sequence)
+        original = message(layout.ORIGINAL_PREFIX + channel.key, event.original_sequence)
         if original is None:  # nothing was changed, dropped or added: not a mutation in effect
             noop += 1
             continue
-        delivered = message(channel.key, event.get("delivered_sequence"))
-        raw.append((record, event, original, delivered))
+        delivered = message(channel.key, event.delivered_sequence)
+        raw.append((record, event, dict(body), original, delivered))
 
     offset_ns = _clock_offset(raw, start_ns)
     mutations = []
     record_times = {}
-    for number, (record, event, original, delivered) in enumerate(raw):
+    for number, (record, event, body, original, delivered) in enumerate(raw):
         steps = _steps(event)
         deferred = any(s.action in DEFERRING_ACTIONS for s in steps)
-        time_s = float(event.get("time", 0.0))
+        time_s = event.time
         arrived_ns = offset_ns + round(time_s * 1e9) if deferred else original.log_time
         mutations.append(Mutation(
-            number=number, channel=event["channel"], steps=steps,
-            consumers=tuple(event.get("consumers") or ()), message_index=int(event.get("message_index", 0)),
-            time=time_s, at=(arrived_ns - start_ns) / 1e9, fields=tuple(FieldChange(f["path"], from_tagged(f.get("old")), from_tagged(f.get("new")))
-                                      for f in event.get("fields") or ()),
+            number=number, channel=event.channel, steps=steps,
+            consumers=event.consumers, message_index=event.message_index,
+            time=time_s, at=(arrived_ns - start_ns) / 1e9,
+            fields=tuple(FieldChange(f.path, from_tagged(f.old), from_tagged(f.new)) for f in event.fields),
             original=original.data,
             original_time_ns=arrived_ns,
             delivered=delivered.data if delivered is not None else None,
             delivered_time_ns=delivered.log_time if delivered is not None else None,
-            testcase=str(event.get("testcase", "")), event=event))
+            testcase=event.testcase, event=body))
         record_times[number] = record.log_time
 
     untouched = {}
@@ -230,26 +280,30 @@ def read_mutations(log: LogContents, spec: Spec) -> MutationLog:
     return MutationLog(spec, mutations, start_ns, noop, untouched, siblings, record_times)
 
 
-def _steps(event: Mapping[str, Any]) -> tuple[Step, ...]:
-    policies = str(event.get("policy", "")).split("+")
-    actions = str(event.get("action", "")).split("+")
-    detail = from_tagged(event.get("detail") or {})
+def _steps(event: rec.MutationRecord) -> tuple[Step, ...]:
+    policies = event.policy.split("+")
+    actions = event.action.split("+")
+    detail = from_tagged(event.detail or {})
     if len(actions) == 1:
         return (Step(policies[0], actions[0], detail),)
     parts = detail.get("steps") or [{} for _ in actions]
-    return tuple(Step(p, a, part.get("detail") or {}) for p, a, part in zip(policies, actions, parts))
+    # Not strict: a damaged event's shorter list yields fewer steps, as it always has.
+    return tuple(Step(p, a, part.get("detail") or {})
+                 for p, a, part in zip(policies, actions, parts, strict=False))
 
 
 def run_start_ns(log: LogContents) -> int:
     """The run's start: its run_started event, else (an event lost to the recorder) its first bus message."""
-    started = [e["time_ns"] for e in log.events("run_started") if "time_ns" in e]
+    started = [r.time_ns for r in map(rec.decode, log.events("run_started"))
+               if isinstance(r, rec.RunStarted) and r.time_ns]
     if started:
-        return int(started[0])
+        return started[0]
     bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
     return min(bus) if bus else 0
 
 
-def _clock_offset(raw: Sequence[tuple[LoggedMessage, dict, LoggedMessage, Any]], start_ns: int) -> int:
+def _clock_offset(raw: Sequence[tuple[LoggedMessage, rec.MutationRecord, dict, LoggedMessage, Any]],
+                  start_ns: int) -> int:
     """Log time minus interceptor time, from mutations delivered the moment their message arrived.
 
     A delayed or reordered message is logged when it was delivered; its
@@ -257,9 +311,9 @@ def _clock_offset(raw: Sequence[tuple[LoggedMessage, dict, LoggedMessage, Any]],
     offset of the immediate mutations maps that clock onto the log's; with
     none, the run's start is the best guess.
     """
-    offsets = [record.log_time - round(float(event.get("time", 0.0)) * 1e9)
-               for record, event, _, _ in raw
-               if not (set(str(event.get("action", "")).split("+")) & (DEFERRING_ACTIONS | EXTRA_ACTIONS))]
+    offsets = [record.log_time - round(event.time * 1e9)
+               for record, event, _, _, _ in raw
+               if not (set(event.action.split("+")) & (DEFERRING_ACTIONS | EXTRA_ACTIONS))]
     return int(statistics.median(offsets)) if offsets else start_ns
 
 

@@ -12,15 +12,16 @@ mutation becomes a policy of its own that pins the very message it hit:
   message and no other;
 * the consumers are the ones that got the mutated delivery (see
   :mod:`.mutations`), so a mutation that reached only ``control`` stays that way;
-* ``set`` fields are written as literals of the values that were actually
-  sent (``json:`` form, which carries NaN, infinities, nulls, mistyped values
-  and lone surrogates exactly; base64 for binary values), never as the
-  dictionary rule that produced them (``time.jump_back`` recomputed on
-  another run would give another value);
+* each action pins itself (``ActionConfig.pinned``, in its own module):
+  ``set`` fields, for instance, are written as literals of the values that
+  were actually sent (``json:`` form, which carries NaN, infinities, nulls,
+  mistyped values and lone surrogates exactly; base64 for binary values),
+  never as the dictionary rule that produced them (``time.jump_back``
+  recomputed on another run would give another value);
 * a stacked mutation (``set+delay``) becomes one policy per step, in order,
   on the same message: the engine stacks them the same way;
-* the kept copies of one message become one ``duplicate`` with that many
-  copies, after the real message's own policies (separate policies would
+* the kept copies of one message become one ``duplicate`` (an action with
+  ``pins_copies``) with that many copies, after the real message's own policies (separate policies would
   duplicate each other's copies; see ``_copy_key`` for copies that carry
   changes).
 
@@ -35,38 +36,13 @@ confirmation runs like any other.
 
 from __future__ import annotations
 
-import base64
-import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
 
 from ..intercept.actions import ACTIONS
-from ..intercept.actions.base import ActionConfig
-from ..intercept.actions.corrupt import Corrupt
-from ..intercept.actions.delay import Delay
-from ..intercept.actions.drop import Drop
-from ..intercept.actions.duplicate import Duplicate
-from ..intercept.actions.interleave import Interleave
-from ..intercept.actions.reorder import Reorder
-from ..intercept.actions.set import Assignment, Set
+from ..intercept.actions.base import ActionConfig, PinnedStep
 from ..intercept.testcase import Policy, Selection, TestCase, Window
 from .mutations import FieldSelection, Mutation
-
-DEFAULT_INJECTION_RATE = 10.0  # Hz, for an injection whose policy is unknown
-MAX_RATE = 1000.0  # the schema's bound
-
-
-def value_text(value: Any) -> str:
-    """A ``<field value=…>`` that sets exactly ``value`` whatever the field's declared type.
-
-    ``json:`` with ASCII escapes: the text stays valid XML (control
-    characters and lone surrogates are escaped) and reads back to the same
-    Python value (NaN and infinities included). Bytes go as base64, which a
-    ``bytes`` field reads as binary.
-    """
-    if isinstance(value, (bytes, bytearray)):
-        return base64.b64encode(bytes(value)).decode("ascii")
-    return "json:" + json.dumps(value, ensure_ascii=True, allow_nan=True, separators=(",", ":"))
 
 
 def restricted_testcase(chosen: Sequence[tuple[Mutation, FieldSelection]], *, testcase_id: str,
@@ -75,27 +51,47 @@ def restricted_testcase(chosen: Sequence[tuple[Mutation, FieldSelection]], *, te
 
     ``original`` is the logged test case, if known: it supplies what events do
     not record (an injection's rate, a reorder's hold time, corrupt modes).
+    Each action pins itself (``ActionConfig.pinned``); this module knows no action by name.
     """
     policies: list[Policy] = []
     originals = {p.id: p for p in original.policies} if original is not None else {}
     copies = _copies(chosen)
     for mutation, selection in chosen:
-        if _copy_key(mutation, chosen) is not None:
-            count = copies.pop(_copy_key(mutation, chosen), 0)
+        copy_key = _copy_key(mutation, chosen)
+        if copy_key is not None:
+            count = copies.pop(copy_key, 0)
             if count:
-                policies.append(_pinned(mutation, "", Duplicate(count)))
+                policies.append(_pinned(mutation, "", _copying_action(mutation).pin_copies(count)))
             continue
         fields = mutation.fields if selection is None else tuple(mutation.fields[i] for i in selection)
-        assignments = tuple(Assignment(c.path, value_text(c.new)) for c in fields)
         steps = mutation.steps
-        field_step = next((i for i, s in enumerate(steps) if s.action in ("set", "interleave")), None)
+        field_step = next((i for i, s in enumerate(steps) if _kind(s.action, "carries_fields")), None)
         for n, step in enumerate(steps):
-            action = _action(step.action, step.detail, assignments if n == field_step else (),
-                             originals.get(step.policy))
+            action = _step_action(step.action, PinnedStep(step.detail, fields if n == field_step else (),
+                                                          _original_action(originals.get(step.policy), step.action)))
             if action is None:
                 continue  # a set step whose fields all went to another step or were minimised away
             policies.append(_pinned(mutation, f"-{n + 1}" if len(steps) > 1 else "", action))
     return TestCase(id=testcase_id, seed=seed, description=description, policies=tuple(policies))
+
+
+def _kind(action: str, flag: str) -> bool:
+    """Whether the action named ``action`` has ``flag`` (False for an action this version does not know)."""
+    cls = ACTIONS.get(action)
+    return bool(cls is not None and getattr(cls, flag))
+
+
+def _step_action(name: str, step: PinnedStep) -> ActionConfig | None:
+    cls = ACTIONS.get(name)
+    return cls.pinned(step) if cls is not None else None
+
+
+def _original_action(policy: Policy | None, name: str) -> ActionConfig | None:
+    return policy.action if policy is not None and policy.action.name == name else None
+
+
+def _copying_action(mutation: Mutation) -> type[ActionConfig]:
+    return next(ACTIONS[a] for a in sorted(mutation.actions) if _kind(a, "pins_copies"))
 
 
 def _pinned(mutation: Mutation, suffix: str, action: ActionConfig) -> Policy:
@@ -113,56 +109,30 @@ def _copy_key(mutation: Mutation, chosen: Sequence[tuple[Mutation, FieldSelectio
     left it, and the steps after act on both; the real message's own event
     holds all of them but the duplication. So when the real delivery to the
     same consumers is kept too (or the copy has no other step), a plain
-    ``duplicate`` pinned after the real message's policies makes the very
+    copying action pinned after the real message's policies makes the very
     same copy. Otherwise the copy's steps are pinned as they are — and reach
     the real message as well (an approximation the engine cannot avoid).
+    An extra delivery that is not a copy (an injection) is never one.
     """
-    if "duplicate" not in mutation.actions or mutation.actions & {"interleave"}:
+    copying = {a for a in mutation.actions if _kind(a, "pins_copies")}
+    injecting = {a for a in mutation.actions if _kind(a, "adds_delivery")} - copying
+    if not copying or injecting:
         return None
     key = (mutation.channel, mutation.message_index, mutation.consumers)
-    if mutation.actions == {"duplicate"}:
+    if mutation.actions == copying:
         return key
     real = {c for m, _ in chosen if not m.extra and (m.channel, m.message_index) == key[:2] for c in m.consumers}
     return key if set(mutation.consumers) <= real else None
 
 
 def _copies(chosen: Sequence[tuple[Mutation, FieldSelection]]) -> dict[tuple, int]:
-    """Plain copies per message: one policy duplicating k times (k policies would stack to 2^k - 1)."""
+    """Plain copies per message: one policy copying k times (k policies would stack to 2^k - 1)."""
     out: dict[tuple, int] = {}
     for mutation, _ in chosen:
         key = _copy_key(mutation, chosen)
         if key is not None:
             out[key] = out.get(key, 0) + 1
     return out
-
-
-def _action(name: str, detail: Mapping[str, Any], assignments: tuple[Assignment, ...],
-            original: Policy | None) -> ActionConfig | None:
-    before = original.action if original is not None and original.action.name == name else None
-    if name == "set":
-        return Set(assignments) if assignments else None
-    if name == "drop":
-        return Drop()
-    if name == "delay":
-        ms = detail.get("delay_ms", getattr(before, "ms", None))
-        return Delay(float(ms)) if ms else None
-    if name == "duplicate":
-        return Duplicate(1)  # each extra copy is a mutation of its own
-    if name == "reorder":
-        return Reorder(before.max_hold_ms) if isinstance(before, Reorder) else Reorder()
-    if name == "interleave":
-        rate = before.rate if isinstance(before, Interleave) else DEFAULT_INJECTION_RATE
-        return Interleave(min(rate, MAX_RATE), assignments)
-    if name == "corrupt":
-        if "truncated_to" in detail and detail.get("length"):
-            keep = (int(detail["truncated_to"]) + 0.5) / int(detail["length"])
-            return Corrupt("truncate", keep=min(keep, 0.999999))
-        if "flipped_bytes" in detail:
-            return Corrupt("flip", bytes=max(len(detail["flipped_bytes"]), 1))
-        return before if isinstance(before, Corrupt) else None
-    if name in ACTIONS and before is not None:  # an action added later: its original form
-        return before
-    return None
 
 
 def write_testcase(testcase: TestCase, path: Path) -> Path:

@@ -30,7 +30,7 @@ import ast
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
-from ..errors import did_you_mean
+from ..errors import AstaaDeftError, did_you_mean
 from ..fields import WILDCARD, FieldPath, FieldPathError
 from ..spec.model import FieldType, MessageType
 from .language import (
@@ -54,7 +54,7 @@ from .paths import EvaluationError, Evaluator, compile_getter, follow
 MAX_LENGTH = 2000  # characters; a monitor expression longer than this is a mistake
 MAX_DEPTH = 40  # nesting; keeps compile and evaluation recursion far from Python's limit
 
-class ExpressionError(ValueError):
+class ExpressionError(AstaaDeftError, ValueError):
     """An expression that is not allowed or does not type-check.
 
     ``position`` is the 0-based character offset in the expression text of

@@ -10,14 +10,15 @@ from __future__ import annotations
 
 from typing import Any, Callable, Sequence
 
+from ..errors import AstaaDeftError
 from ..fields import WILDCARD, FieldPath
 
 
-class Missing(Exception):
+class Missing(AstaaDeftError):
     """The message lacks (part of) the path; ``args[0]`` names the place."""
 
 
-class EvaluationError(Exception):
+class EvaluationError(AstaaDeftError):
     """A message that does not have the shape a concrete path or expression reads."""
 
 

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any, Sequence
 
-from ..errors import did_you_mean
+from ..errors import AstaaDeftError, did_you_mean
 
 SIGNAL_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 # Words of rtamt's language a formula may use.
@@ -57,7 +57,7 @@ _RTAMT_POSITION = re.compile(r"(\d+):(\d+):\s*(.*)", re.DOTALL)
 _REFUSED_ARITHMETIC = {"Division": "'/'", "Sqrt": "sqrt", "Exp": "exp", "Pow": "pow"}
 
 
-class StlError(ValueError):
+class StlError(AstaaDeftError, ValueError):
     def __init__(self, message: str, position: int = 0, fix: str = ""):
         super().__init__(message)
         self.message = message

@@ -195,7 +195,7 @@ class _SpecBuilder:
                 continue
             v = item.value
             name = self.name_of(v["name"], "module name") if "name" in v else "?"
-            if name in seen:
+            if "name" in v and name in seen:
                 self.src.at(v["name"], f"module '{name}' is declared twice", "give each module a unique name")
             seen.add(name)
             command = self.command(v.get("command"), name, params)
@@ -285,12 +285,13 @@ class _SpecBuilder:
                 re.compile(log)
             except re.error as exc:
                 self.src.at(v["log"], f"'ready.log' is not a valid regular expression: {exc}", "fix or quote it")
-        delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0)
-        timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True)
+        delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0, maximum=MAX_WAIT_S)
+        timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True, maximum=MAX_WAIT_S)
         return Readiness(channel=channel, log=log, delay=delay if delay is not None else (None if channel or log else 0.0),
                          timeout=timeout if timeout is not None else 20.0)
 
-    def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False) -> float | None:
+    def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False,
+               maximum: float | None = None) -> float | None:
         if node is None:
             return None
         if not self.expect(node, (int, float), what, "a number"):
@@ -301,6 +302,9 @@ class _SpecBuilder:
             return None
         if minimum is not None and (value < minimum or (strictly and value == minimum)):
             self.src.at(node, f"{what} must be {'>' if strictly else '≥'} {minimum:g}", "give a larger value")
+            return None
+        if maximum is not None and value > maximum:
+            self.src.at(node, f"{what} must be ≤ {maximum:g}", "give a smaller value")
             return None
         return value
 
@@ -315,7 +319,7 @@ class _SpecBuilder:
                 continue
             v = item.value
             name = self.name_of(v["name"], "channel name") if "name" in v else "?"
-            if name in names:
+            if "name" in v and name in names:
                 self.src.at(v["name"], f"channel '{name}' is declared twice", "give each channel a unique name")
             names.add(name)
             key = ""
@@ -385,6 +389,7 @@ class _SpecBuilder:
                 self.src.at_key(node, tname, f"type name '{tname}' is a built-in kind", "rename it")
             if not tnode.is_map or not tnode.value:
                 self.src.at(tnode, f"type '{tname}' must map field names to field types", "e.g. 'x: float64'")
+                out[tname] = MessageType(tname, {})  # keep the name known: later references are not errors too
                 continue
             fields = {}
             for fname, fnode in tnode.items():
@@ -506,6 +511,9 @@ class _SpecBuilder:
                 continue
             out.append(item.value)
         return out
+
+
+MAX_WAIT_S = 86_400.0  # a day: beyond it a wait is a typo, and timers overflow near 1e308
 
 
 def _scalar_text(value: Any) -> str:

@@ -1,9 +1,13 @@
 """Interception actions, one module each, found by scanning this package.
 
 ``ACTIONS`` maps an XML element name (``set``, ``drop``...) to its
-``ActionConfig`` class. To add an action, add a module here defining an
-``ActionConfig`` subclass with a ``name`` and its runtime (see ``base``),
-and add its element to ``policies/testcase.xsd``.
+``ActionConfig`` class: the one registry the engine, the test case reader
+and the minimiser look actions up in. To add an action, add a module here
+defining an ``ActionConfig`` subclass with a ``name``, its runtime, its
+flags, its ``ActionDetail`` record and ``pinned`` (see ``base``), and add
+its element to ``astaa_deft/data/policies/testcase.xsd``; nothing else
+changes (tests/test_intercept_actions.py checks the schema lists exactly
+the registered actions).
 """
 
 from __future__ import annotations

@@ -1,10 +1,16 @@
 """The action interface, and what the engine hands to the proxy.
 
-An action module defines two classes:
+An action module defines everything about its action:
 
 * an ``ActionConfig`` subclass: the action as written in a test case (frozen,
   comparable), read from and written back to its XML element, checked
-  against the spec;
+  against the spec; its flags (``defers``, ``adds_delivery``,
+  ``carries_fields``, ``fields_separable``, ``pins_copies``), read by the
+  minimiser instead of lists of action names; and how it redoes one logged
+  step on one message (``pinned``), for minimisation's restricted test cases;
+* an ``ActionDetail`` subclass (``detail_type``): what the action did to one
+  message beyond its field changes, as a typed record with one encoding to
+  and from the event's ``detail``;
 * an ``ActionRuntime`` subclass: its state during one run, created by
   ``ActionConfig.start``. The engine feeds it the messages its policy
   selected (``apply``), every real message on its channels
@@ -24,9 +30,10 @@ import json
 import math
 import random
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
 from decimal import Decimal
-from typing import TYPE_CHECKING, Any, Callable, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from ...codecs import Codec, EncodeError
 
@@ -259,10 +266,70 @@ class PolicyContext:
                              info.index, info.now, fields, detail)
 
 
+DetailT = TypeVar("DetailT", bound="ActionDetail")
+
+
+@dataclass(frozen=True)
+class ActionDetail:
+    """What one action did to one message, beyond its field changes (subclasses: frozen dataclasses).
+
+    Its JSON form is the event's ``detail`` object: the fields that are not
+    None, in declaration order, lists for tuples. Readers get it back with
+    ``from_json``, which ignores keys it does not know (a stacked event's
+    ``steps``, a ``skipped`` note added on delivery).
+    """
+
+    shown: ClassVar[tuple[str, ...]] = ()  # the fields a one-line description of a mutation shows
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is not None:
+                out[f.name] = list(value) if isinstance(value, tuple) else value
+        return out
+
+    @classmethod
+    def from_json(cls: type[DetailT], data: Mapping[str, Any]) -> DetailT:
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in known})
+
+    def describe(self) -> list[str]:
+        """``key=value`` for the ``shown`` fields present, as their JSON form prints."""
+        return [f"{k}={v}" for k, v in self.to_json().items() if k in self.shown]
+
+
+@dataclass(frozen=True)
+class NoDetail(ActionDetail):
+    """An action that records nothing but its event (drop)."""
+
+
+@dataclass(frozen=True)
+class PinnedStep:
+    """One logged step of a mutation, to be redone on the one message it hit (see ``ActionConfig.pinned``)."""
+
+    detail: Mapping[str, Any]  # the step's logged detail (JSON form, untagged)
+    fields: tuple[FieldChange, ...]  # the field changes kept for this step (values as sent); () if none
+    original: ActionConfig | None  # the logged test case's action of the same kind for this policy, if known
+
+
 class ActionConfig(ABC):
     """An action as written in a test case. Subclasses are frozen dataclasses."""
 
     name: ClassVar[str]  # its XML element name
+    detail_type: ClassVar[type[ActionDetail]] = NoDetail
+
+    # What a delivery this action took part in looks like in the log; the minimiser
+    # reads these flags, never lists of action names.
+    defers: ClassVar[bool] = False  # delivered later than the real message arrived (delay, reorder)
+    adds_delivery: ClassVar[bool] = False  # its event rides on an extra delivery (duplicate, interleave)
+    carries_fields: ClassVar[bool] = False  # sets message fields, logged as field changes (set, interleave)
+    # Whether some of the delivery's field changes can be kept without the others
+    # (False: the delivery is raw bytes or nothing, as after corrupt or drop).
+    fields_separable: ClassVar[bool] = True
+    # Its extra deliveries are plain copies of the real message: a restricted test case
+    # makes the kept copies of one message with one action (``pin_copies``).
+    pins_copies: ClassVar[bool] = False
 
     @classmethod
     @abstractmethod
@@ -273,12 +340,28 @@ class ActionConfig(ABC):
     def write_xml(self, element: etree._Element) -> None:
         """Fill in the attributes and children of this action's (empty) element."""
 
-    def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
+    def check(self, policy: Policy, channels: tuple[Channel, ...],  # noqa: B027 (a hook with a default)
+              checker: ActionChecker) -> None:
         """Check against the spec and dictionary (``checker`` has both); default: nothing to check."""
 
     @abstractmethod
     def start(self, context: PolicyContext) -> ActionRuntime:
         """A fresh runtime for one run."""
+
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> ActionConfig | None:
+        """This action redoing ``step`` on the one message it hit, for a restricted test case.
+
+        None: nothing left to redo (e.g. a set whose fields were all
+        minimised away). The default is the original action as written,
+        if known: right for an action whose outcome its config decides alone.
+        """
+        return step.original if isinstance(step.original, cls) else None
+
+    @classmethod
+    def pin_copies(cls, count: int) -> ActionConfig:
+        """One action making ``count`` plain copies of a message (for ``pins_copies`` actions)."""
+        raise NotImplementedError(f"'{cls.name}' does not make copies")
 
 
 class ActionRuntime:
@@ -300,6 +383,13 @@ class ActionRuntime:
 
     def flush(self, now: float) -> list[Pending]:
         return []
+
+
+def required(element: etree._Element, name: str) -> str:
+    """A required attribute of a schema-valid element (the schema guarantees it is there)."""
+    value = element.get(name)
+    assert isinstance(value, str), f"<{element.tag!s}> lacks '{name}' after schema validation"
+    return value
 
 
 def decimal_text(value: float) -> str:

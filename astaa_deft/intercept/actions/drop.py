@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import ActionConfig, ActionRuntime, MessageInfo, Pending, PolicyContext
+from .base import ActionConfig, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class Drop(ActionConfig):
     name: ClassVar[str] = "drop"
+    fields_separable: ClassVar[bool] = False  # nothing is delivered
 
     @classmethod
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Drop:
@@ -32,6 +33,10 @@ class Drop(ActionConfig):
 
     def start(self, context: PolicyContext) -> ActionRuntime:
         return DropRuntime(context)
+
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Drop:
+        return cls()
 
 
 class DropRuntime(ActionRuntime):

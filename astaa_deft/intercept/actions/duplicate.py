@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import ActionConfig, ActionRuntime, MessageInfo, Pending, PolicyContext
+from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -19,8 +19,18 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class DuplicateDetail(ActionDetail):
+    shown: ClassVar[tuple[str, ...]] = ("copies",)
+    copy: int | None = None  # which copy this delivery is, from 1
+    copies: int | None = None
+
+
+@dataclass(frozen=True)
 class Duplicate(ActionConfig):
     name: ClassVar[str] = "duplicate"
+    detail_type: ClassVar[type[ActionDetail]] = DuplicateDetail
+    adds_delivery: ClassVar[bool] = True
+    pins_copies: ClassVar[bool] = True
     copies: int = 1
 
     @classmethod
@@ -34,6 +44,14 @@ class Duplicate(ActionConfig):
     def start(self, context: PolicyContext) -> ActionRuntime:
         return DuplicateRuntime(self, context)
 
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Duplicate:
+        return cls(1)  # each extra copy is a mutation of its own
+
+    @classmethod
+    def pin_copies(cls, count: int) -> Duplicate:
+        return cls(count)
+
 
 class DuplicateRuntime(ActionRuntime):
     def __init__(self, config: Duplicate, context: PolicyContext):
@@ -44,6 +62,7 @@ class DuplicateRuntime(ActionRuntime):
         out = [item]
         for number in range(1, self.copies + 1):
             twin = item.copy_for(item.consumers, extra=True)
-            twin.events.append(self.context.event("duplicate", info, item.consumers, copy=number, copies=self.copies))
+            twin.events.append(self.context.event("duplicate", info, item.consumers,
+                                                  **DuplicateDetail(number, self.copies).to_json()))
             out.append(twin)
         return out

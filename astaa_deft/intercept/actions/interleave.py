@@ -19,9 +19,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from ...codecs import DecodeError, get_codec
-from .base import ActionConfig, ActionRuntime, MessageInfo, Pending, PolicyContext, decimal_text
-from .set import Assignment, FieldPlan, apply_plans, check_assignments, plan_fields, read_assignments, \
-    write_assignments
+from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
+    decimal_text, required
+from .set import Assignment, FieldPlan, FieldsDetail, apply_plans, check_assignments, literal_assignments, \
+    plan_fields, read_assignments, write_assignments
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -30,15 +31,22 @@ if TYPE_CHECKING:
     from ..testcase import ActionChecker, Policy
 
 
+DEFAULT_PINNED_RATE = 10.0  # Hz, for a pinned injection whose policy is unknown
+MAX_RATE = 1000.0  # the schema's bound
+
+
 @dataclass(frozen=True)
 class Interleave(ActionConfig):
     name: ClassVar[str] = "interleave"
+    detail_type: ClassVar[type[ActionDetail]] = FieldsDetail
+    adds_delivery: ClassVar[bool] = True
+    carries_fields: ClassVar[bool] = True
     rate: float  # injections per second
     fields: tuple[Assignment, ...] = ()
 
     @classmethod
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Interleave:
-        return cls(float(element.get("rate")), read_assignments(element))
+        return cls(float(required(element, "rate")), read_assignments(element))
 
     def write_xml(self, element: etree._Element) -> None:
         element.set("rate", decimal_text(self.rate))
@@ -49,6 +57,12 @@ class Interleave(ActionConfig):
 
     def start(self, context: PolicyContext) -> ActionRuntime:
         return InterleaveRuntime(self, context)
+
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Interleave:
+        """An injection in the first slot after its template message, at the original policy's rate."""
+        rate = step.original.rate if isinstance(step.original, Interleave) else DEFAULT_PINNED_RATE
+        return cls(min(rate, MAX_RATE), literal_assignments(step.fields))
 
 
 @dataclass
@@ -121,14 +135,13 @@ class InterleaveRuntime(ActionRuntime):
             template.undecodable = True
             info = MessageInfo(channel, template.index, slot, codec, dict)
             item.consumers = ()
-            item.events.append(self.context.event("interleave", info, consumers, skipped=f"undecodable: {exc}"))
+            item.events.append(self.context.event("interleave", info, consumers,
+                                                  **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
             return [item]
         self.injected += 1
         info = MessageInfo(channel, template.index, slot, codec, lambda: codec.decode(template.payload))
         changes, skipped = apply_plans(message, self.plans[channel], info)
         item.message = message
-        detail: dict = {"injection": self.injected}
-        if skipped:
-            detail["skipped_fields"] = skipped
-        item.events.append(self.context.event("interleave", info, consumers, tuple(changes), **detail))
+        detail = FieldsDetail(injection=self.injected, skipped_fields=tuple(skipped) if skipped else None)
+        item.events.append(self.context.event("interleave", info, consumers, tuple(changes), **detail.to_json()))
         return [item]

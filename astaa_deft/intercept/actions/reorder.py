@@ -14,7 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import ActionConfig, ActionRuntime, MessageInfo, Pending, PolicyContext, decimal_text
+from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
+    decimal_text
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -23,8 +24,16 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class ReorderDetail(ActionDetail):
+    swapped_with: int | None = None  # the index of the message that overtook the held one
+    released: str | None = None  # why it went out without a successor
+
+
+@dataclass(frozen=True)
 class Reorder(ActionConfig):
     name: ClassVar[str] = "reorder"
+    detail_type: ClassVar[type[ActionDetail]] = ReorderDetail
+    defers: ClassVar[bool] = True
     max_hold_ms: float = 1000.0
 
     @classmethod
@@ -37,6 +46,11 @@ class Reorder(ActionConfig):
 
     def start(self, context: PolicyContext) -> ActionRuntime:
         return ReorderRuntime(self, context)
+
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Reorder:
+        """The original policy's hold time (events do not record it), else the default."""
+        return cls(step.original.max_hold_ms) if isinstance(step.original, Reorder) else cls()
 
 
 @dataclass
@@ -64,19 +78,20 @@ class ReorderRuntime(ActionRuntime):
         held = self.held.get(info.channel)
         if held is None or held.index >= info.index:
             return []
-        return [self._release(info.channel, info.now, swapped_with=info.index)]
+        return [self._release(info.channel, info.now, ReorderDetail(swapped_with=info.index))]
 
     def on_tick(self, now: float) -> list[Pending]:
         overdue = [channel for channel, held in self.held.items() if now - held.since >= self.max_hold]
-        return [self._release(channel, now, released="no next message within max-hold-ms") for channel in overdue]
+        return [self._release(channel, now, ReorderDetail(released="no next message within max-hold-ms"))
+                for channel in overdue]
 
     def flush(self, now: float) -> list[Pending]:
-        return [self._release(channel, now, released="end of run") for channel in list(self.held)]
+        return [self._release(channel, now, ReorderDetail(released="end of run")) for channel in list(self.held)]
 
-    def _release(self, channel: str, now: float, **detail: object) -> Pending:
+    def _release(self, channel: str, now: float, detail: ReorderDetail) -> Pending:
         held = self.held.pop(channel)
         item = held.item
         item.at = max(item.at, now)
         event = item.events[-1]
-        item.events[-1] = replace(event, detail={**event.detail, **detail})
+        item.events[-1] = replace(event, detail={**event.detail, **detail.to_json()})
         return item

@@ -26,21 +26,23 @@ import base64
 import binascii
 import json
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any, ClassVar, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from lxml import etree
 
 from ...codecs import DecodeError, get_codec
-from ...errors import InputError, Problem, did_you_mean
+from ...errors import AstaaDeftError, InputError, Problem, did_you_mean
 from ...fields import FieldPath, FieldPathError, get, set_field
 from ...spec.model import FLOAT_KINDS, INT_KINDS, Channel, FieldType
 from ..dictionary import (
     DYNAMIC, GROUP_OF_KIND, REF_PREFIX, Dictionary, Entry, FieldSite, NotApplicable, UnknownEntry, ValueContext,
     field_site, wire_value,
 )
-from .base import ActionConfig, ActionRuntime, FieldChange, MessageInfo, Pending, PolicyContext
+from .base import ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, \
+    PolicyContext, required
 
 if TYPE_CHECKING:
     from ..testcase import ActionChecker, Policy
@@ -58,8 +60,39 @@ class Assignment:
     value: str  # as written: a literal, dict:..., json:... or str:...
 
 
+def value_text(value: Any) -> str:
+    """A ``<field value=…>`` that sets exactly ``value`` whatever the field's declared type.
+
+    ``json:`` with ASCII escapes: the text stays valid XML (control
+    characters and lone surrogates are escaped) and reads back to the same
+    Python value (NaN and infinities included). Bytes go as base64, which a
+    ``bytes`` field reads as binary.
+    """
+    if isinstance(value, (bytes, bytearray)):
+        return base64.b64encode(bytes(value)).decode("ascii")
+    return JSON_PREFIX + json.dumps(value, ensure_ascii=True, allow_nan=True, separators=(",", ":"))
+
+
+def literal_assignments(changes: Sequence[FieldChange]) -> tuple[Assignment, ...]:
+    """Assignments setting the values that were actually sent, never the rule that produced them.
+
+    (``time.jump_back`` recomputed on another run would give another value.)
+    """
+    return tuple(Assignment(change.path, value_text(change.new)) for change in changes)
+
+
+@dataclass(frozen=True)
+class FieldsDetail(ActionDetail):
+    """What ``set`` and ``interleave`` record beyond their field changes."""
+
+    injection: int | None = None  # interleave: the number of this injection, from 1
+    skipped_fields: tuple[dict[str, Any], ...] | None = None  # assignments that did not apply, and why
+    skipped: str | None = None  # why nothing was set (or injected)
+
+
 def read_assignments(element: etree._Element) -> tuple[Assignment, ...]:
-    return tuple(Assignment(child.get("path"), child.get("value")) for child in element.iterfind("field"))
+    return tuple(Assignment(required(child, "path"), required(child, "value"))
+                 for child in element.iterfind("field"))
 
 
 def write_assignments(element: etree._Element, assignments: Sequence[Assignment]) -> None:
@@ -106,7 +139,7 @@ def _report_value(checker: ActionChecker, element: etree._Element, problem: Valu
 
 # ---------------------------------------------------------------- typing values
 
-class ValueProblem(ValueError):
+class ValueProblem(AstaaDeftError, ValueError):
     def __init__(self, message: str, fix: str = ""):
         super().__init__(message)
         self.fix = fix
@@ -323,6 +356,8 @@ def _previous_at(info: MessageInfo, where: FieldPath) -> Any:
 @dataclass(frozen=True)
 class Set(ActionConfig):
     name: ClassVar[str] = "set"
+    detail_type: ClassVar[type[ActionDetail]] = FieldsDetail
+    carries_fields: ClassVar[bool] = True
     fields: tuple[Assignment, ...]
 
     @classmethod
@@ -338,6 +373,11 @@ class Set(ActionConfig):
     def start(self, context: PolicyContext) -> ActionRuntime:
         return SetRuntime(self, context)
 
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Set | None:
+        """The kept field changes as literals of the values sent; None when none is kept."""
+        return cls(literal_assignments(step.fields)) if step.fields else None
+
 
 class SetRuntime(ActionRuntime):
     def __init__(self, config: Set, context: PolicyContext):
@@ -351,15 +391,13 @@ class SetRuntime(ActionRuntime):
             try:
                 item.message = info.codec.decode(item.payload)  # type: ignore[arg-type]
             except DecodeError as exc:
-                item.events.append(self.context.event("set", info, item.consumers, skipped=f"undecodable: {exc}"))
+                item.events.append(self.context.event(
+                    "set", info, item.consumers, **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
                 return [item]
         changes, skipped = apply_plans(item.message, self.plans[info.channel], info)  # type: ignore[arg-type]
-        detail: dict[str, Any] = {}
-        if skipped:
-            detail["skipped_fields"] = skipped
-        if not changes:
-            detail["skipped"] = "no field was set"
-            if decoded_here:  # nothing changed: keep the real payload object (zero copy downstream)
-                item.message = None
-        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail))
+        detail = FieldsDetail(skipped_fields=tuple(skipped) if skipped else None,
+                              skipped=None if changes else "no field was set")
+        if not changes and decoded_here:  # nothing changed: keep the real payload object (zero copy downstream)
+            item.message = None
+        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail.to_json()))
         return [item]
