@@ -1,9 +1,9 @@
 """The one adapter between a campaign and minimisation: minimise a bucket's first failing run.
 
-Today it runs ``astaa-deft minimise`` as a child process over the failing
-run's log (the existing machinery, unchanged, and nothing outside commands/
-imports commands/). When ``minimise/workflow.py`` lands this becomes a
-library call returning the same record.
+It runs ``astaa-deft minimise`` (:func:`astaa_deft.minimise.workflow.minimise_log`)
+as a child process in its own session over the failing run's log: a
+minimisation re-runs the SUT many times, so a hard time bound and a process
+group the campaign can stop are worth more than an in-process call.
 """
 
 from __future__ import annotations

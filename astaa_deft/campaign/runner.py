@@ -1,31 +1,30 @@
 """The one adapter between a campaign and the rest of the tool: run one case, get a typed outcome.
 
-Today it drives :class:`astaa_deft.bus.run.BusRun` directly: a fresh run
-with its own router port (the spec's endpoints with port 0 → a free port),
-its own run directory and its own log, ended by the first broken invariant,
-every module gone, or the time horizon. When the session layer lands this
-module becomes a call of ``run_session(spec, options, stop_when=…)``; nothing
-else in the campaign package touches the bus.
+One call of :func:`astaa_deft.session.run_session`: a fresh run with its
+own router port (the spec's endpoints with port 0 → a free port), its own
+run directory and its own log, ended by the first broken invariant, a
+crashed module, every module gone, or the time horizon. Nothing else in
+the campaign package touches the bus.
 """
 
 from __future__ import annotations
 
 import math
 import threading
-import time
 from dataclasses import replace
 from pathlib import Path
 
 from .. import fields
-from ..bus.run import BusRun, RunOptions
 from ..codecs import get_codec
 from ..errors import InputError
 from ..intercept.dictionary import Dictionary, load_dictionary
 from ..intercept.engine import Interceptor
 from ..intercept.testcase import TestCase
 from ..log import layout
+from ..log.records import ViolationRecord
 from ..monitor.kinds.bound import BoundInvariant
 from ..monitor.verdict import IMPLICIT
+from ..session import BusRun, RunOptions, run_session
 from ..spec.model import Spec
 from .model import CaseOutcome, Finding
 
@@ -59,41 +58,25 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     options = RunOptions(mode="star", launch=True, record=log_path, params=dict(params),
                          command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
                          interceptor=interceptor, stop_on_violation=True, attachments=attachments)
-    started = time.monotonic()
-    bus = BusRun(isolated(spec), options)
+    options.time_limit = horizon
     watch = MarginWatch(spec)
-    reason = "horizon"
     try:
-        with bus:
-            watch.attach(bus)
-            t0 = time.monotonic()
-            while time.monotonic() - t0 < horizon:
-                if bus.stop_requested.is_set():
-                    reason = "violation"
-                    break
-                if bus.crashed():
-                    reason = "module crashed"
-                    break
-                if bus.launcher is not None and not bus.alive():
-                    reason = "all modules exited"
-                    break
-                time.sleep(POLL_SECONDS)
+        result = run_session(isolated(spec), options, on_start=watch.attach,
+                             stop_when=lambda run: "module crashed" if run.crashed() else None)
     except InputError as exc:
-        return CaseOutcome("error", "?", "the run did not start", seconds=time.monotonic() - started,
-                           error="; ".join(str(p) for p in exc.problems))
-    seconds = time.monotonic() - started
-    verdict = bus.verdict
-    if verdict is None:  # never observed to the end: no Pass
-        return CaseOutcome("error", "?", "the run was not observed to its end", seconds=seconds,
-                           log_path=str(log_path), reason=reason, error="no verdict")
-    findings = [Finding(str(v.get("invariant")), str(v.get("crash", "Silent")), v.get("module"),
-                        v.get("channel"), str(v.get("detail", ""))) for v in bus.violations]
-    for exit_ in bus.crashed():
+        return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems))
+    reason = {"time limit": "horizon", "violation (--stop-on-violation)": "violation"}.get(result.end_reason,
+                                                                                            result.end_reason)
+    if result.verdict is None or not result.observed or not result.complete:  # not fully observed: no Pass
+        return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
+                           log_path=str(log_path), reason=reason,
+                           error="no verdict" if result.verdict is None else "the log was not finished")
+    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail) for v in result.violations]
+    for exit_ in result.crashes:
         if not any(f.module == exit_.module for f in findings):
             findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe()))
-    mutations = bus.interception.mutations if bus.interception is not None else 0
-    return CaseOutcome("done", verdict.klass, verdict.summary, findings, seconds, str(log_path), reason,
-                       mutations, margins=watch.margins(bus.violations))
+    return CaseOutcome("done", result.verdict.klass, result.verdict.summary, findings, result.seconds,
+                       str(log_path), reason, result.mutations, margins=watch.margins(result.violations))
 
 
 class MarginWatch:
@@ -138,9 +121,9 @@ class MarginWatch:
                 if margin < self.closest.get(inv.name, math.inf):
                     self.closest[inv.name] = margin
 
-    def margins(self, violations: list[dict]) -> dict[str, float]:
+    def margins(self, violations: tuple[ViolationRecord, ...]) -> dict[str, float]:
         with self._lock:
             out = dict(self.closest)
         for v in violations:
-            out[str(v.get("invariant"))] = 0.0
+            out[v.invariant] = 0.0
         return out
