@@ -95,8 +95,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="replay with the planner's own process in lock-step (needs planner.replay.command)")
     ext.add_argument("--ground-truth", metavar="FIELD",
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
+    ext.add_argument("--jobs", type=int, metavar="N",
+                     help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
-                                                         a.ground_truth))
+                                                         a.ground_truth, jobs=a.jobs))
 
     # minimise
     mini = sub.add_parser("minimise", aliases=["minimize"],
@@ -118,6 +120,30 @@ def build_parser() -> argparse.ArgumentParser:
                                                           a.parallel, a.live_only, confirm=a.confirm,
                                                           max_tests=a.max_tests,
                                                           live_fallback=not a.no_live_fallback))
+
+    # fuzz, report (campaigns)
+    fz = sub.add_parser("fuzz", help="a campaign: generated test cases, each a fresh run; failures bucketed, "
+                                     "re-run for their rate, minimised, reported")
+    fz.add_argument("--spec", type=Path, help="the SUT spec (YAML)")
+    fz.add_argument("-o", "--out", type=Path, required=True, help="the campaign directory (journal, logs, report)")
+    fz.add_argument("--cases", type=int, help="generated cases to run")
+    fz.add_argument("--budget", help="or a time budget: 90s, 30m, 2h")
+    fz.add_argument("--workers", type=int, help="cases at once (default: from the cores and the spec's modules)")
+    fz.add_argument("--seed", type=int, default=0)
+    fz.add_argument("--strategy", default="random", help="random (ASTAA's weighted generation) or guided")
+    fz.add_argument("--dictionary", type=Path, action="append", default=[])
+    fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
+    fz.add_argument("--horizon", type=_positive, default=20.0, help="seconds a case runs at most")
+    fz.add_argument("--baseline", type=int, default=2, help="clean runs first")
+    fz.add_argument("--reruns", type=int, default=2, help="re-runs of each bucket's first failure, for its rate")
+    fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
+    fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")
+    fz.add_argument("--cluster", help="tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes)")
+    fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit")
+    fz.set_defaults(func=_fuzz)
+    rep = sub.add_parser("report", help="regenerate a campaign's report.html")
+    rep.add_argument("campaign", type=Path)
+    rep.set_defaults(func=lambda a: _cmd("report").run(a.campaign))
 
     # demo
     demo = sub.add_parser("demo", help="the bundled driving stack through the whole tool: record, DeFT tests, "
@@ -157,6 +183,24 @@ def _proxy(a: argparse.Namespace) -> int:
     return proxy.run(spec, a.record, a.passive, a.duration, a.launch, console.parse_params(a.param),
                      sys.argv, a.run_dir, stop_on_violation=a.stop_on_violation, interceptor=interceptor,
                      attachments=attachments)
+
+
+def _fuzz(a: argparse.Namespace) -> int:
+    from .campaign.campaign import CampaignConfig
+    from .commands import fuzz
+
+    if a.status:
+        return fuzz.status(a.out)
+    if a.spec is None and not a.resume:
+        raise InputError("astaa-deft fuzz: --spec is required (or --resume, or --status)")
+    if a.cases is None and a.budget is None and not a.resume:
+        raise InputError("astaa-deft fuzz: give --cases N or --budget DURATION")
+    config = CampaignConfig(a.spec or Path("."), a.out, cases=a.cases,
+                            budget=fuzz.parse_budget(a.budget) if a.budget else None, workers=a.workers,
+                            seed=a.seed, strategy=a.strategy, dictionaries=a.dictionary,
+                            params=fuzz.parse_params(a.params), cluster=a.cluster, horizon=a.horizon,
+                            baseline_runs=a.baseline, reruns=a.reruns, minimise=not a.no_minimise)
+    return fuzz.run(config, a.resume)
 
 
 def _demo(a: argparse.Namespace) -> int:

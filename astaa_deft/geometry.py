@@ -77,3 +77,15 @@ def interpolate_pose(poses: list[tuple[float, float, float, float]], t: float) -
             return x0 + u * (x1 - x0), y0 + u * (y1 - y0), h0 + u * dh
     t0, x0, y0, h0 = poses[-1]
     return x0, y0, h0
+
+
+def box_between(a: Box, b: Box, u: float) -> Box:
+    """The box a fraction u of the way from a to b (centre linearly, heading the short way round)."""
+    dh = math.atan2(math.sin(b.heading - a.heading), math.cos(b.heading - a.heading))
+    return Box(a.x + u * (b.x - a.x), a.y + u * (b.y - a.y), a.heading + u * dh,
+               a.length + u * (b.length - a.length), a.width + u * (b.width - a.width))
+
+
+def box_moved(box: Box, vx: float, vy: float, dt: float) -> Box:
+    """The box carried dt seconds along a constant velocity (vx, vy)."""
+    return Box(box.x + vx * dt, box.y + vy * dt, box.heading, box.length, box.width)

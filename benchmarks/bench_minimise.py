@@ -36,8 +36,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.bus.run import BusRun, RunOptions
 from astaa_deft.demo.bundled import demo_noise_policies, demo_spec_path
+from astaa_deft.session import RunOptions, run_session
 from astaa_deft.intercept import load_interceptor
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
@@ -73,10 +73,8 @@ def record(defect: int, directory: Path) -> Path:
     log = directory / f"defect{defect}.mcap"
     options = RunOptions(mode="star", interceptor=load_interceptor(policy, spec), record=log,
                          params={"scenario": "lane_follow", "defects": "on"}, run_dir=directory / f"run{defect}",
-                         attachments={layout.POLICY_ATTACHMENT: policy})
-    with BusRun(spec, options) as run:
-        while (time.time_ns() - run.started_ns) / 1e9 < RECORD_SECONDS:
-            time.sleep(0.05)
+                         attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=RECORD_SECONDS)
+    run_session(spec, options)
     return log
 
 

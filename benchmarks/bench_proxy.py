@@ -21,7 +21,7 @@ from pathlib import Path
 
 from astaa_deft.bus import zenoh_config as zc
 from astaa_deft.bus.processes import stop_process
-from astaa_deft.bus.run import BusRun, RunOptions
+from astaa_deft.session import RunOptions, run_session
 from astaa_deft.intercept import load_interceptor
 from astaa_deft.spec.loader import load_spec
 
@@ -70,10 +70,10 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
         run_dir = Path(tmp)
         interceptor = load_interceptor(policy, spec) if policy is not None else None
         options = RunOptions(mode=mode, params=params, run_dir=run_dir, interceptor=interceptor,
-                             record=run_dir / "bench.mcap" if record else None)
-        with BusRun(spec, options) as run:
-            result = wait_result(run_dir / "sink.json")
-        return result, run.recorded
+                             record=run_dir / "bench.mcap" if record else None, time_limit=RESULT_TIMEOUT)
+        sink = run_dir / "sink.json"
+        outcome = run_session(spec, options, stop_when=lambda run: "sink done" if sink.exists() else None)
+        return wait_result(sink), outcome.recorded
 
 
 def fmt_rate(r: dict) -> str:

@@ -3,28 +3,26 @@
 Runs are recorded passively (as DeFT records: no star in the path) with the
 demo's seeded defects off, and stopped as soon as the simulator's `status`
 channel says the scenario is done (goal, collision or its time limit) — the
-way `astaa-deft demo run` stops (commands/demo.py's StatusWatch).
+way `astaa-deft demo run` stops (astaa_deft/demo/status.py's StatusWatch).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import threading
 import time
 from bisect import bisect_left
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
-from astaa_deft.bus.run import RunOptions
 from astaa_deft.codecs import get_codec
-from astaa_deft.commands.demo import StatusWatch
-from astaa_deft.commands.proxy import run_bus
 from astaa_deft.deft.replay import trajectory_points
 from astaa_deft.deft.validator import Point, compare
 from astaa_deft.demo.bundled import demo_spec_path
+from astaa_deft.demo.status import StatusWatch
 from astaa_deft.log.reader import LogContents
+from astaa_deft.session import RunOptions, run_session
 from astaa_deft.spec.loader import load_spec
 from astaa_deft.spec.model import Spec
 
@@ -56,14 +54,14 @@ class RunRecord:
 
 def record_run(spec: Spec, scenario: str, path: Path, time_limit: float = RUN_TIME_LIMIT) -> RunRecord:
     params = {"scenario": scenario, "defects": "off"}
-    options = RunOptions(mode="passive", record=path, params=params,
+    options = RunOptions(mode="passive", record=path, params=params, time_limit=time_limit,
                          command_line=["benchmarks/deft_reproduction.py", scenario])
     watch = DoneWatch()
     t0 = time.monotonic()
-    outcome = run_bus(spec, options, time_limit, until=watch.finished,
-                      on_start=lambda r: r.subscribe("status", watch.on_sample), verbose=False)
+    outcome = run_session(spec, options, stop_when=watch.finished,
+                          on_start=lambda r: r.subscribe("status", watch.on_sample))
     wall = time.monotonic() - t0
-    return RunRecord(path, scenario, wall, outcome.seconds, outcome.reason, watch.collision is not None,
+    return RunRecord(path, scenario, wall, outcome.seconds, outcome.end_reason, watch.collision is not None,
                      (watch.collision or {}).get("collision_with"), float(watch.latest.get("sim_time", 0.0)),
                      watch.min_clearance, len(outcome.crashes))
 

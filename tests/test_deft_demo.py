@@ -12,7 +12,7 @@ import pytest
 
 from astaa_deft.commands.demo import demo_spec_path
 from astaa_deft.commands.proxy import run_bus
-from astaa_deft.bus.run import RunOptions
+from astaa_deft.session import RunOptions
 from astaa_deft.deft.extract import extract, ground_truth_rate
 from astaa_deft.deft.replay import make_planner
 from astaa_deft.errors import InputError
@@ -32,7 +32,7 @@ def recorded(tmp_path_factory):
     watch = StatusWatch()
     outcome = run_bus(spec, RunOptions(mode="passive", record=path, params=PARAMS), 40.0, until=watch.finished,
                       on_start=lambda r: r.subscribe("status", watch.on_sample), verbose=False)
-    assert watch.goal, outcome.reason
+    assert watch.goal, outcome.end_reason
     return spec, path
 
 

@@ -41,7 +41,7 @@ def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
     log = tmp_path / "run.mcap"
     outcome, watch = drive(scenario, defects=False, passive=False, record=log, command_line=[])
     assert watch.goal and watch.collision is None
-    assert outcome.violations == [], [v["invariant"] for v in outcome.violations]
+    assert outcome.violations == (), [v.invariant for v in outcome.violations]
     assert outcome.verdict.klass == "Pass"
     offline = agree_offline(log)
     assert offline.verdict.klass == "Pass" and offline.violations == []
@@ -59,4 +59,4 @@ def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass
     offline = agree_offline(log)
     assert offline.verdict.klass == outcome.verdict.klass
     assert offline.verdict.first.invariant == outcome.verdict.first.invariant
-    assert sorted(v.invariant for v in offline.violations) == sorted(v["invariant"] for v in outcome.violations)
+    assert sorted(v.invariant for v in offline.violations) == sorted(v.invariant for v in outcome.violations)

@@ -23,7 +23,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from astaa_deft.bus.run import BusRun, RunOptions
+from astaa_deft.session import RunOptions, run_session
 from astaa_deft.commands import minimise as command
 from astaa_deft.commands.demo import demo_noise_policies, demo_spec_path
 from astaa_deft.deft.suite import Suite
@@ -58,10 +58,8 @@ def record(directory: Path, name: str, policies: str, seconds: float) -> Path:
     log = directory / f"{name}.mcap"
     options = RunOptions(mode="star", interceptor=load_interceptor(policy, SPEC), record=log,
                          params={"scenario": "lane_follow", "defects": "on"}, run_dir=directory / f"run-{name}",
-                         attachments={layout.POLICY_ATTACHMENT: policy})
-    with BusRun(SPEC, options) as run:
-        while (time.time_ns() - run.started_ns) / 1e9 < seconds:
-            time.sleep(0.05)
+                         attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=seconds)
+    run_session(SPEC, options)
     return log
 
 

@@ -240,9 +240,11 @@ def test_collision_reports_the_obstacle_at_the_first_overlapping_message(tmp_pat
             log.message("localization", 0.1 * k + 0.05, pose(k, x=1.0 * k))
 
     found = check(tmp_path, COLLISION.format(margin=0.0), write)
-    # boxes 4 m long touch when the centres are 4 m apart: x = 16 (k=16, touching), overlap from k=17
-    assert where(found) == [("no_collision", "localization", 18, ns(1.75))]
-    assert found[0].message["obstacle_id"] == 7 and "obstacle 7 by 1.00 m" in found[0].detail
+    # boxes 4 m long touch when the centres are 4 m apart: x = 16 at 1.65 s (touching). At the obstacle
+    # message of 1.7 s the ego is half way to x = 17 (interpolated, not its 1.65 s pose held): 0.5 m deep.
+    assert where(found) == [("no_collision", "obstacles", 18, ns(1.7))]
+    assert found[0].message["obstacle_id"] == 7 and "obstacle 7 by 0.50 m" in found[0].detail
+    assert found[0].message["skew_s"] == 0.0
 
 
 def test_collision_margin_and_an_obstacle_entering_on_its_own_message(tmp_path):

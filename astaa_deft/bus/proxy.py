@@ -14,6 +14,7 @@ from typing import Callable
 import zenoh
 
 from ..spec.model import Spec
+from .star_requests import StarLiveliness, StarQueries
 from .topology import STAR_PREFIX, UNDECLARED_PREFIX, Route, module_namespace, split_star_key, star_routes
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -72,6 +73,9 @@ class StarProxy:
         self._subscribers: list[zenoh.Subscriber] = []
         self._threads: list[threading.Thread] = []
         self.undeclared_count = 0
+        # Liveliness tokens and queries are wired like publications (see star_requests).
+        self.liveliness = StarLiveliness(session, spec, on_undeclared)
+        self.queries = StarQueries(session, spec, on_undeclared)
 
     def start(self) -> None:
         for route in star_routes(self.spec):
@@ -80,6 +84,8 @@ class StarProxy:
             self._pump(route.source, self.make_forwarder(live), f"fwd-{route.channel.name}")
         # allowed_origin=REMOTE keeps our own republished copies out of the catch-all.
         self._pump(f"{STAR_PREFIX}/**", self._catch_all, "fwd-catch-all", allowed_origin=REMOTE)
+        self.liveliness.start()
+        self.queries.start()
 
     def _pump(self, key_expr: str, handle: Callable[[zenoh.Sample], None], name: str, **options) -> None:
         sub = self.session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(FIFO_CAPACITY), **options)
@@ -97,6 +103,8 @@ class StarProxy:
         self._threads.append(thread)
 
     def stop(self) -> None:
+        self.queries.stop()
+        self.liveliness.stop()
         for sub in self._subscribers:
             sub.undeclare()
         for thread in self._threads:

@@ -122,3 +122,43 @@ def split_star_key(full_key: str) -> tuple[str, str] | None:
     if len(parts) < 3 or parts[0] != STAR_PREFIX:
         return None
     return parts[1], parts[2]
+
+
+def _keys_meet(a: str, b: str) -> bool:
+    """True if two key expressions (wildcards allowed) share a key."""
+    import zenoh  # local: the rest of this module stays free of Zenoh
+
+    return a == b or zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b))
+
+
+def token_destinations(spec: Spec, module: str, key: str) -> tuple[str, ...]:
+    """Modules that see `module`'s liveliness token on `key`.
+
+    A token is wired like a publication: a channel on that key produced by
+    `module` sends it to the channel's consumers; a key no channel declares
+    reaches every other module (the catch-all); a declared key produced by
+    another module reaches nobody.
+    """
+    declared = [ch for ch in spec.channels if _keys_meet(ch.key, key)]
+    if not declared:
+        return tuple(m.name for m in spec.modules if m.name != module)
+    return tuple(dict.fromkeys(c for ch in declared if ch.producer == module for c in ch.consumers))
+
+
+def query_servers(spec: Spec, caller: str, key: str) -> tuple[str, ...]:
+    """Modules a query of `caller` on `key` is sent to.
+
+    Request-reply is wired by the channel on the key: its producer is the
+    server (the queryable), its consumers the callers allowed to ask; a key no
+    channel declares reaches every other module (the catch-all).
+    """
+    declared = [ch for ch in spec.channels if _keys_meet(ch.key, key)]
+    if not declared:
+        return tuple(m.name for m in spec.modules if m.name != caller)
+    return tuple(dict.fromkeys(ch.producer for ch in declared if caller in ch.consumers))
+
+
+def rebase_star_key(full_key: str, module: str) -> str | None:
+    """'sut/<a>/<key>' → 'sut/<module>/<key>'; None for a key outside the star."""
+    parts = split_star_key(full_key)
+    return None if parts is None else f"{module_namespace(module)}/{parts[1]}"

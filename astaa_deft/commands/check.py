@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, Problem
+from ..log import records as rec
 from ..log.reader import LogContents
 from ..monitor import format_verdict, format_violation
 from ..monitor.check import check_recorded_run
@@ -71,7 +72,7 @@ def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invarian
     if show_pass or not result.passed:
         print(format_verdict(result.verdict, result.start_ns))
     if result.online_verdict is not None:
-        online = result.online_verdict.get("class", "?")
+        online = result.online_verdict.klass
         agreement = "agrees" if online == result.verdict.klass else "DIFFERS from this check"
         print(f"online verdict recorded during the run: {online} ({agreement})")
 
@@ -85,7 +86,7 @@ def _as_json(result: CheckResult, log: LogContents) -> dict:
         "seconds": result.seconds,
         "start_ns": result.start_ns,
         "end_ns": result.end_ns,
-        "online_verdict": result.online_verdict,
+        "online_verdict": rec.encode(result.online_verdict) if result.online_verdict is not None else None,
         "log": {"intact": log.intact, "truncated": log.truncated, "damage": log.damage,
                 "read": log.describe_reading()},
     }

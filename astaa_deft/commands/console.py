@@ -9,6 +9,7 @@ import time
 from typing import Callable, Iterable
 
 from ..errors import InputError
+from ..log import records as rec
 
 
 class StopSignal:
@@ -58,7 +59,7 @@ class StatusLine:
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def __enter__(self) -> "StatusLine":
-        if self.enabled:
+        if self.enabled and not self._thread.is_alive():
             self._thread.start()
         return self
 
@@ -74,7 +75,7 @@ class StatusLine:
 
     def __exit__(self, *exc) -> None:
         self._stop.set()
-        if self.enabled:
+        if self._thread.is_alive():
             self._thread.join()
             self.clear()
 
@@ -99,28 +100,27 @@ def say(message: str) -> None:
     print(message, flush=True)
 
 
-def format_event(event: dict) -> str | None:
-    kind = event.get("kind")
-    if kind == "process_exit":
-        if event.get("during_shutdown"):
+def format_event(record: rec.Record) -> str | None:
+    """One event as the console shows it (None: not shown)."""
+    if isinstance(record, rec.ProcessExitRecord):
+        if record.during_shutdown:
             return None
-        how = f"killed by {event['signal']}" if event.get("signal") else f"exit code {event.get('returncode')}"
-        text = f"!! module '{event.get('module')}' {how}"
-        tail = (event.get("stderr_tail") or "").strip().splitlines()
+        text = f"!! {record.describe()}"
+        tail = record.stderr_tail.strip().splitlines()
         if tail:
             text += "\n   " + "\n   ".join(tail[-5:])
         return text
-    if kind == "violation":
+    if isinstance(record, rec.ViolationRecord):
         from ..monitor.violation import Violation, format_violation
 
-        return format_violation(Violation.from_json(event))
-    if kind == "mutation":
-        fields = ", ".join(f"{c.get('path')}: {_short(c.get('old'))} → {_short(c.get('new'))}"
-                           for c in event.get("fields", []) if isinstance(c, dict))
-        return (f"~~ {event.get('action')} on '{event.get('channel')}' #{event.get('message_index')}"
-                f" (policy {event.get('policy')})" + (f": {fields}" if fields else ""))
-    if kind == "undeclared_key":
-        return f"-- undeclared key '{event.get('key')}' from '{event.get('module')}': {event.get('note')}"
+        return format_violation(Violation.from_json(rec.encode(record)))
+    if isinstance(record, rec.MutationRecord):
+        fields = ", ".join(f"{c.path}: {_short(c.old)} → {_short(c.new)}" for c in record.fields)
+        index = f" #{record.message_index}" if record.message_index is not None else ""
+        return (f"~~ {record.action} on '{record.channel}'{index} (policy {record.policy})"
+                + (f": {fields}" if fields else ""))
+    if isinstance(record, rec.UndeclaredKey):
+        return f"-- undeclared key '{record.key}' from '{record.module}': {record.note}"
     return None
 
 

@@ -12,66 +12,28 @@ Everything lands in ./astaa-deft-demo/ (or --out).
 
 from __future__ import annotations
 
-import json
-import math
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
-from ..bus.run import RunOptions
 from ..demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
+from ..demo.status import StatusWatch
 from ..intercept import load_interceptor
 from ..log import layout
 from ..log.reader import read_log
 from ..log.summary import format_info
 from ..monitor.verdict import format_verdict
+from ..session import RunOptions, RunResult
 from ..spec.loader import load_spec
 from .console import say
-from .proxy import Outcome, run_bus
+from .proxy import run_bus
 
 DEFAULT_TIME_LIMIT = 40.0
 
 
-class StatusWatch:
-    """The simulator's latest status message, as the tool saw it (done: goal, collision or time limit)."""
-
-    def __init__(self) -> None:
-        self.latest: dict = {}
-        self.collision: dict | None = None
-        self.goal = False
-        self.done = False
-        self.min_clearance = math.inf
-        self._lock = threading.Lock()
-
-    def on_sample(self, sample) -> None:
-        try:
-            msg = json.loads(sample.payload.to_bytes())
-        except ValueError:
-            return
-        with self._lock:
-            self.latest = msg
-            if msg.get("collision") and self.collision is None:
-                self.collision = msg
-            self.goal = self.goal or bool(msg.get("goal_reached"))
-            self.done = self.done or bool(msg.get("done"))
-            clearance = msg.get("min_clearance")
-            if isinstance(clearance, (int, float)):
-                self.min_clearance = min(self.min_clearance, float(clearance))
-
-    def finished(self, _run) -> str | None:
-        if self.collision is not None:
-            return "collision"
-        if self.goal:
-            return "goal reached"
-        if self.done:
-            return "done"
-        return None
-
-
 def drive(scenario: str, defects: bool, passive: bool, record: Path, command_line: list[str],
           duration: float | None = None, policy: Path | None = None, stop_on_violation: bool = False,
-          ) -> tuple[Outcome, StatusWatch]:
+          ) -> tuple[RunResult, StatusWatch]:
     """One scenario through the proxy, recorded; stops at the goal, a collision or the time limit."""
     spec = load_spec(demo_spec_path())
     params = {"scenario": scenario, "defects": "on" if defects else "off"}
@@ -85,9 +47,9 @@ def drive(scenario: str, defects: bool, passive: bool, record: Path, command_lin
     return outcome, watch
 
 
-def summarise(outcome: Outcome, watch: StatusWatch) -> None:
+def summarise(outcome: RunResult, watch: StatusWatch) -> None:
     st = watch.latest
-    say(f"stopped: {outcome.reason} after {outcome.seconds:.1f} s wall, sim time {st.get('sim_time', 0):.1f} s")
+    say(f"stopped: {outcome.end_reason} after {outcome.seconds:.1f} s wall, sim time {st.get('sim_time', 0):.1f} s")
     say(f"goal reached: {'yes' if watch.goal else 'no'}")
     if watch.collision is not None:
         say(f"collision: yes, with {watch.collision.get('collision_with', '?')} "
@@ -161,7 +123,14 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
         problems.append("minimisation did not reproduce the failure")
 
     say("")
-    say(f"everything is in {out_dir}/: clean.mcap, planner-tests/, intercepted.mcap, minimised/")
+    say("== 5/5 fuzz: a short campaign finds defects on its own ==")
+    from ..campaign.demo_step import campaign_step
+
+    if campaign_step(spec_path, out_dir / "campaign", say) == 0:
+        problems.append("the campaign found no failure")
+
+    say("")
+    say(f"everything is in {out_dir}/: clean.mcap, planner-tests/, intercepted.mcap, minimised/, campaign/")
     say(f"look inside a log: astaa-deft log info {attack_log}")
     for p in problems:
         say(f"demo problem: {p}")

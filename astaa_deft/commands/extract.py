@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from ..deft.config import PAPER_THRESHOLDS
-from ..deft.extract import Extraction
+from ..deft.extract import Extraction, near_miss_note
 from ..deft.workflow import extract_module_tests
 from .console import say
 
@@ -39,10 +39,13 @@ def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
 
 
 def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None, process: bool,
-        ground_truth: str | None) -> int:
+        ground_truth: str | None, jobs: int | None = None) -> int:
     report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=process,
-                                  ground_truth=ground_truth, progress=progress_bar, notice=say)
+                                  ground_truth=ground_truth, jobs=jobs, progress=progress_bar, notice=say)
     say(summary_table(report.extraction))
+    note = near_miss_note(report.extraction)
+    if note:
+        say(note)
     if report.collision:
         say(f"collision observed in the run: {report.oracles} frame(s) planned into a predicted obstacle "
             f"beforehand → oracle tests that fail while the planner still does so")

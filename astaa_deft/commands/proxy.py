@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..bus.run import BusRun, RunOptions
+from ..log import records as rec
+from ..session import BusRun, RunOptions, RunResult, run_session
 from ..spec.model import Spec
 from ..monitor.verdict import format_verdict
 from .console import RateMeter, StatusLine, StopSignal, format_event, say
@@ -16,69 +16,46 @@ from .console import RateMeter, StatusLine, StopSignal, format_event, say
 MUTATIONS_SHOWN = 3
 
 
-@dataclass
-class Outcome:
-    reason: str  # "duration", "signal", "all modules exited", "violation", "stopped"
-    seconds: float
-    counts: dict[str, int]
-    recorded: dict[str, int]
-    crashes: list
-    verdict: object = None  # astaa_deft.monitor.verdict.Verdict
-    violations: list = None
-    mutations: int = 0
-
-
 def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             until: Callable[[BusRun], str | None] = lambda run: None,
-            on_start: Callable[[BusRun], None] = lambda run: None, verbose: bool = True) -> Outcome:
-    """Run until `duration`, Ctrl-C/SIGTERM, every module gone, or `until` names a reason."""
+            on_start: Callable[[BusRun], None] = lambda run: None, verbose: bool = True) -> RunResult:
+    """:func:`run_session` with the console: events as they come, a status line, Ctrl-C/SIGTERM to stop."""
 
     shown: dict[str, int] = {}
 
-    def on_event(event: dict) -> None:
-        if event.get("kind") == "mutation":  # a policy may fire at 50 Hz: show the first few of each
-            policy = str(event.get("policy"))
-            shown[policy] = shown.get(policy, 0) + 1
-            if shown[policy] > MUTATIONS_SHOWN:
-                if shown[policy] == MUTATIONS_SHOWN + 1 and verbose:
-                    say(f"~~ (further mutations of policy {policy} are in the log, not shown)")
+    def on_event(record: rec.Record) -> None:
+        if isinstance(record, rec.MutationRecord):  # a policy may fire at 50 Hz: show the first few of each
+            shown[record.policy] = shown.get(record.policy, 0) + 1
+            if shown[record.policy] > MUTATIONS_SHOWN:
+                if shown[record.policy] == MUTATIONS_SHOWN + 1 and verbose:
+                    say(f"~~ (further mutations of policy {record.policy} are in the log, not shown)")
                 return
-        text = format_event(event)
+        text = format_event(record)
         if text and verbose:
             status.clear()
             say(text)
 
+    if duration is not None:
+        options.time_limit = duration if options.time_limit is None else min(duration, options.time_limit)
+    status = StatusLine(lambda: "")
     with StopSignal() as stop:
-        run = BusRun(spec, options, on_event=on_event)
-        meter = RateMeter(run.counts)
-        status = StatusLine(lambda: _status(run, meter, t0))
-        t0 = time.monotonic()
-        with run, status:
+
+        def started(run: BusRun) -> None:
+            meter = RateMeter(run.counts)
             t0 = time.monotonic()
+            status.render = lambda: _status(run, meter, t0)
+            status.__enter__()
             on_start(run)
-            reason = "stopped"
-            while True:
-                time.sleep(0.05)
-                if stop.requested():
-                    reason = f"signal {stop.received}"
-                    break
-                if duration is not None and time.monotonic() - t0 >= duration:
-                    reason = "duration"
-                    break
-                if run.stop_requested.is_set():
-                    reason = "violation (--stop-on-violation)"
-                    break
-                if options.launch and run.launcher is not None and not run.alive():
-                    reason = "all modules exited"
-                    break
-                custom = until(run)
-                if custom:
-                    reason = custom
-                    break
-            seconds = time.monotonic() - t0
-            counts = run.counts()
-        return Outcome(reason, seconds, counts, run.recorded, run.crashed(), run.verdict, run.violations,
-                       run.interception.mutations if run.interception is not None else 0)
+
+        def stop_when(run: BusRun) -> str | None:
+            if stop.requested():
+                return f"signal {stop.received}"
+            return until(run)
+
+        try:
+            return run_session(spec, options, stop_when=stop_when, on_event=on_event, on_start=started)
+        finally:
+            status.__exit__()
 
 
 def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
@@ -97,8 +74,8 @@ def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, 
     say(f"astaa-deft proxy: spec '{spec.name}', {'passive' if passive else 'star'} mode"
         + (f", recording to {record}" if record else "") + " — Ctrl-C to stop")
     outcome = run_bus(spec, options, duration)
-    say(f"stopped ({outcome.reason}) after {outcome.seconds:.1f} s")
-    for name, n in outcome.counts.items():
+    say(f"stopped ({outcome.end_reason}) after {outcome.seconds:.1f} s")
+    for name, n in outcome.sent.items():
         rec = f", recorded {outcome.recorded.get(name, 0)}" if record else ""
         say(f"  {name:20} {n:8d} messages{rec}")
     if interceptor is not None:

@@ -15,6 +15,7 @@ from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 from .config import PlannerSpec
 from .frames import Stream, candidates
+from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
 from .replay import ReplayPlanner, trajectory_points
 from .validator import Comparison, compare
 
@@ -59,7 +60,34 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 
 
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
-            progress: Callable[[int, int], None] = lambda done, total: None) -> Extraction:
+            progress: Callable[[int, int], None] = lambda done, total: None,
+            jobs: int | None = None) -> Extraction:
+    """Reconstruct and validate a frame per recorded output.
+
+    With ``jobs`` (an in-process planner on a system that can fork), the
+    candidates of an output are tried in forked processes, up to ``jobs`` at
+    a time, from the very same planner state (see fork_replay); otherwise
+    from deep copies of the planner, one after another.
+    """
+    if jobs is not None and planner.can_snapshot and can_fork():
+        return run_supervised(
+            lambda send: _extract(log, spec, planner, lambda done, total: send((done, total)),
+                                  ForkedSearch(jobs, send)),
+            on_message=lambda message: progress(*message))
+    return _extract(log, spec, planner, progress, None)
+
+
+def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
+    """The time the recorded planner took for this output: the gap since its previous one (or the median)."""
+    gaps = sorted(b.log_time - a.log_time for a, b in zip(outputs, outputs[1:]))
+    median = gaps[len(gaps) // 2] * 1e-9 if gaps else 0.0
+    if index == 0:
+        return median
+    return max(median, (outputs[index].log_time - outputs[index - 1].log_time) * 1e-9)
+
+
+def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Callable[[int, int], None],
+             search: ForkedSearch | None) -> Extraction:
     cfg: PlannerSpec = spec.planner
     streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
     outputs = streams_msgs.pop(cfg.output)
@@ -98,6 +126,22 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
             continue
         if not planner.can_snapshot:
             options = options[:1]
+        if search is not None:
+            kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points,
+                                  candidate_limit(_recorded_cycle_s(outputs, out_index)), result)
+            if kept is None:
+                result.skipped.append((out_index, "no candidate frame decodes or finishes within its time limit"))
+                progress(out_index + 1, len(outputs))
+                continue
+            cand, cmp, exact, tries = kept
+            previous = dict(cand.choice)
+            result.frames.append(ExtractedFrame(
+                index=len(result.frames), output=output,
+                trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
+                inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
+                comparison=cmp, accepted=cmp.within(cfg.threshold), candidates_tried=tries, exact=exact))
+            progress(out_index + 1, len(outputs))
+            continue
         # Several candidates: each must start from the same planner state.
         t1 = time.perf_counter()
         start_state = planner.snapshot() if len(options) > 1 else None
@@ -150,6 +194,55 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
         ))
         progress(out_index + 1, len(outputs))
     return result
+
+
+def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: PlannerSpec,
+                   expected: Any, expected_points: list, limit_s: float, result: Extraction):
+    """(candidate, comparison, exact, tries) kept for one output, in the process that carries on; or None."""
+    t0 = time.perf_counter()
+    frames = [{name: decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
+    result.reconstruction_seconds += time.perf_counter() - t0
+
+    def run(index: int):
+        frame = frames[index]
+        if any(v is None for v in frame.values()):
+            return None
+        try:
+            replayed = planner.step(frame)
+        except Exception as exc:  # the planner under test may crash on a frame: that is data
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        return compare(trajectory_points(replayed, cfg.trajectory), expected_points), _same(replayed, expected)
+
+    t1 = time.perf_counter()
+    if len(options) == 1:  # one candidate: nothing to keep apart, step right here
+        outcome = run(0)
+        kept = None if outcome is None else (0, outcome)
+    else:
+        tried = search.search(len(options), run, accepted=lambda r: r[0].within(cfg.threshold),
+                              closeness=lambda r: r[0].distance, limit_s=limit_s)
+        kept = None if tried is None else (tried.index, tried.result)
+    result.planner_seconds += time.perf_counter() - t1
+    if kept is None:
+        return None
+    index, (cmp, exact) = kept
+    tries = index + 1 if cmp.within(cfg.threshold) else len(options)
+    return options[index], cmp, exact, tries
+
+
+NEAR_MISS_M = 1e-9
+
+
+def near_miss_note(extraction: Extraction) -> str | None:
+    """Why outputs that match at 1e-9 m are not counted at θ = 0: the distances, and the flag that sets θ."""
+    near = sorted(f.comparison.distance for f in extraction.frames if 0.0 < f.comparison.distance <= NEAR_MISS_M)
+    if not near:
+        return None
+    quantiles = ", ".join(f"{name} {near[min(len(near) - 1, int(q * len(near)))]:.3g} m"
+                          for name, q in (("min", 0.0), ("median", 0.5), ("p90", 0.9)))
+    return (f"{len(near)} output(s) match within {NEAR_MISS_M:g} m but not exactly (distances: {quantiles}, "
+            f"max {near[-1]:.3g} m): floating-point noise, e.g. a planner state that does not survive copying "
+            f"bit for bit. If that is acceptable, set θ with --threshold {NEAR_MISS_M:g} "
+            f"(or planner.threshold in the spec).")
 
 
 def _same(a: Any, b: Any) -> bool:

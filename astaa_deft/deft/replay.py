@@ -42,21 +42,42 @@ class ReplayPlanner(Protocol):
     def close(self) -> None: ...
 
 
-def load_factory(path: str) -> Any:
+def load_factory(path: str, spec_dir: Path | None = None) -> Any:
+    """The factory named 'module:attr', imported from sys.path or else from the spec's directory.
+
+    A planner that sits next to its spec (a user's own stack, not an installed
+    package) is found without setting PYTHONPATH by hand.
+    """
     module_name, _, attr = path.partition(":")
     try:
-        return getattr(importlib.import_module(module_name), attr)
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            top = module_name.split(".")[0]
+            if spec_dir is None or exc.name != top or not _importable_from(spec_dir, top):
+                raise
+            if str(spec_dir) not in sys.path:
+                sys.path.append(str(spec_dir))  # after installed packages: never shadows them
+            module = importlib.import_module(module_name)
+        return getattr(module, attr)
     except (ImportError, AttributeError) as exc:
+        where = f" or the spec's directory {spec_dir}" if spec_dir is not None else ""
         raise InputError(Problem("<spec>", None, None, f"planner factory '{path}' cannot be loaded: {exc}",
-                                 "check 'planner.replay.factory' and that its package is installed")) from None
+                                 f"check 'planner.replay.factory': its module must be importable from sys.path"
+                                 f"{where} (set PYTHONPATH, or install its package)")) from None
+
+
+def _importable_from(directory: Path, top: str) -> bool:
+    return (directory / f"{top}.py").is_file() or (directory / top / "__init__.py").is_file() \
+        or (directory / top).is_dir()
 
 
 class InProcessPlanner:
     can_snapshot = True
 
-    def __init__(self, factory: str, kwargs: Mapping[str, Any]):
+    def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None):
         self.factory = factory
-        self.obj = load_factory(factory)(**kwargs)
+        self.obj = load_factory(factory, spec_dir)(**kwargs)
         if not callable(getattr(self.obj, "step", None)):
             raise InputError(f"planner factory '{factory}' returned an object without a step(frame) method")
 
@@ -160,7 +181,8 @@ class LockstepPlanner:
 def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False) -> ReplayPlanner:
     planner: PlannerSpec = spec.planner
     if planner.factory and not (prefer_process and planner.command):
-        return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}))
+        return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
+                                spec.path.parent.resolve() if spec.path else None)
     return LockstepPlanner(spec, planner, params)
 
 

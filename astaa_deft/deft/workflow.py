@@ -10,6 +10,7 @@ with oracle tests for a collision the run saw, and returns what it found.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -51,13 +52,14 @@ class ExtractReport:
 
 
 def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, threshold: float | None = None,
-                         process: bool = False, ground_truth: str | None = None,
+                         process: bool = False, ground_truth: str | None = None, jobs: int | None = None,
                          progress: Callable[[int, int], None] = lambda done, total: None,
                          notice: Callable[[str], None] = lambda line: None) -> ExtractReport:
     """Extract and write the module tests of one run (InputError on bad input).
 
     ``progress(done, total)`` follows the planner outputs; ``notice`` gets
-    the log reader's warnings.
+    the log reader's warnings; ``jobs`` bounds the worker processes that
+    try an output's candidate frames in parallel (default: one per core).
     """
     spec = load_spec(spec_path)
     if spec.planner is None:
@@ -71,7 +73,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
     params = run_params(log, spec)
     planner = make_planner(spec, params, prefer_process=process)
     try:
-        ex = extract(log, spec, planner, progress=progress)
+        ex = extract(log, spec, planner, progress=progress, jobs=jobs or os.cpu_count() or 1)
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]

@@ -29,7 +29,7 @@ from ..bus import zenoh_config as zc
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..spec.loader import load_spec
-from . import layout
+from . import layout, records
 from .writer import LogWriter
 
 _STOP = object()
@@ -150,8 +150,7 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mu
         try:
             codec.decode(data)
         except DecodeError as exc:
-            writer.event("undecodable", time_ns=log_time, channel_id=writer.flags_channel,
-                         channel=name, sequence=seq, reason=str(exc), size=len(data))
+            writer.record(records.FlagRecord(log_time, name, seq, str(exc), len(data)), channel_id=writer.flags_channel)
 
 
 def _write_intercepted(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, attachment: bytes,

@@ -6,6 +6,7 @@ from collections import Counter
 from dataclasses import dataclass
 
 from . import layout
+from . import records as rec
 from .reader import LogContents
 
 
@@ -58,28 +59,30 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
         if s.topic.startswith("/astaa/"):
             continue
         lines.append(f"{s.topic:44} {s.channel:16} {s.count:7d} {s.rate_hz:8.1f}")
-    events = log.events()
-    kinds = Counter(e.get("kind") for e in events)
+    events = [rec.decode(e, where=str(log.path)) for e in log.events()]
+    kinds = Counter(e.kind for e in events)
     lines.append("")
     lines.append("events: " + (", ".join(f"{k} ×{n}" for k, n in sorted(kinds.items())) or "none"))
     for e in events:
-        if e.get("kind") == "process_exit" and e.get("abnormal"):
-            how = f"signal {e['signal']}" if e.get("signal") else f"exit code {e.get('returncode')}"
-            lines.append(f"  crash: module '{e.get('module')}' ({how})")
-        elif e.get("kind") == "undeclared_key":
-            lines.append(f"  undeclared key '{e.get('key')}' from module '{e.get('module')}'")
-    violations = Counter(e.get("invariant") for e in events if e.get("kind") == "violation")
+        if isinstance(e, rec.ProcessExitRecord) and e.abnormal:
+            how = f"signal {e.signal}" if e.signal else f"exit code {e.returncode}"
+            lines.append(f"  crash: module '{e.module}' ({how})")
+        elif isinstance(e, rec.UndeclaredKey):
+            lines.append(f"  undeclared key '{e.key}' from module '{e.module}'")
+        elif isinstance(e, rec.RunEnd):
+            lines.append(f"  run ended: {e.reason}")
+    violations = Counter(e.invariant for e in events if isinstance(e, rec.ViolationRecord))
     if violations:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
-    verdicts = [e for e in events if e.get("kind") == "verdict"]
+    verdicts = [e for e in events if isinstance(e, rec.VerdictRecord)]
     if verdicts:
         from ..monitor.verdict import format_verdict
 
-        start = next((e["time_ns"] for e in events if e.get("kind") == "run_started"), None)
-        lines.append(format_verdict(verdicts[-1], start))
-    flags = log.flags()
+        start = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)
+        lines.append(format_verdict(rec.encode(verdicts[-1]), start))
+    flags = [rec.decode(f, where=str(log.path)) for f in log.flags()]
     if flags:
-        per = Counter(f.get("channel") for f in flags)
+        per = Counter(f.channel for f in flags if isinstance(f, rec.FlagRecord))
         lines.append("undecodable payloads (forwarded untouched): "
                      + ", ".join(f"{c} ×{n}" for c, n in sorted(per.items())))
     if log.attachments:

@@ -17,6 +17,7 @@ from .. import __version__
 from ..codecs.jsonschema import json_schema
 from ..spec.model import Channel, Spec
 from . import layout
+from . import records
 
 DEFAULT_CHUNK_SIZE = 64 * 1024
 
@@ -100,10 +101,16 @@ class LogWriter:
         return seq
 
     def event(self, kind: str, time_ns: int | None = None, channel_id: int | None = None, **fields: Any) -> None:
+        """A raw event body, as given: for crafting logs (tests, benchmarks); the tool itself writes records."""
         t = time_ns if time_ns is not None else time.time_ns()
         body = {"kind": kind, "time_ns": t, **fields}
         self.message(self.events_channel if channel_id is None else channel_id, t,
                      json.dumps(body, default=str).encode())
+
+    def record(self, record: records.Record, channel_id: int | None = None) -> None:
+        """One typed event record (the events topic unless ``channel_id`` says otherwise)."""
+        self.message(self.events_channel if channel_id is None else channel_id, record.time_ns,
+                     records.to_json_text(record).encode())
 
     def attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream") -> None:
         now = time.time_ns()

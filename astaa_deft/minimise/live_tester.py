@@ -34,22 +34,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-from ..bus.run import BusRun, RunOptions
 from ..errors import InputError
 from ..intercept.dictionary import load_dictionary
 from ..intercept.engine import Interceptor
 from ..intercept.testcase import TestCase
 from ..log import layout
+from ..log import records as rec
 from ..log.reader import read_log
 from ..monitor.offline import CheckResult, check_log
 from ..monitor.verdict import IMPLICIT
+from ..session import BusRun, RunOptions, run_session
 from ..spec.model import Spec
 from .ddmin import Outcome, TestResult
 from .mutations import FieldSelection, Mutation
 from .restrict import restricted_testcase, write_testcase
 
 MARGIN_SECONDS = 3.0  # a run goes on this long past the original failure (or the last mutation) before it passes
-POLL_SECONDS = 0.05
 
 
 @dataclass(frozen=True)
@@ -116,16 +116,17 @@ class LiveTester:
             options = RunOptions(mode="star", interceptor=interceptor, record=log_path, params=self.params,
                                  run_dir=Path(tmp) / "run", attachments={layout.POLICY_ATTACHMENT: policy_file},
                                  command_line=["astaa-deft", "minimise"])
-            bus = BusRun(self.spec, options)
             self.runs += 1
+
+            def stop_when(bus: BusRun) -> str | None:
+                if self._seen_online(bus):
+                    return "the failure was seen"
+                if (time.time_ns() - bus.started_ns) / 1e9 >= horizon:
+                    return "horizon"
+                return None
+
             try:
-                with bus:
-                    while not self._seen_online(bus):
-                        if (time.time_ns() - bus.started_ns) / 1e9 >= horizon:
-                            break
-                        if bus.launcher is not None and not bus.alive():
-                            break
-                        time.sleep(POLL_SECONDS)
+                run_session(self.spec, options, stop_when=stop_when)
             except InputError as exc:
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
             seconds = time.monotonic() - started
@@ -135,19 +136,19 @@ class LiveTester:
                 result = check_log(log, self.spec)
             except InputError as exc:
                 return LiveRun(None, f"the run's log cannot be judged: {exc}", seconds)
-            detail = self._matching(result, log.events("process_exit"))
+            exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExitRecord)]
+            detail = self._matching(result, exits)
             if detail:
                 return LiveRun(True, detail, seconds, record)
             return LiveRun(False, result.verdict.summary, seconds, record)
 
-    def _matching(self, result: CheckResult, exits: list[dict]) -> str:
+    def _matching(self, result: CheckResult, exits: list[rec.ProcessExitRecord]) -> str:
         """The failure being minimised among a run's findings ('' if it is not there)."""
         if self.invariant == IMPLICIT:  # a crash no invariant named: the module's abnormal exit
             for e in exits:
-                if (not e.get("during_shutdown") and (e.get("returncode") or e.get("signal"))
-                        and (self.module is None or e.get("module") == self.module)):
-                    how = f"killed by {e['signal']}" if e.get("signal") else f"exit code {e.get('returncode')}"
-                    return f"module '{e.get('module')}' {how}"
+                if (not e.during_shutdown and (e.returncode or e.signal)
+                        and (self.module is None or e.module == self.module)):
+                    return e.describe()
             return ""
         for v in result.violations:
             if v.invariant == self.invariant and (self.module is None or v.module == self.module):
@@ -158,5 +159,5 @@ class LiveTester:
         """Has the run visibly failed already (worth stopping it)?"""
         if any(self.module is None or e.module == self.module for e in bus.crashed()):
             return True
-        return any(v.get("invariant") == self.invariant and (self.module is None or v.get("module") == self.module)
+        return any(v.invariant == self.invariant and (self.module is None or v.module == self.module)
                    for v in list(bus.violations))

@@ -40,6 +40,7 @@ from ..fields import FieldPath, FieldPathError, set_field
 from ..intercept.actions import ACTIONS
 from ..intercept.actions.base import ActionDetail, FieldChange, from_tagged
 from ..log import layout
+from ..log import records as rec
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 
@@ -227,43 +228,47 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
         return found
 
     known = {c.name: c for c in spec.channels}
-    raw: list[tuple[LoggedMessage, dict, LoggedMessage, LoggedMessage | None]] = []
+    raw: list[tuple[LoggedMessage, rec.MutationRecord, dict, LoggedMessage, LoggedMessage | None]] = []
     noop = 0
     delivered_seqs: dict[str, set[int]] = defaultdict(set)
-    for record, event in events:
-        channel = known.get(event.get("channel"))
+    for record, body in events:
+        if not isinstance(body, Mapping):
+            raise InputError(Problem(str(log.path), None, None, "a mutation event is not a JSON object",
+                                     "the log is damaged or was not written by astaa-deft"))
+        event = rec.decode_mutation(body, record.log_time)
+        channel = known.get(event.channel)
         if channel is None:
             raise InputError(Problem(str(log.path), None, None,
-                                     f"a mutation event names channel '{event.get('channel')}', "
+                                     f"a mutation event names channel '{event.channel}', "
                                      f"which spec '{spec.name}' does not declare",
                                      "give the spec the run was recorded with"))
-        if event.get("delivered_sequence") is not None:
-            delivered_seqs[channel.name].add(int(event["delivered_sequence"]))
-        original = message(layout.ORIGINAL_PREFIX + channel.key, event.get("original_sequence"))
+        if event.delivered_sequence is not None:
+            delivered_seqs[channel.name].add(event.delivered_sequence)
+        original = message(layout.ORIGINAL_PREFIX + channel.key, event.original_sequence)
         if original is None:  # nothing was changed, dropped or added: not a mutation in effect
             noop += 1
             continue
-        delivered = message(channel.key, event.get("delivered_sequence"))
-        raw.append((record, event, original, delivered))
+        delivered = message(channel.key, event.delivered_sequence)
+        raw.append((record, event, dict(body), original, delivered))
 
     offset_ns = _clock_offset(raw, start_ns)
     mutations = []
     record_times = {}
-    for number, (record, event, original, delivered) in enumerate(raw):
+    for number, (record, event, body, original, delivered) in enumerate(raw):
         steps = _steps(event)
         deferred = any(s.action in DEFERRING_ACTIONS for s in steps)
-        time_s = float(event.get("time", 0.0))
+        time_s = event.time
         arrived_ns = offset_ns + round(time_s * 1e9) if deferred else original.log_time
         mutations.append(Mutation(
-            number=number, channel=event["channel"], steps=steps,
-            consumers=tuple(event.get("consumers") or ()), message_index=int(event.get("message_index", 0)),
-            time=time_s, at=(arrived_ns - start_ns) / 1e9, fields=tuple(FieldChange(f["path"], from_tagged(f.get("old")), from_tagged(f.get("new")))
-                                      for f in event.get("fields") or ()),
+            number=number, channel=event.channel, steps=steps,
+            consumers=event.consumers, message_index=event.message_index,
+            time=time_s, at=(arrived_ns - start_ns) / 1e9,
+            fields=tuple(FieldChange(f.path, from_tagged(f.old), from_tagged(f.new)) for f in event.fields),
             original=original.data,
             original_time_ns=arrived_ns,
             delivered=delivered.data if delivered is not None else None,
             delivered_time_ns=delivered.log_time if delivered is not None else None,
-            testcase=str(event.get("testcase", "")), event=event))
+            testcase=event.testcase, event=body))
         record_times[number] = record.log_time
 
     untouched = {}
@@ -275,10 +280,10 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
     return MutationLog(spec, mutations, start_ns, noop, untouched, siblings, record_times)
 
 
-def _steps(event: Mapping[str, Any]) -> tuple[Step, ...]:
-    policies = str(event.get("policy", "")).split("+")
-    actions = str(event.get("action", "")).split("+")
-    detail = from_tagged(event.get("detail") or {})
+def _steps(event: rec.MutationRecord) -> tuple[Step, ...]:
+    policies = event.policy.split("+")
+    actions = event.action.split("+")
+    detail = from_tagged(event.detail or {})
     if len(actions) == 1:
         return (Step(policies[0], actions[0], detail),)
     parts = detail.get("steps") or [{} for _ in actions]
@@ -289,14 +294,16 @@ def _steps(event: Mapping[str, Any]) -> tuple[Step, ...]:
 
 def run_start_ns(log: LogContents) -> int:
     """The run's start: its run_started event, else (an event lost to the recorder) its first bus message."""
-    started = [e["time_ns"] for e in log.events("run_started") if "time_ns" in e]
+    started = [r.time_ns for r in map(rec.decode, log.events("run_started"))
+               if isinstance(r, rec.RunStarted) and r.time_ns]
     if started:
-        return int(started[0])
+        return started[0]
     bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
     return min(bus) if bus else 0
 
 
-def _clock_offset(raw: Sequence[tuple[LoggedMessage, dict, LoggedMessage, Any]], start_ns: int) -> int:
+def _clock_offset(raw: Sequence[tuple[LoggedMessage, rec.MutationRecord, dict, LoggedMessage, Any]],
+                  start_ns: int) -> int:
     """Log time minus interceptor time, from mutations delivered the moment their message arrived.
 
     A delayed or reordered message is logged when it was delivered; its
@@ -304,9 +311,9 @@ def _clock_offset(raw: Sequence[tuple[LoggedMessage, dict, LoggedMessage, Any]],
     offset of the immediate mutations maps that clock onto the log's; with
     none, the run's start is the best guess.
     """
-    offsets = [record.log_time - round(float(event.get("time", 0.0)) * 1e9)
-               for record, event, _, _ in raw
-               if not (set(str(event.get("action", "")).split("+")) & (DEFERRING_ACTIONS | EXTRA_ACTIONS))]
+    offsets = [record.log_time - round(event.time * 1e9)
+               for record, event, _, _, _ in raw
+               if not (set(event.action.split("+")) & (DEFERRING_ACTIONS | EXTRA_ACTIONS))]
     return int(statistics.median(offsets)) if offsets else start_ns
 
 

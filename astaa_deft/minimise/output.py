@@ -30,6 +30,7 @@ from ..deft.validator import Comparison
 from ..errors import InputError, Problem
 from ..intercept.testcase import TestCase, load_testcase
 from ..log import layout
+from ..log import records as log_records
 from ..log.reader import LoggedMessage
 from ..log.writer import LogWriter
 from .deft_tester import Frame, ReplayModel, oracle_entry
@@ -106,7 +107,7 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
                 seen.add(key)
                 records.append((mutation.delivered_time_ns, topic(mutation.channel), data, key))
         sequences: dict[Any, int] = {}
-        writer.event("run_started", time_ns=model.start_ns, mode="replay", spec=spec.name)
+        writer.record(log_records.RunStarted(model.start_ns, "replay", spec.name))
         for time_ns, channel_id, data, what in sorted(records, key=lambda r: r[0]):
             sequences[what] = writer.message(channel_id, time_ns, data)
         events = writer.tool_channel(layout.MUTATIONS_TOPIC)
@@ -118,7 +119,7 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
                     "delivered_sequence": sequences.get(("mutation", mutation.number, _normal(selection, mutation)))}
             writer.message(events, mutation.original_time_ns, json.dumps(body, default=str).encode())
         end = max((r[0] for r in records), default=model.start_ns) + 1
-        writer.event("run_stopping", time_ns=end)
+        writer.record(log_records.RunStopping(end))
     finally:
         writer.finish()
     return path

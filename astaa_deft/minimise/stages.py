@@ -61,25 +61,24 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
     """
     start_ns = run_start_ns(log)
     result = check_log(log, with_typed_invariants(spec))
-    events = [v.to_json() for v in result.violations]
-    deciding = result.verdict.first
-    if deciding is not None and deciding.invariant == IMPLICIT:  # a crash no invariant named: in the verdict only
-        events.append(deciding.to_json())
-    events.sort(key=lambda e: e.get("time_ns", 0))
+    found = list(result.violations)
+    first = result.verdict.first
+    if first is not None and first.invariant == IMPLICIT:  # a crash no invariant named: in the verdict only
+        found.append(first)
+    found.sort(key=lambda v: v.time_ns)
     if invariant is not None:
-        chosen = [e for e in events if e.get("invariant") == invariant]
+        chosen = [v for v in found if v.invariant == invariant]
         if not chosen:
-            broken = sorted({str(e.get("invariant")) for e in events})
+            broken = sorted({v.invariant for v in found})
             raise InputError(Problem(str(log.path), None, None, f"invariant '{invariant}' never broke in this run",
                                      f"broken in it: {', '.join(broken)}" if broken else "nothing broke in it"))
-        events = chosen
-    if not events:
+        found = chosen
+    if not found:
         raise InputError(Problem(str(log.path), None, None, "the run did not fail: no invariant broke, "
                                  "no module crashed", "minimise a log whose run failed (astaa-deft check LOG)"))
-    first = events[0]
-    return Failure(str(first.get("invariant")), str(first.get("invariant_kind", "?")), first.get("module"),
-                   first.get("channel"), (int(first.get("time_ns", start_ns)) - start_ns) / 1e9,
-                   str(first.get("detail", "")), str(first.get("crash", "")))
+    first = found[0]
+    return Failure(first.invariant, first.kind, first.module, first.channel, ((first.time_ns or start_ns) - start_ns) / 1e9,
+                   first.detail, first.crash)
 
 
 def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str]:

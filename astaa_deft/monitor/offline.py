@@ -25,6 +25,7 @@ from ..codecs import Codec, get_codec
 from ..codecs.base import DecodeError
 from ..errors import InputError, Problem
 from ..log import layout
+from ..log import records as rec
 from ..log.reader import LogContents
 from ..spec.model import Spec
 from ..yamlsource import decode_utf8
@@ -32,10 +33,6 @@ from .monitorset import MonitorSet
 from .verdict import Verdict
 from .violation import Violation
 
-START_EVENT = "run_started"
-STOP_EVENT = "run_stopping"
-VIOLATION_EVENT = "violation"
-VERDICT_EVENT = "verdict"
 
 
 @dataclass
@@ -47,8 +44,8 @@ class CheckResult:
     messages: int  # bus messages given to the monitors
     stats: dict[str, dict[str, int]]
     seconds: float  # time spent evaluating (decoding included, reading the file not)
-    online_verdict: dict | None = None  # the verdict the proxy logged during the run, if any
-    online_violations: list[dict] = field(default_factory=list)
+    online_verdict: rec.VerdictRecord | None = None  # the verdict the proxy logged during the run, if any
+    online_violations: list[rec.ViolationRecord] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -57,20 +54,20 @@ class CheckResult:
 
 
 def check_log(log: LogContents, spec: Spec) -> CheckResult:
-    events = log.events()
+    events = [rec.decode(e, where=str(log.path)) for e in log.events()]
     start_ns = _start(log, events)
     end_ns = _end(log, events)
     monitors = MonitorSet(spec, start_ns)
     wanted = monitors.channels()
     routes = _routes(log, spec, wanted)
-    exits = sorted((e for e in events if e.get("kind") == "process_exit"), key=lambda e: e.get("time_ns", 0))
+    exits = sorted((e for e in events if isinstance(e, rec.ProcessExitRecord)), key=lambda e: e.time_ns)
 
     clock = time.perf_counter()
     exit_index = 0
     for message in sorted((m for m in log.messages if m.topic in routes), key=lambda m: m.log_time):
         if message.log_time > end_ns:
             break
-        while exit_index < len(exits) and exits[exit_index].get("time_ns", 0) <= message.log_time:
+        while exit_index < len(exits) and exits[exit_index].time_ns <= message.log_time:
             _feed_exit(monitors, exits[exit_index])
             exit_index += 1
         channel, codec = routes[message.topic]
@@ -85,13 +82,13 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
     monitors.finish(end_ns)
     seconds = time.perf_counter() - clock
 
-    extra = [e for e in events if e.get("kind") == "bus_lost"]
-    online = [e for e in events if e.get("kind") == VERDICT_EVENT]
+    extra = [rec.encode(e) for e in events if isinstance(e, rec.OtherEvent) and e.kind == "bus_lost"]
+    online = [e for e in events if isinstance(e, rec.VerdictRecord)]
     return CheckResult(
         violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(extra),
         start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,
         online_verdict=online[-1] if online else None,
-        online_violations=[e for e in events if e.get("kind") == VIOLATION_EVENT],
+        online_violations=[e for e in events if isinstance(e, rec.ViolationRecord)],
         warnings=list(log.warnings) + monitors.warnings,
     )
 
@@ -111,27 +108,26 @@ def _routes(log: LogContents, spec: Spec, wanted: set[str]) -> dict[str, tuple[s
     return out
 
 
-def _start(log: LogContents, events: list[dict]) -> int:
-    started = [e["time_ns"] for e in events if e.get("kind") == START_EVENT and "time_ns" in e]
+def _start(log: LogContents, events: list[rec.Record]) -> int:
+    started = [e.time_ns for e in events if isinstance(e, rec.RunStarted) and e.time_ns]
     if started:
         return int(started[0])
     bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
     return min(bus) if bus else 0
 
 
-def _end(log: LogContents, events: list[dict]) -> int:
-    stopping = [e["time_ns"] for e in events if e.get("kind") == STOP_EVENT and "time_ns" in e]
+def _end(log: LogContents, events: list[rec.Record]) -> int:
+    stopping = [e.time_ns for e in events if isinstance(e, rec.RunStopping) and e.time_ns]
     if stopping:
         return int(stopping[0])
     bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
     return max(bus) if bus else _start(log, events)
 
 
-def _feed_exit(monitors: MonitorSet, event: dict) -> None:
+def _feed_exit(monitors: MonitorSet, event: rec.ProcessExitRecord) -> None:
     monitors.on_process_exit(
-        module=str(event.get("module")), returncode=int(event.get("returncode") or 0), signal=event.get("signal"),
-        time_ns=int(event.get("time_ns", 0)), during_shutdown=bool(event.get("during_shutdown")),
-        stderr_tail=str(event.get("stderr_tail") or ""))
+        module=event.module, returncode=int(event.returncode or 0), signal=event.signal, time_ns=event.time_ns,
+        during_shutdown=bool(event.during_shutdown), stderr_tail=str(event.stderr_tail or ""))
 
 
 def spec_from_log(log: LogContents, name: str) -> Spec | None:

@@ -1,4 +1,4 @@
-"""One run of the SUT on the bus: tool session, proxy or observer, recorder, modules.
+"""One run of the SUT on the bus (the session's parts; :func:`run_session` drives it): tool session, proxy or observer, recorder, modules.
 
 Start order: the tool's session (and the star proxy) first, then the recorder
 (subscribed before any module speaks), then the modules in spec order.
@@ -14,47 +14,35 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from collections.abc import Callable
 
 import zenoh
 
 from ..errors import InputError, Problem
 from ..spec.model import Spec
-from . import topology
-from . import zenoh_config as zc
+from ..bus import topology
+from ..bus import zenoh_config as zc
+from ..log import records as rec
 from ..monitor.online import OnlineMonitors
-from .launcher import Launcher, ProcessExit
-from .observer import ChannelCounter
-from .processes import die_with_parent, stop_process, tail
-from .interception import InterceptionBridge
-from .proxy import StarProxy, plain_forwarder
+from ..bus.launcher import Launcher, ProcessExit
+from ..bus.observer import ChannelCounter
+from ..bus.processes import die_with_parent, stop_process, tail
+from ..bus.interception import InterceptionBridge
+from ..bus.proxy import StarProxy, plain_forwarder
+from .options import RunOptions
 
 HELPER_READY_TIMEOUT = 20.0
 DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the recorder
 
 
-@dataclass
-class RunOptions:
-    mode: str = "star"  # "star" (man in the middle) or "passive" (observer only)
-    launch: bool = True  # False: attach to an already running SUT
-    record: Path | None = None
-    params: dict[str, str] = field(default_factory=dict)
-    command_line: list[str] = field(default_factory=list)
-    run_dir: Path | None = None  # module logs and configs; a temp dir if None
-    interceptor: Any = None  # an ASTAA test case engine (star mode only)
-    stop_on_violation: bool = False
-    attachments: dict[str, Path] = field(default_factory=dict)  # name in the log → file (policy, dictionaries)
-
-
 class BusRun:
     def __init__(self, spec: Spec, options: RunOptions,
-                 on_event: Callable[[dict], None] = lambda event: None):
+                 on_event: Callable[[rec.Record], None] = lambda event: None):
         self.spec = spec
         self.options = options
         self.on_event = on_event
-        self.events: list[dict] = []
+        self.events: list[rec.Record] = []
         self.exits: list[ProcessExit] = []
         self.session: zenoh.Session | None = None
         self.proxy: StarProxy | None = None
@@ -73,11 +61,13 @@ class BusRun:
         self.interception: InterceptionBridge | None = None
         self.monitors: OnlineMonitors | None = None
         self.verdict = None  # the CRASH-scale verdict, once stopped
-        self.violations: list[dict] = []
+        self.violations: list[rec.ViolationRecord] = []
         self.stop_requested = threading.Event()  # --stop-on-violation
+        self.end_reason = ""
+        self.recorder_finished = False  # the recorder reported its counts and exited cleanly
 
     # -- lifecycle ---------------------------------------------------------
-    def __enter__(self) -> "BusRun":
+    def __enter__(self) -> BusRun:
         try:
             self.start()
         except BaseException:
@@ -135,8 +125,8 @@ class BusRun:
             self.counter = ChannelCounter(self.session, self.spec, opts.mode)
         if opts.record is not None:
             self._start_recorder(opts.record)
-        started = self.event("run_started", mode=opts.mode, spec=self.spec.name, command_line=opts.command_line)
-        self.monitors = OnlineMonitors(self.spec, started["time_ns"], self._violated)
+        started = self.emit(rec.RunStarted(time.time_ns(), opts.mode, self.spec.name, tuple(opts.command_line)))
+        self.monitors = OnlineMonitors(self.spec, started.time_ns, self._violated)
         intercepted = self.interception.targets if self.interception is not None else set()
         self.monitors.subscribe(self.session, [(k, ch.name) for k, ch in topology.observed_keys(self.spec, opts.mode)
                                                if ch.name not in intercepted])
@@ -211,15 +201,15 @@ class BusRun:
     def stop(self) -> None:
         if self.interception is not None:
             self.interception.stop()  # release held and delayed messages while consumers still listen
-        stopping = self.event("run_stopping") if self.monitors is not None else None
+        stopping = self.emit(rec.RunStopping(time.time_ns())) if self.monitors is not None else None
         if self.launcher is not None:
             self.launcher.stop()
         if self.monitors is not None and stopping is not None:
-            self.verdict = self.monitors.finish(stopping["time_ns"])
-            self.event("verdict", **self.verdict.to_json())
+            self.verdict = self.monitors.finish(stopping.time_ns)
+            self.emit(rec.decode({"kind": "verdict", "time_ns": time.time_ns(), **self.verdict.to_json()}))
             self.monitors = None
         if self.session is not None and (self.launcher is not None or self.recorder is not None):
-            self.event("run_stopped")
+            self.emit(rec.RunStopped(time.time_ns()))
             time.sleep(DRAIN_SECONDS)
         if self.recorder is not None:
             stop_process(self.recorder, grace=30.0)
@@ -228,6 +218,7 @@ class BusRun:
             for line in lines:
                 if line.startswith("{"):
                     self.recorded = json.loads(line).get("recorded", {})
+                    self.recorder_finished = self.recorder.returncode == 0
             self.recorder = None
         for holder in (self.proxy, self.counter):
             if holder is not None:
@@ -263,18 +254,24 @@ class BusRun:
         return self.launcher.alive() if self.launcher else []
 
     # -- events ------------------------------------------------------------
-    def event(self, kind: str, **fields) -> dict:
-        body = {"kind": kind, "time_ns": time.time_ns(), **fields}
+    def emit(self, record: rec.Record) -> rec.Record:
+        """Log one event (the recorder writes what the tool publishes) and hand it to ``on_event``."""
         with self._lock:
-            self.events.append(body)
+            self.events.append(record)
         if self._events_pub is not None:
-            self._events_pub.put(json.dumps(body, default=str))
-        self.on_event(body)
-        return body
+            self._events_pub.put(rec.to_json_text(record))
+        self.on_event(record)
+        return record
+
+    def end(self, reason: str) -> None:
+        """Say in the log why the run ends (before the modules are stopped)."""
+        self.end_reason = reason
+        self.emit(rec.RunEnd(time.time_ns(), reason))
 
     def _violated(self, violation) -> None:
-        body = self.event("violation", **violation.to_json())
-        self.violations.append(body)
+        record = rec.decode({"kind": "violation", **violation.to_json()})
+        self.violations.append(record)
+        self.emit(record)
         if self.options.stop_on_violation:
             self.stop_requested.set()
 
@@ -283,16 +280,16 @@ class BusRun:
         if self.monitors is not None:
             self.monitors.process_exit(exit_.module, exit_.returncode, exit_.signal, exit_.time_ns,
                                        exit_.during_shutdown, exit_.stderr_tail)
-        self.event("process_exit", module=exit_.module, pid=exit_.pid, returncode=exit_.returncode,
-                   signal=exit_.signal, during_shutdown=exit_.during_shutdown, abnormal=exit_.abnormal,
-                   stderr_tail=exit_.stderr_tail)
+        self.emit(rec.ProcessExitRecord(exit_.time_ns, exit_.module, exit_.pid, exit_.returncode, exit_.signal,
+                                        exit_.during_shutdown, exit_.abnormal, exit_.stderr_tail))
 
     def _mutated(self, event: dict) -> None:
-        self.on_event({"kind": "mutation", **event})
+        # Not re-published: the interception's own record (with the original) is in the log already.
+        self.on_event(rec.decode({"kind": "mutation", "time_ns": time.time_ns(), **event}))
 
     def _undeclared(self, module: str, key: str) -> None:
-        self.event("undeclared_key", module=module, key=key,
-                   note="forwarded to every other module; declare it under 'channels' to route it precisely")
+        self.emit(rec.UndeclaredKey(time.time_ns(), module, key,
+                                    "forwarded to every other module; declare it under 'channels' to route it precisely"))
 
 
 def _concrete(endpoint: str) -> str:

@@ -1,0 +1,297 @@
+"""The campaign workflow: baseline, generated cases, buckets, rates, minimisation, report.
+
+Every decision reads from or writes to the journal first, so a campaign
+stopped anywhere resumes where it was: finished cases stay finished, the
+ones in flight run again, buckets and their re-runs pick up where they were.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from ..errors import InputError, Problem
+from ..intercept.dictionary import load_dictionary
+from ..spec.loader import load_spec
+from . import signature as sig
+from .journal import Journal
+from .minimiser import minimise_run
+from .model import BASELINE, MUTATED, RERUN, CaseOutcome, PlannedCase
+from .strategies import STRATEGIES
+
+DEFAULT_HORIZON = 20.0
+DEFAULT_BASELINE_RUNS = 2
+DEFAULT_RERUNS = 2
+CORES_PER_MODULE = 0.15  # a run's modules mostly sleep: measured on the demo (benchmarks/bench_campaign.py)
+HELPER_CORES = 0.3  # the tool's own session, proxy and recorder per run
+
+
+@dataclass
+class CampaignConfig:
+    spec_path: Path
+    out: Path
+    cases: int | None = None
+    budget: float | None = None  # seconds
+    workers: int | None = None
+    seed: int = 0
+    strategy: str = "random"
+    dictionaries: list[Path] = field(default_factory=list)
+    params: dict[str, list[str]] = field(default_factory=dict)  # key → values the cases spread over
+    cluster: str | None = None
+    horizon: float = DEFAULT_HORIZON
+    baseline_runs: int = DEFAULT_BASELINE_RUNS
+    reruns: int = DEFAULT_RERUNS
+    minimise: bool = True
+    minimise_max_tests: int = 30
+    report: bool = True
+
+
+@dataclass
+class CampaignResult:
+    cases_done: int
+    failures: int
+    buckets: int
+    seconds: float
+    stopped: str  # "done", "budget", "interrupted"
+
+
+class CampaignStopped(Exception):
+    """The campaign cannot go on (the SUT does not start): one message, exit 2."""
+
+
+def default_workers(module_count: int, cores: int | None = None) -> int:
+    cores = cores or os.cpu_count() or 1
+    per_run = HELPER_CORES + CORES_PER_MODULE * module_count
+    return max(1, int(cores / per_run))
+
+
+def param_grid(params: dict[str, list[str]]) -> list[dict[str, str]]:
+    keys = sorted(params)
+    return [dict(zip(keys, values)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
+
+
+class Campaign:
+    def __init__(self, config: CampaignConfig, journal: Journal,
+                 on_progress: Callable[["Campaign"], None] = lambda c: None, say: Callable[[str], None] = print):
+        self.config = config
+        self.journal = journal
+        self.on_progress = on_progress
+        self.say = say
+        self.spec = load_spec(config.spec_path)
+        self.dictionary = load_dictionary(config.dictionaries)
+        if config.strategy not in STRATEGIES:
+            raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
+                                     f"use one of: {', '.join(STRATEGIES)}"))
+        self.strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed, config.horizon)
+        self.grid = param_grid(config.params)
+        self.workers = config.workers or default_workers(len(self.spec.modules))
+        self.started = time.monotonic()
+        self.baseline_keys: dict[str, str] = {}  # failure key → its baseline bucket
+
+    # -- the whole campaign --------------------------------------------------
+    def run(self) -> CampaignResult:
+        self.journal.set_meta(spec=str(self.config.spec_path.resolve()), seed=self.config.seed,
+                              strategy=self.config.strategy, params=self.config.params, horizon=self.config.horizon,
+                              cases=self.config.cases, budget=self.config.budget)
+        requeued = self.journal.requeue_running()
+        if requeued:
+            self.say(f"resume: {requeued} case(s) that were in flight run again")
+        pool = self._pool()
+        stopped = "done"
+        try:
+            self._baseline(pool)
+            stopped = self._main(pool)
+        except KeyboardInterrupt:
+            stopped = "interrupted"
+        finally:
+            pool.close()
+        if stopped != "interrupted" and self.config.minimise:
+            try:
+                self._minimise_buckets()
+            except KeyboardInterrupt:
+                stopped = "interrupted"
+        done = [r for r in self.journal.cases() if r["status"] in ("done", "error")]
+        failures = sum(1 for r in done if r["kind"] == MUTATED and r["verdict"] not in ("Pass", None, "?"))
+        return CampaignResult(len(done), failures, len(self.journal.buckets(include_merged=False)),
+                              time.monotonic() - self.started, stopped)
+
+    def _pool(self):
+        from .executors import DaskPool, LocalPool
+
+        if self.config.cluster:
+            return DaskPool(self.config.cluster, self.workers)
+        return LocalPool(self.workers)
+
+    # -- baseline ------------------------------------------------------------
+    def _baseline(self, pool) -> None:
+        for n in range(1, self.config.baseline_runs + 1):
+            params = {**self.grid[(n - 1) % len(self.grid)]}
+            self.journal.plan(PlannedCase(f"b-{n:04d}", BASELINE, n, self.config.seed, params, None, "baseline"))
+        for case in self.journal.pending(BASELINE):
+            self._submit(pool, case)
+        self._drain(pool, lambda: False)
+        rows = self.journal.cases(BASELINE)
+        outcomes = [self.journal.outcome(r) for r in rows]
+        if rows and all(o is not None and o.status == "error" for o in outcomes):
+            raise CampaignStopped(f"the SUT does not start: {outcomes[0].error or outcomes[0].summary}")
+        for row, outcome in zip(rows, outcomes):
+            if outcome is not None and outcome.failed:
+                self.baseline_keys.setdefault(sig.failure_key(outcome), row["bucket"])
+
+    # -- generated cases -------------------------------------------------------
+    def _main(self, pool) -> str:
+        for row in self.journal.cases(MUTATED):  # a resumed guided search learns its corpus again
+            outcome = self.journal.outcome(row)
+            if outcome is not None:
+                self.strategy.observe(row["case_id"], row["testcase_xml"], outcome)
+        queue = self.journal.pending(MUTATED) + self.journal.pending(RERUN)
+        number = self.journal.max_number(MUTATED)
+        stopped = "done"
+        while True:
+            while pool.pending() < self.workers * 2:
+                if queue:
+                    self._submit(pool, queue.pop(0))
+                    continue
+                if self._budget_over():
+                    stopped = "budget"
+                    break
+                if self.config.cases is not None and number >= self.config.cases:
+                    break
+                number += 1
+                case = self._plan_mutated(number)
+                self._submit(pool, case)
+            if not pool.pending():
+                return stopped
+            for case_id, outcome in pool.done(timeout=0.5):
+                queue.extend(self._finished(case_id, outcome))
+            self.on_progress(self)
+
+    def _plan_mutated(self, number: int) -> PlannedCase:
+        proposal = self.strategy.propose(number)
+        params = self.grid[(number - 1) % len(self.grid)]
+        case = PlannedCase(f"c-{number:06d}", MUTATED, number, self.config.seed, params, proposal.testcase_xml,
+                           self.config.strategy, proposal.parent)
+        self.journal.plan(case)
+        return case
+
+    def _budget_over(self) -> bool:
+        return self.config.budget is not None and time.monotonic() - self.started >= self.config.budget
+
+    def _submit(self, pool, case: PlannedCase) -> None:
+        payload = {"spec": str(self.config.spec_path.resolve()), "case": case.to_json(),
+                   "run_dir": str(self.case_dir(case.case_id)), "horizon": self.config.horizon,
+                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries]}
+        self.journal.started(case.case_id)
+        pool.submit(case.case_id, payload)
+
+    def case_dir(self, case_id: str) -> Path:
+        return (self.config.out / "cases" / case_id).resolve()
+
+    def _drain(self, pool, stop: Callable[[], bool]) -> None:
+        while pool.pending():
+            for case_id, outcome in pool.done(timeout=0.5):
+                self._finished(case_id, outcome)
+            self.on_progress(self)
+
+    # -- one finished case -----------------------------------------------------
+    def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
+        row = self.journal.case(case_id)
+        kind, xml = row["kind"], row["testcase_xml"]
+        new: list[PlannedCase] = []
+        signature = key = bucket = None
+        if outcome.failed:
+            key = sig.failure_key(outcome)
+            if kind == BASELINE:
+                signature = f"{key}|{sig.NO_MUTATION}"
+                bucket = self._bucket(signature, outcome, case_id, True)
+            elif kind == RERUN:
+                signature = sig.signature(outcome, xml)
+            elif key in self.baseline_keys:  # the SUT fails this way without mutation too: not the mutation's
+                signature = f"{key}|{sig.NO_MUTATION}"
+                bucket = self.baseline_keys[key]
+                self.journal.bucket_hit(bucket)
+            else:
+                signature = sig.signature(outcome, xml)
+                existing = self.journal.bucket_by_signature(signature)
+                if existing is not None:
+                    bucket = existing.bucket
+                    self.journal.bucket_hit(bucket)
+                else:
+                    bucket = self._bucket(signature, outcome, case_id, False)
+                    new = self._plan_reruns(bucket, row)
+        if kind == RERUN:
+            bucket = row["parent"]
+            first = self.journal.outcome(self.journal.case(self._first_case(bucket)))
+            same = outcome.failed and first is not None and sig.failure_key(first) == key
+            if outcome.status == "done":
+                self.journal.bucket_rerun(bucket, same)
+        self.journal.finished(case_id, outcome, signature, key, bucket)
+        if kind == MUTATED:
+            self.strategy.observe(case_id, xml, outcome)
+        return new
+
+    def _first_case(self, bucket: str) -> str:
+        return next(b.first_case for b in self.journal.buckets() if b.bucket == bucket)
+
+    def _bucket(self, signature: str, outcome: CaseOutcome, case_id: str, baseline: bool) -> str:
+        existing = self.journal.bucket_by_signature(signature)
+        if existing is not None:
+            self.journal.bucket_hit(existing.bucket)
+            return existing.bucket
+        name = f"B{len(self.journal.buckets()) + 1:03d}"
+        finding = sig.primary(outcome)
+        done = sum(1 for r in self.journal.cases() if r["status"] in ("done", "error"))
+        self.journal.add_bucket(name, signature, outcome.verdict, finding.invariant if finding else "?",
+                                finding.module if finding else None, signature.split("|")[-1], case_id, baseline,
+                                done + 1)
+        self.say(f"new bucket {name}: {outcome.verdict}: {finding.invariant if finding else '?'}"
+                 f"{' (without mutation)' if baseline else ''} — {signature.split('|')[-1]}")
+        return name
+
+    def _plan_reruns(self, bucket: str, row) -> list[PlannedCase]:
+        cases = []
+        for k in range(1, self.config.reruns + 1):
+            case = PlannedCase(f"r-{bucket}-{k}", RERUN, row["number"], row["seed"], json.loads(row["params"]), row["testcase_xml"], row["strategy"], parent=bucket)
+            self.journal.plan(case)
+            cases.append(case)
+        return cases
+
+    # -- minimisation ------------------------------------------------------------
+    def _minimise_buckets(self) -> None:
+        done = self.journal.minimisations()
+        culprits: dict[str, str] = {r["culprit"]: b for b, r in done.items() if r["culprit"]}
+        for bucket in self.journal.buckets(include_merged=False):
+            if bucket.without_mutation or bucket.bucket in done:
+                continue
+            row = self.journal.case(bucket.first_case)
+            if not row["log_path"] or not Path(row["log_path"]).is_file():
+                continue
+            self.say(f"minimising bucket {bucket.bucket} ({bucket.invariant}) …")
+            out_dir = self.config.out / "minimised" / bucket.bucket
+            if out_dir.exists():
+                shutil.rmtree(out_dir)
+            result = minimise_run(Path(row["log_path"]), self.config.spec_path, out_dir, bucket.invariant,
+                                  max_tests=self.config.minimise_max_tests)
+            tests_dir = None
+            if result.tests_dir is not None:
+                tests_dir = self.config.out / "tests" / bucket.bucket
+                if tests_dir.exists():
+                    shutil.rmtree(tests_dir)
+                shutil.copytree(result.tests_dir, tests_dir)
+            status = "minimised" if result.exit_code == 0 else "not reproduced" if result.exit_code == 1 else "error"
+            self.journal.minimised(bucket.bucket, status, result.exit_code, result.minimal_xml, result.culprit,
+                                   str(out_dir), str(tests_dir) if tests_dir else None, result.seconds,
+                                   result.detail)
+            self.say(f"  {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
+            if result.culprit and result.exit_code == 0:
+                if result.culprit in culprits and culprits[result.culprit] != bucket.bucket:
+                    self.journal.merge_bucket(bucket.bucket, culprits[result.culprit])
+                    self.say(f"  same culprit as {culprits[result.culprit]}: merged")
+                else:
+                    culprits[result.culprit] = bucket.bucket

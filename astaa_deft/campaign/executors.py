@@ -1,0 +1,131 @@
+"""Where cases run: a pool of local child processes, or a Dask distributed cluster.
+
+Both take payloads and hand back (case id, outcome) as cases finish, so the
+campaign's loop is the same either way. Local: each case is its own Python
+process (started in its own session and told to die with us), so a crash or
+a hang of one case never touches another or the campaign. Dask: each worker
+runs its cases on its own loopback and returns the log with the outcome; a
+task whose worker died is re-run by the scheduler elsewhere.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import subprocess
+import sys
+import threading
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from pathlib import Path
+from typing import Any, Iterator
+
+from ..bus.processes import die_with_parent, stop_process
+from .model import CaseOutcome
+
+CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
+
+
+class LocalPool:
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="case")
+        self._procs: set[subprocess.Popen] = set()
+        self._lock = threading.Lock()
+        self.futures: dict[Future, str] = {}
+
+    def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+        self.futures[self._pool.submit(self._run, payload)] = case_id
+
+    def _run(self, payload: dict[str, Any]) -> CaseOutcome:
+        proc = subprocess.Popen([sys.executable, "-m", "astaa_deft.campaign.worker"], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=True, preexec_fn=die_with_parent)
+        with self._lock:
+            self._procs.add(proc)
+        try:
+            out, err = proc.communicate(json.dumps(payload), timeout=float(payload["horizon"]) + CASE_TIMEOUT_MARGIN)
+        except subprocess.TimeoutExpired:
+            stop_process(proc, grace=5.0)
+            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+        finally:
+            with self._lock:
+                self._procs.discard(proc)
+        Path(payload["run_dir"]).mkdir(parents=True, exist_ok=True)
+        (Path(payload["run_dir"]) / "case.log").write_text(err)
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        if proc.returncode != 0 or not lines:
+            return CaseOutcome("error", "?", "the case process failed", error=err.strip()[-2000:])
+        return CaseOutcome.from_json(json.loads(lines[-1]))
+
+    def pending(self) -> int:
+        return len(self.futures)
+
+    def done(self, timeout: float | None = None) -> Iterator[tuple[str, CaseOutcome]]:
+        finished, _ = wait(list(self.futures), timeout=timeout, return_when=FIRST_COMPLETED)
+        for future in finished:
+            case_id = self.futures.pop(future)
+            yield case_id, future.result()
+
+    def close(self) -> None:
+        with self._lock:
+            procs = list(self._procs)
+        for proc in procs:
+            stop_process(proc, grace=10.0)
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+class DaskPool:
+    """Cases on a Dask cluster: ``tcp://HOST:PORT`` (a running scheduler) or ``local:K`` (K worker processes)."""
+
+    def __init__(self, address: str, workers: int):
+        from dask.distributed import Client, LocalCluster
+
+        self.cluster = None
+        if address.startswith("local:"):
+            count = int(address.split(":", 1)[1] or workers)
+            self.cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                                        host="127.0.0.1", dashboard_address=None, protocol="tcp")
+            self.client = Client(self.cluster)
+        else:
+            self.client = Client(address)
+        self.workers = max(1, len(self.client.scheduler_info().get("workers", {})) or workers)
+        self.futures: dict[Any, tuple[str, dict]] = {}
+
+    def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+        from .worker import execute_remote
+
+        # retries: a task lost with its worker (killed, machine gone) is re-queued on another.
+        future = self.client.submit(execute_remote, payload, key=f"case-{case_id}-{payload.get('attempt', 0)}",
+                                    pure=False, retries=3)
+        self.futures[future] = (case_id, payload)
+
+    def pending(self) -> int:
+        return len(self.futures)
+
+    def done(self, timeout: float | None = None) -> Iterator[tuple[str, CaseOutcome]]:
+        from dask.distributed import wait as dwait
+
+        try:
+            result = dwait(list(self.futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # nothing finished yet (dask raises instead of returning an empty set)
+            return
+        for future in result.done:
+            case_id, payload = self.futures.pop(future)
+            try:
+                body = future.result()
+            except Exception as exc:  # noqa: BLE001 - a task that failed on every retry
+                yield case_id, CaseOutcome("error", "?", "the case failed on the cluster", error=str(exc))
+                continue
+            log_b64 = body.pop("log_b64", None)
+            run_dir = Path(payload["run_dir"])
+            run_dir.mkdir(parents=True, exist_ok=True)
+            outcome = CaseOutcome.from_json(body)
+            if log_b64:
+                (run_dir / "run.mcap").write_bytes(base64.b64decode(log_b64))
+                outcome.log_path = str(run_dir / "run.mcap")
+            yield case_id, outcome
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()

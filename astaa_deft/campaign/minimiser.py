@@ -1,0 +1,80 @@
+"""The one adapter between a campaign and minimisation: minimise a bucket's first failing run.
+
+It runs ``astaa-deft minimise`` (:func:`astaa_deft.minimise.workflow.minimise_log`)
+as a child process in its own session over the failing run's log: a
+minimisation re-runs the SUT many times, so a hard time bound and a process
+group the campaign can stop are worth more than an in-process call.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..bus.processes import die_with_parent
+
+MINIMAL_XML = "minimal.xml"
+SUMMARY = "summary.json"
+TESTS_DIR = "tests"
+
+
+@dataclass(frozen=True)
+class Minimised:
+    exit_code: int  # 0 minimised and confirmed, 1 a finding without a clean reproduction, 2 bad input
+    minimal_xml: str | None
+    culprit: str | None  # what the minimal test case does, e.g. "routing:speed_limit = dict:float.nan"
+    out_dir: Path
+    tests_dir: Path | None
+    seconds: float
+    detail: str
+
+
+def minimise_run(log: Path, spec_path: Path, out_dir: Path, invariant: str | None = None,
+                 max_tests: int = 40, confirm: int = 1, timeout: float = 900.0) -> Minimised:
+    started = time.monotonic()
+    args = [sys.executable, "-m", "astaa_deft.cli", "minimise", str(log), "--spec", str(spec_path),
+            "-o", str(out_dir), "--repeats", "1", "--confirm", str(confirm), "--max-tests", str(max_tests)]
+    if invariant and not invariant.startswith("("):
+        args += ["--invariant", invariant]
+    try:
+        done = subprocess.run(args, capture_output=True, text=True, timeout=timeout, start_new_session=True,
+                              preexec_fn=die_with_parent)
+        code, text = done.returncode, (done.stdout + done.stderr).strip()
+    except subprocess.TimeoutExpired:
+        code, text = 1, f"minimisation stopped after {timeout:.0f} s"
+    minimal = out_dir / MINIMAL_XML
+    tests = out_dir / TESTS_DIR
+    return Minimised(code, minimal.read_text() if minimal.is_file() else None, _culprit(minimal), out_dir,
+                     tests if tests.is_dir() else None, time.monotonic() - started, text[-1500:])
+
+
+def _culprit(minimal: Path) -> str | None:
+    """The minimal test case's mutations, as one comparable line (channel:field = value, sorted)."""
+    if not minimal.is_file():
+        return None
+    from lxml import etree
+
+    parser = etree.XMLParser(resolve_entities=False, no_network=True)
+    root = etree.fromstring(minimal.read_bytes(), parser)
+    parts = set()
+    for policy in root.iterfind("policy"):
+        channels = [c.text for c in policy.iterfind("channel")] or ["*"]
+        action = next((child for child in policy if child.tag not in ("channel", "window", "select", "consumer",
+                                                                      "type")), None)
+        if action is None:
+            continue
+        fields = [f"{f.get('path')} = {f.get('value')}" for f in action.iterfind("field")] or [action.tag]
+        parts.update(f"{ch}:{f}" for ch in channels for f in fields)
+    return "; ".join(sorted(parts)) or None
+
+
+def summary(out_dir: Path) -> dict:
+    path = out_dir / SUMMARY
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}

@@ -1,0 +1,11 @@
+"""How a campaign draws its next test case: one interface, one module per strategy."""
+
+from __future__ import annotations
+
+from .base import Proposal, Strategy
+from .guided import GuidedStrategy
+from .random import RandomStrategy
+
+STRATEGIES = {"random": RandomStrategy, "guided": GuidedStrategy}
+
+__all__ = ["Proposal", "Strategy", "STRATEGIES", "RandomStrategy", "GuidedStrategy"]

@@ -1,0 +1,28 @@
+"""The strategy interface: propose the n-th test case, learn from what runs gave."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from ...intercept.dictionary import Dictionary
+from ...spec.model import Spec
+from ..model import CaseOutcome
+
+
+@dataclass(frozen=True)
+class Proposal:
+    testcase_xml: str
+    parent: str | None = None  # the case it was derived from, if any
+
+
+class Strategy(Protocol):
+    name: str
+
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None: ...
+
+    def propose(self, number: int) -> Proposal:
+        """The ``number``-th test case; deterministic given the seed and what was observed before."""
+
+    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
+        """A finished case (in the order results arrive)."""

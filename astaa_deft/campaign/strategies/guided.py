@@ -1,0 +1,102 @@
+"""Guided search: mutate the test cases that brought an invariant closest to breaking.
+
+In the spirit of falsification (S-TaLiRo, PSY-TaLiRo) and PGFuzz: each run
+reports, per invariant, how close it came to breaking (``CaseOutcome.margins``:
+the bound margin or STL robustness, 0 when it broke). A case joins the corpus
+when it brought some invariant closer than any case before; the next cases
+are, half of the time, a corpus entry changed in one way (another value for
+a field, another field, a shifted window, a repeated instead of a one-message
+action, or one more policy) and otherwise a fresh random case, so the search
+never stops exploring. Deterministic for a given seed and order of results.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import replace
+
+from ...intercept import generate as gen
+from ...intercept.actions.set import Assignment, Set
+from ...intercept.dictionary import Dictionary
+from ...intercept.testcase import Selection, TestCase, Window, parse_testcase
+from ...spec.model import Spec
+from ..model import CaseOutcome
+from .base import Proposal
+from .random import RandomStrategy
+
+EXPLOIT_SHARE = 0.5
+CORPUS_LIMIT = 32
+OPERATORS = ("value", "field", "window", "action", "policy")
+
+
+class GuidedStrategy:
+    name = "guided"
+
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float):
+        self.fresh = RandomStrategy(spec, dictionary, seed, duration)
+        self.seed = seed
+        self.duration = duration
+        self.targets = {(t.channel.name, str(t.path)): t for ts in self.fresh.by_channel.values() for t in ts}
+        self.best: dict[str, float] = {}  # invariant → closest approach so far
+        self.corpus: list[tuple[str, str]] = []  # (case id, test case XML), newest last
+
+    def propose(self, number: int) -> Proposal:
+        rng = random.Random(f"guided/{self.seed}/{number}")
+        if not self.corpus or rng.random() >= EXPLOIT_SHARE:
+            return self.fresh.propose(number)
+        parent_id, parent_xml = rng.choice(self.corpus)
+        parent = parse_testcase(parent_xml.encode())
+        operator = rng.choice(OPERATORS)
+        child = self._mutate(parent, operator, rng, number)
+        return Proposal(child.to_xml().decode(), parent=parent_id)
+
+    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
+        if testcase_xml is None or outcome.status != "done":
+            return
+        closer = False
+        for invariant, margin in outcome.margins.items():
+            if math.isfinite(margin) and margin < self.best.get(invariant, math.inf):
+                self.best[invariant] = margin
+                closer = True
+        if closer:
+            self.corpus.append((case_id, testcase_xml))
+            del self.corpus[:-CORPUS_LIMIT]
+
+    # -- mutation operators ------------------------------------------------
+    def _mutate(self, parent: TestCase, operator: str, rng: random.Random, number: int) -> TestCase:
+        policies = list(parent.policies)
+        index = rng.randrange(len(policies))
+        policy = policies[index]
+        channel = policy.channels[0] if policy.channels else None
+        if operator == "policy":
+            extra = parse_testcase(self.fresh.propose(number).testcase_xml.encode()).policies[0]
+            policies.append(replace(extra, id=f"p{len(policies) + 1}"))
+        elif isinstance(policy.action, Set) and operator in ("value", "field") and channel is not None:
+            fields = list(policy.action.fields)
+            if operator == "value":
+                k = rng.randrange(len(fields))
+                target = self.targets.get((channel, fields[k].path))
+                if target is not None:
+                    fields[k] = Assignment(fields[k].path, rng.choice(target.values).ref)
+            else:
+                taken = {a.path for a in fields}
+                options = [t for (ch, path), t in sorted(self.targets.items()) if ch == channel and path not in taken
+                           and not any(gen._overlaps(t.path, self.targets[(ch, p)].path)
+                                       for p in taken if (ch, p) in self.targets)]
+                if options:
+                    t = rng.choice(options)
+                    fields.append(Assignment(str(t.path), rng.choice(t.values).ref))
+            policies[index] = replace(policy, action=Set(tuple(fields)))
+        elif operator == "window":
+            start = max(0.0, round(policy.window.start + rng.uniform(-2.0, 2.0), 1))
+            end = policy.window.end
+            if end is not None:
+                end = max(round(start + 0.1, 1), end)
+            policies[index] = replace(policy, window=replace(policy.window, start=start, end=end))
+        else:  # action: one message → every message (or every n-th) in a short window
+            start = policy.window.start
+            policies[index] = replace(policy, window=Window(start, round(start + rng.uniform(1.0, 5.0), 1)),
+                                      selection=rng.choice([Selection(), Selection(every=rng.choice([2, 5]))]))
+        return TestCase(f"tc-{number:06d}", rng.getrandbits(32), f"guided ({operator}) from {parent.id}: "
+                        + parent.description, tuple(policies))

@@ -1,0 +1,56 @@
+"""One case, executed where it runs: a child process of the local pool, or a Dask worker.
+
+The payload is plain JSON (spec path, planned case, run directory, horizon,
+extra dictionaries) and so is the result: the same function serves both.
+Run as ``python -m astaa_deft.campaign.worker`` it reads the payload on
+stdin and prints the outcome as its last line.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..intercept.dictionary import load_dictionary
+from ..intercept.testcase import parse_testcase
+from ..spec.loader import load_spec
+from .model import CaseOutcome, PlannedCase
+from .runner import run_case
+
+
+def execute(payload: dict[str, Any]) -> dict[str, Any]:
+    case = PlannedCase.from_json(payload["case"])
+    try:
+        spec = load_spec(Path(payload["spec"]))
+        dictionary = load_dictionary([Path(p) for p in payload.get("dictionaries", [])])
+        testcase = parse_testcase(case.testcase_xml.encode(), case.case_id, spec, dictionary) \
+            if case.testcase_xml else None
+    except InputError as exc:
+        return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems))).to_json()
+    outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary)
+    return outcome.to_json()
+
+
+def execute_remote(payload: dict[str, Any]) -> dict[str, Any]:
+    """On a Dask worker: run in a local temp dir, send the log back with the result."""
+    import base64
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="astaa-deft-case-") as tmp:
+        body = execute({**payload, "run_dir": tmp})
+        log = Path(tmp) / "run.mcap"
+        body["log_b64"] = base64.b64encode(log.read_bytes()).decode() if log.is_file() else None
+        return body
+
+
+def main() -> int:
+    payload = json.loads(sys.stdin.read())
+    print(json.dumps(execute(payload), default=str), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

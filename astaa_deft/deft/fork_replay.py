@@ -1,0 +1,279 @@
+"""Exact planner snapshots by fork: candidates tried in parallel from one state.
+
+A deep copy of a planner is not always the planner: extension objects
+round-trip through ``__getstate__`` and come back different in the last bits
+(plans 8e-15 m apart), so nothing replayed from a copy reproduces at θ = 0.
+A forked process is: copy-on-write memory keeps native state bit for bit.
+
+How it runs (POSIX only):
+
+* the calling process forks a *supervisor*, which makes itself the reaper of
+  every descendant and forks the first *runner*;
+* the runner walks the outputs (the ordinary extraction loop). For an output
+  with several candidate frames it forks one child per candidate (at most
+  ``jobs`` at a time), each stepping its own copy of the planner on its
+  frame and reporting the comparison back;
+* the first candidate in order that is accepted wins (or, if none is, the
+  closest); the winning child *becomes* the runner — it holds the planner
+  state that frame produced, untouched by any other — and the old runner and
+  the other children exit;
+* the runner sends progress and finally the whole extraction to the caller
+  over a pipe.
+
+A candidate that runs past its time limit (derived from the recorded cycle
+time) is stopped and counts as not reproduced.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import pickle
+import select
+import signal
+import struct
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+PR_SET_CHILD_SUBREAPER = 36
+_LEN = struct.Struct("<Q")
+MIN_LIMIT_S = 2.0
+LIMIT_FACTOR = 10.0  # a candidate may take this many recorded cycles before it is stopped
+
+
+def can_fork() -> bool:
+    return hasattr(os, "fork")
+
+
+def candidate_limit(cycle_s: float) -> float:
+    """Seconds one candidate may take: ten recorded cycles, at least two seconds."""
+    return max(MIN_LIMIT_S, LIMIT_FACTOR * cycle_s)
+
+
+def _send(fd: int, obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    view = memoryview(_LEN.pack(len(data)) + data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _read_exactly(fd: int, size: int) -> bytes | None:
+    chunks, left = [], size
+    while left:
+        chunk = os.read(fd, min(left, 1 << 20))
+        if not chunk:
+            return None
+        chunks.append(chunk)
+        left -= len(chunk)
+    return b"".join(chunks)
+
+
+def _receive(fd: int) -> Any:
+    head = _read_exactly(fd, _LEN.size)
+    if head is None:
+        raise EOFError
+    body = _read_exactly(fd, _LEN.unpack(head)[0])
+    if body is None:
+        raise EOFError
+    return pickle.loads(body)
+
+
+@dataclass
+class Tried:
+    """What a candidate's child reported: its comparison and whether the output equals the recording."""
+
+    index: int
+    result: Any  # whatever judge() returned, or None if the child died or ran out of time
+    timed_out: bool = False
+
+
+class ForkedSearch:
+    """Inside the runner: try candidates in forked children; the winner carries on as the runner."""
+
+    def __init__(self, jobs: int, send_to_caller: Callable[[Any], None]):
+        self.jobs = max(1, jobs)
+        self.send_to_caller = send_to_caller
+        self.timeouts = 0
+
+    def search(self, count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool],
+               closeness: Callable[[Any], float], limit_s: float) -> Tried | None:
+        """Try candidates 0..count-1; return (in the surviving process) the one kept, or None.
+
+        ``run(i)`` steps the planner on candidate i and returns a picklable
+        result; it runs in a child. The process that returns from here holds
+        the planner state after the kept candidate (or, for None, the state
+        from before: no candidate ran in it).
+        """
+        running: dict[int, tuple[int, int, int, float]] = {}  # index → (pid, result fd, go fd, started)
+        done: dict[int, Tried] = {}
+        next_index = 0
+        winner: int | None = None
+        while winner is None and (next_index < count or running):
+            while next_index < count and len(running) < self.jobs:
+                child = self._spawn(next_index, run, running, done)
+                if child is None:  # in the child: it won, and carries on as the runner
+                    return self._won
+                running[next_index] = child
+                next_index += 1
+            self._collect(running, done, limit_s)
+            winner = self._decide(done, count, next_index, running, accepted, closeness)
+        if winner is None:
+            winner = self._decide(done, count, count, {}, accepted, closeness, final=True)
+        for index, (pid, result_fd, go_fd, _) in running.items():  # still running: not needed
+            os.kill(pid, signal.SIGKILL)
+            os.close(result_fd)
+            os.close(go_fd)
+            os.waitpid(pid, 0)
+        if winner is None:
+            for tried in done.values():
+                self._release(tried, go=False)
+            return None  # nothing to keep: this process, untouched, carries on
+        for index, tried in done.items():
+            self._release(tried, go=index == winner)
+        os._exit(0)  # the winner carries on from here; this runner's state is the old one
+
+    # -- the pieces ------------------------------------------------------------
+    def _spawn(self, index: int, run: Callable[[int], Any], running: dict, done: dict
+               ) -> tuple[int, int, int, float] | None:
+        result_r, result_w = os.pipe()
+        go_r, go_w = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(result_r)
+            os.close(go_w)
+            # The siblings' pipes are the runner's business; a winner must not carry them on.
+            for _, sibling_result, sibling_go, _ in running.values():
+                os.close(sibling_result)
+                os.close(sibling_go)
+            for tried in done.values():
+                if getattr(tried, "go_fd", None) is not None:
+                    os.close(tried.go_fd)
+            try:
+                result = run(index)
+            except BaseException as exc:  # noqa: BLE001 - a child must never return into the caller's loop
+                result = None
+                _ = exc
+            try:
+                _send(result_w, result)
+            except OSError:
+                os._exit(0)
+            os.close(result_w)
+            verdict = os.read(go_r, 1)
+            os.close(go_r)
+            if verdict != b"1":
+                os._exit(0)
+            self._won = Tried(index, result)
+            return None
+        os.close(result_w)
+        os.close(go_r)
+        return pid, result_r, go_w, time.monotonic()
+
+    def _collect(self, running: dict, done: dict, limit_s: float) -> None:
+        """Wait for at least one running child to report (or to run out of time)."""
+        now = time.monotonic()
+        deadline = min(started + limit_s for (_, _, _, started) in running.values())
+        fds = {result_fd: index for index, (_, result_fd, _, _) in running.items()}
+        ready, _, _ = select.select(list(fds), [], [], max(0.0, deadline - now))
+        for fd in ready:
+            index = fds[fd]
+            pid, result_fd, go_fd, _ = running.pop(index)
+            try:
+                result = _receive(result_fd)
+            except (EOFError, pickle.UnpicklingError):
+                result = None
+            os.close(result_fd)
+            done[index] = Tried(index, result)
+            done[index].pid, done[index].go_fd = pid, go_fd  # type: ignore[attr-defined]
+        now = time.monotonic()
+        for index, (pid, result_fd, go_fd, started) in list(running.items()):
+            if now - started >= limit_s:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                os.close(result_fd)
+                os.close(go_fd)
+                del running[index]
+                self.timeouts += 1
+                done[index] = Tried(index, None, timed_out=True)
+
+    @staticmethod
+    def _decide(done: dict, count: int, started: int, running: dict, accepted, closeness,
+                final: bool = False) -> int | None:
+        """The first candidate in order that is accepted, once all before it have reported."""
+        for index in range(count):
+            if index not in done:
+                if not final:
+                    return None  # an earlier one may still be accepted
+                continue
+            result = done[index].result
+            if result is not None and accepted(result):
+                return index
+        if not final:
+            return None
+        reported = [t for t in done.values() if t.result is not None]
+        if not reported:
+            return None
+        return min(reported, key=lambda t: (closeness(t.result), t.index)).index
+
+    @staticmethod
+    def _release(tried: Tried, go: bool) -> None:
+        pid = getattr(tried, "pid", None)
+        if pid is None:
+            return
+        try:
+            os.write(tried.go_fd, b"1" if go else b"0")  # type: ignore[attr-defined]
+        except OSError:
+            pass
+        os.close(tried.go_fd)  # type: ignore[attr-defined]
+        if not go:
+            os.waitpid(pid, 0)
+
+
+def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None]) -> Any:
+    """Run ``body(send)`` in a forked runner under a reaping supervisor; return what it finally returned.
+
+    ``send(obj)`` passes a message to ``on_message`` in the caller (progress);
+    the runner's return value comes back once the last runner finishes.
+    """
+    read_fd, write_fd = os.pipe()
+    supervisor = os.fork()
+    if supervisor == 0:  # the supervisor: reap every descendant until none is left
+        os.close(read_fd)
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+        runner = os.fork()
+        if runner == 0:
+            code = 0
+            try:
+                result = body(lambda obj: _send(write_fd, ("message", obj)))
+                _send(write_fd, ("done", result))
+            except BaseException as exc:  # noqa: BLE001 - reported to the caller, never raised here
+                try:
+                    _send(write_fd, ("error", f"{type(exc).__name__}: {exc}"))
+                except Exception:  # noqa: BLE001
+                    code = 1
+            os._exit(code)
+        os.close(write_fd)
+        while True:
+            try:
+                os.waitpid(-1, 0)
+            except ChildProcessError:
+                os._exit(0)
+    os.close(write_fd)
+    try:
+        while True:
+            try:
+                kind, payload = _receive(read_fd)
+            except EOFError:
+                raise RuntimeError("the replay process ended without a result (it crashed)") from None
+            if kind == "message":
+                on_message(payload)
+            elif kind == "error":
+                raise RuntimeError(f"the replay process failed: {payload}")
+            else:
+                return payload
+    finally:
+        os.close(read_fd)
+        os.waitpid(supervisor, 0)

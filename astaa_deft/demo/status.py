@@ -1,0 +1,43 @@
+"""The simulator's status channel as a stop condition: a demo run ends at the goal, a collision or its time limit."""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+
+
+class StatusWatch:
+    """The simulator's latest status message, as the tool saw it (done: goal, collision or time limit)."""
+
+    def __init__(self) -> None:
+        self.latest: dict = {}
+        self.collision: dict | None = None
+        self.goal = False
+        self.done = False
+        self.min_clearance = math.inf
+        self._lock = threading.Lock()
+
+    def on_sample(self, sample) -> None:
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        with self._lock:
+            self.latest = msg
+            if msg.get("collision") and self.collision is None:
+                self.collision = msg
+            self.goal = self.goal or bool(msg.get("goal_reached"))
+            self.done = self.done or bool(msg.get("done"))
+            clearance = msg.get("min_clearance")
+            if isinstance(clearance, (int, float)):
+                self.min_clearance = min(self.min_clearance, float(clearance))
+
+    def finished(self, _run) -> str | None:
+        if self.collision is not None:
+            return "collision"
+        if self.goal:
+            return "goal reached"
+        if self.done:
+            return "done"
+        return None

@@ -1,0 +1,75 @@
+"""The run loop: the one place where a run of the SUT is started, watched and ended."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from ..log import records as rec
+from ..spec.model import Spec
+from .bus_run import BusRun
+from .options import RunOptions, RunResult
+
+POLL_SECONDS = 0.05
+
+
+def run_session(spec: Spec, options: RunOptions, *,
+                stop_when: Callable[[BusRun], str | None] | None = None,
+                on_event: Callable[[rec.Record], None] | None = None,
+                on_start: Callable[[BusRun], None] | None = None) -> RunResult:
+    """Run the SUT of ``spec`` once through the bus and return what happened.
+
+    Stable entry point for commands, minimisation, campaigns and benchmarks.
+
+    * ``spec``: a loaded :class:`~astaa_deft.spec.model.Spec`.
+    * ``options``: :class:`RunOptions` (mode, recording path, params, run dir,
+      interceptor, time limit, ...). Each call has its own tool session,
+      helper processes and run directory (a fresh temp dir unless
+      ``options.run_dir`` is given), so concurrent calls in one process do
+      not share state; give each its own ``run_dir`` and log path, and port 0
+      (the default) in ``zenoh.endpoints``.
+    * ``stop_when(run)``: polled every 50 ms while the run goes on; a
+      non-empty string ends the run and becomes its ``end_reason``.
+    * ``on_event(record)``: every event as a typed record
+      (:mod:`astaa_deft.log.records`), from the thread that produced it —
+      keep it quick and thread-safe.
+    * ``on_start(run)``: called once the modules are launched (e.g. to
+      subscribe to a channel with ``run.subscribe``).
+
+    The run ends at the first of: ``options.time_limit``; every launched module
+    gone; a violation with ``options.stop_on_violation``; ``stop_when``.
+    Raises :class:`~astaa_deft.errors.InputError` when the run cannot start.
+    """
+    run = BusRun(spec, options, on_event=on_event or (lambda record: None))
+    t0 = time.monotonic()
+    with run:
+        t0 = time.monotonic()
+        if on_start is not None:
+            on_start(run)
+        while True:
+            reason = _why_end(run, options, t0, stop_when)
+            if reason:
+                break
+            time.sleep(POLL_SECONDS)
+        seconds = time.monotonic() - t0
+        sent = run.counts()
+        run.end(reason)
+    return RunResult(
+        end_reason=reason, seconds=seconds, verdict=run.verdict, violations=tuple(run.violations),
+        exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),
+        mutations=run.interception.mutations if run.interception is not None else 0,
+        log=options.record, complete=options.record is None or run.recorder_finished,
+        observed=run.verdict is not None)
+
+
+def _why_end(run: BusRun, options: RunOptions, t0: float,
+             stop_when: Callable[[BusRun], str | None] | None) -> str:
+    if options.time_limit is not None and time.monotonic() - t0 >= options.time_limit:
+        return "time limit"
+    if run.stop_requested.is_set():
+        return "violation (--stop-on-violation)"
+    if options.launch and run.launcher is not None and not run.alive():
+        return "all modules exited"
+    if stop_when is not None:
+        return stop_when(run) or ""
+    return ""

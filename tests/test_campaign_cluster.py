@@ -1,0 +1,63 @@
+"""Cases on a real Dask LocalCluster of worker processes on 127.0.0.1 (dashboard off)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from dask.distributed import Client, LocalCluster
+
+from astaa_deft.campaign.executors import DaskPool
+from astaa_deft.campaign.model import BASELINE, PlannedCase
+from astaa_deft.campaign.strategies import STRATEGIES
+from astaa_deft.intercept.dictionary import load_dictionary
+from astaa_deft.spec.loader import load_spec
+
+ECHO = Path(__file__).parent / "sut" / "echo.yaml"
+
+
+def test_cluster_campaign_runs_the_same_cases_as_local_and_brings_logs_back(tmp_path: Path):
+    out = tmp_path / "campaign"
+    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", "--spec", str(ECHO), "-o", str(out),
+                           "--cases", "3", "--seed", "11", "--horizon", "2", "--baseline", "1", "--no-minimise",
+                           "--cluster", "local:2"], capture_output=True, text=True, timeout=240)
+    assert done.returncode in (0, 1), done.stdout + done.stderr
+    db = sqlite3.connect(out / "journal.sqlite")
+    cases = db.execute("SELECT number, testcase_xml, status, log_path FROM cases WHERE kind='mutated'"
+                       " ORDER BY number").fetchall()
+    random = STRATEGIES["random"](load_spec(ECHO), load_dictionary(), 11, 2.0)
+    assert [c[1] for c in cases] == [random.propose(n).testcase_xml for n in (1, 2, 3)]
+    for _number, _xml, status, log_path in cases:
+        assert status == "done" and Path(log_path).is_file() and Path(log_path).is_relative_to(out.resolve())
+
+
+def test_a_killed_workers_cases_are_requeued(tmp_path: Path):
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None)
+    try:
+        pool = DaskPool(cluster.scheduler_address, 2)
+        for n in range(1, 5):
+            case = PlannedCase(f"b-{n}", BASELINE, n, 0, {"count": "20"}, None)
+            pool.submit(case.case_id, {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / str(n)),
+                                       "horizon": 4.0, "dictionaries": []})
+        time.sleep(3.0)  # both workers are inside a case now
+        with Client(cluster.scheduler_address) as client:
+            processing = client.processing()
+            busy = next(w for w, tasks in processing.items() if tasks)
+            pid = client.run(os.getpid, workers=[busy])[busy]
+        os.kill(pid, signal.SIGKILL)
+        outcomes = {}
+        deadline = time.monotonic() + 180
+        while pool.pending() and time.monotonic() < deadline:
+            outcomes.update(dict(pool.done(timeout=1.0)))
+        assert sorted(outcomes) == ["b-1", "b-2", "b-3", "b-4"]
+        assert all(o.status == "done" for o in outcomes.values()), outcomes
+        assert all((tmp_path / str(n) / "run.mcap").is_file() for n in range(1, 5))
+        pool.client.close()
+    finally:
+        cluster.close()

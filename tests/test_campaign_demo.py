@@ -1,0 +1,88 @@
+"""`astaa-deft fuzz` end to end on the demo stack: real subprocesses, real Zenoh, real SQLite."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from astaa_deft.commands.demo import demo_spec_path
+
+# Seed 356: generated case 1 empties trajectory.points 0.5 s in (seeded defect 3: control crashes);
+# case 2 nudges a steering value (the stack survives it).
+FINDING_SEED = "356"
+
+
+def fuzz(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def rows(out: Path, sql: str) -> list[tuple]:
+    db = sqlite3.connect(out / "journal.sqlite")
+    try:
+        return db.execute(sql).fetchall()
+    finally:
+        db.close()
+
+
+def test_campaign_finds_buckets_reruns_and_reports(tmp_path: Path):
+    out = tmp_path / "campaign"
+    done = fuzz("--spec", str(demo_spec_path()), "-o", str(out), "--cases", "2", "--seed", FINDING_SEED,
+                "--horizon", "6", "--workers", "3", "--baseline", "1", "--reruns", "1", "--no-minimise")
+    assert done.returncode == 1, done.stdout + done.stderr  # a finding
+    cases = dict(rows(out, "SELECT case_id, status FROM cases"))
+    assert cases == {"b-0001": "done", "c-000001": "done", "c-000002": "done", "r-B001-1": "done"}
+    (bucket, verdict, invariant, module, family, first, without, reruns, fails), = rows(
+        out, "SELECT bucket, verdict, invariant, module, family, first_case, without_mutation, reruns,"
+             " rerun_failures FROM buckets")
+    assert (bucket, verdict, module, family, first, without) == ("B001", "Abort", "control", "trajectory:points:set",
+                                                                 "c-000001", 0)
+    assert reruns == 1 and fails in (0, 1)
+    # each case its own run dir and log
+    assert (out / "cases" / "c-000001" / "run.mcap").is_file() and (out / "cases" / "c-000002" / "run.mcap").is_file()
+    # the report is the journal's: the bucket, its culprit family, the minimal/generated XML, the log link, plots
+    page = (out / "report.html").read_text()
+    assert "B001" in page and "Abort" in page and "trajectory:points:set" in page
+    assert "cases/c-000001/run.mcap" in page and "dict:array.empty" in page
+    assert page.count("data:image/png;base64,") == 4
+    status = fuzz("--status", "-o", str(out))
+    assert status.returncode == 0 and "B001" in status.stdout and "Abort" in status.stdout
+    (out / "report.html").unlink()
+    regen = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "report", str(out)], capture_output=True,
+                           text=True, timeout=120)
+    assert regen.returncode == 0 and "B001" in (out / "report.html").read_text()
+
+
+def test_kill_9_then_resume_loses_no_finished_case(tmp_path: Path):
+    out = tmp_path / "campaign"
+    args = ["--spec", str(demo_spec_path()), "-o", str(out), "--cases", "4", "--seed", "5", "--horizon", "3",
+            "--workers", "2", "--baseline", "1", "--no-minimise", "--params", "defects=off"]
+    proc = subprocess.Popen([sys.executable, "-m", "astaa_deft.cli", "fuzz", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    finished_before: list[tuple] = []
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline:
+            time.sleep(0.5)
+            if (out / "journal.sqlite").exists():
+                finished_before = rows(out, "SELECT case_id, verdict, finished_at FROM cases WHERE kind='mutated'"
+                                            " AND status='done'")
+                if finished_before:
+                    break
+        assert finished_before, "no case finished before the kill"
+        os.kill(proc.pid, signal.SIGKILL)  # the campaign process only; its case processes die with it
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    done = fuzz("-o", str(out), "--resume", "--horizon", "3")
+    assert done.returncode == 0, done.stdout + done.stderr
+    after = rows(out, "SELECT case_id, verdict, finished_at FROM cases WHERE kind='mutated'")
+    assert len(after) == 4 and all(r[1] == "Pass" for r in after)
+    for case in finished_before:  # finished then: the same record now, not re-run
+        assert case in after

@@ -1,0 +1,150 @@
+"""Campaign pieces that need no SUT: signatures, params, strategies, the journal, bad input."""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.campaign import signature as sig
+from astaa_deft.campaign.campaign import default_workers, param_grid
+from astaa_deft.campaign.journal import Journal
+from astaa_deft.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.campaign.strategies import STRATEGIES
+from astaa_deft.commands.demo import demo_spec_path
+from astaa_deft.commands.fuzz import parse_budget, parse_params
+from astaa_deft.errors import InputError
+from astaa_deft.intercept import generate as gen
+from astaa_deft.intercept.dictionary import load_dictionary
+from astaa_deft.intercept.testcase import parse_testcase
+from astaa_deft.spec.loader import load_spec
+
+
+@pytest.fixture(scope="module")
+def demo():
+    return load_spec(demo_spec_path()), load_dictionary()
+
+
+def test_random_strategy_is_astaa_generation_case_for_case(demo):
+    spec, dictionary = demo
+    strategy = STRATEGIES["random"](spec, dictionary, 7, 20.0)
+    generated = gen.generate(spec, dictionary, 5, 7, 20.0)
+    for number, testcase in enumerate(generated, start=1):
+        mine = parse_testcase(strategy.propose(number).testcase_xml.encode())
+        assert mine.policies == testcase.policies and mine.seed == testcase.seed
+
+
+def test_guided_strategy_mutates_its_corpus_deterministically(demo):
+    spec, dictionary = demo
+
+    def run() -> list[tuple[str | None, str]]:
+        guided = STRATEGIES["guided"](spec, dictionary, 3, 20.0)
+        first = guided.propose(1)
+        guided.observe("c-1", first.testcase_xml, CaseOutcome("done", "Pass", "", margins={"speed_limit": 2.0}))
+        return [(p.parent, p.testcase_xml) for p in (guided.propose(n) for n in range(2, 12))]
+
+    a, b = run(), run()
+    assert a == b
+    children = [xml for parent, xml in a if parent == "c-1"]
+    assert children, "half the proposals should derive from the corpus"
+    for xml in children:  # every child is a valid test case for the spec
+        parse_testcase(xml.encode(), "child", spec, dictionary)
+
+
+def test_guided_corpus_keeps_only_cases_that_came_closer(demo):
+    spec, dictionary = demo
+    guided = STRATEGIES["guided"](spec, dictionary, 3, 20.0)
+    xml = guided.propose(1).testcase_xml
+    guided.observe("a", xml, CaseOutcome("done", "Pass", "", margins={"i": 2.0}))
+    guided.observe("b", xml, CaseOutcome("done", "Pass", "", margins={"i": 3.0}))
+    guided.observe("c", xml, CaseOutcome("done", "Pass", "", margins={"i": 1.0}))
+    assert [case for case, _ in guided.corpus] == ["a", "c"]
+
+
+def test_signature_separates_mutation_families_and_folds_indices(demo):
+    spec, dictionary = demo
+    outcome = CaseOutcome("done", "Silent", "", [Finding("speed_limit", "Silent", None, "status", "")])
+    one = parse_testcase(STRATEGIES["random"](spec, dictionary, 356, 8.0).propose(1).testcase_xml.encode())
+    assert sig.mutation_family(one) == "trajectory:points:set"
+    assert sig.signature(outcome, None).endswith(sig.NO_MUTATION)
+    assert sig.failure_key(outcome) == "Silent|speed_limit|-"
+    xml = one.to_xml().decode().replace('path="points"', 'path="points[3].v"')
+    assert sig.signature(outcome, xml).endswith("trajectory:points[].v:set")
+
+
+def test_params_spread_over_every_combination():
+    assert parse_params(["scenario=a,b", "defects=off"]) == {"scenario": ["a", "b"], "defects": ["off"]}
+    assert param_grid({"scenario": ["a", "b"], "defects": ["off"]}) == [
+        {"defects": "off", "scenario": "a"}, {"defects": "off", "scenario": "b"}]
+    assert param_grid({}) == [{}]
+    with pytest.raises(InputError):
+        parse_params(["scenario"])
+
+
+def test_budget_and_default_workers():
+    assert parse_budget("30m") == 1800 and parse_budget("90s") == 90 and parse_budget("2h") == 7200
+    with pytest.raises(InputError):
+        parse_budget("soon")
+    assert default_workers(4, cores=2) >= 2  # modules mostly sleep: more runs than cores
+    assert default_workers(40, cores=2) == 1
+
+
+def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
+    journal = Journal(tmp_path)
+    for n in range(1, 4):
+        journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, "<x/>"))
+        journal.started(f"c-{n}")
+    journal.finished("c-1", CaseOutcome("done", "Pass", "ok"), None, None, None)
+    journal.close()
+    again = Journal(tmp_path)
+    assert again.requeue_running() == 2
+    assert [c.case_id for c in again.pending()] == ["c-2", "c-3"]
+    assert again.case("c-1")["status"] == "done"
+    assert again.outcome(again.case("c-1")).summary == "ok"
+
+
+def test_journal_on_a_read_only_file_is_one_clear_message(tmp_path: Path):
+    journal = Journal(tmp_path)
+    journal.plan(PlannedCase("c-1", MUTATED, 1, 1, {}, None))
+    journal.close()
+    ro = sqlite3.connect(f"file:{tmp_path / 'journal.sqlite'}?mode=ro", uri=True)
+    journal.db = ro
+    with pytest.raises(InputError, match="cannot write the campaign journal"):
+        journal.started("c-1")
+
+
+def _fuzz(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_bad_input_is_one_message_exit_2(tmp_path: Path):
+    bad_spec = tmp_path / "bad.yaml"
+    bad_spec.write_text("name: [unclosed\n")
+    done = _fuzz("--spec", str(bad_spec), "-o", str(tmp_path / "c1"), "--cases", "1")
+    assert done.returncode == 2 and "Traceback" not in done.stderr and "bad.yaml" in done.stderr
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("")
+    done = _fuzz("--spec", str(demo_spec_path()), "-o", str(tmp_path / "c2"), "--cases", "1", "--dictionary",
+                 str(empty))
+    assert done.returncode == 2 and "Traceback" not in done.stderr and "empty.yaml" in done.stderr
+    done = _fuzz("--status", "-o", str(tmp_path / "nowhere"))
+    assert done.returncode == 2 and "no campaign journal" in done.stderr
+
+
+def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
+    spec = tmp_path / "dead.yaml"
+    spec.write_text((Path(__file__).parent / "sut" / "echo.yaml").read_text().replace(
+        '"{spec_dir}/listener.py"', '"-c", "import sys; sys.exit(3)"', 1).replace(
+        "name: echo", f"name: dead\n# copied from tests/sut/echo.yaml\n"))
+    (tmp_path / "listener.py").write_text((Path(__file__).parent / "sut" / "listener.py").read_text())
+    (tmp_path / "talker.py").write_text((Path(__file__).parent / "sut" / "talker.py").read_text())
+    out = tmp_path / "camp"
+    done = _fuzz("--spec", str(spec), "-o", str(out), "--cases", "50", "--horizon", "3", "--baseline", "1")
+    assert done.returncode == 2, done.stderr
+    assert "campaign stopped: the SUT does not start" in done.stderr and "Traceback" not in done.stderr
+    rows = sqlite3.connect(out / "journal.sqlite").execute("SELECT kind, status FROM cases").fetchall()
+    assert rows == [("baseline", "error")]  # no generated case burnt

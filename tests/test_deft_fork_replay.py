@@ -1,0 +1,129 @@
+"""Exact replay by fork: candidates tried from the very planner state, in parallel, not from deep copies.
+
+The planner (tests/sut/lossy_state_planner.py) loses bits through its
+pickled state as extension objects do. In the crafted log the planner used
+the older of two poses on every second cycle, so its most likely candidate
+is wrong there and a second must be tried from the same state: restored from
+a deep copy, every later plan is a little off (nothing reproduces at θ = 0);
+forked, all do.
+"""
+
+from __future__ import annotations
+
+import json
+import textwrap
+
+import pytest
+
+from astaa_deft.deft.extract import extract, near_miss_note
+from astaa_deft.deft.fork_replay import can_fork
+from astaa_deft.deft.replay import make_planner
+from astaa_deft.log.reader import read_log
+from astaa_deft.log.writer import LogWriter
+from astaa_deft.spec.loader import load_spec
+
+from proxy_helpers import SUT_DIR
+
+pytestmark = pytest.mark.skipif(not can_fork(), reason="fork-based replay needs os.fork (POSIX)")
+
+SPEC = textwrap.dedent("""\
+    name: lossy
+    modules: [{name: sim, command: "true"}, {name: planner, command: "true"}]
+    channels:
+      - {name: pose, key: lossy/pose, producer: sim, consumers: [planner], type: Pose}
+      - {name: tick, key: lossy/tick, producer: sim, consumers: [planner], type: Tick}
+      - {name: plan, key: lossy/plan, producer: planner, consumers: [], type: Plan}
+    types:
+      Header: {seq: uint64, stamp: time}
+      Pose: {header: Header, x: float64, y: float64, speed: float64}
+      Tick: {header: Header}
+      Point: {t: time, x: float64, y: float64, heading: float64}
+      Plan: {header: Header, points: {array: Point}}
+    planner:
+      module: planner
+      inputs: [pose, tick]
+      trigger: tick
+      output: plan
+      trajectory: {points: points, x: x, y: y, t: t}
+      replay: {factory: "lossy_state_planner:LossyStatePlanner"}
+    """)
+CYCLES = 12
+
+
+@pytest.fixture()
+def crafted(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(SUT_DIR))
+    from lossy_state_planner import LossyStatePlanner
+
+    spec_path = tmp_path / "lossy.yaml"
+    spec_path.write_text(SPEC)
+    spec = load_spec(spec_path)
+    log_path = tmp_path / "lossy.mcap"
+    w = LogWriter(log_path, spec)
+    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
+    planner = LossyStatePlanner()
+    t0 = 1_000_000_000
+    seq = 0
+    for k in range(CYCLES):
+        base = t0 + k * 100_000_000
+        poses = []
+        for j, dt in enumerate((0, 500_000)):  # two poses shortly before each tick
+            seq += 1
+            pose = {"header": {"seq": seq, "stamp": 0.1 * k}, "x": 1.0 * k + 0.3 * j, "y": 0.0, "speed": 10.0}
+            w.message(ids["pose"], base + dt, json.dumps(pose).encode())
+            poses.append(pose)
+        tick = {"header": {"seq": k + 1, "stamp": 0.1 * k}}
+        w.message(ids["tick"], base + 1_000_000, json.dumps(tick).encode())
+        used = poses[0] if k % 2 else poses[1]  # the second pose came too late for odd cycles
+        plan = planner.step({"pose": used, "tick": tick})
+        w.message(ids["plan"], base + 5_000_000, json.dumps(plan).encode())
+    w.event("run_started", time_ns=t0)
+    w.finish()
+    return spec, log_path
+
+
+def test_deep_copies_of_a_lossy_state_do_not_reproduce_at_zero(crafted):
+    spec, log_path = crafted
+    ex = extract(read_log(log_path), spec, make_planner(spec, {}))
+    assert ex.outputs == CYCLES and len(ex.frames) == CYCLES
+    assert ex.accepted_at(0.0) < CYCLES  # why forking exists: copies plan a little off
+    assert ex.accepted_at(1e-6) == CYCLES
+    # The user is told why, with the distances and the flag that sets θ.
+    note = near_miss_note(ex)
+    assert note is not None and "--threshold 1e-09" in note and "median" in note
+    near = sum(1 for f in ex.frames if 0 < f.comparison.distance <= 1e-9)
+    assert near > 0 and f"{near} output(s) match within 1e-09 m" in note
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_forked_candidates_reproduce_every_output_exactly(crafted, jobs):
+    spec, log_path = crafted
+    seen = []
+    ex = extract(read_log(log_path), spec, make_planner(spec, {}), jobs=jobs,
+                 progress=lambda done, total: seen.append((done, total)))
+    assert ex.outputs == CYCLES and len(ex.frames) == CYCLES and not ex.skipped
+    assert ex.accepted_at(0.0) == CYCLES
+    assert all(f.exact for f in ex.frames)
+    assert near_miss_note(ex) is None
+    assert [f.candidates_tried for f in ex.frames][:2] == [1, 2]  # odd cycles needed the second candidate
+    assert seen[-1] == (CYCLES, CYCLES)  # progress reached the caller from the replay process
+
+
+def test_factory_next_to_the_spec_is_found_without_pythonpath(tmp_path):
+    """Found 9: a planner module beside the spec is imported from the spec's directory."""
+    (tmp_path / "beside_spec_planner.py").write_text((SUT_DIR / "lossy_state_planner.py").read_text())
+    spec_path = tmp_path / "lossy.yaml"
+    spec_path.write_text(SPEC.replace("lossy_state_planner:LossyStatePlanner",
+                                      "beside_spec_planner:LossyStatePlanner"))
+    planner = make_planner(load_spec(spec_path), {})
+    assert type(planner.obj).__name__ == "LossyStatePlanner"
+
+
+def test_factory_nowhere_is_one_clear_error(tmp_path):
+    from astaa_deft.errors import InputError
+
+    spec_path = tmp_path / "lossy.yaml"
+    spec_path.write_text(SPEC.replace("lossy_state_planner:LossyStatePlanner", "no_such_planner_mod:P"))
+    with pytest.raises(InputError) as caught:
+        make_planner(load_spec(spec_path), {})
+    assert "spec's directory" in str(caught.value) and "PYTHONPATH" in str(caught.value)

@@ -1,0 +1,90 @@
+"""The session layer: typed log records and run_session (real processes, real Zenoh on loopback)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.errors import InputError
+from astaa_deft.log import records as rec
+from astaa_deft.log.reader import read_log
+from astaa_deft.session import RunOptions, RunResult, run_session
+from astaa_deft.spec.loader import load_spec
+
+from proxy_helpers import ECHO_SPEC
+
+ALL_KINDS = [
+    rec.RunStarted(1, "star", "echo", ("astaa-deft", "proxy")),
+    rec.RunStopping(2),
+    rec.RunStopped(3),
+    rec.RunEnd(4, "time limit"),
+    rec.ProcessExitRecord(5, "talker", 42, 3, None, False, True, "Traceback ..."),
+    rec.ViolationRecord(6, "speed", "bound", "high", "Hindering", "too fast", None, "status", 7, {"v": 1}),
+    rec.VerdictRecord(7, "Hindering", "1 violation",
+                      rec.ViolationRecord(6, "speed", "bound", "high", "Hindering", "too fast"), ("a reason",)),
+    rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
+    rec.MutationRecord(9, "p1", "set", "data", 12, (rec.FieldChange("value", 1.0, {"float": "nan"}),), "tc",
+                       ("listener",), 1.5, {"steps": []}, 4, 5),
+    rec.ModuleLogLine(10, "talker", "stderr", "ERROR: boom"),
+    rec.FlagRecord(12, "data", 4, "not JSON", 11),
+    rec.OtherEvent("bus_lost", 11, (("detail", "router gone"),)),
+]
+
+
+@pytest.mark.parametrize("record", ALL_KINDS, ids=lambda r: r.kind)
+def test_every_record_has_one_encoding_both_ways(record):
+    assert rec.decode(rec.encode(record)) == record
+
+
+def test_existing_log_events_decode_to_records():
+    # The shapes older tools wrote (no format field, lists not tuples).
+    old = {"kind": "process_exit", "time_ns": 5, "module": "m", "pid": 1, "returncode": -9, "signal": "SIGKILL",
+           "during_shutdown": False, "abnormal": True, "stderr_tail": ""}
+    exit_ = rec.decode(old)
+    assert isinstance(exit_, rec.ProcessExitRecord) and exit_.signal == "SIGKILL" and exit_.abnormal
+    started = rec.decode({"kind": "run_started", "time_ns": 1, "mode": "star", "spec": "s", "command_line": ["a"]})
+    assert started == rec.RunStarted(1, "star", "s", ("a",))
+
+
+def test_a_newer_record_format_is_refused_with_a_clear_message():
+    with pytest.raises(InputError, match="newer astaa-deft"):
+        rec.decode({"kind": "run_started", "time_ns": 1, "format": rec.FORMAT + 1}, where="x.mcap")
+
+
+def test_a_record_missing_required_fields_is_kept_not_guessed():
+    assert isinstance(rec.decode({"kind": "process_exit", "time_ns": 3}), rec.OtherEvent)
+
+
+def _all_delivered(run) -> str | None:
+    out = run.run_dir / "listener.out"
+    return "all delivered" if out.exists() and out.read_text().count("\n") >= 100 else None
+
+
+def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
+    spec = load_spec(ECHO_SPEC)
+    results: dict[str, RunResult] = {}
+    events: dict[str, list] = {"a": [], "b": []}
+
+    def one(name: str) -> None:
+        options = RunOptions(mode="star", record=tmp_path / f"{name}.mcap", run_dir=tmp_path / f"run-{name}",
+                             params={"count": "100", "rate": "200"}, time_limit=60.0)
+        results[name] = run_session(spec, options, stop_when=_all_delivered, on_event=events[name].append)
+
+    threads = [threading.Thread(target=one, args=(n,)) for n in ("a", "b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    for name in ("a", "b"):
+        result = results[name]
+        assert result.end_reason == "all delivered"
+        assert result.sent["data"] == 100 and result.recorded["data"] == 100
+        assert result.complete and result.observed and result.log == tmp_path / f"{name}.mcap"
+        assert (tmp_path / f"run-{name}" / "listener.out").read_text().count("\n") == 100
+        kinds = [type(r) for r in events[name]]
+        assert rec.RunStarted in kinds and rec.VerdictRecord in kinds
+        logged = [rec.decode(e) for e in read_log(result.log).events()]
+        assert any(isinstance(r, rec.RunEnd) and r.reason == "all delivered" for r in logged)
+        assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1, (name, [r for r in logged if not isinstance(r, rec.ProcessExitRecord)])  # the other session's events are not here
