@@ -168,7 +168,7 @@ def _demo_args(p: argparse.ArgumentParser) -> None:
 
 def _proxy(a: argparse.Namespace) -> int:
     from .commands import console, proxy
-    from .spec.loader import load_spec
+    from .spec_loader import load_spec
 
     spec = load_spec(a.spec)
     interceptor, attachments = None, {}

@@ -30,7 +30,7 @@ import cbor2
 
 from astaa_deft.codecs import get_codec
 from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
-from astaa_deft.spec.loader import load_spec_text
+from astaa_deft.spec_loader import load_spec_text
 
 SPEC = load_spec_text("""
 name: bench_intercept

@@ -42,7 +42,7 @@ from astaa_deft.intercept import load_interceptor
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 RECORD_SECONDS = 7.0
 

@@ -26,7 +26,7 @@ from astaa_deft.codecs import get_codec
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.writer import LogWriter
 from astaa_deft.monitor import MonitorSet, check_log, with_typed_invariants
-from astaa_deft.spec.loader import load_spec_text
+from astaa_deft.spec_loader import load_spec_text
 
 BASE = """\
 name: bench

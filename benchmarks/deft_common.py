@@ -23,7 +23,7 @@ from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.demo.status import StatusWatch
 from astaa_deft.log.reader import LogContents
 from astaa_deft.session import RunOptions, run_session
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 from astaa_deft.spec.model import Spec
 
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)

@@ -16,7 +16,7 @@ from astaa_deft.campaign.executors import DaskPool
 from astaa_deft.campaign.model import BASELINE, PlannedCase
 from astaa_deft.campaign.strategies import STRATEGIES
 from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"
 

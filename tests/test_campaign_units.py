@@ -20,7 +20,7 @@ from astaa_deft.errors import InputError
 from astaa_deft.intercept import generate as gen
 from astaa_deft.intercept.dictionary import load_dictionary
 from astaa_deft.intercept.testcase import parse_testcase
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from astaa_deft.deft.extract import extract, ground_truth_rate
 from astaa_deft.deft.replay import make_planner
 from astaa_deft.errors import InputError
 from astaa_deft.log.reader import read_log
-from astaa_deft.spec.loader import load_spec, load_spec_text
+from astaa_deft.spec_loader import load_spec, load_spec_text
 
 PARAMS = {"scenario": "lane_follow", "defects": "off"}
 

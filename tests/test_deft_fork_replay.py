@@ -20,7 +20,7 @@ from astaa_deft.deft.fork_replay import can_fork
 from astaa_deft.deft.replay import make_planner
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 from proxy_helpers import SUT_DIR
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from astaa_deft.deft.export import MANIFEST
 from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
 

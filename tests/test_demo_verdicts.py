@@ -16,7 +16,7 @@ import pytest
 from astaa_deft.commands.demo import demo_policy_path, demo_spec_path, drive
 from astaa_deft.log.reader import read_log
 from astaa_deft.monitor import check_log
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 REPEATS = int(os.environ.get("ASTAA_DEFT_REPEATS", "1"))
 CLEAN = ["lane_follow", "static_obstacle", "cut_in", "red_light"]

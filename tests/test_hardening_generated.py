@@ -139,7 +139,7 @@ def write_log(path: Path, spec_path: Path) -> list[int]:
     from mcap.stream_reader import StreamReader
 
     from astaa_deft.log.writer import LogWriter
-    from astaa_deft.spec.loader import load_spec
+    from astaa_deft.spec_loader import load_spec
 
     spec = load_spec(spec_path)
     w = LogWriter(path, spec, chunk_size=2048)

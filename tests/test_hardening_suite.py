@@ -10,7 +10,7 @@ from pathlib import Path
 
 from astaa_deft.commands.demo import demo_spec_path
 from astaa_deft.deft.export import export_suite
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 HOSTILE_PYPROJECT = """\
 [tool.pytest.ini_options]

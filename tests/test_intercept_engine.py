@@ -16,7 +16,7 @@ from astaa_deft.intercept import Delivery, Interceptor, TestCase, load_dictionar
 from astaa_deft.intercept.actions.base import from_tagged, to_tagged
 from astaa_deft.intercept.actions.set import Assignment, Set
 from astaa_deft.intercept.testcase import Policy
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC = load_spec(ROOT / "tests" / "data" / "intercept_sut.yaml")

@@ -15,7 +15,7 @@ from astaa_deft.fields import FieldPath
 from astaa_deft.intercept import load_dictionary, load_testcase
 from astaa_deft.intercept.dictionary import wire_value
 from astaa_deft.intercept.generate import generate, is_generation_brittle, mutation_targets, write_testcases
-from astaa_deft.spec.loader import load_spec, load_spec_text
+from astaa_deft.spec_loader import load_spec, load_spec_text
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC_PATH = ROOT / "tests" / "data" / "intercept_sut.yaml"
@@ -144,7 +144,7 @@ def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
 def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
     from astaa_deft.intercept.generate import generate_to_directory
 
-    report = generate_to_directory(SPEC_PATH, 6, 4, tmp_path / "cases", duration=10.0)
+    report = generate_to_directory(load_spec(SPEC_PATH), 6, 4, tmp_path / "cases", duration=10.0)
     assert capsys.readouterr().out == ""
     assert [p.name for p in report.paths] == [f"tc-{n:04d}.xml" for n in range(1, 7)]
     assert sum(report.shapes.values()) == 6

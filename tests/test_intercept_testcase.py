@@ -24,7 +24,7 @@ from astaa_deft.intercept.actions.set import Assignment, Set
 from astaa_deft.intercept.testcase import (
     SCHEMA_PATH, Policy, Selection, TestCase, Window, _hardened_parser, _parse_xml, load_testcase, parse_testcase,
 )
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
 ECHO = load_spec(ROOT / "tests" / "sut" / "echo.yaml")

@@ -14,7 +14,7 @@ import pytest
 from astaa_deft.errors import InputError
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec.loader import load_spec_text
+from astaa_deft.spec_loader import load_spec_text
 
 SPEC = textwrap.dedent("""\
     name: t
@@ -33,7 +33,7 @@ def write_killed_log(path: Path) -> None:
         import json, os
         from pathlib import Path
         from astaa_deft.log.writer import LogWriter
-        from astaa_deft.spec.loader import load_spec_text
+        from astaa_deft.spec_loader import load_spec_text
         spec = load_spec_text({SPEC!r})
         w = LogWriter(Path({str(path)!r}), spec)
         cid = w.bus_channel(spec.channel("data"))

@@ -37,7 +37,7 @@ from astaa_deft.minimise.mutations import (
 from astaa_deft.minimise.restrict import restricted_testcase
 from astaa_deft.minimise import workflow
 from astaa_deft.minimise.stages import Failure, Minimisation
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 SPEC = load_spec(demo_spec_path())
 START_NS = 1_000_000_000_000

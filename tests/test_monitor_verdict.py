@@ -123,7 +123,7 @@ def test_check_input_errors(tmp_path):
 
 
 def test_the_offline_check_is_a_library_call_that_prints_nothing(tmp_path, capsys):
-    from astaa_deft.monitor.check import check_recorded_run
+    from astaa_deft.session.check import check_recorded_run
 
     checked = check_recorded_run(write_run(tmp_path / "nan.mcap", nan_at=12))
     assert capsys.readouterr().out == ""

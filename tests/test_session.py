@@ -11,7 +11,7 @@ from astaa_deft.errors import InputError
 from astaa_deft.log import records as rec
 from astaa_deft.log.reader import read_log
 from astaa_deft.session import RunOptions, RunResult, run_session
-from astaa_deft.spec.loader import load_spec
+from astaa_deft.spec_loader import load_spec
 
 from proxy_helpers import ECHO_SPEC
 

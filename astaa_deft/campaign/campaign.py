@@ -18,7 +18,7 @@ from typing import Callable
 
 from ..errors import InputError, Problem
 from ..intercept.dictionary import load_dictionary
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 from . import signature as sig
 from .journal import Journal
 from .minimiser import minimise_run

@@ -16,7 +16,7 @@ from typing import Any
 from ..errors import InputError
 from ..intercept.dictionary import load_dictionary
 from ..intercept.testcase import parse_testcase
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 from .model import CaseOutcome, PlannedCase
 from .runner import run_case
 

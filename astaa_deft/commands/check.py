@@ -7,7 +7,7 @@ record that was not fully read cannot support a Pass, and findings next to
 damage may come from the damage rather than the SUT, so no verdict is given.
 A log that merely stops early (a killed writer) still reports its findings
 with exit 1: what was read is intact. The work is
-:func:`astaa_deft.monitor.check.check_recorded_run`; this prints its result.
+:func:`astaa_deft.session.check.check_recorded_run`; this prints its result.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from ..errors import InputError, Problem
 from ..log import records as rec
 from ..log.reader import LogContents
 from ..monitor import format_verdict, format_violation
-from ..monitor.check import check_recorded_run
+from ..session.check import check_recorded_run
 from ..monitor.offline import CheckResult
 
 

@@ -21,10 +21,10 @@ from ..demo.status import StatusWatch
 from ..intercept import load_interceptor
 from ..log import layout
 from ..log.reader import read_log
-from ..log.summary import format_info
+from ..session.summary import format_info
 from ..monitor.verdict import format_verdict
 from ..session import RunOptions, RunResult
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 from .console import say
 from .proxy import run_bus
 

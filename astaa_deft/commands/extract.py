@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..deft.config import PAPER_THRESHOLDS
+from ..spec.planner import PAPER_THRESHOLDS
 from ..deft.extract import Extraction, near_miss_note
 from ..deft.workflow import extract_module_tests
 from .console import say

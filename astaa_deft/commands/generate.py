@@ -9,11 +9,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..intercept.generate import generate_to_directory
+from ..spec_loader import load_spec
 
 
 def run(spec_path: Path, count: int, seed: int, out_dir: Path, duration: float = 30.0,
         include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> int:
-    report = generate_to_directory(spec_path, count, seed, out_dir, duration, include_brittle, dictionaries)
+    report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration, include_brittle, dictionaries)
     shapes = report.shapes
     print(f"wrote {len(report.paths)} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "
           f"message, {shapes['multi_field']} several fields of one message, {shapes['repeated']} repeated")

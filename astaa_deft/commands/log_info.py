@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from ..log.reader import read_log
-from ..log.summary import format_info
+from ..session.summary import format_info
 
 
 def run(path: Path) -> int:

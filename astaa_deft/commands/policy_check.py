@@ -9,7 +9,7 @@ from typing import Sequence
 from ..errors import InputError, Problem
 from ..intercept.dictionary import load_dictionary
 from ..intercept.testcase import load_testcase
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 
 
 def run(files: Sequence[Path], spec_path: Path | None = None, dictionaries: Sequence[Path] = ()) -> int:

@@ -6,7 +6,7 @@ import importlib
 from pathlib import Path
 
 from ..errors import InputError, Problem
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 
 
 def run(path: Path) -> int:

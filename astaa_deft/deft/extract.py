@@ -13,7 +13,7 @@ from ..codecs.base import DecodeError
 from ..errors import InputError, Problem
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
-from .config import PlannerSpec
+from ..spec.planner import PlannerSpec
 from .frames import Stream, candidates
 from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
 from .replay import ReplayPlanner, trajectory_points

@@ -16,7 +16,7 @@ from ..codecs.base import DecodeError
 from ..fields import get
 from ..geometry import Box, interpolate_pose, overlap
 from ..spec.model import Spec
-from .config import CollisionOracle, TrajectoryLayout
+from ..spec.planner import CollisionOracle, TrajectoryLayout
 from .extract import Extraction
 from .replay import trajectory_points
 
@@ -81,7 +81,7 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
 def check_oracle(suite, entry: Mapping[str, Any]) -> str | None:
     """Run by the pytest plugin: the reason the test fails, or None."""
     if entry.get("kind") == "invariant":  # written by `astaa-deft minimise`
-        from ..minimise.deft_tester import check_invariant_oracle
+        from .invariant_oracle import check_invariant_oracle
 
         return check_invariant_oracle(suite, entry)
     cfg = suite.spec.planner

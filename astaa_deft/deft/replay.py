@@ -25,7 +25,7 @@ from ..bus.processes import stop_process, tail
 from ..errors import InputError, Problem
 from ..fields import get
 from ..spec.model import Spec
-from .config import PlannerSpec, TrajectoryLayout, resolve_args
+from ..spec.planner import PlannerSpec, TrajectoryLayout, resolve_args
 from .validator import Point
 
 OUTPUT_TIMEOUT = 10.0

@@ -9,7 +9,7 @@ from typing import Any
 
 from ..codecs import get_codec
 from ..log.reader import read_log
-from ..spec.loader import load_spec_text
+from ..spec_loader import load_spec_text
 from ..spec.model import Spec
 from .export import FRAMES, MANIFEST
 from .replay import make_planner, trajectory_points

@@ -19,7 +19,7 @@ from typing import Any
 from ..errors import InputError, Problem
 from ..log import layout
 from ..log.reader import LogContents, read_log
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 from ..spec.model import Spec
 from .export import export_suite
 from .extract import Extraction, extract, ground_truth_rate

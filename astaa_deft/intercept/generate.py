@@ -29,7 +29,6 @@ from pathlib import Path
 from ..codecs import get_codec
 from ..errors import InputError, Problem
 from ..fields import FieldPath, is_brittle, leaf_fields, type_at
-from ..spec.loader import load_spec
 from ..spec.model import Channel, Spec
 from .actions.set import Assignment, Set
 from .dictionary import Dictionary, Entry, FieldSite, field_site, load_dictionary
@@ -83,19 +82,18 @@ class GenerateReport:
     shapes: Counter[str]  # test cases per shape: single, multi_field, repeated
 
 
-def generate_to_directory(spec_path: Path, count: int, seed: int, out_dir: Path, duration: float = 30.0,
+def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, duration: float = 30.0,
                           include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> GenerateReport:
-    """Write ``count`` test cases drawn from the spec and the dictionaries into a new or empty ``out_dir``.
+    """Write ``count`` test cases drawn from ``spec`` and the dictionaries into a new or empty ``out_dir``.
 
     InputError for a bad count or duration, an output directory holding test
-    cases already, or a spec or dictionary that does not load.
+    cases already, or a dictionary that does not load.
     """
     if count < 1:
         raise InputError(Problem("--count", None, None, f"{count} test cases", "ask for at least 1"))
     if not duration > 0:
         raise InputError(Problem("--duration", None, None, f"{duration} s", "give a positive number of seconds"))
     _check_output_directory(out_dir)
-    spec = load_spec(spec_path)
     dictionary = load_dictionary(dictionaries)
     testcases = generate(spec, dictionary, count, seed, duration, include_brittle)
     paths = write_testcases(testcases, out_dir)

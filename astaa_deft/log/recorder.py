@@ -28,7 +28,7 @@ from ..bus.topology import read_intercept_record
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
-from ..spec.loader import load_spec
+from ..spec_loader import load_spec
 from . import layout, records
 from .writer import LogWriter
 

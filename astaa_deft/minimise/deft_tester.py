@@ -60,7 +60,7 @@ from ..errors import InputError, Problem
 from ..log import layout
 from ..log.reader import LoggedMessage, read_log
 from ..monitor import MonitorSet, format_violation, with_typed_invariants
-from ..monitor.offline import spec_from_log
+from ..session.check import spec_from_log
 from ..spec.model import Spec
 from .ddmin import Outcome, TestResult
 from .mutations import (
@@ -123,7 +123,7 @@ class Frame:
 
 def load_spec_for(log, spec_path: str | None) -> Spec:
     if spec_path is not None:
-        from ..spec.loader import load_spec
+        from ..spec_loader import load_spec
 
         return load_spec(spec_path)
     spec = spec_from_log(log, f"{log.path}:{layout.SPEC_ATTACHMENT}")
@@ -615,46 +615,6 @@ class DeftTester:
 
 def default_setup(log_path: Path, spec_path: Path | None, invariant: str) -> ReplaySetup:
     return ReplaySetup(str(log_path), str(spec_path) if spec_path is not None else None, invariant)
-
-
-# ---------------------------------------------------------------- the module tests' oracle
-
-
-ORACLE_KIND = "invariant"
-
-
-def oracle_entry(invariant: str, frame: int, start_ns: int) -> dict:
-    """The manifest entry of a module test that fails while the replayed outputs break ``invariant``."""
-    return {"kind": ORACLE_KIND, "invariant": invariant, "frame": frame, "start_ns": start_ns}
-
-
-def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
-    """Run by the pytest plugin for an ``invariant`` oracle: why the test fails, or None.
-
-    The invariant is judged, as the replay tester judges it, over the
-    suite's replayed outputs in frame order at their recorded times; a
-    frame the planner raised on is left to its frame test.
-    """
-    spec = with_typed_invariants(suite.spec)
-    invariant = next((i for i in spec.invariants if i.name == entry["invariant"]), None)
-    if invariant is None:
-        return f"the suite's spec has no invariant '{entry['invariant']}'"
-    monitors = MonitorSet(replace(spec, invariants=(invariant,)), int(entry.get("start_ns", 0)))
-    output = spec.planner.output
-    last = int(entry.get("start_ns", 0))
-    for number, (frame, result) in enumerate(zip(suite.frames, suite.results()), start=1):
-        if result.error is not None:
-            continue
-        last = int(frame["output_time_ns"])
-        monitors.on_tick(last)
-        found = monitors.on_message(output, last, result.message, number)
-        if found:
-            return (f"frame {frame['index']}: the planner's output breaks invariant '{invariant.name}': "
-                    f"{found[0].detail}")
-    found = monitors.finish(last)
-    if found:
-        return f"the planner's outputs break invariant '{invariant.name}': {found[0].detail}"
-    return None
 
 
 if __name__ == "__main__":

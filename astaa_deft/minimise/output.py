@@ -33,7 +33,8 @@ from ..log import layout
 from ..log import records as log_records
 from ..log.reader import LoggedMessage
 from ..log.writer import LogWriter
-from .deft_tester import Frame, ReplayModel, oracle_entry
+from ..deft.invariant_oracle import oracle_entry
+from .deft_tester import Frame, ReplayModel
 from .stages import Minimisation
 
 MINIMAL_XML = "minimal.xml"

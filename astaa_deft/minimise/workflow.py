@@ -108,7 +108,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
         say(f"warning: {warning}")
     spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None))
     if spec.path is None:  # the log's own spec: live runs (their recorder) need it as a file
-        from ..spec.loader import load_spec
+        from ..spec_loader import load_spec
 
         (scratch / "spec.yaml").write_text(spec.source_text)
         spec = with_typed_invariants(load_spec(scratch / "spec.yaml"))

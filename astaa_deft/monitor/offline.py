@@ -23,12 +23,9 @@ from dataclasses import dataclass, field
 
 from ..codecs import Codec, get_codec
 from ..codecs.base import DecodeError
-from ..errors import InputError, Problem
-from ..log import layout
 from ..log import records as rec
 from ..log.reader import LogContents
 from ..spec.model import Spec
-from ..yamlsource import decode_utf8
 from .monitorset import MonitorSet
 from .verdict import Verdict
 from .violation import Violation
@@ -129,16 +126,3 @@ def _feed_exit(monitors: MonitorSet, event: rec.ProcessExitRecord) -> None:
         module=event.module, returncode=int(event.returncode or 0), signal=event.signal, time_ns=event.time_ns,
         during_shutdown=bool(event.during_shutdown), stderr_tail=str(event.stderr_tail or ""))
 
-
-def spec_from_log(log: LogContents, name: str) -> Spec | None:
-    """The spec the run was recorded with (attached to the log), or None."""
-    from ..spec.loader import load_spec_text
-
-    data = log.attachments.get(layout.SPEC_ATTACHMENT)
-    if data is None:
-        return None
-    try:
-        return load_spec_text(decode_utf8(data, name), name=name)
-    except InputError as exc:
-        raise InputError(exc.problems + [Problem(str(log.path), None, None, "the spec stored in the log is unreadable",
-                                                 "give the SUT spec with --spec sut.yaml")]) from None

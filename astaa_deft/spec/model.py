@@ -1,6 +1,6 @@
 """Typed, validated objects a SUT spec loads into (see docs/spec.md).
 
-Pure data: no I/O, no Zenoh. The loader in ``astaa_deft.spec.loader`` builds
+Pure data: no I/O, no Zenoh. The loader in ``astaa_deft.spec_loader`` builds
 these and guarantees every cross reference in them resolves.
 """
 
@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
+
+if TYPE_CHECKING:
+    from .planner import PlannerSpec
 
 FLOAT_KINDS = ("float32", "float64")
 INT_KINDS = ("int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64")
@@ -108,9 +111,10 @@ class Spec:
     types: Mapping[str, MessageType]
     brittle: tuple[str, ...] = ()
     params: Mapping[str, str] = field(default_factory=dict)
-    # Sections owned by later stages; kept raw until those stages validate them.
+    # Typed by the spec loader: invariants are astaa_deft.monitor's Invariant objects (each kind's own
+    # class; the spec layer sits below monitor, so it does not name the type), the planner section its record.
     invariants: tuple[Any, ...] = ()
-    planner: Any = None  # astaa_deft.deft.config.PlannerSpec, when the spec names a planner
+    planner: PlannerSpec | None = None
     source_text: str = ""
 
     def module(self, name: str) -> Module:

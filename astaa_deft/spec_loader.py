@@ -12,12 +12,12 @@ import string
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, did_you_mean
-from ..deft.config import build_planner
-from ..fields import FieldPathError, check_brittle_pattern
-from ..monitor.invariants import build_invariants
-from ..yamlsource import Node, Source, describe_value
-from .model import (
+from .errors import did_you_mean
+from .spec.planner import build_planner
+from .fields import FieldPathError, check_brittle_pattern
+from .monitor.invariants import build_invariants
+from .yamlsource import Node, Source, describe_value
+from .spec.model import (
     SCALAR_KINDS,
     Channel,
     FieldType,

@@ -2,9 +2,11 @@
 
 ``check_recorded_run(log_path, spec_path)`` reads the log, takes the spec
 given (or the one stored in the log), and evaluates every invariant over the
-recorded messages (:func:`.offline.check_log`). ``astaa-deft check`` prints
-the result and picks the exit code; the minimiser and campaigns call
-:func:`.offline.check_log` on logs they hold already.
+recorded messages (:func:`astaa_deft.monitor.offline.check_log`).
+``astaa-deft check`` prints the result and picks the exit code; the minimiser
+and campaigns call ``check_log`` on logs they hold already. It sits in the
+session layer, above the spec loader: judging a recorded run is the offline
+half of what ``run_session`` does live.
 """
 
 from __future__ import annotations
@@ -13,11 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError, Problem
+from ..log import layout
 from ..log.reader import LogContents, read_log
-from ..spec.loader import load_spec
+from ..monitor.invariants import with_typed_invariants
+from ..monitor.offline import CheckResult, check_log
 from ..spec.model import Spec
-from .invariants import with_typed_invariants
-from .offline import CheckResult, check_log, spec_from_log
+from ..spec_loader import load_spec, load_spec_text
+from ..yamlsource import decode_utf8
 
 
 @dataclass(frozen=True)
@@ -53,3 +57,15 @@ def check_recorded_run(log_path: Path, spec_path: Path | None = None) -> Recorde
                                      "give the SUT spec with --spec sut.yaml"))
     spec = with_typed_invariants(spec)
     return RecordedCheck(check_log(log, spec), spec, spec_path is None, log)
+
+
+def spec_from_log(log: LogContents, name: str) -> Spec | None:
+    """The spec the run was recorded with (attached to the log), or None."""
+    data = log.attachments.get(layout.SPEC_ATTACHMENT)
+    if data is None:
+        return None
+    try:
+        return load_spec_text(decode_utf8(data, name), name=name)
+    except InputError as exc:
+        raise InputError(exc.problems + [Problem(str(log.path), None, None, "the spec stored in the log is unreadable",
+                                                 "give the SUT spec with --spec sut.yaml")]) from None

@@ -5,9 +5,10 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 
-from . import layout
-from . import records as rec
-from .reader import LogContents
+from ..log import layout
+from ..log import records as rec
+from ..log.reader import LogContents
+from ..monitor.verdict import format_verdict
 
 
 @dataclass(frozen=True)
@@ -76,8 +77,6 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
     verdicts = [e for e in events if isinstance(e, rec.VerdictRecord)]
     if verdicts:
-        from ..monitor.verdict import format_verdict
-
         start = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)
         lines.append(format_verdict(rec.encode(verdicts[-1]), start))
     flags = [rec.decode(f, where=str(log.path)) for f in log.flags()]
