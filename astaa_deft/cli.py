@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .errors import AstaaDeftError
+from .errors import AstaaDeftError, InputError, Problem
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -192,9 +192,11 @@ def _fuzz(a: argparse.Namespace) -> int:
     if a.status:
         return fuzz.status(a.out)
     if a.spec is None and not a.resume:
-        raise InputError("astaa-deft fuzz: --spec is required (or --resume, or --status)")
+        raise InputError(Problem("astaa-deft fuzz", None, None, "no spec given",
+                                 "give --spec sut.yaml (or --resume to go on with the campaign in -o DIR)"))
     if a.cases is None and a.budget is None and not a.resume:
-        raise InputError("astaa-deft fuzz: give --cases N or --budget DURATION")
+        raise InputError(Problem("astaa-deft fuzz", None, None, "no size given for the campaign",
+                                 "give --cases N or --budget DURATION (e.g. 10m)"))
     config = CampaignConfig(a.spec or Path("."), a.out, cases=a.cases,
                             budget=fuzz.parse_budget(a.budget) if a.budget else None, workers=a.workers,
                             seed=a.seed, strategy=a.strategy, dictionaries=a.dictionary,

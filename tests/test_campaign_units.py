@@ -133,6 +133,10 @@ def test_bad_input_is_one_message_exit_2(tmp_path: Path):
     assert done.returncode == 2 and "Traceback" not in done.stderr and "empty.yaml" in done.stderr
     done = _fuzz("--status", "-o", str(tmp_path / "nowhere"))
     assert done.returncode == 2 and "no campaign journal" in done.stderr
+    done = _fuzz("-o", str(tmp_path / "c3"))  # no spec: a NameError traceback once
+    assert done.returncode == 2 and "Traceback" not in done.stderr and "--spec" in done.stderr
+    done = _fuzz("--spec", str(demo_spec_path()), "-o", str(tmp_path / "c4"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr and "--cases" in done.stderr
 
 
 def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
