@@ -7,6 +7,7 @@ Validated with located errors like the rest of the spec; the loader calls
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -226,9 +227,10 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
         if not isinstance(factory, str) or not FACTORY_RE.match(factory):
             src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", "e.g. mystack.planner:Planner")
             factory = None
-        elif not _module_found(factory.split(":")[0]):
-            src.at(v["factory"], f"factory module '{factory.split(':')[0]}' cannot be found on the Python path",
-                   "install the package that provides it, or fix the name")
+        elif not _module_found(factory.split(":")[0], src.name):
+            src.at(v["factory"], f"factory module '{factory.split(':')[0]}' is neither on the Python path nor in "
+                   "the spec's directory", "install the package that provides it, put it in the spec's directory, "
+                   "add its directory to PYTHONPATH, or fix the name")
     args: dict[str, str] = {}
     if "args" in v:
         if not v["args"].is_map:
@@ -264,10 +266,21 @@ def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str
     return out
 
 
-def _module_found(module: str) -> bool:
-    """Whether `import module` would find something, without running the module itself."""
+def _module_found(module: str, spec_name: str) -> bool:
+    """Whether replay would find the factory's module, without running it: on the path or next to the spec.
+
+    A spec that is not a file (the copy stored in a log, read on another
+    machine) is not held to it: replay says so clearly if it comes to that.
+    """
     import importlib.util
 
+    spec_file = Path(spec_name)
+    if not spec_file.is_file():
+        return True
+    top = module.split(".")[0]
+    beside = spec_file.resolve().parent
+    if (beside / f"{top}.py").is_file() or (beside / top).is_dir():
+        return True
     try:
         return importlib.util.find_spec(module) is not None
     except Exception:  # a parent package is missing or broken (any error its import raises)
