@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..errors import InputError, Problem
+from ..errors import AstaaDeftError, InputError, Problem
 from ..intercept.dictionary import load_dictionary
 from ..spec_loader import load_spec
 from . import signature as sig
@@ -61,8 +61,10 @@ class CampaignResult:
     stopped: str  # "done", "budget", "interrupted"
 
 
-class CampaignStopped(Exception):
-    """The campaign cannot go on (the SUT does not start): one message, exit 2."""
+class CampaignStopped(AstaaDeftError):
+    """The campaign cannot go on (the SUT does not start): one message, exit 2 (the command adds the fix)."""
+
+    exit_code = 2
 
 
 def default_workers(module_count: int, cores: int | None = None) -> int:
