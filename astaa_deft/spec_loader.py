@@ -363,7 +363,7 @@ class _SpecBuilder:
                     self.src.at(v["encoding"], f"unknown encoding '{encoding}'", hint)
             out.append(Channel(name, key, producer, tuple(consumers), type_name, encoding))
         for channel, cnode in self._ready_channels:
-            if channel is not None and channel not in names:
+            if channel is not None and cnode is not None and channel not in names:
                 hint = did_you_mean(channel, names) or "name a channel declared under 'channels'"
                 self.src.at(cnode, f"readiness channel '{channel}' is not declared", hint)
         return out

@@ -104,8 +104,9 @@ class Source:
                 depth -= 1
             elif isinstance(event, yaml.AliasEvent):
                 aliases += 1
-                if self._first_alias is None:
-                    self._first_alias = (event.start_mark.line + 1, event.start_mark.column + 1)
+                mark = event.start_mark
+                if self._first_alias is None and mark is not None:
+                    self._first_alias = (mark.line + 1, mark.column + 1)
                 if aliases > MAX_ALIASES:
                     raise self._refuse(event, f"more than {MAX_ALIASES} aliases (*{event.anchor})",
                                        "write the values out instead of repeating anchors")

@@ -103,7 +103,7 @@ def test_type_body_not_a_mapping_through_generate(tmp_path, capsys):
      "obstacles: {channel: prediction, array: obstacles, id: {a: 1},", "'id' must be a field path"),
     ("obstacles: {channel: prediction, array: obstacles, id: id, length: length,",
      "obstacles: {channel: prediction, array: obstacles, id: id, length: [],", "'length' must be a field path"),
-    ("astaa_deft.demo.planner_core:Planner", "astaa_deft.demo.no_such_module:Planner", "cannot be found"),
+    ("astaa_deft.demo.planner_core:Planner", "astaa_deft.demo.no_such_module:Planner", "is neither on the Python path nor in the spec's directory"),
     ("astaa_deft.demo.planner_core:Planner", "astaa_deft.demo.planner_core:NoSuchPlanner", "no callable"),
 ])
 def test_spec_check_rejects_what_extract_would_fail_on(old, new, expect, tmp_path, capsys):

@@ -53,6 +53,8 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
         exact, checked = report.ground_truth
         say(f"ground truth ({ground_truth}): {exact}/{checked} frames used exactly the planner's inputs"
             + (f" ({exact / checked:.1%})" if checked else ""))
-    say(f"{report.accepted} module tests (θ = {report.spec.planner.threshold:g} m) written to {out_dir}; "
+    planner = report.spec.planner
+    assert planner is not None  # extract_module_tests refuses a spec without a planner section
+    say(f"{report.accepted} module tests (θ = {planner.threshold:g} m) written to {out_dir}; "
         f"run them with: pytest {out_dir}")
     return 0 if report.manifest else 1

@@ -112,8 +112,10 @@ class Controller:
         rear_x = loc.x - half * math.cos(loc.heading)
         rear_y = loc.y - half * math.sin(loc.heading)
         # The plan's points are box centres; pursue the path its rear axle will follow.
-        path_x = self.plan["x"] - half * np.cos(self.plan["heading"])
-        path_y = self.plan["y"] - half * np.sin(self.plan["heading"])
+        plan = self.plan
+        assert plan is not None  # step() brakes instead of steering when there is no plan
+        path_x = plan["x"] - half * np.cos(plan["heading"])
+        path_y = plan["y"] - half * np.sin(plan["heading"])
         distances = np.hypot(path_x - rear_x, path_y - rear_y)
         nearest = int(np.argmin(distances))  # SEEDED DEFECT 3: raises on a plan with no points
         lookahead = min(LOOKAHEAD_MAX, max(LOOKAHEAD_MIN, LOOKAHEAD_GAIN * loc.speed))
@@ -132,8 +134,10 @@ class Controller:
 
     def _acceleration(self, loc: Localization, dt: np.float64) -> float:
         t = loc.stamp + SPEED_PREVIEW
-        v_ref = float(np.interp(t, self.plan["t"], self.plan["v"]))
-        a_ref = float(np.interp(t, self.plan["t"], self.plan["a"]))
+        plan = self.plan
+        assert plan is not None  # step() brakes instead of following when there is no plan
+        v_ref = float(np.interp(t, plan["t"], plan["v"]))
+        a_ref = float(np.interp(t, plan["t"], plan["a"]))
         if v_ref < 0.05 and loc.speed < 0.3:
             self.integral, self.prev_error, self.derivative = 0.0, 0.0, 0.0
             return HOLD_BRAKE

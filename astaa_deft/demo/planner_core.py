@@ -124,6 +124,8 @@ class Planner:
                 if best_key is None or key < best_key:
                     best_key, best = key, (candidate, points, path)
 
+        if best is None or best_key is None:  # the candidate set always holds keeping the current lane
+            raise RuntimeError("the planner had no candidate to choose from")
         candidate, points, path = best
         behavior = self._behavior(candidate, current_lane, cruise, emergency=best_key[0])
         self.lane_decision, self.lateral = candidate.lane, path

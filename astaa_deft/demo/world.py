@@ -82,7 +82,7 @@ class WorldObject:
             self.pending.remove(maneuver)
             if maneuver.lane_change is not None:
                 self.lane_change = LaneChange(t, maneuver.duration, self.y, lane_center(maneuver.lane_change))
-            else:
+            elif maneuver.speed is not None:
                 self.target_speed, self.accel = maneuver.speed, maneuver.accel
         if self.speed != self.target_speed:
             change = self.accel * dt

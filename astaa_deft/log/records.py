@@ -185,7 +185,7 @@ def encode(record: Record) -> dict:
                 "fields": [{"path": c.path, "old": c.old, "new": c.new} for c in record.fields],
                 "detail": record.detail, "original_sequence": record.original_sequence,
                 "delivered_sequence": record.delivered_sequence}
-    body = {"kind": record.kind}
+    body: dict[str, Any] = {"kind": record.kind}
     for f in fields(record):
         value = getattr(record, f.name)
         body[f.name] = list(value) if isinstance(value, tuple) else value
@@ -218,7 +218,7 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     cls = _SIMPLE.get(kind)
     if cls is None:
         return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
-    values = {}
+    values: dict[str, Any] = {}  # checked by the dataclass itself: a missing field is a TypeError below
     for f in fields(cls):
         if f.name in body:
             value = body[f.name]

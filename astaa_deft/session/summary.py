@@ -77,8 +77,8 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
     verdicts = [e for e in events if isinstance(e, rec.VerdictRecord)]
     if verdicts:
-        start = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)
-        lines.append(format_verdict(rec.encode(verdicts[-1]), start))
+        started = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)
+        lines.append(format_verdict(rec.encode(verdicts[-1]), started))
     flags = [rec.decode(f, where=str(log.path)) for f in log.flags()]
     if flags:
         per = Counter(f.channel for f in flags if isinstance(f, rec.FlagRecord))

@@ -198,7 +198,7 @@ def _trajectory(src: Source, node: Node | None, types: Mapping[str, MessageType]
         if points.kind != "array" or points.items is None or points.items.kind != "struct":
             raise FieldPathError(f"'{layout.points}' is not an array of points", text=layout.points, position=0)
         for sub in (layout.x, layout.y, layout.t):
-            type_at(types, points.items.ref, sub)
+            type_at(types, points.items.ref or "", sub)
         if layout.time == "relative":
             type_at(types, output.type, layout.stamp)
     except FieldPathError as exc:

@@ -355,7 +355,7 @@ class CollisionMonitor(Monitor):
         if before is None:
             return None
         t0, older = before
-        t1, newer = after if after is not None else (None, {})
+        t1, newer = after if after is not None else (t0, {})  # no later message: nothing to bring back
         out = []
         for ident, (box, element, velocity) in older.items():
             if ident in newer:
