@@ -16,7 +16,6 @@ The target is >= 50k messages/s for bound and expression. Asserts nothing.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import tempfile
 import time
@@ -28,32 +27,8 @@ from astaa_deft.log.writer import LogWriter
 from astaa_deft.monitor import MonitorSet, check_log, with_typed_invariants
 from astaa_deft.spec_loader import load_spec_text
 
-BASE = """\
-name: bench
-modules:
-  - {name: sim, command: "true"}
-  - {name: planning, command: "true"}
-  - {name: control, command: "true"}
-channels:
-  - {name: localization, key: b/loc, producer: sim, type: Pose}
-  - {name: obstacles, key: b/obs, producer: sim, type: Obstacles}
-  - {name: lights, key: b/lights, producer: sim, type: Lights}
-  - {name: trajectory, key: b/traj, producer: planning, type: Trajectory}
-  - {name: command, key: b/cmd, producer: control, type: Command}
-  - {name: status, key: b/status, producer: control, type: Status}
-types:
-  Header: {seq: uint64, stamp: time}
-  Pose: {header: Header, x: float64, y: float64, heading: float64, speed: float64}
-  Obstacle: {id: int32, x: float64, y: float64, heading: float64, length: float64, width: float64}
-  Obstacles: {header: Header, obstacles: "Obstacle[]"}
-  Light: {id: int32, state: {enum: [red, yellow, green]}, stop_line_x: float64}
-  Lights: {header: Header, lights: "Light[]"}
-  Point: {t: float64, x: float64, v: float64}
-  Trajectory: {header: Header, points: "Point[]"}
-  Command: {header: Header, acceleration: float64, steering: float64}
-  Status: {ego_speed: float64, speed_limit: float64, mode: string}
-invariants:
-"""
+# The driving stack the monitor tests use too (one copy, under tests/data).
+BASE = (Path(__file__).resolve().parent.parent / "tests" / "data" / "driving_stack.yaml").read_text() + "invariants:\n"
 
 KINDS = {
     "bound": ("command", """
@@ -86,6 +61,11 @@ def write_log(path: Path, messages: int) -> None:
     spec = load_spec_text(BASE + "  []\n")
     writer = LogWriter(path, spec)
     channel_ids = {c.name: writer.bus_channel(c) for c in spec.channels}
+    codecs = {c.name: get_codec(c.encoding) for c in spec.channels}  # status is CBOR, the rest JSON
+
+    def write(name: str, time_ns: int, value: dict) -> None:
+        writer.message(channel_ids[name], time_ns, codecs[name].encode(value))
+
     t0 = 1_700_000_000_000_000_000
     writer.event("run_started", time_ns=t0)
     # per 10 ms step: command, status, trajectory, localization; every 10th step obstacles and lights
@@ -94,21 +74,21 @@ def write_log(path: Path, messages: int) -> None:
         t = t0 + k * 10_000_000
         header = {"seq": k, "stamp": k * 0.01}
         x = 0.1 * k
-        writer.message(channel_ids["command"], t + 1000, json.dumps(
-            {"header": header, "acceleration": math.nan if k % 997 == 0 else 0.5, "steering": 0.0}).encode())
-        writer.message(channel_ids["status"], t + 2000, json.dumps(
-            {"ego_speed": 10.0 + (k % 50 == 0), "speed_limit": 10.4, "mode": "auto"}).encode())
-        writer.message(channel_ids["trajectory"], t + 3000, json.dumps(
-            {"header": header, "points": [{"t": i * 0.1, "x": x + i, "v": 10.0} for i in range(10)]}).encode())
-        writer.message(channel_ids["localization"], t + 4000, json.dumps(
-            {"header": header, "x": x % 200, "y": 0.0, "heading": 0.0, "speed": 10.0}).encode())
+        write("command", t + 1000, (
+            {"header": header, "acceleration": math.nan if k % 997 == 0 else 0.5, "steering": 0.0}))
+        write("status", t + 2000, (
+            {"ego_speed": 10.0 + (k % 50 == 0), "speed_limit": 10.4, "mode": "auto"}))
+        write("trajectory", t + 3000, (
+            {"header": header, "points": [{"t": i * 0.1, "x": x + i, "v": 10.0} for i in range(10)]}))
+        write("localization", t + 4000, (
+            {"header": header, "x": x % 200, "y": 0.0, "heading": 0.0, "speed": 10.0}))
         if k % 10 == 0:
-            writer.message(channel_ids["obstacles"], t + 5000, json.dumps({"header": header, "obstacles": [
+            write("obstacles", t + 5000, ({"header": header, "obstacles": [
                 {"id": i, "x": 20.0 * i, "y": 4.0, "heading": 0.0, "length": 4.0, "width": 2.0} for i in range(8)]
-            }).encode())
+            }))
             state = "red" if (k // 500) % 2 else "green"
-            writer.message(channel_ids["lights"], t + 6000, json.dumps(
-                {"header": header, "lights": [{"id": 1, "state": state, "stop_line_x": 150.0}]}).encode())
+            write("lights", t + 6000, (
+                {"header": header, "lights": [{"id": 1, "state": state, "stop_line_x": 150.0}]}))
     writer.finish()
 
 
@@ -120,7 +100,8 @@ def bench(log, kind: str, invariant: str) -> dict:
     wanted = monitors.channels()
     routes = {topic: info.metadata["channel"] for topic, info in log.channels.items()
               if info.metadata.get("channel") in wanted}
-    decoded = [(routes[m.topic], m.log_time, get_codec("json").decode(m.data), m.sequence)
+    codecs = {ch.name: get_codec(ch.encoding) for ch in spec.channels}
+    decoded = [(routes[m.topic], m.log_time, codecs[routes[m.topic]].decode(m.data), m.sequence)
                for m in log.messages if m.topic in routes]
     clock = time.perf_counter()
     for channel, t, value, seq in decoded:

@@ -22,31 +22,7 @@ from astaa_deft.spec.model import Spec
 
 T0 = 1_700_000_000_000_000_000  # ns: the run's start in every hand-made log
 
-BASE_SPEC = """\
-name: av
-modules:
-  - {name: sim, command: "true"}
-  - {name: planning, command: "true"}
-  - {name: control, command: "true"}
-channels:
-  - {name: localization, key: av/loc, producer: sim, consumers: [planning, control], type: Pose}
-  - {name: obstacles, key: av/obs, producer: sim, consumers: [planning], type: Obstacles}
-  - {name: lights, key: av/lights, producer: sim, consumers: [planning], type: Lights}
-  - {name: trajectory, key: av/traj, producer: planning, consumers: [control], type: Trajectory}
-  - {name: command, key: av/cmd, producer: control, consumers: [sim], type: Command}
-  - {name: status, key: av/status, producer: control, consumers: [], type: Status, encoding: cbor}
-types:
-  Header: {seq: uint64, stamp: time}
-  Pose: {header: Header, x: float64, y: float64, heading: float64, speed: float64}
-  Obstacle: {id: int32, x: float64, y: float64, heading: float64, length: float64, width: float64}
-  Obstacles: {header: Header, obstacles: "Obstacle[]"}
-  Light: {id: int32, state: {enum: [red, yellow, green]}, stop_line_x: float64}
-  Lights: {header: Header, lights: "Light[]"}
-  Point: {t: float64, x: float64, v: float64}
-  Trajectory: {header: Header, points: "Point[]", gear: {enum: [drive, reverse, park]}}
-  Command: {header: Header, acceleration: float64, steering: float64}
-  Status: {ego_speed: float64, speed_limit: float64, mode: string}
-"""
+BASE_SPEC = (Path(__file__).parent / "data" / "driving_stack.yaml").read_text()
 
 
 def spec_text(invariants: str) -> str:
