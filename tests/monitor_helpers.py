@@ -66,8 +66,11 @@ class HandMadeLog:
         if started:
             self.event("run_started", 0.0, mode="star", spec=spec.name)
 
-    def message(self, channel: str, at: float, value: Any) -> int:
-        """Log ``value`` on ``channel`` at ``at`` seconds; returns its seq (1-based, per channel)."""
+    def message(self, channel: str, at: float, value: Any, published: float | None = None) -> int:
+        """Log ``value`` on ``channel`` at ``at`` seconds; returns its seq (1-based, per channel).
+
+        ``published``: the message's own (Zenoh) time, when it differs from when the recorder got it.
+        """
         declared = self.spec.channel(channel)
         cid = self.writer.bus_channel(declared)
         if isinstance(value, (bytes, bytearray)):
@@ -77,7 +80,7 @@ class HandMadeLog:
             data = cbor2.dumps(value)
         else:
             data = json.dumps(value).encode()
-        return self.writer.message(cid, ns(at), data)
+        return self.writer.message(cid, ns(at), data, ns(published) if published is not None else None)
 
     def event(self, kind: str, at: float, **fields: Any) -> None:
         self.writer.event(kind, time_ns=ns(at), **fields)

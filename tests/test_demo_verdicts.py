@@ -50,8 +50,9 @@ def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
 @pytest.mark.parametrize("policy,klass,invariants", DEFECTS, ids=[d[0][5:-4] for d in DEFECTS])
 def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass, invariants):
     log = tmp_path / "run.mcap"
+    # Ends at the first violation (the verdict is decided then), or after 30 s on a slow machine.
     outcome, _ = drive("lane_follow", defects=True, passive=False, record=log, command_line=[],
-                       policy=demo_policy_path(policy), duration=9.0)
+                       policy=demo_policy_path(policy), duration=30.0, stop_on_violation=True)
     assert outcome.mutations >= 1
     assert outcome.verdict.klass == klass, outcome.verdict.summary
     assert outcome.verdict.first.invariant in invariants

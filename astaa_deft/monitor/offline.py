@@ -4,7 +4,7 @@ The log is replayed into the same ``MonitorSet`` the proxy uses online:
 
 * bus messages of the channels invariants read, decoded with the channel's
   codec (an undecodable payload is passed as ``None``, as online), in
-  log-time order, with ``seq`` = the message's sequence number on its
+  message-time order (see ``order``: the same order online), with ``seq`` = the message's sequence number on its
   channel in the log (the recorder numbers them from 1);
 * ``process_exit`` events at their ``time_ns``;
 * a tick at every message time, then ``finish`` at the end of the run.
@@ -26,6 +26,7 @@ from ..codecs.base import DecodeError
 from ..log import records as rec
 from ..log.reader import LogContents
 from ..spec.model import Spec
+from .order import channel_ranks, order_key
 from .monitorset import MonitorSet
 from .verdict import Verdict
 from .violation import Violation
@@ -61,10 +62,14 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
 
     clock = time.perf_counter()
     exit_index = 0
-    for message in sorted((m for m in log.messages if m.topic in routes), key=lambda m: m.log_time):
-        if message.log_time > end_ns:
+    ranks = channel_ranks(spec)
+    ordered = sorted((m for m in log.messages if m.topic in routes),
+                     key=lambda m: order_key(m.publish_time, ranks[routes[m.topic][0]], m.sequence))
+    for message in ordered:
+        at = message.publish_time  # the message time: the Zenoh timestamp the recorder kept (else log time)
+        if at > end_ns:
             break
-        while exit_index < len(exits) and exits[exit_index].time_ns <= message.log_time:
+        while exit_index < len(exits) and exits[exit_index].time_ns <= at:
             _feed_exit(monitors, exits[exit_index])
             exit_index += 1
         channel, codec = routes[message.topic]
@@ -72,8 +77,8 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
             value = codec.decode(message.data)
         except DecodeError:
             value = None
-        monitors.on_tick(message.log_time)
-        monitors.on_message(channel, message.log_time, value, message.sequence)
+        monitors.on_tick(at)
+        monitors.on_message(channel, at, value, message.sequence)
     for exit_event in exits[exit_index:]:
         _feed_exit(monitors, exit_event)
     monitors.finish(end_ns)

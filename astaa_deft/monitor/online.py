@@ -1,16 +1,19 @@
 """Online monitoring during a run: the same MonitorSet as `check`, fed live.
 
-Messages are stamped on receipt in Zenoh's callback and queued; decoding and
-evaluation happen on a worker thread, off the proxy's forwarding path. The
-worker also ticks the deadline monitors every TICK seconds.
+Messages are stamped in Zenoh's callback (their Zenoh timestamp, else the
+receive time) and queued; decoding and evaluation happen on a worker thread,
+off the proxy's forwarding path, in the order ``order`` states (the one
+offline checking uses), after a short reorder wait. The worker also ticks
+the deadline monitors every TICK seconds.
 """
 
 from __future__ import annotations
 
+import heapq
 import queue
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import zenoh
 
@@ -18,6 +21,7 @@ from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..spec.model import Spec
 from .monitorset import MonitorSet
+from .order import REORDER_WINDOW_NS, channel_ranks, order_key, sample_time_ns
 from .verdict import Verdict
 from .violation import Violation
 
@@ -34,7 +38,9 @@ class OnlineMonitors:
         self.wanted = self.set.channels()
         self._codecs = {ch.name: get_codec(ch.encoding) for ch in spec.channels if ch.name in self.wanted}
         self._seq = {name: 0 for name in self.wanted}
-        self._q: "queue.SimpleQueue" = queue.SimpleQueue()
+        self._ranks = channel_ranks(spec)
+        self._held: list = []  # heap of (order key, channel, time, payload, seq) waiting for their turn
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._subs: list = []
         self._thread = threading.Thread(target=self._work, name="monitors", daemon=True)
         self._thread.start()
@@ -49,7 +55,7 @@ class OnlineMonitors:
         q = self._q
 
         def on_sample(sample: zenoh.Sample) -> None:
-            q.put((name, time.time_ns(), sample.payload.to_bytes()))
+            q.put((name, sample_time_ns(sample.timestamp, time.time_ns()), sample.payload.to_bytes()))
 
         return on_sample
 
@@ -66,29 +72,44 @@ class OnlineMonitors:
         next_tick = time.monotonic() + TICK_SECONDS
         while True:
             try:
-                item = self._q.get(timeout=max(0.0, next_tick - time.monotonic()))
+                item = self._q.get(timeout=max(0.0, min(next_tick - time.monotonic(), TICK_SECONDS)))
             except queue.Empty:
                 item = None
             if item is _STOP:
+                self._release(None)
                 return
             found: list[Violation] = []
             if item is not None:
                 name, t, body = item
                 if name == "__exit__":
+                    self._release(t)  # what came before the exit first
                     module, code, sig, shutdown, tail = body
                     found = self.set.on_process_exit(module, code, sig, t, shutdown, tail)
                 else:
-                    self._seq[name] += 1
-                    try:
-                        value = self._codecs[name].decode(body)
-                    except DecodeError:
-                        value = None
-                    found = self.set.on_message(name, t, value, self._seq[name])
+                    self._seq[name] += 1  # per channel in arrival order, as the recorder numbers them
+                    heapq.heappush(self._held, (order_key(t, self._ranks[name], self._seq[name]), name, t, body))
+            found = found + self._release(time.time_ns() - REORDER_WINDOW_NS)
             if time.monotonic() >= next_tick:
                 next_tick = time.monotonic() + TICK_SECONDS
-                found = found + self.set.on_tick(time.time_ns())
+                found = found + self.set.on_tick(time.time_ns() - REORDER_WINDOW_NS)
             for v in found:
                 self.on_violation(v)
+
+    def _release(self, up_to_ns: int | None) -> list[Violation]:
+        """Evaluate held messages stamped at or before up_to_ns (all of them for None), in order."""
+        found: list[Violation] = []
+        while self._held and (up_to_ns is None or self._held[0][0][0] <= up_to_ns):
+            (_, _, seq), name, t, body = heapq.heappop(self._held)
+            try:
+                value = self._codecs[name].decode(body)
+            except DecodeError:
+                value = None
+            found.extend(self.set.on_message(name, t, value, seq))
+        if up_to_ns is None:
+            for v in found:
+                self.on_violation(v)
+            return []
+        return found
 
     def finish(self, time_ns: int) -> Verdict:
         """Stop listening, judge what is queued and what only the end can decide; the run's verdict."""
