@@ -54,7 +54,7 @@ def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass
     outcome, _ = drive("lane_follow", defects=True, passive=False, record=log, command_line=[],
                        policy=demo_policy_path(policy), duration=30.0, stop_on_violation=True)
     assert outcome.mutations >= 1
-    assert outcome.verdict.klass == klass, outcome.verdict.summary
+    assert outcome.verdict.klass == klass, (outcome.verdict.summary, outcome.end_reason, outcome.seconds)
     assert outcome.verdict.first.invariant in invariants
     # Online and offline verdicts agree on the same run.
     offline = agree_offline(log)

@@ -54,6 +54,11 @@ class RunningModule:
     exit: ProcessExit | None = None
 
 
+def output_file(run_dir: Path, module: str) -> Path:
+    """Where a module's stdout and stderr go (one file, in the order written)."""
+    return run_dir / f"{module}.log"
+
+
 @dataclass
 class Launcher:
     """Launch the spec's modules with the given per-module Zenoh config files."""
@@ -107,7 +112,7 @@ class Launcher:
         env["ZENOH_CONFIG"] = config
         env["ZENOH_SESSION_CONFIG_URI"] = config  # ROS 2 rmw_zenoh
         env.setdefault("PYTHONUNBUFFERED", "1")
-        log_path = self.run_dir / f"{module.name}.log"
+        log_path = output_file(self.run_dir, module.name)
         log = open(log_path, "wb")
         try:
             process = subprocess.Popen(

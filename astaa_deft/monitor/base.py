@@ -13,7 +13,8 @@ log.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar
+from collections.abc import Sequence
 
 from ..spec.model import Spec
 from .violation import Violation, message_copy
@@ -56,6 +57,15 @@ class ProcessExitInfo:
 
 
 @dataclass(frozen=True)
+class LogLineInfo:
+    """One line a module wrote on its output, and when the tool read it."""
+
+    module: str
+    text: str
+    time_ns: int
+
+
+@dataclass(frozen=True)
 class MonitorContext:
     spec: Spec
     start_ns: int  # the run's start: deadlines 'after: start' and the temporal sampling grid count from it
@@ -68,6 +78,7 @@ class Monitor:
     """Runtime state of one invariant. Subclasses override what they need."""
 
     wants_ticks: ClassVar[bool] = False  # on_tick is only called on monitors that say so
+    wants_log_lines: ClassVar[bool] = False  # on_log_line likewise
 
     def __init__(self, invariant: Invariant, context: MonitorContext):
         self.invariant = invariant
@@ -83,6 +94,9 @@ class Monitor:
         return NO_VIOLATIONS
 
     def on_process_exit(self, exit_: ProcessExitInfo) -> list[Violation]:
+        return NO_VIOLATIONS
+
+    def on_log_line(self, line: LogLineInfo) -> list[Violation]:
         return NO_VIOLATIONS
 
     def on_tick(self, time_ns: int) -> list[Violation]:

@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import ast
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
+from collections.abc import Callable, Mapping, Sequence
 
 from ..errors import AstaaDeftError, did_you_mean
 from ..fields import WILDCARD, FieldPath, FieldPathError

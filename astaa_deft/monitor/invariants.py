@@ -9,7 +9,7 @@ valid are returned, so one ``spec check`` lists every mistake.
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 from ..errors import did_you_mean
 from ..spec.model import Channel, MessageType, Spec

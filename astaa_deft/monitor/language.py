@@ -13,7 +13,8 @@ import ast
 import math
 import operator
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from ..spec.model import FLOAT_KINDS, INT_KINDS, FieldType
 from .paths import EvaluationError
@@ -25,7 +26,7 @@ class Ty:
 
     kind: str
     ref: str | None = None  # struct: the message type name
-    items: "Ty | None" = None  # array: the element type
+    items: Ty | None = None  # array: the element type
     values: tuple[Any, ...] = ()  # enum: the allowed values
 
     def describe(self) -> str:

@@ -20,10 +20,10 @@ warning instead of ending the run.
 from __future__ import annotations
 
 import threading
-from typing import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 from ..spec.model import Spec
-from .base import Monitor, MonitorContext, ProcessExitInfo
+from .base import LogLineInfo, Monitor, MonitorContext, ProcessExitInfo
 from .invariants import with_typed_invariants
 from .kinds import KINDS
 from .verdict import Verdict, run_verdict
@@ -42,6 +42,7 @@ class MonitorSet:
             for channel in monitor.channels():
                 self._routes.setdefault(channel, []).append(monitor)
         self._tickers = [m for m in self.monitors if m.wants_ticks]
+        self._log_readers = [m for m in self.monitors if m.wants_log_lines]
         self.violations: list[Violation] = []
         self.exits: list[dict] = []  # process_exit events, as the log stores them (for the run verdict)
         self.warnings: list[str] = []
@@ -71,6 +72,16 @@ class MonitorSet:
                                "signal": signal, "time_ns": time_ns, "during_shutdown": during_shutdown,
                                "abnormal": exit_.abnormal})
             return self._collect(self.monitors, lambda m: m.on_process_exit(exit_))
+
+    def wants_log_lines(self) -> bool:
+        return bool(self._log_readers)
+
+    def on_log_line(self, module: str, text: str, time_ns: int) -> list[Violation]:
+        if not self._log_readers:
+            return []
+        line = LogLineInfo(module, text, time_ns)
+        with self._lock:
+            return self._collect(self._log_readers, lambda m: m.on_log_line(line))
 
     def on_tick(self, time_ns: int) -> list[Violation]:
         if not self._tickers:

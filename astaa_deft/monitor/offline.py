@@ -58,7 +58,10 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
     monitors = MonitorSet(spec, start_ns)
     wanted = monitors.channels()
     routes = _routes(log, spec, wanted)
-    exits = sorted((e for e in events if isinstance(e, rec.ProcessExitRecord)), key=lambda e: e.time_ns)
+    # Process exits and module output lines, fed at their times between the messages.
+    side: list[rec.ProcessExitRecord | rec.ModuleLogLine] = sorted(
+        (e for e in events if isinstance(e, rec.ProcessExitRecord)
+         or (isinstance(e, rec.ModuleLogLine) and monitors.wants_log_lines())), key=lambda e: e.time_ns)
 
     clock = time.perf_counter()
     exit_index = 0
@@ -69,8 +72,8 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
         at = message.publish_time  # the message time: the Zenoh timestamp the recorder kept (else log time)
         if at > end_ns:
             break
-        while exit_index < len(exits) and exits[exit_index].time_ns <= at:
-            _feed_exit(monitors, exits[exit_index])
+        while exit_index < len(side) and side[exit_index].time_ns <= at:
+            _feed_side(monitors, side[exit_index])
             exit_index += 1
         channel, codec = routes[message.topic]
         try:
@@ -79,8 +82,9 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
             value = None
         monitors.on_tick(at)
         monitors.on_message(channel, at, value, message.sequence)
-    for exit_event in exits[exit_index:]:
-        _feed_exit(monitors, exit_event)
+    for event in side[exit_index:]:
+        if event.time_ns <= end_ns:
+            _feed_side(monitors, event)
     monitors.finish(end_ns)
     seconds = time.perf_counter() - clock
 
@@ -124,6 +128,13 @@ def _end(log: LogContents, events: list[rec.Record]) -> int:
         return int(stopping[0])
     bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
     return max(bus) if bus else _start(log, events)
+
+
+def _feed_side(monitors: MonitorSet, event: rec.ProcessExitRecord | rec.ModuleLogLine) -> None:
+    if isinstance(event, rec.ModuleLogLine):
+        monitors.on_log_line(event.module, event.line, event.time_ns)
+    else:
+        _feed_exit(monitors, event)
 
 
 def _feed_exit(monitors: MonitorSet, event: rec.ProcessExitRecord) -> None:

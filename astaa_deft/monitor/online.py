@@ -68,6 +68,13 @@ class OnlineMonitors:
                      during_shutdown: bool, stderr_tail: str) -> None:
         self._q.put(("__exit__", time_ns, (module, returncode, signal, during_shutdown, stderr_tail)))
 
+    def wants_log_lines(self) -> bool:
+        return self.set.wants_log_lines()
+
+    def log_line(self, module: str, text: str, time_ns: int) -> None:
+        """A line a module wrote on its output (read by the session from the module's output file)."""
+        self._q.put(("__log__", time_ns, (module, text)))
+
     def _work(self) -> None:
         next_tick = time.monotonic() + TICK_SECONDS
         while True:
@@ -82,9 +89,13 @@ class OnlineMonitors:
             if item is not None:
                 name, t, body = item
                 if name == "__exit__":
-                    self._release(t)  # what came before the exit first
+                    found = self._release(t)  # what came before the exit first
                     module, code, sig, shutdown, tail = body
-                    found = self.set.on_process_exit(module, code, sig, t, shutdown, tail)
+                    found = found + self.set.on_process_exit(module, code, sig, t, shutdown, tail)
+                elif name == "__log__":
+                    found = self._release(t)
+                    module, text = body
+                    found = found + self.set.on_log_line(module, text, t)
                 else:
                     self._seq[name] += 1  # per channel in arrival order, as the recorder numbers them
                     heapq.heappush(self._held, (order_key(t, self._ranks[name], self._seq[name]), name, t, body))

@@ -8,7 +8,8 @@ say precisely where the message stops matching its declared shape.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from typing import Any
+from collections.abc import Callable, Sequence
 
 from ..errors import AstaaDeftError
 from ..fields import WILDCARD, FieldPath

@@ -18,7 +18,7 @@ The rule (also in docs/monitors.md):
 
 from __future__ import annotations
 
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 
 class GridSampler:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 from ..errors import did_you_mean
 from ..fields import FieldPath, FieldPathError, type_at

@@ -34,7 +34,8 @@ import typing
 import warnings
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 from ..errors import AstaaDeftError, did_you_mean
 
@@ -74,7 +75,7 @@ class StlFormula:
     period: Fraction  # seconds
     horizon_samples: int  # how many samples late the verdict of a sample is known
 
-    def online_monitor(self) -> "OnlineStl":
+    def online_monitor(self) -> OnlineStl:
         return OnlineStl(self)
 
 

@@ -23,7 +23,8 @@ Crashes are always monitored: an abnormal exit counts even when no
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 from .violation import Violation
 
@@ -43,7 +44,7 @@ class Verdict:
                 "summary": self.summary, "reasons": list(self.reasons)}
 
     @classmethod
-    def from_json(cls, body: Mapping[str, Any]) -> "Verdict":
+    def from_json(cls, body: Mapping[str, Any]) -> Verdict:
         first = body.get("first")
         return cls(str(body.get("class", "?")), Violation.from_json(first) if first else None,
                    str(body.get("summary", "")), tuple(body.get("reasons") or ()))

@@ -12,7 +12,8 @@ from __future__ import annotations
 import base64
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 # The CRASH class a violation points at when nothing overrides it (see verdict.py).
 CRASH_CLASSES = ("Catastrophic", "Restart", "Abort", "Silent", "Hindering")
@@ -46,7 +47,7 @@ class Violation:
         }
 
     @classmethod
-    def from_json(cls, body: Mapping[str, Any]) -> "Violation":
+    def from_json(cls, body: Mapping[str, Any]) -> Violation:
         return cls(
             invariant=str(body.get("invariant", "?")), kind=str(body.get("invariant_kind", "?")),
             severity=str(body.get("severity", "high")), time_ns=int(body.get("time_ns", 0)),

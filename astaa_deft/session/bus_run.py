@@ -25,11 +25,12 @@ from ..bus import topology
 from ..bus import zenoh_config as zc
 from ..log import records as rec
 from ..monitor.online import OnlineMonitors
-from ..bus.launcher import Launcher, ProcessExit
+from ..bus.launcher import Launcher, ProcessExit, output_file
 from ..bus.observer import ChannelCounter
 from ..bus.processes import die_with_parent, stop_process, tail
 from ..bus.interception import InterceptionBridge
 from ..bus.proxy import StarProxy, plain_forwarder
+from .module_output import ModuleOutputFollower
 from .options import RunOptions
 
 HELPER_READY_TIMEOUT = 20.0
@@ -48,6 +49,8 @@ class BusRun:
         self.proxy: StarProxy | None = None
         self.counter: ChannelCounter | None = None
         self.launcher: Launcher | None = None
+        self.output: ModuleOutputFollower | None = None  # the modules' output lines, as they come
+        self._judged_until_ns = 2**63  # set when the run begins to stop
         self.recorder: subprocess.Popen | None = None
         self.recorded: dict[str, int] = {}
         self.started_ns = 0
@@ -154,6 +157,9 @@ class BusRun:
         self.launcher = Launcher(self.spec, self.run_dir, files, params=self.options.params,
                                  channel_seen=lambda ch: self.counts().get(ch, 0) > 0,
                                  on_exit=self._process_exited)
+        self.output = ModuleOutputFollower({m.name: output_file(self.run_dir, m.name) for m in self.spec.modules},
+                                           self._module_line)
+        self.output.start()
         self.launcher.start()
 
     def _start_recorder(self, path: Path) -> None:
@@ -202,8 +208,12 @@ class BusRun:
         if self.interception is not None:
             self.interception.stop()  # release held and delayed messages while consumers still listen
         stopping = self.emit(rec.RunStopping(time.time_ns())) if self.monitors is not None else None
+        self._judged_until_ns = stopping.time_ns if stopping is not None else time.time_ns()
         if self.launcher is not None:
             self.launcher.stop()
+        if self.output is not None:
+            self.output.stop()  # the modules' last lines, before the monitors finish
+            self.output = None
         if self.monitors is not None and stopping is not None:
             self.verdict = self.monitors.finish(stopping.time_ns)
             self.emit(rec.decode({"kind": "verdict", "time_ns": time.time_ns(), **self.verdict.to_json()}))
@@ -274,6 +284,13 @@ class BusRun:
         self.emit(record)
         if self.options.stop_on_violation:
             self.stop_requested.set()
+
+    def _module_line(self, module: str, text: str, time_ns: int) -> None:
+        self.emit(rec.ModuleLogLine(time_ns, module, "output", text))
+        monitors = self.monitors
+        # Lines read after the run began to stop are logged, not judged (offline, `check` does the same).
+        if monitors is not None and monitors.wants_log_lines() and time_ns <= self._judged_until_ns:
+            monitors.log_line(module, text, time_ns)
 
     def _process_exited(self, exit_: ProcessExit) -> None:
         self.exits.append(exit_)

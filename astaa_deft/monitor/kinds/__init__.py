@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Callable
+from collections.abc import Callable
 
-from . import bound, collision, deadline, expression, process, temporal
+from . import bound, collision, deadline, expression, log, process, temporal
 
 
 @dataclass(frozen=True)
@@ -40,5 +40,6 @@ KINDS: dict[str, Kind] = {
         _kind(expression, expression.ExpressionInvariant),
         _kind(temporal, temporal.TemporalInvariant),
         _kind(collision, collision.CollisionInvariant),
+        _kind(log, log.LogInvariant),
     )
 }

@@ -43,7 +43,8 @@ import bisect
 import collections
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
+from collections.abc import Callable
 
 from ...fields import FieldPath
 from ...spec.model import FieldType

@@ -25,7 +25,8 @@ import re
 from collections import deque
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
+from collections.abc import Callable
 
 from ...yamlsource import Node
 from ..base import NO_VIOLATIONS, EpisodeGate, Invariant, Monitor, MonitorContext

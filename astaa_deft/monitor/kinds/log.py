@@ -1,0 +1,105 @@
+"""``log``: what a module writes on its output — a traceback, an ``ERROR`` line, a named exception.
+
+    - {name: planner_quiet, kind: log, modules: [planning], pattern: "Traceback|ERROR"}
+    - {name: no_solver_failure, kind: log, pattern: "SolverError", crash: Silent, max_count: 2}
+
+A module that catches an exception, logs it and carries on publishes nothing
+for that cycle; no message monitor can see it (the deadline monitor's gap is
+too coarse for one lost cycle). Every output line of the watched modules
+(all modules by default) is matched against ``pattern`` (a Python regular
+expression, searched anywhere in the line); each matching line beyond the
+first ``max_count`` (default 0) is a violation, dated by when the tool read
+the line. The lines come from the modules' output files (stdout and stderr
+together, as the launcher writes them) and are logged as ``module_log``
+events, so ``check`` judges them again offline. Default CRASH class:
+*Silent* — the module went on as if nothing happened.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import ClassVar
+
+from ...yamlsource import Node
+from ..base import NO_VIOLATIONS, Invariant, LogLineInfo, Monitor, MonitorContext
+from ..spec_reader import InvariantReader
+from ..violation import Violation
+
+KEYS = ("modules", "pattern", "max_count")
+REQUIRED = ("pattern",)
+MAX_PATTERN = 1000  # characters: a pattern is a short regex, not a document
+
+
+@dataclass(frozen=True, kw_only=True)
+class LogInvariant(Invariant):
+    kind: ClassVar[str] = "log"
+    default_crash: ClassVar[str] = "Silent"
+
+    modules: tuple[str, ...]
+    pattern: re.Pattern
+    max_count: int = 0
+
+
+def parse(reader: InvariantReader, node: Node, common: dict) -> LogInvariant | None:
+    v = node.value
+    modules: list[str] = list(reader.modules)
+    if "modules" in v:
+        mnode = v["modules"]
+        if not mnode.is_list or not mnode.value:
+            reader.problem(mnode, "'modules' must be a non-empty list of module names", "e.g. modules: [planning]")
+            return None
+        names = [reader.module(item) for item in mnode.value]
+        if any(n is None for n in names):
+            return None
+        modules = [n for n in names if n is not None]
+    text = reader.text(v.get("pattern"), "'pattern'", "Traceback|ERROR")
+    if text is None:
+        return None
+    if len(text) > MAX_PATTERN:
+        reader.problem(v["pattern"], f"'pattern' is {len(text)} characters long", f"keep it under {MAX_PATTERN}")
+        return None
+    try:
+        pattern = re.compile(text)
+    except re.error as exc:
+        reader.problem(v["pattern"], f"'pattern' is not a regular expression: {exc}",
+                       "escape special characters with a backslash, e.g. 'ValueError\\\\('")
+        return None
+    max_count = 0
+    if "max_count" in v:
+        value = v["max_count"].value
+        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            reader.problem(v["max_count"], "'max_count' must be a whole number ≥ 0",
+                           "the matching lines tolerated before it counts, e.g. max_count: 2")
+            return None
+        max_count = value
+    return LogInvariant(modules=tuple(modules), pattern=pattern, max_count=max_count, **common)
+
+
+class LogMonitor(Monitor):
+    wants_log_lines: ClassVar[bool] = True
+
+    def __init__(self, invariant: LogInvariant, context: MonitorContext):
+        super().__init__(invariant, context)
+        self.inv = invariant
+        self._search = invariant.pattern.search
+        self.matches = 0
+
+    def on_log_line(self, line: LogLineInfo) -> list[Violation]:
+        if line.module not in self.inv.modules:
+            return NO_VIOLATIONS
+        self.evaluations += 1
+        if self._search(line.text) is None:
+            return NO_VIOLATIONS
+        self.matches += 1
+        if self.matches <= self.inv.max_count:
+            return NO_VIOLATIONS
+        self.violating += 1
+        shown = line.text if len(line.text) <= 200 else line.text[:200] + "…"
+        detail = f"module '{line.module}' wrote a line matching /{self.inv.pattern.pattern}/: {shown}"
+        return [self.violation(line.time_ns, detail, module=line.module, message={"line": line.text},
+                               copy_message=False)]
+
+
+def monitor(invariant: LogInvariant, context: MonitorContext) -> LogMonitor:
+    return LogMonitor(invariant, context)
