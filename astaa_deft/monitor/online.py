@@ -36,6 +36,7 @@ class OnlineMonitors:
         self._seq = {name: 0 for name in self.wanted}
         self._q: "queue.SimpleQueue" = queue.SimpleQueue()
         self._subs: list = []
+        self.ended_ns: int | None = None  # the run's end: deadlines are not judged past it
         self._thread = threading.Thread(target=self._work, name="monitors", daemon=True)
         self._thread.start()
 
@@ -86,12 +87,22 @@ class OnlineMonitors:
                     found = self.set.on_message(name, t, value, self._seq[name])
             if time.monotonic() >= next_tick:
                 next_tick = time.monotonic() + TICK_SECONDS
-                found = found + self.set.on_tick(time.time_ns())
+                found = found + self.set.on_tick(self._now())
             for v in found:
                 self.on_violation(v)
 
+    def end_at(self, time_ns: int) -> None:
+        """The run ended at ``time_ns``: the shutdown that follows is no longer judged by the clock."""
+        self.ended_ns = time_ns
+
+    def _now(self) -> int:
+        now = time.time_ns()
+        return now if self.ended_ns is None else min(now, self.ended_ns)
+
     def finish(self, time_ns: int) -> Verdict:
         """Stop listening, judge what is queued and what only the end can decide; the run's verdict."""
+        if self.ended_ns is not None:
+            time_ns = min(time_ns, self.ended_ns)
         for sub in self._subs:
             sub.undeclare()
         self._subs = []

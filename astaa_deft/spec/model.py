@@ -111,6 +111,7 @@ class Spec:
     # Sections owned by later stages; kept raw until those stages validate them.
     invariants: tuple[Any, ...] = ()
     planner: Any = None  # astaa_deft.deft.config.PlannerSpec, when the spec names a planner
+    run: Any = None  # astaa_deft.spec.run_section.RunSection: how a run ends (None: no 'run:' section)
     source_text: str = ""
 
     def module(self, name: str) -> Module:
