@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import statistics
 import tempfile
 import time
@@ -46,11 +47,15 @@ DEFECTS = {
 }
 
 
-def defect_of(bucket: Bucket) -> int | None:
-    """Which seeded defect a bucket is (None: none of them)."""
+NON_FINITE = re.compile(r'path="speed_limit" value="[^"]*(nan|inf)', re.IGNORECASE)
+
+
+def defect_of(bucket: Bucket, first_xml: str) -> int | None:
+    """Which seeded defect a bucket is (None: none of them), from its signature and its first case's values."""
     family = bucket.family
     if bucket.invariant in ("speed_limit", "planned_speed", "finite_plan") and "routing:speed_limit" in family:
-        return 1
+        # defect 1 is a non-finite limit; a finite limit above 15 m/s breaks planned_speed without any defect
+        return 1 if NON_FINITE.search(first_xml or "") else None
     if bucket.verdict == "Restart" and "localization:heading" in family:
         return 2
     if bucket.module == "control" and bucket.verdict == "Abort" and "trajectory:points" in family:
@@ -66,6 +71,7 @@ class Campaigned:
     seconds: float
     cases: int
     buckets: list[Bucket]
+    first_xml: dict[str, str]  # bucket → its first case's test case XML
     started: float  # wall clock (time.time) at the start
 
 
@@ -80,9 +86,10 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
     try:
         result = Campaign(config, journal, say=lambda text: None).run()
         buckets = journal.buckets()
+        first_xml = {b.bucket: (journal.case(b.first_case)["testcase_xml"] or "") for b in buckets}
     finally:
         journal.close()
-    return Campaigned(result.seconds, result.cases_done, buckets, started)
+    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started)
 
 
 def throughput(tmp: Path, cases: int) -> None:
@@ -124,7 +131,7 @@ def first_finds(tmp: Path, seeds: list[int], budget: float, max_cases: int) -> N
             for b in done.buckets:
                 if b.without_mutation:
                     continue
-                d = defect_of(b)
+                d = defect_of(b, done.first_xml[b.bucket])
                 if d is None:
                     extra[strategy].append(f"seed {seed}: {b.verdict} {b.invariant} {b.family}")
                 else:
