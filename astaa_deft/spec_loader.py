@@ -17,6 +17,7 @@ from .spec.planner import build_planner
 from .fields import FieldPathError, check_brittle_pattern
 from .monitor.invariants import build_invariants
 from .yamlsource import Node, Source, describe_value
+from .run_section import build_run_section
 from .spec.model import (
     SCALAR_KINDS,
     Channel,
@@ -35,7 +36,7 @@ KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no D
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
 ENCODINGS = ("json", "cbor")
 
-TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner")
+TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -76,6 +77,7 @@ class _SpecBuilder:
         brittle = self.brittle(v.get("brittle"), types)
         invariants = build_invariants(self.src, v.get("invariants"), types, channels, [m.name for m in modules])
         planner = build_planner(self.src, v.get("planner"), types, channels, modules)
+        run = build_run_section(self.src, v.get("run"), types, channels, [m.name for m in modules])
         self.src.raise_if_problems()
         return Spec(
             name=name,
@@ -88,6 +90,7 @@ class _SpecBuilder:
             params=params,
             invariants=tuple(invariants),
             planner=planner,
+            run=run,
             source_text=self.src.text,
         )
 

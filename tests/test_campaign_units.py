@@ -152,3 +152,26 @@ def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
     assert "campaign stopped: the SUT does not start" in done.stderr and "Traceback" not in done.stderr
     rows = sqlite3.connect(out / "journal.sqlite").execute("SELECT kind, status FROM cases").fetchall()
     assert rows == [("baseline", "error")]  # no generated case burnt
+
+
+def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp_path: Path):
+    from astaa_deft.campaign.campaign import merge_same_culprits
+
+    journal = Journal(tmp_path)
+    try:
+        culprit = "routing:speed_limit = dict:float.nan"
+        for n, (invariant, exit_code, found) in enumerate([("planned_speed", 0, culprit), ("speed_limit", 0, culprit),
+                                                           ("finite_plan", 1, culprit), ("control_alive", 0, "x")],
+                                                          start=1):
+            name = f"B00{n}"
+            journal.add_bucket(name, f"Silent|{invariant}|planning|fam", "Silent", invariant, "planning", "fam",
+                               f"c-{n}", False, n)
+            journal.minimised(name, "minimised" if exit_code == 0 else "not reproduced", exit_code, "<xml/>",
+                              found, None, None, 1.0, "")
+        assert merge_same_culprits(journal) == [("B002", "B001")]  # B003 was not confirmed; B004 is another culprit
+        assert {b.bucket: b.merged_into for b in journal.buckets()} == {"B001": None, "B002": "B001", "B003": None,
+                                                                      "B004": None}
+        assert merge_same_culprits(journal) == []  # on resume: nothing merged twice
+        assert [b.bucket for b in journal.buckets(include_merged=False)] == ["B001", "B003", "B004"]
+    finally:
+        journal.close()

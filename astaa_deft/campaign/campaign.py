@@ -267,7 +267,6 @@ class Campaign:
     # -- minimisation ------------------------------------------------------------
     def _minimise_buckets(self) -> None:
         done = self.journal.minimisations()
-        culprits: dict[str, str] = {r["culprit"]: b for b, r in done.items() if r["culprit"]}
         for bucket in self.journal.buckets(include_merged=False):
             if bucket.without_mutation or bucket.bucket in done:
                 continue
@@ -281,19 +280,65 @@ class Campaign:
             result = minimise_run(Path(row["log_path"]), self.config.spec_path, out_dir, bucket.invariant,
                                   max_tests=self.config.minimise_max_tests)
             tests_dir = None
-            if result.tests_dir is not None:
-                tests_dir = self.config.out / "tests" / bucket.bucket
+            if result.tests_dir is not None:  # the minimiser's own: they fail on the culprit
+                tests_dir = self.config.out / TESTS_DIR / bucket.bucket
                 if tests_dir.exists():
                     shutil.rmtree(tests_dir)
                 shutil.copytree(result.tests_dir, tests_dir)
+            elif self._planner_caused(bucket):
+                tests_dir = self._planner_tests(bucket, Path(row["log_path"]))
             status = "minimised" if result.exit_code == 0 else "not reproduced" if result.exit_code == 1 else "error"
             self.journal.minimised(bucket.bucket, status, result.exit_code, result.minimal_xml, result.culprit,
                                    str(out_dir), str(tests_dir) if tests_dir else None, result.seconds,
                                    result.detail)
             self.say(f"  {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
-            if result.culprit and result.exit_code == 0:
-                if result.culprit in culprits and culprits[result.culprit] != bucket.bucket:
-                    self.journal.merge_bucket(bucket.bucket, culprits[result.culprit])
-                    self.say(f"  same culprit as {culprits[result.culprit]}: merged")
-                else:
-                    culprits[result.culprit] = bucket.bucket
+        for bucket, into in merge_same_culprits(self.journal):
+            self.say(f"  bucket {bucket}: same minimised culprit as {into}: merged")
+
+    def _planner_caused(self, bucket) -> bool:
+        planner = self.spec.planner
+        return planner is not None and bucket.module == planner.module
+
+    def _planner_tests(self, bucket, log: Path) -> Path | None:
+        """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs)."""
+        from ..deft.workflow import extract_module_tests
+
+        tests_dir = self.config.out / TESTS_DIR / f"{bucket.bucket}{REPLAY_TESTS_SUFFIX}"
+        if tests_dir.exists():
+            shutil.rmtree(tests_dir)
+        try:
+            report = extract_module_tests(log, self.config.spec_path, tests_dir, jobs=1)
+        except InputError as exc:
+            self.say(f"  no module tests: {exc}")
+            return None
+        if not report.accepted:
+            self.say("  no module tests: no planner output of the run replayed exactly")
+            shutil.rmtree(tests_dir, ignore_errors=True)
+            return None
+        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}")
+        return tests_dir
+
+
+TESTS_DIR = "tests"
+REPLAY_TESTS_SUFFIX = "-replay"  # DeFT replays of the failing run (not the minimiser's failing oracle tests)
+
+
+def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
+    """Merge each bucket whose minimised culprit is an earlier bucket's: (bucket, merged into) pairs.
+
+    Two signatures can hide one bug (the same NaN breaks two invariants,
+    first on one, then on the other): once minimised, the culprits say so.
+    Only confirmed minimisations count; the earliest bucket keeps the culprit.
+    """
+    minimised = journal.minimisations()
+    owner: dict[str, str] = {}
+    merged = []
+    for bucket in journal.buckets():
+        row = minimised.get(bucket.bucket)
+        if bucket.without_mutation or row is None or row["exit_code"] != 0 or not row["culprit"]:
+            continue
+        first = owner.setdefault(row["culprit"], bucket.bucket)
+        if first != bucket.bucket and bucket.merged_into != first:
+            journal.merge_bucket(bucket.bucket, first)
+            merged.append((bucket.bucket, first))
+    return merged

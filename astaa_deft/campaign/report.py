@@ -17,17 +17,25 @@ import time
 from pathlib import Path
 
 from .journal import Journal, open_existing
+from .campaign import REPLAY_TESTS_SUFFIX
 from .model import BASELINE, MUTATED
 
 REPORT_NAME = "report.html"
 
 CSS = """
-body{font-family:system-ui,sans-serif;margin:2em;max-width:1150px;color:#222}
-table{border-collapse:collapse;width:100%;font-size:13px}td,th{border:1px solid #ccc;padding:4px 6px;
-vertical-align:top;text-align:left}th{background:#f0f0f0}pre{white-space:pre-wrap;font-size:11px;margin:0;
-max-height:14em;overflow:auto;background:#fafafa}.bad{color:#a00;font-weight:bold}.ok{color:#070}
-.plots img{width:48%;margin:1%}.muted{color:#777}
+body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1150px;padding:0 1em;color:#222}
+table{border-collapse:collapse;width:100%;font-size:13px;table-layout:auto}td,th{border:1px solid #ccc;
+padding:4px 6px;vertical-align:top;text-align:left}th{background:#f0f0f0;white-space:nowrap}
+td.family,td.culprit{overflow-wrap:anywhere}
+table.summary{width:auto}table.summary th{width:14em}
+pre{white-space:pre-wrap;font-size:11px;margin:4px 0 0;max-height:18em;overflow:auto;background:#fafafa;
+padding:4px}.bad{color:#a00;font-weight:bold}.ok{color:#070;font-weight:bold}.muted{color:#777}
+tr.xml td{border-top:none;background:#fcfcfc}details summary{cursor:pointer;color:#345}
+.family div{white-space:nowrap}.headline{font-size:1.15em}
+.plots{display:grid;grid-template-columns:1fr 1fr;gap:12px}.plots img{width:100%;border:1px solid #eee}
 """
+VERDICT_COLOURS = {"Pass": "#2a9d4b", "Hindering": "#e0a030", "Silent": "#d05a1e", "Abort": "#b3202a",
+                   "Restart": "#7a2ca0", "Catastrophic": "#222222", "?": "#999999"}
 
 
 def write_report(out: Path) -> Path:
@@ -63,18 +71,28 @@ def render(journal: Journal, out: Path) -> str:
     minimised = journal.minimisations()
     live = [b for b in buckets if b.merged_into is None]
     e = html.escape
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>astaa-deft campaign</title>"
+    spec_name = Path(str(meta.get("spec") or "?")).stem
+    found = len([b for b in live if not b.without_mutation])
+    headline = (f"<span class='bad'>{found} bug bucket(s) found</span>" if found
+                else "<span class='ok'>no failure caused by a mutation</span>")
+    flaky = sum(1 for b in live if b.without_mutation)
+    if flaky:
+        headline += f", <span class='bad'>{flaky} failing without mutation</span>"
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>astaa-deft campaign: {e(spec_name)}</title>"
              f"<style>{CSS}</style></head><body>",
-             "<h1>astaa-deft campaign</h1>",
-             "<h2>Summary</h2><table>"]
+             f"<h1>astaa-deft campaign: {e(spec_name)}</h1>",
+             f"<p class='headline'>{headline} in {len(mutated)} generated case(s) and "
+             f"{len([r for r in done if r['kind'] == BASELINE])} clean run(s).</p>",
+             "<h2>Summary</h2><table class='summary'>"]
     summary = [("spec", meta.get("spec")), ("strategy", meta.get("strategy")), ("seed", meta.get("seed")),
-               ("params", json.dumps(meta.get("params"))), ("horizon", f"{meta.get('horizon')} s"),
+               ("params", json.dumps(meta.get("params")) if meta.get("params") else "the spec's defaults"), ("horizon", f"{meta.get('horizon')} s"),
                ("baseline runs", len([r for r in done if r["kind"] == BASELINE])),
                ("generated cases run", len(mutated)), ("failing cases", len(failing)),
                ("cases that could not run", len(errors)),
+               ("how runs ended", _end_reasons(done)),
                ("buckets", f"{len(live)} ({sum(1 for b in live if b.without_mutation)} without mutation,"
                            f" {len(buckets) - len(live)} merged)"),
-               ("wall time", f"{_wall(done):.0f} s"), ("generated", time.strftime("%Y-%m-%d %H:%M:%S UTC",
+               ("wall time of the cases", f"{_wall(done):.0f} s"), ("generated", time.strftime("%Y-%m-%d %H:%M:%S UTC",
                                                                                   time.gmtime()))]
     parts += [f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in summary]
     parts.append("</table><h2>Buckets</h2>")
@@ -82,8 +100,9 @@ def render(journal: Journal, out: Path) -> str:
         parts.append("<p class='ok'>No failures found.</p>")
     else:
         parts.append("<table><tr><th>bucket</th><th>verdict</th><th>invariant</th><th>module</th>"
-                     "<th>mutation family</th><th>culprit (minimised)</th><th>cases</th><th>rate</th>"
-                     "<th>minimal test case</th><th>files</th></tr>")
+                     "<th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
+                     "<th title='re-runs of the first failure that failed the same way'>rate</th>"
+                     "<th>files</th></tr>")
         for b in buckets:
             first = journal.case(b.first_case)
             m = minimised.get(b.bucket)
@@ -92,27 +111,46 @@ def render(journal: Journal, out: Path) -> str:
             links = []
             log = _rel(first["log_path"] if first is not None else None, out)
             if log:
-                links.append(f"<a href='{e(log)}'>log (MCAP, opens in Foxglove)</a>")
+                links.append(f"<a href='{e(log)}'>failing log</a> <span class='muted'>(MCAP: Foxglove opens it)</span>")
             if m is not None and m["tests_dir"]:
-                links.append(f"<a href='{e(_rel(m['tests_dir'], out))}'>module tests</a>")
+                kind = ("DeFT replay of the failing run" if str(m["tests_dir"]).endswith(REPLAY_TESTS_SUFFIX)
+                        else "fail on the culprit")
+                links.append(f"<a href='{e(_rel(m['tests_dir'], out))}'>module tests</a> "
+                             f"<span class='muted'>({kind}; <code>pytest {e(_rel(m['tests_dir'], out))}</code>)</span>")
             if m is not None and m["out_dir"]:
                 links.append(f"<a href='{e(_rel(m['out_dir'], out))}'>minimisation</a>")
-            xml = m["minimal_xml"] if m is not None and m["minimal_xml"] else (first["testcase_xml"] or "") \
-                if first is not None else ""
-            label = "" if m is not None and m["minimal_xml"] else "<span class='muted'>(not minimised)</span>"
-            family = "without mutation" if b.without_mutation else b.family
+            minimal = m is not None and m["minimal_xml"]
+            xml = m["minimal_xml"] if minimal else (first["testcase_xml"] or "") if first is not None else ""
+            family = ("<span class='muted'>without mutation</span>" if b.without_mutation
+                      else "".join(f"<div>{e(part)}</div>" for part in b.family.split("+")))
             merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""
-            culprit = e(m["culprit"] or m["status"]) if m is not None else "-"
-            parts.append(f"<tr><td>{e(b.bucket)}{merged}</td><td class='bad'>{e(b.verdict)}</td>"
-                         f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td>{e(family)}</td>"
-                         f"<td>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
-                         f"<td>{label}<pre>{e(xml)}</pre></td><td>{'<br>'.join(links)}</td></tr>")
-        parts.append("</table>")
+            culprit = e(m["culprit"] or m["status"]) if m is not None else "<span class='muted'>not minimised</span>"
+            colour = VERDICT_COLOURS.get(b.verdict, "#a00")
+            parts.append(f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td>"
+                         f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
+                         f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
+                         f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td><td>{'<br>'.join(links)}</td></tr>")
+            if xml:
+                what = "minimal test case" if minimal else "first failing test case (not minimised)"
+                parts.append(f"<tr class='xml'><td></td><td colspan='8'><details{' open' if minimal else ''}>"
+                             f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
+        parts.append("</table><p class='muted'>rate: re-runs of a bucket's first failure that failed the same way"
+                     " (for a bucket without mutation: clean runs that failed this way). cases: generated cases"
+                     " filed in the bucket.</p>")
     parts.append("<h2>Plots</h2><div class='plots'>")
     for title, png in _plots(journal, done, buckets):
         parts.append(f"<img alt='{e(title)}' title='{e(title)}' src='data:image/png;base64,{png}'>")
     parts.append("</div></body></html>")
     return "\n".join(parts)
+
+
+def _end_reasons(done) -> str:
+    """How the runs ended (the spec's run: reasons, violations, the horizon), most frequent first."""
+    counts: dict[str, int] = {}
+    for r in done:
+        reason = (json.loads(r["outcome"]).get("reason") if r["outcome"] else None) or r["status"]
+        counts[reason] = counts.get(reason, 0) + 1
+    return ", ".join(f"{reason} {n}" for reason, n in sorted(counts.items(), key=lambda kv: -kv[1])) or "-"
 
 
 def _wall(done) -> float:
@@ -126,6 +164,7 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     out = []
     ordered = sorted(done, key=lambda r: r["finished_at"] or 0)
@@ -138,12 +177,15 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
         xs.append(n)
         ts.append((r["finished_at"] or t0) - t0)
         ys.append(count)
-    fig, (a, b) = plt.subplots(1, 2, figsize=(8, 3.2))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(5, 3.2))
     a.step(xs, ys, where="post")
     a.set_xlabel("cases finished")
     a.set_ylabel("buckets")
     b.step(ts, ys, where="post", color="tab:orange")
     b.set_xlabel("seconds")
+    for axis in (a, b):
+        axis.yaxis.set_major_locator(MaxNLocator(integer=True))
+    a.xaxis.set_major_locator(MaxNLocator(integer=True))
     fig.suptitle("New buckets over cases and time")
     out.append(("New buckets over cases and time", _png(fig, plt)))
 
@@ -151,7 +193,8 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
     for r in done:
         classes[r["verdict"] or "?"] = classes.get(r["verdict"] or "?", 0) + 1
     fig, ax = plt.subplots(figsize=(5, 3.2))
-    ax.bar(list(classes), list(classes.values()), color="tab:red")
+    ax.bar(list(classes), list(classes.values()), color=[VERDICT_COLOURS.get(c, "#a00") for c in classes])
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_title("Verdict classes (all runs)")
     out.append(("Verdict classes", _png(fig, plt)))
 
@@ -168,6 +211,7 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
         ax.step([p[0] for p in series], [p[1] for p in series], where="post", label=f"{inv} ({strategy})")
     if closest:
         ax.legend(fontsize=6)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("cases finished")
     ax.set_ylabel("closest approach (0 = broke)")
     ax.set_title("Closest approach per invariant")
@@ -175,6 +219,7 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
 
     fig, ax = plt.subplots(figsize=(5, 3.2))
     ax.hist([r["seconds"] for r in done if r["seconds"] is not None] or [0], bins=20, color="tab:green")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("seconds per case")
     ax.set_title("Time per case")
     out.append(("Time per case", _png(fig, plt)))

@@ -2,9 +2,11 @@
 
 One call of :func:`astaa_deft.session.run_session`: a fresh run with its
 own router port (the spec's endpoints with port 0 → a free port), its own
-run directory and its own log, ended by the first broken invariant, a
-crashed module, every module gone, or the time horizon. Nothing else in
-the campaign package touches the bus.
+run directory and its own log, ended by the spec's own ``run:`` section (a
+module's exit, a channel's "done", its time limit — applied by the session
+for every caller, no SUT-specific logic here), the first broken invariant,
+a crashed module, every module gone, or the campaign's time horizon.
+Nothing else in the campaign package touches the bus.
 """
 
 from __future__ import annotations

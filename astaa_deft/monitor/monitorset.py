@@ -97,6 +97,11 @@ class MonitorSet:
             self._finished = True
             return self._collect(self.monitors, lambda m: m.finish(time_ns))
 
+    def add_finding(self, violation: Violation) -> None:
+        """A finding made outside the monitors (a run's declared outcome), counted in the verdict."""
+        with self._lock:
+            self.violations.append(violation)
+
     # -- results -------------------------------------------------------------
     def verdict(self, extra_events: Sequence[Mapping] = ()) -> Verdict:
         """The run's CRASH verdict from everything seen so far (``extra_events``: e.g. a bus_lost event)."""

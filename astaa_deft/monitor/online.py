@@ -42,6 +42,7 @@ class OnlineMonitors:
         self._held: list = []  # heap of (order key, channel, time, payload, seq) waiting for their turn
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._subs: list = []
+        self.ended_ns: int | None = None  # the run's end: deadlines are not judged past it
         self._thread = threading.Thread(target=self._work, name="monitors", daemon=True)
         self._thread.start()
 
@@ -102,7 +103,7 @@ class OnlineMonitors:
             found = found + self._release(time.time_ns() - REORDER_WINDOW_NS)
             if time.monotonic() >= next_tick:
                 next_tick = time.monotonic() + TICK_SECONDS
-                found = found + self.set.on_tick(time.time_ns() - REORDER_WINDOW_NS)
+                found = found + self.set.on_tick(self._now())
             for v in found:
                 self.on_violation(v)
 
@@ -122,8 +123,19 @@ class OnlineMonitors:
             return []
         return found
 
+    def end_at(self, time_ns: int) -> None:
+        """The run ended at ``time_ns``: the shutdown that follows is no longer judged by the clock."""
+        self.ended_ns = time_ns
+
+    def _now(self) -> int:
+        """The time the deadlines are judged at: the reorder window behind the clock, never past the run's end."""
+        now = time.time_ns() - REORDER_WINDOW_NS
+        return now if self.ended_ns is None else min(now, self.ended_ns)
+
     def finish(self, time_ns: int) -> Verdict:
         """Stop listening, judge what is queued and what only the end can decide; the run's verdict."""
+        if self.ended_ns is not None:
+            time_ns = min(time_ns, self.ended_ns)
         for sub in self._subs:
             sub.undeclare()
         self._subs = []

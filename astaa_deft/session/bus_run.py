@@ -8,6 +8,7 @@ log is finished cleanly whatever ended the run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -273,10 +274,22 @@ class BusRun:
         self.on_event(record)
         return record
 
-    def end(self, reason: str) -> None:
-        """Say in the log why the run ends (before the modules are stopped)."""
+    def end(self, reason: str, at_ns: int | None = None) -> None:
+        """Say in the log why the run ends (before the modules are stopped).
+
+        ``at_ns``: when the ending condition held; deadlines are judged up to
+        then, not through the shutdown that follows (no findings after the end).
+        """
         self.end_reason = reason
-        self.emit(rec.RunEnd(time.time_ns(), reason))
+        ended = self.emit(rec.RunEnd(time.time_ns(), reason))
+        if self.monitors is not None:
+            self.monitors.end_at(at_ns if at_ns is not None else ended.time_ns)
+
+    def add_finding(self, violation) -> None:
+        """A finding made outside the monitors (the spec's run: outcome): in the verdict and the log."""
+        if self.monitors is not None:
+            self.monitors.set.add_finding(violation)
+        self._violated(violation)
 
     def _violated(self, violation) -> None:
         record = rec.decode({"kind": "violation", **violation.to_json()})
@@ -293,6 +306,11 @@ class BusRun:
             monitors.log_line(module, text, time_ns)
 
     def _process_exited(self, exit_: ProcessExit) -> None:
+        run_section = self.spec.run
+        if run_section is not None and run_section.exit_end(exit_.module) is not None and not exit_.during_shutdown:
+            # The spec says this module's exit *is* the run's end: not a crash; its code is the outcome
+            # (session/run_end.py turns a failing code into a finding).
+            exit_ = dataclasses.replace(exit_, during_shutdown=True)
         self.exits.append(exit_)
         if self.monitors is not None:
             self.monitors.process_exit(exit_.module, exit_.returncode, exit_.signal, exit_.time_ns,

@@ -9,6 +9,7 @@ from ..log import records as rec
 from ..spec.model import Spec
 from .bus_run import BusRun
 from .options import RunOptions, RunResult
+from .run_end import RunEndWatch
 
 POLL_SECONDS = 0.05
 
@@ -36,24 +37,34 @@ def run_session(spec: Spec, options: RunOptions, *,
     * ``on_start(run)``: called once the modules are launched (e.g. to
       subscribe to a channel with ``run.subscribe``).
 
-    The run ends at the first of: ``options.time_limit``; every launched module
-    gone; a violation with ``options.stop_on_violation``; ``stop_when``.
+    The run ends at the first of: ``options.time_limit`` or the spec's
+    ``run: time_limit``; a violation with ``options.stop_on_violation``; a
+    condition of the spec's ``run: end_when`` (a module's exit, an expression
+    over a channel's latest message); every launched module gone;
+    ``stop_when``. An end the spec declares as a failure (an exit code or a
+    condition with a ``crash`` class) is a finding of the run's verdict.
     Raises :class:`~astaa_deft.errors.InputError` when the run cannot start.
     """
     run = BusRun(spec, options, on_event=on_event or (lambda record: None))
+    ends = RunEndWatch(spec)
+    time_limit = min((t for t in (options.time_limit, ends.time_limit) if t is not None), default=None)
     t0 = time.monotonic()
     with run:
         t0 = time.monotonic()
+        ends.attach(run)
         if on_start is not None:
             on_start(run)
         while True:
-            reason = _why_end(run, options, t0, stop_when)
+            reason = _why_end(run, options, t0, time_limit, ends, stop_when)
             if reason:
                 break
             time.sleep(POLL_SECONDS)
         seconds = time.monotonic() - t0
         sent = run.counts()
-        run.end(reason)
+        finding = ends.ended.finding() if ends.ended is not None and ends.ended.reason == reason else None
+        if finding is not None:
+            run.add_finding(finding)
+        run.end(reason, ends.ended.time_ns if ends.ended is not None and ends.ended.reason == reason else None)
     return RunResult(
         end_reason=reason, seconds=seconds, verdict=run.verdict, violations=tuple(run.violations),
         exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),
@@ -62,12 +73,15 @@ def run_session(spec: Spec, options: RunOptions, *,
         observed=run.verdict is not None)
 
 
-def _why_end(run: BusRun, options: RunOptions, t0: float,
+def _why_end(run: BusRun, options: RunOptions, t0: float, time_limit: float | None, ends: RunEndWatch,
              stop_when: Callable[[BusRun], str | None] | None) -> str:
-    if options.time_limit is not None and time.monotonic() - t0 >= options.time_limit:
+    if time_limit is not None and time.monotonic() - t0 >= time_limit:
         return "time limit"
     if run.stop_requested.is_set():
         return "violation (--stop-on-violation)"
+    ended = ends.check(list(run.exits))
+    if ended is not None:
+        return ended.reason
     if options.launch and run.launcher is not None and not run.alive():
         return "all modules exited"
     if stop_when is not None:

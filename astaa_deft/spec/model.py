@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 if TYPE_CHECKING:
     from .planner import PlannerSpec
+    from ..run_section import RunSection
 
 FLOAT_KINDS = ("float32", "float64")
 INT_KINDS = ("int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64")
@@ -115,6 +116,7 @@ class Spec:
     # class; the spec layer sits below monitor, so it does not name the type), the planner section its record.
     invariants: tuple[Any, ...] = ()
     planner: PlannerSpec | None = None
+    run: RunSection | None = None  # how a run ends (None: no 'run:' section)
     source_text: str = ""
 
     def module(self, name: str) -> Module:

@@ -1,0 +1,54 @@
+"""A bucket the planner caused gets DeFT module tests of the planner, runnable by plain pytest.
+
+A real recording of the demo stack through the star with the planner fed a
+NaN speed limit (seeded defect 1), then the campaign's own step that writes
+the tests; pytest runs them in a child process without the log.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from astaa_deft.campaign.campaign import REPLAY_TESTS_SUFFIX, Campaign, CampaignConfig
+from astaa_deft.campaign.journal import Bucket, Journal
+from astaa_deft.campaign.runner import run_case
+from astaa_deft.commands.demo import demo_spec_path
+from astaa_deft.intercept.dictionary import load_dictionary
+from astaa_deft.intercept.testcase import parse_testcase
+from astaa_deft.spec_loader import load_spec
+
+NAN_LIMIT = b"""<testcase id="nan-limit" seed="1"><description>defect 1</description>
+  <policy id="p1"><channel>routing</channel><window from="0.5"/>
+    <set><field path="speed_limit" value="dict:float.nan"/></set></policy>
+</testcase>"""
+
+
+def _bucket(name: str, module: str) -> Bucket:
+    return Bucket(name, "sig", "Silent", "planned_speed", module, "routing:speed_limit:set", "c-000001", False, 1,
+                  0, 0, None, 0.0, 1)
+
+
+def test_a_planner_caused_bucket_gets_deft_module_tests_that_pytest_runs(tmp_path: Path):
+    spec = load_spec(demo_spec_path())
+    dictionary = load_dictionary()
+    testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
+    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case", 8.0,
+                       dictionary)
+    assert outcome.status == "done" and outcome.mutations > 0, outcome
+    out = tmp_path / "campaign"
+    journal = Journal(out)
+    try:
+        campaign = Campaign(CampaignConfig(demo_spec_path(), out), journal, say=lambda text: None)
+        assert campaign._planner_caused(_bucket("B001", "planning"))
+        assert not campaign._planner_caused(_bucket("B002", "control"))
+        tests = campaign._planner_tests(_bucket("B001", "planning"), Path(outcome.log_path))
+    finally:
+        journal.close()
+    assert tests == out / "tests" / f"B001{REPLAY_TESTS_SUFFIX}" and (tests / "deft.json").is_file()
+    Path(outcome.log_path).unlink()  # the suite stands on its own
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
+                         capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:]
+    assert " passed" in run.stdout and "failed" not in run.stdout

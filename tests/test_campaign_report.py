@@ -1,0 +1,65 @@
+"""The campaign report's content, from a journal written the way a campaign writes it (real SQLite)."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from astaa_deft.campaign.journal import Journal
+from astaa_deft.campaign.model import BASELINE, MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.campaign.report import write_report
+
+XML = '<testcase id="tc-{n}" seed="{n}"><policy id="p"><channel>routing</channel>' \
+      '<set><field path="speed_limit" value="dict:float.nan"/></set></policy></testcase>'
+
+
+def _case(journal: Journal, out: Path, case_id: str, kind: str, n: int, verdict: str, reason: str,
+          bucket: str | None = None, finding: Finding | None = None) -> None:
+    journal.plan(PlannedCase(case_id, kind, n, 1, {"scenario": "lane_follow"},
+                             None if kind == BASELINE else XML.format(n=n), "random"))
+    journal.started(case_id)
+    log = out / "cases" / case_id / "run.mcap"
+    outcome = CaseOutcome("done", verdict, f"{verdict}: …", [finding] if finding else [], 3.0, str(log), reason,
+                          margins={"planned_speed": 0.2 / n})
+    journal.finished(case_id, outcome, "sig" if bucket else None, None, bucket)
+
+
+def test_report_shows_buckets_culprits_tests_merges_and_how_runs_ended(tmp_path: Path):
+    out = tmp_path / "campaign"
+    journal = Journal(out)
+    try:
+        journal.set_meta(spec="/x/demo_av.yaml", seed=1, strategy="random", params={}, horizon=8.0)
+        speed = Finding("planned_speed", "Silent", "planning", "trajectory", "v 20 > 15")
+        _case(journal, out, "b-0001", BASELINE, 1, "Pass", "goal reached")
+        _case(journal, out, "c-000001", MUTATED, 1, "Silent", "violation", "B001", speed)
+        _case(journal, out, "c-000002", MUTATED, 2, "Silent", "violation", "B002", speed)
+        _case(journal, out, "c-000003", MUTATED, 3, "Pass", "goal reached")
+        _case(journal, out, "b-0002", BASELINE, 2, "Restart", "violation", "B003",
+              Finding("control_alive", "Restart", "control", "command", "silent"))
+        journal.add_bucket("B001", "s1", "Silent", "planned_speed", "planning", "routing:speed_limit:set+routing:x:set",
+                           "c-000001", False, 2)
+        journal.add_bucket("B002", "s2", "Silent", "speed_limit", "planning", "routing:speed_limit:set", "c-000002",
+                           False, 3)
+        journal.add_bucket("B003", "s3", "Restart", "control_alive", "control", "(no mutation)", "b-0002", True, 5)
+        journal.minimised("B001", "minimised", 0, "<testcase id='minimal-1'/>", "routing:speed_limit = dict:float.nan",
+                          str(out / "minimised" / "B001"), str(out / "tests" / "B001"), 12.0, "")
+        journal.minimised("B002", "minimised", 0, "<testcase id='minimal-2'/>", "routing:speed_limit = dict:float.nan",
+                          str(out / "minimised" / "B002"), str(out / "tests" / "B002-replay"), 12.0, "")
+        journal.merge_bucket("B002", "B001")
+    finally:
+        journal.close()
+    page = write_report(out).read_text()
+    text = html.unescape(page)
+    assert "<title>astaa-deft campaign: demo_av</title>" in page
+    assert "1 bug bucket(s) found" in text and "1 failing without mutation" in text  # B002 is merged
+    assert "violation 3, goal reached 2" in text  # how runs ended
+    assert "routing:speed_limit = dict:float.nan" in text
+    assert "<div>routing:speed_limit:set</div><div>routing:x:set</div>" in page  # one family part a line
+    assert "merged into B001" in text and "without mutation" in text
+    assert "<testcase id='minimal-1'/>" in text and "minimal test case (XML)" in text
+    assert "first failing test case (not minimised)" not in text  # every mutated bucket was minimised
+    assert "href='tests/B001'" in page and "fail on the culprit; <code>pytest tests/B001</code>" in page
+    assert "DeFT replay of the failing run" in text
+    assert "href='cases/c-000001/run.mcap'" in page
+    assert page.count("data:image/png;base64,") == 4
+    assert "Traceback" not in page
