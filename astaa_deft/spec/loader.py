@@ -35,7 +35,8 @@ KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no D
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
 ENCODINGS = ("json", "cbor")
 
-TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner")
+TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner",
+            "decictor")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -88,6 +89,7 @@ class _SpecBuilder:
             params=params,
             invariants=tuple(invariants),
             planner=planner,
+            decictor=v["decictor"].plain() if "decictor" in v else None,
             source_text=self.src.text,
         )
 

@@ -111,6 +111,7 @@ class Spec:
     # Sections owned by later stages; kept raw until those stages validate them.
     invariants: tuple[Any, ...] = ()
     planner: Any = None  # astaa_deft.deft.config.PlannerSpec, when the spec names a planner
+    decictor: Any = None  # the raw 'decictor:' section (participant mappings, lanes); read by its users
     source_text: str = ""
 
     def module(self, name: str) -> Module:
