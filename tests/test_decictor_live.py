@@ -27,8 +27,9 @@ CONE = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)
 
 def test_a_spec_without_lanes_stops_the_strategy_with_a_clear_error():
     text = Path(SPEC_PATH).read_text()
-    start = text.index("  lanes:")
-    end = text.index("  ego:")
+    section = text.index("\ndecictor:")
+    start = text.index("\n  lanes:", section)
+    end = text.index("\n  ego:", section)
     spec = load_spec_text(text[:start] + text[end:])
     with pytest.raises(InputError) as err:
         DecictorStrategy(spec, load_dictionary(), 0, 15.0)
