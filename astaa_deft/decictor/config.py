@@ -98,8 +98,14 @@ def read_config(spec: Spec) -> DecictorConfig:
     if unknown:
         raise _fail(spec, f"decictor.ego: unknown key '{unknown[0]}'",
                     "keys: " + ", ".join(EgoFields.__dataclass_fields__))
-    ego_fields = EgoFields(**{k: (float(v) if k in ("length", "width") else str(v)) for k, v in ego.items()})
+    sizes = {k: v for k, v in ego.items() if k in ("length", "width")}
+    for key, value in sizes.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 100:
+            raise _fail(spec, f"decictor.ego.{key}: {value!r} is not a size in metres", "e.g. length: 4.6")
+    names = {k: str(v) for k, v in ego.items() if k not in ("length", "width")}
+    ego_fields = EgoFields(**names, **sizes)  # type: ignore[arg-type]
     goal = _flag(spec, section.get("goal"), "goal", required=True)
+    assert goal is not None
     collision = _flag(spec, section.get("collision"), "collision", required=False)
     clearance = section.get("clearance", DEFAULT_CLEARANCE)
     dt = section.get("dt", DT)

@@ -18,14 +18,16 @@ import math
 import random
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from ..geometry import Box, overlap
 from ..intercept.actions.participant import Participant, Waypoint
 from .paths import EgoPath
 
 DT = 2.0  # s between waypoints, the paper's time step
 DEFAULT_CLEARANCE = 0.5  # m, the paper's safe distance
-FOOTPRINT_SPACING = 0.5  # m between the seed footprints that tile the swept path
-MOTION_SAMPLE = 0.25  # m between checked positions along a participant's motion
+FOOTPRINT_SPACING = 1.0  # m between the seed footprints that tile the swept path (each is 4.6 m + 2 clearances long)
+MOTION_SAMPLE = 0.5  # m between checked positions along a participant's motion
 
 
 class PlacementError(ValueError):
@@ -71,6 +73,9 @@ class ForbiddenRegion:
         self.dt = dt
         self.clearance = clearance
         self.boxes = [seed.box(s).grown(clearance) for s in seed.thinned(FOOTPRINT_SPACING)]
+        # Bounding circles of the tiles, so a box is tested exactly only against the few tiles near it.
+        self._centres = np.array([(b.x, b.y) for b in self.boxes], dtype=float).reshape(-1, 2)
+        self._radii = np.array([b.radius for b in self.boxes], dtype=float)
 
     def window(self, t: float) -> list[Box]:
         """R^{P0}(t, dt): the grown footprints of the ego's recorded motion during [t, t + dt]."""
@@ -78,9 +83,10 @@ class ForbiddenRegion:
 
     def hit(self, box: Box) -> Box | None:
         """The forbidden tile ``box`` overlaps, if any."""
-        for tile in self.boxes:
-            if overlap(tile, box) > 0.0:
-                return tile
+        near = np.hypot(self._centres[:, 0] - box.x, self._centres[:, 1] - box.y) < self._radii + box.radius
+        for k in np.flatnonzero(near):
+            if overlap(self.boxes[k], box) > 0.0:
+                return self.boxes[k]
         return None
 
 
@@ -179,8 +185,10 @@ def _extend(rng: random.Random, placed: Participant, kind: Kind, region: Forbidd
             h = heading + turn
             nxt = Waypoint(round(last.t + region.dt, 3), round(last.x + v * region.dt * math.cos(h), 2),
                            round(last.y + v * region.dt * math.sin(h), 2))
-            candidate = replace(placed, path=(*path, nxt))
-            if area.y_min <= nxt.y <= area.y_max and is_feasible(candidate, region):
+            # Only the new segment needs checking: the path up to ``last`` is clear already.
+            segment = replace(placed, x=last.x, y=last.y, heading=h, t=last.t, path=(nxt,))
+            if area.y_min <= nxt.y <= area.y_max and all(region.hit(box) is None
+                                                         for _, box in motion_boxes(segment)):
                 path.append(nxt)
                 heading, speed, last = h, v, nxt
                 break

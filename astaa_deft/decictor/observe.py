@@ -67,10 +67,9 @@ def observe(log: LogContents, spec: Spec, config: DecictorConfig) -> LoggedRun:
     ego = config.ego
     states: list[EgoState] = []
     for message in _messages(log, spec, ego.channel):
-        values = [_number(message, p) for p in (ego.t, ego.x, ego.y, ego.heading)]
-        if any(v is None for v in values):
+        t, x, y, heading = (_number(message, p) for p in (ego.t, ego.x, ego.y, ego.heading))
+        if t is None or x is None or y is None or heading is None:
             continue
-        t, x, y, heading = values  # type: ignore[misc]
         if states and t <= states[-1].t:  # held world (t = 0 repeated) and repeats: keep time increasing
             continue
         states.append(EgoState(t, x, y, heading, _number(message, ego.speed) or 0.0,

@@ -68,27 +68,31 @@ class LaneGrid:
     def cell_count(self, lane: int) -> int:
         return max(1, math.ceil(self._geometry[lane][3][-1] / self.cell))
 
+    def locate_all(self, points: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per lane: (which points lie in its strip, their cell indices), for all points at once."""
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        out = []
+        for k, (pts, seg, lengths, stations) in enumerate(self._geometry):
+            rel = points[:, None, :] - pts[None, :-1, :]  # (n points, m segments, 2)
+            u = np.clip(np.einsum("nmj,mj->nm", rel, seg) / np.maximum(lengths ** 2, 1e-12), 0.0, 1.0)
+            foot = pts[None, :-1, :] + seg[None, :, :] * u[:, :, None]
+            d = np.hypot(foot[..., 0] - points[:, None, 0], foot[..., 1] - points[:, None, 1])
+            j = np.argmin(d, axis=1)
+            rows = np.arange(len(points))
+            inside = d[rows, j] <= 0.5 * self.lanes[k].width
+            station = stations[j] + u[rows, j] * lengths[j]
+            cell = np.minimum((station // self.cell).astype(int), self.cell_count(k) - 1)
+            out.append((inside, cell))
+        return out
+
     def locate(self, x: float, y: float) -> list[tuple[int, int]]:
         """(lane index, cell index) of every lane strip containing the point."""
-        found = []
-        for k, (pts, seg, lengths, stations) in enumerate(self._geometry):
-            rel = np.array([x, y]) - pts[:-1]
-            u = np.clip(np.einsum("ij,ij->i", rel, seg) / np.maximum(lengths ** 2, 1e-12), 0.0, 1.0)
-            foot = pts[:-1] + seg * u[:, None]
-            d = np.hypot(foot[:, 0] - x, foot[:, 1] - y)
-            j = int(np.argmin(d))
-            if d[j] <= 0.5 * self.lanes[k].width:
-                station = stations[j] + u[j] * lengths[j]
-                if 0.0 <= station <= stations[-1]:
-                    found.append((k, min(int(station // self.cell), self.cell_count(k) - 1)))
-        return found
+        return [(k, int(cell[0])) for k, (inside, cell) in enumerate(self.locate_all(np.array([[x, y]])))
+                if inside[0]]
 
     def cells(self, path: EgoPath) -> dict[int, set[int]]:
-        out: dict[int, set[int]] = {k: set() for k in range(len(self.lanes))}
-        for x, y in resample(path.points, PATH_SAMPLE):
-            for lane, cell in self.locate(float(x), float(y)):
-                out[lane].add(cell)
-        return out
+        points = resample(path.points, PATH_SAMPLE)
+        return {k: set(cell[inside].tolist()) for k, (inside, cell) in enumerate(self.locate_all(points))}
 
 
 @dataclass(frozen=True)
