@@ -130,7 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
     fz.add_argument("--budget", help="or a time budget: 90s, 30m, 2h")
     fz.add_argument("--workers", type=int, help="cases at once (default: from the cores and the spec's modules)")
     fz.add_argument("--seed", type=int, default=0)
-    fz.add_argument("--strategy", default="random", help="random (ASTAA's weighted generation) or guided")
+    fz.add_argument("--strategy", default="random",
+                    help="random (ASTAA's weighted generation), guided, or decictor (non-optimal decisions; "
+                         "baselines decictor-random, decictor-random-delta: docs/decictor.md)")
     fz.add_argument("--dictionary", type=Path, action="append", default=[])
     fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
     fz.add_argument("--horizon", type=_positive, default=20.0, help="seconds a case runs at most")

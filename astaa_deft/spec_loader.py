@@ -36,7 +36,8 @@ KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no D
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
 ENCODINGS = ("json", "cbor")
 
-TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run")
+TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run",
+            "decictor")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -91,6 +92,7 @@ class _SpecBuilder:
             invariants=tuple(invariants),
             planner=planner,
             run=run,
+            decictor=v["decictor"].plain() if "decictor" in v else None,
             source_text=self.src.text,
         )
 

@@ -323,7 +323,8 @@ def test_every_action_module_has_its_schema_element():
     schema = etree.parse(str(SCHEMA_PATH))
     ns = {"xs": "http://www.w3.org/2001/XMLSchema"}
     in_schema = set(schema.xpath("//xs:group[@name='Action']//xs:element/@name", namespaces=ns))
-    assert in_schema == set(ACTIONS) == {"set", "drop", "delay", "duplicate", "reorder", "interleave", "corrupt"}
+    assert in_schema == set(ACTIONS) == {"set", "drop", "delay", "duplicate", "reorder", "interleave", "corrupt",
+                                                 "participant"}
 
 
 def test_the_documented_example_is_valid():

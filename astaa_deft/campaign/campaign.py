@@ -113,7 +113,10 @@ class Campaign:
             stopped = "interrupted"
         finally:
             pool.close()
-        if stopped != "interrupted" and self.config.minimise:
+        finish = getattr(self.strategy, "finish", None)  # a strategy with its own findings (decictor)
+        if stopped != "interrupted" and finish is not None:
+            finish(self.journal, self.config.out, self.config.spec_path, self.say)
+        elif stopped != "interrupted" and self.config.minimise:
             try:
                 self._minimise_buckets()
             except KeyboardInterrupt:
@@ -142,7 +145,10 @@ class Campaign:
         outcomes = [self.journal.outcome(r) for r in rows]
         if rows and all(o is not None and o.status == "error" for o in outcomes):
             raise CampaignStopped(f"the SUT does not start: {outcomes[0].error or outcomes[0].summary}")
+        seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes):
+            if seed_hook is not None and outcome is not None:
+                seed_hook(row["case_id"], outcome)
             if outcome is not None and outcome.failed:
                 self.baseline_keys.setdefault(sig.failure_key(outcome), row["bucket"])
 
@@ -205,6 +211,9 @@ class Campaign:
     def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
         row = self.journal.case(case_id)
         kind, xml = row["kind"], row["testcase_xml"]
+        judge = getattr(self.strategy, "judge", None)  # decictor: its oracle turns a run into a finding
+        if judge is not None and kind in (MUTATED, RERUN):
+            outcome = judge(case_id, xml, outcome, kind == MUTATED)
         new: list[PlannedCase] = []
         signature = key = bucket = None
         if outcome.failed:

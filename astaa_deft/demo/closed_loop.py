@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 from . import messages
 from .control import Controller
@@ -35,18 +35,27 @@ class LoopResult:
 class _Wire:
     """Numbers headers per channel and makes each message a JSON round trip."""
 
-    def __init__(self) -> None:
+    def __init__(self, rewrite: Callable[[str, dict], dict] | None = None) -> None:
         self.seq: dict[str, int] = {}
+        self.rewrite = rewrite
 
     def message(self, channel: str, body: dict, stamp: float) -> dict:
         self.seq[channel] = self.seq.get(channel, 0) + 1
-        return json.loads(json.dumps({"header": {"seq": self.seq[channel], "stamp": stamp}, **body}))
+        message = {"header": {"seq": self.seq[channel], "stamp": stamp}, **body}
+        if self.rewrite is not None:
+            message = self.rewrite(channel, message)
+        return json.loads(json.dumps(message))
 
 
-def run_closed_loop(scenario: str | Scenario, defects: bool = False, max_time: float | None = None) -> LoopResult:
-    """Run until the scenario is done (or ``max_time`` of sim time); returns what happened."""
+def run_closed_loop(scenario: str | Scenario, defects: bool = False, max_time: float | None = None,
+                    rewrite: Callable[[str, dict], dict] | None = None) -> LoopResult:
+    """Run until the scenario is done (or ``max_time`` of sim time); returns what happened.
+
+    ``rewrite(channel, message)``, if given, changes each message as it goes on the wire (the way
+    the tool's proxy would in the real stack: Decictor's participants in the benchmarks).
+    """
     world = World(scenario if isinstance(scenario, Scenario) else load_scenario(scenario))
-    planner, controller, wire = Planner(defects=defects), Controller(defects=defects), _Wire()
+    planner, controller, wire = Planner(defects=defects), Controller(defects=defects), _Wire(rewrite)
     result = LoopResult(status={})
     latest: dict[str, dict] = {}
     steering, acceleration = 0.0, 0.0

@@ -19,7 +19,7 @@ the lights it has committed to stop for, the last good speed limit.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, NamedTuple
+from typing import Any, Mapping, NamedTuple, Sequence
 
 from . import messages, vehicle
 from .frenet import (DT, STEPS, LateralPath, SpeedProfile, forecast_boxes, interpolate,
@@ -54,6 +54,12 @@ W_CONSISTENCY = 0.2  # per (m/s)² s of speed change against the previous plan
 LANE_CHANGE_COST = 10.0
 LANE_SWITCH_COST = 10.0  # changing the lane decision: the hysteresis
 OFF_GOAL_LANE_COST = 25.0  # per lane away from the goal lane
+# SEEDED DEFECT 5 (defects on, a decision defect): a cone standing on the shoulder (off the
+# lanes) is taken for wider than it is — STANDING_WIDEN m more on each side in the hard check, so
+# a cone near the road edge closes the lane: a needless lane change — and the ego slows to
+# CAUTION_SPEED_SHARE of cruise while such a cone is within CAUTION_GAP m beside it.
+STANDING_WIDEN = 2.2  # m
+CAUTION_GAP, CAUTION_AHEAD, CAUTION_SPEED_SHARE = 3.5, 15.0, 0.6
 
 
 class Start(NamedTuple):
@@ -107,7 +113,15 @@ class Planner:
 
         cruise = self._cruise_speed(routing.speed_limit)
         current_lane = road.nearest_lane(start.l)
-        obstacles = [b for b in (forecast_boxes(o, now) for o in predicted) if b is not None]
+        obstacles, standing = [], []
+        for obstacle in predicted:
+            boxes = forecast_boxes(obstacle, now)
+            if boxes is None:
+                continue
+            obstacles.append(boxes)
+            if self.defects and obstacle.kind == "cone" and _standing(boxes) and _off_road(boxes[0], road):
+                standing.append(boxes)
+        hard = [_widened(boxes) if any(boxes is b for b in standing) else boxes for boxes in obstacles]
         stop_lines = self._stop_lines(lights, road, start)
         previous_v = self._previous_speeds(now)
 
@@ -116,9 +130,9 @@ class Planner:
             path = self._lateral_path(lane, road, start)
             for candidate in self._candidates(lane, start, cruise, stop_lines):
                 points = _points(now, start, path, candidate.profile)
-                first_violation = self._first_violation(points, obstacles, stop_lines)
+                first_violation = self._first_violation(points, hard, stop_lines)
                 cost = self._cost(candidate, points, obstacles, cruise, stop_lines, road, current_lane,
-                                  previous_v)
+                                  previous_v, standing)
                 # Feasible plans by cost; if none is, the one that stays safe longest.
                 key = (first_violation is not None, -(first_violation or 0), cost)
                 if best_key is None or key < best_key:
@@ -251,7 +265,8 @@ class Planner:
         return None
 
     def _cost(self, candidate: Candidate, points: list[dict], obstacles: list[list[Box]], cruise: float,
-              stop_lines: list[float], road: Road, current_lane: int, previous_v: list[float] | None) -> float:
+              stop_lines: list[float], road: Road, current_lane: int, previous_v: list[float] | None,
+              standing: Sequence[list[Box]] = ()) -> float:
         cost = 0.0
         stop_at = stop_lines[0] - STOP_LINE_BUFFER
         for k, p in enumerate(points):
@@ -260,6 +275,11 @@ class Planner:
             # (otherwise the best-looking plans crawl towards a red light instead of stopping at it).
             room = max(0.0, stop_at - p["x"] - 0.5 * vehicle.LENGTH)
             reference = min(cruise, math.sqrt(2.0 * COMFORT_DECEL * room))
+            for boxes in standing:  # defect 5: caution beside a standing obstacle
+                box = boxes[k]
+                if (abs(box.y - p["y"]) - 0.5 * (vehicle.WIDTH + box.width) < CAUTION_GAP
+                        and -0.5 * (vehicle.LENGTH + box.length) < box.x - p["x"] < CAUTION_AHEAD):
+                    reference = min(reference, CAUTION_SPEED_SHARE * cruise)
             cost += (W_SPEED * (v - reference) ** 2 + W_ACCEL * p["a"] ** 2) * DT
             if previous_v is not None:
                 cost += W_CONSISTENCY * (v - previous_v[k]) ** 2 * DT
@@ -304,6 +324,18 @@ class Planner:
             # Sorted so the bytes never depend on the order the caller built the frame in.
             "debug": {"inputs": {name: messages.header(frame[name]).seq for name in sorted(frame)}},
         }
+
+
+def _standing(boxes: list[Box]) -> bool:
+    return abs(boxes[-1].x - boxes[0].x) + abs(boxes[-1].y - boxes[0].y) < 0.1
+
+
+def _off_road(box: Box, road: Road) -> bool:
+    return box.y < -0.5 * road.lane_width or box.y > road.center(road.lanes - 1) + 0.5 * road.lane_width
+
+
+def _widened(boxes: list[Box]) -> list[Box]:
+    return [Box(b.x, b.y, b.heading, b.length, b.width + 2.0 * STANDING_WIDEN) for b in boxes]
 
 
 def _points(now: float, start: Start, path: LateralPath, profile: SpeedProfile) -> list[dict]:

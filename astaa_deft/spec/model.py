@@ -117,6 +117,7 @@ class Spec:
     invariants: tuple[Any, ...] = ()
     planner: PlannerSpec | None = None
     run: RunSection | None = None  # how a run ends (None: no 'run:' section)
+    decictor: Any = None  # the raw 'decictor:' section; astaa_deft.decictor.spec types and checks it
     source_text: str = ""
 
     def module(self, name: str) -> Module:

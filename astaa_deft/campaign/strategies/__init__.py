@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from .base import Proposal, Strategy
+from .decictor import DecictorRandomDeltaStrategy, DecictorRandomStrategy, DecictorStrategy
 from .guided import GuidedStrategy
 from .random import RandomStrategy
 
-STRATEGIES = {"random": RandomStrategy, "guided": GuidedStrategy}
+STRATEGIES = {"random": RandomStrategy, "guided": GuidedStrategy, "decictor": DecictorStrategy,
+              "decictor-random": DecictorRandomStrategy, "decictor-random-delta": DecictorRandomDeltaStrategy}
 
 __all__ = ["Proposal", "Strategy", "STRATEGIES", "RandomStrategy", "GuidedStrategy"]

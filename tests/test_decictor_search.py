@@ -1,0 +1,111 @@
+"""The search and the campaign strategy's plumbing, on synthetic observations (no runs): deterministic
+proposals, every proposal feasible, the elitist selection keeping the best, findings leaving the pool,
+test case XML round trips, and the strategy's clear errors."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.campaign.strategies.decictor import DecictorStrategy, area_around, scene_of, scene_xml
+from astaa_deft.decictor.config import read_config
+from astaa_deft.decictor.feasible import ForbiddenRegion, check_placement
+from astaa_deft.decictor.oracle import LaneGrid, RunObservation, straight_lanes
+from astaa_deft.decictor.paths import EgoPath, EgoState
+from astaa_deft.decictor.search import MODES, Search
+from astaa_deft.errors import InputError
+from astaa_deft.intercept.dictionary import load_dictionary
+from astaa_deft.intercept.testcase import parse_testcase
+from astaa_deft.spec_loader import load_spec, load_spec_text
+
+SPEC_PATH = Path(__file__).resolve().parent.parent / "specs" / "demo_av.yaml"
+SPEC = load_spec(SPEC_PATH)
+LANES = straight_lanes(2, 3.5, 300.0)
+
+
+def straight(y: float = 0.0) -> EgoPath:
+    return EgoPath(tuple(EgoState(k * 0.1, 10.0 + k * 1.2, y, 0.0, 12.0) for k in range(101)))
+
+
+SEED = RunObservation(straight(), True)
+
+
+def search(mode: str, seed: int = 1) -> Search:
+    return Search(mode, seed, SEED, LaneGrid(LANES), area_around(SEED, LANES),
+                  ForbiddenRegion(SEED.ego, clearance=1.5))
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_proposals_are_deterministic_and_feasible(mode):
+    a, b = search(mode), search(mode)
+    for number in range(1, 9):
+        scene = a.propose(number)
+        assert scene == b.propose(number)
+        for participant in scene.participants:
+            check_placement(participant, a.region)
+        assert len({p.id for p in scene.participants}) == len(scene.participants)
+        a.observe(scene, SEED)
+        b.observe(scene, SEED)
+
+
+def test_selection_keeps_the_best_and_findings_leave_the_pool():
+    s = search("decictor")
+    scenes = [s.propose(n) for n in range(1, 5)]
+    detour = EgoPath(tuple(EgoState(st.t, st.x, 3.5 if 50 < st.x < 90 else 0.0, 0.0, 12.0)
+                           for st in straight().states))
+    s.observe(scenes[0], RunObservation(straight(0.4), True))  # a little off: the best fitness
+    s.observe(scenes[1], RunObservation(detour, True))  # non-optimal: a finding
+    s.observe(scenes[2], RunObservation(straight(), False))  # task failed
+    s.observe(scenes[3], SEED)
+    assert s.stats.findings == 1 and s.stats.task_failed == 1
+    assert s.population[0].scene == scenes[0] and s.population[0].fitness > 0
+    assert scenes[1] not in [m.scene for m in s.population]
+
+
+def test_the_seed_must_reach_its_goal():
+    with pytest.raises(ValueError, match="seed run must reach its goal"):
+        Search("decictor", 1, RunObservation(straight(), False), LaneGrid(LANES), area_around(SEED, LANES),
+               ForbiddenRegion(SEED.ego))
+
+
+def test_scene_xml_round_trips_through_a_checked_test_case():
+    scene = search("random").propose(3)
+    xml = scene_xml(scene, "tc-000003", 3, "prediction")
+    parse_testcase(xml.encode(), "tc", SPEC, load_dictionary())  # valid against XSD, spec and mapping
+    assert scene_of(xml).participants == scene.participants
+
+
+def without(key: str) -> str:
+    text = SPEC_PATH.read_text()
+    section = text.index("\ndecictor:")
+    start = text.index(f"\n  {key}:", section)
+    end = re.compile(r"\n  [a-z#]").search(text, start + 1)
+    return text[:start] + (text[end.start():] if end else "\n")
+
+
+@pytest.mark.parametrize("key, message", [
+    ("lanes", "no 'lanes': the consistency check needs the ego's lanes"),
+    ("ego", "no 'ego: {channel: …}'"),
+    ("goal", "no 'goal: {channel: …, field: …}'"),
+    ("participants", "no 'decictor: participants:' section"),
+])
+def test_missing_parts_of_the_section_are_named(key, message):
+    spec = load_spec_text(without(key))
+    with pytest.raises(InputError) as err:
+        DecictorStrategy(spec, load_dictionary(), 0, 15.0)
+    assert message in str(err.value)
+
+
+def test_lanes_from_a_file(tmp_path):
+    (tmp_path / "lanes.yaml").write_text("lanes:\n  - {id: a, width: 3.5, centre: [[0, 0], [100, 0]]}\n")
+    text = SPEC_PATH.read_text().replace(
+        "    channel: routing              # straight lanes along +x: lane i centred on y = i * width\n"
+        "    straight: {count: lane_count, width: lane_width, length: road_length}\n", "    file: lanes.yaml\n")
+    (tmp_path / "spec.yaml").write_text(text)
+    config = read_config(load_spec(tmp_path / "spec.yaml"))
+    assert config.lanes.file == (tmp_path / "lanes.yaml").resolve()
+    (tmp_path / "lanes.yaml").write_text("lanes: 3\n")
+    with pytest.raises(InputError, match="not a lanes file"):
+        read_config(load_spec(tmp_path / "spec.yaml"))
