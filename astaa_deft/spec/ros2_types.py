@@ -28,6 +28,7 @@ from ..errors import AstaaDeftError
 from .model import FieldType, MessageType
 
 ROS_TYPE_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*$")
+_MSGDEF_SEPARATOR = "=" * 80 + "\n"
 TOPIC_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_/{}~]*$")
 
 # ROS 2 primitive names -> the spec's scalar kinds. byte/char/octet are one
@@ -114,6 +115,32 @@ class Ros2Types:
         """The ``ros2msg`` schema text (the type, then each dependency after a ``MSG:`` separator)."""
         text, _md5 = self.store.generate_msgdef(type_name, ros_version=2)
         return text
+
+    def definitions(self, type_name: str) -> dict[str, str]:
+        """``.msg`` text of ``type_name`` and of every type it uses, by full type name.
+
+        What a ROS 2 client without a ROS install (zenoh-ros2-sdk) needs to be
+        given locally; its RIHS01 hashes of these texts equal ``rihs01``.
+        """
+        first, *rest = self.msgdef(type_name).split(_MSGDEF_SEPARATOR)
+        out = {type_name: first}
+        for part in rest:
+            head, _, body = part.partition("\n")
+            package, name = head.removeprefix("MSG: ").split("/")
+            out[f"{package}/msg/{name}"] = body
+        return out
+
+    def write_definitions(self, type_names: list[str], directory: Path) -> list[Path]:
+        """Write ``<package>/msg/<Name>.msg`` files (a ROS 2 share layout) for these types and their fields."""
+        written = []
+        for type_name in type_names:
+            for name, text in self.definitions(type_name).items():
+                package, _, short = name.split("/")
+                path = Path(directory) / package / "msg" / f"{short}.msg"
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(text)
+                written.append(path)
+        return written
 
     def spec_types(self, type_name: str) -> dict[str, MessageType]:
         """``type_name`` and every type it contains, as spec message types (same names)."""
