@@ -129,7 +129,7 @@ def test_the_log_decodes_with_mcap_ros2_support(star_run):
     seen: dict[str, int] = {}
     with open(log, "rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for schema, channel, message in reader.iter_messages():
+        for schema, channel, _message in reader.iter_messages():
             if channel.message_encoding != "cdr":
                 assert channel.message_encoding == "json"  # the tool's own channels stay JSON
                 continue

@@ -22,7 +22,8 @@ delivers the real message and reports why.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from rosbags.typesys.base import Nodetype

@@ -74,8 +74,9 @@ def main(argv: list[str] | None = None) -> int:
         codec = get_codec(channel.encoding)
         counts[channel.name] = 0
 
-        def on_sample(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name,
-                      ros2=channel.encoding.startswith("cdr:")) -> None:
+        ros2 = channel.encoding.startswith("cdr:")
+
+        def on_sample(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name, ros2=ros2) -> None:
             q.put((time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
                    _source_time(sample) if ros2 else sample.timestamp))
 

@@ -327,9 +327,9 @@ class _SpecBuilder:
             elif "topic" in v:
                 self.src.at_key(item, "topic", "'topic' needs 'encoding: cdr' (a ROS 2 channel)",
                                 "add 'encoding: cdr', or give a Zenoh 'key' instead")
-            if "key" not in v and not (cdr and cdr[1]):
-                if "topic" not in v:
-                    self.src.at(item, "a channel lacks 'key'", "add 'key: …' (or, for ROS 2, 'topic:' and 'encoding: cdr')")
+            if "key" not in v and "topic" not in v:
+                self.src.at(item, "a channel lacks 'key'",
+                            "add 'key: …' (or, for ROS 2, 'topic:' and 'encoding: cdr')")
             name = self.name_of(v["name"], "channel name") if "name" in v else "?"
             if name in names:
                 self.src.at(v["name"], f"channel '{name}' is declared twice", "give each channel a unique name")

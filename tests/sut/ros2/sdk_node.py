@@ -52,7 +52,7 @@ else:
     sys.exit("sdk_node: no ZENOH_SESSION_CONFIG_URI (run me under astaa-deft)")
 
 TWIST = "geometry_msgs/msg/Twist"
-out = open(args.out, "w", buffering=1)
+out = open(args.out, "w", buffering=1)  # noqa: SIM115 (open for the whole run)
 
 if args.role == "talker":
     publisher = ROS2Publisher(topic=args.topic, msg_type=TWIST, node_name=args.node or "teleop",
@@ -85,7 +85,7 @@ if args.role == "talker":
     stop.wait()
     publisher.close()
 else:
-    raw = open(args.out + ".raw", "w", buffering=1)
+    raw = open(args.out + ".raw", "w", buffering=1)  # noqa: SIM115
 
     def on_message(msg):
         out.write(json.dumps({"linear": [msg.linear.x, msg.linear.y, msg.linear.z],
