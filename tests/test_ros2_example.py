@@ -40,7 +40,7 @@ def test_nan_on_cmd_vel_breaks_the_odometry_invariants_and_the_log_decodes(tmp_p
                              if c.message_encoding == "cdr"})
         stream.seek(0)
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for schema, channel, _message, value in reader.iter_decoded_messages(topics=cdr_topics):
+        for schema, _channel, _message, value in reader.iter_decoded_messages(topics=cdr_topics):
             decoded.setdefault(schema.name, []).append(value)
     assert set(decoded) == {"geometry_msgs/msg/Twist", "nav_msgs/msg/Odometry"}
     odometry = decoded["nav_msgs/msg/Odometry"]
