@@ -29,6 +29,16 @@ def build_parser() -> argparse.ArgumentParser:
     check = spec.add_parser("check", help="validate a SUT spec")
     check.add_argument("file", type=Path)
     check.set_defaults(func=lambda a: _cmd("spec_check").run(a.file))
+    disc = spec.add_parser("discover", help="write a spec skeleton from a running ROS 2 system (rmw_zenoh)")
+    disc.add_argument("--connect", action="append", required=True, metavar="ENDPOINT",
+                      help="the running system's Zenoh router, e.g. tcp/127.0.0.1:7447")
+    disc.add_argument("--seconds", type=_positive, default=3.0, help="how long to listen (default 3)")
+    disc.add_argument("-o", "--out", type=Path, required=True, help="the spec file to write")
+    disc.add_argument("--name", default="discovered", help="the spec's name")
+    disc.add_argument("--domain", type=int, help="ROS_DOMAIN_ID to keep (default: the first one seen)")
+    disc.add_argument("--all-topics", action="store_true", help="keep /rosout and /parameter_events too")
+    disc.set_defaults(func=lambda a: _cmd("discover").run(a.out, a.connect, a.seconds, a.name, a.domain,
+                                                          a.all_topics))
 
     # proxy
     proxy = sub.add_parser("proxy", help="run the SUT through the proxy and record the bus")

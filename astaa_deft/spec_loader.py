@@ -18,6 +18,7 @@ from .fields import FieldPathError, check_brittle_pattern
 from .monitor.invariants import build_invariants
 from .yamlsource import Node, Source, describe_value
 from .run_section import build_run_section
+from .spec.ros2_section import read_ros2_section, resolve_cdr_channel
 from .spec.model import (
     SCALAR_KINDS,
     Channel,
@@ -25,6 +26,7 @@ from .spec.model import (
     MessageType,
     Module,
     Readiness,
+    Ros2Section,
     Spec,
     ZenohSection,
 )
@@ -34,10 +36,10 @@ TYPE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 FIELD_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no DSL
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
-ENCODINGS = ("json", "cbor")
+ENCODINGS = ("json", "cbor", "cdr")
 
 TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run",
-            "decictor")
+            "decictor", "ros2")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -60,6 +62,7 @@ class _SpecBuilder:
         self.base_dir = path.parent
         # (channel name, node) of every readiness channel, checked once channels are known
         self._ready_channels: list[tuple[str | None, Node | None]] = []
+        self.ros2 = Ros2Section()
 
     # -- entry -------------------------------------------------------------
     def build(self) -> Spec:
@@ -73,6 +76,7 @@ class _SpecBuilder:
         params = self.params(v.get("params"))
         zenoh = self.zenoh(v.get("zenoh"))
         types = self.types(v.get("types"))
+        self.ros2 = read_ros2_section(self.src, v.get("ros2"), self.base_dir, self.from_file)
         modules = self.modules(v.get("modules"), params)
         channels = self.channels(v.get("channels"), modules, types)
         brittle = self.brittle(v.get("brittle"), types)
@@ -94,6 +98,7 @@ class _SpecBuilder:
             run=run,
             decictor=v["decictor"].plain() if "decictor" in v else None,
             source_text=self.src.text,
+            ros2=self.ros2,
         )
 
     # -- generic checks ----------------------------------------------------
@@ -319,15 +324,31 @@ class _SpecBuilder:
         keys: dict[str, str] = {}
         module_names = [m.name for m in modules]
         for item in self.list_of_maps(node, "channels", required=True):
-            allowed = ("name", "key", "producer", "consumers", "type", "encoding")
-            if not self.keys(item, allowed, ("name", "key", "producer", "type"), "a channel"):
+            allowed = ("name", "key", "topic", "producer", "consumers", "type", "encoding")
+            if not self.keys(item, allowed, ("name", "producer", "type"), "a channel"):
                 continue
             v = item.value
+            # A CDR channel's type is a ROS 2 message type (its fields join `types`);
+            # its key may come from its ROS 2 topic.
+            cdr = None
+            if "encoding" in v and v["encoding"].value == "cdr":
+                cdr = resolve_cdr_channel(self.src, v, self.ros2, types)
+            elif "topic" in v:
+                self.src.at_key(item, "topic", "'topic' needs 'encoding: cdr' (a ROS 2 channel)",
+                                "add 'encoding: cdr', or give a Zenoh 'key' instead")
+            if "key" not in v and "topic" not in v:
+                self.src.at(item, "a channel lacks 'key'",
+                            "add 'key: …' (or, for ROS 2, 'topic:' and 'encoding: cdr')")
             name = self.name_of(v["name"], "channel name") if "name" in v else "?"
             if "name" in v and name in names:
                 self.src.at(v["name"], f"channel '{name}' is declared twice", "give each channel a unique name")
             names.add(name)
-            key = ""
+            key = cdr[1] if cdr else ""
+            if key in keys:
+                self.src.at(v["topic"], f"topic '{v['topic'].value}' is already used by channel '{keys[key]}'",
+                            "give each channel its own topic")
+            elif key:
+                keys[key] = name
             if "key" in v and self.expect(v["key"], (str,), "'key'", "a Zenoh key"):
                 key = v["key"].value
                 if not KEY_RE.match(key) or key.startswith("/") or key.endswith("/") or "//" in key:
@@ -357,7 +378,9 @@ class _SpecBuilder:
             type_name = ""
             if "type" in v and self.expect(v["type"], (str,), "'type'", "a type name"):
                 type_name = v["type"].value
-                if type_name not in types:
+                if cdr is None and "encoding" in v and v["encoding"].value == "cdr":
+                    pass  # reported by resolve_cdr_channel
+                elif type_name not in types:
                     hint = did_you_mean(type_name, types) or "declare it under 'types'"
                     self.src.at(v["type"], f"unknown message type '{type_name}'", hint)
             encoding = "json"
@@ -366,7 +389,10 @@ class _SpecBuilder:
                 if encoding not in ENCODINGS:
                     hint = did_you_mean(encoding, ENCODINGS) or f"supported: {', '.join(ENCODINGS)}"
                     self.src.at(v["encoding"], f"unknown encoding '{encoding}'", hint)
-            out.append(Channel(name, key, producer, tuple(consumers), type_name, encoding))
+            if encoding == "cdr":
+                encoding = cdr[0] if cdr else "cdr"
+            topic = v["topic"].value if "topic" in v and isinstance(v["topic"].value, str) else None
+            out.append(Channel(name, key, producer, tuple(consumers), type_name, encoding, topic))
         for channel, cnode in self._ready_channels:
             if channel is not None and cnode is not None and channel not in names:
                 hint = did_you_mean(channel, names) or "name a channel declared under 'channels'"

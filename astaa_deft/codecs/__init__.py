@@ -2,6 +2,9 @@
 
 Codec names are also MCAP well-known message encodings ("json", "cbor"), so
 a recorder can use ``codec.name`` as the channel's ``message_encoding``.
+A family of codecs is named ``family:argument``: ``cdr:geometry_msgs/msg/Twist``
+is the ROS 2 CDR codec of that type (``message_encoding`` "cdr"), built on
+first use.
 """
 
 from __future__ import annotations
@@ -39,8 +42,19 @@ def get_codec(name: str) -> Codec:
     try:
         return _REGISTRY[name]
     except KeyError:
-        known = ", ".join(available_codecs())
-        raise UnknownCodecError(f"unknown encoding {name!r}; known encodings: {known}") from None
+        pass
+    family, _, argument = name.partition(":")
+    if argument and family == "cdr":
+        from .cdr import codec_for_type  # rosbags loads only for ROS 2 systems
+
+        try:
+            codec: Codec = codec_for_type(argument)
+        except ValueError as exc:  # Ros2TypeError: an unknown type, with close names
+            raise UnknownCodecError(f"unknown encoding {name!r}: {exc}") from None
+        _REGISTRY.setdefault(name, codec)
+        return _REGISTRY[name]
+    known = ", ".join(n for n in available_codecs() if ":" not in n)
+    raise UnknownCodecError(f"unknown encoding {name!r}; known encodings: {known}, cdr:<ROS 2 type>") from None
 
 
 def available_codecs() -> tuple[str, ...]:

@@ -28,6 +28,7 @@ from ..bus.topology import read_intercept_record
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
+from ..codecs.rmw_attachment import parse_attachment
 from ..spec_loader import load_spec
 from . import layout, records
 from .writer import LogWriter
@@ -73,8 +74,11 @@ def main(argv: list[str] | None = None) -> int:
         codec = get_codec(channel.encoding)
         counts[channel.name] = 0
 
-        def on_sample(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name) -> None:
-            q.put((time.time_ns(), cid, codec, name, sample.payload.to_bytes(), sample.timestamp))
+        ros2 = channel.encoding.startswith("cdr:")
+
+        def on_sample(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name, ros2=ros2) -> None:
+            q.put((time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
+                   _source_time(sample) if ros2 else sample.timestamp))
 
         if channel.name in args.intercepted:
             original_cid = writer.bus_channel(channel, topic=layout.ORIGINAL_PREFIX + channel.key)
@@ -129,7 +133,7 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mu
         if item is _STOP:
             return
         log_time, cid, codec, name, data, ts = item
-        publish_time = ts.get_time_as_ntp64().as_nanos() if ts is not None else log_time
+        publish_time = (ts if type(ts) is int else ts.get_time_as_ntp64().as_nanos()) if ts is not None else log_time
         if isinstance(cid, tuple) and cid[0] == "intercepted":
             _, cid, original_cid, attachment = cid
             if attachment is not None:  # the proxy changed something: log it three ways
@@ -151,6 +155,12 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mu
             codec.decode(data)
         except DecodeError as exc:
             writer.record(records.FlagRecord(log_time, name, seq, str(exc), len(data)), channel_id=writer.flags_channel)
+
+
+def _source_time(sample: zenoh.Sample) -> int | zenoh.Timestamp | None:
+    """A ROS 2 message's publish time: rmw_zenoh's source timestamp, else the Zenoh timestamp."""
+    attachment = parse_attachment(sample.attachment.to_bytes()) if sample.attachment is not None else None
+    return attachment.source_time_ns if attachment is not None else sample.timestamp
 
 
 def _write_intercepted(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, attachment: bytes,

@@ -16,6 +16,7 @@ from mcap.writer import CompressionType, Writer
 from .. import __version__
 from ..codecs.jsonschema import json_schema
 from ..spec.model import Channel, Spec
+from ..spec.ros2_types import shared_types
 from . import layout
 from . import records
 
@@ -49,11 +50,15 @@ class LogWriter:
         if topic in self._topics:
             return self._topics[topic]
         schema_id = 0
+        message_encoding = channel.encoding
         if channel.encoding == "json" and self._spec is not None and channel.type in self._spec.types:
             schema_id = self._schema(channel.type, json_schema(self._spec.types, channel.type))
+        elif channel.encoding.startswith("cdr:"):  # ROS 2: as `ros2 bag record -s mcap` writes it
+            schema_id = self._ros2_schema(channel.type)
+            message_encoding = "cdr"
         cid = self._writer.register_channel(
             topic=topic,
-            message_encoding=channel.encoding,
+            message_encoding=message_encoding,
             schema_id=schema_id,
             metadata={
                 "channel": channel.name,
@@ -61,6 +66,7 @@ class LogWriter:
                 "producer": channel.producer,
                 "consumers": ",".join(channel.consumers),
                 "type": channel.type,
+                **({"ros2_topic": channel.topic} if channel.topic else {}),
             },
         )
         self._topics[topic] = cid
@@ -86,6 +92,12 @@ class LogWriter:
                 name=name, encoding="jsonschema", data=json.dumps(schema).encode()
             )
         return self._schemas[name]
+
+    def _ros2_schema(self, type_name: str) -> int:
+        if type_name not in self._schemas:
+            self._schemas[type_name] = self._writer.register_schema(
+                name=type_name, encoding="ros2msg", data=shared_types().msgdef(type_name).encode())
+        return self._schemas[type_name]
 
     # -- records -----------------------------------------------------------
     def message(self, channel_id: int, log_time_ns: int, data: bytes, publish_time_ns: int | None = None) -> int:

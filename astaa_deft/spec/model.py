@@ -99,7 +99,16 @@ class Channel:
     producer: str
     consumers: tuple[str, ...]
     type: str
-    encoding: str = "json"
+    encoding: str = "json"  # a codec name: json, cbor, or cdr:<ROS 2 type> for `encoding: cdr`
+    topic: str | None = None  # the ROS 2 topic of a CDR channel, when the spec names one
+
+
+@dataclass(frozen=True)
+class Ros2Section:
+    """The spec's ``ros2:`` section (see astaa_deft.spec.ros2_section)."""
+
+    domain_id: int = 0
+    messages: Mapping[str, Path] = field(default_factory=dict)  # custom type name -> .msg file
 
 
 @dataclass(frozen=True)
@@ -119,6 +128,7 @@ class Spec:
     run: RunSection | None = None  # how a run ends (None: no 'run:' section)
     decictor: Any = None  # the raw 'decictor:' section; astaa_deft.decictor.spec types and checks it
     source_text: str = ""
+    ros2: Ros2Section = Ros2Section()
 
     def module(self, name: str) -> Module:
         return next(m for m in self.modules if m.name == name)
