@@ -40,7 +40,7 @@ def run_session(spec: Spec, options: RunOptions, *,
     gone; a violation with ``options.stop_on_violation``; ``stop_when``.
     Raises :class:`~astaa_deft.errors.InputError` when the run cannot start.
     """
-    run = BusRun(spec, options, on_event=on_event or (lambda record: None))
+    run = BusRun(spec, options, on_event=on_event)
     t0 = time.monotonic()
     with run:
         t0 = time.monotonic()
