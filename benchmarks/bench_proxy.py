@@ -111,6 +111,9 @@ def throughput(size: int, count: int) -> None:
     print(f"  star                 {fmt_rate(star)}   ratio {star['rate'] / direct['rate']:.2f}× direct")
     print(f"  star + recorder      {fmt_rate(star_rec)}   ratio {star_rec['rate'] / direct['rate']:.2f}× direct")
     print(f"  loss: sent {count:,}, delivered {star_rec['received']:,}, recorded {recorded.get('data', 0):,}")
+    recorder_us = star_rec["children_cpu_us"] - star["children_cpu_us"]  # children: the modules, + the recorder
+    if recorder_us > 0:
+        print(f"  recorder CPU {recorder_us:.1f} µs/msg: it alone could sustain {1e6 / recorder_us:,.0f} msg/s")
 
 
 def latency(count: int) -> None:
@@ -156,7 +159,26 @@ def interception(count: int) -> None:
           f"p99 {monitored_l['p99_us'] / plain_l['p99_us']:.2f}× star")
 
 
-SECTIONS = ("throughput", "latency", "interception")
+def large(count: int) -> None:
+    """Point-cloud sized messages (1 MB) at 30 Hz: the latency star and recorder add, and any loss."""
+    params = {"size": str(1_000_000), "count": str(count), "rate": "30", "latency": "--latency"}
+    direct = run_direct(params)
+    star, _ = run_tool(params, "star", record=False)
+    star_rec, recorded = run_tool(params, "star", record=True)
+    print(f"\n1 MB messages at 30 Hz, {count:,} sent (one way, ms; the sink parses each message in all rows)")
+    for name, r in (("direct", direct), ("star", star), ("star + recorder", star_rec)):
+        print(f"  {name:18} p50 {r['p50_us'] / 1000:7.2f}   p99 {r['p99_us'] / 1000:7.2f}   "
+              f"received {r['received']:,}")
+    print(f"  added by the star: p50 {(star['p50_us'] - direct['p50_us']) / 1000:.2f} ms, "
+          f"p99 {(star['p99_us'] - direct['p99_us']) / 1000:.2f} ms; with the recorder: "
+          f"p50 {(star_rec['p50_us'] - direct['p50_us']) / 1000:.2f} ms, "
+          f"p99 {(star_rec['p99_us'] - direct['p99_us']) / 1000:.2f} ms")
+    print(f"  loss: sent {count:,}, delivered {star_rec['received']:,}, recorded {recorded.get('data', 0):,}; "
+          f"recorder + modules CPU {star_rec['children_cpu_us'] / 1000:.2f} ms/msg "
+          f"(modules alone {star['children_cpu_us'] / 1000:.2f})")
+
+
+SECTIONS = ("throughput", "latency", "interception", "large")
 
 
 def main() -> None:
@@ -174,6 +196,8 @@ def main() -> None:
         latency(int(5_000 * scale))
     if "interception" in wanted:
         interception(int(50_000 * scale))
+    if "large" in wanted:
+        large(max(30, int(300 * scale)))
 
 
 if __name__ == "__main__":
