@@ -33,7 +33,6 @@ from ..bus import topology
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
 from ..codecs.base import Codec, DecodeError
-from ..intercept.actions.base import FieldChange, MutationEvent
 from ..log import layout, records
 from ..log.writer import LogWriter
 from ..spec.loader import load_spec_text
@@ -232,6 +231,10 @@ def event_json(wire: topology.WireEvent) -> dict:
     """A mutation event's JSON form (``MutationEvent.to_json``), from what the proxy sent."""
     if wire.form == topology.EVENT_JSON:
         return dict(wire.value)
+    # Here, not at the top: the interception's modules take a third of a second to load, and
+    # a recorder must be ready quickly (every live minimisation test starts one).
+    from ..intercept.actions.base import FieldChange, MutationEvent
+
     parts = topology.wire_event_parts(wire)
     changes = tuple(FieldChange(path, old, new) for path, old, new in parts.pop(topology.EVENT_FIELDS))
     return MutationEvent(**parts, fields=changes).to_json()
