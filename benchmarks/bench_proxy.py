@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -64,20 +65,40 @@ def run_direct(params: dict[str, str]) -> dict:
                 stop_process(p, grace=3.0)
 
 
+def cpu_seconds(who: int) -> float:
+    usage = resource.getrusage(who)
+    return usage.ru_utime + usage.ru_stime
+
+
 def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy: Path | None = None
              ) -> tuple[dict, dict]:
+    """One run through the tool; the sink's result gains the CPU the tool (and its recorder) spent per message.
+
+    CPU per message is the steadier figure on a shared machine: a rate falls
+    when other processes take the cores, CPU per message hardly moves.
+    """
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp)
         interceptor = load_interceptor(policy, spec) if policy is not None else None
         options = RunOptions(mode=mode, params=params, run_dir=run_dir, interceptor=interceptor,
                              record=run_dir / "bench.mcap" if record else None, time_limit=RESULT_TIMEOUT)
         sink = run_dir / "sink.json"
+        tool0, children0 = cpu_seconds(resource.RUSAGE_SELF), cpu_seconds(resource.RUSAGE_CHILDREN)
         outcome = run_session(spec, options, stop_when=lambda run: "sink done" if sink.exists() else None)
-        return wait_result(sink), outcome.recorded
+        result = dict(wait_result(sink))
+        # Children: the recorder (and the modules, which are the same in every row).
+        tool, children = cpu_seconds(resource.RUSAGE_SELF) - tool0, cpu_seconds(resource.RUSAGE_CHILDREN) - children0
+        result["tool_cpu_us"] = tool / max(1, result["received"]) * 1e6
+        result["children_cpu_us"] = children / max(1, result["received"]) * 1e6
+        return result, outcome.recorded
 
 
 def fmt_rate(r: dict) -> str:
     return f"{r['rate']:9,.0f} msg/s ({r['received']:,} received)"
+
+
+def fmt_cpu(r: dict) -> str:
+    return f"tool CPU {r['tool_cpu_us']:6.1f} µs/msg, children {r['children_cpu_us']:6.1f} µs/msg"
 
 
 def throughput(size: int, count: int) -> None:
@@ -90,6 +111,9 @@ def throughput(size: int, count: int) -> None:
     print(f"  star                 {fmt_rate(star)}   ratio {star['rate'] / direct['rate']:.2f}× direct")
     print(f"  star + recorder      {fmt_rate(star_rec)}   ratio {star_rec['rate'] / direct['rate']:.2f}× direct")
     print(f"  loss: sent {count:,}, delivered {star_rec['received']:,}, recorded {recorded.get('data', 0):,}")
+    recorder_us = star_rec["children_cpu_us"] - star["children_cpu_us"]  # children: the modules, + the recorder
+    if recorder_us > 0:
+        print(f"  recorder CPU {recorder_us:.1f} µs/msg: it alone could sustain {1e6 / recorder_us:,.0f} msg/s")
 
 
 def latency(count: int) -> None:
@@ -114,9 +138,15 @@ def interception(count: int) -> None:
     params = {"size": "200", "count": str(count), "rate": "0", "latency": ""}
     plain, _ = run_tool(params, "star", record=False)
     mutated, _ = run_tool(params, "star", record=False, policy=SET_POLICY)
+    mutated_rec, recorded = run_tool(params, "star", record=True, policy=SET_POLICY)
     print(f"\ninterception throughput, 200 B JSON, {count:,} sent")
-    print(f"  star passthrough     {fmt_rate(plain)}")
-    print(f"  star + set on every  {fmt_rate(mutated)}   ratio {mutated['rate'] / plain['rate']:.2f}× passthrough")
+    print(f"  star passthrough     {fmt_rate(plain)}   {fmt_cpu(plain)}")
+    print(f"  star + set on every  {fmt_rate(mutated)}   {fmt_cpu(mutated)}")
+    print(f"  + recorder           {fmt_rate(mutated_rec)}   {fmt_cpu(mutated_rec)}")
+    print(f"  ratio {mutated['rate'] / plain['rate']:.2f}× passthrough ({mutated_rec['rate'] / plain['rate']:.2f}× "
+          f"recorded); tool CPU {mutated['tool_cpu_us'] / plain['tool_cpu_us']:.2f}× passthrough's")
+    print(f"  loss with set + recorder: sent {count:,}, delivered {mutated_rec['received']:,}, "
+          f"recorded {recorded.get('data', 0):,}")
     lat = {"size": "200", "count": str(count // 20), "rate": "1000", "latency": "--latency"}
     plain_l, _ = run_tool(lat, "star", record=False)
     mutated_l, _ = run_tool(lat, "star", record=False, policy=SET_POLICY)
@@ -129,15 +159,45 @@ def interception(count: int) -> None:
           f"p99 {monitored_l['p99_us'] / plain_l['p99_us']:.2f}× star")
 
 
+def large(count: int) -> None:
+    """Point-cloud sized messages (1 MB) at 30 Hz: the latency star and recorder add, and any loss."""
+    params = {"size": str(1_000_000), "count": str(count), "rate": "30", "latency": "--latency"}
+    direct = run_direct(params)
+    star, _ = run_tool(params, "star", record=False)
+    star_rec, recorded = run_tool(params, "star", record=True)
+    print(f"\n1 MB messages at 30 Hz, {count:,} sent (one way, ms; the sink parses each message in all rows)")
+    for name, r in (("direct", direct), ("star", star), ("star + recorder", star_rec)):
+        print(f"  {name:18} p50 {r['p50_us'] / 1000:7.2f}   p99 {r['p99_us'] / 1000:7.2f}   "
+              f"received {r['received']:,}")
+    print(f"  added by the star: p50 {(star['p50_us'] - direct['p50_us']) / 1000:.2f} ms, "
+          f"p99 {(star['p99_us'] - direct['p99_us']) / 1000:.2f} ms; with the recorder: "
+          f"p50 {(star_rec['p50_us'] - direct['p50_us']) / 1000:.2f} ms, "
+          f"p99 {(star_rec['p99_us'] - direct['p99_us']) / 1000:.2f} ms")
+    print(f"  loss: sent {count:,}, delivered {star_rec['received']:,}, recorded {recorded.get('data', 0):,}; "
+          f"recorder + modules CPU {star_rec['children_cpu_us'] / 1000:.2f} ms/msg "
+          f"(modules alone {star['children_cpu_us'] / 1000:.2f})")
+
+
+SECTIONS = ("throughput", "latency", "interception", "large")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer messages (a smoke run)")
+    ap.add_argument("--only", choices=SECTIONS, action="append",
+                    help="run only these sections (default: all)")
     args = ap.parse_args()
     scale = 0.1 if args.quick else 1.0
-    throughput(200, int(100_000 * scale))
-    throughput(20_000, int(20_000 * scale))
-    latency(int(5_000 * scale))
-    interception(int(50_000 * scale))
+    wanted = args.only or SECTIONS
+    if "throughput" in wanted:
+        throughput(200, int(100_000 * scale))
+        throughput(20_000, int(20_000 * scale))
+    if "latency" in wanted:
+        latency(int(5_000 * scale))
+    if "interception" in wanted:
+        interception(int(50_000 * scale))
+    if "large" in wanted:
+        large(max(30, int(300 * scale)))
 
 
 if __name__ == "__main__":

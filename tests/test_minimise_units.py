@@ -23,7 +23,7 @@ from astaa_deft.intercept.actions.base import FieldChange
 from astaa_deft.intercept.actions.set import value_text
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
-from astaa_deft.log.recorder import _write_intercepted
+from astaa_deft.session.recorder import _write_intercepted
 from astaa_deft.log.writer import LogWriter
 from astaa_deft.minimise.ddmin import Outcome
 from astaa_deft.minimise.live_tester import LiveRun, LiveTester

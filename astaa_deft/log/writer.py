@@ -1,4 +1,4 @@
-"""Write a self-contained MCAP test log.
+"""Write a self-contained MCAP test log (through ``mcap_writer``: the bytes of ``mcap``'s writer, faster).
 
 Chunks are small (64 KiB by default) so that a recorder killed mid-run loses
 at most one chunk: the streaming reader recovers every complete chunk.
@@ -11,14 +11,13 @@ import time
 from pathlib import Path
 from typing import Any, BinaryIO, Mapping
 
-from mcap.writer import CompressionType, Writer
-
 from .. import __version__
 from ..codecs.jsonschema import json_schema
 from ..spec.model import Channel, Spec
 from ..spec.ros2_types import shared_types
 from . import layout
 from . import records
+from .mcap_writer import McapWriter
 
 DEFAULT_CHUNK_SIZE = 64 * 1024
 
@@ -28,10 +27,10 @@ class LogWriter:
                  compression: str = "zstd"):
         self.path = Path(path)
         self._stream: BinaryIO = open(self.path, "wb")
-        self._writer = Writer(
+        self._writer = McapWriter(
             self._stream,
             chunk_size=chunk_size,
-            compression=CompressionType.ZSTD if compression == "zstd" else CompressionType.NONE,
+            compression="zstd" if compression == "zstd" else "",
             enable_data_crcs=True,  # the data section's CRC: damage outside chunks (headers, indexes) is detectable
         )
         self._writer.start(profile=layout.PROFILE, library=f"astaa-deft {__version__}")
@@ -103,13 +102,8 @@ class LogWriter:
     def message(self, channel_id: int, log_time_ns: int, data: bytes, publish_time_ns: int | None = None) -> int:
         seq = self._sequences.get(channel_id, 0) + 1
         self._sequences[channel_id] = seq
-        self._writer.add_message(
-            channel_id=channel_id,
-            log_time=log_time_ns,
-            data=data,
-            publish_time=publish_time_ns if publish_time_ns is not None else log_time_ns,
-            sequence=seq,
-        )
+        self._writer.add_message(channel_id, log_time_ns, data,
+                                 publish_time_ns if publish_time_ns is not None else log_time_ns, seq)
         return seq
 
     def event(self, kind: str, time_ns: int | None = None, channel_id: int | None = None, **fields: Any) -> None:

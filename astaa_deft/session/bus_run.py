@@ -40,10 +40,11 @@ DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the 
 
 class BusRun:
     def __init__(self, spec: Spec, options: RunOptions,
-                 on_event: Callable[[rec.Record], None] = lambda event: None):
+                 on_event: Callable[[rec.Record], None] | None = None):
         self.spec = spec
         self.options = options
-        self.on_event = on_event
+        self.on_event: Callable[[rec.Record], None] = on_event or (lambda event: None)
+        self._listening = on_event is not None  # mutations become typed records only for a listener
         self.events: list[rec.Record] = []
         self.exits: list[ProcessExit] = []
         self.session: zenoh.Session | None = None
@@ -118,7 +119,7 @@ class BusRun:
             make_forwarder = plain_forwarder
             if opts.interceptor is not None:
                 self.interception = InterceptionBridge(self.session, opts.interceptor, time.monotonic(),
-                                                       on_mutation=self._mutated)
+                                                       on_mutation=self._mutated if self._listening else None)
                 make_forwarder = self.interception.make_forwarder
             self.proxy = StarProxy(self.session, self.spec, on_undeclared=self._undeclared,
                                    make_forwarder=make_forwarder)
@@ -167,8 +168,10 @@ class BusRun:
         meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
                 "started_ns": str(self.started_ns),
                 "params": json.dumps({**self.spec.params, **self.options.params}, sort_keys=True)}
-        args = [sys.executable, "-m", "astaa_deft.log.recorder", "--spec", str(self.spec.path),
-                "--out", str(path), "--mode", self.options.mode, "--meta", json.dumps(meta)]
+        # The spec travels as its text on stdin: the recorder reads the session's spec, not a file.
+        args = [sys.executable, "-m", "astaa_deft.session.recorder", "--out", str(path),
+                "--spec-name", self.spec.path.name if self.spec.path is not None else f"{self.spec.name}.yaml",
+                "--mode", self.options.mode, "--meta", json.dumps(meta)]
         for ep in self.bus_endpoints:
             args += ["--connect", ep]
         if self.interception is not None:
@@ -176,15 +179,25 @@ class BusRun:
                 args += ["--intercepted", name]
         for name, file in self.options.attachments.items():
             args += ["--attach", f"{name}={file}"]
-        self.recorder = self._spawn_ready("recorder", args, error_file=path)
+        self.recorder = self._spawn_ready("recorder", args, error_file=path, stdin_text=self.spec.source_text or (
+            self.spec.path.read_text() if self.spec.path is not None else ""))
 
-    def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None) -> subprocess.Popen:
-        """Start one of the tool's own helper processes and wait for its 'ready' line."""
+    def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None,
+                     stdin_text: str | None = None) -> subprocess.Popen:
+        """Start one of the tool's own helper processes (``stdin_text`` on its stdin) and wait for its 'ready' line."""
         log_path = self.run_dir / f"{name}.log"
         with open(log_path, "wb") as err:
-            proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL,
+            proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err,
+                                    stdin=subprocess.DEVNULL if stdin_text is None else subprocess.PIPE,
                                     start_new_session=True, preexec_fn=die_with_parent, text=True)
         self._helpers.append(proc)
+        if stdin_text is not None:
+            assert proc.stdin is not None
+            try:
+                proc.stdin.write(stdin_text)
+                proc.stdin.close()
+            except BrokenPipeError:  # it died at once: the ready check below says why
+                pass
         ready = threading.Event()
         lines: list[str] = []
 
@@ -318,9 +331,9 @@ class BusRun:
         self.emit(rec.ProcessExitRecord(exit_.time_ns, exit_.module, exit_.pid, exit_.returncode, exit_.signal,
                                         exit_.during_shutdown, exit_.abnormal, exit_.stderr_tail))
 
-    def _mutated(self, event: dict) -> None:
+    def _mutated(self, event) -> None:
         # Not re-published: the interception's own record (with the original) is in the log already.
-        self.on_event(rec.decode({"kind": "mutation", "time_ns": time.time_ns(), **event}))
+        self.on_event(rec.decode({"kind": "mutation", "time_ns": time.time_ns(), **event.to_json()}))
 
     def _undeclared(self, module: str, key: str) -> None:
         self.emit(rec.UndeclaredKey(time.time_ns(), module, key,

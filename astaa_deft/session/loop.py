@@ -45,7 +45,7 @@ def run_session(spec: Spec, options: RunOptions, *,
     condition with a ``crash`` class) is a finding of the run's verdict.
     Raises :class:`~astaa_deft.errors.InputError` when the run cannot start.
     """
-    run = BusRun(spec, options, on_event=on_event or (lambda record: None))
+    run = BusRun(spec, options, on_event=on_event)
     ends = RunEndWatch(spec)
     time_limit = min((t for t in (options.time_limit, ends.time_limit) if t is not None), default=None)
     t0 = time.monotonic()

@@ -395,9 +395,12 @@ class SetRuntime(ActionRuntime):
                     "set", info, item.consumers, **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
                 return [item]
         changes, skipped = apply_plans(item.message, self.plans[info.channel], info)  # type: ignore[arg-type]
-        detail = FieldsDetail(skipped_fields=tuple(skipped) if skipped else None,
-                              skipped=None if changes else "no field was set")
-        if not changes and decoded_here:  # nothing changed: keep the real payload object (zero copy downstream)
-            item.message = None
-        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail.to_json()))
+        if changes and not skipped:  # every field set (the common case): an empty detail, built for free
+            detail: dict[str, Any] = {}
+        else:
+            detail = FieldsDetail(skipped_fields=tuple(skipped) if skipped else None,
+                                  skipped=None if changes else "no field was set").to_json()
+            if not changes and decoded_here:  # nothing changed: keep the real payload object (zero copy downstream)
+                item.message = None
+        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail))
         return [item]

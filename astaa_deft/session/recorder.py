@@ -5,8 +5,14 @@ adds millisecond latency spikes (GIL); here it only costs a core. It stops
 cleanly (``finish()``) on SIGTERM/SIGINT and when the tool that started it
 dies, so the log it leaves is complete unless the recorder itself is killed.
 
-Started by the tool as ``python -m astaa_deft.log.recorder ARGS``; prints
-``ready`` on stdout once subscribed and a JSON line of counts when done.
+Started by the session as ``python -m astaa_deft.session.recorder ARGS``
+with the spec's text on stdin (the session's spec, not a file to re-read:
+it may have been built in code, or come out of a log); prints ``ready`` on
+stdout once subscribed and a JSON line of counts when done.
+
+It belongs to the session, not to ``log/``: it joins transport (the bus
+keys it subscribes to), interception (the events it records) and the file
+format, which ``log/`` alone owns.
 """
 
 from __future__ import annotations
@@ -24,14 +30,18 @@ from pathlib import Path
 import zenoh
 
 from ..bus import topology
-from ..bus.topology import read_intercept_record
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
-from ..codecs.base import DecodeError
+from ..codecs.base import Codec, DecodeError
 from ..codecs.rmw_attachment import parse_attachment
-from ..spec_loader import load_spec
-from . import layout, records
-from .writer import LogWriter
+from ..log import layout, records
+from ..log.writer import LogWriter
+from ..spec_loader import load_spec_text
+
+try:  # a faster first answer to "does this JSON payload decode?" (see undecodable)
+    import orjson as _orjson
+except ImportError:  # pragma: no cover - a declared dependency; the stdlib alone gives the same verdicts
+    _orjson = None  # type: ignore[assignment]
 
 _STOP = object()
 SHUTDOWN_LIMIT_SECONDS = 20.0
@@ -39,7 +49,7 @@ SHUTDOWN_LIMIT_SECONDS = 20.0
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astaa-deft-recorder")
-    ap.add_argument("--spec", required=True, type=Path)
+    ap.add_argument("--spec-name", default="spec.yaml", help="the spec's file name, for messages (its text is on stdin)")
     ap.add_argument("--mode", choices=("star", "passive"), required=True)
     ap.add_argument("--connect", action="append", required=True, help="the bus to record (a router or peer)")
     ap.add_argument("--out", required=True, type=Path)
@@ -55,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, _frame: stopping.append(signum))
 
-    spec = load_spec(args.spec)
+    spec = load_spec_text(sys.stdin.read(), name=args.spec_name)
     writer = LogWriter(args.out, spec, chunk_size=args.chunk_size)
     writer.attachment(layout.SPEC_ATTACHMENT, spec.source_text.encode(), "application/yaml")
     for item in args.attach:
@@ -85,9 +95,8 @@ def main(argv: list[str] | None = None) -> int:
 
             def on_intercepted(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name,
                                original_cid=original_cid) -> None:
-                att = sample.attachment.to_bytes() if sample.attachment is not None else None
-                q.put((time.time_ns(), ("intercepted", cid, original_cid, att), codec, name,
-                       sample.payload.to_bytes(), sample.timestamp))
+                q.put((time.time_ns(), ("intercepted", cid, original_cid), codec, name, sample.payload.to_bytes(),
+                       None))
 
             subscribers.append(session.declare_subscriber(topology.intercepted_key(channel.key), on_intercepted))
         else:
@@ -127,34 +136,84 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int) -> None:
+    """Write what the callbacks queued, in arrival order; the common case (a declared channel) first and short."""
     undeclared_ids: dict[str, int] = {}
+    message, get = writer.message, q.get
     while True:
-        item = q.get()
+        item = get()
         if item is _STOP:
             return
         log_time, cid, codec, name, data, ts = item
+        # ts: the rmw_zenoh source time (ns) of a ROS 2 message, else the Zenoh timestamp
         publish_time = (ts if type(ts) is int else ts.get_time_as_ntp64().as_nanos()) if ts is not None else log_time
-        if isinstance(cid, tuple) and cid[0] == "intercepted":
-            _, cid, original_cid, attachment = cid
-            if attachment is not None:  # the proxy changed something: log it three ways
-                if _write_intercepted(writer, cid, original_cid, mutations_cid, attachment, log_time, data,
-                                      publish_time):
-                    counts[name] += 1
+        if type(cid) is int:
+            seq = message(cid, log_time, data, publish_time)
+            if codec is None:  # the tool's own event
                 continue
-        if isinstance(cid, tuple):  # an undeclared key the proxy forwarded
+            counts[name] += 1
+            reason = undecodable(codec, data)
+            if reason is not None:
+                writer.record(records.FlagRecord(log_time, name, seq, reason, len(data)),
+                              channel_id=writer.flags_channel)
+        elif cid[0] == "intercepted":
+            _write_batch(writer, cid[1], cid[2], mutations_cid, codec, name, data, counts, log_time)
+        else:  # an undeclared key the proxy forwarded
             _, key, encoding = cid
             if key not in undeclared_ids:
                 undeclared_ids[key] = writer.undeclared_channel(key, encoding)
-            writer.message(undeclared_ids[key], log_time, data, publish_time)
-            continue
-        seq = writer.message(cid, log_time, data, publish_time)
-        if codec is None:
-            continue
-        counts[name] += 1
+            message(undeclared_ids[key], log_time, data, publish_time)
+
+
+# A JSON document this short cannot nest deeply enough to exhaust the stdlib parser's recursion
+# limit (~1000 levels), the one case orjson (limit 1024) accepts and the stdlib may not.
+FAST_JSON_LIMIT = 1800
+
+
+def undecodable(codec: Codec, data: bytes) -> str | None:
+    """Why ``codec`` cannot decode ``data`` (the flag's reason), or None if it can.
+
+    The verdict is the codec's own; for short JSON payloads orjson answers
+    first when it accepts an object (a tenth of the stdlib's time; whatever
+    orjson accepts, the stdlib's parser accepts too: it is the stricter
+    one, see tests/test_recorder.py), and the codec decides everything else.
+    """
+    if _orjson is not None and codec.name == "json" and len(data) < FAST_JSON_LIMIT:
         try:
-            codec.decode(data)
-        except DecodeError as exc:
-            writer.record(records.FlagRecord(log_time, name, seq, str(exc), len(data)), channel_id=writer.flags_channel)
+            if type(_orjson.loads(data)) is dict:
+                return None
+        except _orjson.JSONDecodeError:
+            pass
+    try:
+        codec.decode(data)
+    except DecodeError as exc:
+        return str(exc)
+    return None
+
+
+def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, codec, name: str,
+                 data: bytes, counts: dict[str, int], received_ns: int) -> None:
+    """The deliveries of one intercepted channel the proxy sent together (see ``topology.pack_batch``).
+
+    Each is logged at the time the proxy delivered it, which is when the
+    consumer got it.
+    """
+    try:
+        entries = topology.unpack_batch(data)
+    except ValueError as exc:
+        writer.record(records.FlagRecord(received_ns, name, None, str(exc), len(data)), channel_id=writer.flags_channel)
+        return
+    for time_ns, payload, record in entries:
+        if record:  # the proxy changed something: log it three ways
+            if _write_intercepted(writer, cid, original_cid, mutations_cid, record, time_ns, payload, time_ns,
+                                  name=name):
+                counts[name] += 1
+            continue
+        seq = writer.message(cid, time_ns, payload, time_ns)
+        counts[name] += 1
+        reason = undecodable(codec, payload)
+        if reason is not None:
+            writer.record(records.FlagRecord(time_ns, name, seq, reason, len(payload)),
+                          channel_id=writer.flags_channel)
 
 
 def _source_time(sample: zenoh.Sample) -> int | zenoh.Timestamp | None:
@@ -164,14 +223,32 @@ def _source_time(sample: zenoh.Sample) -> int | zenoh.Timestamp | None:
 
 
 def _write_intercepted(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, attachment: bytes,
-                       log_time: int, data: bytes, publish_time: int) -> bool:
+                       log_time: int, data: bytes, publish_time: int, name: str = "") -> bool:
     """Original, delivered message and mutation event, cross-referenced; True if something was delivered."""
-    event, original, delivered = read_intercept_record(attachment)
+    try:
+        wire, original, delivered = topology.read_intercept_record(attachment)
+    except ValueError as exc:
+        writer.record(records.FlagRecord(log_time, name, None, str(exc), len(attachment)),
+                      channel_id=writer.flags_channel)
+        return False
     original_seq = writer.message(original_cid, log_time, original, publish_time) if original is not None else None
     delivered_seq = writer.message(cid, log_time, data, publish_time) if delivered else None
-    body = {**event, "original_sequence": original_seq, "delivered_sequence": delivered_seq}
+    body = {**event_json(wire), "original_sequence": original_seq, "delivered_sequence": delivered_seq}
     writer.message(mutations_cid, log_time, json.dumps(body, default=str).encode())
     return delivered
+
+
+def event_json(wire: topology.WireEvent) -> dict:
+    """A mutation event's JSON form (``MutationEvent.to_json``), from what the proxy sent."""
+    if wire.form == topology.EVENT_JSON:
+        return dict(wire.value)
+    # Here, not at the top: the interception's modules take a third of a second to load, and
+    # a recorder must be ready quickly (every live minimisation test starts one).
+    from ..intercept.actions.base import FieldChange, MutationEvent
+
+    parts = topology.wire_event_parts(wire)
+    changes = tuple(FieldChange(path, old, new) for path, old, new in parts.pop(topology.EVENT_FIELDS))
+    return MutationEvent(**parts, fields=changes).to_json()
 
 
 if __name__ == "__main__":

@@ -1,0 +1,70 @@
+"""What the proxy sends the recorder about an intercepted delivery, and what the recorder makes of it.
+
+The event travels as ``marshal`` data (cheap on the proxy's thread) and the
+recorder writes its JSON form: that form must be exactly the one
+``MutationEvent.to_json`` gives, whatever the values (exceptional floats,
+bytes, lone surrogates, objects that look like tags, types marshal refuses).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+
+import pytest
+
+from astaa_deft.bus.topology import (
+    EVENT_JSON, EVENT_MARSHAL, intercept_record, pack_batch, read_intercept_record, unpack_batch,
+)
+from astaa_deft.intercept.actions.base import FieldChange, MutationEvent
+from astaa_deft.session.recorder import event_json
+
+
+def _event(old, new, detail=None) -> MutationEvent:
+    return MutationEvent("tc", "p1", "set", "data", ("sink", "other"), 7, 1.25,
+                         (FieldChange("a.b[2]", old, new),), detail or {})
+
+
+VALUES = [
+    (0.5, float("nan")),
+    (1, float("-inf")),
+    ("text", b"\x00\xffbytes"),
+    ("\ud800lone", "ok"),
+    ({"float": 1}, [1, (2, 3), {"x": None}]),
+    (True, 2**80),
+]
+
+
+@pytest.mark.parametrize("old,new", VALUES)
+def test_marshalled_event_reads_back_as_its_json_form(old, new) -> None:
+    event = _event(old, new, {"skipped_fields": ({"path": "x", "reason": "r"},)})
+    wire, original, delivered = read_intercept_record(intercept_record(event, b"orig", delivered=True))
+    assert wire.form == EVENT_MARSHAL
+    assert (original, delivered) == (b"orig", True)
+    assert json.dumps(event_json(wire), default=str) == json.dumps(event.to_json(), default=str)
+
+
+def test_a_value_marshal_cannot_carry_falls_back_to_the_json_form() -> None:
+    event = _event(OrderedDict(a=1), object())  # a dict subclass and an arbitrary object
+    wire, original, delivered = read_intercept_record(intercept_record(event, None, delivered=False))
+    assert wire.form == EVENT_JSON
+    assert (original, delivered) == (None, False)
+    assert json.dumps(event_json(wire), default=str) == json.dumps(event.to_json(), default=str)
+
+
+def test_an_event_already_in_json_form_is_kept_as_is() -> None:
+    body = _event(1, 2).to_json()
+    wire, _, _ = read_intercept_record(intercept_record(body, None, delivered=True))
+    assert event_json(wire) == body
+
+
+def test_malformed_records_and_batches_raise_value_error() -> None:
+    record = intercept_record(_event(1, 2), b"o", delivered=True)
+    with pytest.raises(ValueError):
+        read_intercept_record(record[:8])
+    with pytest.raises(ValueError):
+        read_intercept_record(b"\x09" + record[1:])  # unknown event form
+    batch = pack_batch([(1, b"payload", record), (2, b"p2", b"")])
+    assert unpack_batch(batch) == [(1, b"payload", record), (2, b"p2", b"")]
+    with pytest.raises(ValueError):
+        unpack_batch(batch[:-1])
