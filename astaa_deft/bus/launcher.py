@@ -22,7 +22,7 @@ from typing import Callable, Mapping
 
 from ..errors import InputError, Problem
 from ..spec.model import Module, Spec
-from .processes import signal_group, tail
+from .processes import python_module, signal_group, tail
 
 
 
@@ -74,7 +74,7 @@ class Launcher:
     # -- start ---------------------------------------------------------------
     def start(self, on_ready: Callable[[str], None] = lambda _m: None) -> None:
         """Start every module in spec order, each after the previous one is ready."""
-        self._reaper = subprocess.Popen([sys.executable, "-m", "astaa_deft.bus.reaper"], stdin=subprocess.PIPE,
+        self._reaper = subprocess.Popen(python_module("astaa_deft.bus.reaper"), stdin=subprocess.PIPE,
                                         stdout=subprocess.DEVNULL, start_new_session=True, text=True)
         try:
             for module in self.spec.modules:

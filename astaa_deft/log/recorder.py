@@ -117,9 +117,18 @@ def main(argv: list[str] | None = None) -> int:
     q.put(_STOP)
     write_thread.join()
     writer.finish()
-    print(json.dumps({"recorded": counts}), flush=True)
-    session.close()
+    _report(json.dumps({"recorded": counts}))
+    # No session.close(): the log is finished, and closing a session whose router is gone (the tool
+    # killed, or the bus router) waits for Zenoh's timeouts; exiting drops the connection just as well.
     os._exit(0)  # the shutdown timer is a non-daemon thread
+
+
+def _report(line: str) -> None:
+    """One line to the tool; if the tool is gone (its end of the pipe closed) there is no one to tell."""
+    try:
+        print(line, flush=True)
+    except (BrokenPipeError, OSError):
+        pass
 
 
 def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int) -> None:

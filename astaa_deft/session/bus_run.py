@@ -27,7 +27,7 @@ from ..log import records as rec
 from ..monitor.online import OnlineMonitors
 from ..bus.launcher import Launcher, ProcessExit
 from ..bus.observer import ChannelCounter
-from ..bus.processes import die_with_parent, stop_process, tail
+from ..bus.processes import die_with_parent, python_module, stop_process, tail
 from ..bus.interception import InterceptionBridge
 from ..bus.proxy import StarProxy, plain_forwarder
 from .options import RunOptions
@@ -104,7 +104,7 @@ class BusRun:
             tool_cfg = zc.config_dict(mode="router", listen=listen)
         else:
             self.bus_endpoints = listen[:1]
-            self.bus_router = self._spawn_ready("router", [sys.executable, "-m", "astaa_deft.bus.router",
+            self.bus_router = self._spawn_ready("router", [*python_module("astaa_deft.bus.router"),
                                                           *[a for ep in listen for a in ("--listen", ep)]])
             tool_cfg = zc.config_dict(mode="client", connect=self.bus_endpoints)
         self.session = self._open(tool_cfg, listen)
@@ -160,7 +160,7 @@ class BusRun:
         meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
                 "started_ns": str(self.started_ns),
                 "params": json.dumps({**self.spec.params, **self.options.params}, sort_keys=True)}
-        args = [sys.executable, "-m", "astaa_deft.log.recorder", "--spec", str(self.spec.path),
+        args = [*python_module("astaa_deft.log.recorder"), "--spec", str(self.spec.path),
                 "--out", str(path), "--mode", self.options.mode, "--meta", json.dumps(meta)]
         for ep in self.bus_endpoints:
             args += ["--connect", ep]

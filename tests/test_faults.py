@@ -1,0 +1,268 @@
+"""Faults during a run, each one real: the tool, its recorder, its bus router or a
+module killed with SIGKILL; SIGINT and SIGTERM; the log's disk full.
+
+Each test runs `astaa-deft proxy` on the echo SUT as a real process, induces
+the fault, and checks the same four things: every process the tool started is
+gone soon after (polled, with a generous bound; the time taken is printed), the
+log is readable up to the fault, the exit code tells the truth, and the verdict
+is never Pass about a run that was not fully observed.
+
+Processes are found as descendants of the tool (by parent pid, snapshotted
+before the fault) and stopped only by their pid.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.log.reader import read_log
+from proxy_helpers import ECHO_SPEC, SUT_DIR, alive, received
+
+TOOL = Path(sys.executable).with_name("astaa-deft")  # the installed entry point: no cwd on sys.path
+GONE_BOUND = 15.0  # generous: the target is 5 s, printed per test; this only stops a hung test
+
+
+def _children() -> dict[int, list[int]]:
+    kids: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as fh:
+                ppid = int(fh.read().rsplit(") ", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        kids.setdefault(ppid, []).append(int(entry))
+    return kids
+
+
+def descendants(pid: int) -> dict[int, str]:
+    """Every live descendant of ``pid`` (pid → command line), found through parent pids."""
+    kids, out, todo = _children(), {}, [pid]
+    while todo:
+        for child in kids.get(todo.pop(), []):
+            try:
+                out[child] = Path(f"/proc/{child}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except OSError:
+                continue
+            todo.append(child)
+    return out
+
+
+def helper_pid(started: dict[int, str], module: str) -> int:
+    """The pid of the tool's helper running ``python ... -m module``."""
+    found = [pid for pid, cmd in started.items() if f"-m {module}" in cmd]
+    assert len(found) == 1, started
+    return found[0]
+
+
+def wait_gone(pids, bound: float = GONE_BOUND) -> tuple[list[int], float]:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < bound and any(alive(p) for p in pids):
+        time.sleep(0.05)
+    return [p for p in pids if alive(p)], time.monotonic() - t0
+
+
+class ToolRun:
+    """`astaa-deft proxy` on the echo SUT at 500 Hz, recorded; stopped only by the test's fault."""
+
+    def __init__(self, tmp_path: Path, *extra: str, preexec_fn=None, params: tuple[str, ...] = ()):
+        self.run_dir, self.log = tmp_path / "run", tmp_path / "run.mcap"
+        args = [str(TOOL), "proxy", "--spec", str(ECHO_SPEC), "--record", str(self.log), "--run-dir",
+                str(self.run_dir), "--param", "count=1000000", "--param", "rate=500", *params, *extra]
+        self.out_path, self.err_path = tmp_path / "tool.out", tmp_path / "tool.err"
+        with open(self.out_path, "wb") as out, open(self.err_path, "wb") as err:
+            self.proc = subprocess.Popen(args, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+                                         preexec_fn=preexec_fn)
+        self.started: dict[int, str] = {}
+
+    def wait_flowing(self, messages: int = 300, timeout: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and len(received(self.run_dir / "listener.out")) < messages:
+            assert self.proc.poll() is None, self.output()
+            time.sleep(0.05)
+        assert len(received(self.run_dir / "listener.out")) >= messages, self.output()
+        self.started = descendants(self.proc.pid)
+
+    def finish(self, timeout: float = 60.0) -> int:
+        try:
+            return self.proc.wait(timeout=timeout)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait()
+
+    def output(self) -> str:
+        return self.out_path.read_text(errors="replace") + self.err_path.read_text(errors="replace")
+
+    def all_gone(self, what: str) -> None:
+        pids = [self.proc.pid, *self.started]
+        left, seconds = wait_gone(pids)
+        print(f"{what}: every started process gone after {seconds:.2f} s")
+        assert left == [], f"still running after {what}: {[self.started.get(p, 'tool') for p in left]}"
+
+    def stop_leftovers(self) -> None:
+        for pid in [*self.started, self.proc.pid]:
+            if alive(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+@pytest.fixture
+def tool_run(tmp_path):
+    runs: list[ToolRun] = []
+
+    def start(*extra: str, **kw) -> ToolRun:
+        runs.append(ToolRun(tmp_path, *extra, **kw))
+        return runs[-1]
+
+    yield start
+    for r in runs:
+        r.stop_leftovers()
+
+
+def logged_seqs(log: Path) -> set[int]:
+    return {json.loads(m.data)["header"]["seq"] for m in read_log(log).on("test/data")}
+
+
+# --- the tool itself ------------------------------------------------------------------------------------------
+
+def test_kill_9_of_the_tool_leaves_nothing_running_and_a_finished_log(tool_run):
+    run = tool_run()
+    run.wait_flowing()
+    recorder = helper_pid(run.started, "astaa_deft.log.recorder")
+    run.proc.send_signal(signal.SIGKILL)
+    assert run.finish() == -signal.SIGKILL
+    run.all_gone("kill -9 of the tool")
+    # The recorder finished the log on its parent's death: readable, and no traceback in its own log.
+    recorder_log = (run.run_dir / "recorder.log").read_text()
+    assert "Traceback" not in recorder_log and "BrokenPipeError" not in recorder_log, recorder_log
+    contents = read_log(run.log)
+    assert contents.finished and not contents.damage
+    assert len(logged_seqs(run.log)) >= 300
+    assert not alive(recorder)
+    # Nothing in it claims a verdict: the tool that would have given one is gone.
+    assert contents.events("verdict") == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_signal_ends_the_run_cleanly(tool_run, sig):
+    run = tool_run()
+    run.wait_flowing()
+    run.proc.send_signal(sig)
+    code = run.finish()
+    out = run.output()
+    assert code == 0, out
+    assert f"stopped (signal {sig.name})" in out
+    assert "verdict: Pass" in out and "Traceback" not in out
+    run.all_gone(sig.name)
+    contents = read_log(run.log)
+    assert contents.finished and not contents.damage
+    assert contents.events("verdict")[-1]["class"] == "Pass"
+    recorded = logged_seqs(run.log)
+    delivered = {json.loads(p)["header"]["seq"] for k, p, _ in received(run.run_dir / "listener.out")
+                 if k == "test/data"}
+    assert delivered <= recorded  # everything delivered before the stop is in the log
+
+
+# --- the tool's helpers -----------------------------------------------------------------------------------------
+
+def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):
+    run = tool_run()
+    run.wait_flowing()
+    os.kill(helper_pid(run.started, "astaa_deft.log.recorder"), signal.SIGKILL)
+    code = run.finish()
+    out = run.output()
+    assert code == 3, out
+    assert "the recorder stopped" in out and "killed by SIGKILL" in out
+    assert "verdict: Pass" not in out and "verdict withheld" in out
+    assert "Traceback" not in out
+    run.all_gone("kill -9 of the recorder")
+    contents = read_log(run.log)  # readable up to its last complete chunk
+    assert contents.truncated
+    assert len(logged_seqs(run.log)) > 0
+
+
+def test_kill_9_of_the_bus_router_is_reported_and_is_no_pass(tool_run):
+    run = tool_run("--passive")
+    run.wait_flowing()
+    os.kill(helper_pid(run.started, "astaa_deft.bus.router"), signal.SIGKILL)
+    code = run.finish()
+    out = run.output()
+    assert code == 3, out
+    assert "the bus router stopped" in out and "killed by SIGKILL" in out
+    assert "verdict: Pass" not in out and "verdict withheld" in out
+    assert "Traceback" not in out
+    run.all_gone("kill -9 of the bus router")
+    contents = read_log(run.log)
+    assert not contents.damage
+    assert len(logged_seqs(run.log)) >= 300
+
+
+def test_a_full_disk_for_the_log_is_reported_and_is_no_pass(tool_run):
+    run = tool_run()
+    run.wait_flowing()
+    # A full disk for the log alone: cap the size of the files the recorder may write (RLIMIT_FSIZE)
+    # a few chunks beyond what it has written so far; the SUT's own files stay unlimited.
+    recorder = helper_pid(run.started, "astaa_deft.log.recorder")
+    cap = run.log.stat().st_size + 48 * 1024
+    resource.prlimit(recorder, resource.RLIMIT_FSIZE, (cap, cap))
+    code = run.finish(timeout=120)
+    out = run.output()
+    assert code == 3, out
+    assert "the recorder stopped" in out and "cannot write the log" in out
+    assert "verdict: Pass" not in out and "verdict withheld" in out
+    assert "Traceback" not in out
+    run.all_gone("a full disk")
+    assert run.log.stat().st_size <= cap
+    contents = read_log(run.log)  # every chunk written before the disk filled
+    assert contents.truncated
+    assert len(logged_seqs(run.log)) >= 300
+
+
+# --- a module -------------------------------------------------------------------------------------------------
+
+def test_kill_9_of_a_module_ends_the_run_with_abort(tool_run):
+    run = tool_run()
+    run.wait_flowing()
+    talker = json.loads((run.run_dir / "processes.json").read_text())["talker"]
+    os.kill(talker, signal.SIGKILL)
+    code = run.finish()
+    out = run.output()
+    assert code == 1, out
+    assert "module 'talker'" in out and "killed by SIGKILL" in out
+    assert "verdict: Abort" in out
+    run.all_gone("kill -9 of a module")
+    contents = read_log(run.log)
+    assert contents.finished and not contents.damage
+    assert contents.events("verdict")[-1]["class"] == "Abort"
+
+
+# --- helpers run the installed code ---------------------------------------------------------------------------
+
+def test_helpers_run_the_installed_package_not_the_current_directory(tmp_path):
+    """Recorder, bus router and reaper started from a folder holding another `astaa_deft/` still run ours."""
+    fake = tmp_path / "checkout" / "astaa_deft"
+    for sub in ("", "log", "bus"):
+        (fake / sub).mkdir(parents=True, exist_ok=True)
+        (fake / sub / "__init__.py").write_text(
+            "import os, pathlib\n"
+            "pathlib.Path(os.environ['FAKE_MARK']).write_text('the current directory was imported')\n"
+            "raise SystemExit(7)\n")
+    mark = tmp_path / "imported"
+    log = tmp_path / "run.mcap"
+    res = subprocess.run([str(TOOL), "proxy", "--spec", str(ECHO_SPEC), "--passive", "--record", str(log),
+                          "--duration", "2", "--run-dir", str(tmp_path / "run"), "--param", "count=50"],
+                         cwd=fake.parent, env=dict(os.environ, FAKE_MARK=str(mark)),
+                         capture_output=True, text=True, timeout=120)
+    assert not mark.exists(), res.stdout + res.stderr
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert len(logged_seqs(log)) == 50
