@@ -177,7 +177,7 @@ def test_a_stop_signal_ends_the_run_cleanly(tool_run, sig):
 
 def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):
     run = tool_run()
-    run.wait_flowing()
+    run.wait_flowing(1500)  # a few 64 KiB chunks in the file: a recorder killed outright loses only the last
     os.kill(helper_pid(run.started, "astaa_deft.log.recorder"), signal.SIGKILL)
     code = run.finish()
     out = run.output()
@@ -224,7 +224,7 @@ def test_a_full_disk_for_the_log_is_reported_and_is_no_pass(tool_run):
     run.all_gone("a full disk")
     assert run.log.stat().st_size <= cap
     contents = read_log(run.log)  # every chunk written before the disk filled
-    assert contents.truncated
+    assert not contents.intact and contents.damage
     assert len(logged_seqs(run.log)) >= 300
 
 

@@ -102,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     subscribers.append(session.declare_subscriber(topology.EVENTS_KEY, on_tool_event))
     subscribers.append(session.declare_subscriber(f"{topology.UNDECLARED_PREFIX}/**", on_undeclared))
 
-    write_thread = threading.Thread(target=_drain, args=(q, writer, counts, mutations_cid), daemon=True)
+    write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, writer, counts, mutations_cid),
+                                    daemon=True)
     write_thread.start()
     print("ready", flush=True)
 
@@ -129,6 +130,19 @@ def _report(line: str) -> None:
         print(line, flush=True)
     except (BrokenPipeError, OSError):
         pass
+
+
+def _drain_or_exit(out: Path, *args) -> None:
+    """Write until told to stop; if the log cannot be written (disk full, file size limit), say so and exit 4.
+
+    The tool sees its recorder gone and withholds the verdict; every chunk
+    written before the failure stays readable.
+    """
+    try:
+        _drain(*args)
+    except OSError as exc:
+        print(f"recorder: cannot write the log {out}: {exc.strerror or exc}", file=sys.stderr, flush=True)
+        os._exit(4)
 
 
 def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int) -> None:

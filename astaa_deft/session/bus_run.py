@@ -9,6 +9,7 @@ log is finished cleanly whatever ended the run.
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 import tempfile
@@ -57,6 +58,8 @@ class BusRun:
         self._lock = threading.Lock()
         self._helpers: list[subprocess.Popen] = []  # recorder, bus router: ours to stop
         self._helper_output: dict[int, tuple[threading.Thread, list[str]]] = {}
+        self._helper_names: dict[int, str] = {}  # pid → "recorder" | "bus router"
+        self.lost: str = ""  # why a helper of ours stopped mid-run: the run is not fully observed or recorded
         self.bus_endpoints: list[str] = []
         self.interception: InterceptionBridge | None = None
         self.monitors: OnlineMonitors | None = None
@@ -104,7 +107,7 @@ class BusRun:
             tool_cfg = zc.config_dict(mode="router", listen=listen)
         else:
             self.bus_endpoints = listen[:1]
-            self.bus_router = self._spawn_ready("router", [*python_module("astaa_deft.bus.router"),
+            self.bus_router = self._spawn_ready("bus router", [*python_module("astaa_deft.bus.router"),
                                                           *[a for ep in listen for a in ("--listen", ep)]])
             tool_cfg = zc.config_dict(mode="client", connect=self.bus_endpoints)
         self.session = self._open(tool_cfg, listen)
@@ -173,11 +176,12 @@ class BusRun:
 
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None) -> subprocess.Popen:
         """Start one of the tool's own helper processes and wait for its 'ready' line."""
-        log_path = self.run_dir / f"{name}.log"
+        log_path = self.run_dir / f"{name.split()[-1]}.log"
         with open(log_path, "wb") as err:
             proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL,
                                     start_new_session=True, preexec_fn=die_with_parent, text=True)
         self._helpers.append(proc)
+        self._helper_names[proc.pid] = name
         ready = threading.Event()
         lines: list[str] = []
 
@@ -246,6 +250,28 @@ class BusRun:
         key = dict((ch.name, k) for k, ch in topology.observed_keys(self.spec, self.options.mode))[channel]
         assert self.session is not None
         self._subs.append(self.session.declare_subscriber(key, callback))
+
+    def helper_lost(self) -> str:
+        """Why the recorder or the bus router stopped before the run did ("" while both run).
+
+        Either loss ends the run: without its recorder the log is incomplete,
+        without its router nothing more of the bus is seen; no verdict can then
+        be a Pass. Noted once in the log (if it can still be written) and kept
+        in ``lost``.
+        """
+        if self.lost:
+            return self.lost
+        for proc in self._helpers:
+            code = proc.poll()
+            if code is None:
+                continue
+            how = f"killed by {signal.Signals(-code).name}" if code < 0 and -code in signal.valid_signals() \
+                else f"exit code {code}"
+            name = self._helper_names.get(proc.pid, "helper")
+            why = tail(self.run_dir / f"{name.split()[-1]}.log", lines=3).strip()
+            self.lost = f"the {name} stopped ({how})" + (f": {why}" if why else "")
+            return self.lost
+        return ""
 
     def crashed(self) -> list[ProcessExit]:
         return [e for e in self.exits if e.abnormal]

@@ -59,11 +59,14 @@ def run_session(spec: Spec, options: RunOptions, *,
         exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),
         mutations=run.interception.mutations if run.interception is not None else 0,
         log=options.record, complete=options.record is None or run.recorder_finished,
-        observed=run.verdict is not None)
+        observed=run.verdict is not None and not run.lost)
 
 
 def _why_end(run: BusRun, options: RunOptions, t0: float,
              stop_when: Callable[[BusRun], str | None] | None) -> str:
+    lost = run.helper_lost()
+    if lost:
+        return lost
     if options.time_limit is not None and time.monotonic() - t0 >= options.time_limit:
         return "time limit"
     if run.stop_requested.is_set():
