@@ -233,17 +233,69 @@ def test_a_full_disk_for_the_log_is_reported_and_is_no_pass(tool_run):
 def test_kill_9_of_a_module_ends_the_run_with_abort(tool_run):
     run = tool_run()
     run.wait_flowing()
-    talker = json.loads((run.run_dir / "processes.json").read_text())["talker"]
-    os.kill(talker, signal.SIGKILL)
+    listener = json.loads((run.run_dir / "processes.json").read_text())["listener"]
+    os.kill(listener, signal.SIGKILL)
     code = run.finish()
     out = run.output()
     assert code == 1, out
-    assert "module 'talker'" in out and "killed by SIGKILL" in out
+    assert "module 'listener'" in out and "killed by SIGKILL" in out and "(on_crash: end_run)" in out
     assert "verdict: Abort" in out
     run.all_gone("kill -9 of a module")
     contents = read_log(run.log)
     assert contents.finished and not contents.damage
     assert contents.events("verdict")[-1]["class"] == "Abort"
+
+
+def spec_variant(tmp_path: Path, *replacements: tuple[str, str]) -> Path:
+    text = ECHO_SPEC.read_text().replace("{spec_dir}", str(SUT_DIR))
+    for old, new in replacements:
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / "sut.yaml"
+    path.write_text(text)
+    return path
+
+
+def run_tool(spec: Path, tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(TOOL), "proxy", "--spec", str(spec), "--record", str(tmp_path / "run.mcap"),
+                           "--run-dir", str(tmp_path / "run"), *args], capture_output=True, text=True, timeout=120)
+
+
+KEEP_RUNNING = ("    on_crash: keep_running", "")
+
+
+def test_a_module_crash_ends_the_run_promptly_by_default(tmp_path):
+    # No --duration: before, the run went on after the crash until someone stopped it.
+    res = run_tool(spec_variant(tmp_path, KEEP_RUNNING), tmp_path, "--param", "crash_after=50")
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert "stopped (module 'talker'" in res.stdout and "exit code 3 (on_crash: end_run)" in res.stdout
+    assert "verdict: Abort" in res.stdout
+    assert read_log(tmp_path / "run.mcap").events("verdict")[-1]["class"] == "Abort"
+    pids = json.loads((tmp_path / "run" / "processes.json").read_text())
+    assert [m for m, p in pids.items() if alive(p)] == []
+
+
+def test_a_module_never_ready_is_exit_2_and_no_pass_in_the_log(tmp_path):
+    spec = spec_variant(tmp_path, KEEP_RUNNING, ('ready: {log: "listener: subscribed"}',
+                                                 'ready: {log: "never printed", timeout: 1}'))
+    res = run_tool(spec, tmp_path, "--duration", "30")
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "module 'listener' not ready: no output line matching 'never printed' within 1 s" in res.stderr
+    assert "Traceback" not in res.stderr
+    verdicts = read_log(tmp_path / "run.mcap").events("verdict")
+    assert verdicts and verdicts[-1]["class"] == "Restart", verdicts
+    pids = json.loads((tmp_path / "run" / "processes.json").read_text())
+    assert [m for m, p in pids.items() if alive(p)] == []
+
+
+def test_a_module_crashing_while_starting_is_exit_1_as_documented(tmp_path):
+    spec = spec_variant(tmp_path, KEEP_RUNNING, ('"--key", "test/extra", "--out"', '"--no-such-flag", "--out"'))
+    res = run_tool(spec, tmp_path, "--duration", "30")
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert "module 'listener' exited with code 2 while starting" in res.stderr
+    assert "Traceback" not in res.stderr.split("while starting")[0]
+    verdicts = read_log(tmp_path / "run.mcap").events("verdict")
+    assert verdicts and verdicts[-1]["class"] == "Abort", verdicts
 
 
 # --- helpers run the installed code ---------------------------------------------------------------------------

@@ -26,6 +26,25 @@ from .processes import python_module, signal_group, tail
 
 
 
+class ModuleNotReady(InputError):
+    """A module still running but not ready in time (exit 2: most often a readiness condition to fix)."""
+
+    def __init__(self, problem: Problem, module: str, detail: str):
+        super().__init__(problem)
+        self.module = module
+        self.detail = detail
+
+
+class ModuleCrashedWhileStarting(InputError):
+    """A module that exited while starting: a finding about the SUT, exit code 1 like any module crash.
+
+    An InputError still, so every caller that turns "the run could not start"
+    into a message keeps doing so; only the CLI's exit code differs.
+    """
+
+    exit_code = 1
+
+
 @dataclass(frozen=True)
 class ProcessExit:
     module: str
@@ -158,11 +177,11 @@ class Launcher:
         while not is_ready():
             self._raise_if_exited(module)
             if time.monotonic() > deadline:
-                raise InputError(Problem(
-                    str(self.spec.path or "<spec>"), None, None,
-                    f"module '{module.name}' not ready: {what} within {ready.timeout:g} s",
+                detail = f"{what} within {ready.timeout:g} s"
+                raise ModuleNotReady(Problem(
+                    str(self.spec.path or "<spec>"), None, None, f"module '{module.name}' not ready: {detail}",
                     f"check {self.running[module.name].log_path} or raise 'ready.timeout'",
-                ))
+                ), module.name, detail)
             time.sleep(0.02)
 
     def _raise_if_exited(self, module: Module) -> None:
@@ -170,7 +189,10 @@ class Launcher:
         code = running.process.poll()
         if code is not None:
             log_tail = tail(running.log_path)
-            raise InputError(Problem(
+            deadline = time.monotonic() + 2.0  # its watcher logs the exit as an event (the verdict's finding)
+            while running.exit is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+            raise ModuleCrashedWhileStarting(Problem(
                 str(self.spec.path or "<spec>"), None, None,
                 f"module '{module.name}' exited with code {code} while starting" + (f":\n{log_tail}" if log_tail else ""),
                 f"run its command by hand to see why (log: {running.log_path})",

@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -26,7 +25,8 @@ from ..bus import topology
 from ..bus import zenoh_config as zc
 from ..log import records as rec
 from ..monitor.online import OnlineMonitors
-from ..bus.launcher import Launcher, ProcessExit
+from ..bus.launcher import Launcher, ModuleNotReady, ProcessExit
+from ..monitor.violation import Violation
 from ..bus.observer import ChannelCounter
 from ..bus.processes import die_with_parent, python_module, stop_process, tail
 from ..bus.interception import InterceptionBridge
@@ -157,7 +157,13 @@ class BusRun:
         self.launcher = Launcher(self.spec, self.run_dir, files, params=self.options.params,
                                  channel_seen=lambda ch: self.counts().get(ch, 0) > 0,
                                  on_exit=self._process_exited)
-        self.launcher.start()
+        try:
+            self.launcher.start()
+        except ModuleNotReady as exc:
+            # Alive but silent: a hang as far as the CRASH scale goes. Logged so the run's verdict
+            # is no Pass (the exit code stays 2: most often the readiness condition needs fixing).
+            self._not_ready(exc)
+            raise
 
     def _start_recorder(self, path: Path) -> None:
         meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
@@ -308,6 +314,14 @@ class BusRun:
                                        exit_.during_shutdown, exit_.stderr_tail)
         self.emit(rec.ProcessExitRecord(exit_.time_ns, exit_.module, exit_.pid, exit_.returncode, exit_.signal,
                                         exit_.during_shutdown, exit_.abnormal, exit_.stderr_tail))
+
+    def _not_ready(self, exc: ModuleNotReady) -> None:
+        if self.monitors is None:
+            return
+        found = Violation("(module start)", "ready", "high", time.time_ns(), None, None, None,
+                          f"module '{exc.module}' not ready: {exc.detail}", "Restart", exc.module)
+        self.monitors.set.violations.append(found)  # the verdict is the monitors' own: they must count it
+        self._violated(found)
 
     def _mutated(self, event: dict) -> None:
         # Not re-published: the interception's own record (with the original) is in the log already.

@@ -37,7 +37,9 @@ def run_session(spec: Spec, options: RunOptions, *,
       subscribe to a channel with ``run.subscribe``).
 
     The run ends at the first of: ``options.time_limit``; every launched module
-    gone; a violation with ``options.stop_on_violation``; ``stop_when``.
+    gone; a module's abnormal exit (unless the spec says ``on_crash: keep_running``
+    for it); a violation with ``options.stop_on_violation``; the recorder or
+    the bus router lost (then ``complete``/``observed`` is False); ``stop_when``.
     Raises :class:`~astaa_deft.errors.InputError` when the run cannot start.
     """
     run = BusRun(spec, options, on_event=on_event or (lambda record: None))
@@ -71,6 +73,11 @@ def _why_end(run: BusRun, options: RunOptions, t0: float,
         return "time limit"
     if run.stop_requested.is_set():
         return "violation (--stop-on-violation)"
+    ending = {m.name for m in run.spec.modules if m.on_crash == "end_run"}
+    crash = next((e for e in run.crashed() if e.module in ending), None)
+    if crash is not None:
+        # The verdict is decided (Abort at least); going on would only wait for a time limit or a Ctrl-C.
+        return f"{crash.describe()} (on_crash: end_run)"
     if options.launch and run.launcher is not None and not run.alive():
         return "all modules exited"
     if stop_when is not None:
