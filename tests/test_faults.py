@@ -318,3 +318,51 @@ def test_helpers_run_the_installed_package_not_the_current_directory(tmp_path):
     assert not mark.exists(), res.stdout + res.stderr
     assert res.returncode == 0, res.stdout + res.stderr
     assert len(logged_seqs(log)) == 50
+
+
+# --- non-finite values on JSON channels -----------------------------------------------------------------------
+
+def _strict(data: bytes):
+    """Parse as a strict JSON parser (Foxglove's) does: NaN and ±Infinity are errors."""
+    def refuse(token):
+        raise ValueError(f"non-standard token {token}")
+    return json.loads(data, parse_constant=refuse)
+
+
+def test_non_finite_mutations_stay_exact_on_the_bus_and_every_logged_message_is_strict_json(tmp_path):
+    from astaa_deft.intercept.actions.base import from_tagged
+    from astaa_deft.log.viewable import VIEWABLE_PREFIX
+
+    policy = tmp_path / "tc.xml"
+    policy.write_text("""<?xml version="1.0" encoding="UTF-8"?>
+<testcase id="nan" seed="1"><description>non-finite values</description>
+  <policy id="p1"><channel>data</channel><select every="4"/>
+    <set><field path="value" value="dict:float.nan"/></set></policy>
+  <policy id="p2"><channel>data</channel><select every="7"/>
+    <set><field path="value" value="dict:float.neg_inf"/></set></policy>
+</testcase>
+""")
+    res = run_tool(ECHO_SPEC, tmp_path, "--policy", str(policy), "--duration", "3",
+                   "--param", "count=100", "--param", "rate=200")
+    assert res.returncode in (0, 1), res.stdout + res.stderr
+    delivered = [p for k, p, _ in received(tmp_path / "run" / "listener.out") if k == "test/data"]
+    log = read_log(tmp_path / "run.mcap")
+    logged = [m.data for m in log.on("test/data")]
+    assert logged == delivered and len(delivered) == 100  # the exact bytes, bare NaN and -Infinity included
+    assert sum(b"NaN" in p for p in logged) >= 20 and sum(b"-Infinity" in p for p in logged) >= 10
+    twins = {m.log_time: m.data for m in log.on(VIEWABLE_PREFIX + "test/data")}
+    not_strict = 0
+    for topic, info in log.channels.items():
+        if info.message_encoding != "json":
+            continue
+        for m in log.on(topic):
+            try:
+                _strict(m.data)
+            except ValueError:
+                not_strict += 1
+                assert not topic.startswith("/astaa/"), (topic, m.data)  # the tool's own topics are always strict
+                twin = _strict(twins[m.log_time])  # viewable: a strict twin at the same time
+                exact = json.loads(m.data)
+                assert from_tagged(twin["value"]) == exact["value"] or exact["value"] != exact["value"]
+                assert str(from_tagged(twin["value"])) == str(exact["value"]) and twin["header"] == exact["header"]
+    assert not_strict == len(twins) >= 30

@@ -30,6 +30,7 @@ from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..spec_loader import load_spec
 from . import layout, records
+from .viewable import ViewableTwins
 from .writer import LogWriter
 
 _STOP = object()
@@ -90,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             subscribers.append(session.declare_subscriber(key_expr, on_sample))
 
     mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
+    twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
 
     def on_tool_event(sample: zenoh.Sample) -> None:
         q.put((time.time_ns(), writer.events_channel, None, None, sample.payload.to_bytes(), None))
@@ -102,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     subscribers.append(session.declare_subscriber(topology.EVENTS_KEY, on_tool_event))
     subscribers.append(session.declare_subscriber(f"{topology.UNDECLARED_PREFIX}/**", on_undeclared))
 
-    write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, writer, counts, mutations_cid),
+    write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, writer, counts, mutations_cid, twins),
                                     daemon=True)
     write_thread.start()
     print("ready", flush=True)
@@ -145,7 +147,8 @@ def _drain_or_exit(out: Path, *args) -> None:
         os._exit(4)
 
 
-def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int) -> None:
+def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int,
+           twins: ViewableTwins) -> None:
     undeclared_ids: dict[str, int] = {}
     while True:
         item = q.get()
@@ -159,6 +162,8 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mu
                 if _write_intercepted(writer, cid, original_cid, mutations_cid, attachment, log_time, data,
                                       publish_time):
                     counts[name] += 1
+                    if codec.name == "json":
+                        twins.add(name, log_time, data, publish_time)  # a NaN mutation: viewable too
                 continue
         if isinstance(cid, tuple):  # an undeclared key the proxy forwarded
             _, key, encoding = cid
@@ -170,6 +175,8 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mu
         if codec is None:
             continue
         counts[name] += 1
+        if codec.name == "json":
+            twins.add(name, log_time, data, publish_time)
         try:
             codec.decode(data)
         except DecodeError as exc:
