@@ -84,6 +84,11 @@ class ToolRun:
             self.proc = subprocess.Popen(args, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
                                          preexec_fn=preexec_fn)
         self.started: dict[int, str] = {}
+        self.fault_at = time.monotonic()
+
+    def fault(self, pid: int, sig: signal.Signals) -> None:
+        self.fault_at = time.monotonic()
+        os.kill(pid, sig)
 
     def wait_flowing(self, messages: int = 300, timeout: float = 60.0) -> None:
         deadline = time.monotonic() + timeout
@@ -106,8 +111,8 @@ class ToolRun:
 
     def all_gone(self, what: str) -> None:
         pids = [self.proc.pid, *self.started]
-        left, seconds = wait_gone(pids)
-        print(f"{what}: every started process gone after {seconds:.2f} s")
+        left, _ = wait_gone(pids)
+        print(f"{what}: every started process gone {time.monotonic() - self.fault_at:.2f} s after the fault")
         assert left == [], f"still running after {what}: {[self.started.get(p, 'tool') for p in left]}"
 
     def stop_leftovers(self) -> None:
@@ -139,7 +144,7 @@ def test_kill_9_of_the_tool_leaves_nothing_running_and_a_finished_log(tool_run):
     run = tool_run()
     run.wait_flowing()
     recorder = helper_pid(run.started, "astaa_deft.log.recorder")
-    run.proc.send_signal(signal.SIGKILL)
+    run.fault(run.proc.pid, signal.SIGKILL)
     assert run.finish() == -signal.SIGKILL
     run.all_gone("kill -9 of the tool")
     # The recorder finished the log on its parent's death: readable, and no traceback in its own log.
@@ -149,15 +154,20 @@ def test_kill_9_of_the_tool_leaves_nothing_running_and_a_finished_log(tool_run):
     assert contents.finished and not contents.damage
     assert len(logged_seqs(run.log)) >= 300
     assert not alive(recorder)
-    # Nothing in it claims a verdict: the tool that would have given one is gone.
+    # Nothing in it claims a verdict: the tool that would have given one is gone; the recorder says so,
+    # and a check of the log gives its findings but withholds a Pass.
     assert contents.events("verdict") == []
+    check = subprocess.run([str(TOOL), "check", str(run.log)], capture_output=True, text=True, timeout=60)
+    assert check.returncode == 3, check.stdout + check.stderr
+    assert "verdict: Pass" not in check.stdout and "verdict withheld: the tool was lost" in check.stdout
+    assert "Traceback" not in check.stderr
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_stop_signal_ends_the_run_cleanly(tool_run, sig):
     run = tool_run()
     run.wait_flowing()
-    run.proc.send_signal(sig)
+    run.fault(run.proc.pid, sig)
     code = run.finish()
     out = run.output()
     assert code == 0, out
@@ -178,7 +188,7 @@ def test_a_stop_signal_ends_the_run_cleanly(tool_run, sig):
 def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):
     run = tool_run()
     run.wait_flowing(1500)  # a few 64 KiB chunks in the file: a recorder killed outright loses only the last
-    os.kill(helper_pid(run.started, "astaa_deft.log.recorder"), signal.SIGKILL)
+    run.fault(helper_pid(run.started, "astaa_deft.log.recorder"), signal.SIGKILL)
     code = run.finish()
     out = run.output()
     assert code == 3, out
@@ -194,7 +204,7 @@ def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):
 def test_kill_9_of_the_bus_router_is_reported_and_is_no_pass(tool_run):
     run = tool_run("--passive")
     run.wait_flowing()
-    os.kill(helper_pid(run.started, "astaa_deft.bus.router"), signal.SIGKILL)
+    run.fault(helper_pid(run.started, "astaa_deft.bus.router"), signal.SIGKILL)
     code = run.finish()
     out = run.output()
     assert code == 3, out
@@ -215,6 +225,7 @@ def test_a_full_disk_for_the_log_is_reported_and_is_no_pass(tool_run):
     recorder = helper_pid(run.started, "astaa_deft.log.recorder")
     cap = run.log.stat().st_size + 48 * 1024
     resource.prlimit(recorder, resource.RLIMIT_FSIZE, (cap, cap))
+    run.fault_at = time.monotonic()
     code = run.finish(timeout=120)
     out = run.output()
     assert code == 3, out
@@ -234,7 +245,7 @@ def test_kill_9_of_a_module_ends_the_run_with_abort(tool_run):
     run = tool_run()
     run.wait_flowing()
     listener = json.loads((run.run_dir / "processes.json").read_text())["listener"]
-    os.kill(listener, signal.SIGKILL)
+    run.fault(listener, signal.SIGKILL)
     code = run.finish()
     out = run.output()
     assert code == 1, out

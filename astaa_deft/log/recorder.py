@@ -51,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="a channel the proxy may alter: record what it delivered, and the originals")
     args = ap.parse_args(argv)
 
+    tool_pid = os.getppid()  # if this changes, the tool died (and its death signal is what stops us)
     stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, _frame: stopping.append(signum))
@@ -119,6 +120,8 @@ def main(argv: list[str] | None = None) -> int:
         sub.undeclare()
     q.put(_STOP)
     write_thread.join()
+    if os.getppid() != tool_pid:
+        writer.record(records.RunEnd(time.time_ns(), layout.TOOL_LOST))
     writer.finish()
     _report(json.dumps({"recorded": counts}))
     # No session.close(): the log is finished, and closing a session whose router is gone (the tool
