@@ -183,6 +183,27 @@ def test_a_stop_signal_ends_the_run_cleanly(tool_run, sig):
     assert delivered <= recorded  # everything delivered before the stop is in the log
 
 
+def test_a_recorder_behind_at_the_stop_still_records_everything_delivered(tool_run):
+    """The stop waits for the recorder to catch up (it sees the run_stopped event), not a fixed 0.3 s."""
+    run = tool_run()
+    run.wait_flowing()
+    recorder = helper_pid(run.started, "astaa_deft.log.recorder")
+    os.kill(recorder, signal.SIGSTOP)  # the recorder falls behind: what it has not read waits in its socket
+    try:
+        time.sleep(1.0)
+        run.fault(run.proc.pid, signal.SIGINT)
+        time.sleep(1.5)  # the tool has stopped the modules and is ending the run meanwhile
+    finally:
+        os.kill(recorder, signal.SIGCONT)
+    code = run.finish()
+    assert code == 0, run.output()
+    run.all_gone("SIGINT with the recorder behind")
+    delivered = {json.loads(p)["header"]["seq"] for k, p, _ in received(run.run_dir / "listener.out")
+                 if k == "test/data"}
+    missing = delivered - logged_seqs(run.log)
+    assert not missing, f"{len(missing)} of {len(delivered)} delivered messages are not in the log"
+
+
 # --- the tool's helpers -----------------------------------------------------------------------------------------
 
 def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):

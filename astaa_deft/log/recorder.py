@@ -34,6 +34,7 @@ from .viewable import ViewableTwins
 from .writer import LogWriter
 
 _STOP = object()
+CAUGHT_UP = "caught up"  # stdout line: the run_stopped event arrived, so did every message before it
 SHUTDOWN_LIMIT_SECONDS = 20.0
 
 
@@ -95,7 +96,12 @@ def main(argv: list[str] | None = None) -> int:
     twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
 
     def on_tool_event(sample: zenoh.Sample) -> None:
-        q.put((time.time_ns(), writer.events_channel, None, None, sample.payload.to_bytes(), None))
+        data = sample.payload.to_bytes()
+        q.put((time.time_ns(), writer.events_channel, None, None, data, None))
+        if b'"run_stopped"' in data:
+            # Everything the tool forwarded before this event has reached us (one link, in order):
+            # the tool may stop us now without losing a backlog.
+            _report(CAUGHT_UP)
 
     def on_undeclared(sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)[len(topology.UNDECLARED_PREFIX) + 1:]

@@ -34,7 +34,9 @@ from ..bus.proxy import StarProxy, plain_forwarder
 from .options import RunOptions
 
 HELPER_READY_TIMEOUT = 20.0
-DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the recorder
+DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the tool's subscribers
+CATCH_UP_LIMIT = 15.0  # at most this long for a recorder that fell behind to read its backlog
+RECORDER_CAUGHT_UP = "caught up"  # the recorder's line once the run_stopped event (and all before it) arrived
 
 
 class BusRun:
@@ -221,6 +223,7 @@ class BusRun:
         if self.session is not None and (self.launcher is not None or self.recorder is not None):
             self.emit(rec.RunStopped(time.time_ns()))
             time.sleep(DRAIN_SECONDS)
+            self._wait_recorder_caught_up()
         if self.recorder is not None:
             stop_process(self.recorder, grace=30.0)
             reader, lines = self._helper_output[self.recorder.pid]
@@ -242,6 +245,17 @@ class BusRun:
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
+
+    def _wait_recorder_caught_up(self) -> None:
+        """A recorder behind (a burst, a slow disk) still holds messages in its socket: stopping it now would
+        lose them. It says when the run_stopped event has arrived, i.e. everything sent before it."""
+        if self.recorder is None:
+            return
+        _, lines = self._helper_output[self.recorder.pid]
+        deadline = time.monotonic() + CATCH_UP_LIMIT
+        while (RECORDER_CAUGHT_UP not in lines and self.recorder.poll() is None
+               and time.monotonic() < deadline):
+            time.sleep(0.02)
 
     # -- observation -------------------------------------------------------
     def counts(self) -> dict[str, int]:
