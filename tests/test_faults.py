@@ -204,6 +204,19 @@ def test_a_recorder_behind_at_the_stop_still_records_everything_delivered(tool_r
     assert not missing, f"{len(missing)} of {len(delivered)} delivered messages are not in the log"
 
 
+def test_silence_while_the_run_stops_is_no_finding(tmp_path):
+    """A module slow to exit after SIGTERM (its channel silent meanwhile) is the tool's shutdown, not a hang."""
+    slow_exit = ('command: ["{python}", "%s/talker.py"' % SUT_DIR,
+                 'command: ["sh", "-c", "trap \'sleep 1.5; exit 0\' TERM; \\"$0\\" \\"$@\\" & wait; wait", '
+                 '"{python}", "%s/talker.py"' % SUT_DIR)
+    spec = spec_variant(tmp_path, slow_exit, ("brittle:", "invariants:\n  - {name: data_alive, kind: deadline, "
+                                                          "channel: data, max_gap: 0.3}\nbrittle:"))
+    res = run_tool(spec, tmp_path, "--duration", "3", "--param", "count=100000", "--param", "rate=100")
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "verdict: Pass" in res.stdout
+    assert read_log(tmp_path / "run.mcap").events("verdict")[-1]["class"] == "Pass"
+
+
 # --- the tool's helpers -----------------------------------------------------------------------------------------
 
 def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):

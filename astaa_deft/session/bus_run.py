@@ -214,12 +214,14 @@ class BusRun:
         if self.interception is not None:
             self.interception.stop()  # release held and delayed messages while consumers still listen
         stopping = self.emit(rec.RunStopping(time.time_ns())) if self.monitors is not None else None
-        if self.launcher is not None:
-            self.launcher.stop()
         if self.monitors is not None and stopping is not None:
+            # Judged up to the stop, as `check` judges the log: the silence of modules being stopped
+            # (one slow to exit, a loaded machine) is the tool's doing, not a hang of the SUT.
             self.verdict = self.monitors.finish(stopping.time_ns)
             self.emit(rec.decode({"kind": "verdict", "time_ns": time.time_ns(), **self.verdict.to_json()}))
             self.monitors = None
+        if self.launcher is not None:
+            self.launcher.stop()
         if self.session is not None and (self.launcher is not None or self.recorder is not None):
             self.emit(rec.RunStopped(time.time_ns()))
             time.sleep(DRAIN_SECONDS)
