@@ -38,6 +38,7 @@ KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no D
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
 ENCODINGS = ("json", "cbor", "cdr")
 
+ON_CRASH = ("end_run", "keep_running")
 TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run",
             "decictor", "ros2")
 REQUIRED_TOP = ("name", "modules", "channels")
@@ -201,7 +202,8 @@ class _SpecBuilder:
         out: list[Module] = []
         seen: set[str] = set()
         for item in self.list_of_maps(node, "modules", required=True):
-            if not self.keys(item, ("name", "command", "env", "cwd", "ready"), ("name", "command"), "a module"):
+            if not self.keys(item, ("name", "command", "env", "cwd", "ready", "on_crash"), ("name", "command"),
+                             "a module"):
                 continue
             v = item.value
             name = self.name_of(v["name"], "module name") if "name" in v else "?"
@@ -216,7 +218,13 @@ class _SpecBuilder:
                 if self.from_file and not cwd.is_dir():
                     self.src.at(v["cwd"], f"directory '{cwd}' does not exist", "give a path relative to the spec file")
             ready = self.ready(v.get("ready"))
-            out.append(Module(name=name, command=command, env=env, cwd=cwd, ready=ready))
+            on_crash = "end_run"
+            if "on_crash" in v and self.expect(v["on_crash"], (str,), "'on_crash'", "end_run or keep_running"):
+                on_crash = v["on_crash"].value
+                if on_crash not in ON_CRASH:
+                    self.src.at(v["on_crash"], f"'on_crash' must be end_run or keep_running, not '{on_crash}'",
+                                did_you_mean(on_crash, ON_CRASH) or "write end_run or keep_running")
+            out.append(Module(name=name, command=command, env=env, cwd=cwd, ready=ready, on_crash=on_crash))
         return out
 
     def command(self, node: Node | None, module: str, params: dict[str, str]) -> tuple[str, ...]:

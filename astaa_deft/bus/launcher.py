@@ -22,8 +22,27 @@ from typing import Callable, Mapping
 
 from ..errors import InputError, Problem
 from ..spec.model import Module, Spec
-from .processes import signal_group, tail
+from .processes import python_module, signal_group, tail
 
+
+
+class ModuleNotReady(InputError):
+    """A module still running but not ready in time (exit 2: most often a readiness condition to fix)."""
+
+    def __init__(self, problem: Problem, module: str, detail: str):
+        super().__init__(problem)
+        self.module = module
+        self.detail = detail
+
+
+class ModuleCrashedWhileStarting(InputError):
+    """A module that exited while starting: a finding about the SUT, exit code 1 like any module crash.
+
+    An InputError still, so every caller that turns "the run could not start"
+    into a message keeps doing so; only the CLI's exit code differs.
+    """
+
+    exit_code = 1
 
 
 @dataclass(frozen=True)
@@ -79,7 +98,7 @@ class Launcher:
     # -- start ---------------------------------------------------------------
     def start(self, on_ready: Callable[[str], None] = lambda _m: None) -> None:
         """Start every module in spec order, each after the previous one is ready."""
-        self._reaper = subprocess.Popen([sys.executable, "-m", "astaa_deft.bus.reaper"], stdin=subprocess.PIPE,
+        self._reaper = subprocess.Popen(python_module("astaa_deft.bus.reaper"), stdin=subprocess.PIPE,
                                         stdout=subprocess.DEVNULL, start_new_session=True, text=True)
         try:
             for module in self.spec.modules:
@@ -163,11 +182,11 @@ class Launcher:
         while not is_ready():
             self._raise_if_exited(module)
             if time.monotonic() > deadline:
-                raise InputError(Problem(
-                    str(self.spec.path or "<spec>"), None, None,
-                    f"module '{module.name}' not ready: {what} within {ready.timeout:g} s",
+                detail = f"{what} within {ready.timeout:g} s"
+                raise ModuleNotReady(Problem(
+                    str(self.spec.path or "<spec>"), None, None, f"module '{module.name}' not ready: {detail}",
                     f"check {self.running[module.name].log_path} or raise 'ready.timeout'",
-                ))
+                ), module.name, detail)
             time.sleep(0.02)
 
     def _raise_if_exited(self, module: Module) -> None:
@@ -175,7 +194,10 @@ class Launcher:
         code = running.process.poll()
         if code is not None:
             log_tail = tail(running.log_path)
-            raise InputError(Problem(
+            deadline = time.monotonic() + 2.0  # its watcher logs the exit as an event (the verdict's finding)
+            while running.exit is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+            raise ModuleCrashedWhileStarting(Problem(
                 str(self.spec.path or "<spec>"), None, None,
                 f"module '{module.name}' exited with code {code} while starting" + (f":\n{log_tail}" if log_tail else ""),
                 f"run its command by hand to see why (log: {running.log_path})",

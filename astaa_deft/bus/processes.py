@@ -10,10 +10,28 @@ import ctypes
 import os
 import signal
 import subprocess
+import sys
 from collections import deque
 from pathlib import Path
 
 PR_SET_PDEATHSIG = 1
+
+# Python 3.10 has no -P: drop the current directory from sys.path by hand, then run the module as -m would.
+_RUN_INSTALLED = "import runpy, sys; sys.path.pop(0); sys.argv[0] = '{m}'; runpy.run_module('{m}', run_name='__main__', alter_sys=True)"
+
+
+def python_module(module: str) -> list[str]:
+    """The argv that runs ``module`` of the installed astaa_deft, as ``python -m`` would but safely.
+
+    ``python -m`` puts the current directory first on sys.path, so a helper
+    started from inside a checkout (or any folder holding an ``astaa_deft/``)
+    would run that code instead of the package the user installed. ``-P``
+    (Python >= 3.11) leaves the current directory out; environment variables
+    such as ZENOH_CONFIG still reach the helper, which ``-I`` would not allow.
+    """
+    if sys.version_info >= (3, 11):
+        return [sys.executable, "-P", "-m", module]
+    return [sys.executable, "-c", _RUN_INSTALLED.format(m=module)]
 
 
 def die_with_parent() -> None:

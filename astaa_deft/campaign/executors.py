@@ -19,7 +19,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any, Iterator
 
-from ..bus.processes import die_with_parent, stop_process
+from ..bus.processes import die_with_parent, python_module, stop_process
 from .model import CaseOutcome
 
 CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
@@ -37,7 +37,7 @@ class LocalPool:
         self.futures[self._pool.submit(self._run, payload)] = case_id
 
     def _run(self, payload: dict[str, Any]) -> CaseOutcome:
-        proc = subprocess.Popen([sys.executable, "-m", "astaa_deft.campaign.worker"], stdin=subprocess.PIPE,
+        proc = subprocess.Popen(python_module("astaa_deft.campaign.worker"), stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 start_new_session=True, preexec_fn=die_with_parent)
         with self._lock:

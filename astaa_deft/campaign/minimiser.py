@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..bus.processes import die_with_parent
+from ..bus.processes import die_with_parent, python_module
 
 MINIMAL_XML = "minimal.xml"
 SUMMARY = "summary.json"
@@ -36,7 +36,7 @@ class Minimised:
 def minimise_run(log: Path, spec_path: Path, out_dir: Path, invariant: str | None = None,
                  max_tests: int = 40, confirm: int = 1, timeout: float = 900.0) -> Minimised:
     started = time.monotonic()
-    args = [sys.executable, "-m", "astaa_deft.cli", "minimise", str(log), "--spec", str(spec_path),
+    args = [*python_module("astaa_deft.cli"), "minimise", str(log), "--spec", str(spec_path),
             "-o", str(out_dir), "--repeats", "1", "--confirm", str(confirm), "--max-tests", str(max_tests)]
     if invariant and not invariant.startswith("("):
         args += ["--invariant", invariant]

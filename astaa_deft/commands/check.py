@@ -6,7 +6,9 @@ including a log that is damaged, stops early or holds nothing readable: a
 record that was not fully read cannot support a Pass, and findings next to
 damage may come from the damage rather than the SUT, so no verdict is given.
 A log that merely stops early (a killed writer) still reports its findings
-with exit 1: what was read is intact. The work is
+with exit 1: what was read is intact. A log whose recorder outlived its tool
+(the tool killed mid-run: a ``run_end`` event says "tool lost") reports its
+findings with exit 1 but withholds a Pass: exit 3, the run was not fully observed. The work is
 :func:`astaa_deft.session.check.check_recorded_run`; this prints its result.
 """
 
@@ -17,22 +19,31 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, Problem
+from ..log import layout
 from ..log import records as rec
 from ..log.reader import LogContents
 from ..monitor import format_verdict, format_violation
 from ..session.check import check_recorded_run
 from ..monitor.offline import CheckResult
 
+EXIT_NOT_OBSERVED = 3  # as `proxy`: the run was not observed to its end, no Pass can be given
+
 
 def run(log_path: Path, spec_path: Path | None = None, as_json: bool = False) -> int:
     checked = check_recorded_run(log_path, spec_path)
     result, log = checked.result, checked.log
+    tool_lost = any(e.get("reason") == layout.TOOL_LOST for e in log.events("run_end"))
     if as_json:
-        print(json.dumps(_as_json(result, log), default=str))
+        print(json.dumps(_as_json(result, log, tool_lost), default=str))
     else:
-        _print(result, log_path, spec_path, len(checked.spec.invariants), show_pass=log.intact)
+        _print(result, log_path, spec_path, len(checked.spec.invariants), show_pass=log.intact and not tool_lost)
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    if log.intact and tool_lost and result.passed:
+        if not as_json:
+            print("verdict withheld: the tool was lost mid-run (killed), so the run was not observed to its end "
+                  "and cannot Pass")
+        return EXIT_NOT_OBSERVED
     if log.intact:
         return 0 if result.passed else 1
     if log.truncated and len(log.damage) == 1 and not result.passed:
@@ -77,9 +88,9 @@ def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invarian
         print(f"online verdict recorded during the run: {online} ({agreement})")
 
 
-def _as_json(result: CheckResult, log: LogContents) -> dict:
+def _as_json(result: CheckResult, log: LogContents, tool_lost: bool = False) -> dict:
     return {
-        "verdict": result.verdict.to_json() if log.intact or not result.passed else None,
+        "verdict": result.verdict.to_json() if (log.intact and not tool_lost) or not result.passed else None,
         "violations": [v.to_json() for v in result.violations],
         "stats": result.stats,
         "messages": result.messages,

@@ -26,7 +26,7 @@ from ..monitor.verdict import format_verdict
 from ..session import RunOptions, RunResult
 from ..spec_loader import load_spec
 from .console import say
-from .proxy import run_bus
+from .proxy import EXIT_NOT_OBSERVED, run_bus
 
 DEFAULT_TIME_LIMIT = 40.0
 
@@ -58,7 +58,9 @@ def summarise(outcome: RunResult, watch: StatusWatch) -> None:
         say("collision: no")
     if outcome.mutations:
         say(f"mutations applied: {outcome.mutations}")
-    if outcome.verdict is not None:
+    if not outcome.complete or not outcome.observed:
+        say(f"verdict withheld: the run was not fully observed ({outcome.end_reason})")
+    elif outcome.verdict is not None:
         say(format_verdict(outcome.verdict))
 
 
@@ -76,6 +78,8 @@ def run(scenario: str, duration: float | None, defects: bool, passive: bool, rec
     summarise(outcome, watch)
     say("")
     say(format_info(read_log(record)))
+    if not outcome.complete or not outcome.observed:
+        return EXIT_NOT_OBSERVED
     ok = watch.goal and watch.collision is None and not outcome.crashes
     return 0 if ok else 1
 
@@ -91,7 +95,7 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     clean_log = out_dir / "clean.mcap"
     outcome, watch = drive(scenario, True, False, clean_log, command_line)
     summarise(outcome, watch)
-    if not watch.goal or outcome.verdict is None or outcome.verdict.klass != "Pass":
+    if not watch.goal or not outcome.passed:
         problems.append("the clean run did not reach its goal with a Pass verdict")
 
     say("")
@@ -116,6 +120,8 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     summarise(outcome, watch)
     if outcome.verdict is None or outcome.verdict.klass == "Pass":
         problems.append("the interception did not make any invariant break")
+    elif not outcome.complete or not outcome.observed:
+        problems.append(f"the intercepted run was not fully observed ({outcome.end_reason})")
 
     say("")
     say("== 4/4 minimise: which mutations cause that failure? ==")

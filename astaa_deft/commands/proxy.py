@@ -14,6 +14,7 @@ from .console import RateMeter, StatusLine, StopSignal, format_event, say
 
 
 MUTATIONS_SHOWN = 3
+EXIT_NOT_OBSERVED = 3  # the tool lost its recorder or bus router: no verdict can be given
 
 
 def run_bus(spec: Spec, options: RunOptions, duration: float | None,
@@ -76,14 +77,29 @@ def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, 
     outcome = run_bus(spec, options, duration)
     say(f"stopped ({outcome.end_reason}) after {outcome.seconds:.1f} s")
     for name, n in outcome.sent.items():
-        rec = f", recorded {outcome.recorded.get(name, 0)}" if record else ""
+        # A recorder that did not finish never reported its counts: say so rather than "recorded 0".
+        rec = (f", recorded {outcome.recorded.get(name, 0)}" if outcome.complete else ", recorded ?") if record else ""
         say(f"  {name:20} {n:8d} messages{rec}")
     if interceptor is not None:
         say(f"mutations applied: {outcome.mutations}")
     if record:
-        say(f"log: {record}  (astaa-deft log info {record})")
+        say(f"log: {record}  (astaa-deft log info {record})"
+            + ("" if outcome.complete else " — incomplete: the recorder did not finish it"))
     for c in outcome.crashes:
         say(f"crashed: {c.describe()}")
+    return exit_code(outcome)
+
+
+def exit_code(outcome: RunResult) -> int:
+    """Print the verdict (or why there is none) and pick the exit code: 0 Pass, 1 a finding, 3 not observed."""
+    if not outcome.complete or not outcome.observed:
+        # Findings made before the loss are real, but a Pass would claim what nobody saw.
+        if outcome.verdict is not None and outcome.verdict.klass != "Pass":
+            say(format_verdict(outcome.verdict))
+        why = outcome.end_reason if not outcome.observed or "recorder" in outcome.end_reason \
+            else "the recorder did not finish the log"
+        say(f"verdict withheld: the run was not fully observed ({why})")
+        return EXIT_NOT_OBSERVED
     if outcome.verdict is not None:
         say(format_verdict(outcome.verdict))
         return 0 if outcome.verdict.klass == "Pass" else 1

@@ -8,6 +8,8 @@ EVENTS_TOPIC = "/astaa/events"  # process exits, undeclared keys, run start/stop
 FLAGS_TOPIC = "/astaa/flags"  # a bus message the recorder could not decode (logged raw on its own topic)
 ORIGINAL_PREFIX = "/astaa/original/"  # the message before a mutation, by key
 MUTATIONS_TOPIC = "/astaa/mutations"  # what the interceptor did: test case, policy, action, fields, old → new
+# The reason of the run_end event a recorder writes when its tool died mid-run: no verdict may be a Pass.
+TOOL_LOST = "tool lost: the tool stopped without ending the run, which was not observed to its end"
 
 SPEC_ATTACHMENT = "spec.yaml"
 POLICY_ATTACHMENT = "policy.xml"  # the ASTAA test case applied during the run, if any

@@ -51,7 +51,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ..bus.processes import die_with_parent, stop_process
+from ..bus.processes import die_with_parent, python_module, stop_process
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before
@@ -455,7 +455,7 @@ class _Worker:
         job_read, job_write = os.pipe()
         answer_read, answer_write = os.pipe()
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "astaa_deft.minimise.deft_tester", str(job_read), str(answer_write)],
+            [*python_module("astaa_deft.minimise.deft_tester"), str(job_read), str(answer_write)],
             pass_fds=(job_read, answer_write), stdin=subprocess.DEVNULL, start_new_session=True,
             preexec_fn=die_with_parent)
         os.close(job_read)

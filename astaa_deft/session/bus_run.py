@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -26,16 +26,19 @@ from ..bus import topology
 from ..bus import zenoh_config as zc
 from ..log import records as rec
 from ..monitor.online import OnlineMonitors
-from ..bus.launcher import Launcher, ProcessExit, output_file
+from ..bus.launcher import Launcher, ModuleNotReady, ProcessExit, output_file
+from ..monitor.violation import Violation
 from ..bus.observer import ChannelCounter
-from ..bus.processes import die_with_parent, stop_process, tail
+from ..bus.processes import die_with_parent, python_module, stop_process, tail
 from ..bus.interception import InterceptionBridge
 from ..bus.proxy import StarProxy, plain_forwarder
 from .module_output import ModuleOutputFollower
 from .options import RunOptions
 
 HELPER_READY_TIMEOUT = 20.0
-DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the recorder
+DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the tool's subscribers
+CATCH_UP_LIMIT = 15.0  # at most this long for a recorder that fell behind to read its backlog
+RECORDER_CAUGHT_UP = "caught up"  # the recorder's line once the run_stopped event (and all before it) arrived
 
 
 class BusRun:
@@ -62,6 +65,8 @@ class BusRun:
         self._lock = threading.Lock()
         self._helpers: list[subprocess.Popen] = []  # recorder, bus router: ours to stop
         self._helper_output: dict[int, tuple[threading.Thread, list[str]]] = {}
+        self._helper_names: dict[int, str] = {}  # pid → "recorder" | "bus router"
+        self.lost: str = ""  # why a helper of ours stopped mid-run: the run is not fully observed or recorded
         self.bus_endpoints: list[str] = []
         self.interception: InterceptionBridge | None = None
         self.monitors: OnlineMonitors | None = None
@@ -109,7 +114,7 @@ class BusRun:
             tool_cfg = zc.config_dict(mode="router", listen=listen)
         else:
             self.bus_endpoints = listen[:1]
-            self.bus_router = self._spawn_ready("router", [sys.executable, "-m", "astaa_deft.bus.router",
+            self.bus_router = self._spawn_ready("bus router", [*python_module("astaa_deft.bus.router"),
                                                           *[a for ep in listen for a in ("--listen", ep)]])
             tool_cfg = zc.config_dict(mode="client", connect=self.bus_endpoints)
         self.session = self._open(tool_cfg, listen)
@@ -162,14 +167,20 @@ class BusRun:
         self.output = ModuleOutputFollower({m.name: output_file(self.run_dir, m.name) for m in self.spec.modules},
                                            self._module_line)
         self.output.start()
-        self.launcher.start()
+        try:
+            self.launcher.start()
+        except ModuleNotReady as exc:
+            # Alive but silent: a hang as far as the CRASH scale goes. Logged so the run's verdict
+            # is no Pass (the exit code stays 2: most often the readiness condition needs fixing).
+            self._not_ready(exc)
+            raise
 
     def _start_recorder(self, path: Path) -> None:
         meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
                 "started_ns": str(self.started_ns),
                 "params": json.dumps({**self.spec.params, **self.options.params}, sort_keys=True)}
         # The spec travels as its text on stdin: the recorder reads the session's spec, not a file.
-        args = [sys.executable, "-m", "astaa_deft.session.recorder", "--out", str(path),
+        args = [*python_module("astaa_deft.session.recorder"), "--out", str(path),
                 "--spec-name", self.spec.path.name if self.spec.path is not None else f"{self.spec.name}.yaml",
                 "--mode", self.options.mode, "--meta", json.dumps(meta)]
         for ep in self.bus_endpoints:
@@ -185,7 +196,7 @@ class BusRun:
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None,
                      stdin_text: str | None = None) -> subprocess.Popen:
         """Start one of the tool's own helper processes (``stdin_text`` on its stdin) and wait for its 'ready' line."""
-        log_path = self.run_dir / f"{name}.log"
+        log_path = self.run_dir / f"{name.split()[-1]}.log"
         with open(log_path, "wb") as err:
             proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err,
                                     stdin=subprocess.DEVNULL if stdin_text is None else subprocess.PIPE,
@@ -198,6 +209,7 @@ class BusRun:
                 proc.stdin.close()
             except BrokenPipeError:  # it died at once: the ready check below says why
                 pass
+        self._helper_names[proc.pid] = name
         ready = threading.Event()
         lines: list[str] = []
 
@@ -223,18 +235,21 @@ class BusRun:
             self.interception.stop()  # release held and delayed messages while consumers still listen
         stopping = self.emit(rec.RunStopping(time.time_ns())) if self.monitors is not None else None
         self._judged_until_ns = stopping.time_ns if stopping is not None else time.time_ns()
-        if self.launcher is not None:
-            self.launcher.stop()
-        if self.output is not None:
-            self.output.stop()  # the modules' last lines, before the monitors finish
-            self.output = None
         if self.monitors is not None and stopping is not None:
+            # Judged up to the stop, as `check` judges the log: the silence of modules being stopped
+            # (one slow to exit, a loaded machine) is the tool's doing, not a hang of the SUT.
             self.verdict = self.monitors.finish(stopping.time_ns)
             self.emit(rec.decode({"kind": "verdict", "time_ns": time.time_ns(), **self.verdict.to_json()}))
             self.monitors = None
+        if self.launcher is not None:
+            self.launcher.stop()
+        if self.output is not None:
+            self.output.stop()  # the modules' last lines (logged; judged only up to the stop)
+            self.output = None
         if self.session is not None and (self.launcher is not None or self.recorder is not None):
             self.emit(rec.RunStopped(time.time_ns()))
             time.sleep(DRAIN_SECONDS)
+            self._wait_recorder_caught_up()
         if self.recorder is not None:
             stop_process(self.recorder, grace=30.0)
             reader, lines = self._helper_output[self.recorder.pid]
@@ -257,6 +272,17 @@ class BusRun:
             self._tmp.cleanup()
             self._tmp = None
 
+    def _wait_recorder_caught_up(self) -> None:
+        """A recorder behind (a burst, a slow disk) still holds messages in its socket: stopping it now would
+        lose them. It says when the run_stopped event has arrived, i.e. everything sent before it."""
+        if self.recorder is None:
+            return
+        _, lines = self._helper_output[self.recorder.pid]
+        deadline = time.monotonic() + CATCH_UP_LIMIT
+        while (RECORDER_CAUGHT_UP not in lines and self.recorder.poll() is None
+               and time.monotonic() < deadline):
+            time.sleep(0.02)
+
     # -- observation -------------------------------------------------------
     def counts(self) -> dict[str, int]:
         if self.proxy is not None:
@@ -270,6 +296,28 @@ class BusRun:
         key = dict((ch.name, k) for k, ch in topology.observed_keys(self.spec, self.options.mode))[channel]
         assert self.session is not None
         self._subs.append(self.session.declare_subscriber(key, callback))
+
+    def helper_lost(self) -> str:
+        """Why the recorder or the bus router stopped before the run did ("" while both run).
+
+        Either loss ends the run: without its recorder the log is incomplete,
+        without its router nothing more of the bus is seen; no verdict can then
+        be a Pass. Noted once in the log (if it can still be written) and kept
+        in ``lost``.
+        """
+        if self.lost:
+            return self.lost
+        for proc in self._helpers:
+            code = proc.poll()
+            if code is None:
+                continue
+            how = f"killed by {signal.Signals(-code).name}" if code < 0 and -code in signal.valid_signals() \
+                else f"exit code {code}"
+            name = self._helper_names.get(proc.pid, "helper")
+            why = tail(self.run_dir / f"{name.split()[-1]}.log", lines=3).strip()
+            self.lost = f"the {name} stopped ({how})" + (f": {why}" if why else "")
+            return self.lost
+        return ""
 
     def crashed(self) -> list[ProcessExit]:
         return [e for e in self.exits if e.abnormal]
@@ -330,6 +378,14 @@ class BusRun:
                                        exit_.during_shutdown, exit_.stderr_tail)
         self.emit(rec.ProcessExitRecord(exit_.time_ns, exit_.module, exit_.pid, exit_.returncode, exit_.signal,
                                         exit_.during_shutdown, exit_.abnormal, exit_.stderr_tail))
+
+    def _not_ready(self, exc: ModuleNotReady) -> None:
+        if self.monitors is None:
+            return
+        found = Violation("(module start)", "ready", "high", time.time_ns(), None, None, None,
+                          f"module '{exc.module}' not ready: {exc.detail}", "Restart", exc.module)
+        self.monitors.set.violations.append(found)  # the verdict is the monitors' own: they must count it
+        self._violated(found)
 
     def _mutated(self, event) -> None:
         # Not re-published: the interception's own record (with the original) is in the log already.

@@ -37,12 +37,15 @@ def run_session(spec: Spec, options: RunOptions, *,
     * ``on_start(run)``: called once the modules are launched (e.g. to
       subscribe to a channel with ``run.subscribe``).
 
-    The run ends at the first of: ``options.time_limit`` or the spec's
+    The run ends at the first of: the recorder or the bus router lost (then
+    ``complete``/``observed`` is False); ``options.time_limit`` or the spec's
     ``run: time_limit``; a violation with ``options.stop_on_violation``; a
     condition of the spec's ``run: end_when`` (a module's exit, an expression
-    over a channel's latest message); every launched module gone;
-    ``stop_when``. An end the spec declares as a failure (an exit code or a
-    condition with a ``crash`` class) is a finding of the run's verdict.
+    over a channel's latest message); a module's abnormal exit the spec does
+    not declare as an outcome (unless it says ``on_crash: keep_running`` for
+    that module); every launched module gone; ``stop_when``. An end the spec
+    declares as a failure (an exit code or a condition with a ``crash``
+    class) is a finding of the run's verdict.
     Raises :class:`~astaa_deft.errors.InputError` when the run cannot start.
     """
     run = BusRun(spec, options, on_event=on_event)
@@ -70,11 +73,14 @@ def run_session(spec: Spec, options: RunOptions, *,
         exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),
         mutations=run.interception.mutations if run.interception is not None else 0,
         log=options.record, complete=options.record is None or run.recorder_finished,
-        observed=run.verdict is not None)
+        observed=run.verdict is not None and not run.lost)
 
 
 def _why_end(run: BusRun, options: RunOptions, t0: float, time_limit: float | None, ends: RunEndWatch,
              stop_when: Callable[[BusRun], str | None] | None) -> str:
+    lost = run.helper_lost()
+    if lost:
+        return lost
     if time_limit is not None and time.monotonic() - t0 >= time_limit:
         return "time limit"
     if run.stop_requested.is_set():
@@ -82,6 +88,11 @@ def _why_end(run: BusRun, options: RunOptions, t0: float, time_limit: float | No
     ended = ends.check(list(run.exits))
     if ended is not None:
         return ended.reason
+    ending = {m.name for m in run.spec.modules if m.on_crash == "end_run"}
+    crash = next((e for e in run.crashed() if e.module in ending), None)
+    if crash is not None:
+        # The verdict is decided (Abort at least); going on would only wait for a time limit or a Ctrl-C.
+        return f"{crash.describe()} (on_crash: end_run)"
     if options.launch and run.launcher is not None and not run.alive():
         return "all modules exited"
     if stop_when is not None:

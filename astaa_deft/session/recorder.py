@@ -35,6 +35,7 @@ from ..codecs import get_codec
 from ..codecs.base import Codec, DecodeError
 from ..codecs.rmw_attachment import parse_attachment
 from ..log import layout, records
+from ..log.viewable import ViewableTwins
 from ..log.writer import LogWriter
 from ..spec_loader import load_spec_text
 
@@ -44,6 +45,7 @@ except ImportError:  # pragma: no cover - a declared dependency; the stdlib alon
     _orjson = None  # type: ignore[assignment]
 
 _STOP = object()
+CAUGHT_UP = "caught up"  # stdout line: the run_stopped event arrived, so did every message before it
 SHUTDOWN_LIMIT_SECONDS = 20.0
 
 
@@ -61,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="a channel the proxy may alter: record what it delivered, and the originals")
     args = ap.parse_args(argv)
 
+    tool_pid = os.getppid()  # if this changes, the tool died (and its death signal is what stops us)
     stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, _frame: stopping.append(signum))
@@ -103,9 +106,15 @@ def main(argv: list[str] | None = None) -> int:
             subscribers.append(session.declare_subscriber(key_expr, on_sample))
 
     mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
+    twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
 
     def on_tool_event(sample: zenoh.Sample) -> None:
-        q.put((time.time_ns(), writer.events_channel, None, None, sample.payload.to_bytes(), None))
+        data = sample.payload.to_bytes()
+        q.put((time.time_ns(), writer.events_channel, None, None, data, None))
+        if b'"run_stopped"' in data:
+            # Everything the tool forwarded before this event has reached us (one link, in order):
+            # the tool may stop us now without losing a backlog.
+            _report(CAUGHT_UP)
 
     def on_undeclared(sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)[len(topology.UNDECLARED_PREFIX) + 1:]
@@ -115,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     subscribers.append(session.declare_subscriber(topology.EVENTS_KEY, on_tool_event))
     subscribers.append(session.declare_subscriber(f"{topology.UNDECLARED_PREFIX}/**", on_undeclared))
 
-    write_thread = threading.Thread(target=_drain, args=(q, writer, counts, mutations_cid), daemon=True)
+    write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, writer, counts, mutations_cid, twins),
+                                    daemon=True)
     write_thread.start()
     print("ready", flush=True)
 
@@ -129,13 +139,38 @@ def main(argv: list[str] | None = None) -> int:
         sub.undeclare()
     q.put(_STOP)
     write_thread.join()
+    if os.getppid() != tool_pid:
+        writer.record(records.RunEnd(time.time_ns(), layout.TOOL_LOST))
     writer.finish()
-    print(json.dumps({"recorded": counts}), flush=True)
-    session.close()
+    _report(json.dumps({"recorded": counts}))
+    # No session.close(): the log is finished, and closing a session whose router is gone (the tool
+    # killed, or the bus router) waits for Zenoh's timeouts; exiting drops the connection just as well.
     os._exit(0)  # the shutdown timer is a non-daemon thread
 
 
-def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int) -> None:
+def _report(line: str) -> None:
+    """One line to the tool; if the tool is gone (its end of the pipe closed) there is no one to tell."""
+    try:
+        print(line, flush=True)
+    except (BrokenPipeError, OSError):
+        pass
+
+
+def _drain_or_exit(out: Path, *args) -> None:
+    """Write until told to stop; if the log cannot be written (disk full, file size limit), say so and exit 4.
+
+    The tool sees its recorder gone and withholds the verdict; every chunk
+    written before the failure stays readable.
+    """
+    try:
+        _drain(*args)
+    except OSError as exc:
+        print(f"recorder: cannot write the log {out}: {exc.strerror or exc}", file=sys.stderr, flush=True)
+        os._exit(4)
+
+
+def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int,
+           twins: ViewableTwins) -> None:
     """Write what the callbacks queued, in arrival order; the common case (a declared channel) first and short."""
     undeclared_ids: dict[str, int] = {}
     message, get = writer.message, q.get
@@ -151,12 +186,14 @@ def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mu
             if codec is None:  # the tool's own event
                 continue
             counts[name] += 1
+            if codec.name == "json":
+                twins.add(name, log_time, data, publish_time)  # a NaN on the wire: viewable too
             reason = undecodable(codec, data)
             if reason is not None:
                 writer.record(records.FlagRecord(log_time, name, seq, reason, len(data)),
                               channel_id=writer.flags_channel)
         elif cid[0] == "intercepted":
-            _write_batch(writer, cid[1], cid[2], mutations_cid, codec, name, data, counts, log_time)
+            _write_batch(writer, cid[1], cid[2], mutations_cid, codec, name, data, counts, log_time, twins)
         else:  # an undeclared key the proxy forwarded
             _, key, encoding = cid
             if key not in undeclared_ids:
@@ -191,7 +228,7 @@ def undecodable(codec: Codec, data: bytes) -> str | None:
 
 
 def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, codec, name: str,
-                 data: bytes, counts: dict[str, int], received_ns: int) -> None:
+                 data: bytes, counts: dict[str, int], received_ns: int, twins: ViewableTwins) -> None:
     """The deliveries of one intercepted channel the proxy sent together (see ``topology.pack_batch``).
 
     Each is logged at the time the proxy delivered it, which is when the
@@ -207,9 +244,13 @@ def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: 
             if _write_intercepted(writer, cid, original_cid, mutations_cid, record, time_ns, payload, time_ns,
                                   name=name):
                 counts[name] += 1
+                if codec.name == "json":
+                    twins.add(name, time_ns, payload, time_ns)  # a NaN mutation: viewable too
             continue
         seq = writer.message(cid, time_ns, payload, time_ns)
         counts[name] += 1
+        if codec.name == "json":
+            twins.add(name, time_ns, payload, time_ns)
         reason = undecodable(codec, payload)
         if reason is not None:
             writer.record(records.FlagRecord(time_ns, name, seq, reason, len(payload)),

@@ -90,6 +90,9 @@ class Module:
     env: Mapping[str, str] = field(default_factory=dict)
     cwd: Path | None = None
     ready: Readiness = Readiness(delay=0.0)
+    # What an abnormal exit of this module mid-run does: "end_run" (default: the run stops at once with
+    # its verdict) or "keep_running" (the others go on until the run's own end, e.g. to see what follows).
+    on_crash: str = "end_run"
 
 
 @dataclass(frozen=True)
