@@ -34,7 +34,7 @@ from ..log import records as log_records
 from ..log.reader import LoggedMessage
 from ..log.writer import LogWriter
 from ..deft.invariant_oracle import oracle_entry
-from .deft_tester import Frame, ReplayModel
+from .replay_model import Frame, ReplayModel
 from .stages import Minimisation
 
 MINIMAL_XML = "minimal.xml"

@@ -29,9 +29,10 @@ from ..monitor import check_log, with_typed_invariants
 from ..monitor.verdict import IMPLICIT
 from ..spec.model import Spec
 from .ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
-from .deft_tester import DeftTester, Job, ReplayModel, replayable
 from .live_tester import LiveTester
 from .mutations import FieldSelection, Mutation, run_start_ns
+from .replay_model import Job, ReplayModel, replayable
+from .replay_tester import DeftTester
 
 
 @dataclass(frozen=True)
