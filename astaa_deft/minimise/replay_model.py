@@ -36,12 +36,14 @@ import copy
 import json
 import pickle
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before
+from ..deft.planner_section import planner_of
 from ..deft.replay import make_planner
 from ..errors import InputError, Problem
 from ..log import layout
@@ -159,7 +161,7 @@ class ReplayModel:
         if why_not:
             raise InputError(Problem(setup.log_path, None, None, f"no planner replay: {why_not}", "use --live-only"))
         self.spec = spec
-        self.cfg = spec.planner
+        self.cfg = planner_of(spec)
         self.params = {**spec.params, **run_params(log)}
         invariant = next(i for i in spec.invariants if i.name == setup.invariant)
         self.judged = replace(spec, invariants=(invariant,))
@@ -282,8 +284,9 @@ class ReplayModel:
         state = self.snapshots[s]
         planner.restore(pickle.loads(state) if self._pickled else copy.deepcopy(state))
         for i in range(s, k):  # only when snapshots are sparser than frames
-            if self.base_frames[i] is not None:
-                planner.step(self.frame_message(self.base_frames[i]))
+            frame = self.base_frames[i]
+            if frame is not None:
+                planner.step(self.frame_message(frame))
         return planner
 
     def _converged(self, planner, k: int) -> bool:
@@ -310,7 +313,7 @@ class ReplayModel:
         frames = self.frames(kept)
         monitors = self._monitors()
         if job.frames is not None:
-            chosen = [frames[i] for i in job.frames if i < len(frames) and frames[i] is not None]
+            chosen = [frame for i in job.frames if i < len(frames) and (frame := frames[i]) is not None]
             return self._judge(self.fresh_planner(), chosen, monitors)
         planner = None  # None: in step with the baseline, whose outputs are known
         try:
@@ -344,7 +347,7 @@ class ReplayModel:
     def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, Any, str | None]]:
         """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
         planner = self.fresh_planner()
-        out = []
+        out: list[tuple[Frame, Any, str | None]] = []
         try:
             for frame in frames:
                 try:

@@ -18,13 +18,14 @@ records until told to stop.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import signal
 import subprocess
 import sys
 import threading
-from typing import Sequence
+from collections.abc import Sequence
 
 from ..bus.processes import die_with_parent, stop_process
 from ..errors import InputError, Problem
@@ -109,10 +110,8 @@ class _Worker:
         self._close()
 
     def stop(self) -> None:
-        try:
+        with contextlib.suppress(OSError, ValueError):
             self.jobs.send(None)
-        except (OSError, ValueError):
-            pass
         try:
             self.process.wait(timeout=5)
         except subprocess.TimeoutExpired:
@@ -121,10 +120,8 @@ class _Worker:
 
     def _close(self) -> None:
         for conn in (self.jobs, self.answers):
-            try:
+            with contextlib.suppress(OSError):
                 conn.close()
-            except OSError:
-                pass
 
 
 class ReplayPool:
@@ -139,7 +136,7 @@ class ReplayPool:
 
     def __init__(self, setup: ReplaySetup, workers: int = 2, timeout: float | None = None):
         self.setup = setup
-        self._idle: "queue.Queue[_Worker]" = queue.Queue()
+        self._idle: queue.Queue[_Worker] = queue.Queue()
         self._all: list[_Worker] = []
         self._lock = threading.Lock()
         self.timeouts = 0

@@ -12,8 +12,9 @@ from __future__ import annotations
 import base64
 import copy
 import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 from ...codecs import Codec
 from ...errors import AstaaDeftError, did_you_mean

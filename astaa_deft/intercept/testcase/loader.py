@@ -17,9 +17,9 @@ Gates 1-3 are the file format (:mod:`.xml_format`); gate 4 builds the model
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Sequence
 
 from lxml import etree
 
@@ -29,7 +29,16 @@ from ..actions import ACTIONS
 from ..actions.base import decimal_text
 from ..dictionary import Dictionary, load_dictionary
 from .model import Policy, Selection, TestCase, Window
-from .xml_format import MAX_FILE_BYTES, Checker, parse_xml, safe_text, validate_schema
+from .xml_format import (
+    MAX_FILE_BYTES,
+    Checker,
+    parse_xml,
+    required,
+    required_child,
+    safe_text,
+    source_line,
+    validate_schema,
+)
 
 
 def load_testcase(path: Path | str, spec: Spec | None = None, dictionary: Dictionary | None = None) -> TestCase:
@@ -70,9 +79,9 @@ def _default_dictionary() -> Dictionary:
 # ---------------------------------------------------------------- building the model
 
 def _build(root: etree._Element, checker: Checker) -> TestCase:
-    description = root.find("description")
+    description = required_child(root, "description")
     policies = tuple(_policy(element, checker) for element in root.iterfind("policy"))
-    return TestCase(id=root.get("id"), seed=int(root.get("seed")),
+    return TestCase(id=required(root, "id"), seed=int(required(root, "seed")),
                     description=(description.text or "").strip(), policies=policies, source=checker.name)
 
 
@@ -82,13 +91,13 @@ def _policy(element: etree._Element, checker: Checker) -> Policy:
     action = ACTIONS[action_element.tag].from_xml(action_element, action_checker)
     type_element = element.find("type")
     policy = Policy(
-        id=element.get("id"), action=action,
+        id=required(element, "id"), action=action,
         channels=tuple(_text(child) for child in element.iterfind("channel")),
         message_type=_text(type_element) if type_element is not None else None,
         consumers=tuple(_text(child) for child in element.iterfind("consumer")),
         window=_window(element.find("window"), checker),
         selection=_selection(element.find("select")),
-        line=element.sourceline)
+        line=source_line(element))
     channels = _check_targets(policy, element, checker)
     action.check(policy, channels, action_checker)
     return policy
@@ -102,14 +111,15 @@ def _window(element: etree._Element | None, checker: Checker) -> Window:
     if element is None:
         return Window()
     start = float(element.get("from", "0"))
-    end = float(element.get("to")) if element.get("to") is not None else None
+    to = element.get("to")
+    end = float(to) if to is not None else None
     if end is not None and end <= start:
         checker.report(element, f"the window ends ({decimal_text(end)} s) before it starts ({decimal_text(start)} s)",
                        "make 'to' larger than 'from'", attribute="to")
     after = element.find("after")
     if after is None:
         return Window(start, end)
-    return Window(start, end, after.get("channel"), int(after.get("message")))
+    return Window(start, end, required(after, "channel"), int(required(after, "message")))
 
 
 def _selection(element: etree._Element | None) -> Selection:

@@ -12,12 +12,14 @@ actions report through too), with a fix.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
+from typing import Protocol, cast
 
 from lxml import etree
 
-from ...errors import InputError, Problem
+from ...errors import AstaaDeftError, InputError, Problem
 from ...spec.model import Spec
 from ..actions.base import decimal_text
 from ..dictionary import Dictionary
@@ -111,11 +113,19 @@ _POLICY_ORDER = ("a policy holds, in this order: <channel> (one or more) or <typ
                  f"<window>?, <select>?, then exactly one action; see {DOCS}")
 
 
+class _SchemaError(Protocol):
+    """An entry of lxml's error log (lxml-stubs declare the log, not its entries)."""
+
+    message: str
+    path: str | None
+    line: int
+
+
 def validate_schema(root: etree._Element, checker: Checker) -> None:
     schema = _schema()
     if schema.validate(root.getroottree()):
         return
-    for entry in schema.error_log:
+    for entry in cast("Iterable[_SchemaError]", schema.error_log):
         message = entry.message
         attribute = re.search(r"attribute '([^']+)'", message)
         element = _element_at(root, entry.path)
@@ -134,7 +144,7 @@ def _element_at(root: etree._Element, path: str | None) -> etree._Element | None
         found = root.getroottree().xpath(path)
     except etree.XPathError:
         return None
-    return found[0] if found and isinstance(found[0], etree._Element) else None
+    return found[0] if isinstance(found, list) and found and isinstance(found[0], etree._Element) else None
 
 
 def _schema_fix(message: str, attribute: str | None, in_policy: bool) -> str:
@@ -187,7 +197,7 @@ class Checker:
             raise InputError(sorted(unique, key=lambda p: (p.line or 0, p.column or 0)))
 
     def locate(self, element: etree._Element, attribute: str | None = None, offset: int = 0) -> tuple[int, int]:
-        line = element.sourceline or 1
+        line = source_line(element) or 1
         limit = self._line_ends[min(line, len(self._line_ends)) - 1]
         tag = etree.QName(element).localname
         start = self._tag_start(f"{element.prefix}:{tag}" if element.prefix else tag, limit)
@@ -214,6 +224,31 @@ class Checker:
         for match in pattern.finditer(self.text, 0, min(limit + 1, len(self.text))):
             start = match.start()
         return start
+
+
+def source_line(element: etree._Element) -> int | None:
+    """The line an element's start tag ends on (lxml-stubs leave ``sourceline`` untyped)."""
+    return cast("int | None", element.sourceline)
+
+
+class SchemaMismatch(AstaaDeftError):
+    """The model is built from something the XSD does not guarantee: a bug here, never bad input."""
+
+
+def required(element: etree._Element, attribute: str) -> str:
+    """An attribute the XSD requires: present, as the schema is checked before the model is built."""
+    value = element.get(attribute)
+    if value is None:
+        raise SchemaMismatch(f"<{element.tag}> has no '{attribute}', which testcase.xsd requires")
+    return value
+
+
+def required_child(element: etree._Element, tag: str) -> etree._Element:
+    """A child element the XSD requires (see :func:`required`)."""
+    child = element.find(tag)
+    if child is None:
+        raise SchemaMismatch(f"<{element.tag}> has no <{tag}>, which testcase.xsd requires")
+    return child
 
 
 def _line_col(text: str, position: int) -> tuple[int, int]:
