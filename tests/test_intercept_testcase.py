@@ -22,8 +22,9 @@ from astaa_deft.intercept.actions.interleave import Interleave
 from astaa_deft.intercept.actions.reorder import Reorder
 from astaa_deft.intercept.actions.set import Assignment, Set
 from astaa_deft.intercept.testcase import (
-    SCHEMA_PATH, Policy, Selection, TestCase, Window, _hardened_parser, _parse_xml, load_testcase, parse_testcase,
+    SCHEMA_PATH, Policy, Selection, TestCase, Window, load_testcase, parse_testcase,
 )
+from astaa_deft.intercept.testcase.xml_format import hardened_parser, parse_xml
 from astaa_deft.spec_loader import load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -175,7 +176,7 @@ def test_the_parser_itself_is_hardened(secret_file, listener):
     port = listener.getsockname()[1]
     for what, document in _hostile_documents(secret_file, port).items():
         try:
-            root = etree.fromstring(document.encode(), _hardened_parser())
+            root = etree.fromstring(document.encode(), hardened_parser())
         except etree.XMLSyntaxError:
             continue  # refusing is fine too
         assert SECRET not in etree.tostring(root, encoding="unicode"), what
@@ -189,16 +190,16 @@ def test_billion_laughs_is_refused_quickly():
     # And the hardened parser alone does not expand it either.
     body = laughs.replace(b"<testcase", b"<!-- -->\n<testcase")
     try:
-        root = etree.fromstring(body, _hardened_parser())
+        root = etree.fromstring(body, hardened_parser())
         assert len(etree.tostring(root)) < 10_000
     except etree.XMLSyntaxError:
         pass
 
 
 def test_doctype_slipping_past_the_text_check_is_still_refused():
-    """_parse_xml refuses any DOCTYPE the parser saw (defence in depth)."""
+    """parse_xml refuses any DOCTYPE the parser saw (defence in depth)."""
     with pytest.raises(InputError, match="DOCTYPE"):
-        _parse_xml(b'<!DOCTYPE testcase><testcase id="t" seed="1"/>', "x")
+        parse_xml(b'<!DOCTYPE testcase><testcase id="t" seed="1"/>', "x")
 
 
 def test_utf16_and_invalid_utf8_are_refused():

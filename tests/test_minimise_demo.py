@@ -32,7 +32,8 @@ from astaa_deft.intercept import load_interceptor, load_testcase
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.deft.invariant_oracle import check_invariant_oracle
-from astaa_deft.minimise.deft_tester import Job, ReplayPool, ReplaySetup
+from astaa_deft.minimise.replay_model import Job, ReplaySetup
+from astaa_deft.minimise.replay_pool import ReplayPool
 from astaa_deft.minimise.mutations import ReceivedStreams, read_mutations, sent_stream
 from astaa_deft.monitor import check_log
 from astaa_deft.spec_loader import load_spec

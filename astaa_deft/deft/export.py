@@ -10,12 +10,14 @@ plugin in `astaa_deft.deft.pytest_plugin`; the original log is not needed.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 from ..log.writer import LogWriter
 from ..spec.model import Spec
 from .extract import ExtractedFrame
+from .planner_section import planner_of
 
 MANIFEST = "deft.json"
 FRAMES = "frames.mcap"
@@ -37,7 +39,7 @@ VERSION = 1
 def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[str, str], out_dir: Path,
                  oracles: Sequence[Mapping[str, Any]] = ()) -> Path:
     out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = spec.planner
+    cfg = planner_of(spec)
     writer = LogWriter(out_dir / FRAMES, spec)
     channel_ids = {name: writer.bus_channel(spec.channel(name)) for name in list(cfg.inputs) + [cfg.output]}
     written: dict[tuple[str, int, bytes], int] = {}

@@ -5,8 +5,10 @@ from __future__ import annotations
 import copy
 import json
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from itertools import pairwise
+from typing import Any
 
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
@@ -14,8 +16,9 @@ from ..errors import InputError, Problem
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 from ..spec.planner import PlannerSpec
-from .frames import Stream, candidates
 from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
+from .frames import Stream, candidates
+from .planner_section import planner_of
 from .replay import ReplayPlanner, trajectory_points
 from .validator import Comparison, compare
 
@@ -79,7 +82,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
 
 def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
     """The time the recorded planner took for this output: the gap since its previous one (or the median)."""
-    gaps = sorted(b.log_time - a.log_time for a, b in zip(outputs, outputs[1:]))
+    gaps = sorted(b.log_time - a.log_time for a, b in pairwise(outputs))
     median = gaps[len(gaps) // 2] * 1e-9 if gaps else 0.0
     if index == 0:
         return median
@@ -88,7 +91,7 @@ def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
 
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Callable[[int, int], None],
              search: ForkedSearch | None) -> Extraction:
-    cfg: PlannerSpec = spec.planner
+    cfg = planner_of(spec)
     streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
     outputs = streams_msgs.pop(cfg.output)
     streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
@@ -257,7 +260,7 @@ def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "deb
     """
     from ..fields import get
 
-    codec = get_codec(spec.channel(spec.planner.output).encoding)
+    codec = get_codec(spec.channel(planner_of(spec).output).encoding)
     exact = checked = 0
     for f in extraction.frames:
         try:

@@ -26,6 +26,7 @@ time) is stopped and counts as not reproduced.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import pickle
@@ -33,8 +34,9 @@ import select
 import signal
 import struct
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<Q")
@@ -86,6 +88,9 @@ class Tried:
     index: int
     result: Any  # whatever judge() returned, or None if the child died or ran out of time
     timed_out: bool = False
+    # The child that reported, while it waits for the verdict (None: it died or ran out of time).
+    pid: int | None = None
+    go_fd: int | None = None  # the pipe its verdict goes down: b"1" carry on as the runner, b"0" exit
 
 
 class ForkedSearch:
@@ -120,7 +125,7 @@ class ForkedSearch:
             winner = self._decide(done, count, next_index, running, accepted, closeness)
         if winner is None:
             winner = self._decide(done, count, count, {}, accepted, closeness, final=True)
-        for index, (pid, result_fd, go_fd, _) in running.items():  # still running: not needed
+        for pid, result_fd, go_fd, _ in running.values():  # still running: not needed
             os.kill(pid, signal.SIGKILL)
             os.close(result_fd)
             os.close(go_fd)
@@ -147,7 +152,7 @@ class ForkedSearch:
                 os.close(sibling_result)
                 os.close(sibling_go)
             for tried in done.values():
-                if getattr(tried, "go_fd", None) is not None:
+                if tried.go_fd is not None:
                     os.close(tried.go_fd)
             try:
                 result = run(index)
@@ -183,8 +188,7 @@ class ForkedSearch:
             except (EOFError, pickle.UnpicklingError):
                 result = None
             os.close(result_fd)
-            done[index] = Tried(index, result)
-            done[index].pid, done[index].go_fd = pid, go_fd  # type: ignore[attr-defined]
+            done[index] = Tried(index, result, pid=pid, go_fd=go_fd)
         now = time.monotonic()
         for index, (pid, result_fd, go_fd, started) in list(running.items()):
             if now - started >= limit_s:
@@ -217,14 +221,12 @@ class ForkedSearch:
 
     @staticmethod
     def _release(tried: Tried, go: bool) -> None:
-        pid = getattr(tried, "pid", None)
-        if pid is None:
+        pid, go_fd = tried.pid, tried.go_fd
+        if pid is None or go_fd is None:
             return
-        try:
-            os.write(tried.go_fd, b"1" if go else b"0")  # type: ignore[attr-defined]
-        except OSError:
-            pass
-        os.close(tried.go_fd)  # type: ignore[attr-defined]
+        with contextlib.suppress(OSError):
+            os.write(go_fd, b"1" if go else b"0")
+        os.close(go_fd)
         if not go:
             os.waitpid(pid, 0)
 
@@ -239,10 +241,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     supervisor = os.fork()
     if supervisor == 0:  # the supervisor: reap every descendant until none is left
         os.close(read_fd)
-        try:
+        with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
-        except (OSError, AttributeError):
-            pass
         runner = os.fork()
         if runner == 0:
             code = 0

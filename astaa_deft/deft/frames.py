@@ -23,8 +23,8 @@ Everything is bisection over sorted arrays: a frame costs microseconds.
 from __future__ import annotations
 
 from bisect import bisect_right
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 
 @dataclass(frozen=True)

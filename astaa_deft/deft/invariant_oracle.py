@@ -7,10 +7,12 @@ suite's manifest (:func:`oracle_entry`); the pytest plugin calls
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any, Mapping
+from typing import Any
 
 from ..monitor import MonitorSet, with_typed_invariants
+from .planner_section import planner_of
 
 ORACLE_KIND = "invariant"
 
@@ -32,9 +34,9 @@ def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
     if invariant is None:
         return f"the suite's spec has no invariant '{entry['invariant']}'"
     monitors = MonitorSet(replace(spec, invariants=(invariant,)), int(entry.get("start_ns", 0)))
-    output = spec.planner.output
+    output = planner_of(spec).output
     last = int(entry.get("start_ns", 0))
-    for number, (frame, result) in enumerate(zip(suite.frames, suite.results()), start=1):
+    for number, (frame, result) in enumerate(zip(suite.frames, suite.results(), strict=False), start=1):
         if result.error is not None:
             continue
         last = int(frame["output_time_ns"])

@@ -9,7 +9,8 @@ passes once it does not.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
@@ -18,6 +19,7 @@ from ..geometry import Box, interpolate_pose, overlap
 from ..spec.model import Spec
 from ..spec.planner import CollisionOracle, TrajectoryLayout
 from .extract import Extraction
+from .planner_section import planner_of
 from .replay import trajectory_points
 
 Pose = tuple[float, float, float, float]  # t, x, y, heading
@@ -57,7 +59,7 @@ def first_collision(plan: Sequence[Pose], obstacles_msg: Mapping[str, Any] | Non
 def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Sequence[int],
                    window_s: float = 5.0) -> list[dict]:
     """Oracle tests for frames whose recorded plan ran into a predicted obstacle shortly before a collision."""
-    cfg = spec.planner
+    cfg = planner_of(spec)
     oracle: CollisionOracle | None = cfg.collision
     if oracle is None or not collision_times_ns:
         return []

@@ -8,10 +8,15 @@ recorded one.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import pytest
 
 from ..errors import AstaaDeftError
 from .export import MANIFEST
+
+if TYPE_CHECKING:
+    from .suite import Suite
 
 
 def pytest_collect_file(file_path, parent):
@@ -24,11 +29,11 @@ class DeftSuiteFile(pytest.File):
     def collect(self):
         from .suite import Suite
 
-        self.suite = Suite(self.path.parent)
-        for position, entry in enumerate(self.suite.frames):
-            yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", position=position)
-        for n, oracle in enumerate(self.suite.manifest.get("oracles", [])):
-            yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", oracle=oracle)
+        suite = Suite(self.path.parent)
+        for position, entry in enumerate(suite.frames):
+            yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", suite=suite, position=position)
+        for n, oracle in enumerate(suite.manifest.get("oracles", [])):
+            yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite, oracle=oracle)
 
 
 class FrameMismatch(AstaaDeftError):
@@ -36,12 +41,13 @@ class FrameMismatch(AstaaDeftError):
 
 
 class FrameTest(pytest.Item):
-    def __init__(self, *, position: int, **kwargs):
+    def __init__(self, *, suite: Suite, position: int, **kwargs):
         super().__init__(**kwargs)
+        self.suite = suite  # shared by the file's tests: the frames are replayed once, in order
         self.position = position
 
     def runtest(self) -> None:
-        suite = self.parent.suite
+        suite = self.suite
         result = suite.results()[self.position]
         if result.error or not result.comparison.within(suite.threshold):
             raise FrameMismatch(result)
@@ -54,13 +60,14 @@ class FrameTest(pytest.Item):
         if r.error:
             lines.append(f"  the planner raised {r.error}")
         c = r.comparison
-        lines.append(f"  distance {c.distance:.6g} m (threshold {self.parent.suite.threshold:g} m), "
+        lines.append(f"  distance {c.distance:.6g} m (threshold {self.suite.threshold:g} m), "
                      f"largest point error {c.max_error:.6g} m over {c.points} points ({c.how})")
         lines.append(f"  {'t':>10} {'recorded x,y':>24} {'replayed x,y':>24}")
         for i in range(min(6, max(len(r.expected), len(r.replayed)))):
             e = r.expected[i] if i < len(r.expected) else None
             p = r.replayed[i] if i < len(r.replayed) else None
-            t = (e or p)[2]
+            point = e if e is not None else p
+            t = point[2] if point is not None else 0.0  # one of the two exists below max(len, len)
             fmt = lambda q: f"{q[0]:11.4f},{q[1]:11.4f}" if q else f"{'—':>23}"  # noqa: E731
             lines.append(f"  {t:10.3f} {fmt(e):>24} {fmt(p):>24}")
         return "\n".join(lines)
@@ -74,14 +81,15 @@ class OracleFailure(AstaaDeftError):
 
 
 class OracleTest(pytest.Item):
-    def __init__(self, *, oracle: dict, **kwargs):
+    def __init__(self, *, suite: Suite, oracle: dict, **kwargs):
         super().__init__(**kwargs)
+        self.suite = suite
         self.oracle = oracle
 
     def runtest(self) -> None:
         from .oracle import check_oracle
 
-        problem = check_oracle(self.parent.suite, self.oracle)
+        problem = check_oracle(self.suite, self.oracle)
         if problem:
             raise OracleFailure(problem)
 

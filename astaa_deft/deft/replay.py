@@ -8,17 +8,18 @@ what lets extraction try several candidate frames from the same state.
 from __future__ import annotations
 
 import copy
-import statistics
-from collections import deque
 import importlib
 import json
 import queue
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections import deque
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping, Protocol
+from typing import Any, Literal, Protocol, overload
 
 from ..bus import zenoh_config as zc
 from ..bus.processes import stop_process, tail
@@ -26,6 +27,7 @@ from ..errors import InputError, Problem
 from ..fields import get
 from ..spec.model import Spec
 from ..spec.planner import PlannerSpec, TrajectoryLayout, resolve_args
+from .planner_section import planner_of
 from .validator import Point
 
 OUTPUT_TIMEOUT = 10.0
@@ -118,7 +120,7 @@ class LockstepPlanner:
                   "spec_dir": str(spec.path.parent if spec.path else Path.cwd())}
         argv = [part.format_map(values) for part in planner.command]
         self.log_path = run_dir / "planner.log"
-        self.outputs: "queue.Queue[bytes]" = queue.Queue()
+        self.outputs: queue.Queue[bytes] = queue.Queue()
         out_key = spec.channel(planner.output).key
         self._sub = self.session.declare_subscriber(out_key, lambda s: self.outputs.put(s.payload.to_bytes()))
         self._pubs = {name: self.session.declare_publisher(spec.channel(name).key,
@@ -137,7 +139,8 @@ class LockstepPlanner:
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 raise InputError(f"the planner process exited while starting:\n{tail(self.log_path)}")
-            if trigger_pub.matching_status.matching:
+            # zenoh's stub types Publisher.matching_status as bool; at run time it is a MatchingStatus.
+            if trigger_pub.matching_status.matching:  # type: ignore[attr-defined]
                 time.sleep(0.3)  # its other subscriptions follow the first within moments
                 return
             time.sleep(0.05)
@@ -179,7 +182,7 @@ class LockstepPlanner:
 
 
 def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False) -> ReplayPlanner:
-    planner: PlannerSpec = spec.planner
+    planner = planner_of(spec)
     if planner.factory and not (prefer_process and planner.command):
         return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
                                 spec.path.parent.resolve() if spec.path else None)
@@ -198,6 +201,16 @@ def _getter(path: str):
         return found[0][1]
 
     return slow
+
+
+@overload
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+                      with_heading: Literal[False] = False) -> list[Point]: ...
+
+
+@overload
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+                      with_heading: Literal[True]) -> list[tuple[float, float, float, float]]: ...
 
 
 def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,

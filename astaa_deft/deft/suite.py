@@ -9,9 +9,10 @@ from typing import Any
 
 from ..codecs import get_codec
 from ..log.reader import read_log
-from ..spec_loader import load_spec_text
 from ..spec.model import Spec
+from ..spec_loader import load_spec_text
 from .export import FRAMES, MANIFEST
+from .planner_section import planner_of
 from .replay import make_planner, trajectory_points
 from .validator import Comparison, Point, compare
 
@@ -44,7 +45,7 @@ class Suite:
         """Replay every frame once, in order (the planner keeps state across frames)."""
         if self._results is not None:
             return self._results
-        cfg = self.spec.planner
+        cfg = planner_of(self.spec)
         by_channel = self._messages()
         planner = make_planner(self.spec, self.manifest["params"])
         results = []
@@ -68,7 +69,7 @@ class Suite:
     def _messages(self) -> dict[str, list[Any]]:
         if self._by_channel is None:
             log = read_log(self.directory / FRAMES)
-            cfg = self.spec.planner
+            cfg = planner_of(self.spec)
             self._by_channel = {}
             for name in list(cfg.inputs) + [cfg.output]:
                 codec = get_codec(self.spec.channel(name).encoding)

@@ -16,8 +16,8 @@ single point error. Edge cases are decided here, once:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -19,13 +19,15 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from collections.abc import Mapping
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from ..codecs import get_codec
 from ..deft.export import export_suite
 from ..deft.extract import ExtractedFrame
+from ..deft.invariant_oracle import oracle_entry
 from ..deft.validator import Comparison
 from ..errors import InputError, Problem
 from ..intercept.testcase import TestCase, load_testcase
@@ -33,8 +35,7 @@ from ..log import layout
 from ..log import records as log_records
 from ..log.reader import LoggedMessage
 from ..log.writer import LogWriter
-from ..deft.invariant_oracle import oracle_entry
-from .deft_tester import Frame, ReplayModel
+from .replay_model import Frame, ReplayModel
 from .stages import Minimisation
 
 MINIMAL_XML = "minimal.xml"
@@ -67,7 +68,7 @@ def write_testcase_file(out_dir: Path, testcase: TestCase, spec) -> Path:
 
 def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, policy_file: Path) -> Path:
     """DIR/minimal.mcap for the replay path (module doc)."""
-    spec, cfg = model.spec, model.spec.planner
+    spec, cfg = model.spec, model.cfg
     frames = _kept_frames(model, result)
     replayed = model.replay(frames)
     writer = LogWriter(path, spec)
@@ -128,10 +129,10 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
 
 def write_module_tests(directory: Path, model: ReplayModel, result: Minimisation) -> Path:
     """DIR/tests: the kept frames as a DeFT suite whose oracle fails on the culprit (module doc)."""
-    spec, cfg = model.spec, model.spec.planner
+    spec, cfg = model.spec, model.cfg
     codec = get_codec(spec.channel(cfg.output).encoding)
     out_key = spec.channel(cfg.output).key
-    extracted = []
+    extracted: list[ExtractedFrame] = []
     for frame, message, error in model.replay(_kept_frames(model, result)):
         if error is not None:
             break
@@ -150,7 +151,7 @@ def write_module_tests(directory: Path, model: ReplayModel, result: Minimisation
 
 def _kept_frames(model: ReplayModel, result: Minimisation) -> list[Frame]:
     frames = model.frames(result.kept)
-    return [frames[i] for i in result.frames if i < len(frames) and frames[i] is not None]
+    return [frame for i in result.frames if i < len(frames) and (frame := frames[i]) is not None]
 
 
 def _normal(selection, mutation):

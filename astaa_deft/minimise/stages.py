@@ -29,9 +29,10 @@ from ..monitor import check_log, with_typed_invariants
 from ..monitor.verdict import IMPLICIT
 from ..spec.model import Spec
 from .ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
-from .deft_tester import DeftTester, Job, ReplayModel, replayable
 from .live_tester import LiveTester
 from .mutations import FieldSelection, Mutation, run_start_ns
+from .replay_model import Job, ReplayModel, replayable
+from .replay_tester import DeftTester
 
 
 @dataclass(frozen=True)
@@ -77,8 +78,8 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
         raise InputError(Problem(str(log.path), None, None, "the run did not fail: no invariant broke, "
                                  "no module crashed", "minimise a log whose run failed (astaa-deft check LOG)"))
     first = found[0]
-    return Failure(first.invariant, first.kind, first.module, first.channel, ((first.time_ns or start_ns) - start_ns) / 1e9,
-                   first.detail, first.crash)
+    at_s = ((first.time_ns or start_ns) - start_ns) / 1e9
+    return Failure(first.invariant, first.kind, first.module, first.channel, at_s, first.detail, first.crash)
 
 
 def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str]:

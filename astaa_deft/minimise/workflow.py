@@ -31,7 +31,6 @@ from ..log import layout
 from ..log.reader import LogContents, read_log
 from ..monitor import with_typed_invariants
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
-from .deft_tester import DeftTester, ReplayModel, ReplayPool, default_setup, load_spec_for, run_params
 from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
 from .mutations import Mutation, read_mutations
 from .output import (
@@ -46,6 +45,9 @@ from .output import (
     write_summary,
     write_testcase_file,
 )
+from .replay_model import ReplayModel, load_spec_for, run_params
+from .replay_pool import ReplayPool
+from .replay_tester import DeftTester, default_setup
 from .restrict import restricted_testcase
 from .stages import Failure, Minimisation, choose_tester, find_failure, minimise_live, minimise_replay
 

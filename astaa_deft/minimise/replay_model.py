@@ -1,8 +1,8 @@
-"""The replay tester: does a subset of mutations still break the invariant in a planner replay?
+"""The planner replay of a recorded run, with any subset of its mutations applied.
 
 For a failing invariant that reads only the planner's output, a whole-system
 re-run is not needed: the planner is deterministic on its own (docs/deft.md).
-A test of a subset of mutations
+A test of a subset of mutations (:meth:`ReplayModel.run`)
 
 1. rebuilds the planner's input streams with those mutations applied and
    every other one reverted (:class:`~.mutations.ReceivedStreams`);
@@ -20,41 +20,30 @@ done once per process, keeping a planner snapshot every few frames. A test
 replays only where its subset makes a difference: from the first frame it
 changes until the planner is back in the baseline's state (the effect of a
 mutation usually dies out within a few frames), and stops at the first
-violation. Decoded messages are cached by origin. The answer is
-deterministic, so a subset is tested once (:class:`DeftTester` caches by
-subset, on top of ddmin's own cache).
+violation. Decoded messages are cached by origin. Frames whose inputs do not
+decode are not used: an undecodable input is dropped, as a module's
+deserialiser would.
 
-Safety. Replays run in worker processes (:class:`ReplayPool`): a planner
-that hangs is killed after a per-test timeout and the test answers
-UNRESOLVED (a hang is another failure than the invariant being minimised),
-so ddmin does not reduce towards it; a planner that raises answers
-UNRESOLVED too — the real module may never have let such an input reach the
-planner (the demo's planning module drops malformed messages before
-planning), so a replay crash says nothing about the invariant. Frames whose
-inputs do not decode are not used: an undecodable input is dropped, as a
-module's deserialiser would.
+This module runs in whichever process builds the model; the worker processes
+that run tests in isolation are :mod:`.replay_pool`, the tester ddmin calls
+is :mod:`.replay_tester`. Its records (:class:`Job`, :class:`ReplaySetup`,
+:class:`ReplayAnswer`) cross the pipes to the workers pickled.
 """
 
 from __future__ import annotations
 
 import copy
 import json
-import os
 import pickle
-import queue
-import signal
-import subprocess
-import sys
-import threading
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
-from ..bus.processes import die_with_parent, python_module, stop_process
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before
+from ..deft.planner_section import planner_of
 from ..deft.replay import make_planner
 from ..errors import InputError, Problem
 from ..log import layout
@@ -72,9 +61,6 @@ from .mutations import (
 )
 
 SNAPSHOTS = 400  # planner snapshots kept along the baseline replay (at most)
-MIN_TEST_TIMEOUT = 20.0  # s: a test that takes longer than this (and 10x the baseline) is a hang
-WORKER_START_TIMEOUT = 300.0  # s: loading the log and replaying the baseline once
-PARALLEL_PAYS_SECONDS = 0.3  # a second worker only when one replay takes at least this long
 
 
 @dataclass(frozen=True)
@@ -175,7 +161,7 @@ class ReplayModel:
         if why_not:
             raise InputError(Problem(setup.log_path, None, None, f"no planner replay: {why_not}", "use --live-only"))
         self.spec = spec
-        self.cfg = spec.planner
+        self.cfg = planner_of(spec)
         self.params = {**spec.params, **run_params(log)}
         invariant = next(i for i in spec.invariants if i.name == setup.invariant)
         self.judged = replace(spec, invariants=(invariant,))
@@ -298,8 +284,9 @@ class ReplayModel:
         state = self.snapshots[s]
         planner.restore(pickle.loads(state) if self._pickled else copy.deepcopy(state))
         for i in range(s, k):  # only when snapshots are sparser than frames
-            if self.base_frames[i] is not None:
-                planner.step(self.frame_message(self.base_frames[i]))
+            frame = self.base_frames[i]
+            if frame is not None:
+                planner.step(self.frame_message(frame))
         return planner
 
     def _converged(self, planner, k: int) -> bool:
@@ -326,7 +313,7 @@ class ReplayModel:
         frames = self.frames(kept)
         monitors = self._monitors()
         if job.frames is not None:
-            chosen = [frames[i] for i in job.frames if i < len(frames) and frames[i] is not None]
+            chosen = [frame for i in job.frames if i < len(frames) and (frame := frames[i]) is not None]
             return self._judge(self.fresh_planner(), chosen, monitors)
         planner = None  # None: in step with the baseline, whose outputs are known
         try:
@@ -360,7 +347,7 @@ class ReplayModel:
     def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, Any, str | None]]:
         """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
         planner = self.fresh_planner()
-        out = []
+        out: list[tuple[Frame, Any, str | None]] = []
         try:
             for frame in frames:
                 try:
@@ -409,220 +396,6 @@ class ReplayModel:
         if found:
             return ReplayAnswer(TestResult(Outcome.FAIL, format_violation(found[0], self.start_ns)))
         return ReplayAnswer(TestResult(Outcome.PASS))
-
-
-# ---------------------------------------------------------------- worker processes
-
-
-def _worker_main(argv: Sequence[str]) -> int:
-    """A worker process: build the model once, then answer jobs until told to stop (None).
-
-    Started as ``python -m astaa_deft.minimise.deft_tester READ_FD WRITE_FD``
-    (not through ``multiprocessing``'s spawn, which re-runs the caller's main
-    script: a benchmark or notebook without a ``__main__`` guard would fork
-    itself over and over).
-    """
-    from multiprocessing.connection import Connection
-
-    jobs, answers = Connection(int(argv[0]), writable=False), Connection(int(argv[1]), readable=False)
-    setup = jobs.recv()
-    try:
-        model = ReplayModel(setup)
-    except InputError as exc:
-        answers.send(("error", exc.problems))
-        return 2
-    except Exception as exc:  # reported by the parent as a clear error, not a traceback
-        answers.send(("error", [Problem(setup.log_path, None, None, f"the planner replay cannot start: "
-                                                                    f"{type(exc).__name__}: {exc}")]))
-        return 2
-    answers.send(("ready", model.baseline_seconds))
-    while True:
-        try:
-            job = jobs.recv()
-        except EOFError:
-            return 0
-        if job is None:
-            return 0
-        answers.send(model.run(job))
-
-
-class _Worker:
-    """One worker process of ours, and the two pipes to it."""
-
-    def __init__(self, setup: ReplaySetup):
-        from multiprocessing.connection import Connection
-
-        job_read, job_write = os.pipe()
-        answer_read, answer_write = os.pipe()
-        self.process = subprocess.Popen(
-            [*python_module("astaa_deft.minimise.deft_tester"), str(job_read), str(answer_write)],
-            pass_fds=(job_read, answer_write), stdin=subprocess.DEVNULL, start_new_session=True,
-            preexec_fn=die_with_parent)
-        os.close(job_read)
-        os.close(answer_write)
-        self.jobs = Connection(job_write, readable=False)
-        self.answers = Connection(answer_read, writable=False)
-        self.jobs.send(setup)
-        self.where = setup.log_path
-
-    def wait_ready(self, timeout: float) -> float:
-        if not self.answers.poll(timeout):
-            self.kill()
-            raise InputError(Problem(self.where, None, None, f"the planner replay did not start within {timeout:g} s",
-                                     "is the planner's baseline replay hanging?"))
-        try:
-            kind, value = self.answers.recv()
-        except EOFError:
-            self.kill()
-            raise InputError(Problem(self.where, None, None, "the planner replay's worker exited while loading the log",
-                                     "see its error output above")) from None
-        if kind == "error":
-            self.kill()
-            raise InputError(value)
-        return float(value)
-
-    def kill(self) -> None:
-        """End this worker now (a hung planner does not get to finish its frame)."""
-        stop_process(self.process, grace=0.0, sig=signal.SIGKILL)
-        self._close()
-
-    def stop(self) -> None:
-        try:
-            self.jobs.send(None)
-        except (OSError, ValueError):
-            pass
-        try:
-            self.process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            stop_process(self.process, grace=2.0)
-        self._close()
-
-    def _close(self) -> None:
-        for conn in (self.jobs, self.answers):
-            try:
-                conn.close()
-            except OSError:
-                pass
-
-
-class ReplayPool:
-    """Replays in worker processes, with a per-test timeout a hanging planner cannot escape.
-
-    Not ``concurrent.futures.ProcessPoolExecutor``: a task there cannot be
-    timed out (the hung worker keeps its slot until the pool is torn down).
-    Here each worker is a process of our own; a test that overruns its
-    timeout kills just that worker and a fresh one takes its place.
-    ``run`` is thread-safe: ddmin's threads share the workers.
-    """
-
-    def __init__(self, setup: ReplaySetup, workers: int = 2, timeout: float | None = None):
-        self.setup = setup
-        self._idle: "queue.Queue[_Worker]" = queue.Queue()
-        self._all: list[_Worker] = []
-        self._lock = threading.Lock()
-        self.timeouts = 0
-        self.workers = 0
-        try:
-            # All at once (loading and the baseline replay take seconds); the extra
-            # ones are let go if a replay turns out too short for parallel tests to pay.
-            started = [self._spawn() for _ in range(max(1, workers))]
-            self.baseline_seconds = started[0].wait_ready(WORKER_START_TIMEOUT)
-            self.timeout = timeout if timeout is not None else max(MIN_TEST_TIMEOUT, 10 * self.baseline_seconds)
-            self._idle.put(started[0])
-            self.workers = 1
-            if self.baseline_seconds >= PARALLEL_PAYS_SECONDS:
-                for worker in started[1:]:
-                    worker.wait_ready(WORKER_START_TIMEOUT)
-                    self._idle.put(worker)
-                    self.workers += 1
-            else:
-                for worker in started[1:]:
-                    self._retire(worker)
-        except BaseException:
-            self.close()
-            raise
-
-    def _retire(self, worker: _Worker) -> None:
-        worker.kill()
-        with self._lock:
-            self._all.remove(worker)
-
-    def _spawn(self) -> _Worker:
-        worker = _Worker(self.setup)
-        with self._lock:
-            self._all.append(worker)
-        return worker
-
-    def run(self, job: Job) -> ReplayAnswer:
-        worker = self._idle.get()
-        try:
-            worker.jobs.send(job)
-            if worker.answers.poll(self.timeout):
-                answer = worker.answers.recv()
-                self._idle.put(worker)
-                return answer
-            why = f"the replay took over {self.timeout:.0f} s (a hanging planner?): stopped"
-            self.timeouts += 1
-        except (EOFError, OSError) as exc:
-            why = f"the replay worker died ({type(exc).__name__})"
-        self._replace(worker)
-        return ReplayAnswer(TestResult(Outcome.UNRESOLVED, why))
-
-    def _replace(self, worker: _Worker) -> None:
-        self._retire(worker)
-        fresh = self._spawn()
-        fresh.wait_ready(WORKER_START_TIMEOUT)
-        self._idle.put(fresh)
-
-    def close(self) -> None:
-        with self._lock:
-            workers, self._all = list(self._all), []
-        for worker in workers:
-            worker.stop()
-
-    def __enter__(self) -> ReplayPool:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-class DeftTester:
-    """Jobs to answers through a pool, each distinct job run once (the replay is deterministic)."""
-
-    def __init__(self, pool: ReplayPool):
-        self.pool = pool
-        self._cache: dict[Job, ReplayAnswer] = {}
-        self._lock = threading.Lock()
-        self.runs = 0
-        self.hits = 0
-
-    def answer(self, job: Job) -> ReplayAnswer:
-        with self._lock:
-            if job in self._cache:
-                self.hits += 1
-                return self._cache[job]
-        answer = self.pool.run(job)
-        with self._lock:
-            self.runs += 1
-            if answer.result.outcome is not Outcome.UNRESOLVED or "died" not in answer.result.detail:
-                self._cache[job] = answer
-        return answer
-
-    def __call__(self, job: Job) -> TestResult:
-        return self.answer(job).result
-
-
-def default_setup(log_path: Path, spec_path: Path | None, invariant: str) -> ReplaySetup:
-    return ReplaySetup(str(log_path), str(spec_path) if spec_path is not None else None, invariant)
-
-
-if __name__ == "__main__":
-    # Run as a worker: the module's own copy under its real name, so the
-    # classes pickled back to the parent are the ones it knows.
-    from astaa_deft.minimise import deft_tester as _real
-
-    sys.exit(_real._worker_main(sys.argv[1:]))
 
 
 def _first_failure_ns(log, judged: Spec) -> int | None:

@@ -1,129 +1,33 @@
-"""ASTAA test cases: XML files of interception policies, read safely and checked.
+"""The test case file format: XML read safely, checked against the XSD, and written back.
 
-Reading a test case goes through four gates, each reporting every problem
-with file, line, column and a fix (``InputError``):
-
-1. hostile input is refused before any XML parser sees it: anything but
-   UTF-8, a DOCTYPE or ENTITY declaration (billion laughs, external
-   entities), an oversized file;
-2. lxml parses with entity resolution, DTD loading and network access off;
-3. the XSD (``astaa_deft/data/policies/testcase.xsd``) checks the shape;
-4. names, field paths and values are checked against the SUT spec (when
-   given) and the dictionary, with "did you mean" suggestions.
-
-``TestCase.to_xml()`` writes a test case back (generation, minimisation);
-reading its output gives an equal ``TestCase``.
+Reading refuses hostile input before any XML parser sees it (anything but
+UTF-8, a DOCTYPE or ENTITY declaration — billion laughs, external entities —,
+an oversized file), then lxml parses with entity resolution, DTD loading and
+network access off, and the XSD (``astaa_deft/data/policies/testcase.xsd``)
+checks the shape. Every problem is reported at its line and column in the
+source text (:class:`Checker`, which the checks of :mod:`.loader` and of the
+actions report through too), with a fix.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
-from typing import Sequence
+from typing import Protocol, cast
 
 from lxml import etree
 
-from ..errors import InputError, Problem, did_you_mean
-from ..spec.model import Channel, Spec
-from .actions import ACTIONS
-from .actions.base import ActionConfig, decimal_text
-from .dictionary import Dictionary, load_dictionary
+from ...errors import AstaaDeftError, InputError, Problem
+from ...spec.model import Spec
+from ..actions.base import decimal_text
+from ..dictionary import Dictionary
+from .model import Selection, TestCase, Window
 
-SCHEMA_PATH = Path(__file__).resolve().parent.parent / "data" / "policies" / "testcase.xsd"
+SCHEMA_PATH = Path(__file__).resolve().parent.parent.parent / "data" / "policies" / "testcase.xsd"
 MAX_FILE_BYTES = 10 * 1024 * 1024
 DOCS = "docs/policies.md"
-
-
-# ---------------------------------------------------------------- the model
-
-@dataclass(frozen=True)
-class Window:
-    """[start, end) in seconds since the run started, or since the arrival of
-    message ``anchor_message`` (1-based) on ``anchor_channel`` when given."""
-
-    start: float = 0.0
-    end: float | None = None
-    anchor_channel: str | None = None
-    anchor_message: int | None = None
-
-
-@dataclass(frozen=True)
-class Selection:
-    """Inside the window: every ``every``-th message, then each with ``probability``, at most ``limit``."""
-
-    every: int = 1
-    probability: float = 1.0
-    limit: int | None = None
-
-
-@dataclass(frozen=True)
-class Policy:
-    id: str
-    action: ActionConfig
-    channels: tuple[str, ...] = ()  # either channels...
-    message_type: str | None = None  # ...or every channel carrying this type
-    consumers: tuple[str, ...] = ()  # empty: every consumer of the channel
-    window: Window = Window()
-    selection: Selection = Selection()
-    line: int | None = field(default=None, compare=False)
-
-    def target_channels(self, spec: Spec) -> tuple[Channel, ...]:
-        if self.message_type is not None:
-            return tuple(c for c in spec.channels if c.type == self.message_type)
-        return tuple(c for c in spec.channels if c.name in self.channels)
-
-
-@dataclass(frozen=True)
-class TestCase:
-    __test__ = False  # not a pytest test class
-
-    id: str
-    seed: int
-    description: str
-    policies: tuple[Policy, ...]
-    source: str | None = field(default=None, compare=False)  # where it was read from
-
-    def to_xml(self) -> bytes:
-        return _write(self)
-
-
-# ---------------------------------------------------------------- reading
-
-def load_testcase(path: Path | str, spec: Spec | None = None, dictionary: Dictionary | None = None) -> TestCase:
-    """Read and check a test case file (see the module doc). Without ``spec``,
-    channel, consumer and field names are not checked."""
-    path = Path(path)
-    try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise _error(str(path), 1, 1, f"file larger than {MAX_FILE_BYTES // (1024 * 1024)} MB",
-                         "a test case is a few kilobytes; check the file")
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(Problem(str(path), None, None, "file not found", "check the path")) from None
-    except IsADirectoryError:
-        raise InputError(Problem(str(path), None, None, "is a directory", "give an XML test case file")) from None
-    except OSError as exc:
-        raise InputError(Problem(str(path), None, None, f"cannot read: {exc.strerror}", "")) from None
-    return parse_testcase(data, str(path), spec, dictionary)
-
-
-def parse_testcase(data: bytes, name: str = "<testcase>", spec: Spec | None = None,
-                   dictionary: Dictionary | None = None) -> TestCase:
-    text = _safe_text(data, name)
-    root = _parse_xml(data, name)
-    checker = Checker(name, text, spec, _default_dictionary() if dictionary is None else dictionary)
-    _validate_schema(root, checker)
-    checker.raise_if_problems()
-    testcase = _build(root, checker)
-    checker.raise_if_problems()
-    return testcase
-
-
-@lru_cache(maxsize=1)
-def _default_dictionary() -> Dictionary:
-    return load_dictionary()
 
 
 def _error(name: str, line: int | None, column: int | None, message: str, fix: str) -> InputError:
@@ -135,7 +39,7 @@ _ENCODING_DECL = re.compile(rb"""^<\?xml[^>]*?\bencoding\s*=\s*["']([A-Za-z0-9._
 _DANGEROUS = re.compile(r"<!\s*(DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)", re.IGNORECASE)
 
 
-def _safe_text(data: bytes, name: str) -> str:
+def safe_text(data: bytes, name: str) -> str:
     """The file as text, after refusing what could make a parser expand or fetch anything."""
     if len(data) > MAX_FILE_BYTES:
         raise _error(name, 1, 1, f"larger than {MAX_FILE_BYTES // (1024 * 1024)} MB", "check the file")
@@ -158,16 +62,16 @@ def _safe_text(data: bytes, name: str) -> str:
     return text
 
 
-def _hardened_parser() -> etree.XMLParser:
-    # Belt and braces: _safe_text already refused DTDs. No entity expansion, no
+def hardened_parser() -> etree.XMLParser:
+    # Belt and braces: safe_text already refused DTDs. No entity expansion, no
     # DTD loading, no network, default size limits (no huge_tree).
     return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, dtd_validation=False,
                            huge_tree=False, attribute_defaults=False, remove_comments=True, remove_pis=True)
 
 
-def _parse_xml(data: bytes, name: str) -> etree._Element:
+def parse_xml(data: bytes, name: str) -> etree._Element:
     try:
-        root = etree.fromstring(data, _hardened_parser())
+        root = etree.fromstring(data, hardened_parser())
     except etree.XMLSyntaxError as exc:
         line, column = exc.position if exc.position else (exc.lineno, None)
         message = re.sub(r", line \d+, column \d+$", "", exc.msg or str(exc))
@@ -181,7 +85,7 @@ def _parse_xml(data: bytes, name: str) -> etree._Element:
 
 @lru_cache(maxsize=1)
 def _schema() -> etree.XMLSchema:
-    return etree.XMLSchema(etree.parse(str(SCHEMA_PATH), _hardened_parser()))
+    return etree.XMLSchema(etree.parse(str(SCHEMA_PATH), hardened_parser()))
 
 
 # Hints for the schema's own types, keyed by the type name libxml2 quotes.
@@ -209,11 +113,19 @@ _POLICY_ORDER = ("a policy holds, in this order: <channel> (one or more) or <typ
                  f"<window>?, <select>?, then exactly one action; see {DOCS}")
 
 
-def _validate_schema(root: etree._Element, checker: Checker) -> None:
+class _SchemaError(Protocol):
+    """An entry of lxml's error log (lxml-stubs declare the log, not its entries)."""
+
+    message: str
+    path: str | None
+    line: int
+
+
+def validate_schema(root: etree._Element, checker: Checker) -> None:
     schema = _schema()
     if schema.validate(root.getroottree()):
         return
-    for entry in schema.error_log:
+    for entry in cast("Iterable[_SchemaError]", schema.error_log):
         message = entry.message
         attribute = re.search(r"attribute '([^']+)'", message)
         element = _element_at(root, entry.path)
@@ -232,7 +144,7 @@ def _element_at(root: etree._Element, path: str | None) -> etree._Element | None
         found = root.getroottree().xpath(path)
     except etree.XPathError:
         return None
-    return found[0] if found and isinstance(found[0], etree._Element) else None
+    return found[0] if isinstance(found, list) and found and isinstance(found[0], etree._Element) else None
 
 
 def _schema_fix(message: str, attribute: str | None, in_policy: bool) -> str:
@@ -285,7 +197,7 @@ class Checker:
             raise InputError(sorted(unique, key=lambda p: (p.line or 0, p.column or 0)))
 
     def locate(self, element: etree._Element, attribute: str | None = None, offset: int = 0) -> tuple[int, int]:
-        line = element.sourceline or 1
+        line = source_line(element) or 1
         limit = self._line_ends[min(line, len(self._line_ends)) - 1]
         tag = etree.QName(element).localname
         start = self._tag_start(f"{element.prefix}:{tag}" if element.prefix else tag, limit)
@@ -314,123 +226,40 @@ class Checker:
         return start
 
 
+def source_line(element: etree._Element) -> int | None:
+    """The line an element's start tag ends on (lxml-stubs leave ``sourceline`` untyped)."""
+    return cast("int | None", element.sourceline)
+
+
+class SchemaMismatch(AstaaDeftError):
+    """The model is built from something the XSD does not guarantee: a bug here, never bad input."""
+
+
+def required(element: etree._Element, attribute: str) -> str:
+    """An attribute the XSD requires: present, as the schema is checked before the model is built."""
+    value = element.get(attribute)
+    if value is None:
+        raise SchemaMismatch(f"<{element.tag}> has no '{attribute}', which testcase.xsd requires")
+    return value
+
+
+def required_child(element: etree._Element, tag: str) -> etree._Element:
+    """A child element the XSD requires (see :func:`required`)."""
+    child = element.find(tag)
+    if child is None:
+        raise SchemaMismatch(f"<{element.tag}> has no <{tag}>, which testcase.xsd requires")
+    return child
+
+
 def _line_col(text: str, position: int) -> tuple[int, int]:
     line = text.count("\n", 0, position) + 1
     return line, position - (text.rfind("\n", 0, position) + 1) + 1
 
 
-# ---------------------------------------------------------------- building the model
-
-def _build(root: etree._Element, checker: Checker) -> TestCase:
-    description = root.find("description")
-    policies = tuple(_policy(element, checker) for element in root.iterfind("policy"))
-    return TestCase(id=root.get("id"), seed=int(root.get("seed")),
-                    description=(description.text or "").strip(), policies=policies, source=checker.name)
-
-
-def _policy(element: etree._Element, checker: Checker) -> Policy:
-    action_element = next(child for child in element if child.tag in ACTIONS)
-    action_checker = ActionChecker(checker, action_element)
-    action = ACTIONS[action_element.tag].from_xml(action_element, action_checker)
-    type_element = element.find("type")
-    policy = Policy(
-        id=element.get("id"), action=action,
-        channels=tuple(_text(child) for child in element.iterfind("channel")),
-        message_type=_text(type_element) if type_element is not None else None,
-        consumers=tuple(_text(child) for child in element.iterfind("consumer")),
-        window=_window(element.find("window"), checker),
-        selection=_selection(element.find("select")),
-        line=element.sourceline)
-    channels = _check_targets(policy, element, checker)
-    action.check(policy, channels, action_checker)
-    return policy
-
-
-def _text(element: etree._Element) -> str:
-    return (element.text or "").strip()
-
-
-def _window(element: etree._Element | None, checker: Checker) -> Window:
-    if element is None:
-        return Window()
-    start = float(element.get("from", "0"))
-    end = float(element.get("to")) if element.get("to") is not None else None
-    if end is not None and end <= start:
-        checker.report(element, f"the window ends ({decimal_text(end)} s) before it starts ({decimal_text(start)} s)",
-                       "make 'to' larger than 'from'", attribute="to")
-    after = element.find("after")
-    if after is None:
-        return Window(start, end)
-    return Window(start, end, after.get("channel"), int(after.get("message")))
-
-
-def _selection(element: etree._Element | None) -> Selection:
-    if element is None:
-        return Selection()
-    limit = element.get("limit")
-    return Selection(every=int(element.get("every", "1")), probability=float(element.get("probability", "1")),
-                     limit=int(limit) if limit is not None else None)
-
-
-def _check_targets(policy: Policy, element: etree._Element, checker: Checker) -> tuple[Channel, ...]:
-    """Check the policy's channels, type, consumers and window anchor; its target channels."""
-    spec = checker.spec
-    if spec is None:
-        return ()
-    names = [c.name for c in spec.channels]
-    for child in element.iterfind("channel"):
-        if _text(child) not in names:
-            _unknown(checker, child, "channel", _text(child), names)
-    type_element = element.find("type")
-    if type_element is not None:
-        carried = sorted({c.type for c in spec.channels})
-        if policy.message_type not in spec.types:
-            _unknown(checker, type_element, "message type", policy.message_type, list(spec.types))
-        elif policy.message_type not in carried:
-            checker.report(type_element, f"no channel carries type '{policy.message_type}'",
-                           "types carried by channels: " + ", ".join(carried))
-    channels = policy.target_channels(spec)
-    consumers = sorted({m for c in channels for m in c.consumers})
-    for child in element.iterfind("consumer"):
-        if _text(child) not in consumers:
-            what = ", ".join(c.name for c in channels) or "the targeted channels"
-            hint = did_you_mean(_text(child), consumers)
-            checker.report(child, f"'{_text(child)}' does not consume {what}" + (f"; {hint}" if hint else ""),
-                           "consumers there: " + (", ".join(consumers) or "none"))
-    after = element.find("window/after")
-    if after is not None and after.get("channel") not in names:
-        _unknown(checker, after, "channel", after.get("channel"), names, attribute="channel")
-    return channels
-
-
-def _unknown(checker: Checker, element: etree._Element, what: str, name: str | None, known: Sequence[str],
-             attribute: str | None = None) -> None:
-    hint = did_you_mean(str(name), known)
-    shown = ", ".join(list(known)[:12]) + (", ..." if len(known) > 12 else "")
-    checker.report(element, f"unknown {what} '{name}'" + (f"; {hint}" if hint else ""),
-                   f"the spec's {what}s: {shown}" if known else "the spec declares none", attribute=attribute)
-
-
-class ActionChecker:
-    """What an action's ``from_xml`` and ``check`` get: the spec (None when not
-    checking names), the dictionary, its element, and ``report``, which
-    defaults to the action's element."""
-
-    def __init__(self, checker: Checker, element: etree._Element):
-        self._checker = checker
-        self.element = element
-        self.spec = checker.spec
-        self.dictionary = checker.dictionary
-
-    def report(self, element: etree._Element | None, message: str, fix: str = "", *,
-               attribute: str | None = None, offset: int = 0) -> None:
-        self._checker.report(self.element if element is None else element, message, fix,
-                             attribute=attribute, offset=offset)
-
-
 # ---------------------------------------------------------------- writing
 
-def _write(testcase: TestCase) -> bytes:
+def write_testcase(testcase: TestCase) -> bytes:
+    """The test case as an XML file (``TestCase.to_xml``); reading it back gives an equal ``TestCase``."""
     root = etree.Element("testcase", id=testcase.id, seed=str(testcase.seed))
     etree.SubElement(root, "description").text = testcase.description
     for policy in testcase.policies:
