@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..errors import InputError, Problem
+from ..errors import AstaaDeftError, InputError, Problem
 from ..intercept.dictionary import load_dictionary
 from ..spec.loader import load_spec
 from . import signature as sig
@@ -61,7 +61,7 @@ class CampaignResult:
     stopped: str  # "done", "budget", "interrupted"
 
 
-class CampaignStopped(Exception):
+class CampaignStopped(AstaaDeftError):
     """The campaign cannot go on (the SUT does not start): one message, exit 2."""
 
 
