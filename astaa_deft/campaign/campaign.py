@@ -203,6 +203,7 @@ class Campaign:
     def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
         row = self.journal.case(case_id)
         kind, xml = row["kind"], row["testcase_xml"]
+        outcome = sig.without_self_inflicted(outcome, xml, self.spec)
         new: list[PlannedCase] = []
         signature = key = bucket = None
         if outcome.failed:
