@@ -175,3 +175,23 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
         assert [b.bucket for b in journal.buckets(include_merged=False)] == ["B001", "B003", "B004"]
     finally:
         journal.close()
+
+
+def test_a_finding_on_the_channel_the_case_itself_mutates_is_not_a_failure(demo):
+    spec, _ = demo
+    xml = ('<testcase id="t" seed="1"><description>x</description><policy id="p"><channel>command</channel>'
+           '<set><field path="acceleration" value="dict:float.nan"/></set></policy></testcase>')
+    own = Finding("finite_command", "Silent", "control", "command", "acceleration nan")
+    crash = Finding("modules_alive", "Abort", "simulator", None, "exit 1")
+    only_own = CaseOutcome("done", "Silent", "Silent: finite_command", [own], margins={"finite_command": 0.0,
+                                                                                   "finite_plan": 0.3})
+    judged = sig.without_self_inflicted(only_own, xml, spec)
+    assert not judged.failed and judged.verdict == "Pass" and "finite_command" in judged.summary
+    assert judged.margins == {"finite_plan": 0.3}  # guided search: the mutation did not come closer by itself
+    both = sig.without_self_inflicted(CaseOutcome("done", "Abort", "Abort: …", [own, crash]), xml, spec)
+    assert both.failed and both.verdict == "Abort" and sig.primary(both) == crash
+    # another channel's invariant, or a clean run, is judged as the monitors said
+    other = CaseOutcome("done", "Silent", "Silent: finite_plan", [Finding("finite_plan", "Silent", "planning",
+                                                                          "trajectory", "v nan")])
+    assert sig.without_self_inflicted(other, xml, spec).failed
+    assert sig.without_self_inflicted(only_own, None, spec) is only_own

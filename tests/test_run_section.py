@@ -51,6 +51,14 @@ def _spec(tmp_path: Path, run: str, exit_code: int = -1, done_after: int = 8, ex
     return path
 
 
+def _offline(spec_path: Path, tmp_path: Path):
+    """`check` over the run's log: it must name the same verdict and findings as the online monitors."""
+    from astaa_deft.log.reader import read_log
+    from astaa_deft.monitor import check_log
+
+    return check_log(read_log(tmp_path / "run.mcap"), load_spec(spec_path))
+
+
 def _run(spec_path: Path, tmp_path: Path, time_limit: float = SAFETY_LIMIT):
     spec = load_spec(spec_path)
     options = RunOptions(record=tmp_path / "run.mcap", run_dir=tmp_path / "run", time_limit=time_limit)
@@ -85,6 +93,8 @@ def test_an_exit_code_declared_as_an_outcome_is_a_finding_with_its_crash_class(t
     [finding] = result.violations
     assert finding.invariant == "run_end:collision" and finding.severity == "critical" and finding.module == "sim"
     assert not result.crashes  # the code is an outcome, not an Abort on top of it
+    offline = _offline(spec, tmp_path)
+    assert offline.verdict.klass == "Silent" and [v.invariant for v in offline.violations] == ["run_end:collision"]
 
 
 def test_an_exit_code_the_spec_does_not_list_is_a_crash(tmp_path):
@@ -147,6 +157,8 @@ def test_no_deadline_finding_after_the_run_ended(tmp_path):
         """)
     result = _run(spec, tmp_path)
     assert result.verdict.klass == "Pass", result.verdict.summary
+    offline = _offline(spec, tmp_path)
+    assert offline.verdict.klass == "Pass" and offline.violations == [], offline.verdict.summary
 
 
 # -- bad input -----------------------------------------------------------------

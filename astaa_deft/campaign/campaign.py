@@ -211,6 +211,7 @@ class Campaign:
     def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
         row = self.journal.case(case_id)
         kind, xml = row["kind"], row["testcase_xml"]
+        outcome = sig.without_self_inflicted(outcome, xml, self.spec)
         judge = getattr(self.strategy, "judge", None)  # decictor: its oracle turns a run into a finding
         if judge is not None and kind in (MUTATED, RERUN):
             outcome = judge(case_id, xml, outcome, kind == MUTATED)

@@ -29,7 +29,7 @@ from ..spec.model import Spec
 from .order import channel_ranks, order_key
 from .monitorset import MonitorSet
 from .verdict import Verdict
-from .violation import Violation
+from .violation import RUN_END_KIND, Violation
 
 
 
@@ -86,6 +86,9 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
         if event.time_ns <= end_ns:
             _feed_side(monitors, event)
     monitors.finish(end_ns)
+    for event in events:  # the spec's run: outcome (an exit code, a channel's end): judged once, when it happened
+        if isinstance(event, rec.ViolationRecord) and event.invariant_kind == RUN_END_KIND:
+            monitors.add_finding(Violation.from_json(rec.encode(event)))
     seconds = time.perf_counter() - clock
 
     extra = [rec.encode(e) for e in events if isinstance(e, rec.OtherEvent) and e.kind == "bus_lost"]
@@ -123,9 +126,10 @@ def _start(log: LogContents, events: list[rec.Record]) -> int:
 
 
 def _end(log: LogContents, events: list[rec.Record]) -> int:
-    stopping = [e.time_ns for e in events if isinstance(e, rec.RunStopping) and e.time_ns]
-    if stopping:
-        return int(stopping[0])
+    # The run's end as the online monitors judged it: its run_end event (the shutdown that follows is not judged)
+    ended = [e.time_ns for e in events if isinstance(e, (rec.RunEnd, rec.RunStopping)) and e.time_ns]
+    if ended:
+        return int(min(ended))
     bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
     return max(bus) if bus else _start(log, events)
 

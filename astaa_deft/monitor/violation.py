@@ -18,6 +18,7 @@ from collections.abc import Mapping
 # The CRASH class a violation points at when nothing overrides it (see verdict.py).
 CRASH_CLASSES = ("Catastrophic", "Restart", "Abort", "Silent", "Hindering")
 SEVERITIES = ("low", "medium", "high", "critical")
+RUN_END_KIND = "run_end"  # a finding made by the spec's run: section (a failing exit code or end condition)
 
 # Bounds on the copy of the offending message kept in a violation: the log
 # should show the culprit, not grow by a 200-point trajectory per violation.

@@ -335,16 +335,16 @@ class BusRun:
         self.on_event(record)
         return record
 
-    def end(self, reason: str, at_ns: int | None = None) -> None:
+    def end(self, reason: str) -> None:
         """Say in the log why the run ends (before the modules are stopped).
 
-        ``at_ns``: when the ending condition held; deadlines are judged up to
-        then, not through the shutdown that follows (no findings after the end).
+        Time is judged up to this event, not through the shutdown that follows
+        (no deadline findings after the end); `check` ends its judgement there too.
         """
         self.end_reason = reason
         ended = self.emit(rec.RunEnd(time.time_ns(), reason))
         if self.monitors is not None:
-            self.monitors.end_at(at_ns if at_ns is not None else ended.time_ns)
+            self.monitors.end_at(ended.time_ns)
 
     def add_finding(self, violation) -> None:
         """A finding made outside the monitors (the spec's run: outcome): in the verdict and the log."""

@@ -67,7 +67,7 @@ def run_session(spec: Spec, options: RunOptions, *,
         finding = ends.ended.finding() if ends.ended is not None and ends.ended.reason == reason else None
         if finding is not None:
             run.add_finding(finding)
-        run.end(reason, ends.ended.time_ns if ends.ended is not None and ends.ended.reason == reason else None)
+        run.end(reason)
     return RunResult(
         end_reason=reason, seconds=seconds, verdict=run.verdict, violations=tuple(run.violations),
         exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),

@@ -16,11 +16,9 @@ from dataclasses import dataclass
 
 from ..codecs import get_codec
 from ..monitor.expression import RUNTIME_ERRORS
-from ..monitor.violation import Violation, message_copy
+from ..monitor.violation import RUN_END_KIND, Violation, message_copy
 from ..spec.model import Spec
 from ..run_section import ChannelEnd, Outcome, RunSection
-
-RUN_END_KIND = "run_end"
 
 
 @dataclass(frozen=True)
