@@ -103,13 +103,17 @@ class StarProxy:
                         handle(sample)
                     return
                 while True:
-                    sample = fifo.try_recv()
+                    sample = fifo.try_recv()  # ZError once the subscriber is undeclared and drained
                     if sample is None:
                         on_idle()
-                        sample = fifo.recv()  # ZError once the subscriber is undeclared
+                        sample = fifo.recv()
                     handle(sample)
             except zenoh.ZError:
-                pass
+                if on_idle is not None:  # what the last samples left waiting goes out too
+                    try:
+                        on_idle()
+                    except zenoh.ZError:
+                        pass
 
         thread = threading.Thread(target=run, name=name, daemon=True)
         thread.start()
