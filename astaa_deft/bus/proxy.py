@@ -8,6 +8,7 @@ objects (no copy, no decode), through one cached publisher per destination.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from typing import Callable
 
@@ -110,10 +111,8 @@ class StarProxy:
                     handle(sample)
             except zenoh.ZError:
                 if on_idle is not None:  # what the last samples left waiting goes out too
-                    try:
+                    with contextlib.suppress(zenoh.ZError):
                         on_idle()
-                    except zenoh.ZError:
-                        pass
 
         thread = threading.Thread(target=run, name=name, daemon=True)
         thread.start()
