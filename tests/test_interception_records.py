@@ -68,3 +68,19 @@ def test_malformed_records_and_batches_raise_value_error() -> None:
     assert unpack_batch(batch) == [(1, b"payload", record), (2, b"p2", b"")]
     with pytest.raises(ValueError):
         unpack_batch(batch[:-1])
+
+
+def test_built_instances_are_the_dataclasses_own() -> None:
+    """``built`` (the engine's per-message constructor) gives what ``__init__`` gives, every field included."""
+    from dataclasses import FrozenInstanceError, fields
+
+    from astaa_deft.intercept.actions.base import Delivery, built
+
+    for cls, values in ((MutationEvent, _event(1, 2).__dict__),
+                        (FieldChange, {"path": "a", "old": 1, "new": float("inf")}),
+                        (Delivery, {"consumers": ("s",), "payload": b"p", "at": 1.0, "original": b"o", "event": None})):
+        assert set(values) == {f.name for f in fields(cls)}, f"{cls.__name__} gained a field: pass it to built()"
+        fast, slow = built(cls, **values), cls(**values)
+        assert fast == slow and repr(fast) == repr(slow)
+        with pytest.raises(FrozenInstanceError):
+            fast.__setattr__(fields(cls)[0].name, None)

@@ -174,3 +174,13 @@ def test_missing_module_command_is_one_clear_error_and_stops_the_others(tmp_path
     pids = started_pids(run_dir)
     assert set(pids) == {"listener", "outsider", "talker"}
     assert [m for m, p in pids.items() if alive(p)] == []
+
+
+def test_router_configs_do_not_wait_to_scout():
+    """Scouting is off, so a router must not spend scouting.delay (500 ms by default) at open."""
+    from astaa_deft.bus import zenoh_config as zc
+
+    router = zc.config_dict(mode="router", listen=[zc.loopback_endpoint()])
+    assert router["scouting"]["delay"] == 0 and router["scouting"]["multicast"]["enabled"] is False
+    assert "delay" not in zc.config_dict(mode="client", connect=["tcp/127.0.0.1:7447"])["scouting"]
+    assert "delay" not in zc.config_dict(mode="router", gossip=True)["scouting"]  # gossip may find peers

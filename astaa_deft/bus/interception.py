@@ -89,7 +89,8 @@ class InterceptionBridge:
             intercepted_key(key), congestion_control=BLOCK, allowed_destination=REMOTE)
         consumers = tuple(c for c, _ in live.publishers)
         self._batches[name] = []
-        lock, interceptor, dispatch, t0, monotonic = self._lock, self.interceptor, self._dispatch, self.t0, time.monotonic
+        lock, interceptor, dispatch = self._lock, self.interceptor, self._dispatch
+        t0, monotonic = self.t0, time.monotonic
         outbox = self._outbox
 
         def forward(sample: zenoh.Sample) -> None:
@@ -103,7 +104,7 @@ class InterceptionBridge:
                 if len(outbox) >= OUTBOX_LIMIT:
                     self._send()
 
-        forward.on_idle = self.idle  # type: ignore[attr-defined]  (see StarProxy)
+        forward.on_idle = self.idle  # type: ignore[attr-defined]  # see StarProxy
         return forward
 
     def idle(self) -> None:

@@ -8,6 +8,7 @@ objects (no copy, no decode), through one cached publisher per destination.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from typing import Callable
 
@@ -103,13 +104,15 @@ class StarProxy:
                         handle(sample)
                     return
                 while True:
-                    sample = fifo.try_recv()
+                    sample = fifo.try_recv()  # ZError once the subscriber is undeclared and drained
                     if sample is None:
                         on_idle()
-                        sample = fifo.recv()  # ZError once the subscriber is undeclared
+                        sample = fifo.recv()
                     handle(sample)
             except zenoh.ZError:
-                pass
+                if on_idle is not None:  # what the last samples left waiting goes out too
+                    with contextlib.suppress(zenoh.ZError):
+                        on_idle()
 
         thread = threading.Thread(target=run, name=name, daemon=True)
         thread.start()

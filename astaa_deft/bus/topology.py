@@ -98,7 +98,7 @@ def read_intercept_record(attachment: bytes) -> tuple[WireEvent, bytes | None, b
 
 def wire_event_parts(event: WireEvent) -> dict[str, Any]:
     """The attributes of a marshalled event by name (``fields``: (path, old, new) triples)."""
-    return dict(zip((*_EVENT_ATTRS, EVENT_FIELDS, "detail"), event.value))
+    return dict(zip((*_EVENT_ATTRS, EVENT_FIELDS, "detail"), event.value, strict=True))
 
 
 _BATCH_ENTRY = struct.Struct("<QII")  # delivery time (ns), payload length, record length

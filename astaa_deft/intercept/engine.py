@@ -28,7 +28,8 @@ from typing import Any
 from ..codecs import Codec, DecodeError, get_codec
 from ..errors import InputError, Problem
 from ..spec.model import Spec
-from .actions.base import ActionRuntime, Delivery, FieldChange, MessageInfo, MutationEvent, Pending, PolicyContext
+from .actions.base import ActionRuntime, Delivery, FieldChange, MessageInfo, MutationEvent, Pending, PolicyContext, \
+    built
 from .dictionary import Dictionary, NotApplicable, load_dictionary
 from .testcase import Policy, TestCase, load_testcase
 
@@ -151,7 +152,7 @@ class Interceptor:
             info = MessageInfo(channel, index, now, state.codec, state.previous_message)
             out.extend(self._deliver(self._apply(selected, consumers, payload, info), now))
         else:
-            out.append(Delivery(consumers, payload, now))
+            out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
         if state.observers:
             info = MessageInfo(channel, index, now, state.codec, state.previous_message)
             for live in state.observers:

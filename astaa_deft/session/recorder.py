@@ -51,7 +51,8 @@ SHUTDOWN_LIMIT_SECONDS = 20.0
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astaa-deft-recorder")
-    ap.add_argument("--spec-name", default="spec.yaml", help="the spec's file name, for messages (its text is on stdin)")
+    ap.add_argument("--spec-name", default="spec.yaml",
+                    help="the spec's file name, for messages (its text is on stdin)")
     ap.add_argument("--mode", choices=("star", "passive"), required=True)
     ap.add_argument("--connect", action="append", required=True, help="the bus to record (a router or peer)")
     ap.add_argument("--out", required=True, type=Path)

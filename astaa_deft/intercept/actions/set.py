@@ -42,7 +42,7 @@ from ..dictionary import (
     field_site, wire_value,
 )
 from .base import ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, \
-    PolicyContext, required
+    PolicyContext, built, required
 
 if TYPE_CHECKING:
     from ..testcase import ActionChecker, Policy
@@ -311,7 +311,7 @@ def apply_plans(message: dict, plans: Sequence[FieldPlan], info: MessageInfo) ->
             if old is _MISSING:
                 skipped.append({"path": plan.text, "reason": "no such field in this message"})
             else:
-                changes.append(FieldChange(plan.text, old, plan.value))
+                changes.append(built(FieldChange, path=plan.text, old=old, new=plan.value))
         elif plan.value is not DYNAMIC:
             replaced = set_field(message, plan.path, plan.value)
             changes.extend(FieldChange(str(where), old, plan.value) for where, old in replaced)
