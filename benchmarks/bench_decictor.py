@@ -104,8 +104,13 @@ def main() -> None:
     jobs = [(mode, seed, args.scenarios, True) for mode in MODES for seed in range(1, args.seeds + 1)]
     jobs += [("decictor", seed, args.scenarios, False) for seed in range(1, args.off_seeds + 1)]
     started = time.perf_counter()
+    results = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        results = list(pool.map(search_once, *zip(*jobs, strict=True)))
+        for r in pool.map(search_once, *zip(*jobs, strict=True)):
+            results.append(r)
+            print(f"  {r['mode']:13} seed {r['seed']} defect {'on ' if r['defects'] else 'off'}: {r['findings']} "
+                  f"finding(s), first at {r['first']}, {r['simulation'] / r['scenarios']:.1f} s/scenario simulated",
+                  flush=True)
     wall = time.perf_counter() - started
     live = live_cost(args.live) if args.live else []
     live_per = statistics.median(live) if live else None

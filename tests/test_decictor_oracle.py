@@ -144,3 +144,13 @@ def test_generated_and_perturbed_placements_are_always_outside_and_never_touch_t
         if q is not None:
             check_placement(q, REGION)
     assert made >= 30
+
+
+def test_a_participant_crossing_just_past_the_seed_paths_end_is_refused():
+    # Regression (found by bench_decictor with the defect off): a car cutting across the lane 10 m past the
+    # recorded end is in the planner's lookahead and changed the clean planner's plan; it is not harmless.
+    crossing = Participant(9, "vehicle", 140.0, 6.0, -math.pi / 2, 4.6, 1.9, 6.0, (Waypoint(10.0, 140.0, -6.0),))
+    with pytest.raises(PlacementError, match="enters the forbidden region"):
+        check_placement(crossing, REGION)
+    far = Participant(9, "vehicle", 230.0, 6.0, -math.pi / 2, 4.6, 1.9, 6.0, (Waypoint(10.0, 230.0, -6.0),))
+    check_placement(far, REGION)  # beyond speed x lookahead: allowed

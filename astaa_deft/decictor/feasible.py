@@ -26,6 +26,11 @@ from .paths import EgoPath
 
 DT = 2.0  # s between waypoints, the paper's time step
 DEFAULT_CLEARANCE = 0.5  # m, the paper's safe distance
+# s the ego would drive on past the seed path's end: a planner plans that far ahead, so a participant
+# crossing the road just past the recorded end would change the plan legitimately (found by the
+# benchmark with the defect off: a car cutting across the lane 10 m past the goal made the clean
+# planner change lanes).
+LOOKAHEAD = 5.0
 FOOTPRINT_SPACING = 1.0  # m between the seed footprints that tile the swept path (each is 4.6 m + 2 clearances long)
 MOTION_SAMPLE = 0.5  # m between checked positions along a participant's motion
 
@@ -66,13 +71,21 @@ class Area:
 class ForbiddenRegion:
     """The seed ego path's swept footprint grown by ``clearance``, tiled by oriented boxes."""
 
-    def __init__(self, seed: EgoPath, dt: float = DT, clearance: float = DEFAULT_CLEARANCE):
+    def __init__(self, seed: EgoPath, dt: float = DT, clearance: float = DEFAULT_CLEARANCE,
+                 lookahead: float = LOOKAHEAD):
         if not seed.states:
             raise PlacementError("the seed run has no ego path: nothing to place participants around")
         self.seed = seed
         self.dt = dt
         self.clearance = clearance
         self.boxes = [seed.box(s).grown(clearance) for s in seed.thinned(FOOTPRINT_SPACING)]
+        last = seed.states[-1]
+        reach = max(last.speed, 1.0) * lookahead  # the path the ego would go on along, past the end
+        for k in range(1, int(reach / FOOTPRINT_SPACING) + 1):
+            d = k * FOOTPRINT_SPACING
+            ahead = Box(last.x + d * math.cos(last.heading), last.y + d * math.sin(last.heading), last.heading,
+                        seed.length, seed.width)
+            self.boxes.append(ahead.grown(clearance))
         # Bounding circles of the tiles, so a box is tested exactly only against the few tiles near it.
         self._centres = np.array([(b.x, b.y) for b in self.boxes], dtype=float).reshape(-1, 2)
         self._radii = np.array([b.radius for b in self.boxes], dtype=float)
