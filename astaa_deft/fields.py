@@ -25,7 +25,8 @@ import difflib
 import re
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Iterator, Mapping, Sequence, Union
+from typing import Any
+from collections.abc import Iterator, Mapping, Sequence
 
 from astaa_deft.errors import AstaaDeftError
 from astaa_deft.spec.model import FieldType, MessageType
@@ -44,7 +45,7 @@ class _Wildcard:
 WILDCARD = _Wildcard()
 
 # A field name (str), an element index (int, negative counts from the end) or WILDCARD.
-Segment = Union[str, int, _Wildcard]
+Segment = str | int | _Wildcard
 
 _KEY = re.compile(r"[^.\[\]*\s]+")
 _INDEX = re.compile(r"\[(?:(\*)|(-?[1-9][0-9]*|0))\]")
@@ -128,7 +129,7 @@ def _render(segments: Sequence[Segment]) -> str:
     return "".join(parts)
 
 
-PathLike = Union[FieldPath, str]
+PathLike = FieldPath | str
 
 
 def as_path(path: PathLike) -> FieldPath:
@@ -401,7 +402,7 @@ def _parse_brittle_cached(text: str) -> tuple[str, FieldPath]:
 def _covers(pattern: Sequence[Segment], segments: Sequence[Segment]) -> bool:
     if len(pattern) > len(segments):
         return False
-    for wanted, actual in zip(pattern, segments):
+    for wanted, actual in zip(pattern, segments, strict=False):
         if type(wanted) is str:
             if wanted != actual:
                 return False

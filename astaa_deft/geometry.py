@@ -25,7 +25,7 @@ class Box:
     length: float
     width: float
 
-    def grown(self, margin: float) -> "Box":
+    def grown(self, margin: float) -> Box:
         """The box with ``margin`` added on every side."""
         return Box(self.x, self.y, self.heading, self.length + 2 * margin, self.width + 2 * margin)
 
@@ -70,7 +70,7 @@ def interpolate_pose(poses: list[tuple[float, float, float, float]], t: float) -
     """(x, y, heading) at time t from time-sorted (t, x, y, heading) poses; None outside their span."""
     if not poses or t < poses[0][0] or t > poses[-1][0]:
         return None
-    for (t0, x0, y0, h0), (t1, x1, y1, h1) in zip(poses, poses[1:]):
+    for (t0, x0, y0, h0), (t1, x1, y1, h1) in zip(poses, poses[1:], strict=False):
         if t0 <= t <= t1:
             u = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
             dh = math.atan2(math.sin(h1 - h0), math.cos(h1 - h0))

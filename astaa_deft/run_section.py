@@ -21,7 +21,7 @@ against the channel's declared message type when the spec is loaded.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 from .monitor.expression import CompiledExpression
 from .monitor.spec_reader import InvariantReader

@@ -251,7 +251,7 @@ class _SpecBuilder:
             return ()
         if not parts:
             self.src.at(node, f"command of '{module}' is empty", "name the program to run")
-        for part, pnode in zip(parts, part_nodes):
+        for part, pnode in zip(parts, part_nodes, strict=False):
             self.placeholders(part, pnode, params)
         return tuple(parts)
 
@@ -305,8 +305,9 @@ class _SpecBuilder:
                 self.src.at(v["log"], f"'ready.log' is not a valid regular expression: {exc}", "fix or quote it")
         delay = self.number(v.get("delay"), "'ready.delay'", minimum=0.0, maximum=MAX_WAIT_S)
         timeout = self.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True, maximum=MAX_WAIT_S)
-        return Readiness(channel=channel, log=log, delay=delay if delay is not None else (None if channel or log else 0.0),
-                         timeout=timeout if timeout is not None else 20.0)
+        if delay is None:
+            delay = None if channel or log else 0.0
+        return Readiness(channel=channel, log=log, delay=delay, timeout=timeout if timeout is not None else 20.0)
 
     def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False,
                maximum: float | None = None) -> float | None:
@@ -524,7 +525,8 @@ class _SpecBuilder:
                 for ft in types.get(cur, MessageType(cur, {})).fields.values():
                     for r in refs(ft):
                         if r == start:
-                            self.src.at_key(node, start, f"type '{start}' contains itself", "break the cycle with an array")
+                            self.src.at_key(node, start, f"type '{start}' contains itself",
+                                            "break the cycle with an array")
                             stack = []
                             break
                         if r not in seen:

@@ -10,7 +10,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
+from collections.abc import Iterator
 
 import yaml
 
@@ -34,7 +35,7 @@ class Node:
     def is_list(self) -> bool:
         return isinstance(self.value, list)
 
-    def items(self) -> Iterator[tuple[str, "Node"]]:
+    def items(self) -> Iterator[tuple[str, Node]]:
         return iter(self.value.items())
 
     def plain(self) -> Any:
@@ -55,7 +56,7 @@ class Source:
         self.problems: list[Problem] = []
 
     @classmethod
-    def from_file(cls, path: Path) -> "Source":
+    def from_file(cls, path: Path) -> Source:
         try:
             text = decode_utf8(path.read_bytes(), str(path))
         except FileNotFoundError:

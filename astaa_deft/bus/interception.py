@@ -24,7 +24,8 @@ import heapq
 import itertools
 import threading
 import time
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
+from collections.abc import Callable
 
 import zenoh
 

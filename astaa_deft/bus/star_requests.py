@@ -12,7 +12,7 @@ wired from the spec like publications (`topology.token_destinations`,
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import zenoh
 

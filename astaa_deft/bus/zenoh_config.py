@@ -10,7 +10,8 @@ from __future__ import annotations
 import json
 import socket
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 import zenoh
 

@@ -14,7 +14,7 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from ..errors import AstaaDeftError, InputError, Problem
 from ..intercept.dictionary import load_dictionary
@@ -75,12 +75,12 @@ def default_workers(module_count: int, cores: int | None = None) -> int:
 
 def param_grid(params: dict[str, list[str]]) -> list[dict[str, str]]:
     keys = sorted(params)
-    return [dict(zip(keys, values)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
+    return [dict(zip(keys, values, strict=False)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
 
 
 class Campaign:
     def __init__(self, config: CampaignConfig, journal: Journal,
-                 on_progress: Callable[["Campaign"], None] = lambda c: None, say: Callable[[str], None] = print):
+                 on_progress: Callable[[Campaign], None] = lambda c: None, say: Callable[[str], None] = print):
         self.config = config
         self.journal = journal
         self.on_progress = on_progress
@@ -146,7 +146,7 @@ class Campaign:
         if rows and all(o is not None and o.status == "error" for o in outcomes):
             raise CampaignStopped(f"the SUT does not start: {outcomes[0].error or outcomes[0].summary}")
         seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
-        for row, outcome in zip(rows, outcomes):
+        for row, outcome in zip(rows, outcomes, strict=False):
             if seed_hook is not None and outcome is not None:
                 seed_hook(row["case_id"], outcome)
             if outcome is not None and outcome.failed:
@@ -269,7 +269,8 @@ class Campaign:
     def _plan_reruns(self, bucket: str, row) -> list[PlannedCase]:
         cases = []
         for k in range(1, self.config.reruns + 1):
-            case = PlannedCase(f"r-{bucket}-{k}", RERUN, row["number"], row["seed"], json.loads(row["params"]), row["testcase_xml"], row["strategy"], parent=bucket)
+            case = PlannedCase(f"r-{bucket}-{k}", RERUN, row["number"], row["seed"], json.loads(row["params"]),
+                               row["testcase_xml"], row["strategy"], parent=bucket)
             self.journal.plan(case)
             cases.append(case)
         return cases

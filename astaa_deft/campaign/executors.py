@@ -13,11 +13,11 @@ from __future__ import annotations
 import base64
 import json
 import subprocess
-import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
+from collections.abc import Iterator
 
 from ..bus.processes import die_with_parent, python_module, stop_process
 from .model import CaseOutcome

@@ -27,7 +27,7 @@ class PlannedCase:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, body: dict[str, Any]) -> "PlannedCase":
+    def from_json(cls, body: dict[str, Any]) -> PlannedCase:
         return cls(**body)
 
 
@@ -61,7 +61,7 @@ class CaseOutcome:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, body: dict[str, Any]) -> "CaseOutcome":
+    def from_json(cls, body: dict[str, Any]) -> CaseOutcome:
         body = dict(body)
         body["findings"] = [Finding(**f) for f in body.get("findings", [])]
         return cls(**body)

@@ -85,7 +85,8 @@ def render(journal: Journal, out: Path) -> str:
              f"{len([r for r in done if r['kind'] == BASELINE])} clean run(s).</p>",
              "<h2>Summary</h2><table class='summary'>"]
     summary = [("spec", meta.get("spec")), ("strategy", meta.get("strategy")), ("seed", meta.get("seed")),
-               ("params", json.dumps(meta.get("params")) if meta.get("params") else "the spec's defaults"), ("horizon", f"{meta.get('horizon')} s"),
+               ("params", json.dumps(meta.get("params")) if meta.get("params") else "the spec's defaults"),
+               ("horizon", f"{meta.get('horizon')} s"),
                ("baseline runs", len([r for r in done if r["kind"] == BASELINE])),
                ("generated cases run", len(mutated)), ("failing cases", len(failing)),
                ("cases that could not run", len(errors)),
@@ -129,7 +130,8 @@ def render(journal: Journal, out: Path) -> str:
             parts.append(f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td>"
                          f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
                          f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
-                         f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td><td>{'<br>'.join(links)}</td></tr>")
+                         f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
+                         f"<td>{'<br>'.join(links)}</td></tr>")
             if xml:
                 what = "minimal test case" if minimal else "first failing test case (not minimised)"
                 parts.append(f"<tr class='xml'><td></td><td colspan='8'><details{' open' if minimal else ''}>"

@@ -13,7 +13,8 @@ declared bounds become ``minimum``/``maximum``, so a mutated message
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 from astaa_deft.fields import message_type
 from astaa_deft.spec.model import INT_RANGES, FieldType, MessageType

@@ -6,7 +6,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from ..errors import InputError
 from ..log import records as rec
@@ -19,7 +19,7 @@ class StopSignal:
         self.received: str | None = None
         self._old: dict = {}
 
-    def __enter__(self) -> "StopSignal":
+    def __enter__(self) -> StopSignal:
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._old[sig] = signal.signal(sig, self._handle)
         return self
@@ -58,7 +58,7 @@ class StatusLine:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
-    def __enter__(self) -> "StatusLine":
+    def __enter__(self) -> StatusLine:
         if self.enabled and not self._thread.is_alive():
             self._thread.start()
         return self

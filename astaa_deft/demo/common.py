@@ -15,7 +15,8 @@ import os
 import queue
 import signal
 import sys
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import zenoh
 

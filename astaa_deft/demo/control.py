@@ -125,10 +125,7 @@ class Controller:
         if reach < 0.5:
             return 0.0  # standing on the plan's end: nothing to steer towards
         bearing = math.atan2(path_y[target] - rear_y, path_x[target] - rear_x)
-        if self.defects:
-            alpha = normalize_angle_by_loop(bearing - loc.heading)
-        else:
-            alpha = wrap_angle(bearing - loc.heading)
+        alpha = normalize_angle_by_loop(bearing - loc.heading) if self.defects else wrap_angle(bearing - loc.heading)
         steering = math.atan2(2.0 * vehicle.WHEELBASE * math.sin(alpha), reach)
         return max(-vehicle.MAX_STEERING, min(vehicle.MAX_STEERING, steering))
 

@@ -10,7 +10,8 @@ be bit-for-bit reproducible.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
+from collections.abc import Sequence
 
 from .geometry import Box
 from .messages import PredictedObstacle

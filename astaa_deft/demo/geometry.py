@@ -39,7 +39,7 @@ class Box(NamedTuple):
     length: float
     width: float
 
-    def inflated(self, d_length: float, d_width: float) -> "Box":
+    def inflated(self, d_length: float, d_width: float) -> Box:
         return self._replace(length=self.length + d_length, width=self.width + d_width)
 
     def bounding_radius(self) -> float:

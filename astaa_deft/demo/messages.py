@@ -12,7 +12,8 @@ Field names here must match ``astaa_deft/data/specs/demo_av.yaml``.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, NamedTuple
+from typing import Any, NamedTuple
+from collections.abc import Mapping
 
 
 class BadMessage(ValueError):

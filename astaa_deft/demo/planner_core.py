@@ -19,7 +19,8 @@ the lights it has committed to stop for, the last good speed limit.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, NamedTuple, Sequence
+from typing import Any, NamedTuple
+from collections.abc import Mapping, Sequence
 
 from . import messages, vehicle
 from .frenet import (DT, STEPS, LateralPath, SpeedProfile, forecast_boxes, interpolate,
@@ -64,7 +65,7 @@ CAUTION_GAP, CAUTION_AHEAD, CAUTION_SPEED_SHARE = 3.5, 15.0, 0.6
 
 class Start(NamedTuple):
     s: float
-    l: float
+    l: float  # noqa: E741 - the Frenet lateral offset is called l, as in (s, l)
     slope: float  # dl/ds
     v: float
 
@@ -83,7 +84,7 @@ class Road(NamedTuple):
     def center(self, lane: int) -> float:
         return lane * self.lane_width
 
-    def nearest_lane(self, l: float) -> int:
+    def nearest_lane(self, l: float) -> int:  # noqa: E741 - Frenet (s, l)
         return max(0, min(self.lanes - 1, int(round(l / self.lane_width))))
 
 
@@ -342,7 +343,7 @@ def _points(now: float, start: Start, path: LateralPath, profile: SpeedProfile) 
     points = []
     for k in range(STEPS + 1):
         s = profile.s[k]
-        l, slope = path.at(s)
+        l, slope = path.at(s)  # noqa: E741 - Frenet (s, l)
         points.append({"t": round(now + k * DT, 9), "x": s, "y": l, "heading": math.atan(slope),
                        "v": profile.v[k], "a": profile.a[k]})
     return points

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import yaml
 
@@ -169,7 +170,7 @@ def parse_scenario(data: Any, source: str = "<scenario>") -> Scenario:
     )
 
 
-def _object(r: "_Reader", data: Any, where: str, lane, moving: bool) -> ObjectSpec:
+def _object(r: _Reader, data: Any, where: str, lane, moving: bool) -> ObjectSpec:
     optional = ("offset", "heading", "length", "width") + (("speed", "maneuvers") if moving else ())
     m = r.mapping(data, where, required=("name", "kind", "lane", "x"), optional=optional)
     kind = r.string(m["kind"], f"{where}.kind")
@@ -192,7 +193,7 @@ def _object(r: "_Reader", data: Any, where: str, lane, moving: bool) -> ObjectSp
     )
 
 
-def _maneuver(r: "_Reader", data: Any, where: str, lane) -> Maneuver:
+def _maneuver(r: _Reader, data: Any, where: str, lane) -> Maneuver:
     m = r.mapping(data, where, required=(), optional=("when", "lane_change", "duration", "speed", "accel"))
     if ("lane_change" in m) == ("speed" in m):
         raise ScenarioError(f"{r.source}: {where}: give exactly one of lane_change or speed")
@@ -207,7 +208,7 @@ def _maneuver(r: "_Reader", data: Any, where: str, lane) -> Maneuver:
     )
 
 
-def _light(r: "_Reader", data: Any, where: str) -> TrafficLightSpec:
+def _light(r: _Reader, data: Any, where: str) -> TrafficLightSpec:
     m = r.mapping(data, where, required=("id", "stop_line_x", "cycle"))
     cycle = []
     for i, phase in enumerate(r.sequence(m["cycle"], f"{where}.cycle")):

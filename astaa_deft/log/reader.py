@@ -12,7 +12,6 @@ import struct
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 from mcap.exceptions import EndOfFile, InvalidMagic
 from mcap.opcode import Opcode
@@ -107,7 +106,7 @@ class LogContents:
 def read_log(path: Path | str) -> LogContents:
     path = Path(path)
     try:
-        stream = open(path, "rb")
+        stream = open(path, "rb")  # noqa: SIM115 - closed by the `with` below; each open error has its message
     except FileNotFoundError:
         raise InputError(Problem(str(path), None, None, "log file not found", "check the path")) from None
     except IsADirectoryError:

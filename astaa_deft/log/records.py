@@ -15,8 +15,9 @@ refused with a clear message instead of being half understood.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field, fields
-from typing import Any, Mapping, Union
+from dataclasses import dataclass, fields
+from typing import Any
+from collections.abc import Mapping
 
 from ..errors import InputError
 
@@ -163,8 +164,8 @@ class OtherEvent:
     body: tuple[tuple[str, Any], ...] = ()
 
 
-Record = Union[RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, ViolationRecord, VerdictRecord,
-               UndeclaredKey, MutationRecord, FlagRecord, ModuleLogLine, OtherEvent]
+Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExitRecord | ViolationRecord | VerdictRecord
+          | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | OtherEvent)
 
 _SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, UndeclaredKey,
                                ModuleLogLine, ViolationRecord, FlagRecord)}

@@ -9,7 +9,8 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any, BinaryIO, Mapping
+from typing import Any, BinaryIO
+from collections.abc import Mapping
 
 from .. import __version__
 from ..codecs.jsonschema import json_schema
@@ -26,7 +27,7 @@ class LogWriter:
     def __init__(self, path: Path, spec: Spec | None, chunk_size: int = DEFAULT_CHUNK_SIZE,
                  compression: str = "zstd"):
         self.path = Path(path)
-        self._stream: BinaryIO = open(self.path, "wb")
+        self._stream: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - lives as long as the writer (finish)
         self._writer = McapWriter(
             self._stream,
             chunk_size=chunk_size,

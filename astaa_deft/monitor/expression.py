@@ -137,7 +137,7 @@ def _offset(text: str, lineno: int, col: int, byte_offset: bool = True) -> int:
     line = lines[min(max(lineno, 1), len(lines)) - 1]
     if byte_offset:
         col = len(line.encode()[:col].decode(errors="ignore"))
-    return stripped_lead + sum(len(l) + 1 for l in lines[:lineno - 1]) + max(col, 0)
+    return stripped_lead + sum(len(text) + 1 for text in lines[:lineno - 1]) + max(col, 0)
 
 
 class _Compiler:
@@ -296,7 +296,7 @@ class _Compiler:
     def _BoolOp(self, node: ast.BoolOp, depth: int) -> _Part:
         parts = [self.node(v, depth) for v in node.values]
         name = "and" if isinstance(node.op, ast.And) else "or"
-        for part, value in zip(parts, node.values):
+        for part, value in zip(parts, node.values, strict=False):
             self._need(part, BOOL, value, f"'{name}'")
         fns = tuple(p.fn for p in parts)
         if len(fns) == 2:
@@ -309,7 +309,7 @@ class _Compiler:
     def _Compare(self, node: ast.Compare, depth: int) -> _Part:
         operands = [self.node(node.left, depth)]
         steps: list[tuple[Callable[[Any, Any], Any], _Part]] = []
-        for op, comparator in zip(node.ops, node.comparators):
+        for op, comparator in zip(node.ops, node.comparators, strict=False):
             left = operands[-1]
             if isinstance(op, (ast.In, ast.NotIn)):
                 right = self._member_set(comparator, left, node)
@@ -402,7 +402,7 @@ class _Compiler:
         if len(args) < len(fixed) or (not variadic and len(args) > len(fixed)):
             raise self.fail(node, f"{name}() takes {'at least ' if variadic else ''}{len(fixed)} "
                                   f"argument{'s' if len(fixed) != 1 else ''}, got {len(args)}", function.help)
-        for index, (arg, arg_node) in enumerate(zip(args, node.args)):
+        for index, (arg, arg_node) in enumerate(zip(args, node.args, strict=False)):
             kind = fixed[min(index, len(fixed) - 1)]
             ok = arg.ty.kind in ("array", "string", "bytes") if kind == "sized" else arg.ty.kind == kind
             if not ok:

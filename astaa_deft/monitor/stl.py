@@ -198,7 +198,7 @@ def _located(exc: BaseException, text: str) -> StlError:
     if not match:
         return StlError(f"not a valid formula: {message}", 0, "see docs/monitors.md for the STL syntax")
     line, column, reason = int(match.group(1)), int(match.group(2)), match.group(3).strip()
-    offset = sum(len(l) + 1 for l in text.split("\n")[:line - 1]) + column
+    offset = sum(len(row) + 1 for row in text.split("\n")[:line - 1]) + column
     reason = re.sub(r"\s*expecting \{.*", "", reason.replace("Syntax ERROR, ", ""), flags=re.DOTALL)
     reason = reason.replace("mismatched input '<EOF>'", "the formula ends too early")
     return StlError(f"not a valid formula: {reason}", offset, "see docs/monitors.md for the STL syntax")

@@ -38,6 +38,7 @@ from ..log import layout, records
 from ..log.viewable import ViewableTwins
 from ..log.writer import LogWriter
 from ..spec_loader import load_spec_text
+import contextlib
 
 try:  # a faster first answer to "does this JSON payload decode?" (see undecodable)
     import orjson as _orjson
@@ -78,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
         writer.attachment(name, Path(path).read_bytes(), media)
     writer.metadata(layout.RUN_METADATA, {**json.loads(args.meta), "mode": args.mode})
 
-    q: "queue.SimpleQueue" = queue.SimpleQueue()
+    q: queue.SimpleQueue = queue.SimpleQueue()
     counts: dict[str, int] = {}
 
     session = zc.open_session(zc.config_dict(mode="client", connect=args.connect))
@@ -151,10 +152,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _report(line: str) -> None:
     """One line to the tool; if the tool is gone (its end of the pipe closed) there is no one to tell."""
-    try:
+    with contextlib.suppress(BrokenPipeError, OSError):
         print(line, flush=True)
-    except (BrokenPipeError, OSError):
-        pass
 
 
 def _drain_or_exit(out: Path, *args) -> None:
@@ -170,7 +169,7 @@ def _drain_or_exit(out: Path, *args) -> None:
         os._exit(4)
 
 
-def _drain(q: "queue.SimpleQueue", writer: LogWriter, counts: dict[str, int], mutations_cid: int,
+def _drain(q: queue.SimpleQueue, writer: LogWriter, counts: dict[str, int], mutations_cid: int,
            twins: ViewableTwins) -> None:
     """Write what the callbacks queued, in arrival order; the common case (a declared channel) first and short."""
     undeclared_ids: dict[str, int] = {}

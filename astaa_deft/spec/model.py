@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
 
 if TYPE_CHECKING:
     from .planner import PlannerSpec
@@ -39,7 +40,7 @@ class FieldType:
     kind: str
     ref: str | None = None
     values: tuple[Any, ...] = ()
-    items: "FieldType | None" = None
+    items: FieldType | None = None
     min_length: int | None = None
     max_length: int | None = None
     minimum: float | None = None

@@ -9,7 +9,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 from ..errors import did_you_mean
 from ..fields import FieldPathError, type_at
@@ -81,7 +82,8 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
         return None
     for key in node.value:
         if key not in KEYS:
-            src.at_key(node, key, f"unknown key '{key}' in 'planner'", did_you_mean(key, KEYS) or f"allowed: {', '.join(KEYS)}")
+            src.at_key(node, key, f"unknown key '{key}' in 'planner'",
+                       did_you_mean(key, KEYS) or f"allowed: {', '.join(KEYS)}")
     for key in ("module", "inputs", "trigger", "output", "replay"):
         if key not in node.value:
             src.at(node, f"'planner' lacks '{key}'", f"add '{key}: …' (see docs/deft.md)")
@@ -101,7 +103,8 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     def channel_ref(n: Node, what: str) -> str:
         name = n.value if isinstance(n.value, str) else ""
         if name not in by_name:
-            src.at(n, f"{what} '{n.value}' is not a declared channel", did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
+            src.at(n, f"{what} '{n.value}' is not a declared channel",
+                   did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
         return name
 
     module = text("module")
@@ -110,7 +113,8 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     inputs: list[str] = []
     if "inputs" in v:
         if not v["inputs"].is_list or not v["inputs"].value:
-            src.at(v["inputs"], "'planner.inputs' must be a non-empty list of channel names", "e.g. [routing, localization, prediction]")
+            src.at(v["inputs"], "'planner.inputs' must be a non-empty list of channel names",
+                   "e.g. [routing, localization, prediction]")
         else:
             inputs = [channel_ref(n, "planner input") for n in v["inputs"].value]
     trigger = channel_ref(v["trigger"], "planner trigger") if "trigger" in v else ""
@@ -121,10 +125,12 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
         for name in inputs:
             ch = by_name.get(name)
             if ch is not None and module not in ch.consumers:
-                src.at(v["inputs"], f"channel '{name}' does not list '{module}' among its consumers", "add it, or drop the input")
+                src.at(v["inputs"], f"channel '{name}' does not list '{module}' among its consumers",
+                       "add it, or drop the input")
         ch = by_name.get(output)
         if ch is not None and ch.producer != module:
-            src.at(v["output"], f"channel '{output}' is produced by '{ch.producer}', not '{module}'", "name the planner's output")
+            src.at(v["output"], f"channel '{output}' is produced by '{ch.producer}', not '{module}'",
+                   "name the planner's output")
 
     layout = _trajectory(src, v.get("trajectory"), types, by_name.get(output))
     factory, args, command = _replay(src, v.get("replay"))
@@ -185,7 +191,8 @@ def _trajectory(src: Source, node: Node | None, types: Mapping[str, MessageType]
     else:
         for key in node.value:
             if key not in TRAJ_KEYS:
-                src.at_key(node, key, f"unknown key '{key}' in 'planner.trajectory'", did_you_mean(key, TRAJ_KEYS) or "")
+                src.at_key(node, key, f"unknown key '{key}' in 'planner.trajectory'",
+                           did_you_mean(key, TRAJ_KEYS) or "")
         values = {k: n.value for k, n in node.items() if k in TRAJ_KEYS and isinstance(n.value, str)}
         layout = TrajectoryLayout(**values)
         if layout.time not in ("absolute", "relative"):
@@ -243,7 +250,8 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
         if c.is_list and c.value and all(isinstance(n.value, str) for n in c.value):
             command = tuple(n.value for n in c.value)
         else:
-            src.at(c, "'replay.command' must be a non-empty list of strings", 'e.g. ["{python}", "-m", "mystack.planner"]')
+            src.at(c, "'replay.command' must be a non-empty list of strings",
+                   'e.g. ["{python}", "-m", "mystack.planner"]')
     return factory, args, command
 
 
