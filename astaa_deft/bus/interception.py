@@ -149,8 +149,10 @@ class InterceptionBridge:
 
     def _dispatch_unbound(self, d: Any, now: float, force: bool = False) -> None:
         """A delivery produced by a tick (injected, released): route it by its channel."""
-        name = d.event.channel if d.event is not None else None
-        live = self._routes.get(name) if name else None
+        if d.event is None:
+            return
+        name: str = d.event.channel
+        live = self._routes.get(name)
         if live is None:
             return
         meta = self._last_meta.get(name, (None, None, None))
@@ -161,9 +163,8 @@ class InterceptionBridge:
 
     def _put(self, live: LiveRoute, d: Any, meta: tuple, sample: zenoh.Sample | None) -> None:
         encoding, attachment, timestamp = meta
-        untouched = d.original is None and sample is not None
         # The very same Zenoh payload when nothing changed: no copy on the common path.
-        payload = sample.payload if untouched else d.payload
+        payload = sample.payload if d.original is None and sample is not None else d.payload
         if len(d.consumers) == len(live.publishers):  # all of them (the common case): no filtering
             for _consumer, pub in live.publishers:
                 self._outbox.append((pub, payload, encoding, attachment, timestamp))

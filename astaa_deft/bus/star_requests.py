@@ -114,6 +114,8 @@ class StarQueries:
 
     def _pump(self) -> None:
         queryable = self._queryable
+        if queryable is None:  # stopped before the pump began
+            return
         try:
             for query in queryable:  # ends when the queryable is undeclared
                 threading.Thread(target=self._serve, args=(query,), name="star-query", daemon=True).start()
@@ -165,5 +167,5 @@ class StarQueries:
             else:
                 query.reply(key, sample.payload, encoding=sample.encoding,
                             attachment=sample.attachment, timestamp=sample.timestamp)
-        else:
+        elif reply.err is not None:
             query.reply_err(reply.err.payload, encoding=reply.err.encoding)

@@ -23,7 +23,7 @@ from . import signature as sig
 from .journal import Journal
 from .minimiser import minimise_run
 from .model import BASELINE, MUTATED, RERUN, CaseOutcome, PlannedCase
-from .strategies import STRATEGIES
+from .strategies import STRATEGIES, Strategy
 
 DEFAULT_HORIZON = 20.0
 DEFAULT_BASELINE_RUNS = 2
@@ -90,7 +90,7 @@ class Campaign:
         if config.strategy not in STRATEGIES:
             raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
                                      f"use one of: {', '.join(STRATEGIES)}"))
-        self.strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed, config.horizon)
+        self.strategy: Strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed, config.horizon)
         self.grid = param_grid(config.params)
         self.workers = config.workers or default_workers(len(self.spec.modules))
         self.started = time.monotonic()
@@ -143,8 +143,9 @@ class Campaign:
         self._drain(pool, lambda: False)
         rows = self.journal.cases(BASELINE)
         outcomes = [self.journal.outcome(r) for r in rows]
-        if rows and all(o is not None and o.status == "error" for o in outcomes):
-            raise CampaignStopped(f"the SUT does not start: {outcomes[0].error or outcomes[0].summary}")
+        failed = [o for o in outcomes if o is not None and o.status == "error"]
+        if rows and len(failed) == len(rows):
+            raise CampaignStopped(f"the SUT does not start: {failed[0].error or failed[0].summary}")
         seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes, strict=False):
             if seed_hook is not None and outcome is not None:
@@ -209,14 +210,16 @@ class Campaign:
 
     # -- one finished case -----------------------------------------------------
     def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
-        row = self.journal.case(case_id)
+        row = self.journal.planned(case_id)
         kind, xml = row["kind"], row["testcase_xml"]
         outcome = sig.without_self_inflicted(outcome, xml, self.spec)
         judge = getattr(self.strategy, "judge", None)  # decictor: its oracle turns a run into a finding
         if judge is not None and kind in (MUTATED, RERUN):
             outcome = judge(case_id, xml, outcome, kind == MUTATED)
         new: list[PlannedCase] = []
-        signature = key = bucket = None
+        signature: str | None = None
+        key: str | None = None
+        bucket: str | None = None
         if outcome.failed:
             key = sig.failure_key(outcome)
             if kind == BASELINE:
@@ -239,7 +242,7 @@ class Campaign:
                     new = self._plan_reruns(bucket, row)
         if kind == RERUN:
             bucket = row["parent"]
-            first = self.journal.outcome(self.journal.case(self._first_case(bucket)))
+            first = self.journal.outcome(self.journal.planned(self._first_case(bucket)))
             same = outcome.failed and first is not None and sig.failure_key(first) == key
             if outcome.status == "done":
                 self.journal.bucket_rerun(bucket, same)
@@ -281,7 +284,7 @@ class Campaign:
         for bucket in self.journal.buckets(include_merged=False):
             if bucket.without_mutation or bucket.bucket in done:
                 continue
-            row = self.journal.case(bucket.first_case)
+            row = self.journal.planned(bucket.first_case)
             if not row["log_path"] or not Path(row["log_path"]).is_file():
                 continue
             self.say(f"minimising bucket {bucket.bucket} ({bucket.invariant}) …")
@@ -303,8 +306,8 @@ class Campaign:
                                    str(out_dir), str(tests_dir) if tests_dir else None, result.seconds,
                                    result.detail)
             self.say(f"  {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
-        for bucket, into in merge_same_culprits(self.journal):
-            self.say(f"  bucket {bucket}: same minimised culprit as {into}: merged")
+        for merged, into in merge_same_culprits(self.journal):
+            self.say(f"  bucket {merged}: same minimised culprit as {into}: merged")
 
     def _planner_caused(self, bucket) -> bool:
         planner = self.spec.planner

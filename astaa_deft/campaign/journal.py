@@ -133,6 +133,13 @@ class Journal:
     def case(self, case_id: str) -> sqlite3.Row | None:
         return self.db.execute("SELECT * FROM cases WHERE case_id=?", (case_id,)).fetchone()
 
+    def planned(self, case_id: str) -> sqlite3.Row:
+        """A case the campaign planned itself (a KeyError if the journal lost it: a bug, not bad input)."""
+        row = self.case(case_id)
+        if row is None:
+            raise KeyError(f"case {case_id} is not in the journal")
+        return row
+
     def outcome(self, row: sqlite3.Row) -> CaseOutcome | None:
         return CaseOutcome.from_json(json.loads(row["outcome"])) if row["outcome"] else None
 

@@ -59,7 +59,7 @@ def _culprit(minimal: Path) -> str | None:
 
     parser = etree.XMLParser(resolve_entities=False, no_network=True)
     root = etree.fromstring(minimal.read_bytes(), parser)
-    parts = set()
+    parts: set[str] = set()
     for policy in root.iterfind("policy"):
         channels = [c.text for c in policy.iterfind("channel")] or ["*"]
         action = next((child for child in policy if child.tag not in ("channel", "window", "select", "consumer",

@@ -113,15 +113,18 @@ def render(journal: Journal, out: Path) -> str:
             log = _rel(first["log_path"] if first is not None else None, out)
             if log:
                 links.append(f"<a href='{e(log)}'>failing log</a> <span class='muted'>(MCAP: Foxglove opens it)</span>")
-            if m is not None and m["tests_dir"]:
+            tests = _rel(m["tests_dir"], out) if m is not None else None
+            if m is not None and tests:
                 kind = ("DeFT replay of the failing run" if str(m["tests_dir"]).endswith(REPLAY_TESTS_SUFFIX)
                         else "fail on the culprit")
-                links.append(f"<a href='{e(_rel(m['tests_dir'], out))}'>module tests</a> "
-                             f"<span class='muted'>({kind}; <code>pytest {e(_rel(m['tests_dir'], out))}</code>)</span>")
-            if m is not None and m["out_dir"]:
-                links.append(f"<a href='{e(_rel(m['out_dir'], out))}'>minimisation</a>")
-            minimal = m is not None and m["minimal_xml"]
-            xml = m["minimal_xml"] if minimal else (first["testcase_xml"] or "") if first is not None else ""
+                links.append(f"<a href='{e(tests)}'>module tests</a> "
+                             f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>")
+            minimisation = _rel(m["out_dir"], out) if m is not None else None
+            if minimisation:
+                links.append(f"<a href='{e(minimisation)}'>minimisation</a>")
+            minimal_xml = m["minimal_xml"] if m is not None else None
+            minimal = bool(minimal_xml)
+            xml = minimal_xml or ((first["testcase_xml"] or "") if first is not None else "")
             family = ("<span class='muted'>without mutation</span>" if b.without_mutation
                       else "".join(f"<div>{e(part)}</div>" for part in b.family.split("+")))
             merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""

@@ -16,8 +16,11 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
+import zenoh
+
 from .. import fields
 from ..codecs import get_codec
+from ..codecs.base import Codec
 from ..errors import InputError
 from ..intercept.dictionary import Dictionary, load_dictionary
 from ..intercept.engine import Interceptor
@@ -99,8 +102,11 @@ class MarginWatch:
     def attach(self, bus: BusRun) -> None:
         for inv in self.bounds:
             codec = get_codec(self.spec.channel(inv.channel).encoding)
+            def seen(sample: zenoh.Sample, inv: BoundInvariant = inv, codec: Codec = codec) -> None:
+                self._seen(inv, codec, sample)
+
             try:
-                bus.subscribe(inv.channel, lambda sample, inv=inv, codec=codec: self._seen(inv, codec, sample))
+                bus.subscribe(inv.channel, seen)
             except KeyError:  # not observable in this mode
                 continue
 

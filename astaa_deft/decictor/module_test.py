@@ -18,6 +18,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from ..deft.planner_section import planner_of
 from ..deft.replay import trajectory_points
 from ..deft.suite import Suite
 from .oracle import Consistency, Lane, LaneGrid, consistency
@@ -75,7 +76,7 @@ def replay_consistency(suite_dir: Path, overrides: str | None = None) -> Consist
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, _, value = item.partition("=")
         suite.manifest["params"][key.strip()] = value.strip()
-    replayed = end_points([r.message for r in suite.results()], suite.spec.planner.trajectory)
+    replayed = end_points([r.message for r in suite.results()], planner_of(suite.spec).trajectory)
     seed_path = as_path([(float(x), float(y)) for x, y in seed["seed_plan_ends"]])
     return consistency(seed_path, as_path(replayed), LaneGrid(lanes))
 

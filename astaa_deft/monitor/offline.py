@@ -86,9 +86,9 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
         if event.time_ns <= end_ns:
             _feed_side(monitors, event)
     monitors.finish(end_ns)
-    for event in events:  # the spec's run: outcome (an exit code, a channel's end): judged once, when it happened
-        if isinstance(event, rec.ViolationRecord) and event.invariant_kind == RUN_END_KIND:
-            monitors.add_finding(Violation.from_json(rec.encode(event)))
+    for record in events:  # the spec's run: outcome (an exit code, a channel's end): judged once, when it happened
+        if isinstance(record, rec.ViolationRecord) and record.invariant_kind == RUN_END_KIND:
+            monitors.add_finding(Violation.from_json(rec.encode(record)))
     seconds = time.perf_counter() - clock
 
     extra = [rec.encode(e) for e in events if isinstance(e, rec.OtherEvent) and e.kind == "bus_lost"]

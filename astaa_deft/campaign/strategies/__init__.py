@@ -7,7 +7,9 @@ from .decictor import DecictorRandomDeltaStrategy, DecictorRandomStrategy, Decic
 from .guided import GuidedStrategy
 from .random import RandomStrategy
 
-STRATEGIES = {"random": RandomStrategy, "guided": GuidedStrategy, "decictor": DecictorStrategy,
-              "decictor-random": DecictorRandomStrategy, "decictor-random-delta": DecictorRandomDeltaStrategy}
+STRATEGIES: dict[str, type[Strategy]] = {
+    "random": RandomStrategy, "guided": GuidedStrategy, "decictor": DecictorStrategy,
+    "decictor-random": DecictorRandomStrategy, "decictor-random-delta": DecictorRandomDeltaStrategy,
+}
 
 __all__ = ["Proposal", "Strategy", "STRATEGIES", "RandomStrategy", "GuidedStrategy"]

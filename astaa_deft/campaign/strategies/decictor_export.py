@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from ...codecs import get_codec
 from ...decictor.module_test import check_suite, end_points, write_consistency_test
 from ...decictor.observe import observe_log
+from ...deft.planner_section import planner_of
 from ...deft.workflow import extract_module_tests
 from ...errors import InputError
 from ...log.reader import read_log
@@ -37,7 +38,7 @@ PAGE = "decictor.html"
 
 def seed_plan_ends(strategy: DecictorStrategy, log_path: Path) -> list[tuple[float, float]]:
     spec = strategy.spec
-    cfg = spec.planner
+    cfg = planner_of(spec)
     channel = spec.channel(cfg.output)
     codec = get_codec(channel.encoding)
     log = read_log(log_path)
