@@ -29,9 +29,10 @@ from __future__ import annotations
 
 import enum
 import time
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Callable, Generic, Hashable, Mapping, Sequence, TypeVar
+from typing import Generic, TypeVar
 
 from ..errors import AstaaDeftError
 

@@ -30,8 +30,9 @@ import json
 import statistics
 from bisect import bisect_left, bisect_right
 from collections import defaultdict
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Hashable, Iterable, Mapping, Sequence
+from typing import Any
 
 from ..codecs import get_codec
 from ..codecs.base import DecodeError, EncodeError
