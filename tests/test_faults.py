@@ -28,7 +28,7 @@ from astaa_deft.log.reader import read_log
 from proxy_helpers import ECHO_SPEC, SUT_DIR, alive, received
 
 TOOL = Path(sys.executable).with_name("astaa-deft")  # the installed entry point: no cwd on sys.path
-GONE_BOUND = 15.0  # generous: the target is 5 s, printed per test; this only stops a hung test
+GONE_BOUND = 10.0  # from the fault; generous: the target is 5 s, printed per test
 
 
 def _children() -> dict[int, list[int]]:
@@ -111,7 +111,7 @@ class ToolRun:
 
     def all_gone(self, what: str) -> None:
         pids = [self.proc.pid, *self.started]
-        left, _ = wait_gone(pids)
+        left, _ = wait_gone(pids, max(0.5, GONE_BOUND - (time.monotonic() - self.fault_at)))
         print(f"{what}: every started process gone {time.monotonic() - self.fault_at:.2f} s after the fault")
         assert left == [], f"still running after {what}: {[self.started.get(p, 'tool') for p in left]}"
 

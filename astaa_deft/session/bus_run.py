@@ -37,6 +37,7 @@ from .options import RunOptions
 
 HELPER_READY_TIMEOUT = 20.0
 DRAIN_SECONDS = 0.3  # after the modules stop, let in-flight messages reach the tool's subscribers
+SUBSCRIBED_LIMIT = 2.0  # for the router to see the recorder's subscribers after its 'ready'
 CATCH_UP_LIMIT = 15.0  # at most this long for a recorder that fell behind to read its backlog
 RECORDER_CAUGHT_UP = "caught up"  # the recorder's line once the run_stopped event (and all before it) arrived
 
@@ -135,6 +136,7 @@ class BusRun:
             self.counter = ChannelCounter(self.session, self.spec, opts.mode)
         if opts.record is not None:
             self._start_recorder(opts.record)
+            self._wait_recorder_subscribed()
         started = self.emit(rec.RunStarted(time.time_ns(), opts.mode, self.spec.name, tuple(opts.command_line)))
         self.monitors = OnlineMonitors(self.spec, started.time_ns, self._violated)
         intercepted = self.interception.targets if self.interception is not None else set()
@@ -192,6 +194,20 @@ class BusRun:
             args += ["--attach", f"{name}={file}"]
         self.recorder = self._spawn_ready("recorder", args, error_file=path, stdin_text=self.spec.source_text or (
             self.spec.path.read_text() if self.spec.path is not None else ""))
+
+    def _wait_recorder_subscribed(self) -> None:
+        """The recorder says 'ready' once it declared its subscribers; the router may learn of them a moment
+        later, and an event published in between (run_started) would miss the log. Wait until our events
+        publisher sees a subscriber (bounded: a Zenoh that does not report matching must not stall runs)."""
+        assert self._events_pub is not None and self.recorder is not None
+        deadline = time.monotonic() + SUBSCRIBED_LIMIT
+        while time.monotonic() < deadline and self.recorder.poll() is None:
+            try:
+                if self._events_pub.matching_status.matching:
+                    return
+            except zenoh.ZError:
+                return
+            time.sleep(0.005)
 
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None,
                      stdin_text: str | None = None) -> subprocess.Popen:
@@ -274,8 +290,9 @@ class BusRun:
 
     def _wait_recorder_caught_up(self) -> None:
         """A recorder behind (a burst, a slow disk) still holds messages in its socket: stopping it now would
-        lose them. It says when the run_stopped event has arrived, i.e. everything sent before it."""
-        if self.recorder is None:
+        lose them. It says when the run_stopped event has arrived, i.e. everything sent before it. Not
+        waited for when the bus router is lost: nothing reaches the recorder any more."""
+        if self.recorder is None or self.helper_lost():
             return
         _, lines = self._helper_output[self.recorder.pid]
         deadline = time.monotonic() + CATCH_UP_LIMIT
