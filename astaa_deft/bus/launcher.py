@@ -18,11 +18,12 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 from ..errors import InputError, Problem
 from ..spec.model import Module, Spec
 from .processes import python_module, signal_group, tail
+import contextlib
 
 
 
@@ -91,7 +92,7 @@ class Launcher:
 
     def __post_init__(self) -> None:
         self.running: dict[str, RunningModule] = {}
-        self.exits: "queue.Queue[ProcessExit]" = queue.Queue()
+        self.exits: queue.Queue[ProcessExit] = queue.Queue()
         self._stopping = threading.Event()
         self._reaper: subprocess.Popen | None = None
 
@@ -132,7 +133,7 @@ class Launcher:
         env["ZENOH_SESSION_CONFIG_URI"] = config  # ROS 2 rmw_zenoh
         env.setdefault("PYTHONUNBUFFERED", "1")
         log_path = output_file(self.run_dir, module.name)
-        log = open(log_path, "wb")
+        log = open(log_path, "wb")  # noqa: SIM115 - the module writes to it for its whole life; closed at its exit
         try:
             process = subprocess.Popen(
                 argv,
@@ -175,6 +176,7 @@ class Launcher:
         if ready.channel is not None:
             is_ready, what = (lambda: self.channel_seen(ready.channel)), f"no message on '{ready.channel}'"
         else:
+            assert ready.log is not None  # the spec loader gives every readiness a channel, a log line or a delay
             pattern = re.compile(ready.log)
             log_path = self.running[module.name].log_path
             is_ready, what = (lambda: _log_matches(log_path, pattern)), f"no output line matching '{ready.log}'"
@@ -199,7 +201,8 @@ class Launcher:
                 time.sleep(0.01)
             raise ModuleCrashedWhileStarting(Problem(
                 str(self.spec.path or "<spec>"), None, None,
-                f"module '{module.name}' exited with code {code} while starting" + (f":\n{log_tail}" if log_tail else ""),
+                f"module '{module.name}' exited with code {code} while starting"
+                + (f":\n{log_tail}" if log_tail else ""),
                 f"run its command by hand to see why (log: {running.log_path})",
             ))
 
@@ -234,21 +237,18 @@ class Launcher:
             signal_group(r.process, signal.SIGTERM)
         deadline = time.monotonic() + grace
         for r in self.running.values():
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 r.process.wait(timeout=max(0.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                pass
         for r in self.running.values():
             # The group may outlive its leader (a module's own children): kill it whole.
             signal_group(r.process, signal.SIGKILL)
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 r.process.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                pass
         if self._reaper is not None:
             self._tell_reaper("done")
             try:
-                self._reaper.stdin.close()
+                if self._reaper.stdin is not None:
+                    self._reaper.stdin.close()
                 self._reaper.wait(timeout=5.0)
             except (OSError, subprocess.TimeoutExpired):
                 pass
@@ -263,7 +263,7 @@ class Launcher:
                 pass
 
 
-def _log_matches(path: Path, pattern: "re.Pattern[str]") -> bool:
+def _log_matches(path: Path, pattern: re.Pattern[str]) -> bool:
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:

@@ -13,11 +13,13 @@ import subprocess
 import sys
 from collections import deque
 from pathlib import Path
+import contextlib
 
 PR_SET_PDEATHSIG = 1
 
 # Python 3.10 has no -P: drop the current directory from sys.path by hand, then run the module as -m would.
-_RUN_INSTALLED = "import runpy, sys; sys.path.pop(0); sys.argv[0] = '{m}'; runpy.run_module('{m}', run_name='__main__', alter_sys=True)"
+_RUN_INSTALLED = ("import runpy, sys; sys.path.pop(0); sys.argv[0] = '{m}'; "
+                  "runpy.run_module('{m}', run_name='__main__', alter_sys=True)")
 
 
 def python_module(module: str) -> list[str]:
@@ -36,18 +38,14 @@ def python_module(module: str) -> list[str]:
 
 def die_with_parent() -> None:
     """preexec_fn: SIGTERM this child when the tool dies, even by SIGKILL (Linux)."""
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):
-        pass
 
 
 def signal_group(process: subprocess.Popen, sig: signal.Signals) -> None:
     """Signal the process group led by `process` (started with start_new_session)."""
-    try:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(process.pid, sig)
-    except (ProcessLookupError, PermissionError):
-        pass
 
 
 def stop_process(process: subprocess.Popen, grace: float, sig: signal.Signals = signal.SIGTERM) -> int | None:

@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import time
+import contextlib
 
 GRACE_SECONDS = 3.0
 
@@ -35,10 +36,8 @@ def main() -> int:
 def _end(groups: list[int]) -> None:
     for sig in (signal.SIGTERM, signal.SIGKILL):
         for pgid in groups:
-            try:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(pgid, sig)
-            except (ProcessLookupError, PermissionError):
-                pass
         if sig == signal.SIGTERM:
             deadline = time.monotonic() + GRACE_SECONDS
             while time.monotonic() < deadline and any(_group_alive(g) for g in groups):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from ..log import records as rec
 from ..session import BusRun, RunOptions, RunResult, run_session

@@ -1,4 +1,6 @@
-"""One run of the SUT on the bus (the session's parts; :func:`run_session` drives it): tool session, proxy or observer, recorder, modules.
+"""One run of the SUT on the bus: tool session, proxy or observer, recorder, modules.
+
+The session's parts; :func:`run_session` drives them.
 
 Start order: the tool's session (and the star proxy) first, then the recorder
 (subscribed before any module speaks), then the modules in spec order.
@@ -27,6 +29,7 @@ from ..bus import zenoh_config as zc
 from ..log import records as rec
 from ..monitor.online import OnlineMonitors
 from ..bus.launcher import Launcher, ModuleNotReady, ProcessExit, output_file
+from ..monitor.verdict import Verdict
 from ..monitor.violation import Violation
 from ..bus.observer import ChannelCounter
 from ..bus.processes import die_with_parent, python_module, stop_process, tail
@@ -71,7 +74,7 @@ class BusRun:
         self.bus_endpoints: list[str] = []
         self.interception: InterceptionBridge | None = None
         self.monitors: OnlineMonitors | None = None
-        self.verdict = None  # the CRASH-scale verdict, once stopped
+        self.verdict: Verdict | None = None  # the CRASH-scale verdict, once stopped
         self.violations: list[rec.ViolationRecord] = []
         self.stop_requested = threading.Event()  # --stop-on-violation
         self.end_reason = ""
@@ -203,7 +206,8 @@ class BusRun:
         deadline = time.monotonic() + SUBSCRIBED_LIMIT
         while time.monotonic() < deadline and self.recorder.poll() is None:
             try:
-                if self._events_pub.matching_status.matching:
+                # zenoh's stub types Publisher.matching_status as bool; at run time it is a MatchingStatus.
+                if self._events_pub.matching_status.matching:  # type: ignore[attr-defined]
                     return
             except zenoh.ZError:
                 return
@@ -371,6 +375,7 @@ class BusRun:
 
     def _violated(self, violation) -> None:
         record = rec.decode({"kind": "violation", **violation.to_json()})
+        assert isinstance(record, rec.ViolationRecord)  # a 'violation' body always decodes to one
         self.violations.append(record)
         self.emit(record)
         if self.options.stop_on_violation:
@@ -409,8 +414,8 @@ class BusRun:
         self.on_event(rec.decode({"kind": "mutation", "time_ns": time.time_ns(), **event.to_json()}))
 
     def _undeclared(self, module: str, key: str) -> None:
-        self.emit(rec.UndeclaredKey(time.time_ns(), module, key,
-                                    "forwarded to every other module; declare it under 'channels' to route it precisely"))
+        note = "forwarded to every other module; declare it under 'channels' to route it precisely"
+        self.emit(rec.UndeclaredKey(time.time_ns(), module, key, note))
 
 
 def _concrete(endpoint: str) -> str:
