@@ -88,3 +88,36 @@ def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
         logged = [rec.decode(e) for e in read_log(result.log).events()]
         assert any(isinstance(r, rec.RunEnd) and r.reason == "all delivered" for r in logged)
         assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1, (name, [r for r in logged if not isinstance(r, rec.ProcessExitRecord)])  # the other session's events are not here
+
+
+def test_a_relative_run_dir_still_hands_modules_a_config_they_can_open(tmp_path, monkeypatch):
+    """Issue 16, found item 8: a relative --run-dir with a module 'cwd' gave the module a relative
+    ZENOH_CONFIG path that did not exist from its own directory, and it crashed."""
+    import sys
+    import textwrap
+
+    from astaa_deft.spec_loader import load_spec_text
+
+    elsewhere = tmp_path / "module_home"
+    elsewhere.mkdir()
+    probe = textwrap.dedent("""\
+        import os, time
+        open(os.environ["ZENOH_CONFIG"]).read()
+        print("config readable", flush=True)
+        time.sleep(30)
+        """)
+    (elsewhere / "probe.py").write_text(probe)
+    spec = load_spec_text(textwrap.dedent(f"""\
+        name: reldir
+        modules:
+          - {{name: probe, command: ["{sys.executable}", "probe.py"], cwd: "{elsewhere}",
+             ready: {{log: "config readable", timeout: 15}}}}
+        channels:
+          - {{name: data, key: t/data, producer: probe, type: Sample}}
+        types:
+          Sample: {{seq: uint64}}
+        """), name="reldir.yaml")
+    monkeypatch.chdir(tmp_path)
+    result = run_session(spec, RunOptions(mode="star", run_dir=Path("runs/one"), time_limit=1.0))
+    assert result.end_reason == "time limit"
+    assert not result.crashes and result.verdict.klass == "Pass"

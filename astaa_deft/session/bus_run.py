@@ -100,7 +100,8 @@ class BusRun:
             self._tmp = tempfile.TemporaryDirectory(prefix=f"astaa-deft-{self.spec.name}-")
             self.run_dir = Path(self._tmp.name)
         else:
-            self.run_dir = opts.run_dir
+            # Absolute: the paths handed to modules (ZENOH_CONFIG…) must hold from a module's own cwd too.
+            self.run_dir = opts.run_dir.resolve()
             self.run_dir.mkdir(parents=True, exist_ok=True)
         if opts.record is not None:
             _check_writable(opts.record)
