@@ -23,6 +23,7 @@ import numpy as np
 from ..geometry import Box, overlap
 from ..intercept.actions.participant import Participant, Waypoint
 from .paths import EgoPath
+from ..errors import AstaaDeftError
 
 DT = 2.0  # s between waypoints, the paper's time step
 DEFAULT_CLEARANCE = 0.5  # m, the paper's safe distance
@@ -35,8 +36,10 @@ FOOTPRINT_SPACING = 1.0  # m between the seed footprints that tile the swept pat
 MOTION_SAMPLE = 0.5  # m between checked positions along a participant's motion
 
 
-class PlacementError(ValueError):
+class PlacementError(AstaaDeftError, ValueError):
     """A placement that would enter the forbidden region or break its kinematic limits."""
+
+    exit_code = 2  # bad input: the CLI prints it as one line
 
 
 @dataclass(frozen=True)

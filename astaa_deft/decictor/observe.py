@@ -21,10 +21,13 @@ from ..spec.model import Spec
 from .config import DecictorConfig, lanes_from_message, read_lanes_file
 from .oracle import Lane, RunObservation
 from .paths import EgoPath, EgoState
+from ..errors import AstaaDeftError
 
 
-class ObservationError(ValueError):
+class ObservationError(AstaaDeftError, ValueError):
     """The run cannot be judged from its log."""
+
+    exit_code = 2  # bad input: the CLI prints it as one line
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from ...codecs import DecodeError
-from ...errors import InputError, Problem
+from ...errors import AstaaDeftError, InputError, Problem
 from ...fields import FieldPath, FieldPathError, get, type_at
 from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, \
     decimal_text, required
@@ -196,7 +196,9 @@ class Participant(ActionConfig):
 
 # ---------------------------------------------------------------- the spec's mapping
 
-class MappingError(ValueError):
+class MappingError(AstaaDeftError, ValueError):
+
+    exit_code = 2  # bad input: the CLI prints it as one line
     def __init__(self, message: str, fix: str = f"see {MAPPING_DOCS}"):
         super().__init__(message)
         self.fix = fix
