@@ -91,7 +91,7 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     spec_path = demo_spec_path()
     problems: list[str] = []
 
-    say(f"== 1/4 record: the demo stack drives '{scenario}' through the star proxy ==")
+    say(f"== 1/5 record: the demo stack drives '{scenario}' through the star proxy ==")
     clean_log = out_dir / "clean.mcap"
     outcome, watch = drive(scenario, True, False, clean_log, command_line)
     summarise(outcome, watch)
@@ -99,7 +99,7 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
         problems.append("the clean run did not reach its goal with a Pass verdict")
 
     say("")
-    say("== 2/4 DeFT: deterministic planner tests from that record ==")
+    say("== 2/5 DeFT: deterministic planner tests from that record ==")
     tests_dir = out_dir / "planner-tests"
     from .extract import run as extract
 
@@ -113,7 +113,7 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
     say("")
     policy = demo_policy_path()
-    say(f"== 3/4 ASTAA: the same scenario with live messages rewritten ({policy.name}) ==")
+    say(f"== 3/5 ASTAA: the same scenario with live messages rewritten ({policy.name}) ==")
     say(policy.read_text().split("<description>")[1].split("</description>")[0].strip())
     attack_log = out_dir / "intercepted.mcap"
     outcome, watch = drive(scenario, True, False, attack_log, command_line, policy=policy, duration=20.0)
@@ -124,7 +124,7 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
         problems.append(f"the intercepted run was not fully observed ({outcome.end_reason})")
 
     say("")
-    say("== 4/4 minimise: which mutations cause that failure? ==")
+    say("== 4/5 minimise: which mutations cause that failure? ==")
     if minimise_step(attack_log, spec_path, out_dir / "minimised") != 0:
         problems.append("minimisation did not reproduce the failure")
 
