@@ -141,6 +141,18 @@ class InvariantReader:
             return None  # the channel's own declaration is wrong; the loader reports that
         return channel
 
+    def module_list(self, node: Node | None, example: str) -> tuple[str, ...] | None:
+        """The modules a ``modules:`` key names (every module of the spec when absent); None after a problem."""
+        if node is None:
+            return tuple(self.modules)
+        if not node.is_list or not node.value:
+            self.problem(node, "'modules' must be a non-empty list of module names", f"e.g. modules: [{example}]")
+            return None
+        names = [self.module(item) for item in node.value]
+        if any(n is None for n in names):
+            return None
+        return tuple(n for n in names if n is not None)
+
     def module(self, node: Node) -> str | None:
         name = self.text(node, "a module name", "control")
         if name is None:

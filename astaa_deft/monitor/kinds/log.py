@@ -43,16 +43,9 @@ class LogInvariant(Invariant):
 
 def parse(reader: InvariantReader, node: Node, common: dict) -> LogInvariant | None:
     v = node.value
-    modules: list[str] = list(reader.modules)
-    if "modules" in v:
-        mnode = v["modules"]
-        if not mnode.is_list or not mnode.value:
-            reader.problem(mnode, "'modules' must be a non-empty list of module names", "e.g. modules: [planning]")
-            return None
-        names = [reader.module(item) for item in mnode.value]
-        if any(n is None for n in names):
-            return None
-        modules = [n for n in names if n is not None]
+    modules = reader.module_list(v.get("modules"), "planning")
+    if modules is None:
+        return None
     text = reader.text(v.get("pattern"), "'pattern'", "Traceback|ERROR")
     if text is None:
         return None
@@ -73,7 +66,7 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> LogInvariant | N
                            "the matching lines tolerated before it counts, e.g. max_count: 2")
             return None
         max_count = value
-    return LogInvariant(modules=tuple(modules), pattern=pattern, max_count=max_count, **common)
+    return LogInvariant(modules=modules, pattern=pattern, max_count=max_count, **common)
 
 
 class LogMonitor(Monitor):

@@ -45,16 +45,9 @@ class ProcessInvariant(Invariant):
 
 def parse(reader: InvariantReader, node: Node, common: dict) -> ProcessInvariant | None:
     v = node.value
-    modules: list[str] = list(reader.modules)
-    if "modules" in v:
-        mnode = v["modules"]
-        if not mnode.is_list or not mnode.value:
-            reader.problem(mnode, "'modules' must be a non-empty list of module names", "e.g. modules: [control]")
-            return None
-        names = [reader.module(item) for item in mnode.value]
-        if any(n is None for n in names):
-            return None
-        modules = [n for n in names if n is not None]
+    modules = reader.module_list(v.get("modules"), "control")
+    if modules is None:
+        return None
     allow_clean = bool(reader.boolean(v.get("allow_clean_exit"), "'allow_clean_exit'"))
     counter, counter_channels = None, []
     if "restart_counter" in v:
@@ -72,7 +65,7 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> ProcessInvariant
             reader.problem(cnode, f"no channel produced by {', '.join(modules)} has a numeric field '{text}'",
                            "name a counter field (e.g. header.seq) of a message type those modules publish")
             return None
-    return ProcessInvariant(modules=tuple(modules), allow_clean_exit=allow_clean, restart_counter=counter,
+    return ProcessInvariant(modules=modules, allow_clean_exit=allow_clean, restart_counter=counter,
                             counter_channels=tuple(counter_channels), **common)
 
 
