@@ -32,7 +32,7 @@ EXIT_NOT_OBSERVED = 3  # as `proxy`: the run was not observed to its end, no Pas
 def run(log_path: Path, spec_path: Path | None = None, as_json: bool = False) -> int:
     checked = check_recorded_run(log_path, spec_path)
     result, log = checked.result, checked.log
-    tool_lost = any(e.get("reason") == layout.TOOL_LOST for e in log.events("run_end"))
+    tool_lost = any(e.reason == layout.TOOL_LOST for e in log.records(rec.RunEnd))
     if as_json:
         print(json.dumps(_as_json(result, log, tool_lost), default=str))
     else:

@@ -18,6 +18,7 @@ from typing import Any
 
 from ..errors import InputError, Problem
 from ..log import layout
+from ..log import records as rec
 from ..log.reader import LogContents, read_log
 from ..spec_loader import load_spec
 from ..spec.model import Spec
@@ -77,7 +78,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]
-    collisions = [e["time_ns"] for e in log.events("violation") if e.get("invariant_kind") == "collision"]
+    collisions = [v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant_kind == "collision"]
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept]
     manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles)

@@ -11,6 +11,7 @@ import json
 import struct
 import zlib
 from dataclasses import dataclass, field
+from typing import Protocol, TypeVar
 from pathlib import Path
 
 from mcap.exceptions import EndOfFile, InvalidMagic
@@ -21,6 +22,14 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from ..errors import InputError, Problem
 from . import layout
+from . import records as rec
+
+
+class _Kinded(Protocol):
+    kind: str
+
+
+R = TypeVar("R", bound=_Kinded)  # a record type of log/records.py (each names its event kind)
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
@@ -92,6 +101,11 @@ class LogContents:
             if kind is None or body.get("kind") == kind:
                 out.append(body)
         return out
+
+    def records(self, kind: type[R]) -> list[R]:
+        """The tool's events of one record type (``log/records.py``), typed."""
+        bodies = self.events(kind.kind)
+        return [r for r in (rec.decode(b, where=str(self.path)) for b in bodies) if isinstance(r, kind)]
 
     def unreadable_events(self) -> int:
         return sum(_json_object(m.data) is None for m in self.on(layout.EVENTS_TOPIC))

@@ -47,6 +47,7 @@ from ..deft.planner_section import planner_of
 from ..deft.replay import make_planner
 from ..errors import InputError, Problem
 from ..log import layout
+from ..log import records as rec
 from ..log.reader import LoggedMessage, read_log
 from ..monitor import MonitorSet, format_violation, with_typed_invariants
 from ..session.check import spec_from_log
@@ -174,7 +175,7 @@ class ReplayModel:
                                      "record the run with this spec"))
         self.outputs: list[LoggedMessage] = sent_stream(self.mlog, log, self.cfg.output)
         self.start_ns = self.mlog.start_ns
-        stopping = [e["time_ns"] for e in log.events("run_stopping") if "time_ns" in e]
+        stopping = [e.time_ns for e in log.records(rec.RunStopping) if e.time_ns]
         self.end_ns = int(stopping[0]) if stopping else max((m.log_time for m in self.outputs), default=self.start_ns)
         # Replay only up to the output that failed in the run. The frames after it carry the
         # failure's own consequences (in closed loop the ego is already speeding), which would
