@@ -12,6 +12,7 @@ traceback). Only :class:`InputError` (exit code 2) is meant for the user today.
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,10 +44,18 @@ class Problem:
             where += f":{self.line}"
             if self.column is not None:
                 where += f":{self.column}"
-        text = f"{where}: {self.message}"
+        text = f"{where}: {_shortened(self.message)}"
         if self.fix:
-            text += f" — {self.fix}"
+            text += f" — {_shortened(self.fix)}"
         return text
+
+
+_LONG_RUN = re.compile(r"\S{200,}")  # longer than any path a message names
+
+
+def _shortened(text: str) -> str:
+    """Quoted input can be huge (a 5,000-digit number, a mangled document): keep each run's ends, say how long."""
+    return _LONG_RUN.sub(lambda m: f"{m.group()[:60]}…({len(m.group())} characters)…{m.group()[-30:]}", text)
 
 
 class InputError(AstaaDeftError):

@@ -33,3 +33,15 @@ def test_cli_prints_user_errors_once_and_exits_with_their_code(tmp_path, capsys)
     assert cli.main(["spec", "check", str(spec)]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err and all(line.startswith(f"astaa-deft: error: {spec}") for line in err)
+
+
+def test_a_huge_value_quoted_in_a_message_is_shortened_and_says_how_long():
+    """Found by the generated bad input: a 5,000-digit type name made a 5 KB error line."""
+    from astaa_deft.errors import Problem
+
+    line = str(Problem("sut.yaml", 3, 4, f"unknown type '{'9' * 5000}' — did you mean 'bool'?", "fix the name"))
+    assert len(line) < 300
+    assert "(5002 characters)" in line and line.startswith("sut.yaml:3:4: unknown type '999")
+    assert line.endswith("did you mean 'bool'? — fix the name")
+    path = "/tmp/" + "d" * 150 + "/spec.yaml"  # a long path is still named in full
+    assert path in str(Problem("x", None, None, f"see {path}"))
