@@ -33,8 +33,8 @@ SET_POLICY = SUT / "set_every_message.xml"
 RESULT_TIMEOUT = 120.0
 
 
-def wait_result(path: Path) -> dict:
-    deadline = time.monotonic() + RESULT_TIMEOUT
+def wait_result(path: Path, timeout: float = RESULT_TIMEOUT) -> dict:
+    deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if path.exists():
             return json.loads(path.read_text())
@@ -42,7 +42,7 @@ def wait_result(path: Path) -> dict:
     raise RuntimeError(f"no result at {path}")
 
 
-def run_direct(params: dict[str, str]) -> dict:
+def run_direct(params: dict[str, str], spec=SPEC, sut: Path = SUT, timeout: float = RESULT_TIMEOUT) -> dict:
     """Source and sink as plain Zenoh peers, connected to each other: no tool at all."""
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp)
@@ -51,15 +51,15 @@ def run_direct(params: dict[str, str]) -> dict:
                 "source": zc.config_dict(mode="peer", connect=[ep])}
         procs = []
         try:
-            for module in SPEC.modules:
+            for module in spec.modules:
                 cfg = zc.write_config_file(cfgs[module.name], run_dir / f"{module.name}.json5")
-                values = {**SPEC.params, **params, "python": sys.executable, "spec_dir": str(SUT),
+                values = {**spec.params, **params, "python": sys.executable, "spec_dir": str(sut),
                           "run_dir": str(run_dir), "zenoh_config": str(cfg), "module": module.name}
                 argv = [a.format_map(values) for a in module.command]
                 procs.append(subprocess.Popen(argv, env={**os.environ, "ZENOH_CONFIG": str(cfg)},
-                                              start_new_session=True))
+                                              start_new_session=True, stdout=subprocess.DEVNULL))
                 time.sleep(0.5)
-            return wait_result(run_dir / "sink.json")
+            return wait_result(run_dir / "sink.json", timeout)
         finally:
             for p in procs:
                 stop_process(p, grace=3.0)
@@ -70,8 +70,8 @@ def cpu_seconds(who: int) -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy: Path | None = None
-             ) -> tuple[dict, dict]:
+def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy: Path | None = None,
+             timeout: float = RESULT_TIMEOUT) -> tuple[dict, dict]:
     """One run through the tool; the sink's result gains the CPU the tool (and its recorder) spent per message.
 
     CPU per message is the steadier figure on a shared machine: a rate falls
@@ -81,11 +81,11 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
         run_dir = Path(tmp)
         interceptor = load_interceptor(policy, spec) if policy is not None else None
         options = RunOptions(mode=mode, params=params, run_dir=run_dir, interceptor=interceptor,
-                             record=run_dir / "bench.mcap" if record else None, time_limit=RESULT_TIMEOUT)
+                             record=run_dir / "bench.mcap" if record else None, time_limit=timeout)
         sink = run_dir / "sink.json"
         tool0, children0 = cpu_seconds(resource.RUSAGE_SELF), cpu_seconds(resource.RUSAGE_CHILDREN)
         outcome = run_session(spec, options, stop_when=lambda run: "sink done" if sink.exists() else None)
-        result = dict(wait_result(sink))
+        result = dict(wait_result(sink, timeout))
         # Children: the recorder (and the modules, which are the same in every row).
         tool, children = cpu_seconds(resource.RUSAGE_SELF) - tool0, cpu_seconds(resource.RUSAGE_CHILDREN) - children0
         result["tool_cpu_us"] = tool / max(1, result["received"]) * 1e6

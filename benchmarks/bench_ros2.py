@@ -15,24 +15,17 @@ from __future__ import annotations
 
 import argparse
 import base64
-import json
-import os
-import subprocess
-import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from astaa_deft.bus import zenoh_config as zc
-from astaa_deft.bus.processes import stop_process
-from astaa_deft.bus.run import BusRun, RunOptions
 from astaa_deft.codecs import get_codec
 from astaa_deft.fields import set_field
-from astaa_deft.intercept import load_interceptor
 from astaa_deft.spec_loader import load_spec
 from astaa_deft.spec.ros2_types import shared_types
+
+import bench_proxy  # the same direct and through-the-tool runs, on the ROS 2 bench spec
 
 SUT = Path(__file__).parent / "sut" / "ros2"
 SPEC = load_spec(SUT / "bench.yaml")
@@ -114,42 +107,13 @@ def codec_row(label: str, type_name: str, raw: bytes, path: str, repeat: int) ->
 
 # ---------------------------------------------------------------- bus
 
-def wait_result(path: Path) -> dict:
-    deadline = time.monotonic() + RESULT_TIMEOUT
-    while time.monotonic() < deadline:
-        if path.exists():
-            return json.loads(path.read_text())
-        time.sleep(0.05)
-    raise RuntimeError(f"no result at {path}")
-
-
 def run_direct(params: dict[str, str]) -> dict:
-    with tempfile.TemporaryDirectory() as tmp:
-        run_dir = Path(tmp)
-        ep = zc.loopback_endpoint()
-        cfgs = {"sink": zc.config_dict(mode="peer", listen=[ep]), "source": zc.config_dict(mode="peer", connect=[ep])}
-        procs = []
-        try:
-            for module in SPEC.modules:
-                cfg = zc.write_config_file(cfgs[module.name], run_dir / f"{module.name}.json5")
-                values = {**SPEC.params, **params, "python": sys.executable, "spec_dir": str(SUT),
-                          "run_dir": str(run_dir), "zenoh_config": str(cfg), "module": module.name}
-                argv = [a.format_map(values) for a in module.command]
-                procs.append(subprocess.Popen(argv, env={**os.environ, "ZENOH_CONFIG": str(cfg)},
-                                              start_new_session=True, stdout=subprocess.DEVNULL))
-                time.sleep(0.5)
-            return wait_result(run_dir / "sink.json")
-        finally:
-            for p in procs:
-                stop_process(p, grace=3.0)
+    return bench_proxy.run_direct(params, spec=SPEC, sut=SUT, timeout=RESULT_TIMEOUT)
 
 
 def run_tool(params: dict[str, str], mode: str, policy: Path | None = None) -> dict:
-    with tempfile.TemporaryDirectory() as tmp:
-        run_dir = Path(tmp)
-        interceptor = load_interceptor(policy, SPEC) if policy is not None else None
-        with BusRun(SPEC, RunOptions(mode=mode, params=params, run_dir=run_dir, interceptor=interceptor)):
-            return wait_result(run_dir / "sink.json")
+    result, _recorded = bench_proxy.run_tool(params, mode, False, spec=SPEC, policy=policy, timeout=RESULT_TIMEOUT)
+    return result
 
 
 def bus(size: int, count: int, rate: float) -> None:
