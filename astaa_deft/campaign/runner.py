@@ -5,7 +5,7 @@ own router port (the spec's endpoints with port 0 → a free port), its own
 run directory and its own log, ended by the spec's own ``run:`` section (a
 module's exit, a channel's "done", its time limit — applied by the session
 for every caller, no SUT-specific logic here), the first broken invariant,
-a crashed module, every module gone, or the campaign's time horizon.
+a crashed module (as its on_crash says), every module gone, or the campaign's time horizon.
 Nothing else in the campaign package touches the bus.
 """
 
@@ -66,8 +66,8 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     options.time_limit = horizon
     watch = MarginWatch(spec)
     try:
-        result = run_session(isolated(spec), options, on_start=watch.attach,
-                             stop_when=lambda run: "module crashed" if run.crashed() else None)
+        # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
+        result = run_session(isolated(spec), options, on_start=watch.attach)
     except InputError as exc:
         return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems))
     reason = {"time limit": "horizon", "violation (--stop-on-violation)": "violation"}.get(result.end_reason,
