@@ -3,7 +3,7 @@
 Runs are recorded passively (as DeFT records: no star in the path) with the
 demo's seeded defects off, and stopped as soon as the simulator's `status`
 channel says the scenario is done (goal, collision or its time limit) — the
-way `astaa-deft demo run` stops (astaa_deft/demo/status.py's StatusWatch).
+way `astaa-deft demo run` stops: by the demo spec's run: section.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def demo_spec() -> Spec:
     return load_spec(demo_spec_path())
 
 
-DoneWatch = StatusWatch  # the demo's own: stops at the goal, a collision or the time limit
+DoneWatch = StatusWatch  # the demo's status as seen: goal, collision, clearance
 
 
 @dataclass
@@ -58,8 +58,7 @@ def record_run(spec: Spec, scenario: str, path: Path, time_limit: float = RUN_TI
                          command_line=["benchmarks/deft_reproduction.py", scenario])
     watch = DoneWatch()
     t0 = time.monotonic()
-    outcome = run_session(spec, options, stop_when=watch.finished,
-                          on_start=lambda r: r.subscribe("status", watch.on_sample))
+    outcome = run_session(spec, options, on_start=lambda r: r.subscribe("status", watch.on_sample))
     wall = time.monotonic() - t0
     return RunRecord(path, scenario, wall, outcome.seconds, outcome.end_reason, watch.collision is not None,
                      (watch.collision or {}).get("collision_with"), float(watch.latest.get("sim_time", 0.0)),

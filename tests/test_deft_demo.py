@@ -30,7 +30,7 @@ def recorded(tmp_path_factory):
     spec = load_spec(demo_spec_path())
     path = tmp_path_factory.mktemp("deft") / "lane_follow.mcap"
     watch = StatusWatch()
-    outcome = run_bus(spec, RunOptions(mode="passive", record=path, params=PARAMS), 40.0, until=watch.finished,
+    outcome = run_bus(spec, RunOptions(mode="passive", record=path, params=PARAMS), 40.0,
                       on_start=lambda r: r.subscribe("status", watch.on_sample), verbose=False)
     assert watch.goal, outcome.end_reason
     return spec, path

@@ -42,7 +42,8 @@ def drive(scenario: str, defects: bool, passive: bool, record: Path, command_lin
                          command_line=command_line, interceptor=interceptor, stop_on_violation=stop_on_violation,
                          attachments={layout.POLICY_ATTACHMENT: policy} if policy is not None else {})
     watch = StatusWatch()
-    outcome = run_bus(spec, options, duration or DEFAULT_TIME_LIMIT, until=watch.finished,
+    # The spec's run: section ends the run (goal, collision, the scenario's end); the watch keeps what to show.
+    outcome = run_bus(spec, options, duration or DEFAULT_TIME_LIMIT,
                       on_start=lambda r: r.subscribe("status", watch.on_sample))
     return outcome, watch
 

@@ -1,4 +1,4 @@
-"""The simulator's status channel as a stop condition: a demo run ends at the goal, a collision or its time limit."""
+"""The simulator's status channel as the tool saw it: goal, collision, clearance (the run: section ends runs)."""
 
 from __future__ import annotations
 
@@ -32,12 +32,3 @@ class StatusWatch:
             clearance = msg.get("min_clearance")
             if isinstance(clearance, (int, float)):
                 self.min_clearance = min(self.min_clearance, float(clearance))
-
-    def finished(self, _run) -> str | None:
-        if self.collision is not None:
-            return "collision"
-        if self.goal:
-            return "goal reached"
-        if self.done:
-            return "done"
-        return None
