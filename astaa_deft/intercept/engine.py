@@ -28,8 +28,8 @@ from typing import Any
 from ..codecs import Codec, DecodeError, get_codec
 from ..errors import InputError, Problem
 from ..spec.model import Spec
-from .actions.base import ActionRuntime, Delivery, FieldChange, MessageInfo, MutationEvent, Pending, PolicyContext, \
-    built
+from .actions.base import ActionRuntime, Delivery, FastPath, FieldChange, MessageInfo, MutationEvent, Pending, \
+    PolicyContext, built
 from .dictionary import Dictionary, NotApplicable, load_dictionary
 from .testcase import Policy, TestCase, load_testcase
 
@@ -90,7 +90,7 @@ class _LivePolicy:
 
 class _ChannelState:
     __slots__ = ("name", "codec", "count", "previous_payload", "_previous_cache", "acting", "observers", "anchors",
-                 "held")
+                 "held", "fast")
 
     def __init__(self, name: str, codec: Codec):
         self.name = name
@@ -102,6 +102,8 @@ class _ChannelState:
         self.observers: list[_LivePolicy] = []  # runtimes told about every real message
         self.anchors: list[tuple[int, PolicyGate]] = []  # windows counted from message N here
         self.held: list[tuple[float, int, Delivery]] = []  # delayed deliveries, a heap by due time
+        # The acting policy's shortcut when it alone acts here, for every consumer (see ActionRuntime.fast_path).
+        self.fast: FastPath | None = None
 
     def previous_message(self) -> dict:
         """The previous real message, decoded once (derive rules like time.jump_back read it)."""
@@ -129,6 +131,9 @@ class Interceptor:
         self._sequence = itertools.count()  # orders same-time delayed deliveries
         for policy in testcase.policies:
             self._policies.append(self._start(policy, spec, dictionary))
+        for state in self._channels.values():
+            if len(state.acting) == 1 and not state.observers and not state.acting[0].policy.consumers:
+                state.fast = state.acting[0].runtime.fast_path(state.name)
 
     # -- the proxy's interface ---------------------------------------------------------
     def channels(self) -> set[str]:
@@ -148,7 +153,10 @@ class Interceptor:
             if number == index:
                 gate.anchored_at(now)
         selected = [live for live in state.acting if live.gate.selects(channel, now)]
-        if selected:
+        fast = state.fast
+        if selected and fast is not None and (done := fast(consumers, payload, channel, index, now)) is not None:
+            out.append(done)
+        elif selected:
             info = MessageInfo(channel, index, now, state.codec, state.previous_message)
             out.extend(self._deliver(self._apply(selected, consumers, payload, info), now))
         else:

@@ -384,11 +384,27 @@ class ActionConfig(ABC):
         raise NotImplementedError(f"'{cls.name}' does not make copies")
 
 
+# A runtime's shortcut for one channel (``ActionRuntime.fast_path``), called as
+# fast(consumers, payload, channel, message index, now): the one delivery ``apply``
+# would lead to, or None to take the general path for this message.
+FastPath = Callable[[tuple[str, ...], bytes, str, int, float], "Delivery | None"]
+
+
 class ActionRuntime:
     """Base of action runtimes; every hook has a do-nothing default."""
 
     # False for actions that never rewrite the real message they are offered (interleave).
     acts_on_messages: ClassVar[bool] = True
+
+    def fast_path(self, channel: str) -> FastPath | None:
+        """A shortcut for messages of ``channel`` when this policy alone acts on it (and for all its consumers).
+
+        The engine then calls it instead of ``apply`` (with no ``Pending``,
+        ``MessageInfo`` or stacking); it must return exactly the delivery
+        and event the general path would, or None for the general path.
+        Default: none.
+        """
+        return None
 
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         """What becomes of ``item`` (already narrowed to the affected consumers)."""

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from lxml import etree
 
-from ...codecs import DecodeError, get_codec
+from ...codecs import DecodeError, get_codec, json_fast
 from ...errors import AstaaDeftError, InputError, Problem, did_you_mean
 from ...fields import FieldPath, FieldPathError, get, set_field
 from ...spec.model import FLOAT_KINDS, INT_KINDS, Channel, FieldType
@@ -41,8 +41,8 @@ from ..dictionary import (
     DYNAMIC, GROUP_OF_KIND, REF_PREFIX, Dictionary, Entry, FieldSite, NotApplicable, UnknownEntry, ValueContext,
     field_site, wire_value,
 )
-from .base import ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, \
-    PolicyContext, built, required
+from .base import ActionConfig, ActionDetail, ActionRuntime, Delivery, FastPath, FieldChange, MessageInfo, \
+    MutationEvent, Pending, PinnedStep, PolicyContext, built, required
 
 if TYPE_CHECKING:
     from ..testcase import ActionChecker, Policy
@@ -384,6 +384,17 @@ class SetRuntime(ActionRuntime):
         self.context = context
         self.plans = {channel.name: plan_fields(config.fields, channel, context)
                       for channel in context.channels}
+        self._codecs = {channel.name: get_codec(channel.encoding) for channel in context.channels}
+
+    def fast_path(self, channel: str) -> FastPath | None:
+        """JSON, and every field one place set to a fixed scalar orjson writes as the codec does: see ``_fast_set``."""
+        plans, codec = self.plans.get(channel), self._codecs.get(channel)
+        if not plans or codec is None or codec.name != "json":
+            return None
+        if not all(plan.direct and plan.skip is None and json_fast.writes_alike(plan.value, codec.encode)
+                   for plan in plans):
+            return None
+        return partial(_fast_set, plans, self.context.testcase, self.context.policy.id)
 
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         decoded_here = item.message is None
@@ -404,3 +415,31 @@ class SetRuntime(ActionRuntime):
                 item.message = None
         item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail))
         return [item]
+
+
+def _fast_set(plans: tuple[FieldPlan, ...], testcase: str, policy: str, consumers: tuple[str, ...], payload: bytes,
+              channel: str, index: int, now: float) -> Delivery | None:
+    """The delivery ``SetRuntime.apply`` leads to when every field is set, through orjson; None: take the general path.
+
+    None whenever the result might differ by a byte or a value: orjson
+    cannot read the payload exactly (``json_fast.loads``), a field is
+    missing (the general path reports which), a replaced value might read
+    differently with the stdlib, or the output might be written differently
+    (``json_fast.dumps``). ``tests/test_json_fast.py`` holds it to the
+    general path's deliveries and events.
+    """
+    message = json_fast.loads(payload)
+    if message is None:
+        return None
+    changes = []
+    for plan in plans:
+        old = _set_one(message, plan.path.segments, plan.value)
+        if old is _MISSING or not json_fast.is_exact_scalar(old):
+            return None
+        changes.append(built(FieldChange, path=plan.text, old=old, new=plan.value))
+    out = json_fast.dumps(message)
+    if out is None:
+        return None
+    event = built(MutationEvent, testcase=testcase, policy=policy, action="set", channel=channel,
+                  consumers=consumers, message_index=index, time=now, fields=tuple(changes), detail={})
+    return built(Delivery, consumers=consumers, payload=out, at=now, original=payload, event=event)
