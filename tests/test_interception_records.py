@@ -14,7 +14,7 @@ from collections import OrderedDict
 import pytest
 
 from astaa_deft.bus.topology import (
-    EVENT_JSON, EVENT_MARSHAL, intercept_record, pack_batch, read_intercept_record, unpack_batch,
+    EVENT_JSON, EVENT_MARSHAL, intercept_record, pack_deliveries, read_intercept_record, unpack_deliveries,
 )
 from astaa_deft.intercept.actions.base import FieldChange, MutationEvent
 from astaa_deft.session.recorder import event_json
@@ -64,10 +64,30 @@ def test_malformed_records_and_batches_raise_value_error() -> None:
         read_intercept_record(record[:8])
     with pytest.raises(ValueError):
         read_intercept_record(b"\x09" + record[1:])  # unknown event form
-    batch = pack_batch([(1, b"payload", record), (2, b"p2", b"")])
-    assert unpack_batch(batch) == [(1, b"payload", record), (2, b"p2", b"")]
-    with pytest.raises(ValueError):
-        unpack_batch(batch[:-1])
+    batch = pack_deliveries([(1, b"payload", b"o", True, _event(1, 2)), (2, b"p2", None, True, None)])
+    assert [row[:4] for row in unpack_deliveries(batch)] == [(1, b"payload", b"o", True), (2, b"p2", None, True)]
+    for damaged in (batch[:-1], b"", b"\x00garbage"):
+        with pytest.raises(ValueError):
+            unpack_deliveries(damaged)
+    import marshal
+
+    for rows in ([(1, b"p")], [(1, "text", None, True, None)], [(1, b"p", None, True, (1, 2))], {"not": "a list"},
+                 [(1, b"p", None, True, b"{not json")]):
+        with pytest.raises(ValueError):
+            unpack_deliveries(marshal.dumps(rows))
+
+
+@pytest.mark.parametrize("old,new", VALUES)
+def test_a_batch_of_deliveries_carries_each_event_as_its_json_form(old, new) -> None:
+    events = [_event(old, new, {"skipped_fields": ({"path": "x", "reason": "r"},)}),
+              _event(OrderedDict(a=1), object()),  # marshal refuses these: that event alone goes as JSON
+              None]
+    rows = [(i, b"p%d" % i, None if e is None else b"orig", i != 1, e) for i, e in enumerate(events)]
+    back = unpack_deliveries(pack_deliveries(rows))
+    assert [r[:4] for r in back] == [r[:4] for r in rows]
+    assert [None if r[4] is None else r[4].form for r in back] == [EVENT_MARSHAL, EVENT_JSON, None]
+    for (_, _, _, _, wire), event in zip(back[:2], events[:2], strict=True):
+        assert json.dumps(event_json(wire), default=str) == json.dumps(event.to_json(), default=str)
 
 
 def test_built_instances_are_the_dataclasses_own() -> None:

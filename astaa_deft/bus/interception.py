@@ -5,7 +5,7 @@ channel keeps the proxy's zero-copy path. For intercepted channels the proxy
 tells the recorder, on the tool's own key, what it delivered, what the
 original was and what it did — one entry per delivery, so the three records
 can never be mismatched. Entries that pile up while the forwarder is busy go
-out together in one message (see ``topology.pack_batch``); the batch is sent
+out together in one message (see ``topology.pack_deliveries``); the batch is sent
 as soon as the forwarder has nothing more waiting, so at ordinary rates each
 delivery is recorded at once.
 
@@ -30,7 +30,7 @@ from collections.abc import Callable
 import zenoh
 
 from .proxy import BLOCK, REMOTE, LiveRoute, plain_forwarder
-from .topology import intercept_record, intercepted_key, pack_batch
+from .topology import intercepted_key, pack_deliveries
 
 TICK_SECONDS = 0.01
 BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of 200 B messages stays under 64 KiB)
@@ -71,7 +71,8 @@ class InterceptionBridge:
         self._routes: dict[str, LiveRoute] = {}
         self._last_meta: dict[str, tuple] = {}
         self._record_pubs: dict[str, zenoh.Publisher] = {}
-        self._batches: dict[str, list[tuple[int, bytes, bytes]]] = {}  # per channel: entries not yet sent
+        # per channel: deliveries not yet sent to the recorder, (time ns, payload, original, delivered, event)
+        self._batches: dict[str, list[tuple[int, bytes, bytes | None, bool, Any]]] = {}
         self._outbox: list[tuple[zenoh.Publisher, Any, Any, Any, Any]] = []  # (publisher, payload, meta...) to put
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick_loop, name="interception-ticks", daemon=True)
@@ -94,14 +95,20 @@ class InterceptionBridge:
         t0, monotonic = self.t0, time.monotonic
         outbox = self._outbox
 
+        last_meta, put, on_message = self._last_meta, self._put, interceptor.on_message
+
         def forward(sample: zenoh.Sample) -> None:
             live.count += 1
             meta = (sample.encoding, sample.attachment, sample.timestamp)
             payload = sample.payload.to_bytes()
             with lock:
-                self._last_meta[name] = meta
+                last_meta[name] = meta
                 now = monotonic() - t0
-                dispatch(live, interceptor.on_message(name, consumers, payload, now), meta, now, sample)
+                deliveries = on_message(name, consumers, payload, now)
+                if len(deliveries) == 1 and deliveries[0].at <= now:  # the common case, without _dispatch
+                    put(live, deliveries[0], meta, sample)
+                else:
+                    dispatch(live, deliveries, meta, now, sample)
                 if len(outbox) >= OUTBOX_LIMIT:
                     self._send()
 
@@ -117,10 +124,10 @@ class InterceptionBridge:
         for pub, payload, encoding, attachment, timestamp in self._outbox:
             pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
         self._outbox.clear()
-        for name, entries in self._batches.items():
-            if entries:
-                self._record_pubs[name].put(pack_batch(entries))
-                entries.clear()
+        for name, rows in self._batches.items():
+            if rows:
+                self._record_pubs[name].put(pack_deliveries(rows))
+                rows.clear()
 
     def start(self) -> None:
         self._thread.start()
@@ -174,18 +181,19 @@ class InterceptionBridge:
                 if consumer in wanted:
                     self._outbox.append((pub, payload, encoding, attachment, timestamp))
         name = live.route.channel.name
-        data = payload if isinstance(payload, bytes) else payload.to_bytes()
-        record = b""
-        if d.event is not None:
+        data = payload if type(payload) is bytes else payload.to_bytes()
+        event = d.event
+        rows = self._batches[name]
+        if event is not None:
             self.mutations += 1
-            record = intercept_record(d.event, d.original, delivered=bool(d.consumers))
+            rows.append((time.time_ns(), data, d.original, bool(d.consumers), event))
             if self.on_mutation is not None:
-                self.on_mutation(d.event)
-        entries = self._batches[name]
-        entries.append((time.time_ns(), data, record))
-        if len(entries) >= BATCH_LIMIT:
-            self._record_pubs[name].put(pack_batch(entries))
-            entries.clear()
+                self.on_mutation(event)
+        else:
+            rows.append((time.time_ns(), data, None, True, None))
+        if len(rows) >= BATCH_LIMIT:
+            self._record_pubs[name].put(pack_deliveries(rows))
+            rows.clear()
         if d.consumers and self.on_delivered is not None:
             self.on_delivered(name, data)
 

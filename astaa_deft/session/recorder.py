@@ -229,27 +229,28 @@ def undecodable(codec: Codec, data: bytes) -> str | None:
 
 def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, codec, name: str,
                  data: bytes, counts: dict[str, int], received_ns: int, twins: ViewableTwins) -> None:
-    """The deliveries of one intercepted channel the proxy sent together (see ``topology.pack_batch``).
+    """The deliveries of one intercepted channel the proxy sent together (see ``topology.pack_deliveries``).
 
     Each is logged at the time the proxy delivered it, which is when the
     consumer got it.
     """
     try:
-        entries = topology.unpack_batch(data)
+        rows = topology.unpack_deliveries(data)
     except ValueError as exc:
         writer.record(records.FlagRecord(received_ns, name, None, str(exc), len(data)), channel_id=writer.flags_channel)
         return
-    for time_ns, payload, record in entries:
-        if record:  # the proxy changed something: log it three ways
-            if _write_intercepted(writer, cid, original_cid, mutations_cid, record, time_ns, payload, time_ns,
-                                  name=name):
+    json_twins = codec.name == "json"
+    for time_ns, payload, original, delivered, wire in rows:
+        if wire is not None:  # the proxy changed something: log it three ways
+            if _write_mutation(writer, cid, original_cid, mutations_cid, wire, original, delivered, time_ns, payload,
+                               time_ns):
                 counts[name] += 1
-                if codec.name == "json":
+                if json_twins:
                     twins.add(name, time_ns, payload, time_ns)  # a NaN mutation: viewable too
             continue
         seq = writer.message(cid, time_ns, payload, time_ns)
         counts[name] += 1
-        if codec.name == "json":
+        if json_twins:
             twins.add(name, time_ns, payload, time_ns)
         reason = undecodable(codec, payload)
         if reason is not None:
@@ -265,13 +266,20 @@ def _source_time(sample: zenoh.Sample) -> int | zenoh.Timestamp | None:
 
 def _write_intercepted(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, attachment: bytes,
                        log_time: int, data: bytes, publish_time: int, name: str = "") -> bool:
-    """Original, delivered message and mutation event, cross-referenced; True if something was delivered."""
+    """One delivery as ``topology.intercept_record`` frames it (see ``_write_mutation``); flagged if malformed."""
     try:
         wire, original, delivered = topology.read_intercept_record(attachment)
     except ValueError as exc:
         writer.record(records.FlagRecord(log_time, name, None, str(exc), len(attachment)),
                       channel_id=writer.flags_channel)
         return False
+    return _write_mutation(writer, cid, original_cid, mutations_cid, wire, original, delivered, log_time, data,
+                           publish_time)
+
+
+def _write_mutation(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, wire: topology.WireEvent,
+                    original: bytes | None, delivered: bool, log_time: int, data: bytes, publish_time: int) -> bool:
+    """Original, delivered message and mutation event, cross-referenced; True if something was delivered."""
     original_seq = writer.message(original_cid, log_time, original, publish_time) if original is not None else None
     delivered_seq = writer.message(cid, log_time, data, publish_time) if delivered else None
     body = {**event_json(wire), "original_sequence": original_seq, "delivered_sequence": delivered_seq}
