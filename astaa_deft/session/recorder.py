@@ -174,6 +174,8 @@ def _drain(q: queue.SimpleQueue, writer: LogWriter, counts: dict[str, int], muta
     """Write what the callbacks queued, in arrival order; the common case (a declared channel) first and short."""
     undeclared_ids: dict[str, int] = {}
     message, get = writer.message, q.get
+    orjson_loads = _orjson.loads if _orjson is not None else None
+    JSONDecodeError = _orjson.JSONDecodeError if _orjson is not None else ValueError  # noqa: N806
     while True:
         item = get()
         if item is _STOP:
@@ -187,7 +189,14 @@ def _drain(q: queue.SimpleQueue, writer: LogWriter, counts: dict[str, int], muta
                 continue
             counts[name] += 1
             if codec.name == "json":
-                twins.add(name, log_time, data, publish_time)  # a NaN on the wire: viewable too
+                if b"NaN" in data or b"Infinity" in data:  # the twins' own first check, without two calls
+                    twins.add(name, log_time, data, publish_time)  # a NaN on the wire: viewable too
+                if orjson_loads is not None and len(data) < FAST_JSON_LIMIT:  # undecodable's first answer, inline
+                    try:
+                        if type(orjson_loads(data)) is dict:
+                            continue
+                    except JSONDecodeError:
+                        pass
             reason = undecodable(codec, data)
             if reason is not None:
                 writer.record(records.FlagRecord(log_time, name, seq, reason, len(data)),
