@@ -20,6 +20,7 @@ import json
 import marshal
 import struct
 from dataclasses import dataclass
+from operator import attrgetter
 from typing import Any
 
 from ..spec.model import Channel, Spec
@@ -101,13 +102,18 @@ def wire_event_parts(event: WireEvent) -> dict[str, Any]:
     return dict(zip((*_EVENT_ATTRS, EVENT_FIELDS, "detail"), event.value, strict=True))
 
 
+_event_attrs = attrgetter(*_EVENT_ATTRS)
+_change_attrs = attrgetter("path", "old", "new")
+
+
 def _event_wire(event: Any) -> Any:
-    """An event as a batch row carries it: its attribute tuple (see ``intercept_record``), or its JSON form."""
-    e = event
-    if isinstance(e, dict):
-        return json.dumps(e, default=str).encode()
-    return (e.testcase, e.policy, e.action, e.channel, e.consumers, e.message_index, e.time,
-            tuple([(c.path, c.old, c.new) for c in e.fields]), e.detail)
+    """An event as a batch row carries it: its attribute tuple (see ``intercept_record``), or its JSON form.
+
+    (attrgetter: one C call where nine attribute reads and a comprehension cost a third of a row, measured.)
+    """
+    if isinstance(event, dict):
+        return json.dumps(event, default=str).encode()
+    return (*_event_attrs(event), tuple(map(_change_attrs, event.fields)), event.detail)
 
 
 def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]]) -> bytes:

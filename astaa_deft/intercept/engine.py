@@ -36,6 +36,9 @@ from .testcase import Policy, TestCase, load_testcase
 __all__ = ["Delivery", "FieldChange", "Interceptor", "MutationEvent", "PolicyGate", "load_interceptor"]
 
 
+_UNSELECTED: Any = object()  # on_message's shortcut: the policy did not select this message
+
+
 class PolicyGate:
     """A policy's window and selection: does it act on this message (or injection slot)?"""
 
@@ -152,11 +155,21 @@ class Interceptor:
         for number, gate in state.anchors:
             if number == index:
                 gate.anchored_at(now)
-        selected = [live for live in state.acting if live.gate.selects(channel, now)]
         fast = state.fast
-        if selected and fast is not None and (done := fast(consumers, payload, channel, index, now)) is not None:
-            out.append(done)
-        elif selected:
+        if fast is not None:  # one acting policy, no observers (see __init__): the short way
+            done = fast(consumers, payload, channel, index, now) if state.acting[0].gate.selects(channel, now) \
+                else _UNSELECTED
+            if done is _UNSELECTED:
+                out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
+            elif done is not None:
+                out.append(done)
+            else:  # the shortcut declined this message
+                info = MessageInfo(channel, index, now, state.codec, state.previous_message)
+                out.extend(self._deliver(self._apply(state.acting, consumers, payload, info), now))
+            state.previous_payload = payload
+            return out
+        selected = [live for live in state.acting if live.gate.selects(channel, now)]
+        if selected:
             info = MessageInfo(channel, index, now, state.codec, state.previous_message)
             out.extend(self._deliver(self._apply(selected, consumers, payload, info), now))
         else:
