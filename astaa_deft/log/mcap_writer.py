@@ -44,6 +44,9 @@ class McapWriter:
         self._compression = compression
         self._data_crcs = enable_data_crcs
         self._data_crc = 0
+        # One compression context for every chunk: the bytes of zstandard.compress(data) (which builds
+        # a ZstdCompressor(level=3) per call, as mcap's writer does), without building one per chunk.
+        self._compressor = zstandard.ZstdCompressor(level=3)
         self._records = RecordBuilder()  # records outside chunks, until flushed
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
@@ -160,7 +163,7 @@ class McapWriter:
             return
         self._chunk_count += 1
         chunk_data = bytes(self._chunk)
-        compressed = zstandard.compress(chunk_data) if self._compression == "zstd" else chunk_data
+        compressed = self._compressor.compress(chunk_data) if self._compression == "zstd" else chunk_data
         chunk = Chunk(compression=self._compression, data=compressed, message_start_time=self._chunk_start,
                       message_end_time=self._chunk_end, uncompressed_crc=zlib.crc32(chunk_data),
                       uncompressed_size=len(chunk_data))
