@@ -70,12 +70,33 @@ def cpu_seconds(who: int) -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def thread_cpu() -> dict[str, float]:
+    """CPU seconds of this process's live threads by kind: Zenoh's runtime threads by name, Python's as 'python'.
+
+    (Linux: /proc/self/task; Zenoh names its threads rx-N, tx-N, net-N, ...;
+    Python threads keep the process's name.) Empty where /proc is missing.
+    """
+    out: dict[str, float] = {}
+    ticks = os.sysconf("SC_CLK_TCK")
+    for task in Path("/proc/self/task").glob("*"):
+        try:
+            name = (task / "comm").read_text().strip().rstrip("0123456789-") or "?"
+            fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # the thread ended meanwhile
+            continue
+        kind = name if name in ("rx", "tx", "net", "acc", "app") else "python"
+        out[kind] = out.get(kind, 0.0) + (int(fields[11]) + int(fields[12])) / ticks
+    return out
+
+
 def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy: Path | None = None,
              timeout: float = RESULT_TIMEOUT) -> tuple[dict, dict]:
     """One run through the tool; the sink's result gains the CPU the tool (and its recorder) spent per message.
 
     CPU per message is the steadier figure on a shared machine: a rate falls
-    when other processes take the cores, CPU per message hardly moves.
+    when other processes take the cores, CPU per message hardly moves. The
+    tool's share is also split by thread kind (``tool_threads_us``), read
+    just before the run's Zenoh session closes (its threads end with it).
     """
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp)
@@ -83,14 +104,30 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
         options = RunOptions(mode=mode, params=params, run_dir=run_dir, interceptor=interceptor,
                              record=run_dir / "bench.mcap" if record else None, time_limit=timeout)
         sink = run_dir / "sink.json"
+        threads0, at_end = thread_cpu(), {}
+
+        def sink_done(run) -> str | None:
+            if not sink.exists():
+                return None
+            at_end.update(thread_cpu())
+            return "sink done"
+
         tool0, children0 = cpu_seconds(resource.RUSAGE_SELF), cpu_seconds(resource.RUSAGE_CHILDREN)
-        outcome = run_session(spec, options, stop_when=lambda run: "sink done" if sink.exists() else None)
+        outcome = run_session(spec, options, stop_when=sink_done)
         result = dict(wait_result(sink, timeout))
         # Children: the recorder (and the modules, which are the same in every row).
         tool, children = cpu_seconds(resource.RUSAGE_SELF) - tool0, cpu_seconds(resource.RUSAGE_CHILDREN) - children0
-        result["tool_cpu_us"] = tool / max(1, result["received"]) * 1e6
-        result["children_cpu_us"] = children / max(1, result["received"]) * 1e6
+        per = 1e6 / max(1, result["received"])
+        result["tool_cpu_us"] = tool * per
+        result["children_cpu_us"] = children * per
+        result["tool_threads_us"] = {kind: (seconds - threads0.get(kind, 0.0)) * per
+                                     for kind, seconds in sorted(at_end.items())}
         return result, outcome.recorded
+
+
+def fmt_threads(r: dict) -> str:
+    """The tool's CPU per message by thread kind (Python threads; Zenoh's receiving and sending threads)."""
+    return ", ".join(f"{kind} {us:.1f}" for kind, us in r["tool_threads_us"].items() if us >= 0.05) or "n/a"
 
 
 def fmt_rate(r: dict) -> str:
@@ -147,11 +184,14 @@ def interception(count: int) -> None:
           f"recorded); tool CPU {mutated['tool_cpu_us'] / plain['tool_cpu_us']:.2f}× passthrough's")
     print(f"  loss with set + recorder: sent {count:,}, delivered {mutated_rec['received']:,}, "
           f"recorded {recorded.get('data', 0):,}")
+    print("  tool CPU by thread kind, µs/msg (python: forwarders, engine, puts; rx/tx: Zenoh's own):")
+    for name, r in (("passthrough", plain), ("set on every", mutated), ("+ recorder", mutated_rec)):
+        print(f"    {name:14} {fmt_threads(r)}")
     lat = {"size": "200", "count": str(count // 20), "rate": "1000", "latency": "--latency"}
     plain_l, _ = run_tool(lat, "star", record=False)
     mutated_l, _ = run_tool(lat, "star", record=False, policy=SET_POLICY)
     monitored_l, _ = run_tool(lat, "star", record=False, spec=MONITORED)
-    print(f"latency at 1 kHz (µs)   p50      p99")
+    print("latency at 1 kHz (µs)   p50      p99")
     for name, r in (("star", plain_l), ("star + set", mutated_l), ("star + monitors", monitored_l)):
         print(f"  {name:18} {r['p50_us']:8.1f} {r['p99_us']:8.1f}")
     print(f"  added by mutation: p50 {(mutated_l['p50_us'] - plain_l['p50_us']) / 1000:.3f} ms; "
