@@ -45,3 +45,41 @@ def test_cbor_verdict_is_the_codecs() -> None:
     cbor = get_codec("cbor")
     for data in (cbor.encode({"a": 1}), b"\xff\xff", b""):
         assert undecodable(cbor, data) == _codec_reason(cbor, data)
+
+
+@pytest.mark.parametrize("data", EDGES)
+def test_simdjsons_quick_answer_never_accepts_what_the_codec_rejects(data: bytes) -> None:
+    from astaa_deft.session.recorder import _JsonObjectCheck
+
+    check = _JsonObjectCheck()
+    accepted = check(data)
+    assert not accepted or _codec_reason(JSON, data) is None
+    assert check(data) == accepted  # the parser is reusable: a second look gives the same answer
+    if data in (b'{"a": 1}', b'{"a":1,"a":2}', b'{"a":"\x7f"}', b'{"\xc3\xa9":1}'):
+        assert accepted  # plain objects take the quick way
+
+
+def test_simdjsons_quick_answer_agrees_with_the_codec_on_damaged_json() -> None:
+    """Random byte edits of JSON objects (seeded): whatever simdjson accepts, the codec decodes."""
+    import random
+
+    from astaa_deft.session.recorder import _JsonObjectCheck
+
+    check, rnd = _JsonObjectCheck(), random.Random(1)
+    bases = [b'{"a": 1, "b": [1.5, -2e3, "x\\u00e9"], "c": {"d": null, "e": true}}', b'{"header": {"seq": 1}}']
+    accepted = 0
+    for _ in range(20_000):
+        data = bytearray(rnd.choice(bases))
+        for _ in range(rnd.randint(1, 3)):
+            at = rnd.randrange(len(data))
+            edit = rnd.random()
+            if edit < 0.4:
+                data[at] = rnd.randrange(256)
+            elif edit < 0.7:
+                data[at:at] = bytes([rnd.randrange(256)])
+            else:
+                del data[at]
+        if check(bytes(data)):
+            accepted += 1
+            assert _codec_reason(JSON, bytes(data)) is None, bytes(data)
+    assert accepted  # some edits leave valid JSON (a digit for a digit, a space)
