@@ -148,3 +148,39 @@ def test_a_ros2_service_is_called_through_the_star(two_runs):
         answers = _lines(run_dir / "asker.out")
         assert answers == [{"a": i, "sum": i + 100} for i in range(CALLS)], (run_dir / "asker.log").read_text()
         assert _lines(run_dir / "adder.out") == [{"a": i, "b": 100} for i in range(CALLS)]
+
+
+PAIR_SPEC = textwrap.dedent("""\
+    name: sdk_other_definition
+    modules:
+      - name: listener
+        command: ["{python}", "@NODE@", "listener", "--messages", "@MESSAGES@", "--out", "{run_dir}/listener.out"]
+        env: @ENV@
+      - name: talker
+        command: ["{python}", "@NODE@", "talker", "--messages", "@OTHER@", "--out", "{run_dir}/talker.out",
+                  "--count", "10", "--rate", "20"]
+        env: @ENV@
+    channels:
+      - {name: cmd_vel, topic: /cmd_vel, type: geometry_msgs/msg/Twist, encoding: cdr,
+         producer: talker, consumers: [listener]}
+    """)
+
+
+def test_a_node_with_another_definition_of_its_type_is_one_clear_line(tmp_path):
+    """Hash mismatch at run time: the talker's Twist is defined otherwise (fields reordered: another RIHS01)."""
+    messages, other = tmp_path / "msgs", tmp_path / "other_msgs"
+    for directory in (messages, other):
+        shared_types().write_definitions(["geometry_msgs/msg/Twist"], directory)
+    twist = other / "geometry_msgs" / "msg" / "Twist.msg"
+    fields = [line for line in twist.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    twist.write_text("\n".join(reversed(fields)) + "\n")
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(PAIR_SPEC.replace("@NODE@", str(NODE)).replace("@MESSAGES@", str(messages))
+                    .replace("@OTHER@", str(other)).replace("@ENV@", NO_NETWORK))
+    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "proxy", "--spec", str(spec), "--run-dir",
+                           str(tmp_path / "run"), "--duration", "4"], capture_output=True, text=True, timeout=120)
+    assert "Traceback" not in done.stdout + done.stderr
+    lines = [line for line in done.stdout.splitlines() if "type hash differs from channel 'cmd_vel'" in line]
+    assert len(lines) == 1, done.stdout
+    assert lines[0].startswith("-- undeclared key '0/cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_")
+    assert "from 'talker'" in lines[0] and "give the channel this key, or fix the definition" in lines[0]

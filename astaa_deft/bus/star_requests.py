@@ -71,6 +71,25 @@ def parse_ros2_token(key: str) -> Ros2Token | None:
     return Ros2Token(kind, f"{parts[1]}/{name}/{parts[10]}/{parts[11]}")
 
 
+def ros2_hash_mismatch(spec: Spec, token: Ros2Token) -> str | None:
+    """For a publisher whose topic a channel names with another key: that key and why, in one line.
+
+    The usual cause is a node built from another definition of the type (a
+    different RIHS01 hash): its messages then go on a key no channel
+    declares. Reported as that undeclared key, with the channel it missed.
+    """
+    if token.kind != ROS2_PUBLISHER or token.key is None or any(ch.key == token.key for ch in spec.channels):
+        return None
+    observed = token.key.split("/")  # domain, topic chunks…, dds type, hash
+    for ch in spec.channels:
+        declared = ch.key.split("/")
+        if len(declared) >= 4 and declared[0] == observed[0] and declared[1:-2] == observed[1:-2]:
+            what = "type hash" if declared[-2] == observed[-2] else "type"
+            return (f"{token.key} (the node's {what} differs from channel '{ch.name}''s key {ch.key}: "
+                    f"another definition of the message? give the channel this key, or fix the definition)")
+    return None
+
+
 def ros2_token_destinations(spec: Spec, module: str, token: Ros2Token) -> tuple[str, ...]:
     """Modules that see ``module``'s ROS 2 token: wired by the data key its entity puts or serves.
 
@@ -101,6 +120,7 @@ class StarLiveliness:
         self._mirror_keys: set[str] = set()  # our own tokens, which our subscriber sees too
         self._subscribers: list[zenoh.Subscriber] = []
         self.services = StarServices(session)
+        self._reported: set[str] = set()
         self.mirrored = 0
 
     def start(self) -> None:
@@ -149,7 +169,11 @@ class StarLiveliness:
             self._mirrors[full_key] = tokens
             self.mirrored += 1
         if ros2 is not None:
-            return  # graph, not data: an undeclared topic is reported when its messages flow
+            mismatch = ros2_hash_mismatch(self.spec, ros2)
+            if mismatch and mismatch not in self._reported:
+                self._reported.add(mismatch)
+                self.on_undeclared(module, mismatch)
+            return  # otherwise graph, not data: an undeclared topic is reported when its messages flow
         if not any(ch.key == key for ch in self.spec.channels):
             self.on_undeclared(module, f"liveliness:{key}")
 
