@@ -14,11 +14,14 @@ import json
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
+import zenoh
 
-from astaa_deft.bus.star_requests import Ros2Token, parse_ros2_token, ros2_token_destinations
+from astaa_deft.bus import zenoh_config as zc
+from astaa_deft.bus.star_requests import Ros2Token, StarLiveliness, parse_ros2_token, ros2_token_destinations
 from astaa_deft.spec.ros2_types import shared_types
 from astaa_deft.spec_loader import load_spec
 
@@ -184,3 +187,43 @@ def test_a_node_with_another_definition_of_its_type_is_one_clear_line(tmp_path):
     assert len(lines) == 1, done.stdout
     assert lines[0].startswith("-- undeclared key '0/cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_")
     assert "from 'talker'" in lines[0] and "give the channel this key, or fix the definition" in lines[0]
+
+
+def test_a_withdrawn_server_token_takes_its_mirrors_and_its_queryable_with_it(tmp_path):
+    """In-process, real Zenoh on loopback: the proxy's session (a router) and two namespaced module clients."""
+    spec = load_spec(_write_spec(tmp_path, "teleop"))
+    endpoint = zc.loopback_endpoint()
+    proxy = zc.open_session(zc.config_dict(mode="router", listen=[endpoint]))
+    adder = zc.open_session(zc.config_dict(mode="client", connect=[endpoint], namespace="sut/adder"))
+    asker = zc.open_session(zc.config_dict(mode="client", connect=[endpoint], namespace="sut/asker"))
+    star = StarLiveliness(proxy, spec)
+    star.start()
+    service_key = "0/add_two_ints/example_interfaces::srv::dds_::AddTwoInts_/RIHS01_ab"
+    token_key = f"@ros2_lv/0/{'ab' * 16}/0/3/SS/%/%/adder/%add_two_ints/{service_key.split('/', 2)[2]}/::,10:,:,:,,"
+
+    def seen_by_asker() -> list[str]:
+        return [str(r.ok.key_expr) for r in asker.liveliness().get("@ros2_lv/0/**", timeout=1.0) if r.ok is not None]
+
+    def answers() -> list[bytes]:
+        return [r.ok.payload.to_bytes() for r in asker.get(service_key, target=zenoh.QueryTarget.ALL_COMPLETE,
+                                                          timeout=2.0) if r.ok is not None]
+
+    queryable = adder.declare_queryable(service_key, lambda q: q.reply(service_key, b"sum"), complete=True)
+    try:
+        token = adder.liveliness().declare_token(token_key)
+        deadline = time.monotonic() + 5
+        while token_key not in seen_by_asker() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert seen_by_asker() == [token_key]
+        assert answers() == [b"sum"]  # through the complete queryable mirrored into the asker's namespace
+        token.undeclare()
+        deadline = time.monotonic() + 5
+        while seen_by_asker() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert seen_by_asker() == []
+        assert answers() == []  # the mirrored queryable went with the token
+    finally:
+        star.stop()
+        queryable.undeclare()
+        for session in (asker, adder, proxy):
+            session.close()
