@@ -240,6 +240,26 @@ def test_spec_check_command_exits_2_without_traceback(tmp_path):
     assert "Traceback" not in done.stderr and "unknown ROS 2 message type 'nav_msgs/msg/Odom'" in done.stderr
 
 
+def test_unknown_cdr_field_in_a_policy_or_an_invariant_exits_2_with_one_line(tmp_path):
+    spec_path = tmp_path / "spec.yaml"
+    spec_path.write_text(SPEC)
+    policy = tmp_path / "tc.xml"
+    policy.write_text('<testcase id="ros" seed="1"><description>d</description>'
+                      '<policy id="p"><channel>cmd_vel</channel><set><field path="linear.q" value="1.0"/></set>'
+                      '</policy></testcase>\n')
+    checked = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "policy", "check", str(policy), "--spec",
+                              str(spec_path)], capture_output=True, text=True, timeout=60)
+    assert checked.returncode == 2 and "Traceback" not in checked.stderr
+    assert len(checked.stderr.strip().splitlines()) == 1 and "has no field 'q'" in checked.stderr
+    bad_spec = tmp_path / "bad.yaml"
+    bad_spec.write_text(SPEC + "invariants:\n  - {name: b, kind: bound, channel: cmd_vel, field: linear.q, max: 1}\n")
+    checked = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "spec", "check", str(bad_spec)],
+                             capture_output=True, text=True, timeout=60)
+    assert checked.returncode == 2 and "Traceback" not in checked.stderr
+    lines = checked.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(bad_spec) in lines[0] and "'q'" in lines[0], checked.stderr
+
+
 # ---------------------------------------------------------------- property: any values of the types round-trip
 
 FLOATS = st.floats(allow_nan=False, width=64)

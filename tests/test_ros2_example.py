@@ -42,7 +42,7 @@ def test_nan_on_cmd_vel_breaks_the_odometry_invariants_and_the_log_decodes(tmp_p
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         for schema, _channel, _message, value in reader.iter_decoded_messages(topics=cdr_topics):
             decoded.setdefault(schema.name, []).append(value)
-    assert set(decoded) == {"geometry_msgs/msg/Twist", "nav_msgs/msg/Odometry"}
+    assert set(decoded) == {"geometry_msgs/msg/Twist", "nav_msgs/msg/Odometry", "nav_msgs/msg/Path"}
     odometry = decoded["nav_msgs/msg/Odometry"]
     assert len(odometry) > 20 and odometry[0].header.frame_id == "odom"
     assert math.isnan(odometry[-1].pose.pose.position.x)  # NaN for good once it got in

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import sys
 from pathlib import Path
 
 from ..errors import InputError, Problem
@@ -18,14 +19,25 @@ def run(path: Path) -> int:
 
 
 def _check_factory(spec, path: Path) -> None:
-    """Import the planner replay factory the way replay loads it, so a wrong name fails here, not in extract."""
+    """Import the planner replay factory the way replay loads it, so a wrong name fails here, not in extract.
+
+    As replay does (deft.replay.load_factory), a module that is not on the
+    path is looked for in the spec's directory too.
+    """
     factory = spec.planner.factory if spec.planner is not None else None
     if not factory:
         return
     module_name, _, attr = factory.partition(":")
     line = _line_of(path, factory)
+    spec_dir = str(path.resolve().parent)
     try:
-        module = importlib.import_module(module_name)
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name != module_name.split(".")[0] or spec_dir in sys.path:
+                raise
+            sys.path.append(spec_dir)  # after installed packages, as replay does: never shadows them
+            module = importlib.import_module(module_name)
     except Exception as exc:  # the user's module failing to import is their input problem
         raise InputError(Problem(str(path), line, None, f"planner replay factory '{factory}' cannot be imported: "
                                  f"{type(exc).__name__}: {exc}", "fix the module name or install it")) from None

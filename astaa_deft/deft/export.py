@@ -69,6 +69,9 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
         "version": VERSION,
         "spec_name": spec.name,
         "spec_yaml": spec.source_text,
+        # Where the spec was: what it names relative to itself (a replay factory module beside it,
+        # custom ROS 2 .msg files) is looked for there while that directory exists.
+        "spec_dir": str(spec.path.resolve().parent) if spec.path is not None else None,
         "params": dict(params),
         "threshold": cfg.threshold,
         "frames": entries,

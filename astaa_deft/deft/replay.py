@@ -181,11 +181,13 @@ class LockstepPlanner:
         self._dir.cleanup()
 
 
-def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False) -> ReplayPlanner:
+def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False,
+                 spec_dir: Path | None = None) -> ReplayPlanner:
+    """``spec_dir``: where a factory module beside the spec is, for a spec that is not a file (an exported suite's)."""
     planner = planner_of(spec)
     if planner.factory and not (prefer_process and planner.command):
         return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
-                                spec.path.parent.resolve() if spec.path else None)
+                                spec.path.parent.resolve() if spec.path else spec_dir)
     return LockstepPlanner(spec, planner, params)
 
 
@@ -224,12 +226,15 @@ def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayou
     offset = 0.0
     if layout.time == "relative":
         stamp = get(message, layout.stamp)
-        offset = float(stamp[0][1]) if stamp else 0.0
+        try:
+            offset = seconds(stamp[0][1]) if stamp else 0.0
+        except (KeyError, TypeError, ValueError):
+            offset = 0.0
     gx, gy, gt, gh = _getter(layout.x), _getter(layout.y), _getter(layout.t), _getter(layout.heading)
     out: list = []
     for point in found[0][1]:
         try:
-            xyt = (float(gx(point)), float(gy(point)), float(gt(point)) + offset)
+            xyt = (float(gx(point)), float(gy(point)), seconds(gt(point)) + offset)
         except (KeyError, IndexError, TypeError, ValueError):
             continue
         if with_heading:
@@ -241,6 +246,13 @@ def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayou
         else:
             out.append(xyt)
     return out
+
+
+def seconds(value: Any) -> float:
+    """A time as seconds: a number, or a ROS 2 ``builtin_interfaces/msg/Time`` decoded ({sec, nanosec})."""
+    if isinstance(value, Mapping):
+        return float(value["sec"]) + float(value["nanosec"]) * 1e-9
+    return float(value)
 
 
 def _env() -> dict[str, str]:

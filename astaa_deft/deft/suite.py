@@ -31,8 +31,11 @@ class Suite:
     def __init__(self, directory: Path):
         self.directory = directory
         self.manifest = json.loads((directory / MANIFEST).read_text())
+        spec_dir = self.manifest.get("spec_dir")
+        base_dir = Path(spec_dir) if spec_dir and Path(spec_dir).is_dir() else directory
+        self.spec_dir = base_dir
         self.spec: Spec = load_spec_text(self.manifest["spec_yaml"], name=f"{self.manifest['spec_name']} (embedded)",
-                                         base_dir=directory)
+                                         base_dir=base_dir)
         self.threshold = float(self.manifest["threshold"])
         self._results: list[FrameResult] | None = None
         self._by_channel: dict[str, list[Any]] | None = None
@@ -47,7 +50,7 @@ class Suite:
             return self._results
         cfg = planner_of(self.spec)
         by_channel = self._messages()
-        planner = make_planner(self.spec, self.manifest["params"])
+        planner = make_planner(self.spec, self.manifest["params"], spec_dir=self.spec_dir)
         results = []
         try:
             for entry in self.frames:

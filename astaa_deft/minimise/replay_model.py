@@ -182,7 +182,9 @@ class ReplayModel:
         # make the failure look independent of every mutation.
         failed_at = _first_failure_ns(log, self.judged)
         if failed_at is not None:
-            self.outputs = [m for m in self.outputs if m.log_time <= failed_at]
+            # On the clock the monitor judged by: a message's publish time (the source timestamp the
+            # recorder kept, e.g. a ROS 2 message's, which precedes its log time), else its log time.
+            self.outputs = [m for m in self.outputs if m.publish_time <= failed_at]
             self.end_ns = min(self.end_ns, self.outputs[-1].log_time if self.outputs else failed_at)
         self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
         self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}

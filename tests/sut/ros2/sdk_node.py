@@ -5,6 +5,15 @@ talker:   publishes geometry_msgs/msg/Twist on TOPIC (linear.x = 0.1 * i, angula
 listener: subscribes to TOPIC through the SDK (which decodes with its own typestore)
           and writes what the SDK decoded to OUT; a raw Zenoh subscriber on the
           SDK's own key writes the exact payload and attachment to OUT.raw.
+          With --graph it also writes, as JSON lines to OUT.graph, what it sees
+          of the ROS 2 graph: the SDK's own `get_topic_info` (verbose) and the
+          keys a raw liveliness get on `@ros2_lv/<domain>/**` returns.
+server:   serves SERVICE (example_interfaces/srv/AddTwoInts, definitions given
+          inline) with sum = a + b; writes each request it served to OUT.
+client:   waits until the SDK's `get_service_info` sees a server of SERVICE,
+          then calls it --count times (a = i, b = 100) and writes each
+          response (or "none") to OUT.
+The talker and the server also write their session id (zid) to OUT.zid.
 
 Like an rmw_zenoh node it reads ZENOH_SESSION_CONFIG_URI (the SDK does).
 The SDK then overwrites connect endpoints with its router_ip/router_port
@@ -22,7 +31,9 @@ import threading
 import time
 
 ap = argparse.ArgumentParser()
-ap.add_argument("role", choices=("talker", "listener"))
+ap.add_argument("role", choices=("talker", "listener", "server", "client"))
+ap.add_argument("--service", default="/add_two_ints")
+ap.add_argument("--graph", action="store_true")
 ap.add_argument("--topic", default="/cmd_vel")
 ap.add_argument("--messages", required=True, help="directory of <pkg>/msg/<Name>.msg files")
 ap.add_argument("--out", required=True)
@@ -36,7 +47,9 @@ stop = threading.Event()
 signal.signal(signal.SIGTERM, lambda *_: stop.set())
 signal.signal(signal.SIGINT, lambda *_: stop.set())
 
-from zenoh_ros2_sdk import ROS2Publisher, ROS2Subscriber, get_registry  # noqa: E402
+from zenoh_ros2_sdk import (  # noqa: E402
+    ROS2Publisher, ROS2ServiceClient, ROS2ServiceServer, ROS2Subscriber, get_registry, get_service_info, get_topic_info,
+)
 
 get_registry(args.messages)  # the first call fixes where the SDK looks for definitions
 
@@ -52,7 +65,27 @@ else:
     sys.exit("sdk_node: no ZENOH_SESSION_CONFIG_URI (run me under astaa-deft)")
 
 TWIST = "geometry_msgs/msg/Twist"
+ADD_TWO_INTS = "example_interfaces/srv/AddTwoInts"
+REQUEST, RESPONSE = "int64 a\nint64 b", "int64 sum"
 out = open(args.out, "w", buffering=1)  # noqa: SIM115 (open for the whole run)
+
+
+def write_zid(session_mgr):
+    with open(args.out + ".zid", "w") as fh:
+        fh.write(session_mgr.session_id + "\n")
+
+
+def watch_graph(session_mgr):
+    """Every 0.3 s until stopped: the topic's endpoints by the SDK's graph API, and the raw tokens."""
+    graph = open(args.out + ".graph", "w", buffering=1)  # noqa: SIM115
+    while not stop.wait(0.3):
+        info = get_topic_info(args.topic, router_ip=router_ip, router_port=router_port, verbose=True, timeout=0.5)
+        tokens = sorted(str(reply.ok.key_expr) for reply in session_mgr.liveliness.get("@ros2_lv/0/**", timeout=0.5)
+                        if reply.ok is not None)
+        graph.write(json.dumps({
+            "publishers": [p.node_name for p in info.publishers] if info else [],
+            "subscribers": [s.node_name for s in info.subscribers] if info else [],
+            "tokens": tokens}) + "\n")
 
 if args.role == "talker":
     publisher = ROS2Publisher(topic=args.topic, msg_type=TWIST, node_name=args.node or "teleop",
@@ -74,6 +107,7 @@ if args.role == "talker":
 
     publisher.pub = RecordingPublisher(publisher.pub)
     vector = publisher.session_mgr.store.types["geometry_msgs/msg/Vector3"]
+    write_zid(publisher.session_mgr)
     print(f"talker: publishing on {publisher.keyexpr}", flush=True)
     time.sleep(args.start_delay)
     for i in range(args.count):
@@ -84,6 +118,39 @@ if args.role == "talker":
     print("talker: done", flush=True)
     stop.wait()
     publisher.close()
+elif args.role == "server":
+    def add(request):
+        out.write(json.dumps({"a": int(request.a), "b": int(request.b)}) + "\n")
+        return server.response_msg_class(sum=int(request.a) + int(request.b))
+
+    server = ROS2ServiceServer(args.service, ADD_TWO_INTS, callback=add, request_definition=REQUEST,
+                               response_definition=RESPONSE, node_name=args.node or "adder",
+                               router_ip=router_ip, router_port=router_port)
+    write_zid(server.session_mgr)
+    print(f"server: serving {server.keyexpr}", flush=True)
+    stop.wait()
+    server.close()
+elif args.role == "client":
+    client = ROS2ServiceClient(args.service, ADD_TWO_INTS, request_definition=REQUEST, response_definition=RESPONSE,
+                               node_name=args.node or "asker", router_ip=router_ip, router_port=router_port,
+                               timeout=5.0)
+    print(f"client: calling {client.keyexpr}", flush=True)
+    deadline = time.monotonic() + 20
+    while not stop.is_set() and time.monotonic() < deadline:  # as a ROS 2 client's wait_for_service
+        info = get_service_info(args.service, router_ip=router_ip, router_port=router_port, timeout=0.5)
+        if info is not None and info.server_count > 0:
+            break
+        stop.wait(0.2)
+    print("client: service seen" if not stop.is_set() and time.monotonic() < deadline else "client: no service",
+          flush=True)
+    for i in range(args.count):
+        if stop.is_set():
+            break
+        response = client.call(a=i, b=100)
+        out.write(json.dumps({"a": i, "sum": None if response is None else int(response.sum)}) + "\n")
+    print("client: done", flush=True)
+    stop.wait()
+    client.close()
 else:
     raw = open(args.out + ".raw", "w", buffering=1)  # noqa: SIM115
 
@@ -100,6 +167,8 @@ else:
 
     raw_sub = subscriber.session_mgr.session.declare_subscriber(subscriber.keyexpr, on_raw)
     print(f"listener: subscribed to {subscriber.keyexpr}", flush=True)
+    if args.graph:
+        watch_graph(subscriber.session_mgr)
     stop.wait()
     raw_sub.undeclare()
     subscriber.close()
