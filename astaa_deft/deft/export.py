@@ -69,6 +69,8 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
         "version": VERSION,
         "spec_name": spec.name,
         "spec_yaml": spec.source_text,
+        # Where the spec was: a replay factory beside it (not installed) is found from the suite too.
+        "spec_dir": str(spec.path.parent.resolve()) if spec.path else None,
         "params": dict(params),
         "threshold": cfg.threshold,
         "frames": entries,

@@ -33,6 +33,9 @@ class Suite:
         self.manifest = json.loads((directory / MANIFEST).read_text())
         self.spec: Spec = load_spec_text(self.manifest["spec_yaml"], name=f"{self.manifest['spec_name']} (embedded)",
                                          base_dir=directory)
+        # The original spec's folder, while it exists: a replay factory beside it (not installed) is found there.
+        spec_dir = self.manifest.get("spec_dir")
+        self.spec_dir = Path(spec_dir) if spec_dir and Path(spec_dir).is_dir() else None
         self.threshold = float(self.manifest["threshold"])
         self._results: list[FrameResult] | None = None
         self._by_channel: dict[str, list[Any]] | None = None
@@ -47,7 +50,7 @@ class Suite:
             return self._results
         cfg = planner_of(self.spec)
         by_channel = self._messages()
-        planner = make_planner(self.spec, self.manifest["params"])
+        planner = make_planner(self.spec, self.manifest["params"], spec_dir=self.spec_dir)
         results = []
         try:
             for entry in self.frames:
