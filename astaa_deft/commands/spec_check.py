@@ -34,7 +34,8 @@ def _check_factory(spec, path: Path) -> None:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:
             spec_dir = path.resolve().parent
-            if exc.name != module_name.split(".")[0] or not importable_from(spec_dir, exc.name):
+            top = module_name.split(".")[0]
+            if exc.name != top or not importable_from(spec_dir, top):
                 raise
             if str(spec_dir) not in sys.path:
                 sys.path.append(str(spec_dir))  # after installed packages, as replay does
