@@ -148,3 +148,20 @@ def test_a_stopped_car_the_planner_may_avoid_is_judged_as_the_simulator_measured
     assert bool(found) == (truth["code"] == 1), (truth, [f.detail for f in found], res.stdout)
     if found:
         assert f"obstacle {truth['contact'][0]}" in found[0].detail
+
+
+@pytest.mark.slow  # ~30 s: the planner's long searches delay its shutdown
+def test_a_participant_only_the_planner_sees_blocks_the_road_and_the_verdict_says_what_the_simulator_says(tmp_path):
+    # Issue 16, item 7: a car added with the participant action (the spec's decictor: participants mapping),
+    # standing beside the parked car in what the planner perceives: both lanes blocked, the planner searches
+    # long and brakes, the ego never gets past — the simulator's outcome is 2 (goal not reached), no contact.
+    res, log, truth = drive(tmp_path, "blocked", "--policy", str(STACK / "blocked_road.xml"),
+                            "--param", "sim_time_limit=8")
+    assert truth["code"] == 2 and truth["contact"] is None, truth
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert "run_end:goal_not_reached" in res.stdout and "no_collision" not in res.stdout
+    assert not _collisions(log)
+    planning_log = (tmp_path / "blocked" / "planning.log").read_text()
+    assert "long search" in planning_log  # the infeasible cycle
+    perceived = [json.loads(m.data) for m in read_log(log).on("ompl/obstacles")]
+    assert perceived and all(any(o["id"] == 901 for o in msg["obstacles"]) for msg in perceived)
