@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
 from ..demo.status import StatusWatch
+from ..session.summary import untouched_policies
 from ..intercept import load_interceptor
 from ..log import layout
 from ..log.reader import read_log
@@ -59,6 +60,8 @@ def summarise(outcome: RunResult, watch: StatusWatch) -> None:
         say("collision: no")
     if outcome.mutations:
         say(f"mutations applied: {outcome.mutations}")
+    for line in untouched_policies(outcome.policies):
+        say(line)
     if not outcome.complete or not outcome.observed:
         say(f"verdict withheld: the run was not fully observed ({outcome.end_reason})")
     elif outcome.verdict is not None:

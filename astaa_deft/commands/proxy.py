@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from ..log import records as rec
 from ..session import BusRun, RunOptions, RunResult, run_session
+from ..session.summary import untouched_policies
 from ..spec.model import Spec
 from ..monitor.verdict import format_verdict
 from .console import RateMeter, StatusLine, StopSignal, format_event, say
@@ -82,6 +83,8 @@ def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, 
         say(f"  {name:20} {n:8d} messages{rec}")
     if interceptor is not None:
         say(f"mutations applied: {outcome.mutations}")
+        for line in untouched_policies(outcome.policies):
+            say(line)
     if record:
         say(f"log: {record}  (astaa-deft log info {record})"
             + ("" if outcome.complete else " — incomplete: the recorder did not finish it"))

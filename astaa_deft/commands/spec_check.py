@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, Problem
+from ..deft.replay import importable_from
 from ..spec_loader import load_spec
 
 
@@ -21,26 +22,28 @@ def run(path: Path) -> int:
 def _check_factory(spec, path: Path) -> None:
     """Import the planner replay factory the way replay loads it, so a wrong name fails here, not in extract.
 
-    As replay does (deft.replay.load_factory), a module that is not on the
-    path is looked for in the spec's directory too.
+    As replay does: from sys.path, or else from the spec's own directory (a planner beside its spec).
     """
     factory = spec.planner.factory if spec.planner is not None else None
     if not factory:
         return
     module_name, _, attr = factory.partition(":")
     line = _line_of(path, factory)
-    spec_dir = str(path.resolve().parent)
     try:
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:
-            if exc.name != module_name.split(".")[0] or spec_dir in sys.path:
+            spec_dir = path.resolve().parent
+            top = module_name.split(".")[0]
+            if exc.name != top or not importable_from(spec_dir, top):
                 raise
-            sys.path.append(spec_dir)  # after installed packages, as replay does: never shadows them
+            if str(spec_dir) not in sys.path:
+                sys.path.append(str(spec_dir))  # after installed packages, as replay does
             module = importlib.import_module(module_name)
     except Exception as exc:  # the user's module failing to import is their input problem
         raise InputError(Problem(str(path), line, None, f"planner replay factory '{factory}' cannot be imported: "
-                                 f"{type(exc).__name__}: {exc}", "fix the module name or install it")) from None
+                                 f"{type(exc).__name__}: {exc}",
+                                 "fix the module name, put it next to the spec, or install it")) from None
     if not callable(getattr(module, attr, None)):
         raise InputError(Problem(str(path), line, None,
                                  f"planner replay factory '{factory}': module '{module_name}' has no callable '{attr}'",

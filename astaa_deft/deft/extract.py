@@ -222,7 +222,8 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
         kept = None if outcome is None else (0, outcome)
     else:
         tried = search.search(len(options), run, accepted=lambda r: r[0].within(cfg.threshold),
-                              closeness=lambda r: r[0].distance, limit_s=limit_s)
+                              closeness=lambda r: r[0].distance, limit_s=limit_s,
+                              settles=lambda r: r[1] and r[0].within(cfg.threshold))
         kept = None if tried is None else (tried.index, tried.result)
     result.planner_seconds += time.perf_counter() - t1
     if kept is None:

@@ -102,13 +102,17 @@ class ForkedSearch:
         self.timeouts = 0
 
     def search(self, count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool],
-               closeness: Callable[[Any], float], limit_s: float) -> Tried | None:
+               closeness: Callable[[Any], float], limit_s: float,
+               settles: Callable[[Any], bool] = lambda result: False) -> Tried | None:
         """Try candidates 0..count-1; return (in the surviving process) the one kept, or None.
 
         ``run(i)`` steps the planner on candidate i and returns a picklable
         result; it runs in a child. The process that returns from here holds
         the planner state after the kept candidate (or, for None, the state
-        from before: no candidate ran in it).
+        from before: no candidate ran in it). A result that ``settles`` the
+        search (the recorded output reproduced field for field: no earlier
+        candidate can do better) is kept at once, without waiting for the
+        earlier ones — a wrong frame may make the planner search for seconds.
         """
         running: dict[int, tuple[int, int, int, float]] = {}  # index → (pid, result fd, go fd, started)
         done: dict[int, Tried] = {}
@@ -122,7 +126,9 @@ class ForkedSearch:
                 running[next_index] = child
                 next_index += 1
             self._collect(running, done, limit_s)
-            winner = self._decide(done, count, next_index, running, accepted, closeness)
+            winner = next((i for i in sorted(done) if done[i].result is not None and settles(done[i].result)), None)
+            if winner is None:
+                winner = self._decide(done, count, next_index, running, accepted, closeness)
         if winner is None:
             winner = self._decide(done, count, count, {}, accepted, closeness, final=True)
         for pid, result_fd, go_fd, _ in running.values():  # still running: not needed

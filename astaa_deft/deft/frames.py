@@ -6,7 +6,10 @@ receive times, ns). For an output logged at t_P:
 - the trigger is a trigger-channel message at or before t_P and after the
   previous frame's trigger: the newest one first (a planner that keeps up),
   then the oldest not yet used (a planner that lags behind its triggers
-  answers them in order), then the ones between;
+  answers them in order), then the ones between; for the first output
+  (no previous frame) the oldest is among the `FIRST_OUTPUT_TRIGGERS`
+  before it — a first cycle is often the slowest (a planner building its
+  state), answering a trigger several periods old;
 - the frame time t_F lies between the trigger (t_T) and t_P; each other
   input is the newest message at or before t_F, never older than the one
   used in the previous frame (per channel); a channel's lone message is
@@ -25,6 +28,9 @@ from __future__ import annotations
 from bisect import bisect_right
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+
+
+FIRST_OUTPUT_TRIGGERS = 10
 
 
 @dataclass(frozen=True)
@@ -71,7 +77,8 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     newest = newest_at_or_before(trig.times, t_p)
     if newest < 0:
         return []
-    oldest = previous.get(trigger, newest - 1) + 1
+    # The first output (no previous frame) may answer a trigger some periods before the newest.
+    oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
     order_of_triggers = [newest] + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))
     out: list[Candidate] = []
     seen: set[tuple] = set()

@@ -56,7 +56,7 @@ def load_factory(path: str, spec_dir: Path | None = None) -> Any:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:
             top = module_name.split(".")[0]
-            if spec_dir is None or exc.name != top or not _importable_from(spec_dir, top):
+            if spec_dir is None or exc.name != top or not importable_from(spec_dir, top):
                 raise
             if str(spec_dir) not in sys.path:
                 sys.path.append(str(spec_dir))  # after installed packages: never shadows them
@@ -69,7 +69,8 @@ def load_factory(path: str, spec_dir: Path | None = None) -> Any:
                                  f"{where} (set PYTHONPATH, or install its package)")) from None
 
 
-def _importable_from(directory: Path, top: str) -> bool:
+def importable_from(directory: Path, top: str) -> bool:
+    """A module or package named ``top`` sits in ``directory``."""
     return (directory / f"{top}.py").is_file() or (directory / top / "__init__.py").is_file() \
         or (directory / top).is_dir()
 
@@ -183,7 +184,7 @@ class LockstepPlanner:
 
 def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False,
                  spec_dir: Path | None = None) -> ReplayPlanner:
-    """``spec_dir``: where a factory module beside the spec is, for a spec that is not a file (an exported suite's)."""
+    """The replay planner; a factory is looked for beside the spec (``spec_dir`` for a spec not read from a file)."""
     planner = planner_of(spec)
     if planner.factory and not (prefer_process and planner.command):
         return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),

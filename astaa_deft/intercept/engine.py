@@ -30,6 +30,7 @@ from ..errors import InputError, Problem
 from ..spec.model import Spec
 from .actions.base import ActionRuntime, Delivery, FastPath, FieldChange, MessageInfo, MutationEvent, Pending, \
     PolicyContext, built
+from .applications import ChannelTraffic, PolicyApplications
 from .dictionary import Dictionary, NotApplicable, load_dictionary
 from .testcase import Policy, TestCase, load_testcase
 
@@ -63,6 +64,10 @@ class PolicyGate:
     def bounds(self) -> tuple[float, float] | None:
         return None if self.start == math.inf else (self.start, self.end)
 
+    def seen_in_window(self) -> int:
+        """Messages (and injection slots) of its channels that came while the window was open."""
+        return sum(self._counts.values())
+
     def selects(self, channel: str, now: float) -> bool:
         # Ordered cheapest first: most messages fall outside the window.
         if not self.start <= now < self.end or self.taken >= self.limit:
@@ -82,6 +87,7 @@ class _LivePolicy:
     policy: Policy
     gate: PolicyGate
     runtime: ActionRuntime
+    channels: tuple[str, ...] = ()  # the channels it targets
 
     def split(self, consumers: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[str, ...]]:
         """(affected, unaffected) consumers of a delivery."""
@@ -92,13 +98,15 @@ class _LivePolicy:
 
 
 class _ChannelState:
-    __slots__ = ("name", "codec", "count", "previous_payload", "_previous_cache", "acting", "observers", "anchors",
-                 "held", "fast")
+    __slots__ = ("name", "codec", "count", "first_at", "last_at", "previous_payload", "_previous_cache", "acting",
+                 "observers", "anchors", "held", "fast")
 
     def __init__(self, name: str, codec: Codec):
         self.name = name
         self.codec = codec
         self.count = 0
+        self.first_at: float | None = None  # arrival of its first and last real message (run seconds)
+        self.last_at: float | None = None
         self.previous_payload: bytes | None = None
         self._previous_cache: tuple[bytes, dict] | None = None
         self.acting: list[_LivePolicy] = []  # policies that may act on this channel's real messages
@@ -132,6 +140,7 @@ class Interceptor:
         self._channels: dict[str, _ChannelState] = {}
         self._policies: list[_LivePolicy] = []
         self._sequence = itertools.count()  # orders same-time delayed deliveries
+        self._touched: dict[str, int] = {}  # policy id → mutation events naming it
         for policy in testcase.policies:
             self._policies.append(self._start(policy, spec, dictionary))
         for state in self._channels.values():
@@ -152,6 +161,9 @@ class Interceptor:
         out = self._release_due(state, now) if state.held else []
         state.count += 1
         index = state.count
+        if index == 1:
+            state.first_at = now
+        state.last_at = now
         for number, gate in state.anchors:
             if number == index:
                 gate.anchored_at(now)
@@ -162,6 +174,8 @@ class Interceptor:
             if done is _UNSELECTED:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
             elif done is not None:
+                if done.event is not None:  # counted as _deliver counts the general path's events
+                    self._touched[done.event.policy] = self._touched.get(done.event.policy, 0) + 1
                 out.append(done)
             else:  # the shortcut declined this message
                 info = MessageInfo(channel, index, now, state.codec, state.previous_message)
@@ -197,6 +211,26 @@ class Interceptor:
             out.extend(self._release_due(state, math.inf))
         return [delivery if delivery.at <= now else replace(delivery, at=now) for delivery in out]
 
+    def applications(self, now: float) -> list[PolicyApplications]:
+        """What each policy did so far (``now``: the end of the run), in document order."""
+        out = []
+        for live in self._policies:
+            gate, window = live.gate, live.policy.window
+            bounds = gate.bounds()
+            traffic = []
+            for channel in live.channels:
+                state = self._channels[channel]
+                traffic.append(ChannelTraffic(channel, state.count, state.first_at, state.last_at))
+            anchor = (f"message {window.anchor_message or 1} on channel '{window.anchor_channel}'"
+                      if window.anchor_channel is not None else None)
+            out.append(PolicyApplications(
+                testcase=self.testcase.id, policy=live.policy.id, action=live.policy.action.name,
+                window_start_s=bounds[0] if bounds else None,
+                window_end_s=bounds[1] if bounds and bounds[1] != math.inf else None, anchor=anchor,
+                in_window=gate.seen_in_window(), touched=self._touched.get(live.policy.id, 0),
+                traffic=tuple(traffic), run_end_s=now))
+        return out
+
     # -- internals ---------------------------------------------------------------------
     @staticmethod
     def _release_due(state: _ChannelState, now: float) -> list[Delivery]:
@@ -228,6 +262,9 @@ class Interceptor:
         out = []
         for item in items:
             delivery = item.to_delivery()
+            if delivery.event is not None:
+                for policy in delivery.event.policy.split("+"):  # stacked policies share one event
+                    self._touched[policy] = self._touched.get(policy, 0) + 1
             if delivery.at > now and delivery.consumers:
                 assert delivery.event is not None  # only an action (delay) postpones a delivery
                 held = self._channels[delivery.event.channel].held
@@ -248,7 +285,7 @@ class Interceptor:
                        for c in channels},
             rng=random.Random(f"{self.testcase.seed}/{policy.id}/action"),
             window_bounds=gate.bounds, select_slot=gate.selects)
-        live = _LivePolicy(policy, gate, policy.action.start(context))
+        live = _LivePolicy(policy, gate, policy.action.start(context), tuple(c.name for c in channels))
         for channel in channels:
             state = self._state(channel.name, spec)
             if live.runtime.acts_on_messages:

@@ -136,6 +136,29 @@ class MutationRecord:
 
 
 @dataclass(frozen=True)
+class PolicyApplicationsRecord:
+    """What one policy of the run's test case did, logged once at the run's end.
+
+    ``untouched_reason`` says why a policy touched no message (its window
+    never opened, its channel was silent or came late, the run ended first);
+    None when it touched one.
+    """
+    time_ns: int
+    testcase: str
+    policy: str
+    action: str = ""
+    window_start_s: float | None = None
+    window_end_s: float | None = None
+    anchor: str | None = None
+    in_window: int = 0
+    touched: int = 0
+    run_end_s: float = 0.0
+    traffic: tuple[Any, ...] = ()  # per target channel: {channel, count, first_s, last_s}
+    untouched_reason: str | None = None
+    kind = "policy_applications"
+
+
+@dataclass(frozen=True)
 class FlagRecord:
     """A payload the recorder could not decode (forwarded untouched; logged raw on the flags topic)."""
     time_ns: int
@@ -165,10 +188,10 @@ class OtherEvent:
 
 
 Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExitRecord | ViolationRecord | VerdictRecord
-          | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | OtherEvent)
+          | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | PolicyApplicationsRecord | OtherEvent)
 
 _SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, UndeclaredKey,
-                               ModuleLogLine, ViolationRecord, FlagRecord)}
+                               ModuleLogLine, ViolationRecord, FlagRecord, PolicyApplicationsRecord)}
 
 
 def encode(record: Record) -> dict:

@@ -73,6 +73,7 @@ class BusRun:
         self.lost: str = ""  # why a helper of ours stopped mid-run: the run is not fully observed or recorded
         self.bus_endpoints: list[str] = []
         self.interception: InterceptionBridge | None = None
+        self.policies: list[rec.PolicyApplicationsRecord] = []  # per policy of the test case, at the end
         self.monitors: OnlineMonitors | None = None
         self.verdict: Verdict | None = None  # the CRASH-scale verdict, once stopped
         self.violations: list[rec.ViolationRecord] = []
@@ -254,6 +255,7 @@ class BusRun:
     def stop(self) -> None:
         if self.interception is not None:
             self.interception.stop()  # release held and delayed messages while consumers still listen
+            self._log_applications(self.interception.t0)
         stopping = self.emit(rec.RunStopping(time.time_ns())) if self.monitors is not None else None
         self._judged_until_ns = stopping.time_ns if stopping is not None else time.time_ns()
         if self.monitors is not None and stopping is not None:
@@ -409,6 +411,18 @@ class BusRun:
                           f"module '{exc.module}' not ready: {exc.detail}", "Restart", exc.module)
         self.monitors.set.violations.append(found)  # the verdict is the monitors' own: they must count it
         self._violated(found)
+
+    def _log_applications(self, t0: float) -> None:
+        """One event per policy: what it touched, and why it touched nothing if so (a window closed idle)."""
+        report = getattr(self.options.interceptor, "applications", None)
+        if report is None:
+            return
+        for app in report(time.monotonic() - t0):
+            record = rec.decode({"kind": rec.PolicyApplicationsRecord.kind, "time_ns": time.time_ns(),
+                                 **app.to_json()})
+            assert isinstance(record, rec.PolicyApplicationsRecord)
+            self.policies.append(record)
+            self.emit(record)
 
     def _mutated(self, event) -> None:
         # Not re-published: the interception's own record (with the original) is in the log already.

@@ -73,7 +73,7 @@ def run_session(spec: Spec, options: RunOptions, *,
         exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),
         mutations=run.interception.mutations if run.interception is not None else 0,
         log=options.record, complete=options.record is None or run.recorder_finished,
-        observed=run.verdict is not None and not run.lost)
+        observed=run.verdict is not None and not run.lost, policies=tuple(run.policies))
 
 
 def _why_end(run: BusRun, options: RunOptions, t0: float, time_limit: float | None, ends: RunEndWatch,

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..bus.launcher import ProcessExit
-from ..log.records import ViolationRecord
+from ..log.records import PolicyApplicationsRecord, ViolationRecord
 
 
 @dataclass
@@ -39,6 +39,8 @@ class RunResult:
     log: Path | None  # the MCAP log, if recorded
     complete: bool  # the log was finished cleanly by its recorder (or nothing was recorded)
     observed: bool  # the monitors saw the run through to its end
+    policies: tuple[PolicyApplicationsRecord, ...] = ()  # what each policy of the test case did (with a reason
+    # for each that touched nothing)
 
     @property
     def crashes(self) -> tuple[ProcessExit, ...]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from ..log import layout
@@ -33,6 +34,27 @@ def topic_stats(log: LogContents) -> list[TopicStats]:
         out.append(TopicStats(topic, info.metadata.get("channel", ""), len(times), rate,
                               times[0] if times else 0, times[-1] if times else 0))
     return out
+
+
+def untouched_policies(records: Iterable[rec.Record]) -> list[str]:
+    """One line per policy of the test case that touched no message, with why it may not have.
+
+    A window that closed without touching anything is a test that did not
+    happen (the SUT started late, the channel was silent, the run ended
+    first); "mutations applied: 0" alone does not say which policy or why.
+    """
+    return [f"policy '{r.policy}' ({r.action}) touched no message: {r.untouched_reason}"
+            for r in records if isinstance(r, rec.PolicyApplicationsRecord) and r.untouched_reason]
+
+
+def policy_lines(records: Iterable[rec.Record]) -> list[str]:
+    """What each policy touched, then the untouched ones with their reasons (empty without a test case)."""
+    apps = [r for r in records if isinstance(r, rec.PolicyApplicationsRecord)]
+    if not apps:
+        return []
+    lines = ["policies: " + ", ".join(f"{r.policy} {r.touched} touched" for r in apps)]
+    lines.extend("  " + line for line in untouched_policies(apps))
+    return lines
 
 
 def format_info(log: LogContents, with_warnings: bool = True) -> str:
@@ -75,6 +97,7 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
     violations = Counter(e.invariant for e in events if isinstance(e, rec.ViolationRecord))
     if violations:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
+    lines.extend(policy_lines(events))
     verdicts = [e for e in events if isinstance(e, rec.VerdictRecord)]
     if verdicts:
         started = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)

@@ -1,0 +1,86 @@
+"""The stack's planning process: OMPL's RRT* (``ompl_planner.OmplPlanner``) on the Zenoh bus.
+
+Third-party style (no astaa-deft import): the session comes from
+``ZENOH_CONFIG``; it holds a liveliness token the simulator waits for.
+Each obstacles message (10 Hz) triggers a cycle with the newest ego pose
+at that moment; while a cycle runs, newer triggers replace older ones (a
+planner that takes longer than the period plans on the freshest inputs).
+An exception in a cycle is logged and the node carries on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import threading
+import traceback
+
+import zenoh
+
+from ompl_planner import OmplPlanner
+
+LIVELINESS_KEY = "ompl_stack/alive/planning"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--iterations", type=int, default=250)
+    ap.add_argument("--infeasible-iterations", type=int, default=1250)
+    ap.add_argument("--goal-x", type=float, default=50.0)
+    args = ap.parse_args()
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+
+    planner = OmplPlanner(seed=args.seed, iterations=args.iterations,
+                          infeasible_iterations=args.infeasible_iterations, goal_x=args.goal_x)
+    session = zenoh.open(zenoh.Config.from_env())
+    pub = session.declare_publisher("ompl/plan", congestion_control=zenoh.CongestionControl.BLOCK)
+    wake = threading.Condition()
+    latest: dict = {}
+    pending: list[dict] = []
+
+    def on_ego(sample: zenoh.Sample) -> None:
+        latest["ego"] = json.loads(sample.payload.to_bytes())
+
+    def on_obstacles(sample: zenoh.Sample) -> None:
+        if "ego" not in latest:
+            return  # nothing to plan from yet
+        frame = {"ego": latest["ego"], "obstacles": json.loads(sample.payload.to_bytes())}
+        with wake:
+            pending[:] = [frame]
+            wake.notify()
+
+    session.declare_subscriber("ompl/ego", on_ego)
+    session.declare_subscriber("ompl/obstacles", on_obstacles)
+    token = session.liveliness().declare_token(LIVELINESS_KEY)
+    print("planning ready", flush=True)
+    while not stop.is_set():
+        with wake:
+            if not pending:
+                wake.wait(0.1)
+            if not pending:
+                continue
+            frame = pending.pop()
+        try:
+            plan = planner.step(frame)
+        except Exception:  # noqa: BLE001 - a node that logs and survives, as many do
+            traceback.print_exc()
+            continue
+        if plan["status"] != "reused" and plan["iterations"] > args.iterations:
+            print(f"planning: long search ({plan['iterations']} iterations): {plan['status']}", flush=True)
+        pub.put(json.dumps(plan))
+    token.undeclare()
+    session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)  # skip the interpreter's teardown of OMPL's native objects (nanobind reports them as leaks)
