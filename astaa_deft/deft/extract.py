@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import functools
 import json
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -15,18 +18,18 @@ from ..codecs.base import DecodeError
 from ..errors import InputError, Problem
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
-from ..spec.planner import PlannerSpec
+from ..spec.replay_section import ReplayModule
 from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
-from .frames import Stream, candidates
-from .planner_section import planner_of
-from .replay import ReplayPlanner, trajectory_points
+from .frames import Stream, candidates, newest_at_or_before
+from .planner_section import planner_of, replay_module_of
+from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
 
 
 @dataclass
 class ExtractedFrame:
     index: int  # 0-based, in output order
-    output: LoggedMessage
+    output: LoggedMessage | None  # None: the module answered this frame with nothing (per-trigger frames)
     trigger_time: int
     frame_time: int
     inputs: dict[str, LoggedMessage]  # channel → the message used
@@ -64,20 +67,114 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
             progress: Callable[[int, int], None] = lambda done, total: None,
-            jobs: int | None = None) -> Extraction:
-    """Reconstruct and validate a frame per recorded output.
+            jobs: int | None = None, entry: ReplayModule | None = None) -> Extraction:
+    """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
 
-    With ``jobs`` (an in-process planner on a system that can fork), the
-    candidates of an output are tried in forked processes, up to ``jobs`` at
-    a time, from the very same planner state (see fork_replay); otherwise
-    from deep copies of the planner, one after another.
+    ``entry`` names the module replayed (default: the planner). With ``jobs``
+    (an in-process planner on a system that can fork), the candidates of an
+    output are tried in forked processes, up to ``jobs`` at a time, from the
+    very same planner state (see fork_replay); otherwise from deep copies of
+    the planner, one after another.
     """
+    cfg = entry if entry is not None else replay_module_of(spec)
+    if cfg.per_trigger:
+        return _extract_per_trigger(log, spec, planner, cfg, progress)
     if jobs is not None and planner.can_snapshot and can_fork():
         return run_supervised(
             lambda send: _extract(log, spec, planner, lambda done, total: send((done, total)),
-                                  ForkedSearch(jobs, send)),
+                                  ForkedSearch(jobs, send), cfg),
             on_message=lambda message: progress(*message))
-    return _extract(log, spec, planner, progress, None)
+    return _extract(log, spec, planner, progress, None, cfg)
+
+
+def trigger_frame(streams: Mapping[str, Stream], trigger: str, trigger_index: int,
+                  previous: Mapping[str, int]) -> dict[str, int]:
+    """A per-trigger frame: the trigger and each other input's newest message at or before it.
+
+    Never older than in the previous frame (per channel); an input that has
+    had no message yet is left out (the module has not heard from it).
+    """
+    t = streams[trigger].times[trigger_index]
+    choice = {trigger: trigger_index}
+    for name, stream in streams.items():
+        if name != trigger:
+            idx = max(newest_at_or_before(stream.times, t), previous.get(name, -1))
+            if idx >= 0:
+                choice[name] = idx
+    return choice
+
+
+def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
+                         progress: Callable[[int, int], None]) -> Extraction:
+    """One frame per trigger message; each replayed answer is paired, in order, with the next recorded output.
+
+    A frame the module answers with nothing (``step`` returns None) expects
+    no output. Inputs that do not decode are dropped, as the module's
+    deserialiser would. Triggers logged after the module's last recorded
+    output (plus ``skew_ms``) are not replayed: nothing recorded says what
+    it answered. The module's crash or hang ends the replay (it answers
+    nothing more).
+    """
+    msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
+    outputs = msgs.pop(cfg.output)
+    codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
+    t0 = time.perf_counter()
+    usable: dict[str, list[tuple[LoggedMessage, Any]]] = {}
+    for name, stream in msgs.items():
+        usable[name] = []
+        for m in stream:
+            with contextlib.suppress(DecodeError):  # dropped, as the module's deserialiser would
+                usable[name].append((m, codecs[name].decode(m.data)))
+    streams = {name: Stream(name, [m.log_time for m, _ in items]) for name, items in usable.items()}
+    result = Extraction(outputs=len(outputs))
+    result.reconstruction_seconds += time.perf_counter() - t0
+    last = (outputs[-1].log_time if outputs else log_start(log)) + int(cfg.skew_ms * 1e6)
+    triggers = [i for i, t in enumerate(streams[cfg.trigger].times) if t <= last]
+    previous: dict[str, int] = {}
+    next_output = 0
+    for done, t_index in enumerate(triggers, start=1):
+        t1 = time.perf_counter()
+        choice = trigger_frame(streams, cfg.trigger, t_index, previous)
+        previous = choice
+        frame = {name: usable[name][i][1] for name, i in choice.items()}
+        t2 = time.perf_counter()
+        result.reconstruction_seconds += t2 - t1
+        error = None
+        try:
+            replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
+        except StepHang as exc:
+            replayed, error = None, f"the module hangs: {exc}"
+        except Exception as exc:  # the module under test may crash on a frame: that is data
+            replayed, error = None, f"{type(exc).__name__}: {exc}"
+        t3 = time.perf_counter()
+        result.planner_seconds += t3 - t2
+        output = None
+        expected = None
+        if replayed is not None and next_output < len(outputs):
+            output = outputs[next_output]
+            next_output += 1
+            try:
+                expected = codecs[cfg.output].decode(output.data)
+            except DecodeError as exc:
+                result.warnings.append(f"output {next_output - 1}: recorded output does not decode ({exc})")
+        cmp = compare_outputs(cfg, replayed, expected) if error is None else Comparison(math.inf, math.inf, 0,
+                                                                                           "error")
+        result.validation_seconds += time.perf_counter() - t3
+        t_t = streams[cfg.trigger].times[t_index]
+        result.frames.append(ExtractedFrame(
+            index=len(result.frames), output=output, trigger_time=t_t, frame_time=t_t,
+            inputs={name: usable[name][i][0] for name, i in choice.items()}, comparison=cmp,
+            accepted=error is None and cmp.within(cfg.threshold), candidates_tried=1,
+            exact=error is None and _same(replayed, expected)))
+        progress(done, len(triggers))
+        if error is not None:
+            result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))
+            break
+    return result
+
+
+def log_start(log: LogContents) -> int:
+    return min((m.log_time for key in log.channels for m in log.on(key)), default=0)
 
 
 def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
@@ -90,8 +187,7 @@ def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
 
 
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Callable[[int, int], None],
-             search: ForkedSearch | None) -> Extraction:
-    cfg = planner_of(spec)
+             search: ForkedSearch | None, cfg: ReplayModule) -> Extraction:
     streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
     outputs = streams_msgs.pop(cfg.output)
     streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
@@ -121,7 +217,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         except DecodeError as exc:
             expected = None
             result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
-        expected_points = trajectory_points(expected, cfg.trajectory)
+        expected_points = trajectory_points(expected, cfg.trajectory) if cfg.trajectory is not None else []
         result.validation_seconds += time.perf_counter() - t1
         if not options:
             result.skipped.append((out_index, "an input had no message yet"))
@@ -165,7 +261,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
                 replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
             t2 = time.perf_counter()
             result.planner_seconds += t2 - t1
-            cmp = compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+            cmp = _judge(cfg, replayed, expected, expected_points)
             t1 = time.perf_counter()
             result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
@@ -199,7 +295,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     return result
 
 
-def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: PlannerSpec,
+def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
                    expected: Any, expected_points: list, limit_s: float, result: Extraction):
     """(candidate, comparison, exact, tries) kept for one output, in the process that carries on; or None."""
     t0 = time.perf_counter()
@@ -214,7 +310,7 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
             replayed = planner.step(frame)
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
-        return compare(trajectory_points(replayed, cfg.trajectory), expected_points), _same(replayed, expected)
+        return _judge(cfg, replayed, expected, expected_points), _same(replayed, expected)
 
     t1 = time.perf_counter()
     if len(options) == 1:  # one candidate: nothing to keep apart, step right here
@@ -230,6 +326,13 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
     index, (cmp, exact) = kept
     tries = index + 1 if cmp.within(cfg.threshold) else len(options)
     return options[index], cmp, exact, tries
+
+
+def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list) -> Comparison:
+    """The planner's trajectories (points decoded once per output), or any module's output field by field."""
+    if cfg.trajectory is not None:
+        return compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+    return compare_outputs(cfg, replayed, expected)
 
 
 NEAR_MISS_M = 1e-9
@@ -263,6 +366,8 @@ def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "deb
     codec = get_codec(spec.channel(planner_of(spec).output).encoding)
     exact = checked = 0
     for f in extraction.frames:
+        if f.output is None:
+            continue
         try:
             truth = get(codec.decode(f.output.data), debug_path)
         except DecodeError:

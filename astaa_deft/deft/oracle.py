@@ -67,6 +67,8 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
     ob_codec = get_codec(spec.channel(oracle.channel).encoding)
     entries = []
     for f in extraction.frames:
+        if f.output is None:
+            continue
         if not any(0 <= t - f.output.log_time <= window_s * 1e9 for t in collision_times_ns):
             continue
         try:
