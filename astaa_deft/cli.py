@@ -107,8 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
     ext.add_argument("--jobs", type=int, metavar="N",
                      help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
+    ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
-                                                         a.ground_truth, jobs=a.jobs))
+                                                         a.ground_truth, jobs=a.jobs, module=a.module))
 
     # minimise
     mini = sub.add_parser("minimise", aliases=["minimize"],

@@ -42,20 +42,27 @@ from astaa_deft.intercept import load_interceptor
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
+from astaa_deft.monitor import check_log
 from astaa_deft.spec_loader import load_spec
 
 RECORD_SECONDS = 7.0
+RECORD_ATTEMPTS = 3
 
 NOISE = demo_noise_policies()  # policies/examples/demo_noise.xml
 
+# Defects 2–4 need control to be driving when the culprit hits: their windows open 1 s after its first
+# command (a fixed time from the launch missed it on a loaded machine, where the stack starts late).
 CULPRITS = {  # defect → (the policy triggering it once, the field it sets)
     1: ("""<policy id="culprit"><channel>routing</channel><window from="4"/><select limit="1"/>
     <set><field path="speed_limit" value="dict:float.nan"/></set></policy>""", "speed_limit"),
-    2: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer><window from="3"/>
+    2: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer>
+    <window from="1"><after channel="command" message="1"/></window>
     <select limit="1"/><set><field path="heading" value="dict:float.big_1e16"/></set></policy>""", "heading"),
-    3: ("""<policy id="culprit"><channel>trajectory</channel><window from="3"/><select limit="1"/>
+    3: ("""<policy id="culprit"><channel>trajectory</channel>
+    <window from="1"><after channel="command" message="1"/></window><select limit="1"/>
     <set><field path="points" value="dict:array.empty"/></set></policy>""", "points"),
-    4: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer><window from="3"/>
+    4: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer>
+    <window from="1"><after channel="command" message="1"/></window>
     <select limit="1"/><set><field path="header.stamp" value="dict:time.jump_back"/></set></policy>""", "header.stamp"),
 }
 
@@ -67,14 +74,24 @@ def testcase_xml(defect: int) -> str:
 
 
 def record(defect: int, directory: Path) -> Path:
+    """A failing run of the defect: re-recorded (up to RECORD_ATTEMPTS times) while it passes.
+
+    The culprit's window opens at a fixed time; on a loaded machine the stack
+    may not be driving yet by then (the mutated message then changes nothing).
+    """
     spec = load_spec(demo_spec_path())
     policy = directory / f"defect{defect}.xml"
     policy.write_text(testcase_xml(defect))
     log = directory / f"defect{defect}.mcap"
-    options = RunOptions(mode="star", interceptor=load_interceptor(policy, spec), record=log,
-                         params={"scenario": "lane_follow", "defects": "on"}, run_dir=directory / f"run{defect}",
-                         attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=RECORD_SECONDS)
-    run_session(spec, options)
+    for attempt in range(1, RECORD_ATTEMPTS + 1):
+        options = RunOptions(mode="star", interceptor=load_interceptor(policy, spec), record=log,
+                             params={"scenario": "lane_follow", "defects": "on"},
+                             run_dir=directory / f"run{defect}-{attempt}",
+                             attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=RECORD_SECONDS)
+        run_session(spec, options)
+        if check_log(read_log(log), spec).verdict.klass != "Pass":
+            break
+        print(f"(defect {defect}: recorded run {attempt} did not fail; recording again)")
     return log
 
 

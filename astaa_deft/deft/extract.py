@@ -48,6 +48,7 @@ class Extraction:
     validation_seconds: float = 0.0  # reading the recorded and replayed trajectories, comparing them
     planner_seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
+    recorded_outputs: int | None = None  # per-trigger frames: the outputs in the log (``outputs`` counts frames)
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -130,6 +131,7 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
     result.reconstruction_seconds += time.perf_counter() - t0
     last = (outputs[-1].log_time if outputs else log_start(log)) + int(cfg.skew_ms * 1e6)
     triggers = [i for i, t in enumerate(streams[cfg.trigger].times) if t <= last]
+    result.outputs, result.recorded_outputs = len(triggers), len(outputs)
     previous: dict[str, int] = {}
     next_output = 0
     for done, t_index in enumerate(triggers, start=1):

@@ -50,6 +50,10 @@ def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
             if found or invariant is None:
                 return (f"frame {frame['index']}: module '{cfg.module}' crashes: {result.error}"
                         + (f" (invariant '{invariant.name}': {found[0].detail})" if found and invariant else ""))
+        if result.stopped == "hang" and invariant is not None and invariant.kind == "deadline":
+            # The module never answers again: the silence the deadline watches for, whatever the history.
+            return (f"frame {frame['index']}: module '{cfg.module}' hangs (invariant '{invariant.name}'): "
+                    f"{result.error}")
         if result.error is not None or (result.message is None and cfg.per_trigger):
             continue  # a hung or crashed module, or a frame it answers with nothing: no output here
         found = monitors.on_message(output, last, result.message, number)

@@ -81,12 +81,14 @@ class FrameTest(pytest.Item):
         entry = self.suite.entry
         lines = [f"frame {r.index}: module '{entry.module}''s output on '{entry.output}' changed"]
         if r.error:
-            lines.append(f"  the module raised {r.error}" if not r.error.startswith(("not run", "the module"))
-                         else f"  {r.error}")
-        c = r.comparison
-        lines.append(f"  distance {c.distance:.6g} (threshold {self.suite.threshold:g}), largest field error "
-                     f"{c.max_error:.6g} over {c.points} fields ({c.how})")
-        if r.expected_message is None and r.message is not None:
+            lines.append(f"  the module raised {r.error}" if r.stopped == "crash" else f"  {r.error}")
+        else:
+            c = r.comparison
+            lines.append(f"  distance {c.distance:.6g} (threshold {self.suite.threshold:g}), largest field error "
+                         f"{c.max_error:.6g} over {c.points} fields ({c.how})")
+        if r.error:
+            pass  # no output to compare: the error says it all
+        elif r.expected_message is None and r.message is not None:
             lines.append("  recorded: no output for this frame; replayed: an output")
         elif r.message is None and r.expected_message is not None and not r.error:
             lines.append("  recorded: an output; replayed: none")

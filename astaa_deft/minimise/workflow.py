@@ -21,7 +21,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +49,7 @@ from .replay_model import ReplayModel, load_spec_for, run_params
 from .replay_pool import ReplayPool
 from .replay_tester import DeftTester, default_setup
 from .restrict import restricted_testcase
-from .stages import Failure, Minimisation, choose_tester, find_failure, minimise_live, minimise_replay
+from .stages import Failure, Minimisation, choose_replay, find_failure, minimise_live, minimise_replay
 
 FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure not reproducible
 
@@ -128,7 +128,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
                                  "minimise a run that was intercepted"))
     failure = find_failure(log, spec, options.invariant)
     prepare_directory(out_dir)
-    tester_kind, why = choose_tester(spec, failure, options.live_only)
+    tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
     params = {**spec.params, **run_params(log)}
     original = original_testcase(log)
     say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
@@ -139,10 +139,14 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     replays = replay_hits = 0
     notes: list[str] = []
     if tester_kind == "replay":
+        assert entry is not None
         setup = default_setup(log_path, spec_path, failure.invariant)
+        if entry.where != "planner":
+            setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
         workers = max(1, min(options.parallel, os.cpu_count() or 1))
         with ReplayPool(setup, workers=workers) as pool:
-            say(f"planner replay: {pool.workers} worker process(es), one replay of the run in "
+            what = "planner replay" if entry.where == "planner" else f"module replay ({entry.module})"
+            say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
                 f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
             tester = DeftTester(pool)
             model = ReplayModel(setup, baseline=False)
