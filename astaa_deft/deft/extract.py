@@ -20,7 +20,7 @@ from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
-from .frames import Stream, candidates, newest_at_or_before
+from .frames import Stream, candidates, trigger_candidates
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
@@ -88,29 +88,18 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
     return _extract(log, spec, planner, progress, None, cfg)
 
 
-def trigger_frame(streams: Mapping[str, Stream], trigger: str, trigger_index: int,
-                  previous: Mapping[str, int]) -> dict[str, int]:
-    """A per-trigger frame: the trigger and each other input's newest message at or before it.
-
-    Never older than in the previous frame (per channel); an input that has
-    had no message yet is left out (the module has not heard from it).
-    """
-    t = streams[trigger].times[trigger_index]
-    choice = {trigger: trigger_index}
-    for name, stream in streams.items():
-        if name != trigger:
-            idx = max(newest_at_or_before(stream.times, t), previous.get(name, -1))
-            if idx >= 0:
-                choice[name] = idx
-    return choice
-
-
 def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
                          progress: Callable[[int, int], None]) -> Extraction:
-    """One frame per trigger message; each replayed answer is paired, in order, with the next recorded output.
+    """One frame per trigger message, its replayed answer compared with the recorded one.
 
-    A frame the module answers with nothing (``step`` returns None) expects
-    no output. Inputs that do not decode are dropped, as the module's
+    Answers pair with the recorded outputs in order; a frame the module
+    answers with nothing (``step`` returns None) is plausible when the next
+    output was logged after the next trigger. Like the planner's, a frame
+    has candidates (each other input with a message logged between the
+    trigger and the answer, or without its messages logged up to
+    ``lookback_ms`` before the trigger: the module may have received them
+    in another order than the recorder), tried from the same state, the
+    first that matches kept (none: the closest). Inputs that do not decode are dropped, as the module's
     deserialiser would. Triggers logged after the module's last recorded
     output (plus ``skew_ms``) are not replayed: nothing recorded says what
     it answered. The module's crash or hang ends the replay (it answers
@@ -132,42 +121,75 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
     last = (outputs[-1].log_time if outputs else log_start(log)) + int(cfg.skew_ms * 1e6)
     triggers = [i for i, t in enumerate(streams[cfg.trigger].times) if t <= last]
     result.outputs, result.recorded_outputs = len(triggers), len(outputs)
+    times = streams[cfg.trigger].times
+    lookback = int(cfg.lookback_ms * 1e6)
     previous: dict[str, int] = {}
     next_output = 0
     for done, t_index in enumerate(triggers, start=1):
-        t1 = time.perf_counter()
-        choice = trigger_frame(streams, cfg.trigger, t_index, previous)
-        previous = choice
-        frame = {name: usable[name][i][1] for name, i in choice.items()}
-        t2 = time.perf_counter()
-        result.reconstruction_seconds += t2 - t1
-        error = None
-        try:
-            replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
-        except StepHang as exc:
-            replayed, error = None, f"the module hangs: {exc}"
-        except Exception as exc:  # the module under test may crash on a frame: that is data
-            replayed, error = None, f"{type(exc).__name__}: {exc}"
-        t3 = time.perf_counter()
-        result.planner_seconds += t3 - t2
-        output = None
+        t_t = times[t_index]
+        t_next = times[t_index + 1] if t_index + 1 < len(times) else None
+        # Answers are paired with recorded outputs in order: a replayed answer is compared with the next
+        # output; a frame answered with nothing leaves it to a later frame, which is plausible only when it
+        # was logged after the next trigger (a module answers within its cycle, but may lag under load).
+        output = outputs[next_output] if next_output < len(outputs) else None
         expected = None
-        if replayed is not None and next_output < len(outputs):
-            output = outputs[next_output]
-            next_output += 1
+        if output is not None:
             try:
                 expected = codecs[cfg.output].decode(output.data)
             except DecodeError as exc:
-                result.warnings.append(f"output {next_output - 1}: recorded output does not decode ({exc})")
-        cmp = compare_outputs(cfg, replayed, expected) if error is None else Comparison(math.inf, math.inf, 0,
-                                                                                           "error")
-        result.validation_seconds += time.perf_counter() - t3
-        t_t = streams[cfg.trigger].times[t_index]
+                result.warnings.append(f"output {next_output}: recorded output does not decode ({exc})")
+        nothing_plausible = output is None or t_next is None or output.log_time >= t_next
+        t1 = time.perf_counter()
+        options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback,
+                                     output.log_time if output is not None else None)
+        if not planner.can_snapshot:
+            options = options[:1]
+        start_state = planner.snapshot() if len(options) > 1 else None
+        result.reconstruction_seconds += time.perf_counter() - t1
+        # (comparison, choice, replayed, error, the state after it or None if current, tries)
+        best: tuple[Comparison, dict[str, int], Any, str | None, Any, int] | None = None
+        for tries, choice in enumerate(options, start=1):
+            frame = {name: usable[name][i][1] for name, i in choice.items()}
+            if tries > 1 and start_state is not None:
+                planner.restore(copy.deepcopy(start_state))
+            t2 = time.perf_counter()
+            error = None
+            try:
+                replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
+            except StepHang as exc:
+                replayed, error = None, f"the module hangs: {exc}"
+            except Exception as exc:  # the module under test may crash on a frame: that is data
+                replayed, error = None, f"{type(exc).__name__}: {exc}"
+            t3 = time.perf_counter()
+            result.planner_seconds += t3 - t2
+            if error is not None:
+                cmp = Comparison(math.inf, math.inf, 0, "error")
+            elif replayed is None:
+                cmp = Comparison(0.0, 0.0, 0, "both empty") if nothing_plausible else Comparison(
+                    math.inf, math.inf, 0, "one empty")
+            else:
+                cmp = compare_outputs(cfg, replayed, expected)
+            result.validation_seconds += time.perf_counter() - t3
+            if error is None and cmp.within(cfg.threshold):
+                best = (cmp, choice, replayed, error, None, tries)
+                break
+            if best is None or cmp.distance < best[0].distance:
+                state = planner.snapshot() if start_state is not None else None
+                best = (cmp, choice, replayed, error, state, tries)
+        assert best is not None
+        cmp, choice, replayed, error, state, tries = best
+        if state is not None:
+            planner.restore(state)  # carry on from the state the kept frame produced
+        previous = choice
+        answered = replayed is not None and output is not None
+        if answered:
+            next_output += 1
         result.frames.append(ExtractedFrame(
-            index=len(result.frames), output=output, trigger_time=t_t, frame_time=t_t,
+            index=len(result.frames), output=output if answered else None, trigger_time=t_t, frame_time=t_t,
             inputs={name: usable[name][i][0] for name, i in choice.items()}, comparison=cmp,
-            accepted=error is None and cmp.within(cfg.threshold), candidates_tried=1,
-            exact=error is None and _same(replayed, expected)))
+            accepted=error is None and cmp.within(cfg.threshold),
+            candidates_tried=tries if cmp.within(cfg.threshold) else len(options),
+            exact=error is None and _same(replayed, expected if answered else None)))
         progress(done, len(triggers))
         if error is not None:
             result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))

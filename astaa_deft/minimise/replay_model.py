@@ -43,8 +43,7 @@ from typing import Any
 
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
-from ..deft.extract import trigger_frame
-from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before
+from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
 from ..deft.planner_section import replay_module_of, replay_modules
 from ..deft.replay import StepHang, make_planner, within_limit
 from ..errors import InputError, Problem
