@@ -30,10 +30,19 @@ class DeftSuiteFile(pytest.File):
         from .suite import Suite
 
         suite = Suite(self.path.parent)
+        oracles = list(enumerate(suite.manifest.get("oracles", [])))
+        # Oracle tests with a snapshot of the state before their frame run first: one step each, so a
+        # suite that reproduces a failure fails at once (pytest -x) instead of after the whole replay.
+        for n, oracle in oracles:
+            if oracle.get("snapshot"):
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+                                             oracle=oracle)
         for position, entry in enumerate(suite.frames):
             yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", suite=suite, position=position)
-        for n, oracle in enumerate(suite.manifest.get("oracles", [])):
-            yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite, oracle=oracle)
+        for n, oracle in oracles:
+            if not oracle.get("snapshot"):
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+                                             oracle=oracle)
 
 
 class FrameMismatch(AstaaDeftError):

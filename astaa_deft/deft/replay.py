@@ -196,6 +196,30 @@ def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = F
     return LockstepPlanner(spec, planner, params)
 
 
+def code_fingerprint(entry: ReplayModule, spec: Spec) -> str | None:
+    """A hash of the sources beside the factory's module (its package's own files); None if not found.
+
+    A snapshot of the module's state is only as good as the code that made
+    it: a fixed module must be replayed from the start.
+    """
+    import hashlib
+    import inspect
+
+    if not entry.factory:
+        return None
+    try:
+        factory = load_factory(entry.factory, spec.path.parent.resolve() if spec.path else None)
+        source = inspect.getsourcefile(factory)
+    except (InputError, TypeError, OSError):
+        return None
+    if source is None:
+        return None
+    digest = hashlib.sha256()
+    for path in sorted(Path(source).parent.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
 def compare_outputs(entry: ReplayModule, replayed: Any, recorded: Any) -> Comparison:
     """A replayed output against the recorded one: as trajectories (the planner), else field by field."""
     if entry.trajectory is not None:

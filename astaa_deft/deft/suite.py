@@ -84,6 +84,40 @@ class Suite:
         self._results = results
         return results
 
+    @property
+    def replayed(self) -> bool:
+        """Whether every frame has been replayed in order already (its results are then the ones to use)."""
+        return self._results is not None
+
+    def frame_inputs(self, entry: dict) -> dict[str, Any]:
+        """The decoded inputs of one manifest frame entry."""
+        by_channel = self._messages()
+        return {name: by_channel[name][i] for name, i in entry["inputs"].items()}
+
+    def result_from_snapshot(self, index: int, snapshot: str) -> FrameResult:
+        """Frame ``index`` stepped once from the module state pickled just before it (snapshots.py)."""
+        import pickle
+
+        cfg = self.entry
+        entry = next(e for e in self.frames if e["index"] == index)
+        expected_msg = self.decoded(cfg.output, entry["output"]) if entry["output"] is not None else None
+        planner = make_planner(self.spec, self.manifest["params"], entry=cfg)
+        error, how = None, ""
+        try:
+            planner.restore(pickle.loads((self.directory / snapshot).read_bytes()))
+            replayed_msg = within_limit(functools.partial(planner.step, self.frame_inputs(entry)), cfg.hang_after)
+        except StepHang as exc:
+            replayed_msg, error, how = None, f"the module hangs: {exc}", "hang"
+        except Exception as exc:  # the module under test crashing is a test failure, not ours
+            replayed_msg, error, how = None, f"{type(exc).__name__}: {exc}", "crash"
+        finally:
+            planner.close()
+        layout = cfg.trajectory
+        replayed = trajectory_points(replayed_msg, layout) if layout is not None else []
+        expected = trajectory_points(expected_msg, layout) if layout is not None else []
+        return FrameResult(index, compare_outputs(cfg, replayed_msg, expected_msg), replayed, expected, error,
+                           replayed_msg, expected_msg, how)
+
     def _messages(self) -> dict[str, list[Any]]:
         if self._by_channel is None:
             log = read_log(self.directory / FRAMES)

@@ -27,6 +27,7 @@ from .extract import Extraction, extract, ground_truth_rate
 from .oracle import oracle_entries
 from .planner_section import replay_module_of
 from .replay import make_planner
+from .snapshots import add_oracle_snapshots
 
 
 def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
@@ -92,5 +93,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
     manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles, entry=entry)
+    if oracles:
+        add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
     exact = ground_truth_rate(ex, spec, ground_truth) if ground_truth else None
     return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry)
