@@ -127,10 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
     mini.add_argument("--no-live-fallback", action="store_true",
                       help="when the planner replay does not reproduce the failure, stop (exit 1) "
                            "instead of re-running the SUT")
+    mini.add_argument("--jobs", type=int, default=1,
+                      help="whole-system runs at once (live tests, confirmations), each an isolated session")
     mini.set_defaults(func=lambda a: _cmd("minimise").run(a.log, a.spec, a.invariant, a.out, a.repeats,
                                                           a.parallel, a.live_only, confirm=a.confirm,
                                                           max_tests=a.max_tests,
-                                                          live_fallback=not a.no_live_fallback))
+                                                          live_fallback=not a.no_live_fallback, jobs=a.jobs))
 
     # fuzz, report (campaigns)
     fz = sub.add_parser("fuzz", help="a campaign: generated test cases, each a fresh run; failures bucketed, "

@@ -1,6 +1,6 @@
 """Minimisation cost on the demo's seeded defects: one culprit hidden among 100+ benign mutations.
 
-    python benchmarks/bench_minimise.py [--quick] [--defect N ...] [--keep DIR]
+    python benchmarks/bench_minimise.py [--quick] [--defect N ...] [--keep DIR] [--live-only] [--jobs N]
 
 For each seeded defect (astaa_deft/demo/README.md) a run of the demo stack
 (lane_follow, defects on) is recorded through the star proxy with a test
@@ -95,12 +95,13 @@ def record(defect: int, directory: Path) -> Path:
     return log
 
 
-def measure(defect: int, directory: Path, confirm: int) -> dict:
+def measure(defect: int, directory: Path, confirm: int, live_only: bool = False, jobs: int = 1) -> dict:
     log = record(defect, directory)
     mutations = len(read_log(log).on(layout.MUTATIONS_TOPIC))
     out = directory / f"minimal{defect}"
     started = time.monotonic()
-    report = minimise_log(log, out, MinimiseOptions(spec_path=demo_spec_path(), confirm=confirm))
+    report = minimise_log(log, out, MinimiseOptions(spec_path=demo_spec_path(), confirm=confirm,
+                                                    live_only=live_only, jobs=jobs))
     code = 0 if report.reproduced else 1  # as `astaa-deft minimise` exits
     wall = time.monotonic() - started
     body = json.loads((out / "summary.json").read_text())
@@ -115,6 +116,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="one confirmation run instead of three")
     ap.add_argument("--defect", type=int, action="append", choices=sorted(CULPRITS))
     ap.add_argument("--keep", type=Path, help="keep logs and outputs here (default: a temporary directory)")
+    ap.add_argument("--live-only", action="store_true", help="whole-system re-runs, never the module replay")
+    ap.add_argument("--jobs", type=int, default=1, help="whole-system runs at once (live tests, confirmations)")
     args = ap.parse_args()
     defects = args.defect or sorted(CULPRITS)
     confirm = 1 if args.quick else 3
@@ -124,7 +127,7 @@ def main() -> None:
         directory = args.keep or Path(tmp)
         directory.mkdir(parents=True, exist_ok=True)
         for defect in defects:
-            row = measure(defect, directory, confirm)
+            row = measure(defect, directory, confirm, args.live_only, args.jobs)
             body = row["body"]
             if "stages" not in body:
                 print(f"{defect:<7} {body.get('verdict')}")

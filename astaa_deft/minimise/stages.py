@@ -216,22 +216,27 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
 
 
 def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Failure, full: TestResult,
-                  say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
-    """Stages 1 and 3 with whole-system re-runs; ``full`` is the result of the full set, tested already."""
+                  say: Say = lambda line: None, max_tests: int | None = None, jobs: int = 1) -> Minimisation:
+    """Stages 1 and 3 with whole-system re-runs; ``full`` is the result of the full set, tested already.
+
+    ``jobs`` > 1 tests that many subsets of a round at once, each run an isolated session of the SUT
+    (its own router port, run directory and log, as a campaign's cases).
+    """
     out = Minimisation("live", failure, list(mutations), {})
     by_number = {m.number: m for m in mutations}
     items = [m.number for m in mutations]
     cache = OutcomeCache()
     cache.put(tuple(range(len(items))), full)  # the reproduction check's answer: not run again
-    say(f"stage 1: {len(items)} mutations, {tester.repeats} run(s) per test")
+    say(f"stage 1: {len(items)} mutations, {tester.repeats} run(s) per test"
+        + (f", {jobs} tests at once" if jobs > 1 else ""))
     first = ddmin(items, lambda subset: tester([(by_number[n], None) for n in subset]), cache=cache,
-                  max_tests=max_tests, progress=_stage_progress(say, "mutations"))
+                  max_tests=max_tests, progress=_stage_progress(say, "mutations"), parallel=jobs)
     out.stages.append(StageReport.of("mutations", "mutations", len(items), first, extra_tests=1,
                                      note="the full-set reproduction check included"))
     kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
     last = first.results.get(first.indices) or full
     kept, fields_last = _minimise_fields(kept, by_number, lambda selection: tester(
-        [(by_number[n], s) for n, s in sorted(selection.items())]), 1, max_tests, say, out)
+        [(by_number[n], s) for n, s in sorted(selection.items())]), jobs, max_tests, say, out)
     last = fields_last or last
     out.kept, out.detail, out.failure_rate = kept, last.detail, last.failure_rate
     return out
