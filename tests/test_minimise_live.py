@@ -63,3 +63,17 @@ def test_control_defects_minimise_on_the_module_replay(defect, tmp_path):
     [event] = body["culprit_events"]
     assert [f["path"] for f in event["fields"]] == [field]
     assert body["confirmation"]["failures"] == body["confirmation"]["runs"] == 1
+
+
+@pytest.mark.slow
+def test_live_tests_run_in_parallel_isolated_sessions(tmp_path):
+    """--jobs 2: two whole-system runs at a time, each its own session; the same culprit is found."""
+    policy, field, invariant = ANCHORED[4]
+    log = record(tmp_path, "defect4", NOISE + policy, 7.0)
+    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=2, live_only=True, jobs=2)
+    body = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert code == 0, body["verdict"]
+    assert body["tester"] == "live" and body["failure"]["invariant"] == invariant
+    [event] = body["culprit_events"]
+    assert [f["path"] for f in event["fields"]] == [field]
+    assert body["confirmation"]["failures"] == body["confirmation"]["runs"] == 2
