@@ -107,8 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
     ext.add_argument("--jobs", type=int, metavar="N",
                      help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
+    ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
-                                                         a.ground_truth, jobs=a.jobs))
+                                                         a.ground_truth, jobs=a.jobs, module=a.module))
 
     # minimise
     mini = sub.add_parser("minimise", aliases=["minimize"],
@@ -126,10 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
     mini.add_argument("--no-live-fallback", action="store_true",
                       help="when the planner replay does not reproduce the failure, stop (exit 1) "
                            "instead of re-running the SUT")
+    mini.add_argument("--jobs", type=int, default=1,
+                      help="whole-system runs at once (live tests, confirmations), each an isolated session")
     mini.set_defaults(func=lambda a: _cmd("minimise").run(a.log, a.spec, a.invariant, a.out, a.repeats,
                                                           a.parallel, a.live_only, confirm=a.confirm,
                                                           max_tests=a.max_tests,
-                                                          live_fallback=not a.no_live_fallback))
+                                                          live_fallback=not a.no_live_fallback, jobs=a.jobs))
 
     # fuzz, report (campaigns)
     fz = sub.add_parser("fuzz", help="a campaign: generated test cases, each a fresh run; failures bucketed, "

@@ -14,6 +14,7 @@ from typing import Any
 
 from .errors import did_you_mean
 from .spec.planner import build_planner
+from .spec.replay_section import build_replay_section
 from .fields import FieldPathError, check_brittle_pattern
 from .monitor.invariants import build_invariants
 from .yamlsource import Node, Source, describe_value
@@ -40,7 +41,7 @@ ENCODINGS = ("json", "cbor", "cdr")
 
 ON_CRASH = ("end_run", "keep_running")
 TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run",
-            "decictor", "ros2")
+            "decictor", "ros2", "replay")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -83,6 +84,7 @@ class _SpecBuilder:
         brittle = self.brittle(v.get("brittle"), types)
         invariants = build_invariants(self.src, v.get("invariants"), types, channels, [m.name for m in modules])
         planner = build_planner(self.src, v.get("planner"), types, channels, modules)
+        replay = build_replay_section(self.src, v.get("replay"), channels, modules)
         run = build_run_section(self.src, v.get("run"), types, channels, [m.name for m in modules])
         self.src.raise_if_problems()
         return Spec(
@@ -96,6 +98,7 @@ class _SpecBuilder:
             params=params,
             invariants=tuple(invariants),
             planner=planner,
+            replay=replay,
             run=run,
             decictor=v["decictor"].plain() if "decictor" in v else None,
             source_text=self.src.text,

@@ -1,6 +1,6 @@
 """Minimisation cost on the demo's seeded defects: one culprit hidden among 100+ benign mutations.
 
-    python benchmarks/bench_minimise.py [--quick] [--defect N ...] [--keep DIR]
+    python benchmarks/bench_minimise.py [--quick] [--defect N ...] [--keep DIR] [--live-only] [--jobs N]
 
 For each seeded defect (astaa_deft/demo/README.md) a run of the demo stack
 (lane_follow, defects on) is recorded through the star proxy with a test
@@ -42,20 +42,27 @@ from astaa_deft.intercept import load_interceptor
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
 from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
+from astaa_deft.monitor import check_log
 from astaa_deft.spec_loader import load_spec
 
 RECORD_SECONDS = 7.0
+RECORD_ATTEMPTS = 3
 
 NOISE = demo_noise_policies()  # policies/examples/demo_noise.xml
 
+# Defects 2–4 need control to be driving when the culprit hits: their windows open 1 s after its first
+# command (a fixed time from the launch missed it on a loaded machine, where the stack starts late).
 CULPRITS = {  # defect → (the policy triggering it once, the field it sets)
     1: ("""<policy id="culprit"><channel>routing</channel><window from="4"/><select limit="1"/>
     <set><field path="speed_limit" value="dict:float.nan"/></set></policy>""", "speed_limit"),
-    2: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer><window from="3"/>
+    2: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer>
+    <window from="1"><after channel="command" message="1"/></window>
     <select limit="1"/><set><field path="heading" value="dict:float.big_1e16"/></set></policy>""", "heading"),
-    3: ("""<policy id="culprit"><channel>trajectory</channel><window from="3"/><select limit="1"/>
+    3: ("""<policy id="culprit"><channel>trajectory</channel>
+    <window from="1"><after channel="command" message="1"/></window><select limit="1"/>
     <set><field path="points" value="dict:array.empty"/></set></policy>""", "points"),
-    4: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer><window from="3"/>
+    4: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer>
+    <window from="1"><after channel="command" message="1"/></window>
     <select limit="1"/><set><field path="header.stamp" value="dict:time.jump_back"/></set></policy>""", "header.stamp"),
 }
 
@@ -67,23 +74,34 @@ def testcase_xml(defect: int) -> str:
 
 
 def record(defect: int, directory: Path) -> Path:
+    """A failing run of the defect: re-recorded (up to RECORD_ATTEMPTS times) while it passes.
+
+    The culprit's window opens at a fixed time; on a loaded machine the stack
+    may not be driving yet by then (the mutated message then changes nothing).
+    """
     spec = load_spec(demo_spec_path())
     policy = directory / f"defect{defect}.xml"
     policy.write_text(testcase_xml(defect))
     log = directory / f"defect{defect}.mcap"
-    options = RunOptions(mode="star", interceptor=load_interceptor(policy, spec), record=log,
-                         params={"scenario": "lane_follow", "defects": "on"}, run_dir=directory / f"run{defect}",
-                         attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=RECORD_SECONDS)
-    run_session(spec, options)
+    for attempt in range(1, RECORD_ATTEMPTS + 1):
+        options = RunOptions(mode="star", interceptor=load_interceptor(policy, spec), record=log,
+                             params={"scenario": "lane_follow", "defects": "on"},
+                             run_dir=directory / f"run{defect}-{attempt}",
+                             attachments={layout.POLICY_ATTACHMENT: policy}, time_limit=RECORD_SECONDS)
+        run_session(spec, options)
+        if check_log(read_log(log), spec).verdict.klass != "Pass":
+            break
+        print(f"(defect {defect}: recorded run {attempt} did not fail; recording again)")
     return log
 
 
-def measure(defect: int, directory: Path, confirm: int) -> dict:
+def measure(defect: int, directory: Path, confirm: int, live_only: bool = False, jobs: int = 1) -> dict:
     log = record(defect, directory)
     mutations = len(read_log(log).on(layout.MUTATIONS_TOPIC))
     out = directory / f"minimal{defect}"
     started = time.monotonic()
-    report = minimise_log(log, out, MinimiseOptions(spec_path=demo_spec_path(), confirm=confirm))
+    report = minimise_log(log, out, MinimiseOptions(spec_path=demo_spec_path(), confirm=confirm,
+                                                    live_only=live_only, jobs=jobs))
     code = 0 if report.reproduced else 1  # as `astaa-deft minimise` exits
     wall = time.monotonic() - started
     body = json.loads((out / "summary.json").read_text())
@@ -98,6 +116,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="one confirmation run instead of three")
     ap.add_argument("--defect", type=int, action="append", choices=sorted(CULPRITS))
     ap.add_argument("--keep", type=Path, help="keep logs and outputs here (default: a temporary directory)")
+    ap.add_argument("--live-only", action="store_true", help="whole-system re-runs, never the module replay")
+    ap.add_argument("--jobs", type=int, default=1, help="whole-system runs at once (live tests, confirmations)")
     args = ap.parse_args()
     defects = args.defect or sorted(CULPRITS)
     confirm = 1 if args.quick else 3
@@ -107,7 +127,7 @@ def main() -> None:
         directory = args.keep or Path(tmp)
         directory.mkdir(parents=True, exist_ok=True)
         for defect in defects:
-            row = measure(defect, directory, confirm)
+            row = measure(defect, directory, confirm, args.live_only, args.jobs)
             body = row["body"]
             if "stages" not in body:
                 print(f"{defect:<7} {body.get('verdict')}")

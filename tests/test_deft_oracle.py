@@ -133,3 +133,30 @@ def test_frame_tests_fail_with_a_readable_diff_when_the_output_changes(tmp_path)
     assert "frame 3: the planner's output changed" in run.stdout
     assert "largest point error 0.25 m" in run.stdout
     assert "recorded x,y" in run.stdout and "replayed x,y" in run.stdout
+
+
+def test_oracle_tests_run_first_from_a_snapshot_before_their_frame(tmp_path):
+    """TTRF: a suite that reproduces a collision fails at its first test, one planner step from a snapshot."""
+    from astaa_deft.deft.snapshots import usable_snapshot
+    from astaa_deft.deft.suite import Suite
+
+    spec_path, log_path = crafted_log(tmp_path)
+    suite_dir = tmp_path / "suite"
+    res = cli("-m", "astaa_deft.cli", "extract", str(log_path), "--spec", str(spec_path), "-o", str(suite_dir))
+    assert res.returncode == 0, res.stderr
+    oracles = json.loads((suite_dir / MANIFEST).read_text())["oracles"]
+    assert oracles and all(o.get("snapshot") for o in oracles)
+    run = cli("-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", str(suite_dir), cwd=tmp_path)
+    assert run.returncode == 1 and "1 failed" in run.stdout and "passed" not in run.stdout, run.stdout
+    assert "oracle_collision_000" in run.stdout  # the first test run is the oracle, not frame 0
+    sys.path.insert(0, str(SUT))
+    try:
+        suite = Suite(suite_dir)
+        for oracle in oracles:  # one step from the snapshot answers as the whole replay in order does
+            fast = suite.result_from_snapshot(oracle["frame"], usable_snapshot(suite, oracle))
+            slow = next(r for r in suite.results() if r.index == oracle["frame"])
+            assert fast.message == slow.message and fast.error is None
+        set_params(suite_dir, stop="on")  # another planner than the snapshot's: replayed from the start
+        assert all(usable_snapshot(Suite(suite_dir), oracle) is None for oracle in oracles)
+    finally:
+        sys.path.remove(str(SUT))

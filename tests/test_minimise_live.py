@@ -32,7 +32,7 @@ CULPRITS = {  # defect → (its policy, the field it sets, the invariant that br
 def test_live_minimisation_finds_the_culprit_and_it_fails_again_live(defect, tmp_path):
     policy, field, invariant = CULPRITS[defect]
     log = record(tmp_path, f"defect{defect}", NOISE + policy, 7.0)
-    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=1)
+    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=1, live_only=True)  # control has a replay
     body = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert code == 0, body["verdict"]
     assert body["tester"] == "live" and body["failure"]["invariant"] == invariant
@@ -41,3 +41,39 @@ def test_live_minimisation_finds_the_culprit_and_it_fails_again_live(defect, tmp
     assert [f["path"] for f in event["fields"]] == [field]
     assert body["confirmation"]["failures"] == body["confirmation"]["runs"] == 1
     assert (tmp_path / "out" / "minimal.mcap").exists()  # the failing confirmation run's log
+
+
+# The same defects on the module replay (the spec's replay: section names control): seconds, not minutes.
+ANCHORED = {  # the culprits anchored to control's first command: the stack is driving when they hit
+    defect: (policy.replace('<window from="3"/>',
+                            '<window from="1"><after channel="command" message="1"/></window>'), field, invariant)
+    for defect, (policy, field, invariant) in CULPRITS.items()}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("defect", sorted(ANCHORED))
+def test_control_defects_minimise_on_the_module_replay(defect, tmp_path):
+    policy, field, invariant = ANCHORED[defect]
+    log = record(tmp_path, f"defect{defect}", NOISE + policy, 7.0)
+    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=1)
+    body = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert code == 0, body["verdict"]
+    assert body["tester"] == "replay" and body["failure"]["invariant"] == invariant
+    assert body["mutations"]["after"] == 1
+    [event] = body["culprit_events"]
+    assert [f["path"] for f in event["fields"]] == [field]
+    assert body["confirmation"]["failures"] == body["confirmation"]["runs"] == 1
+
+
+@pytest.mark.slow
+def test_live_tests_run_in_parallel_isolated_sessions(tmp_path):
+    """--jobs 2: two whole-system runs at a time, each its own session; the same culprit is found."""
+    policy, field, invariant = ANCHORED[4]
+    log = record(tmp_path, "defect4", NOISE + policy, 7.0)
+    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=2, live_only=True, jobs=2)
+    body = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert code == 0, body["verdict"]
+    assert body["tester"] == "live" and body["failure"]["invariant"] == invariant
+    [event] = body["culprit_events"]
+    assert [f["path"] for f in event["fields"]] == [field]
+    assert body["confirmation"]["failures"] == body["confirmation"]["runs"] == 2

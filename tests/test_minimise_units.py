@@ -325,3 +325,11 @@ def test_verdicts_and_exit_codes():
     report = workflow.MinimiseReport(False, text, {"verdict": text}, complete=False)
     assert report.text() == f"minimise: {text}"
 
+
+
+def test_jobs_below_one_is_an_input_error_naming_the_option():
+    from astaa_deft.errors import InputError
+    from astaa_deft.minimise.workflow import MinimiseOptions
+
+    with pytest.raises(InputError, match="--jobs"):
+        MinimiseOptions(jobs=0).check()

@@ -27,6 +27,9 @@ def progress_bar(done: int, total: int) -> None:
 def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
     lines = [f"planning outputs found: {ex.outputs}; frames reconstructed: {len(ex.frames)}; "
              f"skipped: {len(ex.skipped)}"]
+    if ex.recorded_outputs is not None:  # a per-trigger module: one frame per trigger message
+        lines = [f"trigger messages: {ex.outputs} (recorded outputs: {ex.recorded_outputs}); frames replayed: "
+                 f"{len(ex.frames)}; skipped: {len(ex.skipped)}"]
     lines.append(f"{'θ (m)':>8} {'reproduced':>11} {'rate':>8}")
     for th in thresholds:
         n = ex.accepted_at(th)
@@ -39,9 +42,10 @@ def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
 
 
 def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None, process: bool,
-        ground_truth: str | None, jobs: int | None = None) -> int:
+        ground_truth: str | None, jobs: int | None = None, module: str | None = None) -> int:
     report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=process,
-                                  ground_truth=ground_truth, jobs=jobs, progress=progress_bar, notice=say)
+                                  ground_truth=ground_truth, jobs=jobs, progress=progress_bar, notice=say,
+                                  module=module)
     say(summary_table(report.extraction))
     note = near_miss_note(report.extraction)
     if note:
@@ -53,8 +57,8 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
         exact, checked = report.ground_truth
         say(f"ground truth ({ground_truth}): {exact}/{checked} frames used exactly the planner's inputs"
             + (f" ({exact / checked:.1%})" if checked else ""))
-    planner = report.spec.planner
-    assert planner is not None  # extract_module_tests refuses a spec without a planner section
-    say(f"{report.accepted} module tests (θ = {planner.threshold:g} m) written to {out_dir}; "
+    entry = report.entry
+    unit = " m" if entry.trajectory is not None else ""
+    say(f"{report.accepted} module tests (θ = {entry.threshold:g}{unit}) written to {out_dir}; "
         f"run them with: pytest {out_dir}")
     return 0 if report.manifest else 1

@@ -16,8 +16,9 @@ from typing import Any
 
 from ..log.writer import LogWriter
 from ..spec.model import Spec
+from ..spec.replay_section import ReplayModule
 from .extract import ExtractedFrame
-from .planner_section import planner_of
+from .planner_section import replay_module_of
 
 MANIFEST = "deft.json"
 FRAMES = "frames.mcap"
@@ -37,9 +38,13 @@ VERSION = 1
 
 
 def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[str, str], out_dir: Path,
-                 oracles: Sequence[Mapping[str, Any]] = ()) -> Path:
+                 oracles: Sequence[Mapping[str, Any]] = (), entry: ReplayModule | None = None) -> Path:
+    """Write the suite of ``entry``'s module (default: the planner); the manifest names any other module.
+
+    A frame a per-trigger module answered with nothing has ``"output": null``.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = planner_of(spec)
+    cfg = entry if entry is not None else replay_module_of(spec)
     writer = LogWriter(out_dir / FRAMES, spec)
     channel_ids = {name: writer.bus_channel(spec.channel(name)) for name in list(cfg.inputs) + [cfg.output]}
     written: dict[tuple[str, int, bytes], int] = {}
@@ -58,10 +63,10 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
         entries.append({
             "index": f.index,
             "inputs": {name: put(name, msg) for name, msg in sorted(f.inputs.items())},
-            "output": put(cfg.output, f.output),
+            "output": put(cfg.output, f.output) if f.output is not None else None,
             "frame_time_ns": f.frame_time,
             "trigger_time_ns": f.trigger_time,
-            "output_time_ns": f.output.log_time,
+            "output_time_ns": f.output.log_time if f.output is not None else f.trigger_time,
             "recorded_distance": f.comparison.distance,
         })
     writer.finish()
@@ -77,6 +82,9 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
         "frames": entries,
         "oracles": list(oracles),
     }
+    if cfg.where != "planner":  # a planner suite's manifest stays as it always was
+        manifest["module"] = cfg.module
+        manifest["output"] = cfg.output
     (out_dir / PYTEST_INI).write_text(PYTEST_INI_TEXT)
     path = out_dir / MANIFEST
     path.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")

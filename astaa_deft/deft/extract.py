@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import functools
 import json
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -15,18 +18,18 @@ from ..codecs.base import DecodeError
 from ..errors import InputError, Problem
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
-from ..spec.planner import PlannerSpec
+from ..spec.replay_section import ReplayModule
 from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
-from .frames import Stream, candidates
-from .planner_section import planner_of
-from .replay import ReplayPlanner, trajectory_points
+from .frames import Stream, candidates, trigger_candidates
+from .planner_section import planner_of, replay_module_of
+from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
 
 
 @dataclass
 class ExtractedFrame:
     index: int  # 0-based, in output order
-    output: LoggedMessage
+    output: LoggedMessage | None  # None: the module answered this frame with nothing (per-trigger frames)
     trigger_time: int
     frame_time: int
     inputs: dict[str, LoggedMessage]  # channel → the message used
@@ -45,6 +48,7 @@ class Extraction:
     validation_seconds: float = 0.0  # reading the recorded and replayed trajectories, comparing them
     planner_seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
+    recorded_outputs: int | None = None  # per-trigger frames: the outputs in the log (``outputs`` counts frames)
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -64,20 +68,137 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
             progress: Callable[[int, int], None] = lambda done, total: None,
-            jobs: int | None = None) -> Extraction:
-    """Reconstruct and validate a frame per recorded output.
+            jobs: int | None = None, entry: ReplayModule | None = None) -> Extraction:
+    """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
 
-    With ``jobs`` (an in-process planner on a system that can fork), the
-    candidates of an output are tried in forked processes, up to ``jobs`` at
-    a time, from the very same planner state (see fork_replay); otherwise
-    from deep copies of the planner, one after another.
+    ``entry`` names the module replayed (default: the planner). With ``jobs``
+    (an in-process planner on a system that can fork), the candidates of an
+    output are tried in forked processes, up to ``jobs`` at a time, from the
+    very same planner state (see fork_replay); otherwise from deep copies of
+    the planner, one after another.
     """
+    cfg = entry if entry is not None else replay_module_of(spec)
+    if cfg.per_trigger:
+        return _extract_per_trigger(log, spec, planner, cfg, progress)
     if jobs is not None and planner.can_snapshot and can_fork():
         return run_supervised(
             lambda send: _extract(log, spec, planner, lambda done, total: send((done, total)),
-                                  ForkedSearch(jobs, send)),
+                                  ForkedSearch(jobs, send), cfg),
             on_message=lambda message: progress(*message))
-    return _extract(log, spec, planner, progress, None)
+    return _extract(log, spec, planner, progress, None, cfg)
+
+
+def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
+                         progress: Callable[[int, int], None]) -> Extraction:
+    """One frame per trigger message, its replayed answer compared with the recorded one.
+
+    Answers pair with the recorded outputs in order; a frame the module
+    answers with nothing (``step`` returns None) is plausible when the next
+    output was logged after the next trigger. Like the planner's, a frame
+    has candidates (each other input with a message logged between the
+    trigger and the answer, or without its messages logged up to
+    ``lookback_ms`` before the trigger: the module may have received them
+    in another order than the recorder), tried from the same state, the
+    first that matches kept (none: the closest). Inputs that do not decode are dropped, as the module's
+    deserialiser would. Triggers logged after the module's last recorded
+    output (plus ``skew_ms``) are not replayed: nothing recorded says what
+    it answered. The module's crash or hang ends the replay (it answers
+    nothing more).
+    """
+    msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
+    outputs = msgs.pop(cfg.output)
+    codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
+    t0 = time.perf_counter()
+    usable: dict[str, list[tuple[LoggedMessage, Any]]] = {}
+    for name, stream in msgs.items():
+        usable[name] = []
+        for m in stream:
+            with contextlib.suppress(DecodeError):  # dropped, as the module's deserialiser would
+                usable[name].append((m, codecs[name].decode(m.data)))
+    streams = {name: Stream(name, [m.log_time for m, _ in items]) for name, items in usable.items()}
+    result = Extraction(outputs=len(outputs))
+    result.reconstruction_seconds += time.perf_counter() - t0
+    last = (outputs[-1].log_time if outputs else log_start(log)) + int(cfg.skew_ms * 1e6)
+    triggers = [i for i, t in enumerate(streams[cfg.trigger].times) if t <= last]
+    result.outputs, result.recorded_outputs = len(triggers), len(outputs)
+    times = streams[cfg.trigger].times
+    lookback = int(cfg.lookback_ms * 1e6)
+    previous: dict[str, int] = {}
+    next_output = 0
+    for done, t_index in enumerate(triggers, start=1):
+        t_t = times[t_index]
+        t_next = times[t_index + 1] if t_index + 1 < len(times) else None
+        # Answers are paired with recorded outputs in order: a replayed answer is compared with the next
+        # output; a frame answered with nothing leaves it to a later frame, which is plausible only when it
+        # was logged after the next trigger (a module answers within its cycle, but may lag under load).
+        output = outputs[next_output] if next_output < len(outputs) else None
+        expected = None
+        if output is not None:
+            try:
+                expected = codecs[cfg.output].decode(output.data)
+            except DecodeError as exc:
+                result.warnings.append(f"output {next_output}: recorded output does not decode ({exc})")
+        nothing_plausible = output is None or t_next is None or output.log_time >= t_next
+        t1 = time.perf_counter()
+        options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback,
+                                     output.log_time if output is not None else None)
+        if not planner.can_snapshot:
+            options = options[:1]
+        start_state = planner.snapshot() if len(options) > 1 else None
+        result.reconstruction_seconds += time.perf_counter() - t1
+        # (comparison, choice, replayed, error, the state after it or None if current, tries)
+        best: tuple[Comparison, dict[str, int], Any, str | None, Any, int] | None = None
+        for tries, choice in enumerate(options, start=1):
+            frame = {name: usable[name][i][1] for name, i in choice.items()}
+            if tries > 1 and start_state is not None:
+                planner.restore(copy.deepcopy(start_state))
+            t2 = time.perf_counter()
+            error = None
+            try:
+                replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
+            except StepHang as exc:
+                replayed, error = None, f"the module hangs: {exc}"
+            except Exception as exc:  # the module under test may crash on a frame: that is data
+                replayed, error = None, f"{type(exc).__name__}: {exc}"
+            t3 = time.perf_counter()
+            result.planner_seconds += t3 - t2
+            if error is not None:
+                cmp = Comparison(math.inf, math.inf, 0, "error")
+            elif replayed is None:
+                cmp = Comparison(0.0, 0.0, 0, "both empty") if nothing_plausible else Comparison(
+                    math.inf, math.inf, 0, "one empty")
+            else:
+                cmp = compare_outputs(cfg, replayed, expected)
+            result.validation_seconds += time.perf_counter() - t3
+            if error is None and cmp.within(cfg.threshold):
+                best = (cmp, choice, replayed, error, None, tries)
+                break
+            if best is None or cmp.distance < best[0].distance:
+                state = planner.snapshot() if start_state is not None else None
+                best = (cmp, choice, replayed, error, state, tries)
+        assert best is not None
+        cmp, choice, replayed, error, state, tries = best
+        if state is not None:
+            planner.restore(state)  # carry on from the state the kept frame produced
+        previous = choice
+        answered = replayed is not None and output is not None
+        if answered:
+            next_output += 1
+        result.frames.append(ExtractedFrame(
+            index=len(result.frames), output=output if answered else None, trigger_time=t_t, frame_time=t_t,
+            inputs={name: usable[name][i][0] for name, i in choice.items()}, comparison=cmp,
+            accepted=error is None and cmp.within(cfg.threshold),
+            candidates_tried=tries if cmp.within(cfg.threshold) else len(options),
+            exact=error is None and _same(replayed, expected if answered else None)))
+        progress(done, len(triggers))
+        if error is not None:
+            result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))
+            break
+    return result
+
+
+def log_start(log: LogContents) -> int:
+    return min((m.log_time for key in log.channels for m in log.on(key)), default=0)
 
 
 def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
@@ -90,8 +211,7 @@ def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
 
 
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Callable[[int, int], None],
-             search: ForkedSearch | None) -> Extraction:
-    cfg = planner_of(spec)
+             search: ForkedSearch | None, cfg: ReplayModule) -> Extraction:
     streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
     outputs = streams_msgs.pop(cfg.output)
     streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
@@ -121,7 +241,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         except DecodeError as exc:
             expected = None
             result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
-        expected_points = trajectory_points(expected, cfg.trajectory)
+        expected_points = trajectory_points(expected, cfg.trajectory) if cfg.trajectory is not None else []
         result.validation_seconds += time.perf_counter() - t1
         if not options:
             result.skipped.append((out_index, "an input had no message yet"))
@@ -165,7 +285,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
                 replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
             t2 = time.perf_counter()
             result.planner_seconds += t2 - t1
-            cmp = compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+            cmp = _judge(cfg, replayed, expected, expected_points)
             t1 = time.perf_counter()
             result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
@@ -199,7 +319,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     return result
 
 
-def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: PlannerSpec,
+def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
                    expected: Any, expected_points: list, limit_s: float, result: Extraction):
     """(candidate, comparison, exact, tries) kept for one output, in the process that carries on; or None."""
     t0 = time.perf_counter()
@@ -214,7 +334,7 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
             replayed = planner.step(frame)
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
-        return compare(trajectory_points(replayed, cfg.trajectory), expected_points), _same(replayed, expected)
+        return _judge(cfg, replayed, expected, expected_points), _same(replayed, expected)
 
     t1 = time.perf_counter()
     if len(options) == 1:  # one candidate: nothing to keep apart, step right here
@@ -231,6 +351,13 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
     index, (cmp, exact) = kept
     tries = index + 1 if cmp.within(cfg.threshold) else len(options)
     return options[index], cmp, exact, tries
+
+
+def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list) -> Comparison:
+    """The planner's trajectories (points decoded once per output), or any module's output field by field."""
+    if cfg.trajectory is not None:
+        return compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+    return compare_outputs(cfg, replayed, expected)
 
 
 NEAR_MISS_M = 1e-9
@@ -264,6 +391,8 @@ def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "deb
     codec = get_codec(spec.channel(planner_of(spec).output).encoding)
     exact = checked = 0
     for f in extraction.frames:
+        if f.output is None:
+            continue
         try:
             truth = get(codec.decode(f.output.data), debug_path)
         except DecodeError:

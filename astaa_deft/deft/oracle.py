@@ -67,6 +67,8 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
     ob_codec = get_codec(spec.channel(oracle.channel).encoding)
     entries = []
     for f in extraction.frames:
+        if f.output is None:
+            continue
         if not any(0 <= t - f.output.log_time <= window_s * 1e9 for t in collision_times_ns):
             continue
         try:
@@ -86,8 +88,14 @@ def check_oracle(suite, entry: Mapping[str, Any]) -> str | None:
         from .invariant_oracle import check_invariant_oracle
 
         return check_invariant_oracle(suite, entry)
+    from .snapshots import usable_snapshot
+
     cfg = suite.spec.planner
-    result = next(r for r in suite.results() if r.index == entry["frame"])
+    snapshot = usable_snapshot(suite, dict(entry)) if not suite.replayed else None
+    if snapshot is not None:  # fail fast: one step from the state just before the frame
+        result = suite.result_from_snapshot(entry["frame"], snapshot)
+    else:
+        result = next(r for r in suite.results() if r.index == entry["frame"])
     frame_entry = next(e for e in suite.frames if e["index"] == entry["frame"])
     obstacles = suite.decoded(cfg.collision.channel, frame_entry["inputs"][cfg.collision.channel])
     hit = first_collision(planned_poses(result.message, cfg.trajectory), obstacles, cfg.collision)

@@ -30,10 +30,19 @@ class DeftSuiteFile(pytest.File):
         from .suite import Suite
 
         suite = Suite(self.path.parent)
+        oracles = list(enumerate(suite.manifest.get("oracles", [])))
+        # Oracle tests with a snapshot of the state before their frame run first: one step each, so a
+        # suite that reproduces a failure fails at once (pytest -x) instead of after the whole replay.
+        for n, oracle in oracles:
+            if oracle.get("snapshot"):
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+                                             oracle=oracle)
         for position, entry in enumerate(suite.frames):
             yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", suite=suite, position=position)
-        for n, oracle in enumerate(suite.manifest.get("oracles", [])):
-            yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite, oracle=oracle)
+        for n, oracle in oracles:
+            if not oracle.get("snapshot"):
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+                                             oracle=oracle)
 
 
 class FrameMismatch(AstaaDeftError):
@@ -56,6 +65,8 @@ class FrameTest(pytest.Item):
         if not isinstance(excinfo.value, FrameMismatch):
             return super().repr_failure(excinfo)
         r = excinfo.value.args[0]
+        if self.suite.entry.trajectory is None:
+            return self._fields_failure(r)
         lines = [f"frame {r.index}: the planner's output changed"]
         if r.error:
             lines.append(f"  the planner raised {r.error}")
@@ -70,6 +81,30 @@ class FrameTest(pytest.Item):
             t = point[2] if point is not None else 0.0  # one of the two exists below max(len, len)
             fmt = lambda q: f"{q[0]:11.4f},{q[1]:11.4f}" if q else f"{'—':>23}"  # noqa: E731
             lines.append(f"  {t:10.3f} {fmt(e):>24} {fmt(p):>24}")
+        return "\n".join(lines)
+
+    def _fields_failure(self, r) -> str:
+        """Any other module's output: where the replayed message left the recorded one, field by field."""
+        from .validator import differing_fields
+
+        entry = self.suite.entry
+        lines = [f"frame {r.index}: module '{entry.module}''s output on '{entry.output}' changed"]
+        if r.error:
+            lines.append(f"  the module raised {r.error}" if r.stopped == "crash" else f"  {r.error}")
+        else:
+            c = r.comparison
+            lines.append(f"  distance {c.distance:.6g} (threshold {self.suite.threshold:g}), largest field error "
+                         f"{c.max_error:.6g} over {c.points} fields ({c.how})")
+        if r.error:
+            pass  # no output to compare: the error says it all
+        elif r.expected_message is None and r.message is not None:
+            lines.append("  recorded: no output for this frame; replayed: an output")
+        elif r.message is None and r.expected_message is not None and not r.error:
+            lines.append("  recorded: an output; replayed: none")
+        else:
+            lines.append(f"  {'field':<28} {'recorded':>22} {'replayed':>22}")
+            for path, recorded, replayed in differing_fields(r.message, r.expected_message, entry.ignore):
+                lines.append(f"  {path:<28} {recorded!s:>22} {replayed!s:>22}")
         return "\n".join(lines)
 
     def reportinfo(self):

@@ -11,24 +11,27 @@ import copy
 import importlib
 import json
 import queue
+import signal
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Literal, Protocol, overload
+from typing import Any, Literal, Protocol, TypeVar, overload
 
 from ..bus import zenoh_config as zc
 from ..bus.processes import stop_process, tail
 from ..errors import InputError, Problem
 from ..fields import get
 from ..spec.model import Spec
-from ..spec.planner import PlannerSpec, TrajectoryLayout, resolve_args
-from .planner_section import planner_of
-from .validator import Point
+from ..spec.planner import TrajectoryLayout, resolve_args
+from ..spec.replay_section import ReplayModule
+from .planner_section import replay_module_of
+from .validator import Comparison, Point, compare, compare_messages
 
 OUTPUT_TIMEOUT = 10.0
 SETTLE_SECONDS = 0.01
@@ -44,7 +47,7 @@ class ReplayPlanner(Protocol):
     def close(self) -> None: ...
 
 
-def load_factory(path: str, spec_dir: Path | None = None) -> Any:
+def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.replay") -> Any:
     """The factory named 'module:attr', imported from sys.path or else from the spec's directory.
 
     A planner that sits next to its spec (a user's own stack, not an installed
@@ -63,10 +66,10 @@ def load_factory(path: str, spec_dir: Path | None = None) -> Any:
             module = importlib.import_module(module_name)
         return getattr(module, attr)
     except (ImportError, AttributeError) as exc:
-        where = f" or the spec's directory {spec_dir}" if spec_dir is not None else ""
-        raise InputError(Problem("<spec>", None, None, f"planner factory '{path}' cannot be loaded: {exc}",
-                                 f"check 'planner.replay.factory': its module must be importable from sys.path"
-                                 f"{where} (set PYTHONPATH, or install its package)")) from None
+        beside = f" or the spec's directory {spec_dir}" if spec_dir is not None else ""
+        raise InputError(Problem("<spec>", None, None, f"replay factory '{path}' cannot be loaded: {exc}",
+                                 f"check '{where}.factory': its module must be importable from sys.path"
+                                 f"{beside} (set PYTHONPATH, or install its package)")) from None
 
 
 def importable_from(directory: Path, top: str) -> bool:
@@ -78,11 +81,12 @@ def importable_from(directory: Path, top: str) -> bool:
 class InProcessPlanner:
     can_snapshot = True
 
-    def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None):
+    def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None,
+                 where: str = "planner.replay"):
         self.factory = factory
-        self.obj = load_factory(factory, spec_dir)(**kwargs)
+        self.obj = load_factory(factory, spec_dir, where)(**kwargs)
         if not callable(getattr(self.obj, "step", None)):
-            raise InputError(f"planner factory '{factory}' returned an object without a step(frame) method")
+            raise InputError(f"replay factory '{factory}' ({where}) returned an object without a step(frame) method")
 
     def step(self, frame: Mapping[str, dict]) -> dict:
         return self.obj.step(frame)
@@ -107,7 +111,7 @@ class LockstepPlanner:
 
     can_snapshot = False
 
-    def __init__(self, spec: Spec, planner: PlannerSpec, params: Mapping[str, str]):
+    def __init__(self, spec: Spec, planner: ReplayModule, params: Mapping[str, str]):
         import zenoh
 
         self.spec, self.planner = spec, planner
@@ -183,13 +187,78 @@ class LockstepPlanner:
 
 
 def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False,
-                 spec_dir: Path | None = None) -> ReplayPlanner:
-    """The replay planner; a factory is looked for beside the spec (``spec_dir`` for a spec not read from a file)."""
-    planner = planner_of(spec)
+                 entry: ReplayModule | None = None, spec_dir: Path | None = None) -> ReplayPlanner:
+    """The module of ``entry`` (default: the planner) ready to step, in-process or as its own process.
+
+    Its factory is looked for beside the spec (``spec_dir`` for a spec not read from a file).
+    """
+    planner = entry if entry is not None else replay_module_of(spec)
     if planner.factory and not (prefer_process and planner.command):
+        where = "planner.replay" if planner.where == "planner" else planner.where
         return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
-                                spec.path.parent.resolve() if spec.path else spec_dir)
+                                spec.path.parent.resolve() if spec.path else spec_dir, where)
     return LockstepPlanner(spec, planner, params)
+
+
+def code_fingerprint(entry: ReplayModule, spec: Spec) -> str | None:
+    """A hash of the sources beside the factory's module (its package's own files); None if not found.
+
+    A snapshot of the module's state is only as good as the code that made
+    it: a fixed module must be replayed from the start.
+    """
+    import hashlib
+    import inspect
+
+    if not entry.factory:
+        return None
+    try:
+        factory = load_factory(entry.factory, spec.path.parent.resolve() if spec.path else None)
+        source = inspect.getsourcefile(factory)
+    except (InputError, TypeError, OSError):
+        return None
+    if source is None:
+        return None
+    digest = hashlib.sha256()
+    for path in sorted(Path(source).parent.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+def compare_outputs(entry: ReplayModule, replayed: Any, recorded: Any) -> Comparison:
+    """A replayed output against the recorded one: as trajectories (the planner), else field by field."""
+    if entry.trajectory is not None:
+        return compare(trajectory_points(replayed, entry.trajectory), trajectory_points(recorded, entry.trajectory))
+    return compare_messages(replayed, recorded, entry.ignore)
+
+
+class StepHang(Exception):
+    """A module's step ran past its ``hang_after``: the module hangs on this frame."""
+
+
+T = TypeVar("T")
+
+
+def within_limit(call: Callable[[], T], seconds: float) -> T:
+    """``call()``, interrupted by StepHang after ``seconds`` (0: no limit).
+
+    A SIGALRM timer interrupts Python code that never returns (a loop that
+    cannot end), in the main thread of a POSIX process; elsewhere, or inside
+    native code that never returns to the interpreter, the call is not
+    limited here (the replay pool's per-test timeout still stops it).
+    """
+    if seconds <= 0 or not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+        return call()
+
+    def expired(signum, frame):
+        raise StepHang(f"the step did not return within {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        return call()
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _getter(path: str):

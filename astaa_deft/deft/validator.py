@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,3 +66,73 @@ def _points(a: np.ndarray, b: np.ndarray, how: str) -> Comparison:
 
 def _errors(d: np.ndarray, how: str) -> Comparison:
     return Comparison(float(math.sqrt(float(np.sum(d * d)))), float(np.max(d)), int(len(d)), how)
+
+
+# ------------------------------------------------------------ any module's output, field by field
+
+
+def flatten(message: Any, ignore: Sequence[str] = ()) -> dict[str, Any]:
+    """Leaf path → value of a decoded message (``a.b[2].c``), without the ``ignore`` paths and what lies below them."""
+    out: dict[str, Any] = {}
+
+    def walk(value: Any, path: str) -> None:
+        if path and any(path == skip or path.startswith(skip + ".") or path.startswith(skip + "[")
+                        for skip in ignore):
+            return
+        if isinstance(value, dict):
+            for key in sorted(value):
+                walk(value[key], f"{path}.{key}" if path else str(key))
+        elif isinstance(value, list):
+            for i, item in enumerate(value):
+                walk(item, f"{path}[{i}]")
+            if not value:
+                out[path] = []
+        else:
+            out[path] = value
+    walk(message, "")
+    return out
+
+
+def _leaf_error(a: Any, b: Any) -> float:
+    numeric = (int, float)
+    if isinstance(a, numeric) and isinstance(b, numeric) and not isinstance(a, bool) and not isinstance(b, bool):
+        if math.isnan(a) or math.isnan(b):
+            return 0.0 if math.isnan(a) and math.isnan(b) else math.inf
+        if math.isinf(a) or math.isinf(b):
+            return 0.0 if a == b else math.inf
+        return abs(float(a) - float(b))
+    return 0.0 if type(a) is type(b) and a == b else math.inf
+
+
+def compare_messages(replayed: Any, recorded: Any, ignore: Sequence[str] = ()) -> Comparison:
+    """A module's replayed output against the recorded one: √Σ of the numeric fields' differences.
+
+    A missing output on one side only, a field on one side only or a
+    non-numeric field that differs is no match (∞); NaN matches NaN.
+    """
+    if replayed is None and recorded is None:
+        return Comparison(0.0, 0.0, 0, "both empty")
+    if replayed is None or recorded is None:
+        return Comparison(math.inf, math.inf, 0, "one empty")
+    a, b = flatten(replayed, ignore), flatten(recorded, ignore)
+    if a.keys() != b.keys():
+        return Comparison(math.inf, math.inf, len(b), "fields differ")
+    errors = [_leaf_error(a[k], b[k]) for k in b]
+    if not errors:
+        return Comparison(0.0, 0.0, 0, "fields")
+    worst = max(errors)
+    distance = math.inf if math.isinf(worst) else math.sqrt(sum(e * e for e in errors))
+    return Comparison(distance, worst, len(errors), "fields")
+
+
+def differing_fields(replayed: Any, recorded: Any, ignore: Sequence[str] = (), limit: int = 6
+                     ) -> list[tuple[str, Any, Any]]:
+    """(path, recorded, replayed) of the first fields that differ (for a failing test's report)."""
+    a, b = flatten(replayed, ignore), flatten(recorded, ignore)
+    out = []
+    for key in list(b) + [k for k in a if k not in b]:
+        if key not in a or key not in b or _leaf_error(a[key], b[key]) > 0:
+            out.append((key, b.get(key, "—"), a.get(key, "—")))
+            if len(out) == limit:
+                break
+    return out

@@ -25,7 +25,9 @@ from ..spec.model import Spec
 from .export import export_suite
 from .extract import Extraction, extract, ground_truth_rate
 from .oracle import oracle_entries
+from .planner_section import replay_module_of
 from .replay import make_planner
+from .snapshots import add_oracle_snapshots
 
 
 def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
@@ -44,43 +46,54 @@ def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
 @dataclass
 class ExtractReport:
     extraction: Extraction
-    spec: Spec  # with the threshold used
+    spec: Spec  # with the threshold used (the planner's)
     accepted: int  # module tests written
     oracles: int  # oracle tests written (frames that planned into a predicted obstacle before a collision)
     collision: bool  # the run recorded a collision
     manifest: Any  # export_suite's manifest; empty when nothing was written
     ground_truth: tuple[int, int] | None = None  # (frames that used exactly the planner's inputs, checked)
+    entry: Any = None  # the replayed module's ReplayModule, with the threshold used
 
 
 def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, threshold: float | None = None,
                          process: bool = False, ground_truth: str | None = None, jobs: int | None = None,
                          progress: Callable[[int, int], None] = lambda done, total: None,
-                         notice: Callable[[str], None] = lambda line: None) -> ExtractReport:
+                         notice: Callable[[str], None] = lambda line: None,
+                         module: str | None = None) -> ExtractReport:
     """Extract and write the module tests of one run (InputError on bad input).
 
-    ``progress(done, total)`` follows the planner outputs; ``notice`` gets
-    the log reader's warnings; ``jobs`` bounds the worker processes that
+    ``module`` names a module of the spec's ``replay:`` section (default:
+    the planner). ``progress(done, total)`` follows the outputs; ``notice``
+    gets the log reader's warnings; ``jobs`` bounds the worker processes that
     try an output's candidate frames in parallel (default: one per core).
     """
     spec = load_spec(spec_path)
-    if spec.planner is None:
+    if module is None and spec.planner is None:
         raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
-                                 "describe the planning module under 'planner:' (see docs/deft.md)"))
+                                 "describe the planning module under 'planner:' (see docs/deft.md), or name a "
+                                 "module of its 'replay:' section with --module"))
+    if module is not None and spec.planner is not None and module == spec.planner.module:
+        module = None  # the planner, as its own section describes it
+    entry = replay_module_of(spec, module)
     if threshold is not None:
-        spec = replace(spec, planner=replace(spec.planner, threshold=threshold))
+        entry = replace(entry, threshold=threshold)
+        if module is None and spec.planner is not None:
+            spec = replace(spec, planner=replace(spec.planner, threshold=threshold))
     log = read_log(log_path)
     for warning in log.warnings:
         notice(f"warning: {warning}")
     params = run_params(log, spec)
-    planner = make_planner(spec, params, prefer_process=process)
+    planner = make_planner(spec, params, prefer_process=process, entry=entry)
     try:
-        ex = extract(log, spec, planner, progress=progress, jobs=jobs or os.cpu_count() or 1)
+        ex = extract(log, spec, planner, progress=progress, jobs=jobs or os.cpu_count() or 1, entry=entry)
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]
     collisions = [v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant_kind == "collision"]
     kept = {f.index for f in accepted}
-    oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept]
-    manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles)
+    oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
+    manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles, entry=entry)
+    if oracles:
+        add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
     exact = ground_truth_rate(ex, spec, ground_truth) if ground_truth else None
-    return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact)
+    return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry)

@@ -21,6 +21,7 @@ import zenoh
 
 from . import vehicle
 from .common import KEYS, Inbox, JsonPublisher, log, run_module
+from .common import header as common_header
 from .geometry import wrap_angle
 from .messages import BadMessage, Localization, TrajectoryPoint, header, localization, trajectory
 
@@ -151,6 +152,41 @@ class Controller:
         self.last_command = {"steering": float(steering), "acceleration": float(acceleration),
                              "trajectory_seq": self.plan_seq}
         return self.last_command
+
+
+class ReplayControl:
+    """The control process's handling of one localization, without the bus (the spec's ``replay:`` entry).
+
+    ``step(frame)`` gets ``{"localization": the message that triggers this cycle, "trajectory": the newest
+    trajectory received before it (absent until one arrives)}`` and returns the command the process
+    publishes for it, header included, or None when it publishes nothing. It does what :func:`main`
+    does per message: a malformed message is dropped; any other exception is one the process dies of.
+    Deterministic: no clock, no randomness; its state pickles.
+    """
+
+    def __init__(self, defects: bool = True):
+        self.controller = Controller(defects=defects)
+        self.trajectory: dict | None = None  # the last trajectory handed to the controller
+        self.seq = 0  # header.seq of the commands published (JsonPublisher numbers from 1)
+
+    def step(self, frame: dict) -> dict | None:
+        message = frame.get("trajectory")
+        if message is not None and message is not self.trajectory and message != self.trajectory:
+            self.trajectory = message  # a newer trajectory arrived since the last cycle
+            try:
+                self.controller.on_trajectory(message)
+            except BadMessage as exc:
+                log(MODULE, f"ignored malformed trajectory message: {exc}")
+        try:
+            loc = localization(frame["localization"])
+        except BadMessage as exc:
+            log(MODULE, f"ignored malformed localization message: {exc}")
+            return None
+        command = self.controller.on_localization(loc)
+        if command is None:
+            return None
+        self.seq += 1
+        return {"header": common_header(self.seq, loc.stamp), **command}
 
 
 def main(session: zenoh.Session, args: argparse.Namespace) -> None:

@@ -22,13 +22,16 @@ Whole-system runs are not deterministic (message timing differs between
 runs), so each test runs ``repeats`` times and reports the failure rate;
 it FAILs if any run failed (a subset that fails only sometimes still holds
 the cause), which is what "fails in some runs" means for ddmin here. Runs
-are one at a time: two copies of the SUT on a two-core machine would change
-the very timing under test.
+are one at a time unless asked (``minimise --jobs N``): two copies of the
+SUT on a two-core machine can change the very timing under test. Each run
+is its own session (router port, run directory, log), so parallel runs are
+isolated as a campaign's cases are; ``run`` is thread-safe.
 """
 
 from __future__ import annotations
 
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -78,6 +81,7 @@ class LiveTester:
         self.dictionary = load_dictionary()
         self.runs = 0
         self.run_seconds = 0.0
+        self._count = threading.Lock()  # tests may run in parallel sessions (--jobs)
 
     def testcase(self, chosen: Sequence[tuple[Mutation, FieldSelection]], description: str = "") -> TestCase:
         return restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
@@ -116,7 +120,8 @@ class LiveTester:
             options = RunOptions(mode="star", interceptor=interceptor, record=log_path, params=self.params,
                                  run_dir=Path(tmp) / "run", attachments={layout.POLICY_ATTACHMENT: policy_file},
                                  command_line=["astaa-deft", "minimise"])
-            self.runs += 1
+            with self._count:
+                self.runs += 1
 
             def stop_when(bus: BusRun) -> str | None:
                 if self._seen_online(bus):
@@ -130,7 +135,8 @@ class LiveTester:
             except InputError as exc:
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
             seconds = time.monotonic() - started
-            self.run_seconds += seconds
+            with self._count:
+                self.run_seconds += seconds
             try:
                 log = read_log(log_path)
                 result = check_log(log, self.spec)

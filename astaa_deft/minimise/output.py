@@ -97,8 +97,8 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
         codec = get_codec(spec.channel(cfg.output).encoding)
         for frame, message, _ in replayed:
             if message is not None:
-                output = model.outputs[frame.output]
-                records.append((output.log_time, topic(cfg.output), codec.encode(message), ("output", frame.output)))
+                records.append((model.output_time(frame), topic(cfg.output), codec.encode(message),
+                                ("output", frame.output)))
         chosen = result.chosen
         for mutation, selection in chosen:
             records.append((mutation.original_time_ns, topic(mutation.channel, original=True), mutation.original,
@@ -134,19 +134,24 @@ def write_module_tests(directory: Path, model: ReplayModel, result: Minimisation
     out_key = spec.channel(cfg.output).key
     extracted: list[ExtractedFrame] = []
     for frame, message, error in model.replay(_kept_frames(model, result)):
-        if error is not None:
+        if error is not None and not cfg.per_trigger:
             break
-        output = model.outputs[frame.output]
+        # A per-trigger module's crash or hang is the failure itself: its frame is kept (no output), and last.
+        time_ns = model.output_time(frame)
+        output = (LoggedMessage(out_key, time_ns, time_ns, 0, codec.encode(message)) if message is not None
+                  else None)
         extracted.append(ExtractedFrame(
-            index=len(extracted),
-            output=LoggedMessage(out_key, output.log_time, output.publish_time, 0, codec.encode(message)),
+            index=len(extracted), output=output,
             trigger_time=frame.trigger_time_ns, frame_time=frame.frame_time_ns,
             inputs={name: LoggedMessage(spec.channel(name).key, d.time_ns, d.time_ns, 0, d.data)
                     for name, d in frame.inputs},
             comparison=Comparison(0.0, 0.0, 0, "replayed"), accepted=True, candidates_tried=1, exact=True))
-    smoke = replace(spec, planner=replace(cfg, threshold=math.inf))
+        if error is not None:
+            break
+    smoke_entry = replace(cfg, threshold=math.inf)
+    smoke = replace(spec, planner=replace(spec.planner, threshold=math.inf)) if spec.planner is not None else spec
     oracle = oracle_entry(result.failure.invariant, extracted[-1].index if extracted else 0, model.start_ns)
-    return export_suite(extracted, smoke, model.params, directory, oracles=[oracle])
+    return export_suite(extracted, smoke, model.params, directory, oracles=[oracle], entry=smoke_entry)
 
 
 def _kept_frames(model: ReplayModel, result: Minimisation) -> list[Frame]:

@@ -33,6 +33,7 @@ is :mod:`.replay_tester`. Its records (:class:`Job`, :class:`ReplaySetup`,
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import pickle
 import time
@@ -42,16 +43,18 @@ from typing import Any
 
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
-from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before
-from ..deft.planner_section import planner_of
-from ..deft.replay import make_planner
+from ..deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
+from ..deft.planner_section import replay_module_of, replay_modules
+from ..deft.replay import StepHang, make_planner, within_limit
 from ..errors import InputError, Problem
 from ..log import layout
 from ..log import records as rec
 from ..log.reader import LoggedMessage, read_log
 from ..monitor import MonitorSet, format_violation, with_typed_invariants
+from ..monitor.verdict import IMPLICIT
 from ..session.check import spec_from_log
 from ..spec.model import Spec
+from ..spec.replay_section import ReplayModule
 from .ddmin import Outcome, TestResult
 from .mutations import (
     Delivered,
@@ -94,11 +97,14 @@ class ReplaySetup:
     log_path: str
     spec_path: str | None  # None: the spec stored in the log
     invariant: str
+    module: str | None = None  # the replayed module (None: whichever entry can judge the failure)
+    output: str | None = None  # its output (a module may have one entry per output)
+    failure_module: str | None = None  # the module the failure names (a crash is judged for it only)
 
 
 @dataclass(frozen=True)
 class Frame:
-    output: int  # index into the recorded outputs
+    output: int  # index into the recorded outputs (per-trigger modules: into the trigger messages)
     inputs: tuple[tuple[str, Delivered], ...]
     frame_time_ns: int
     trigger_time_ns: int
@@ -128,23 +134,54 @@ def run_params(log) -> dict[str, str]:
         return {}
 
 
-def replayable(spec: Spec, invariant_name: str) -> str | None:
-    """None if the replay can judge this invariant, else why not (the live tester is used then)."""
-    cfg = spec.planner
-    if cfg is None:
-        return "the spec has no 'planner' section"
+def replayable(spec: Spec, invariant_name: str, failure_module: str | None = None) -> str | None:
+    """None if a module replay can judge this failure, else why not (the live tester is used then)."""
+    entry, why = replay_entry_for(spec, invariant_name, failure_module)
+    return None if entry is not None else why
+
+
+def replay_entry_for(spec: Spec, invariant_name: str, failure_module: str | None = None
+                     ) -> tuple[ReplayModule | None, str]:
+    """The first replayable module (the planner first) that can judge the failure, or (None, why none can)."""
+    entries = replay_modules(spec)
+    if not entries:
+        return None, "the spec has no 'planner' section"
+    reasons = []
+    for entry in entries:
+        why = _why_not(spec, entry, invariant_name, failure_module)
+        if why is None:
+            return entry, ""
+        reasons.append(why)
+    return None, "; ".join(dict.fromkeys(reasons))
+
+
+def _why_not(spec: Spec, cfg: ReplayModule, invariant_name: str, failure_module: str | None) -> str | None:
+    """None if ``cfg``'s replay can judge the failure, else why not."""
+    is_planner = cfg.where == "planner"
     if not cfg.factory:
-        return "the planner has no in-process replay ('planner.replay.factory')"
+        return ("the planner has no in-process replay ('planner.replay.factory')" if is_planner
+                else f"module '{cfg.module}' has no in-process replay ('{cfg.where}.factory')")
+    crash_shown = cfg.per_trigger and cfg.exceptions == "crash"
+    if invariant_name == IMPLICIT:
+        if crash_shown and failure_module == cfg.module:
+            return None
+        return "a module crashed" if is_planner or failure_module != cfg.module else (
+            f"module '{cfg.module}' crashed, but its replay does not show crashes ('exceptions: crash')")
     spec = with_typed_invariants(spec)
     invariant = next((i for i in spec.invariants if i.name == invariant_name), None)
     if invariant is None:
         return f"'{invariant_name}' is not an invariant of the spec"
-    if invariant.kind in ("process", "deadline"):
+    if invariant.kind == "process" and crash_shown and not is_planner:
+        # The module's exception is its process's abnormal exit: judged by this very invariant.
+        return None if failure_module == cfg.module else f"'{invariant_name}' broke for another module"
+    timing_replayed = cfg.per_trigger and invariant.kind == "deadline"
+    if invariant.kind in ("process", "deadline") and not timing_replayed:
         return f"'{invariant_name}' is a {invariant.kind} invariant: timing and processes are not replayed"
     channels = MonitorSet(replace(spec, invariants=(invariant,)), 0).channels()
     if channels != {cfg.output}:
+        whose = "the planner's output" if is_planner else f"module '{cfg.module}''s output"
         return (f"'{invariant_name}' reads {', '.join(sorted(channels)) or 'no channel'}, "
-                f"not only the planner's output '{cfg.output}'")
+                f"not only {whose} '{cfg.output}'")
     return None
 
 
@@ -158,20 +195,28 @@ class ReplayModel:
     def __init__(self, setup: ReplaySetup, baseline: bool = True):
         log = read_log(setup.log_path)
         spec = with_typed_invariants(load_spec_for(log, setup.spec_path))
-        why_not = replayable(spec, setup.invariant)
-        if why_not:
+        if setup.module is not None:
+            entry: ReplayModule | None = replay_module_of(spec, setup.module, setup.output)
+            why_not = _why_not(spec, entry, setup.invariant, setup.failure_module) if entry else None
+        else:
+            entry, why_not = replay_entry_for(spec, setup.invariant, setup.failure_module)
+        if why_not or entry is None:
             raise InputError(Problem(setup.log_path, None, None, f"no planner replay: {why_not}", "use --live-only"))
         self.spec = spec
-        self.cfg = planner_of(spec)
+        self.cfg = entry
+        self.failure_module = setup.failure_module
         self.params = {**spec.params, **run_params(log)}
-        invariant = next(i for i in spec.invariants if i.name == setup.invariant)
-        self.judged = replace(spec, invariants=(invariant,))
+        invariant = next((i for i in spec.invariants if i.name == setup.invariant), None)
+        # A crash no invariant names (IMPLICIT) is judged by the module's exception alone.
+        self.crash_fails = invariant is None
+        self.judged = replace(spec, invariants=(invariant,) if invariant is not None else ())
         self.mlog = read_mutations(log, spec)
         self.streams = ReceivedStreams(self.mlog, self.cfg.module, self.cfg.inputs)
         missing = [name for name in self.cfg.inputs if not self.streams.has(name)]
         if missing:
+            whose = "the planner's" if self.cfg.where == "planner" else f"module '{self.cfg.module}''s"
             raise InputError(Problem(str(log.path), None, None,
-                                     f"the log has no messages on the planner's input(s) {', '.join(missing)}",
+                                     f"the log has no messages on {whose} input(s) {', '.join(missing)}",
                                      "record the run with this spec"))
         self.outputs: list[LoggedMessage] = sent_stream(self.mlog, log, self.cfg.output)
         self.start_ns = self.mlog.start_ns
@@ -180,8 +225,13 @@ class ReplayModel:
         # Replay only up to the output that failed in the run. The frames after it carry the
         # failure's own consequences (in closed loop the ego is already speeding), which would
         # make the failure look independent of every mutation.
-        failed_at = _first_failure_ns(log, self.judged)
-        if failed_at is not None:
+        failed_at = (_first_failure_ns(log, self.judged) if invariant is not None
+                     else _first_crash_ns(log, self.cfg.module))
+        # Per-trigger frames: every trigger message up to the failure (a crash or hang has no output).
+        self.until_ns: int | None = failed_at if self.cfg.per_trigger else None
+        if failed_at is not None and self.cfg.per_trigger:
+            self.end_ns = min(self.end_ns, failed_at + 1)
+        elif failed_at is not None:
             # On the clock the monitor judged by: a message's publish time (the source timestamp the
             # recorder kept, e.g. a ROS 2 message's, which precedes its log time), else its log time.
             self.outputs = [m for m in self.outputs if m.publish_time <= failed_at]
@@ -203,11 +253,25 @@ class ReplayModel:
         return self._decoded[delivered.key]
 
     def frames(self, kept: Mapping[int, FieldSelection]) -> list[Frame | None]:
-        """The most likely frame of every recorded output (None where an input had no message yet)."""
+        """The most likely frame of every recorded output (None where an input had no message yet).
+
+        Per-trigger modules: one frame per trigger message the module received up to the failure.
+        """
         built = self.streams.build(kept)
         usable = {name: [d for d in stream if self.decode(name, d) is not None] for name, stream in built.items()}
         streams = {name: Stream(name, [d.time_ns for d in msgs]) for name, msgs in usable.items()}
         trigger = self.cfg.trigger
+        if self.cfg.per_trigger:
+            out_t: list[Frame | None] = []
+            previous_t: dict[str, int] = {}
+            for t_index, t_t in enumerate(streams[trigger].times):
+                if self.until_ns is not None and t_t > self.until_ns:
+                    break
+                picked = trigger_frame(streams, trigger, t_index, previous_t)
+                previous_t = picked
+                out_t.append(Frame(len(out_t), tuple((name, usable[name][i]) for name, i in sorted(picked.items())),
+                                   t_t, t_t))
+            return out_t
         trigger_times = streams[trigger].times
         previous: dict[str, int] = {}
         out: list[Frame | None] = []
@@ -235,7 +299,18 @@ class ReplayModel:
 
     # -- replay ------------------------------------------------------------
     def fresh_planner(self):
-        return make_planner(self.spec, self.params)
+        return make_planner(self.spec, self.params, entry=self.cfg)
+
+    def step(self, planner, frame: Frame) -> Any:
+        """The module's answer to ``frame`` (StepHang past ``hang_after``; the module's own exceptions)."""
+        return within_limit(functools.partial(planner.step, self.frame_message(frame)), self.cfg.hang_after)
+
+    def output_time(self, frame: Frame) -> int:
+        """When ``frame``'s output is judged: the recorded output's time (per trigger: the trigger's)."""
+        return frame.trigger_time_ns if self.cfg.per_trigger else self.outputs[frame.output].log_time
+
+    def output_sequence(self, frame: Frame) -> int:
+        return frame.output + 1 if self.cfg.per_trigger else self.outputs[frame.output].sequence
 
     def _baseline(self) -> None:
         """Replay with every mutation reverted, once: the snapshots and outputs tests start from.
@@ -261,7 +336,7 @@ class ReplayModel:
                 self.base_outputs.append(None)
                 continue
             try:
-                self.base_outputs.append(planner.step(self.frame_message(frame)))
+                self.base_outputs.append(self.step(planner, frame))
             except Exception as exc:  # judged by the tests that reach it
                 self.base_error = f"output {k}'s frame: {type(exc).__name__}: {exc}"
                 self.base_error_frame = k
@@ -289,7 +364,7 @@ class ReplayModel:
         for i in range(s, k):  # only when snapshots are sparser than frames
             frame = self.base_frames[i]
             if frame is not None:
-                planner.step(self.frame_message(frame))
+                self.step(planner, frame)
         return planner
 
     def _converged(self, planner, k: int) -> bool:
@@ -317,11 +392,18 @@ class ReplayModel:
         monitors = self._monitors()
         if job.frames is not None:
             chosen = [frame for i in job.frames if i < len(frames) and (frame := frames[i]) is not None]
+            if self.cfg.per_trigger:
+                return self._judge_last(self.fresh_planner(), chosen, monitors)
             return self._judge(self.fresh_planner(), chosen, monitors)
         planner = None  # None: in step with the baseline, whose outputs are known
         try:
             for k, frame in enumerate(frames):
-                unchanged = (frame.key if frame is not None else None) == self.base_keys[k]
+                if k >= len(self.base_keys):  # more trigger messages than the baseline's (a duplicate kept)
+                    unchanged = False
+                else:
+                    unchanged = (frame.key if frame is not None else None) == self.base_keys[k]
+                if (self.cfg.per_trigger and self.base_error_frame is not None and k >= self.base_error_frame):
+                    unchanged = False  # the baseline's module crashed or hung here: the step itself is judged
                 if planner is not None and unchanged and self._converged(planner, k):
                     planner.close()
                     planner = None
@@ -340,12 +422,31 @@ class ReplayModel:
                 if frame is None:
                     continue
                 answer = self._step(planner, monitors, frame)
+                if answer is _STOPPED:
+                    return self._silence(monitors, frames[k + 1:], frame.output)
                 if answer is not None:
                     return answer
         finally:
             if planner is not None:
                 planner.close()
         return self._finish(monitors)
+
+    def _silence(self, monitors: MonitorSet, rest: Sequence[Frame | None], stopped_at: int) -> ReplayAnswer:
+        """The module crashed or hangs on frame ``stopped_at``: it answers nothing more; the clock goes on.
+
+        A failure that follows (a deadline) is the stopping frame's: that is the frame a history is kept for.
+        """
+        why = f"module '{self.cfg.module}' silent since trigger {stopped_at}"
+        for frame in rest:
+            if frame is not None:
+                found = monitors.on_tick(self.output_time(frame))
+                if found:
+                    return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.start_ns)} "
+                                                                 f"({why})"), stopped_at)
+        answer = self._finish(monitors)
+        if answer.result.outcome is Outcome.FAIL:
+            return ReplayAnswer(TestResult(Outcome.FAIL, f"{answer.result.detail} ({why})"), stopped_at)
+        return answer
 
     def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, Any, str | None]]:
         """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
@@ -354,8 +455,8 @@ class ReplayModel:
         try:
             for frame in frames:
                 try:
-                    out.append((frame, planner.step(self.frame_message(frame)), None))
-                except Exception as exc:
+                    out.append((frame, self.step(planner, frame), None))
+                except Exception as exc:  # StepHang included
                     out.append((frame, None, f"{type(exc).__name__}: {exc}"))
                     break
         finally:
@@ -366,9 +467,13 @@ class ReplayModel:
         return MonitorSet(self.judged, self.start_ns)
 
     def _feed(self, monitors: MonitorSet, frame: Frame, message: Any) -> str | None:
-        output = self.outputs[frame.output]
-        monitors.on_tick(output.log_time)
-        found = monitors.on_message(self.cfg.output, output.log_time, message, output.sequence)
+        time_ns = self.output_time(frame)
+        found = monitors.on_tick(time_ns)
+        if self.cfg.per_trigger:
+            if not found and message is not None:  # None: the module answered this frame with nothing
+                found = monitors.on_message(self.cfg.output, time_ns, message, self.output_sequence(frame))
+        else:
+            found = monitors.on_message(self.cfg.output, time_ns, message, self.output_sequence(frame))
         if found:
             return f"{format_violation(found[0], self.start_ns)} (output {frame.output})"
         return None
@@ -376,29 +481,104 @@ class ReplayModel:
     def _judge(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
         """Replay ``frames`` in order on ``planner`` and judge every output."""
         try:
-            for frame in frames:
+            for n, frame in enumerate(frames):
                 answer = self._step(planner, monitors, frame)
+                if answer is _STOPPED:
+                    return self._silence(monitors, frames[n + 1:], frame.output)
                 if answer is not None:
                     return answer
         finally:
             planner.close()
         return self._finish(monitors)
 
-    def _step(self, planner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
-        """One replayed output, judged: an answer if it decides the test, else None."""
+    def _judge_last(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
+        """A per-trigger module's scaffolding test: the history steps unjudged, then the last frame is judged.
+
+        Judging the history's outputs would be wrong here: a few kept frames
+        are seconds apart, which a deadline reads as silence. What is asked is
+        whether the last frame fails as in the run: it hangs (a deadline
+        failure), crashes, or its output breaks the invariant.
+        """
         try:
-            message = planner.step(self.frame_message(frame))
+            for frame in frames[:-1]:
+                try:
+                    self.step(planner, frame)
+                except Exception as exc:  # StepHang included: the module stopped before the failing frame
+                    return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"module '{self.cfg.module}' stopped on "
+                                                                       f"trigger {frame.output}: {exc}"))
+            if not frames:
+                return ReplayAnswer(TestResult(Outcome.PASS))
+            last = frames[-1]
+            try:
+                message = self.step(planner, last)
+            except StepHang as exc:
+                if any(i.kind == "deadline" for i in self.judged.invariants):
+                    return ReplayAnswer(TestResult(Outcome.FAIL, f"module '{self.cfg.module}' hangs on trigger "
+                                                                 f"{last.output}: {exc}"), last.output)
+                return ReplayAnswer(TestResult(Outcome.PASS))
+            except Exception as exc:
+                if self.cfg.exceptions != "crash":
+                    return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"module '{self.cfg.module}' raised "
+                                                                       f"{type(exc).__name__}: {exc}"))
+                answer = self._crashed(monitors, last, exc)
+                return answer if answer is not _STOPPED else ReplayAnswer(TestResult(Outcome.PASS))
+            found = self._feed(monitors, last, message)
+            return ReplayAnswer(TestResult(Outcome.FAIL, found), last.output) if found else ReplayAnswer(
+                TestResult(Outcome.PASS))
+        finally:
+            planner.close()
+
+    def _step(self, planner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
+        """One replayed output, judged: an answer if it decides the test, else None.
+
+        A per-trigger module that hangs, or raises where its process would
+        die (``exceptions: crash``), answers ``_STOPPED`` unless that decides
+        the test (a crash the failure is): it answers nothing more.
+        """
+        try:
+            message = self.step(planner, frame)
+        except StepHang as exc:
+            if self.cfg.per_trigger:
+                return _STOPPED
+            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"the planner hangs on output {frame.output}'s frame: "
+                                                               f"{exc}"))
         except Exception as exc:
-            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"the planner raised {type(exc).__name__}: {exc} "
+            if self.cfg.per_trigger and self.cfg.exceptions == "crash":
+                return self._crashed(monitors, frame, exc)
+            who = "the planner" if self.cfg.where == "planner" else f"module '{self.cfg.module}'"
+            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"{who} raised {type(exc).__name__}: {exc} "
                                                                f"on output {frame.output}'s frame"))
         found = self._feed(monitors, frame, message)
         return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output) if found else None
+
+    def _crashed(self, monitors: MonitorSet, frame: Frame, exc: Exception) -> ReplayAnswer:
+        """The module's process would die of ``exc``: its abnormal exit, judged like the run's."""
+        what = f"module '{self.cfg.module}' crashes on trigger {frame.output}: {type(exc).__name__}: {exc}"
+        time_ns = self.output_time(frame)
+        found = monitors.on_process_exit(self.cfg.module, 1, None, time_ns, False)
+        if found:
+            return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.start_ns)} ({what})"),
+                                frame.output)
+        if self.crash_fails and self.failure_module == self.cfg.module:
+            return ReplayAnswer(TestResult(Outcome.FAIL, what), frame.output)
+        return _STOPPED
 
     def _finish(self, monitors: MonitorSet) -> ReplayAnswer:
         found = monitors.finish(self.end_ns)
         if found:
             return ReplayAnswer(TestResult(Outcome.FAIL, format_violation(found[0], self.start_ns)))
         return ReplayAnswer(TestResult(Outcome.PASS))
+
+
+# A per-trigger module that crashed or hangs: no answer decided the test, and it answers nothing more.
+_STOPPED = ReplayAnswer(TestResult(Outcome.UNRESOLVED, "the module stopped answering"))
+
+
+def _first_crash_ns(log, module: str) -> int | None:
+    """When ``module`` first exited abnormally in the run (None if it never did)."""
+    exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExitRecord)]
+    times = [e.time_ns for e in exits if e.module == module and not e.during_shutdown and (e.returncode or e.signal)]
+    return min(times) if times else None
 
 
 def _first_failure_ns(log, judged: Spec) -> int | None:

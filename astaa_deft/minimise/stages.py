@@ -28,10 +28,11 @@ from ..log.reader import LogContents
 from ..monitor import check_log, with_typed_invariants
 from ..monitor.verdict import IMPLICIT
 from ..spec.model import Spec
+from ..spec.replay_section import ReplayModule
 from .ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
 from .live_tester import LiveTester
 from .mutations import FieldSelection, Mutation, run_start_ns
-from .replay_model import Job, ReplayModel, replayable
+from .replay_model import Job, ReplayModel, replay_entry_for
 from .replay_tester import DeftTester
 
 
@@ -84,12 +85,24 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
 
 def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str]:
     """("replay" | "live", why)."""
+    kind, why, _ = choose_replay(spec, failure, live_only)
+    return kind, why
+
+
+def choose_replay(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str, ReplayModule | None]:
+    """("replay" | "live", why, the replayed module's entry or None)."""
     if live_only:
-        return "live", "--live-only"
-    why_not = replayable(spec, failure.invariant) if failure.invariant != IMPLICIT else "a module crashed"
-    if why_not is None:
-        return "replay", f"'{failure.invariant}' reads only the planner's output: planner replay"
-    return "live", f"{why_not}: whole-system re-runs"
+        return "live", "--live-only", None
+    entry, why_not = replay_entry_for(spec, failure.invariant, failure.module)
+    if entry is None:
+        return "live", f"{why_not}: whole-system re-runs", None
+    if entry.where == "planner":
+        return "replay", f"'{failure.invariant}' reads only the planner's output: planner replay", entry
+    if failure.invariant == IMPLICIT or failure.kind == "process":
+        return "replay", (f"module '{entry.module}' crashed, and its replay shows crashes: module replay "
+                          f"({entry.where})"), entry
+    return "replay", (f"'{failure.invariant}' reads only module '{entry.module}''s output '{entry.output}': "
+                      f"module replay ({entry.where})"), entry
 
 
 @dataclass
@@ -150,18 +163,19 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
     relevant = model.streams.relevant
     out = Minimisation("replay", failure, model.mlog.mutations, {})
     ignored = len(model.mlog.mutations) - len(relevant)
+    who = "the planner" if model.cfg.where == "planner" else "the module"
     if ignored:
-        out.notes.append(f"{ignored} mutation(s) did not reach the planner ({model.cfg.module}) and cannot "
+        out.notes.append(f"{ignored} mutation(s) did not reach {who} ({model.cfg.module}) and cannot "
                          f"change its replay: not tested")
 
     # Stage 1: mutations.
     items = [m.number for m in relevant]
-    say(f"stage 1: {len(items)} mutations reaching the planner")
+    say(f"stage 1: {len(items)} mutations reaching {who}")
     first = ddmin(items, lambda subset: tester(Job.of({n: None for n in subset})), parallel=parallel,
                   max_tests=max_tests, progress=_stage_progress(say, "mutations"))
     kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
     out.stages.append(StageReport.of("mutations", "mutations", len(model.mlog.mutations), first,
-                                     note=f"{len(items)} reached the planner"))
+                                     note=f"{len(items)} reached {who}"))
     answer = tester.answer(Job.of(kept))
     failing = answer.failing_output
     if answer.result.outcome is not Outcome.FAIL or failing is None:
@@ -202,22 +216,27 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
 
 
 def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Failure, full: TestResult,
-                  say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
-    """Stages 1 and 3 with whole-system re-runs; ``full`` is the result of the full set, tested already."""
+                  say: Say = lambda line: None, max_tests: int | None = None, jobs: int = 1) -> Minimisation:
+    """Stages 1 and 3 with whole-system re-runs; ``full`` is the result of the full set, tested already.
+
+    ``jobs`` > 1 tests that many subsets of a round at once, each run an isolated session of the SUT
+    (its own router port, run directory and log, as a campaign's cases).
+    """
     out = Minimisation("live", failure, list(mutations), {})
     by_number = {m.number: m for m in mutations}
     items = [m.number for m in mutations]
     cache = OutcomeCache()
     cache.put(tuple(range(len(items))), full)  # the reproduction check's answer: not run again
-    say(f"stage 1: {len(items)} mutations, {tester.repeats} run(s) per test")
+    say(f"stage 1: {len(items)} mutations, {tester.repeats} run(s) per test"
+        + (f", {jobs} tests at once" if jobs > 1 else ""))
     first = ddmin(items, lambda subset: tester([(by_number[n], None) for n in subset]), cache=cache,
-                  max_tests=max_tests, progress=_stage_progress(say, "mutations"))
+                  max_tests=max_tests, progress=_stage_progress(say, "mutations"), parallel=jobs)
     out.stages.append(StageReport.of("mutations", "mutations", len(items), first, extra_tests=1,
                                      note="the full-set reproduction check included"))
     kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
     last = first.results.get(first.indices) or full
     kept, fields_last = _minimise_fields(kept, by_number, lambda selection: tester(
-        [(by_number[n], s) for n, s in sorted(selection.items())]), 1, max_tests, say, out)
+        [(by_number[n], s) for n, s in sorted(selection.items())]), jobs, max_tests, say, out)
     last = fields_last or last
     out.kept, out.detail, out.failure_rate = kept, last.detail, last.failure_rate
     return out

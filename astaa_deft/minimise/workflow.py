@@ -20,8 +20,9 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +50,7 @@ from .replay_model import ReplayModel, load_spec_for, run_params
 from .replay_pool import ReplayPool
 from .replay_tester import DeftTester, default_setup
 from .restrict import restricted_testcase
-from .stages import Failure, Minimisation, choose_tester, find_failure, minimise_live, minimise_replay
+from .stages import Failure, Minimisation, choose_replay, find_failure, minimise_live, minimise_replay
 
 FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure not reproducible
 
@@ -66,6 +67,7 @@ class MinimiseOptions:
     confirm: int = 3  # live re-runs of the final result
     max_tests: int | None = None  # stop after this many tests and keep the smallest failure
     live_fallback: bool = True  # re-run the SUT when the planner replay does not reproduce the failure
+    jobs: int = 1  # whole-system runs at once (live tests, confirmations), each an isolated session
 
     def check(self) -> None:
         """InputError naming the option when a value makes no sense."""
@@ -73,6 +75,8 @@ class MinimiseOptions:
             raise InputError(Problem("--repeats", None, None, f"{self.repeats} runs per test", "give at least 1"))
         if self.parallel < 1:
             raise InputError(Problem("--parallel", None, None, f"{self.parallel} workers", "give at least 1"))
+        if self.jobs < 1:
+            raise InputError(Problem("--jobs", None, None, f"{self.jobs} runs at once", "give at least 1"))
         if self.confirm < 0:
             raise InputError(Problem("--confirm", None, None, f"{self.confirm} runs",
                                      "give 0 (no live check) or more"))
@@ -128,7 +132,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
                                  "minimise a run that was intercepted"))
     failure = find_failure(log, spec, options.invariant)
     prepare_directory(out_dir)
-    tester_kind, why = choose_tester(spec, failure, options.live_only)
+    tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
     params = {**spec.params, **run_params(log)}
     original = original_testcase(log)
     say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
@@ -139,10 +143,14 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     replays = replay_hits = 0
     notes: list[str] = []
     if tester_kind == "replay":
+        assert entry is not None
         setup = default_setup(log_path, spec_path, failure.invariant)
+        if entry.where != "planner":
+            setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
         workers = max(1, min(options.parallel, os.cpu_count() or 1))
         with ReplayPool(setup, workers=workers) as pool:
-            say(f"planner replay: {pool.workers} worker process(es), one replay of the run in "
+            what = "planner replay" if entry.where == "planner" else f"module replay ({entry.module})"
+            say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
                 f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
             tester = DeftTester(pool)
             model = ReplayModel(setup, baseline=False)
@@ -172,7 +180,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
                 f"test case: nothing to minimise (a rare flaky failure? try --repeats N)"), notes=notes)
         live.repeats = repeats_used
         try:
-            result = minimise_live(live, mlog.mutations, failure, full, say, options.max_tests)
+            result = minimise_live(live, mlog.mutations, failure, full, say, options.max_tests, jobs=options.jobs)
         except FailsWithoutItems as exc:
             return _no_mutation_needed(out_dir, failure, exc, started, log_path)
     assert result is not None
@@ -184,7 +192,8 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
                      f"fails {failure.invariant}"))
     xml = write_testcase_file(out_dir, testcase, spec)
     files = {"test case": xml}
-    confirmation, confirm_log = confirm_live(live, testcase, xml, result, options.confirm, say, scratch)
+    confirmation, confirm_log = confirm_live(live, testcase, xml, result, options.confirm, say, scratch,
+                                             jobs=options.jobs)
     if result.tester == "replay" and model is not None:
         files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
         files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
@@ -245,18 +254,18 @@ def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure,
 
 
 def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, runs: int,
-                 say: Progress, scratch: Path) -> tuple[dict, Path | None]:
-    """Run the minimal test case live ``runs`` times: its failure rate, and a log of a failing run."""
+                 say: Progress, scratch: Path, jobs: int = 1) -> tuple[dict, Path | None]:
+    """Run the minimal test case live ``runs`` times (``jobs`` at once): its failure rate, a failing run's log."""
     if runs == 0:
         return {"requested": 0, "runs": 0, "failures": 0, "rate": None}, None
     horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
-    say(f"confirming {xml.name} live through the proxy ({runs} run(s))")
+    say(f"confirming {xml.name} live through the proxy ({runs} run(s)" + (f", {jobs} at once)" if jobs > 1 else ")"))
     kept: Path | None = None
-    outcomes = []
-    for n in range(runs):
-        record = scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None
-        outcome = live.run(testcase, horizon, record=record, policy_file=xml)
-        outcomes.append(outcome)
+    records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None for n in range(runs)]
+    with ThreadPoolExecutor(max(1, min(jobs, runs)), thread_name_prefix="confirm") as pool:
+        outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml),
+                                 records))
+    for n, (outcome, record) in enumerate(zip(outcomes, records, strict=True)):
         say(f"  run {n + 1}: " + ("fail" if outcome.failed else "pass" if outcome.failed is False
                                   else f"could not tell ({outcome.detail})") + f" ({outcome.seconds:.1f} s)")
         if record is not None:

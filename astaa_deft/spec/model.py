@@ -13,6 +13,7 @@ from collections.abc import Mapping
 
 if TYPE_CHECKING:
     from .planner import PlannerSpec
+    from .replay_section import ReplayModule
     from ..run_section import RunSection
 
 FLOAT_KINDS = ("float32", "float64")
@@ -129,6 +130,7 @@ class Spec:
     # class; the spec layer sits below monitor, so it does not name the type), the planner section its record.
     invariants: tuple[Any, ...] = ()
     planner: PlannerSpec | None = None
+    replay: tuple[ReplayModule, ...] = ()  # the 'replay:' section's modules that can run alone
     run: RunSection | None = None  # how a run ends (None: no 'run:' section)
     decictor: Any = None  # the raw 'decictor:' section; astaa_deft.decictor.spec types and checks it
     source_text: str = ""
