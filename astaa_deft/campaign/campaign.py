@@ -24,10 +24,12 @@ from .journal import Journal
 from .minimiser import minimise_run
 from .model import BASELINE, MUTATED, RERUN, CaseOutcome, PlannedCase
 from .strategies import STRATEGIES, Strategy
+from .strategies.base import Timing
 
 DEFAULT_HORIZON = 20.0
 DEFAULT_BASELINE_RUNS = 2
 DEFAULT_RERUNS = 2
+DEFAULT_SETTLE = 3.0  # s a mutated case runs on after its last mutation could act
 CORES_PER_MODULE = 0.15  # a run's modules mostly sleep: measured on the demo (benchmarks/bench_campaign.py)
 HELPER_CORES = 0.3  # the tool's own session, proxy and recorder per run
 
@@ -47,6 +49,7 @@ class CampaignConfig:
     horizon: float = DEFAULT_HORIZON
     baseline_runs: int = DEFAULT_BASELINE_RUNS
     reruns: int = DEFAULT_RERUNS
+    settle: float | None = DEFAULT_SETTLE  # None: a mutated case runs to the run's own end
     minimise: bool = True
     minimise_max_tests: int = 30
     report: bool = True
@@ -65,6 +68,21 @@ class CampaignStopped(AstaaDeftError):
     """The campaign cannot go on (the SUT does not start): one message, exit 2 (the command adds the fix)."""
 
     exit_code = 2
+
+
+LIVE_STEP = 0.5  # s: the measured live time is rounded down to this (same cases for close measurements)
+
+
+def live_timing(clean: list[CaseOutcome], horizon: float) -> Timing:
+    """The anchor channel (its first message came last: every module is running) and the seconds the
+    clean runs went on from there (the smallest), from the baseline's clean runs; the horizon without any."""
+    anchors = [max(o.first_seen, key=lambda c: (o.first_seen[c], c)) for o in clean if o.first_seen]
+    if not anchors:
+        return Timing(None, horizon)
+    anchor = max(set(anchors), key=lambda c: (anchors.count(c), c))
+    lives = [o.seconds - o.first_seen[anchor] for o in clean if anchor in o.first_seen]
+    live = max(LIVE_STEP, min(horizon, LIVE_STEP * int(min(lives) / LIVE_STEP)))
+    return Timing(anchor, live)
 
 
 def default_workers(module_count: int, cores: int | None = None) -> int:
@@ -95,6 +113,7 @@ class Campaign:
         self.workers = config.workers or default_workers(len(self.spec.modules))
         self.started = time.monotonic()
         self.baseline_keys: dict[str, str] = {}  # failure key → its baseline bucket
+        self.timing = Timing(None, config.horizon)
 
     # -- the whole campaign --------------------------------------------------
     def run(self) -> CampaignResult:
@@ -146,12 +165,26 @@ class Campaign:
         failed = [o for o in outcomes if o is not None and o.status == "error"]
         if rows and len(failed) == len(rows):
             raise CampaignStopped(f"the SUT does not start: {failed[0].error or failed[0].summary}")
+        self._calibrate([o for o in outcomes if o is not None and o.status == "done"])
         seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes, strict=False):
             if seed_hook is not None and outcome is not None:
                 seed_hook(row["case_id"], outcome)
             if outcome is not None and outcome.failed:
                 self.baseline_keys.setdefault(sig.failure_key(outcome), row["bucket"])
+
+    def _calibrate(self, clean: list[CaseOutcome]) -> None:
+        """Tell the strategy when the SUT is live: measured once in the baseline, kept in the journal."""
+        stored = self.journal.meta().get("timing")
+        timing = Timing(**stored) if stored else live_timing(clean, self.config.horizon)
+        self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
+        self.timing = timing
+        calibrate = getattr(self.strategy, "calibrate", None)
+        if calibrate is not None:
+            calibrate(timing)
+        if timing.anchor is not None:
+            self.say(f"baseline: the stack is live from the first '{timing.anchor}' message and runs"
+                     f" {timing.live:g} s on; generated windows fall inside that")
 
     # -- generated cases -------------------------------------------------------
     def _main(self, pool) -> str:
@@ -195,7 +228,8 @@ class Campaign:
     def _submit(self, pool, case: PlannedCase) -> None:
         payload = {"spec": str(self.config.spec_path.resolve()), "case": case.to_json(),
                    "run_dir": str(self.case_dir(case.case_id)), "horizon": self.config.horizon,
-                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries]}
+                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries],
+                   "settle": self.config.settle if case.kind != BASELINE else None}
         self.journal.started(case.case_id)
         pool.submit(case.case_id, payload)
 
@@ -341,7 +375,10 @@ def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
     """Merge each bucket whose minimised culprit is an earlier bucket's: (bucket, merged into) pairs.
 
     Two signatures can hide one bug (the same NaN breaks two invariants,
-    first on one, then on the other): once minimised, the culprits say so.
+    first on one, then on the other; a second field that played no part):
+    once minimised, the culprits say so. Culprits coincide when they change
+    the same fields of the same channels by the same action, whatever the
+    value (``heading = max`` and ``heading = big_1e16`` hang the same loop).
     Only confirmed minimisations count; the earliest bucket keeps the culprit.
     """
     minimised = journal.minimisations()
@@ -351,8 +388,14 @@ def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
         row = minimised.get(bucket.bucket)
         if bucket.without_mutation or row is None or row["exit_code"] != 0 or not row["culprit"]:
             continue
-        first = owner.setdefault(row["culprit"], bucket.bucket)
+        first = owner.setdefault(culprit_family(row["culprit"]), bucket.bucket)
         if first != bucket.bucket and bucket.merged_into != first:
             journal.merge_bucket(bucket.bucket, first)
             merged.append((bucket.bucket, first))
     return merged
+
+
+def culprit_family(culprit: str) -> str:
+    """A minimised culprit without its values, array indices folded: ``routing:speed_limit; localization:reorder``."""
+    parts = {sig.fold_indices(part.split(" = ", 1)[0].strip()) for part in culprit.split(";") if part.strip()}
+    return "; ".join(sorted(parts))

@@ -30,7 +30,9 @@ def execute(payload: dict[str, Any]) -> dict[str, Any]:
             if case.testcase_xml else None
     except InputError as exc:
         return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems))).to_json()
-    outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary)
+    settle = payload.get("settle")
+    outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary,
+                       float(settle) if settle is not None else None)
     return outcome.to_json()
 
 
