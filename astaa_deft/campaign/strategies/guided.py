@@ -19,10 +19,10 @@ from dataclasses import replace
 from ...intercept import generate as gen
 from ...intercept.actions.set import Assignment, Set
 from ...intercept.dictionary import Dictionary
-from ...intercept.testcase import Selection, TestCase, Window, parse_testcase
+from ...intercept.testcase import Selection, TestCase, parse_testcase
 from ...spec.model import Spec
 from ..model import CaseOutcome
-from .base import Proposal
+from .base import Proposal, Timing
 from .random import RandomStrategy
 
 EXPLOIT_SHARE = 0.5
@@ -40,12 +40,19 @@ class GuidedStrategy:
         self.targets = {(t.channel.name, str(t.path)): t for ts in self.fresh.by_channel.values() for t in ts}
         self.best: dict[str, float] = {}  # invariant → closest approach so far
         self.corpus: list[tuple[str, str]] = []  # (case id, test case XML), newest last
+        self.closeness: dict[str, float] = {}  # corpus case → the smallest margin it reached
+
+    def calibrate(self, timing: Timing) -> None:
+        self.fresh.calibrate(timing)
+        self.duration = timing.live
 
     def propose(self, number: int) -> Proposal:
         rng = random.Random(f"guided/{self.seed}/{number}")
         if not self.corpus or rng.random() >= EXPLOIT_SHARE:
             return self.fresh.propose(number)
-        parent_id, parent_xml = rng.choice(self.corpus)
+        # Steer: the closer an entry came to breaking an invariant, the more often it is the parent.
+        weights = [1.0 / (self.closeness.get(case, 1.0) + 0.05) for case, _ in self.corpus]
+        parent_id, parent_xml = rng.choices(self.corpus, weights=weights)[0]
         parent = parse_testcase(parent_xml.encode())
         operator = rng.choice(OPERATORS)
         child = self._mutate(parent, operator, rng, number)
@@ -61,6 +68,7 @@ class GuidedStrategy:
                 closer = True
         if closer:
             self.corpus.append((case_id, testcase_xml))
+            self.closeness[case_id] = min(m for m in outcome.margins.values() if math.isfinite(m))
             del self.corpus[:-CORPUS_LIMIT]
 
     # -- mutation operators ------------------------------------------------
@@ -89,14 +97,15 @@ class GuidedStrategy:
                     fields.append(Assignment(str(t.path), rng.choice(t.values).ref))
             policies[index] = replace(policy, action=Set(tuple(fields)))
         elif operator == "window":
-            start = max(0.0, round(policy.window.start + rng.uniform(-2.0, 2.0), 1))
+            start = min(max(0.0, round(policy.window.start + rng.uniform(-2.0, 2.0), 1)), self.duration)
             end = policy.window.end
             if end is not None:
                 end = max(round(start + 0.1, 1), end)
             policies[index] = replace(policy, window=replace(policy.window, start=start, end=end))
         else:  # action: one message → every message (or every n-th) in a short window
             start = policy.window.start
-            policies[index] = replace(policy, window=Window(start, round(start + rng.uniform(1.0, 5.0), 1)),
+            end = round(start + rng.uniform(1.0, 5.0), 1)
+            policies[index] = replace(policy, window=replace(policy.window, start=start, end=end),
                                       selection=rng.choice([Selection(), Selection(every=rng.choice([2, 5]))]))
         return TestCase(f"tc-{number:06d}", rng.getrandbits(32), f"guided ({operator}) from {parent.id}: "
                         + parent.description, tuple(policies))
