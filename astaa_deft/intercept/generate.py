@@ -252,6 +252,7 @@ MESSAGE_FAULT_WEIGHT = 14  # % of weighted cases, next to SHAPES' 72: ASTAA's re
 DELAYS_MS = (50, 100, 200, 500)
 # Value classes in the order a round uses them: what breaks code most often first (Ballista, ASTAA).
 VALUE_CLASSES = ("non_finite", "empty", "extreme", "null", "bound", "zero", "tiny", "other")
+SPREAD_ROUNDS = 3  # round r's windows open in the first (r + 1) / 3 of the live run's 80 %
 EXTREME = 1e15  # magnitudes where float arithmetic stops behaving (2**53 ≈ 9e15: integers skip)
 
 
@@ -326,12 +327,15 @@ def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number:
 def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,
                    anchor: str | None = None) -> TestCase:
     """The test case of one probe: one message, at a random time inside ``duration``."""
+    # Early rounds ask "does this value break the field's consumers at all?": early windows answer that
+    # in shorter runs; later rounds spread over the whole live run for state-dependent failures.
+    latest = duration * 0.8 * min(1.0, (round_number + 1) / SPREAD_ROUNDS)
     if probe.target is None:
         return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], duration, anchor,
-                              repeated=False)
+                              repeated=False, latest=latest)
     entry = value_for_round(probe.target, round_number, rng)
     assignments = (Assignment(str(probe.target.path), entry.ref),)
-    start = round(rng.uniform(0.0, duration * 0.8), 1)
+    start = round(rng.uniform(0.0, latest), 1)
     window = Window(start, duration, *_anchored(anchor))
     selection = Selection(limit=1)
     policy = Policy("p1", Set(assignments), channels=(probe.channel,), window=window, selection=selection)
@@ -340,11 +344,12 @@ def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_num
 
 
 def fault_testcase(testcase_id: str, rng: random.Random, channel: str, fault: str, duration: float,
-                   anchor: str | None = None, repeated: bool | None = None) -> TestCase:
-    """One message fault on ``channel``: one message, or (``repeated``, else by chance) a burst."""
+                   anchor: str | None = None, repeated: bool | None = None, latest: float | None = None) -> TestCase:
+    """One message fault on ``channel``: one message, or (``repeated``, else by chance) a burst;
+    starting by ``latest`` s (default: 80 % of ``duration``)."""
     action: ActionConfig = {"reorder": Reorder(), "delay": Delay(float(rng.choice(DELAYS_MS))), "drop": Drop(),
                             "duplicate": Duplicate()}[fault]
-    start = round(rng.uniform(0.0, duration * 0.8), 1)
+    start = round(rng.uniform(0.0, duration * 0.8 if latest is None else latest), 1)
     if repeated is None:
         repeated = rng.random() < 0.5
     if repeated:
