@@ -6,8 +6,9 @@ the bound margin or STL robustness, 0 when it broke). A case joins the corpus
 when it brought some invariant closer than any case before; the next cases
 are, half of the time, a corpus entry changed in one way (another value for
 a field, another field, a shifted window, a repeated instead of a one-message
-action, or one more policy) and otherwise a fresh random case, so the search
-never stops exploring. Deterministic for a given seed and order of results.
+action, or one more policy) — the closer an entry came, the more often it is
+chosen — and otherwise the random strategy's next coverage case (its schedule
+walked without gaps), so the search never stops exploring. Deterministic for a given seed and order of results.
 """
 
 from __future__ import annotations
@@ -41,15 +42,34 @@ class GuidedStrategy:
         self.best: dict[str, float] = {}  # invariant → closest approach so far
         self.corpus: list[tuple[str, str]] = []  # (case id, test case XML), newest last
         self.closeness: dict[str, float] = {}  # corpus case → the smallest margin it reached
+        self._fresh_counts: list[int] = []  # [n - 1]: fresh (schedule) cases among 1..n
 
     def calibrate(self, timing: Timing) -> None:
         self.fresh.calibrate(timing)
         self.duration = timing.live
 
+    def _exploits(self, number: int) -> bool:
+        """Whether case ``number`` derives from the corpus: a pure function of the seed and the number, so
+        the fresh cases walk the random strategy's coverage schedule without gaps, also after a resume."""
+        return random.Random(f"guided/{self.seed}/{number}").random() < EXPLOIT_SHARE
+
+    def _fresh_index(self, number: int) -> int:
+        while len(self._fresh_counts) < number:
+            k = len(self._fresh_counts) + 1
+            self._fresh_counts.append((self._fresh_counts[-1] if self._fresh_counts else 0)
+                                      + (not self._exploits(k)))
+        return self._fresh_counts[number - 1]
+
     def propose(self, number: int) -> Proposal:
         rng = random.Random(f"guided/{self.seed}/{number}")
-        if not self.corpus or rng.random() >= EXPLOIT_SHARE:
-            return self.fresh.propose(number)
+        rng.random()  # the draw _exploits made
+        if not self._exploits(number):
+            fresh = parse_testcase(self.fresh.propose(self._fresh_index(number)).testcase_xml.encode())
+            return Proposal(replace(fresh, id=f"tc-{number:06d}").to_xml().decode())
+        if not self.corpus:  # nothing to steer by yet: one of ASTAA's weighted draws
+            testcase = gen._testcase(f"tc-{number:06d}", rng, self.fresh.by_channel, self.duration,
+                                     self.fresh.timing.anchor, message_faults=True)
+            return Proposal(testcase.to_xml().decode())
         # Steer: the closer an entry came to breaking an invariant, the more often it is the parent.
         weights = [1.0 / (self.closeness.get(case, 1.0) + 0.05) for case, _ in self.corpus]
         parent_id, parent_xml = rng.choices(self.corpus, weights=weights)[0]
