@@ -49,6 +49,7 @@ DEFECTS = {
 }
 
 
+STAMP_BACKWARDS = re.compile(r"localization:(\*:(reorder|delay)|header\.stamp:)")
 NON_FINITE = re.compile(r'path="speed_limit" value="[^"]*(nan|inf)', re.IGNORECASE)
 
 
@@ -62,8 +63,9 @@ def defect_of(bucket: Bucket, first_xml: str) -> int | None:
         return 2
     if bucket.module == "control" and bucket.verdict == "Abort" and "trajectory:points" in family:
         return 3
-    if bucket.invariant in ("finite_command", "finite_steering") and "localization:" in family \
-            and "localization:heading" not in family:
+    if bucket.invariant in ("finite_command", "finite_steering") and STAMP_BACKWARDS.search(family):
+        # defect 4 is an older stamp (a reordered or delayed localization, or a stamp set back); an extreme
+        # speed in localization or a plan also makes control's derivative non-finite, but through another path
         return 4
     return None
 

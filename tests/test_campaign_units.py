@@ -239,12 +239,21 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
                            False, 6)
         journal.minimised("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan", None, None,
                           1.0, "")
-        assert merge_same_culprits(journal) == [("B002", "B001"), ("B005", "B001")]  # B003 was not confirmed
-        assert {b.bucket: b.merged_into for b in journal.buckets()} == {"B001": None, "B002": "B001", "B003": None,
-                                                                      "B004": None, "B005": "B001", "B006": None}
+        # message faults on one channel breaking the same invariant in the same module: one bug
+        for name, fault, invariant in (("B007", "reorder", "finite_command"), ("B008", "delay", "finite_command"),
+                                       ("B009", "drop", "control_alive")):
+            journal.add_bucket(name, f"Silent|{invariant}|control|{fault}", "Silent", invariant, "control", fault,
+                               f"c-{name}", False, 7)
+            journal.minimised(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0, "")
+        assert merge_same_culprits(journal) == [("B002", "B001"), ("B005", "B001"), ("B008", "B007")]
+        assert {b.bucket: b.merged_into for b in journal.buckets()} == {
+            "B001": None, "B002": "B001", "B003": None, "B004": None, "B005": "B001", "B006": None, "B007": None,
+            "B008": "B007", "B009": None}
         assert merge_same_culprits(journal) == []  # on resume: nothing merged twice
-        assert [b.bucket for b in journal.buckets(include_merged=False)] == ["B001", "B003", "B004", "B006"]
+        assert [b.bucket for b in journal.buckets(include_merged=False)] == ["B001", "B003", "B004", "B006", "B007",
+                                                                             "B009"]
         assert culprit_family("trajectory:points[2].v = dict:float.nan; a:b = 1") == "a:b; trajectory:points[].v"
+        assert culprit_family("localization:reorder") == "localization:(message fault)"
     finally:
         journal.close()
 

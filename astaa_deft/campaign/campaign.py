@@ -380,8 +380,10 @@ def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
     Two signatures can hide one bug (the same NaN breaks two invariants,
     first on one, then on the other; a second field that played no part):
     once minimised, the culprits say so. Culprits coincide when they change
-    the same fields of the same channels by the same action, whatever the
-    value (``heading = max`` and ``heading = big_1e16`` hang the same loop).
+    the same fields of the same channels, whatever the value (``heading =
+    max`` and ``heading = big_1e16`` hang the same loop); message faults on
+    the same channels (a reorder, a delay) that break the same invariant in
+    the same module.
     Only confirmed minimisations count; the earliest bucket keeps the culprit.
     """
     minimised = journal.minimisations()
@@ -391,14 +393,28 @@ def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
         row = minimised.get(bucket.bucket)
         if bucket.without_mutation or row is None or row["exit_code"] != 0 or not row["culprit"]:
             continue
-        first = owner.setdefault(culprit_family(row["culprit"]), bucket.bucket)
+        family = culprit_family(row["culprit"])
+        if MESSAGE_FAULT in family:  # a reorder and a delay of one channel breaking the same thing: one bug
+            family += f" → {bucket.invariant} in {bucket.module}"
+        first = owner.setdefault(family, bucket.bucket)
         if first != bucket.bucket and bucket.merged_into != first:
             journal.merge_bucket(bucket.bucket, first)
             merged.append((bucket.bucket, first))
     return merged
 
 
+MESSAGE_FAULT = "(message fault)"
+
+
 def culprit_family(culprit: str) -> str:
-    """A minimised culprit without its values, array indices folded: ``routing:speed_limit; localization:reorder``."""
-    parts = {sig.fold_indices(part.split(" = ", 1)[0].strip()) for part in culprit.split(";") if part.strip()}
+    """A minimised culprit without its values, array indices folded; a fault on whole messages (reorder,
+    delay, drop, …: no ``field = value``) as ``channel:(message fault)``."""
+    parts = set()
+    for part in (p.strip() for p in culprit.split(";")):
+        if not part:
+            continue
+        if " = " in part:
+            parts.add(sig.fold_indices(part.split(" = ", 1)[0]))
+        else:
+            parts.add(f"{part.rsplit(':', 1)[0]}:{MESSAGE_FAULT}")
     return "; ".join(sorted(parts))
