@@ -11,6 +11,8 @@ import itertools
 import json
 import os
 import shutil
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -366,12 +368,44 @@ class Campaign:
             self.say("  no module tests: no planner output of the run replayed exactly")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
-        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}")
+        oracle = add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
+        verdict = ""
+        if oracle:  # the suite must fail while the planner breaks the invariant: check it once
+            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
+                                  capture_output=True, text=True, timeout=600, cwd=tests_dir)
+            verdict = (f"; it fails as it should (oracle: {bucket.invariant})" if done.returncode == 1
+                       else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
+        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")
         return tests_dir
 
 
 TESTS_DIR = "tests"
 REPLAY_TESTS_SUFFIX = "-replay"  # DeFT replays of the failing run (not the minimiser's failing oracle tests)
+
+
+def add_invariant_oracle(tests_dir: Path, spec, invariant: str) -> bool:
+    """Give an extracted suite an oracle that fails while the replayed plans break ``invariant``.
+
+    Only for an invariant on the planner's output channel (what a replay
+    produces); the frames alone only check that the replay matches the
+    recording, which a defect reproduced exactly passes. True if added.
+    """
+    from ..deft.export import MANIFEST
+    from ..deft.invariant_oracle import oracle_entry
+
+    planner = spec.planner
+    watched = next((inv for inv in spec.invariants if inv.name == invariant), None)
+    if planner is None or watched is None or getattr(watched, "channel", None) != planner.output:
+        return False
+    manifest_path = tests_dir / MANIFEST
+    manifest = json.loads(manifest_path.read_text())
+    frames = manifest.get("frames") or []
+    if not frames:
+        return False
+    manifest.setdefault("oracles", []).append(
+        oracle_entry(invariant, frames[-1]["index"], int(frames[0]["output_time_ns"])))
+    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
+    return True
 
 
 def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
