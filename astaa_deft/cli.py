@@ -149,6 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
     fz.add_argument("--dictionary", type=Path, action="append", default=[])
     fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
     fz.add_argument("--horizon", type=_positive, default=20.0, help="seconds a case runs at most")
+    fz.add_argument("--settle", type=_positive, default=3.0,
+                    help="seconds a mutated case runs on after its last mutation could act")
     fz.add_argument("--baseline", type=int, default=2, help="clean runs first")
     fz.add_argument("--reruns", type=int, default=2, help="re-runs of each bucket's first failure, for its rate")
     fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
@@ -216,7 +218,8 @@ def _fuzz(a: argparse.Namespace) -> int:
                             budget=fuzz.parse_budget(a.budget) if a.budget else None, workers=a.workers,
                             seed=a.seed, strategy=a.strategy, dictionaries=a.dictionary,
                             params=fuzz.parse_params(a.params), cluster=a.cluster, horizon=a.horizon,
-                            baseline_runs=a.baseline, reruns=a.reruns, minimise=not a.no_minimise)
+                            baseline_runs=a.baseline, reruns=a.reruns, minimise=not a.no_minimise,
+                            settle=a.settle)
     return fuzz.run(config, a.resume)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sqlite3
@@ -15,6 +16,7 @@ from dask.distributed import Client, LocalCluster
 from astaa_deft.campaign.executors import DaskPool
 from astaa_deft.campaign.model import BASELINE, PlannedCase
 from astaa_deft.campaign.strategies import STRATEGIES
+from astaa_deft.campaign.strategies.base import Timing
 from astaa_deft.intercept.dictionary import load_dictionary
 from astaa_deft.spec_loader import load_spec
 
@@ -31,6 +33,8 @@ def test_cluster_campaign_runs_the_same_cases_as_local_and_brings_logs_back(tmp_
     cases = db.execute("SELECT number, testcase_xml, status, log_path FROM cases WHERE kind='mutated'"
                        " ORDER BY number").fetchall()
     random = STRATEGIES["random"](load_spec(ECHO), load_dictionary(), 11, 2.0)
+    (timing,), = db.execute("SELECT value FROM meta WHERE key='timing'").fetchall()
+    random.calibrate(Timing(**json.loads(timing)))  # as measured in the campaign's baseline
     assert [c[1] for c in cases] == [random.propose(n).testcase_xml for n in (1, 2, 3)]
     for _number, _xml, status, log_path in cases:
         assert status == "done" and Path(log_path).is_file() and Path(log_path).is_relative_to(out.resolve())

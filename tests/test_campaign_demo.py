@@ -12,9 +12,10 @@ from pathlib import Path
 
 from astaa_deft.commands.demo import demo_spec_path
 
-# Seed 356: generated case 1 empties trajectory.points 0.5 s in (seeded defect 3: control crashes);
-# case 2 nudges a steering value (the stack survives it).
-FINDING_SEED = "356"
+# Seed 25: generated case 1 empties trajectory.points (seeded defect 3: control crashes);
+# case 2 sets a non-finite steering value (the simulator ignores it; the finding on the mutated channel
+# itself is not counted).
+FINDING_SEED = "25"
 
 
 def fuzz(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:

@@ -32,3 +32,23 @@ def test_two_concurrent_cases_never_hear_each_other(tmp_path: Path):
     a_cfg = (tmp_path / "a" / "modules" / "zenoh-listener.json5").read_text()
     b_cfg = (tmp_path / "b" / "modules" / "zenoh-listener.json5").read_text()
     assert a_cfg != b_cfg  # different router ports
+
+
+def test_an_anchored_case_mutates_once_then_ends_settle_seconds_later(tmp_path: Path):
+    # The window counts from the first 'data' message (whenever the talker gets going), so the one
+    # mutation always lands; then the run ends --settle seconds later, not at its 30 s horizon.
+    from astaa_deft.campaign.runner import run_case
+    from astaa_deft.intercept.dictionary import load_dictionary
+    from astaa_deft.intercept.testcase import parse_testcase
+    from astaa_deft.spec_loader import load_spec
+
+    spec, dictionary = load_spec(ECHO), load_dictionary()
+    xml = (b'<testcase id="t" seed="1"><description>x</description><policy id="p1"><channel>data</channel>'
+           b'<window from="0.3" to="30"><after channel="data" message="1"/></window><select limit="1"/>'
+           b'<set><field path="value" value="dict:float.nan"/></set></policy></testcase>')
+    testcase = parse_testcase(xml, "t", spec, dictionary)
+    outcome = run_case(spec, testcase, {"count": "100000", "rate": "50"}, tmp_path / "case", 30.0, dictionary,
+                       settle=1.0)
+    assert outcome.status == "done", outcome
+    assert outcome.reason == "settled"  # ended by the settle rule, not the 30 s horizon
+    assert outcome.mutations == 1

@@ -2,7 +2,9 @@
 
 A real recording of the demo stack through the star with the planner fed a
 NaN speed limit (seeded defect 1), then the campaign's own step that writes
-the tests; pytest runs them in a child process without the log.
+the tests; pytest runs them in a child process without the log: the frames
+replay exactly, and the suite's invariant oracle fails while the planner
+still breaks the bucket's invariant.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from astaa_deft.intercept.testcase import parse_testcase
 from astaa_deft.spec_loader import load_spec
 
 NAN_LIMIT = b"""<testcase id="nan-limit" seed="1"><description>defect 1</description>
-  <policy id="p1"><channel>routing</channel><window from="0.5"/>
+  <policy id="p1"><channel>routing</channel><window from="0.5"><after channel="command" message="1"/></window>
     <set><field path="speed_limit" value="dict:float.nan"/></set></policy>
 </testcase>"""
 
@@ -30,13 +32,14 @@ def _bucket(name: str, module: str) -> Bucket:
                   0, 0, None, 0.0, 1)
 
 
-def test_a_planner_caused_bucket_gets_deft_module_tests_that_pytest_runs(tmp_path: Path):
+def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path: Path):
     spec = load_spec(demo_spec_path())
     dictionary = load_dictionary()
     testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
     outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case", 8.0,
                        dictionary)
     assert outcome.status == "done" and outcome.mutations > 0, outcome
+    assert any(f.invariant == "planned_speed" for f in outcome.findings), outcome  # the overspeed plan was seen
     out = tmp_path / "campaign"
     journal = Journal(out)
     try:
@@ -50,5 +53,7 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_pytest_runs(tmp_pat
     Path(outcome.log_path).unlink()  # the suite stands on its own
     run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
-    assert run.returncode == 0, run.stdout[-2000:]
-    assert " passed" in run.stdout and "failed" not in run.stdout
+    # the frames replay exactly (they pass); the invariant oracle fails: the replayed plans break planned_speed
+    assert run.returncode == 1, run.stdout[-2000:]
+    assert " passed" in run.stdout and "1 failed" in run.stdout
+    assert "oracle_invariant" in run.stdout and "planned_speed" in run.stdout

@@ -19,6 +19,7 @@ from astaa_deft.commands.fuzz import parse_budget, parse_params
 from astaa_deft.errors import InputError
 from astaa_deft.intercept import generate as gen
 from astaa_deft.intercept.dictionary import load_dictionary
+from astaa_deft.intercept.actions.set import Set
 from astaa_deft.intercept.testcase import parse_testcase
 from astaa_deft.spec_loader import load_spec
 
@@ -28,13 +29,74 @@ def demo():
     return load_spec(demo_spec_path()), load_dictionary()
 
 
-def test_random_strategy_is_astaa_generation_case_for_case(demo):
+def test_random_strategy_covers_every_channel_and_field_first_with_values_class_by_class(demo):
     spec, dictionary = demo
     strategy = STRATEGIES["random"](spec, dictionary, 7, 20.0)
-    generated = gen.generate(spec, dictionary, 5, 7, 20.0)
-    for number, testcase in enumerate(generated, start=1):
-        mine = parse_testcase(strategy.propose(number).testcase_xml.encode())
-        assert mine.policies == testcase.policies and mine.seed == testcase.seed
+    targets = {(t.channel.name, str(t.path)): t for t in gen.mutation_targets(spec, dictionary)}
+    channels = {channel for channel, _ in targets}
+    length = strategy.round_length
+    assert length == len(targets) + len(channels)  # every field once, one message fault per channel
+    for round_number in (0, 1):
+        cases = [parse_testcase(strategy.propose(n).testcase_xml.encode(), "t", spec, dictionary)
+                 for n in range(1 + round_number * length, 1 + (round_number + 1) * length)]
+        fields, faults = {}, set()
+        for case in cases:
+            [policy] = case.policies
+            if isinstance(policy.action, Set):
+                [assignment] = policy.action.fields
+                fields[(policy.channels[0], assignment.path)] = assignment.value
+            else:
+                faults.add(policy.channels[0])
+        assert set(fields) == set(targets) and faults == channels
+        for key, ref in fields.items():  # the round's class of each field's values: non-finite first, then extreme
+            classes = [c for c in gen.VALUE_CLASSES if any(gen.value_class(e) == c for e in targets[key].values)]
+            entry = next(e for e in targets[key].values if e.ref == ref)
+            assert gen.value_class(entry) == classes[round_number % len(classes)], (key, ref)
+        # channels take turns: the first len(channels) cases touch every channel
+        assert {c.policies[0].channels[0] for c in cases[:len(channels)]} == channels
+    # same seed, same case; after the coverage rounds, every other case is ASTAA's weighted draw
+    again = STRATEGIES["random"](spec, dictionary, 7, 20.0)
+    assert all(again.propose(n) == strategy.propose(n) for n in (1, 5, 2 * length + 1, 2 * length + 2))
+
+
+def test_value_classes_come_from_the_values_not_their_names():
+    from astaa_deft.intercept.dictionary.model import Entry
+
+    assert gen.value_class(Entry("float", "x", float("nan"))) == "non_finite"
+    assert gen.value_class(Entry("float", "x", -float("inf"))) == "non_finite"
+    assert gen.value_class(Entry("float", "x", 1e16)) == "extreme"
+    assert gen.value_class(Entry("int", "x", 2**63 - 1)) == "extreme"
+    assert gen.value_class(Entry("array", "x", [])) == "empty"
+    assert gen.value_class(Entry("array", "x", None)) == "null"
+    assert gen.value_class(Entry("float", "x", -0.0)) == "zero"
+    assert gen.value_class(Entry("float", "x", 5e-324)) == "tiny"
+    assert gen.value_class(Entry("float", "x", rule="above_max")) == "bound"
+    assert gen.value_class(Entry("int", "x", rule="width_overflow")) == "extreme"
+
+
+def test_calibrated_windows_count_from_the_anchor_and_fall_inside_the_live_run(demo):
+    from astaa_deft.campaign.strategies.base import Timing
+
+    spec, dictionary = demo
+    for name in ("random", "guided"):
+        strategy = STRATEGIES[name](spec, dictionary, 3, 20.0)
+        strategy.calibrate(Timing("command", 6.0))
+        for n in range(1, 200, 7):
+            for policy in parse_testcase(strategy.propose(n).testcase_xml.encode()).policies:
+                window = policy.window
+                assert (window.anchor_channel, window.anchor_message) == ("command", 1)
+                assert 0 <= window.start <= 6.0 and window.end is not None and window.end <= 6.0 + 5.0
+
+
+def test_live_timing_takes_the_channel_that_came_last_and_the_shortest_live_run():
+    from astaa_deft.campaign.campaign import live_timing
+    from astaa_deft.campaign.strategies.base import Timing
+
+    clean = [CaseOutcome("done", "Pass", "", seconds=12.3, first_seen={"a": 0.1, "b": 1.5, "c": 1.6}),
+             CaseOutcome("done", "Pass", "", seconds=13.0, first_seen={"a": 0.2, "b": 1.4, "c": 2.1})]
+    assert live_timing(clean, 20.0) == Timing("c", 10.5)  # 12.3 - 1.6 = 10.7, rounded down to 0.5 s
+    assert live_timing(clean, 8.0) == Timing("c", 8.0)
+    assert live_timing([CaseOutcome("done", "Pass", "", seconds=5.0)], 20.0) == Timing(None, 20.0)
 
 
 def test_guided_strategy_mutates_its_corpus_deterministically(demo):
@@ -67,7 +129,7 @@ def test_guided_corpus_keeps_only_cases_that_came_closer(demo):
 def test_signature_separates_mutation_families_and_folds_indices(demo):
     spec, dictionary = demo
     outcome = CaseOutcome("done", "Silent", "", [Finding("speed_limit", "Silent", None, "status", "")])
-    one = parse_testcase(STRATEGIES["random"](spec, dictionary, 356, 8.0).propose(1).testcase_xml.encode())
+    one = parse_testcase(STRATEGIES["random"](spec, dictionary, 25, 8.0).propose(1).testcase_xml.encode())
     assert sig.mutation_family(one) == "trajectory:points:set"
     assert sig.signature(outcome, None).endswith(sig.NO_MUTATION)
     assert sig.failure_key(outcome) == "Silent|speed_limit|-"
@@ -143,7 +205,7 @@ def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
     spec = tmp_path / "dead.yaml"
     spec.write_text((Path(__file__).parent / "sut" / "echo.yaml").read_text().replace(
         '"{spec_dir}/listener.py"', '"-c", "import sys; sys.exit(3)"', 1).replace(
-        "name: echo", f"name: dead\n# copied from tests/sut/echo.yaml\n"))
+        "name: echo", "name: dead\n# copied from tests/sut/echo.yaml\n"))
     (tmp_path / "listener.py").write_text((Path(__file__).parent / "sut" / "listener.py").read_text())
     (tmp_path / "talker.py").write_text((Path(__file__).parent / "sut" / "talker.py").read_text())
     out = tmp_path / "camp"
@@ -155,7 +217,7 @@ def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
 
 
 def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp_path: Path):
-    from astaa_deft.campaign.campaign import merge_same_culprits
+    from astaa_deft.campaign.campaign import culprit_family, merge_same_culprits
 
     journal = Journal(tmp_path)
     try:
@@ -168,11 +230,30 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
                                f"c-{n}", False, n)
             journal.minimised(name, "minimised" if exit_code == 0 else "not reproduced", exit_code, "<xml/>",
                               found, None, None, 1.0, "")
-        assert merge_same_culprits(journal) == [("B002", "B001")]  # B003 was not confirmed; B004 is another culprit
-        assert {b.bucket: b.merged_into for b in journal.buckets()} == {"B001": None, "B002": "B001", "B003": None,
-                                                                      "B004": None}
+        # the same field with another value (and another array index) is the same culprit
+        journal.add_bucket("B005", "Silent|planned_speed|planning|fam2", "Silent", "planned_speed", "planning", "fam2",
+                           "c-5", False, 5)
+        journal.minimised("B005", "minimised", 0, "<xml/>", "routing:speed_limit = dict:float.inf", None, None, 1.0,
+                          "")
+        journal.add_bucket("B006", "Abort|modules_alive|control|f", "Abort", "modules_alive", "control", "f", "c-6",
+                           False, 6)
+        journal.minimised("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan", None, None,
+                          1.0, "")
+        # message faults on one channel breaking the same invariant in the same module: one bug
+        for name, fault, invariant in (("B007", "reorder", "finite_command"), ("B008", "delay", "finite_command"),
+                                       ("B009", "drop", "control_alive")):
+            journal.add_bucket(name, f"Silent|{invariant}|control|{fault}", "Silent", invariant, "control", fault,
+                               f"c-{name}", False, 7)
+            journal.minimised(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0, "")
+        assert merge_same_culprits(journal) == [("B002", "B001"), ("B005", "B001"), ("B008", "B007")]
+        assert {b.bucket: b.merged_into for b in journal.buckets()} == {
+            "B001": None, "B002": "B001", "B003": None, "B004": None, "B005": "B001", "B006": None, "B007": None,
+            "B008": "B007", "B009": None}
         assert merge_same_culprits(journal) == []  # on resume: nothing merged twice
-        assert [b.bucket for b in journal.buckets(include_merged=False)] == ["B001", "B003", "B004"]
+        assert [b.bucket for b in journal.buckets(include_merged=False)] == ["B001", "B003", "B004", "B006", "B007",
+                                                                             "B009"]
+        assert culprit_family("trajectory:points[2].v = dict:float.nan; a:b = 1") == "a:b; trajectory:points[].v"
+        assert culprit_family("localization:reorder") == "localization:(message fault)"
     finally:
         journal.close()
 

@@ -11,6 +11,8 @@ import itertools
 import json
 import os
 import shutil
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,12 +26,17 @@ from .journal import Journal
 from .minimiser import minimise_run
 from .model import BASELINE, MUTATED, RERUN, CaseOutcome, PlannedCase
 from .strategies import STRATEGIES, Strategy
+from .strategies.base import Timing
 
 DEFAULT_HORIZON = 20.0
 DEFAULT_BASELINE_RUNS = 2
 DEFAULT_RERUNS = 2
-CORES_PER_MODULE = 0.15  # a run's modules mostly sleep: measured on the demo (benchmarks/bench_campaign.py)
-HELPER_CORES = 0.3  # the tool's own session, proxy and recorder per run
+DEFAULT_SETTLE = 3.0  # s a mutated case runs on after its last mutation could act
+# A run's modules mostly sleep: the demo's whole run (4 modules, proxy, recorder) used ~0.3 core on average
+# (user+sys over wall time); these leave headroom so deadline invariants do not starve on a loaded machine
+# (benchmarks/bench_campaign.py measures other counts).
+CORES_PER_MODULE = 0.1
+HELPER_CORES = 0.25  # the tool's own session, proxy and recorder per run
 
 
 @dataclass
@@ -47,6 +54,7 @@ class CampaignConfig:
     horizon: float = DEFAULT_HORIZON
     baseline_runs: int = DEFAULT_BASELINE_RUNS
     reruns: int = DEFAULT_RERUNS
+    settle: float | None = DEFAULT_SETTLE  # None: a mutated case runs to the run's own end
     minimise: bool = True
     minimise_max_tests: int = 30
     report: bool = True
@@ -65,6 +73,21 @@ class CampaignStopped(AstaaDeftError):
     """The campaign cannot go on (the SUT does not start): one message, exit 2 (the command adds the fix)."""
 
     exit_code = 2
+
+
+LIVE_STEP = 0.5  # s: the measured live time is rounded down to this (same cases for close measurements)
+
+
+def live_timing(clean: list[CaseOutcome], horizon: float) -> Timing:
+    """The anchor channel (its first message came last: every module is running) and the seconds the
+    clean runs went on from there (the smallest), from the baseline's clean runs; the horizon without any."""
+    anchors = [max(o.first_seen, key=lambda c: (o.first_seen[c], c)) for o in clean if o.first_seen]
+    if not anchors:
+        return Timing(None, horizon)
+    anchor = max(set(anchors), key=lambda c: (anchors.count(c), c))
+    lives = [o.seconds - o.first_seen[anchor] for o in clean if anchor in o.first_seen]
+    live = max(LIVE_STEP, min(horizon, LIVE_STEP * int(min(lives) / LIVE_STEP)))
+    return Timing(anchor, live)
 
 
 def default_workers(module_count: int, cores: int | None = None) -> int:
@@ -95,6 +118,7 @@ class Campaign:
         self.workers = config.workers or default_workers(len(self.spec.modules))
         self.started = time.monotonic()
         self.baseline_keys: dict[str, str] = {}  # failure key → its baseline bucket
+        self.timing = Timing(None, config.horizon)
 
     # -- the whole campaign --------------------------------------------------
     def run(self) -> CampaignResult:
@@ -146,12 +170,26 @@ class Campaign:
         failed = [o for o in outcomes if o is not None and o.status == "error"]
         if rows and len(failed) == len(rows):
             raise CampaignStopped(f"the SUT does not start: {failed[0].error or failed[0].summary}")
+        self._calibrate([o for o in outcomes if o is not None and o.status == "done"])
         seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes, strict=False):
             if seed_hook is not None and outcome is not None:
                 seed_hook(row["case_id"], outcome)
             if outcome is not None and outcome.failed:
                 self.baseline_keys.setdefault(sig.failure_key(outcome), row["bucket"])
+
+    def _calibrate(self, clean: list[CaseOutcome]) -> None:
+        """Tell the strategy when the SUT is live: measured once in the baseline, kept in the journal."""
+        stored = self.journal.meta().get("timing")
+        timing = Timing(**stored) if stored else live_timing(clean, self.config.horizon)
+        self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
+        self.timing = timing
+        calibrate = getattr(self.strategy, "calibrate", None)
+        if calibrate is not None:
+            calibrate(timing)
+        if timing.anchor is not None:
+            self.say(f"baseline: the stack is live from the first '{timing.anchor}' message and runs"
+                     f" {timing.live:g} s on; generated windows fall inside that")
 
     # -- generated cases -------------------------------------------------------
     def _main(self, pool) -> str:
@@ -195,7 +233,8 @@ class Campaign:
     def _submit(self, pool, case: PlannedCase) -> None:
         payload = {"spec": str(self.config.spec_path.resolve()), "case": case.to_json(),
                    "run_dir": str(self.case_dir(case.case_id)), "horizon": self.config.horizon,
-                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries]}
+                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries],
+                   "settle": self.config.settle if case.kind != BASELINE else None}
         self.journal.started(case.case_id)
         pool.submit(case.case_id, payload)
 
@@ -329,7 +368,14 @@ class Campaign:
             self.say("  no module tests: no planner output of the run replayed exactly")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
-        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}")
+        oracle = add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
+        verdict = ""
+        if oracle:  # the suite must fail while the planner breaks the invariant: check it once
+            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
+                                  capture_output=True, text=True, timeout=600, cwd=tests_dir)
+            verdict = (f"; it fails as it should (oracle: {bucket.invariant})" if done.returncode == 1
+                       else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
+        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")
         return tests_dir
 
 
@@ -337,11 +383,41 @@ TESTS_DIR = "tests"
 REPLAY_TESTS_SUFFIX = "-replay"  # DeFT replays of the failing run (not the minimiser's failing oracle tests)
 
 
+def add_invariant_oracle(tests_dir: Path, spec, invariant: str) -> bool:
+    """Give an extracted suite an oracle that fails while the replayed plans break ``invariant``.
+
+    Only for an invariant on the planner's output channel (what a replay
+    produces); the frames alone only check that the replay matches the
+    recording, which a defect reproduced exactly passes. True if added.
+    """
+    from ..deft.export import MANIFEST
+    from ..deft.invariant_oracle import oracle_entry
+
+    planner = spec.planner
+    watched = next((inv for inv in spec.invariants if inv.name == invariant), None)
+    if planner is None or watched is None or getattr(watched, "channel", None) != planner.output:
+        return False
+    manifest_path = tests_dir / MANIFEST
+    manifest = json.loads(manifest_path.read_text())
+    frames = manifest.get("frames") or []
+    if not frames:
+        return False
+    manifest.setdefault("oracles", []).append(
+        oracle_entry(invariant, frames[-1]["index"], int(frames[0]["output_time_ns"])))
+    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
+    return True
+
+
 def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
     """Merge each bucket whose minimised culprit is an earlier bucket's: (bucket, merged into) pairs.
 
     Two signatures can hide one bug (the same NaN breaks two invariants,
-    first on one, then on the other): once minimised, the culprits say so.
+    first on one, then on the other; a second field that played no part):
+    once minimised, the culprits say so. Culprits coincide when they change
+    the same fields of the same channels, whatever the value (``heading =
+    max`` and ``heading = big_1e16`` hang the same loop); message faults on
+    the same channels (a reorder, a delay) that break the same invariant in
+    the same module.
     Only confirmed minimisations count; the earliest bucket keeps the culprit.
     """
     minimised = journal.minimisations()
@@ -351,8 +427,28 @@ def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
         row = minimised.get(bucket.bucket)
         if bucket.without_mutation or row is None or row["exit_code"] != 0 or not row["culprit"]:
             continue
-        first = owner.setdefault(row["culprit"], bucket.bucket)
+        family = culprit_family(row["culprit"])
+        if MESSAGE_FAULT in family:  # a reorder and a delay of one channel breaking the same thing: one bug
+            family += f" → {bucket.invariant} in {bucket.module}"
+        first = owner.setdefault(family, bucket.bucket)
         if first != bucket.bucket and bucket.merged_into != first:
             journal.merge_bucket(bucket.bucket, first)
             merged.append((bucket.bucket, first))
     return merged
+
+
+MESSAGE_FAULT = "(message fault)"
+
+
+def culprit_family(culprit: str) -> str:
+    """A minimised culprit without its values, array indices folded; a fault on whole messages (reorder,
+    delay, drop, …: no ``field = value``) as ``channel:(message fault)``."""
+    parts = set()
+    for part in (p.strip() for p in culprit.split(";")):
+        if not part:
+            continue
+        if " = " in part:
+            parts.add(sig.fold_indices(part.split(" = ", 1)[0]))
+        else:
+            parts.add(f"{part.rsplit(':', 1)[0]}:{MESSAGE_FAULT}")
+    return "; ".join(sorted(parts))

@@ -9,10 +9,12 @@ from .campaign import Campaign, CampaignConfig
 from .journal import Journal
 from .report import write_report
 
-# A seed whose first generated case empties trajectory.points (seeded defect 3): a short campaign that
-# shows a find without minutes of search. Any seed finds the defects given enough cases.
-DEMO_SEED = 356
-DEMO_CASES = 4
+# A seed whose first five generated cases reorder localization (seeded defect 4), empty trajectory.points
+# (defect 3) and set routing.speed_limit non-finite (defect 1): a short campaign that shows finds without
+# minutes of search. Any seed finds the four robustness defects given a round or two of cases
+# (benchmarks/bench_campaign.py).
+DEMO_SEED = 1153
+DEMO_CASES = 5
 DEMO_HORIZON = 6.0
 
 

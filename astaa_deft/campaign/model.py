@@ -56,6 +56,8 @@ class CaseOutcome:
     mutations: int = 0
     margins: dict[str, float] = field(default_factory=dict)  # invariant → closest approach (smaller = closer)
     error: str = ""
+    # Clean runs: seconds from the modules' launch to each channel's first message (the live stack's timing).
+    first_seen: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -64,7 +66,8 @@ class CaseOutcome:
     def from_json(cls, body: dict[str, Any]) -> CaseOutcome:
         body = dict(body)
         body["findings"] = [Finding(**f) for f in body.get("findings", [])]
-        return cls(**body)
+        known = cls.__dataclass_fields__
+        return cls(**{k: v for k, v in body.items() if k in known})  # a journal of an older version
 
     @property
     def failed(self) -> bool:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -49,8 +50,14 @@ def isolated(spec: Spec) -> Spec:
 
 
 def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, horizon: float,
-             dictionary: Dictionary | None = None) -> CaseOutcome:
-    """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds."""
+             dictionary: Dictionary | None = None, settle: float | None = None) -> CaseOutcome:
+    """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
+
+    ``settle``: a mutated run ends this many seconds after its test case can
+    mutate no more (its last window closed or its last one-message policy
+    acted) — what the SUT does with a bad message shows within seconds, and
+    a run's remaining minutes would be spent for nothing.
+    """
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
     attachments = {}
@@ -65,13 +72,24 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                          interceptor=interceptor, stop_on_violation=True, attachments=attachments)
     options.time_limit = horizon
     watch = MarginWatch(spec)
+    settled = SettleWatch(testcase, settle) if testcase is not None and settle is not None else None
+    starts = FirstMessages(spec) if testcase is None else None  # a clean run measures the stack's timing
+
+    def on_start(bus: BusRun) -> None:
+        watch.attach(bus)
+        if settled is not None:
+            settled.attach(bus)
+        if starts is not None:
+            starts.attach(bus)
+
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
-        result = run_session(isolated(spec), options, on_start=watch.attach)
+        result = run_session(isolated(spec), options, on_start=on_start,
+                             stop_when=settled.check if settled is not None else None)
     except InputError as exc:
         return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems))
-    reason = {"time limit": "horizon", "violation (--stop-on-violation)": "violation"}.get(result.end_reason,
-                                                                                            result.end_reason)
+    reason = {"time limit": "horizon", SETTLED: "settled",
+              "violation (--stop-on-violation)": "violation"}.get(result.end_reason, result.end_reason)
     if result.verdict is None or not result.observed or not result.complete:  # not fully observed: no Pass
         return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
                            log_path=str(log_path), reason=reason,
@@ -81,7 +99,97 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
         if not any(f.module == exit_.module for f in findings):
             findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe()))
     return CaseOutcome("done", result.verdict.klass, result.verdict.summary, findings, result.seconds,
-                       str(log_path), reason, result.mutations, margins=watch.margins(result.violations))
+                       str(log_path), reason, result.mutations, margins=watch.margins(result.violations),
+                       first_seen=starts.seconds() if starts is not None else {})
+
+
+SETTLED = "settled after the last mutation"
+
+
+class FirstMessages:
+    """Seconds from the run's start to the first message on each channel a module consumes."""
+
+    def __init__(self, spec: Spec):
+        self.channels = [c.name for c in spec.channels if c.consumers]
+        self.t0 = 0.0
+        self.first: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def attach(self, bus: BusRun) -> None:
+        self.t0 = time.monotonic()
+        for channel in self.channels:
+            def seen(sample: zenoh.Sample, channel: str = channel) -> None:
+                if channel not in self.first:
+                    with self._lock:
+                        self.first.setdefault(channel, time.monotonic() - self.t0)
+
+            try:
+                bus.subscribe(channel, seen)
+            except KeyError:
+                continue
+
+    def seconds(self) -> dict[str, float]:
+        with self._lock:
+            return {k: round(v, 3) for k, v in self.first.items()}
+
+
+class SettleWatch:
+    """Ends a mutated run ``settle`` seconds after its test case can mutate no more.
+
+    A policy is done at its window's end, or — when it changes a bounded
+    number of messages — once its window opened and the interception's
+    mutation count has stood still for ``settle`` seconds. Windows counted
+    from a channel's first message start counting when the tool sees it.
+    A policy with an open-ended window keeps the run to its usual end.
+    """
+
+    def __init__(self, testcase: TestCase, settle: float):
+        self.settle = settle
+        self.anchors = {p.window.anchor_channel for p in testcase.policies if p.window.anchor_channel is not None}
+        self.policies = testcase.policies
+        self.t0 = 0.0
+        self.first: dict[str, float] = {}  # anchor channel → monotonic time of its first message
+        self.mutations = -1
+        self.changed = 0.0
+        self._lock = threading.Lock()
+
+    def attach(self, bus: BusRun) -> None:
+        self.t0 = time.monotonic()
+        self.changed = self.t0
+        for channel in self.anchors:
+            def seen(sample: zenoh.Sample, channel: str = channel) -> None:
+                with self._lock:
+                    self.first.setdefault(channel, time.monotonic())
+
+            try:
+                bus.subscribe(channel, seen)
+            except KeyError:  # not observable: the run keeps its usual end
+                continue
+
+    def _last_chance(self) -> float:
+        """Monotonic time after which no policy can act (inf: not known yet, or never)."""
+        last = self.t0
+        for policy in self.policies:
+            window = policy.window
+            base = self.t0
+            if window.anchor_channel is not None:
+                with self._lock:
+                    base = self.first.get(window.anchor_channel, math.inf)
+            bounded = policy.selection.limit is not None
+            end = window.start if bounded else window.end
+            if end is None:
+                return math.inf
+            last = max(last, base + end)
+        return last
+
+    def check(self, bus: BusRun) -> str | None:
+        now = time.monotonic()
+        mutations = bus.interception.mutations if bus.interception is not None else 0
+        if mutations != self.mutations:
+            self.mutations, self.changed = mutations, now
+        if now >= self._last_chance() + self.settle and now >= self.changed + self.settle:
+            return SETTLED
+        return None
 
 
 class MarginWatch:

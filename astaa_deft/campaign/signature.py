@@ -38,6 +38,11 @@ def mutation_family(testcase: TestCase | None) -> str:
     return "+".join(sorted(parts))
 
 
+def fold_indices(path: str) -> str:
+    """``points[3].v`` → ``points[].v``: one family for every element of an array."""
+    return _INDEX.sub("[]", path)
+
+
 def failure_key(outcome: CaseOutcome) -> str:
     """The failure alone (no mutation): compared with the baseline's failures."""
     finding = primary(outcome)

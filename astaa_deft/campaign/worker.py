@@ -2,8 +2,13 @@
 
 The payload is plain JSON (spec path, planned case, run directory, horizon,
 extra dictionaries) and so is the result: the same function serves both.
-Run as ``python -m astaa_deft.campaign.worker`` it reads the payload on
-stdin and prints the outcome as its last line.
+Run as ``python -m astaa_deft.campaign.worker [--warm SPEC [DICTIONARY …]]``
+it reads the payload on stdin and prints the outcome as its last line.
+``--warm``: import everything and load that spec and those dictionaries
+*before* waiting for the payload — the local pool starts each case's process
+while the previous case still runs, so a case does not wait seconds for
+Python's imports and the spec on a loaded machine (each case still gets a
+process of its own).
 """
 
 from __future__ import annotations
@@ -21,16 +26,24 @@ from .model import CaseOutcome, PlannedCase
 from .runner import run_case
 
 
-def execute(payload: dict[str, Any]) -> dict[str, Any]:
+_Preloaded = tuple[str, list[str], Any, Any]  # spec path, dictionary paths, spec, dictionary
+
+
+def execute(payload: dict[str, Any], preloaded: _Preloaded | None = None) -> dict[str, Any]:
     case = PlannedCase.from_json(payload["case"])
     try:
-        spec = load_spec(Path(payload["spec"]))
-        dictionary = load_dictionary([Path(p) for p in payload.get("dictionaries", [])])
+        if preloaded is not None and (preloaded[0], preloaded[1]) == (payload["spec"], payload.get("dictionaries", [])):
+            spec, dictionary = preloaded[2], preloaded[3]
+        else:
+            spec = load_spec(Path(payload["spec"]))
+            dictionary = load_dictionary([Path(p) for p in payload.get("dictionaries", [])])
         testcase = parse_testcase(case.testcase_xml.encode(), case.case_id, spec, dictionary) \
             if case.testcase_xml else None
     except InputError as exc:
         return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems))).to_json()
-    outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary)
+    settle = payload.get("settle")
+    outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary,
+                       float(settle) if settle is not None else None)
     return outcome.to_json()
 
 
@@ -46,9 +59,16 @@ def execute_remote(payload: dict[str, Any]) -> dict[str, Any]:
         return body
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    preloaded: _Preloaded | None = None
+    if argv[:1] == ["--warm"] and len(argv) >= 2:
+        try:
+            preloaded = (argv[1], argv[2:], load_spec(Path(argv[1])), load_dictionary([Path(p) for p in argv[2:]]))
+        except InputError:
+            preloaded = None  # execute() loads it again and reports the problem as the case's outcome
     payload = json.loads(sys.stdin.read())
-    print(json.dumps(execute(payload), default=str), flush=True)
+    print(json.dumps(execute(payload, preloaded), default=str), flush=True)
     return 0
 
 

@@ -30,6 +30,11 @@ from ..codecs import get_codec
 from ..errors import InputError, Problem
 from ..fields import FieldPath, is_brittle, leaf_fields, type_at
 from ..spec.model import Channel, Spec
+from .actions.base import ActionConfig
+from .actions.delay import Delay
+from .actions.drop import Drop
+from .actions.duplicate import Duplicate
+from .actions.reorder import Reorder
 from .actions.set import Assignment, Set
 from .dictionary import Dictionary, Entry, FieldSite, field_site, load_dictionary
 from .testcase import Policy, Selection, TestCase, Window
@@ -168,8 +173,14 @@ def _targets_by_channel(spec: Spec, dictionary: Dictionary, include_brittle: boo
 # ---------------------------------------------------------------- drawing one test case
 
 def _testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]],
-              duration: float) -> TestCase:
-    shape = rng.choices([name for name, _ in SHAPES], weights=[weight for _, weight in SHAPES])[0]
+              duration: float, anchor: str | None = None, message_faults: bool = False) -> TestCase:
+    """ASTAA's weighted draw; ``anchor``: windows count from that channel's first message;
+    ``message_faults``: a share of cases reorder, delay, duplicate or drop messages instead."""
+    shapes = SHAPES + ((("message", MESSAGE_FAULT_WEIGHT),) if message_faults else ())
+    shape = rng.choices([name for name, _ in shapes], weights=[weight for _, weight in shapes])[0]
+    if shape == "message":
+        channel = rng.choice(sorted(by_channel))
+        return fault_testcase(testcase_id, rng, channel, rng.choice(MESSAGE_FAULTS), duration, anchor)
     channel = rng.choice(sorted(by_channel))  # channels equally likely, whatever their field count
     targets = by_channel[channel]
     if shape == "multi_field":
@@ -185,7 +196,7 @@ def _testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[T
     else:  # one message: the first one in the window
         end = duration
         selection = Selection(limit=1)
-    window = Window(start, max(end, round(start + 0.1, 1)))
+    window = Window(start, max(end, round(start + 0.1, 1)), *_anchored(anchor))
     policy = Policy("p1", Set(assignments), channels=(channel,), window=window, selection=selection)
     return TestCase(testcase_id, rng.getrandbits(32), _describe(shape, channel, assignments, window, selection),
                     (policy,))
@@ -222,3 +233,138 @@ def _describe(shape: str, channel: str, assignments: Sequence[Assignment], windo
 def _ordinal(number: int) -> str:
     suffix = "th" if 10 <= number % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(number % 10, "th")
     return f"{number}{suffix}"
+
+
+# ---------------------------------------------------------------- coverage-first probes (campaigns)
+#
+# A campaign has a budget of a few hundred runs, not ASTAA's thousands: it
+# should try every channel and field early, with the values most likely to
+# break something first, instead of drawing the same field again before
+# another was ever touched. A *round* visits every (channel, field) once and
+# applies one message fault (no field changed) to every channel; round k
+# gives each field a value of its k-th value class, so round 0 tries the
+# non-finite (or empty) values everywhere, round 1 the extreme magnitudes, …
+
+# Message faults: timing and ordering bugs need no bad value (a stamp going
+# backwards after a reorder, a late message overtaken by newer ones).
+MESSAGE_FAULTS = ("reorder", "delay", "duplicate", "drop")
+MESSAGE_FAULT_WEIGHT = 14  # % of weighted cases, next to SHAPES' 72: ASTAA's remaining bug classes were timing
+DELAYS_MS = (50, 100, 200, 500)
+# Value classes in the order a round uses them: what breaks code most often first (Ballista, ASTAA).
+VALUE_CLASSES = ("non_finite", "empty", "extreme", "null", "bound", "zero", "tiny", "other")
+SPREAD_ROUNDS = 3  # round r's windows open in the first (r + 1) / 3 of the live run's 80 %
+EXTREME = 1e15  # magnitudes where float arithmetic stops behaving (2**53 ≈ 9e15: integers skip)
+
+
+def value_class(entry: Entry) -> str:
+    """The class of a dictionary entry, from its value or derive rule (not its name)."""
+    if entry.rule is not None:
+        rule = entry.rule
+        if rule in ("below_min", "above_max"):
+            return "bound"
+        if rule.startswith("width_"):
+            return "extreme"
+        return "other"
+    value = entry.value
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "other"
+    if isinstance(value, float) and value != value or isinstance(value, float) and abs(value) == float("inf"):
+        return "non_finite"
+    if isinstance(value, (int, float)):
+        magnitude = abs(value)
+        if magnitude >= EXTREME:
+            return "extreme"
+        if magnitude in (0, 1):
+            return "zero"
+        return "tiny" if magnitude < 1e-30 else "other"
+    if isinstance(value, (str, bytes, list, dict, tuple)):
+        if len(value) == 0:
+            return "empty"
+        return "extreme" if len(value) >= 1024 else "other"
+    return "other"
+
+
+def value_for_round(target: Target, round_number: int, rng: random.Random) -> Entry:
+    """A value of the target's ``round_number``-th class present (cycling), drawn with ``rng``."""
+    classes: dict[str, list[Entry]] = {}
+    for entry in target.values:
+        classes.setdefault(value_class(entry), []).append(entry)
+    ordered = [classes[name] for name in VALUE_CLASSES if name in classes]
+    return rng.choice(ordered[round_number % len(ordered)])
+
+
+@dataclass(frozen=True)
+class Probe:
+    """One case of a coverage round: a field with a value of the round's class, or a message fault."""
+
+    channel: str
+    target: Target | None  # None: a message fault
+    fault: str | None = None
+
+
+def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number: int) -> list[Probe]:
+    """Every (channel, field) once and one message fault per channel; channels interleaved.
+
+    Channels take turns (in a seeded order), so the first cases of a round
+    touch every channel before any channel's second field.
+    """
+    rng = random.Random(f"coverage/{seed}/{round_number}")
+    per_channel: list[list[Probe]] = []
+    for channel in rng.sample(sorted(by_channel), len(by_channel)):
+        probes = [Probe(channel, target) for target in by_channel[channel]]
+        rng.shuffle(probes)
+        fault = MESSAGE_FAULTS[round_number % len(MESSAGE_FAULTS)]
+        probes.insert(rng.randrange(min(len(probes), 2) + 1), Probe(channel, None, fault))
+        per_channel.append(probes)
+    ordered: list[Probe] = []
+    for turn in range(max(len(p) for p in per_channel)):
+        ordered.extend(p[turn] for p in per_channel if turn < len(p))
+    return ordered
+
+
+def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,
+                   anchor: str | None = None) -> TestCase:
+    """The test case of one probe: one message, at a random time inside ``duration``."""
+    # Early rounds ask "does this value break the field's consumers at all?": early windows answer that
+    # in shorter runs; later rounds spread over the whole live run for state-dependent failures.
+    latest = duration * 0.8 * min(1.0, (round_number + 1) / SPREAD_ROUNDS)
+    if probe.target is None:
+        return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], duration, anchor,
+                              repeated=False, latest=latest)
+    entry = value_for_round(probe.target, round_number, rng)
+    assignments = (Assignment(str(probe.target.path), entry.ref),)
+    start = round(rng.uniform(0.0, latest), 1)
+    window = Window(start, duration, *_anchored(anchor))
+    selection = Selection(limit=1)
+    policy = Policy("p1", Set(assignments), channels=(probe.channel,), window=window, selection=selection)
+    return TestCase(testcase_id, rng.getrandbits(32),
+                    _describe("single", probe.channel, assignments, window, selection), (policy,))
+
+
+def fault_testcase(testcase_id: str, rng: random.Random, channel: str, fault: str, duration: float,
+                   anchor: str | None = None, repeated: bool | None = None, latest: float | None = None) -> TestCase:
+    """One message fault on ``channel``: one message, or (``repeated``, else by chance) a burst;
+    starting by ``latest`` s (default: 80 % of ``duration``)."""
+    action: ActionConfig = {"reorder": Reorder(), "delay": Delay(float(rng.choice(DELAYS_MS))), "drop": Drop(),
+                            "duplicate": Duplicate()}[fault]
+    start = round(rng.uniform(0.0, duration * 0.8 if latest is None else latest), 1)
+    if repeated is None:
+        repeated = rng.random() < 0.5
+    if repeated:
+        end = min(round(start + rng.uniform(0.5, 3.0), 1), duration)
+        selection = Selection(every=rng.choice([1, 2, 5]))
+        which = "every message" if selection.every == 1 else f"every {_ordinal(selection.every)} message"
+        what = f"{which} from {start} s to {end} s"
+    else:
+        end, selection = duration, Selection(limit=1)
+        what = f"first message after {start} s"
+    window = Window(start, max(end, round(start + 0.1, 1)), *_anchored(anchor))
+    policy = Policy("p1", action, channels=(channel,), window=window, selection=selection)
+    return TestCase(testcase_id, rng.getrandbits(32), f"{fault}: {channel}: {what}"
+                    + (f" (counted from the first {anchor} message)" if anchor else ""), (policy,))
+
+
+def _anchored(anchor: str | None) -> tuple[str | None, int | None]:
+    return (anchor, 1) if anchor is not None else (None, None)

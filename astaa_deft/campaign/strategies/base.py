@@ -11,6 +11,17 @@ from ..model import CaseOutcome
 
 
 @dataclass(frozen=True)
+class Timing:
+    """When a generated case's windows open: counted from the first message on ``anchor`` (None: from
+    the run's start), inside the first ``live`` seconds. The campaign measures both in its baseline runs:
+    the anchor is the channel whose first message came last (the whole stack is running then), ``live``
+    how long the baseline ran on from there."""
+
+    anchor: str | None
+    live: float
+
+
+@dataclass(frozen=True)
 class Proposal:
     testcase_xml: str
     parent: str | None = None  # the case it was derived from, if any

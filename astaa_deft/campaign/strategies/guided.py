@@ -6,8 +6,9 @@ the bound margin or STL robustness, 0 when it broke). A case joins the corpus
 when it brought some invariant closer than any case before; the next cases
 are, half of the time, a corpus entry changed in one way (another value for
 a field, another field, a shifted window, a repeated instead of a one-message
-action, or one more policy) and otherwise a fresh random case, so the search
-never stops exploring. Deterministic for a given seed and order of results.
+action, or one more policy) — the closer an entry came, the more often it is
+chosen — and otherwise the random strategy's next coverage case (its schedule
+walked without gaps), so the search never stops exploring. Deterministic for a given seed and order of results.
 """
 
 from __future__ import annotations
@@ -19,10 +20,10 @@ from dataclasses import replace
 from ...intercept import generate as gen
 from ...intercept.actions.set import Assignment, Set
 from ...intercept.dictionary import Dictionary
-from ...intercept.testcase import Selection, TestCase, Window, parse_testcase
+from ...intercept.testcase import Selection, TestCase, parse_testcase
 from ...spec.model import Spec
 from ..model import CaseOutcome
-from .base import Proposal
+from .base import Proposal, Timing
 from .random import RandomStrategy
 
 EXPLOIT_SHARE = 0.5
@@ -40,12 +41,38 @@ class GuidedStrategy:
         self.targets = {(t.channel.name, str(t.path)): t for ts in self.fresh.by_channel.values() for t in ts}
         self.best: dict[str, float] = {}  # invariant → closest approach so far
         self.corpus: list[tuple[str, str]] = []  # (case id, test case XML), newest last
+        self.closeness: dict[str, float] = {}  # corpus case → the smallest margin it reached
+        self._fresh_counts: list[int] = []  # [n - 1]: fresh (schedule) cases among 1..n
+
+    def calibrate(self, timing: Timing) -> None:
+        self.fresh.calibrate(timing)
+        self.duration = timing.live
+
+    def _exploits(self, number: int) -> bool:
+        """Whether case ``number`` derives from the corpus: a pure function of the seed and the number, so
+        the fresh cases walk the random strategy's coverage schedule without gaps, also after a resume."""
+        return random.Random(f"guided/{self.seed}/{number}").random() < EXPLOIT_SHARE
+
+    def _fresh_index(self, number: int) -> int:
+        while len(self._fresh_counts) < number:
+            k = len(self._fresh_counts) + 1
+            self._fresh_counts.append((self._fresh_counts[-1] if self._fresh_counts else 0)
+                                      + (not self._exploits(k)))
+        return self._fresh_counts[number - 1]
 
     def propose(self, number: int) -> Proposal:
         rng = random.Random(f"guided/{self.seed}/{number}")
-        if not self.corpus or rng.random() >= EXPLOIT_SHARE:
-            return self.fresh.propose(number)
-        parent_id, parent_xml = rng.choice(self.corpus)
+        rng.random()  # the draw _exploits made
+        if not self._exploits(number):
+            fresh = parse_testcase(self.fresh.propose(self._fresh_index(number)).testcase_xml.encode())
+            return Proposal(replace(fresh, id=f"tc-{number:06d}").to_xml().decode())
+        if not self.corpus:  # nothing to steer by yet: one of ASTAA's weighted draws
+            testcase = gen._testcase(f"tc-{number:06d}", rng, self.fresh.by_channel, self.duration,
+                                     self.fresh.timing.anchor, message_faults=True)
+            return Proposal(testcase.to_xml().decode())
+        # Steer: the closer an entry came to breaking an invariant, the more often it is the parent.
+        weights = [1.0 / (self.closeness.get(case, 1.0) + 0.05) for case, _ in self.corpus]
+        parent_id, parent_xml = rng.choices(self.corpus, weights=weights)[0]
         parent = parse_testcase(parent_xml.encode())
         operator = rng.choice(OPERATORS)
         child = self._mutate(parent, operator, rng, number)
@@ -61,6 +88,7 @@ class GuidedStrategy:
                 closer = True
         if closer:
             self.corpus.append((case_id, testcase_xml))
+            self.closeness[case_id] = min(m for m in outcome.margins.values() if math.isfinite(m))
             del self.corpus[:-CORPUS_LIMIT]
 
     # -- mutation operators ------------------------------------------------
@@ -89,14 +117,15 @@ class GuidedStrategy:
                     fields.append(Assignment(str(t.path), rng.choice(t.values).ref))
             policies[index] = replace(policy, action=Set(tuple(fields)))
         elif operator == "window":
-            start = max(0.0, round(policy.window.start + rng.uniform(-2.0, 2.0), 1))
+            start = min(max(0.0, round(policy.window.start + rng.uniform(-2.0, 2.0), 1)), self.duration)
             end = policy.window.end
             if end is not None:
                 end = max(round(start + 0.1, 1), end)
             policies[index] = replace(policy, window=replace(policy.window, start=start, end=end))
         else:  # action: one message → every message (or every n-th) in a short window
             start = policy.window.start
-            policies[index] = replace(policy, window=Window(start, round(start + rng.uniform(1.0, 5.0), 1)),
+            end = round(start + rng.uniform(1.0, 5.0), 1)
+            policies[index] = replace(policy, window=replace(policy.window, start=start, end=end),
                                       selection=rng.choice([Selection(), Selection(every=rng.choice([2, 5]))]))
         return TestCase(f"tc-{number:06d}", rng.getrandbits(32), f"guided ({operator}) from {parent.id}: "
                         + parent.description, tuple(policies))

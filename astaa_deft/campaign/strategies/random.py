@@ -1,7 +1,17 @@
-"""ASTAA's weighted random generation (:mod:`astaa_deft.intercept.generate`), one case at a time.
+"""Random generation, coverage first: every channel and field early, then ASTAA's weighted draws.
 
-Case ``n`` is exactly ``astaa-deft generate --seed S`` test case ``n``:
-the same seed gives the same cases locally and on a cluster, in any order.
+A campaign runs a few hundred cases, not ASTAA's thousands, so case ``n``
+comes from a schedule (:func:`astaa_deft.intercept.generate.coverage_round`):
+the first ``COVERAGE_ROUNDS`` rounds each visit every (channel, field) once
+with a value of the round's class (non-finite or empty first, then extreme
+magnitudes, …) and apply one message fault (reorder, delay, duplicate, drop)
+to every channel; after them, cases alternate between further rounds and
+ASTAA's weighted generation (one field, several fields, repeated; plus
+message faults). Windows fall inside the run's live part, counted from the
+first message of the channel that came last in the baseline runs (the
+campaign's :class:`Timing`), so a case mutates the running SUT, not its
+start-up. Deterministic: case ``n`` depends on the seed, ``n`` and the
+timing only — the same cases locally and on a cluster, in any order.
 """
 
 from __future__ import annotations
@@ -12,9 +22,10 @@ from ...intercept import generate as gen
 from ...intercept.dictionary import Dictionary
 from ...spec.model import Spec
 from ..model import CaseOutcome
-from .base import Proposal
+from .base import Proposal, Timing
 
 ID_WIDTH = 6
+COVERAGE_ROUNDS = 2  # pure coverage rounds before weighted draws are mixed in
 
 
 class RandomStrategy:
@@ -25,11 +36,36 @@ class RandomStrategy:
         self.by_channel = gen._targets_by_channel(spec, dictionary, False)
         gen.generate(spec, dictionary, 0, seed, duration)
         self.seed = seed
-        self.duration = duration
+        self.timing = Timing(None, duration)
+        self._rounds: dict[int, list[gen.Probe]] = {}
+
+    def calibrate(self, timing: Timing) -> None:
+        """Windows from now on count from ``timing.anchor`` and fall inside ``timing.live`` seconds."""
+        self.timing = timing
+
+    @property
+    def round_length(self) -> int:
+        return len(self._round(0))
+
+    def _round(self, number: int) -> list[gen.Probe]:
+        if number not in self._rounds:
+            self._rounds[number] = gen.coverage_round(self.by_channel, self.seed, number)
+        return self._rounds[number]
 
     def propose(self, number: int) -> Proposal:
-        testcase = gen._testcase(f"tc-{number:0{ID_WIDTH}d}", random.Random(f"{self.seed}/{number}"),
-                                 self.by_channel, self.duration)
+        testcase_id = f"tc-{number:0{ID_WIDTH}d}"
+        rng = random.Random(f"{self.seed}/{number}")
+        index = number - 1
+        covered = COVERAGE_ROUNDS * self.round_length
+        if index >= covered:  # after the pure rounds: every other case is a weighted draw
+            if (index - covered) % 2:
+                testcase = gen._testcase(testcase_id, rng, self.by_channel, self.timing.live, self.timing.anchor,
+                                         message_faults=True)
+                return Proposal(testcase.to_xml().decode())
+            index = covered + (index - covered) // 2
+        round_number, position = divmod(index, self.round_length)
+        probe = self._round(round_number)[position]
+        testcase = gen.probe_testcase(testcase_id, rng, probe, round_number, self.timing.live, self.timing.anchor)
         return Proposal(testcase.to_xml().decode())
 
     def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
