@@ -36,7 +36,7 @@ def test_the_seed_reaches_its_goal_in_its_lane(seed):
 
 @pytest.mark.parametrize("defects", [True, False])
 def test_a_cone_on_the_shoulder_is_a_non_optimal_decision_only_with_the_defect(seed, defects):
-    check_placement(CONE, ForbiddenRegion(seed.ego, clearance=SPEC.decictor["clearance"]))  # harmless
+    check_placement(CONE, ForbiddenRegion(seed.ego, clearance=SPEC.decictor.clearance))  # harmless
     mutated = observe_closed_loop("lane_follow", (CONE,), MAPPING, defects=defects)
     verdict = judge(seed, mutated, (CONE,), GRID)
     if defects:
@@ -50,7 +50,7 @@ def test_a_cone_on_the_shoulder_is_a_non_optimal_decision_only_with_the_defect(s
 def test_a_cone_on_the_seed_path_is_refused(seed):
     with pytest.raises(PlacementError, match="enters the forbidden region"):
         check_placement(Participant(902, "cone", 60.0, -1.5, 0.0, 0.5, 0.5),
-                        ForbiddenRegion(seed.ego, clearance=SPEC.decictor["clearance"]))
+                        ForbiddenRegion(seed.ego, clearance=SPEC.decictor.clearance))
 
 
 def test_a_turned_cone_or_a_barrier_on_the_shoulder_closes_the_lane_too(seed):
