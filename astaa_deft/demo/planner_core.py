@@ -273,15 +273,15 @@ class Planner:
               standing: Sequence[list[Box]] = ()) -> float:
         cost = 0.0
         stop_at = stop_lines[0] - STOP_LINE_BUFFER
+        standing_half_y = [_half_extents(boxes[0])[1] for boxes in standing]  # it stands still: one extent
         for k, p in enumerate(points):
             v = p["v"]
             # The speed to aim for: cruise, or less where a comfortable stop at the line demands it
             # (otherwise the best-looking plans crawl towards a red light instead of stopping at it).
             room = max(0.0, stop_at - p["x"] - 0.5 * vehicle.LENGTH)
             reference = min(cruise, math.sqrt(2.0 * COMFORT_DECEL * room))
-            for boxes in standing:  # defect 5: caution beside a standing object, the more the closer
+            for boxes, half_y in zip(standing, standing_half_y, strict=True):  # defect 5: caution, the closer the more
                 box = boxes[k]
-                _, half_y = _half_extents(box)
                 side_gap = abs(box.y - p["y"]) - 0.5 * vehicle.WIDTH - half_y
                 if side_gap < CAUTION_GAP and -0.5 * (vehicle.LENGTH + box.length) < box.x - p["x"] < CAUTION_AHEAD:
                     share = CAUTION_SPEED_SHARE + (1.0 - CAUTION_SPEED_SHARE) * max(side_gap, 0.0) / CAUTION_GAP
