@@ -19,6 +19,7 @@ from .fields import FieldPathError, check_brittle_pattern
 from .monitor.invariants import build_invariants
 from .yamlsource import Node, Source, describe_value
 from .run_section import build_run_section
+from .spec.decictor_section import read_decictor_section
 from .spec.ros2_section import read_ros2_section, resolve_cdr_channel
 from .spec.model import (
     SCALAR_KINDS,
@@ -86,6 +87,7 @@ class _SpecBuilder:
         planner = build_planner(self.src, v.get("planner"), types, channels, modules)
         replay = build_replay_section(self.src, v.get("replay"), channels, modules)
         run = build_run_section(self.src, v.get("run"), types, channels, [m.name for m in modules])
+        decictor = read_decictor_section(self.src, v.get("decictor"), tuple(c.name for c in channels), self.base_dir)
         self.src.raise_if_problems()
         return Spec(
             name=name,
@@ -100,7 +102,7 @@ class _SpecBuilder:
             planner=planner,
             replay=replay,
             run=run,
-            decictor=v["decictor"].plain() if "decictor" in v else None,
+            decictor=decictor,
             source_text=self.src.text,
             ros2=self.ros2,
         )

@@ -13,7 +13,9 @@
       clearance: 1.5                      # m around the seed path no participant may enter (default 0.5)
       dt: 2.0                             # s between a participant's waypoints (the paper's time step)
 
-Every problem is one ``InputError`` naming the spec and the key.
+The spec loader types the section and checks its shape, with lines
+(``astaa_deft.spec.decictor_section``); this asks for the parts a search
+needs, each missing one an ``InputError`` naming it.
 """
 
 from __future__ import annotations
@@ -21,13 +23,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import yaml
 
 from ..errors import InputError, Problem
 from ..fields import FieldPath, get
 from ..intercept.actions.participant import ChannelMapping, MappingError, read_mappings
+from ..spec.decictor_section import EgoSection, FlagSection, LanesSection
 from ..spec.model import Spec
 from .feasible import DEFAULT_CLEARANCE, DT
 from .oracle import Lane, straight_lanes
@@ -36,38 +38,14 @@ DOCS = "see docs/decictor.md"
 
 
 @dataclass(frozen=True)
-class EgoFields:
-    channel: str
-    t: str = "header.stamp"
-    x: str = "x"
-    y: str = "y"
-    heading: str = "heading"
-    speed: str = "speed"
-    acceleration: str = "acceleration"
-    length: float = 4.6
-    width: float = 1.9
-
-
-@dataclass(frozen=True)
-class Flag:
-    channel: str
-    field: str
-
-
-@dataclass(frozen=True)
-class LanesSource:
-    channel: str | None = None
-    straight: dict[str, str] | None = None  # count, width, length → field names
-    file: Path | None = None
-
-
-@dataclass(frozen=True)
 class DecictorConfig:
+    """What a Decictor search needs from the spec, every part present."""
+
     participants: ChannelMapping  # the channel participants are injected on
-    lanes: LanesSource
-    ego: EgoFields
-    goal: Flag
-    collision: Flag | None
+    lanes: LanesSection
+    ego: EgoSection
+    goal: FlagSection
+    collision: FlagSection | None
     clearance: float = DEFAULT_CLEARANCE
     dt: float = DT
 
@@ -77,81 +55,32 @@ def _fail(spec: Spec, message: str, fix: str = DOCS) -> InputError:
 
 
 def read_config(spec: Spec) -> DecictorConfig:
+    """The section's parts a search needs (the loader checked their shape); one clear error per missing part."""
     section = spec.decictor
-    if not isinstance(section, dict):
+    if section is None:
         raise _fail(spec, "the spec has no 'decictor:' section",
                     f"add one with participants, lanes, ego, goal ({DOCS})")
     try:
         mappings = read_mappings(spec)
     except MappingError as exc:
         raise _fail(spec, str(exc), exc.fix) from None
-    lanes = section.get("lanes")
-    if not lanes:
+    if section.lanes is None:
         raise _fail(spec, "decictor: no 'lanes': the consistency check needs the ego's lanes",
                     "name them: lanes: {channel: …, straight: {count, width, length}} or lanes: {file: lanes.yaml}")
-    source = _lanes(spec, lanes)
-    ego = section.get("ego")
-    if not isinstance(ego, dict) or "channel" not in ego:
+    if section.lanes.file is not None:
+        if not section.lanes.file.is_file():
+            raise _fail(spec, f"decictor.lanes.file: no such file {section.lanes.file}",
+                        "give a path relative to the spec")
+        read_lanes_file(section.lanes.file)  # fails early on a bad file
+    if section.ego is None:
         raise _fail(spec, "decictor: no 'ego: {channel: …}': where the ego's pose is published")
-    _channel(spec, ego["channel"], "decictor.ego.channel")
-    unknown = sorted(set(ego) - set(EgoFields.__dataclass_fields__))
-    if unknown:
-        raise _fail(spec, f"decictor.ego: unknown key '{unknown[0]}'",
-                    "keys: " + ", ".join(EgoFields.__dataclass_fields__))
-    sizes = {k: v for k, v in ego.items() if k in ("length", "width")}
-    for key, value in sizes.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 100:
-            raise _fail(spec, f"decictor.ego.{key}: {value!r} is not a size in metres", "e.g. length: 4.6")
-    names = {k: str(v) for k, v in ego.items() if k not in ("length", "width")}
-    ego_fields = EgoFields(**names, **sizes)  # type: ignore[arg-type]
-    goal = _flag(spec, section.get("goal"), "goal", required=True)
-    assert goal is not None
-    collision = _flag(spec, section.get("collision"), "collision", required=False)
-    clearance = section.get("clearance", DEFAULT_CLEARANCE)
-    dt = section.get("dt", DT)
-    for name, value in (("clearance", clearance), ("dt", dt)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 <= value < 1000) \
-                or not math.isfinite(value):
-            raise _fail(spec, f"decictor.{name}: {value!r} is not a number of metres/seconds", "e.g. 1.5")
-    return DecictorConfig(next(iter(mappings.values())), source, ego_fields, goal, collision, float(clearance),
-                          float(dt))
-
-
-def _channel(spec: Spec, name: Any, where: str) -> str:
-    if name not in {c.name for c in spec.channels}:
-        raise _fail(spec, f"{where}: unknown channel {name!r}", "channels: " + ", ".join(c.name for c in spec.channels))
-    return str(name)
-
-
-def _flag(spec: Spec, node: Any, key: str, required: bool) -> Flag | None:
-    if node is None and not required:
-        return None
-    if not isinstance(node, dict) or "channel" not in node or "field" not in node:
-        raise _fail(spec, f"decictor: no '{key}: {{channel: …, field: …}}'",
-                    f"name the boolean field that says {'the goal was reached' if key == 'goal' else 'it collided'}")
-    return Flag(_channel(spec, node["channel"], f"decictor.{key}.channel"), str(node["field"]))
-
-
-def _lanes(spec: Spec, node: Any) -> LanesSource:
-    if not isinstance(node, dict):
-        raise _fail(spec, "decictor.lanes must be a mapping: {channel: …, straight: …} or {file: …}")
-    if "file" in node:
-        base = spec.path.parent if spec.path else Path.cwd()
-        path = (base / str(node["file"])).resolve()
-        if not path.is_file():
-            raise _fail(spec, f"decictor.lanes.file: no such file {path}", "give a path relative to the spec")
-        read_lanes_file(path)  # fails early on a bad file
-        return LanesSource(file=path)
-    if "channel" not in node or not isinstance(node.get("straight"), dict):
-        raise _fail(spec, "decictor.lanes: needs 'file', or 'channel' with 'straight: {count, width, length}'")
-    _channel(spec, node["channel"], "decictor.lanes.channel")
-    straight = node["straight"]
-    missing = [k for k in ("count", "width", "length") if k not in straight]
-    if missing:
-        raise _fail(spec, f"decictor.lanes.straight: missing '{missing[0]}'",
-                    "name the fields holding the lane count, lane width and road length")
-    return LanesSource(channel=str(node["channel"]), straight={k: str(straight[k]) for k in ("count", "width",
-                                                                                                "length")})
+    if section.goal is None:
+        raise _fail(spec, "decictor: no 'goal: {channel: …, field: …}'",
+                    "name the boolean field that says the goal was reached")
+    clearance = DEFAULT_CLEARANCE if section.clearance is None else section.clearance
+    dt = DT if section.dt is None else section.dt
+    return DecictorConfig(next(iter(mappings.values())), section.lanes, section.ego, section.goal,
+                          section.collision, clearance, dt)
 
 
 def read_lanes_file(path: Path) -> tuple[Lane, ...]:
@@ -167,7 +96,7 @@ def read_lanes_file(path: Path) -> tuple[Lane, ...]:
     return lanes
 
 
-def lanes_from_message(source: LanesSource, message: dict) -> tuple[Lane, ...]:
+def lanes_from_message(source: LanesSection, message: dict) -> tuple[Lane, ...]:
     """Straight lanes from the lanes channel's message (count, width, length fields)."""
     assert source.straight is not None
     values = {}

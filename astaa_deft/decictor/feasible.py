@@ -223,8 +223,10 @@ def perturb(rng: random.Random, participant: Participant, region: ForbiddenRegio
         t0 = max(region.seed.start, participant.t + dt)
         path = tuple(Waypoint(round(t0 + (w.t - participant.t) * stretch, 3), round(w.x + dx, 2),
                               round(w.y + dy, 2)) for w in participant.path)
+        heading = participant.heading + rng.gauss(0.0, 0.3)  # how it stands (a static one) or first faces
         candidate = replace(participant, x=round(participant.x + dx, 2), y=round(participant.y + dy, 2),
-                            t=round(t0, 3), path=path)
+                            heading=round(math.atan2(math.sin(heading), math.cos(heading)), 3), t=round(t0, 3),
+                            path=path)
         if area.x_min <= candidate.x <= area.x_max and area.y_min <= candidate.y <= area.y_max \
                 and is_feasible(candidate, region):
             return candidate

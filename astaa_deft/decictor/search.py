@@ -98,8 +98,9 @@ class Search:
 
     def _mutate(self, rng: random.Random, parent: Scene) -> Scene | None:
         current = list(parent.participants)
-        options = ["add"] if not current else [op for op in OPERATORS
-                                                if op != "add" or len(current) < MAX_PARTICIPANTS]
+        # Removing the only added participant would give back the seed itself: a run that can teach nothing.
+        options = [op for op in OPERATORS if (op != "add" or len(current) < MAX_PARTICIPANTS)
+                   and (op != "remove" or len(current) >= 2) and (op not in ("change", "move") or current)]
         operator = rng.choice(options)
         if operator in ("remove", "change"):
             current.pop(rng.randrange(len(current)))

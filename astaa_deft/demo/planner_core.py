@@ -55,12 +55,15 @@ W_CONSISTENCY = 0.2  # per (m/s)² s of speed change against the previous plan
 LANE_CHANGE_COST = 10.0
 LANE_SWITCH_COST = 10.0  # changing the lane decision: the hysteresis
 OFF_GOAL_LANE_COST = 25.0  # per lane away from the goal lane
-# SEEDED DEFECT 5 (defects on, a decision defect): a cone standing on the shoulder (off the
-# lanes) is taken for wider than it is — STANDING_WIDEN m more on each side in the hard check, so
-# a cone near the road edge closes the lane: a needless lane change — and the ego slows to
-# CAUTION_SPEED_SHARE of cruise while such a cone is within CAUTION_GAP m beside it.
+# SEEDED DEFECT 5 (defects on, a decision defect): traffic furniture (a cone or a barrier) standing
+# on the shoulder, off the lanes, is taken for wider than it is: STANDING_WIDEN m more on each side
+# across the road, whatever way it is turned, in the hard check — so one within ~1 m of the lane edge
+# closes the lane: a needless lane change. While passing such an object the ego also slows, the
+# more the closer it stands (down to CAUTION_SPEED_SHARE of cruise beside it, none CAUTION_GAP m
+# away): harmless in itself, it is the gradient a guided search can climb towards the lane change.
+STANDING_KINDS = ("cone", "barrier")
 STANDING_WIDEN = 2.2  # m
-CAUTION_GAP, CAUTION_AHEAD, CAUTION_SPEED_SHARE = 3.5, 15.0, 0.6
+CAUTION_GAP, CAUTION_AHEAD, CAUTION_SPEED_SHARE = 6.0, 40.0, 0.5
 
 
 class Start(NamedTuple):
@@ -120,7 +123,7 @@ class Planner:
             if boxes is None:
                 continue
             obstacles.append(boxes)
-            if self.defects and obstacle.kind == "cone" and _standing(boxes) and _off_road(boxes[0], road):
+            if self.defects and obstacle.kind in STANDING_KINDS and _standing(boxes) and _off_road(boxes[0], road):
                 standing.append(boxes)
         hard = [_widened(boxes) if any(boxes is b for b in standing) else boxes for boxes in obstacles]
         stop_lines = self._stop_lines(lights, road, start)
@@ -270,17 +273,19 @@ class Planner:
               standing: Sequence[list[Box]] = ()) -> float:
         cost = 0.0
         stop_at = stop_lines[0] - STOP_LINE_BUFFER
+        standing_half_y = [_half_extents(boxes[0])[1] for boxes in standing]  # it stands still: one extent
         for k, p in enumerate(points):
             v = p["v"]
             # The speed to aim for: cruise, or less where a comfortable stop at the line demands it
             # (otherwise the best-looking plans crawl towards a red light instead of stopping at it).
             room = max(0.0, stop_at - p["x"] - 0.5 * vehicle.LENGTH)
             reference = min(cruise, math.sqrt(2.0 * COMFORT_DECEL * room))
-            for boxes in standing:  # defect 5: caution beside a standing obstacle
+            for boxes, half_y in zip(standing, standing_half_y, strict=True):  # defect 5: caution, the closer the more
                 box = boxes[k]
-                if (abs(box.y - p["y"]) - 0.5 * (vehicle.WIDTH + box.width) < CAUTION_GAP
-                        and -0.5 * (vehicle.LENGTH + box.length) < box.x - p["x"] < CAUTION_AHEAD):
-                    reference = min(reference, CAUTION_SPEED_SHARE * cruise)
+                side_gap = abs(box.y - p["y"]) - 0.5 * vehicle.WIDTH - half_y
+                if side_gap < CAUTION_GAP and -0.5 * (vehicle.LENGTH + box.length) < box.x - p["x"] < CAUTION_AHEAD:
+                    share = CAUTION_SPEED_SHARE + (1.0 - CAUTION_SPEED_SHARE) * max(side_gap, 0.0) / CAUTION_GAP
+                    reference = min(reference, share * cruise)
             cost += (W_SPEED * (v - reference) ** 2 + W_ACCEL * p["a"] ** 2) * DT
             if previous_v is not None:
                 cost += W_CONSISTENCY * (v - previous_v[k]) ** 2 * DT
@@ -335,8 +340,19 @@ def _off_road(box: Box, road: Road) -> bool:
     return box.y < -0.5 * road.lane_width or box.y > road.center(road.lanes - 1) + 0.5 * road.lane_width
 
 
+def _half_extents(box: Box) -> tuple[float, float]:
+    """Half its extent along the road (x) and across it (y), as turned."""
+    c, s = abs(math.cos(box.heading)), abs(math.sin(box.heading))
+    return 0.5 * (box.length * c + box.width * s), 0.5 * (box.length * s + box.width * c)
+
+
 def _widened(boxes: list[Box]) -> list[Box]:
-    return [Box(b.x, b.y, b.heading, b.length, b.width + 2.0 * STANDING_WIDEN) for b in boxes]
+    """Defect 5: the footprint's extent across the road grown by STANDING_WIDEN on each side, whatever its heading."""
+    out = []
+    for b in boxes:
+        half_x, half_y = _half_extents(b)
+        out.append(Box(b.x, b.y, 0.0, 2.0 * half_x, 2.0 * (half_y + STANDING_WIDEN)))
+    return out
 
 
 def _points(now: float, start: Start, path: LateralPath, profile: SpeedProfile) -> list[dict]:

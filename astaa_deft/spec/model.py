@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 from collections.abc import Mapping
 
 if TYPE_CHECKING:
+    from .decictor_section import DecictorSection  # it imports fields, which imports this module
     from .planner import PlannerSpec
     from .replay_section import ReplayModule
     from ..run_section import RunSection
@@ -132,7 +133,7 @@ class Spec:
     planner: PlannerSpec | None = None
     replay: tuple[ReplayModule, ...] = ()  # the 'replay:' section's modules that can run alone
     run: RunSection | None = None  # how a run ends (None: no 'run:' section)
-    decictor: Any = None  # the raw 'decictor:' section; astaa_deft.decictor.spec types and checks it
+    decictor: DecictorSection | None = None  # the 'decictor:' section (None: the spec has none)
     source_text: str = ""
     ros2: Ros2Section = Ros2Section()
 

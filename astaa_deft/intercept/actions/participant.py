@@ -44,12 +44,10 @@ from .base import ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pendin
 if TYPE_CHECKING:
     from lxml import etree
 
+    from ...spec.decictor_section import ParticipantMappingSection
     from ...spec.model import Channel, Spec
     from ..testcase import ActionChecker, Policy
 
-ATTRIBUTES = ("id", "kind", "x", "y", "heading", "vx", "vy", "speed", "length", "width")
-POINT_ATTRIBUTES = ("t", "x", "y", "heading")
-MAX_TRAJECTORY_POINTS = 1000
 MAPPING_DOCS = "docs/decictor.md"
 
 
@@ -222,70 +220,39 @@ class ChannelMapping:
 
 
 def read_mappings(spec: Spec) -> dict[str, ChannelMapping]:
-    """The spec's ``decictor.participants``, checked against the channels' types (MappingError)."""
+    """The spec's ``decictor.participants`` (shape checked by the loader), checked against the channels' types."""
     section = spec.decictor
-    if not isinstance(section, dict) or not section.get("participants"):
+    if section is None or not section.participants:
         raise MappingError("the spec has no 'decictor: participants:' section saying how a participant maps onto "
                            "a channel's fields", f"add one (example in {MAPPING_DOCS})")
-    items = section["participants"]
-    if not isinstance(items, list):
-        raise MappingError("decictor.participants must be a list of channel mappings")
     out: dict[str, ChannelMapping] = {}
-    for k, item in enumerate(items):
-        where = f"decictor.participants[{k}]"
-        mapping = _read_mapping(spec, item, where)
+    for k, item in enumerate(section.participants):
+        mapping = _read_mapping(spec, item, f"decictor.participants[{k}]")
         out[mapping.channel] = mapping
     return out
 
 
-def _read_mapping(spec: Spec, item: Any, where: str) -> ChannelMapping:
-    if not isinstance(item, dict):
-        raise MappingError(f"{where} must be a mapping with channel, array, fields")
-    unknown = sorted(set(item) - {"channel", "array", "stamp", "fields", "trajectory"})
-    if unknown:
-        raise MappingError(f"{where}: unknown key '{unknown[0]}'", "keys: channel, array, stamp, fields, trajectory")
-    for key in ("channel", "array", "fields"):
-        if key not in item:
-            raise MappingError(f"{where}: missing '{key}'")
-    name = item["channel"]
-    channel = next((c for c in spec.channels if c.name == name), None)
-    if channel is None:
-        raise MappingError(f"{where}: unknown channel '{name}'",
-                           "channels: " + ", ".join(c.name for c in spec.channels))
-    array = _path(item["array"], f"{where}.array")
+def _read_mapping(spec: Spec, item: ParticipantMappingSection, where: str) -> ChannelMapping:
+    channel = spec.channel(item.channel)
+    array = _path(item.array, f"{where}.array")
     element = _field_type(spec, channel.type, FieldPath.parse(f"{array}[*]"), f"{where}.array")
     if element.kind != "struct":
-        raise MappingError(f"{where}.array: '{array}' of channel '{name}' is not an array of structures")
-    stamp = _path(item["stamp"], f"{where}.stamp") if item.get("stamp") else None
+        raise MappingError(f"{where}.array: '{array}' of channel '{item.channel}' is not an array of structures")
+    stamp = _path(item.stamp, f"{where}.stamp") if item.stamp else None
     if stamp is not None:
         _field_type(spec, channel.type, stamp, f"{where}.stamp")
-    fields = _attribute_map(item["fields"], ATTRIBUTES, f"{where}.fields")
+    fields = dict(item.fields)
     for attr, field_name in fields.items():
         _field_type(spec, channel.type, FieldPath.parse(f"{array}[*].{field_name}"), f"{where}.fields.{attr}")
     trajectory = None
-    if item.get("trajectory") is not None:
-        t = item["trajectory"]
-        if not isinstance(t, dict) or "array" not in t:
-            raise MappingError(f"{where}.trajectory: needs array (and t, x, y[, heading], horizon, step)")
-        points = {k: v for k, v in t.items() if k in POINT_ATTRIBUTES}
-        extra = sorted(set(t) - set(POINT_ATTRIBUTES) - {"array", "horizon", "step"})
-        if extra:
-            raise MappingError(f"{where}.trajectory: unknown key '{extra[0]}'",
-                               "keys: array, t, x, y, heading, horizon, step")
-        point_fields = _attribute_map(points, POINT_ATTRIBUTES, f"{where}.trajectory")
-        for attr in ("t", "x", "y"):
-            if attr not in point_fields:
-                raise MappingError(f"{where}.trajectory: missing '{attr}'")
+    if item.trajectory is not None:
+        t = item.trajectory
+        point_fields = dict(t.points)
         for attr, field_name in point_fields.items():
-            _field_type(spec, channel.type, FieldPath.parse(f"{array}[*].{t['array']}[*].{field_name}"),
+            _field_type(spec, channel.type, FieldPath.parse(f"{array}[*].{t.array}[*].{field_name}"),
                         f"{where}.trajectory.{attr}")
-        horizon, step = t.get("horizon", 5.0), t.get("step", 0.1)
-        if not (isinstance(horizon, (int, float)) and isinstance(step, (int, float)) and 0 < step <= horizon
-                and horizon / step <= MAX_TRAJECTORY_POINTS):
-            raise MappingError(f"{where}.trajectory: horizon and step must be numbers with 0 < step <= horizon "
-                               f"and at most {MAX_TRAJECTORY_POINTS} points", "e.g. horizon: 5.0, step: 0.1")
-        trajectory = TrajectoryMapping(str(t["array"]), point_fields, float(horizon), float(step))
-    return ChannelMapping(name, array, stamp, fields, trajectory)
+        trajectory = TrajectoryMapping(t.array, point_fields, t.horizon, t.step)
+    return ChannelMapping(item.channel, array, stamp, fields, trajectory)
 
 
 def _path(text: Any, where: str) -> FieldPath:
@@ -301,15 +268,6 @@ def _field_type(spec: Spec, type_name: str, path: FieldPath, where: str):
     except FieldPathError as exc:
         raise MappingError(f"{where}: {type_name} has no field '{path}': {exc.reason}",
                            "map onto fields the channel's type declares") from None
-
-
-def _attribute_map(value: Any, allowed: tuple[str, ...], where: str) -> dict[str, str]:
-    if not isinstance(value, dict) or not value:
-        raise MappingError(f"{where} must map attributes ({', '.join(allowed)}) to field names")
-    for key in value:
-        if key not in allowed:
-            raise MappingError(f"{where}: '{key}' is not a participant attribute", "use: " + ", ".join(allowed))
-    return {str(k): str(v) for k, v in value.items()}
 
 
 # ---------------------------------------------------------------- rendering

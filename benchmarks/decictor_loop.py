@@ -1,5 +1,8 @@
 """Decictor against the demo stack in one process (``demo.closed_loop``): no bus, no real time.
 
+Lives beside the benchmarks (and is imported by the Decictor tests) because it
+joins the tool to the demo SUT: the tool itself never imports the demo.
+
 The participants are rendered into the planner's prediction messages by the
 same code the ``participant`` action runs in the proxy (``render`` with the
 spec's mapping), so a scenario here is the one a live campaign would run,
@@ -9,10 +12,10 @@ scenarios; the live path is ``astaa-deft fuzz --strategy decictor``.
 
 from __future__ import annotations
 
-from ..demo.closed_loop import run_closed_loop
-from ..intercept.actions.participant import ChannelMapping, Participant, render
-from .oracle import RunObservation
-from .paths import EgoPath, EgoState
+from astaa_deft.decictor.oracle import RunObservation
+from astaa_deft.decictor.paths import EgoPath, EgoState
+from astaa_deft.demo.closed_loop import run_closed_loop
+from astaa_deft.intercept.actions.participant import ChannelMapping, Participant, render
 
 
 def observe_closed_loop(scenario: str, participants: tuple[Participant, ...], mapping: ChannelMapping,
