@@ -331,17 +331,27 @@ def _write_mutation(writer: LogWriter, cid: int, original_cid: int, mutations_ci
     return delivered
 
 
+_event_types: tuple | None = None  # (FieldChange, MutationEvent, built) once the first event needs them
+
+
 def event_json(wire: topology.WireEvent) -> dict:
     """A mutation event's JSON form (``MutationEvent.to_json``), from what the proxy sent."""
     if wire.form == topology.EVENT_JSON:
         return dict(wire.value)
-    # Here, not at the top: the interception's modules take a third of a second to load, and
-    # a recorder must be ready quickly (every live minimisation test starts one).
-    from ..intercept.actions.base import FieldChange, MutationEvent
+    global _event_types
+    if _event_types is None:
+        # Here, not at the top: the interception's modules take a third of a second to load, and
+        # a recorder must be ready quickly (every live minimisation test starts one). Kept once
+        # loaded: an import statement per event cost most of this function (measured).
+        from ..intercept.actions import base
 
+        _event_types = (base.FieldChange, base.MutationEvent, base.built)
+    FieldChange, MutationEvent, built = _event_types  # noqa: N806
     parts = topology.wire_event_parts(wire)
-    changes = tuple(FieldChange(path, old, new) for path, old, new in parts.pop(topology.EVENT_FIELDS))
-    return MutationEvent(**parts, fields=changes).to_json()
+    # built: the frozen dataclasses without their __init__ (per mutated message; the same instances).
+    changes = tuple(built(FieldChange, path=path, old=old, new=new)
+                    for path, old, new in parts.pop(topology.EVENT_FIELDS))
+    return built(MutationEvent, **parts, fields=changes).to_json()
 
 
 if __name__ == "__main__":
