@@ -83,6 +83,10 @@ def main(argv: list[str] | None = None) -> int:
         writer.attachment(name, Path(path).read_bytes(), media)
     writer.metadata(layout.RUN_METADATA, {**json.loads(args.meta), "mode": args.mode})
 
+    # Callbacks (one Python thread each, Zenoh's default) queue what they receive for one writing
+    # thread. Both alternatives measured worse at 200 B: writing inside the callbacks (no queue)
+    # 21-22 µs/msg of recorder + modules CPU against 17-18, and callbacks on Zenoh's own receiving
+    # thread (indirect=False) 35.
     q: queue.SimpleQueue = queue.SimpleQueue()
     counts: dict[str, int] = {}
 
