@@ -21,14 +21,22 @@ from a shared 2-core machine under load, so compare within a line):
   Zenoh's own threads another 5-15 µs (the receiving thread is woken for
   every slot the forwarder frees in its full FIFO; the sending thread for
   puts that find it parked);
-* now (tool 28-30 µs): the engine takes a shortcut for a lone ``set``
-  policy on JSON (``SetRuntime.fast_path``: orjson, only where its bytes are
-  the codec's; 38 -> 8 µs in the engine benchmark at the same moment), the
-  recorder's rows are one ``marshal`` call per batch (``pack_deliveries``),
-  and the single delivery skips ``_dispatch``. What remains is about two
-  thirds Python (Zenoh sample objects and puts as in passthrough, plus the
-  engine, the row, the lock) and one third Zenoh's receiving and sending
-  threads being woken per message or per burst.
+* now (tool 31-33 µs against 5 for passthrough, the same moment): the
+  engine takes a shortcut for a lone ``set`` policy on JSON
+  (``SetRuntime.fast_path``: orjson, only where its bytes are the codec's;
+  38 -> 8 µs in the engine benchmark at the same moment), the recorder's
+  rows are one ``marshal`` call per batch (``pack_deliveries``), and the
+  single delivery skips ``_dispatch``. By thread kind (bench_proxy prints
+  it): Python 22.6 µs (passthrough 3.4), Zenoh's receiving thread 3.4 (1.0)
+  and sending thread 5.0 (0.2). Python's share is the forwarder's sample
+  objects, the engine (~8), the row and the lock, and the puts, each of
+  which releases the GIL; Zenoh's is being woken per message (the full FIFO
+  frees one slot at a time) or per burst of puts, where passthrough keeps
+  both threads busy without sleeping. Tried and measured worse: flushing
+  the outbox after every message (the sending thread woken per put: 12.8
+  µs/msg), and, in the recorder, Python callbacks run on Zenoh's own
+  receiving thread (indirect=False: 35 µs/msg against 18, likely a Python
+  thread state per callback), which is why the forwarders stay on FIFOs.
 
 Earlier (wave 1): the event travels as ``marshal`` data that the recorder
 turns into JSON in its own process, and the run's typed record is built only
