@@ -38,18 +38,20 @@ def test_reasons_point_at_what_the_traffic_shows():
 
 def test_live_run_names_the_idle_policy_on_the_terminal_and_in_the_log(tmp_path):
     # The talker publishes for half a second after a 0.5 s start delay, then idles: policy 'late' waits for
-    # a window after that, 'early' closes before the first message, 'hits' touches messages.
+    # a window after its last message (anchored on it: no guess at start-up time on a loaded machine),
+    # 'early' closes before the first message, 'hits' touches messages.
     policy = tmp_path / "tc.xml"
     policy.write_text("""<?xml version="1.0" encoding="UTF-8"?>
 <testcase id="windows" seed="1">
   <description>two windows that see nothing</description>
   <policy id="early"><channel>data</channel><window from="0" to="0.05"/><drop/></policy>
-  <policy id="late"><channel>data</channel><window from="2.5" to="3"/><drop/></policy>
+  <policy id="late"><channel>data</channel>
+    <window from="0.5" to="1"><after channel="data" message="100"/></window><drop/></policy>
   <policy id="hits"><channel>data</channel><select every="50"/><drop/></policy>
 </testcase>
 """)
     log = tmp_path / "run.mcap"
-    res = run_proxy(ECHO_SPEC, "--policy", str(policy), "--record", str(log), "--duration", "3.5",
+    res = run_proxy(ECHO_SPEC, "--policy", str(policy), "--record", str(log), "--duration", "6",
                     "--run-dir", str(tmp_path / "run"), "--param", "count=100", "--param", "rate=200")
     assert res.returncode in (0, 1), res.stdout + res.stderr
     out = res.stdout
@@ -63,7 +65,10 @@ def test_live_run_names_the_idle_policy_on_the_terminal_and_in_the_log(tmp_path)
     assert set(by_id) == {"early", "late", "hits"}
     assert by_id["hits"].touched == 2 and by_id["hits"].untouched_reason is None
     assert by_id["early"].touched == 0 and "after the window had closed" in (by_id["early"].untouched_reason or "")
-    assert by_id["late"].window_start_s == 2.5 and by_id["late"].window_end_s == 3.0
+    late = by_id["late"]
+    assert late.anchor == "message 100 on channel 'data'" and late.touched == 0
+    assert late.window_start_s is not None and late.window_end_s is not None
+    assert abs(late.window_end_s - late.window_start_s - 0.5) < 1e-9
     info = format_info(read_log(log))
     assert "policies: early 0 touched, late 0 touched, hits 2 touched" in info
     assert "policy 'late' (drop) touched no message" in info

@@ -66,6 +66,18 @@ def test_a_first_output_may_answer_a_trigger_older_than_the_newest():
     assert {"obstacles": 0, "ego": 0} in [dict(c.choice) for c in found]
 
 
+def test_a_busy_planner_is_expected_on_the_trigger_newest_when_it_finished_its_previous_cycle():
+    # Before: after the newest trigger came the oldest unused one, then the rest in order; a planner busier
+    # than its 10 Hz trigger (an RRT* search) starts its next cycle as it publishes, on the newest trigger
+    # then — up to 16 wrong frames, each a search of its own, were tried first.
+    streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS, 300 * MS, 400 * MS]),
+               "ego": Stream("ego", [k * 50 * MS for k in range(9)])}
+    found = candidates(streams, "obstacles", 420 * MS, previous={"obstacles": 0, "ego": 0}, lookback_ns=0,
+                       previous_output_ns=250 * MS)
+    triggers = list(dict.fromkeys(c.choice["obstacles"] for c in found))
+    assert triggers == [4, 2, 1, 3]
+
+
 def test_the_planner_state_cannot_be_deep_copied():
     # What fork-exact replay exists for: native OMPL objects in the planner's state.
     sys.path.insert(0, str(STACK))

@@ -233,7 +233,8 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     skew = int(cfg.skew_ms * 1e6)
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
-        options = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback)
+        options = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
+                             outputs[out_index - 1].log_time + skew if out_index else None)
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
         try:

@@ -6,7 +6,9 @@ receive times, ns). For an output logged at t_P:
 - the trigger is a trigger-channel message at or before t_P and after the
   previous frame's trigger: the newest one first (a planner that keeps up),
   then the oldest not yet used (a planner that lags behind its triggers
-  answers them in order), then the ones between; for the first output
+  answers them in order), then the ones between — the newest at the
+  previous output's time right after the newest (a planner busier than its
+  trigger period starts a cycle as it ends one); for the first output
   (no previous frame) the oldest is among the `FIRST_OUTPUT_TRIGGERS`
   before it — a first cycle is often the slowest (a planner building its
   state), answering a trigger several periods old;
@@ -71,15 +73,23 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
 
 
 def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
-               lookback_ns: int) -> list[Candidate]:
-    """Distinct candidate frames for an output at t_P, most likely first."""
+               lookback_ns: int, previous_output_ns: int | None = None) -> list[Candidate]:
+    """Distinct candidate frames for an output at t_P, most likely first.
+
+    ``previous_output_ns``: when the previous output was logged. A planner
+    busier than its trigger period starts its next cycle as it finishes one,
+    on the newest trigger then: that trigger comes right after the newest.
+    """
     trig = streams[trigger]
     newest = newest_at_or_before(trig.times, t_p)
     if newest < 0:
         return []
     # The first output (no previous frame) may answer a trigger some periods before the newest.
     oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
-    order_of_triggers = [newest] + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))
+    busy = newest_at_or_before(trig.times, previous_output_ns) if previous_output_ns is not None else -1
+    order_of_triggers = list(dict.fromkeys(
+        [newest] + ([busy] if oldest <= busy < newest else []) + ([oldest] if oldest < newest else [])
+        + list(range(oldest + 1, newest))))
     out: list[Candidate] = []
     seen: set[tuple] = set()
     for t_index in order_of_triggers:
