@@ -32,7 +32,7 @@ def _bucket(name: str, module: str) -> Bucket:
                   0, 0, None, 0.0, 1)
 
 
-def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path: Path):
+def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path: Path, monkeypatch):
     spec = load_spec(demo_spec_path())
     dictionary = load_dictionary()
     testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
@@ -40,16 +40,19 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
                        dictionary)
     assert outcome.status == "done" and outcome.mutations > 0, outcome
     assert any(f.invariant == "planned_speed" for f in outcome.findings), outcome  # the overspeed plan was seen
-    out = tmp_path / "campaign"
+    monkeypatch.chdir(tmp_path)
+    out = Path("campaign")  # relative, as `fuzz -o campaign/` gives it
+    said: list[str] = []
     journal = Journal(out)
     try:
-        campaign = Campaign(CampaignConfig(demo_spec_path(), out), journal, say=lambda text: None)
+        campaign = Campaign(CampaignConfig(demo_spec_path(), out), journal, say=said.append)
         assert campaign._planner_caused(_bucket("B001", "planning"))
         assert not campaign._planner_caused(_bucket("B002", "control"))
         tests = campaign._planner_tests(_bucket("B001", "planning"), Path(outcome.log_path))
     finally:
         journal.close()
     assert tests == out / "tests" / f"B001{REPLAY_TESTS_SUFFIX}" and (tests / "deft.json").is_file()
+    assert any("it fails as it should (oracle: planned_speed)" in line for line in said), said
     Path(outcome.log_path).unlink()  # the suite stands on its own
     run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
                          capture_output=True, text=True, cwd=tmp_path, timeout=300)

@@ -371,8 +371,9 @@ class Campaign:
         oracle = add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
         verdict = ""
         if oracle:  # the suite must fail while the planner breaks the invariant: check it once
-            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
-                                  capture_output=True, text=True, timeout=600, cwd=tests_dir)
+            suite = tests_dir.resolve()  # -o may be relative: pytest runs from inside the suite
+            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(suite)],
+                                  capture_output=True, text=True, timeout=600, cwd=suite)
             verdict = (f"; it fails as it should (oracle: {bucket.invariant})" if done.returncode == 1
                        else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
         self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")
