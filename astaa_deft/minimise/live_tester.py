@@ -10,7 +10,9 @@ the star proxy with the test case that pins exactly the subset
   violation names one, the same module) — or, for a crash no invariant
   named, the same module exits abnormally;
 * PASS if the run reaches the horizon (the original failure's time, or the
-  last pinned mutation's, plus a margin) without it;
+  last pinned mutation's, plus a margin, counted from when the pinned
+  mutations happened in this run: a stack that starts late sends the pinned
+  messages late) without it;
 * UNRESOLVED when the run cannot start.
 
 Each run is recorded and judged by the spec's monitors over its log, as
@@ -53,6 +55,9 @@ from .mutations import FieldSelection, Mutation
 from .restrict import restricted_testcase, write_testcase
 
 MARGIN_SECONDS = 3.0  # a run goes on this long past the original failure (or the last mutation) before it passes
+# A run whose pinned mutations have not all happened by the horizon (the stack started late: the pinned
+# messages come later) waits this much longer for them before it passes.
+PIN_WAIT_SECONDS = 15.0
 
 
 @dataclass(frozen=True)
@@ -90,7 +95,8 @@ class LiveTester:
     def __call__(self, chosen: Sequence[tuple[Mutation, FieldSelection]]) -> TestResult:
         testcase = self.testcase(chosen)
         horizon = max([self.failure_at] + [m.at for m, _ in chosen]) + MARGIN_SECONDS
-        runs = [self.run(testcase, horizon) for _ in range(self.repeats)]
+        anchor = max((m.at for m, _ in chosen), default=None)
+        runs = [self.run(testcase, horizon, anchor=anchor) for _ in range(self.repeats)]
         told = [r for r in runs if r.failed is not None]
         fails = [r for r in told if r.failed]
         rate = len(fails) / len(told) if told else None
@@ -104,13 +110,19 @@ class LiveTester:
         return TestResult(Outcome.PASS, told[0].detail, rate)
 
     def run(self, testcase: TestCase, horizon: float, record: Path | None = None,
-            policy_file: Path | None = None) -> LiveRun:
+            policy_file: Path | None = None, anchor: float | None = None) -> LiveRun:
         """One whole-system run with ``testcase``: stopped at the failure or at ``horizon`` s.
 
         Every run is recorded and its verdict is the spec's monitors over
         that log (``check``): the same judgement whatever the online monitors
         could see. The online ones only stop a run early once they report the
         failure (or the module crashes).
+
+        ``anchor``: when the last pinned mutation happened in the original run
+        (s). Pinned policies hit the N-th message of a channel, which a stack
+        that starts late sends later: the horizon then counts from when the
+        last of them happened here (at least ``horizon - anchor`` after it),
+        waiting up to PIN_WAIT_SECONDS past the horizon for them to happen.
         """
         started = time.monotonic()
         with tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as tmp:
@@ -123,15 +135,31 @@ class LiveTester:
             with self._count:
                 self.runs += 1
 
+            wanted = {p.id for p in testcase.policies}
+            fired: dict[str, int] = {}  # pinned policy id → when its mutation happened here (ns)
+
+            def on_event(record: rec.Record) -> None:
+                if isinstance(record, rec.MutationRecord):
+                    for policy in record.policy.split("+"):
+                        fired.setdefault(policy, record.time_ns)
+
             def stop_when(bus: BusRun) -> str | None:
                 if self._seen_online(bus):
                     return "the failure was seen"
-                if (time.time_ns() - bus.started_ns) / 1e9 >= horizon:
+                now = time.time_ns()
+                if (now - bus.started_ns) / 1e9 < horizon:
+                    return None
+                if anchor is None or not wanted:
                     return "horizon"
-                return None
+                happened = [fired.get(p) for p in wanted]
+                if None in happened:  # the stack started late: wait for the pinned messages
+                    return "horizon (a pinned mutation never happened)" if (
+                        now - bus.started_ns) / 1e9 >= horizon + PIN_WAIT_SECONDS else None
+                last = max(t for t in happened if t is not None)
+                return "horizon" if (now - last) / 1e9 >= horizon - anchor else None
 
             try:
-                run_session(self.spec, options, stop_when=stop_when)
+                run_session(self.spec, options, stop_when=stop_when, on_event=on_event)
             except InputError as exc:
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
             seconds = time.monotonic() - started
