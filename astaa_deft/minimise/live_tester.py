@@ -87,16 +87,23 @@ class LiveTester:
         self.runs = 0
         self.run_seconds = 0.0
         self._count = threading.Lock()  # tests may run in parallel sessions (--jobs)
+        self._anchors: dict[int, tuple[TestCase, float | None]] = {}  # id(testcase) → (it, last pinned at)
 
     def testcase(self, chosen: Sequence[tuple[Mutation, FieldSelection]], description: str = "") -> TestCase:
-        return restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
-                                   original=self.original)
+        testcase = restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
+                                       original=self.original)
+        self.pin(testcase, chosen)
+        return testcase
+
+    def pin(self, testcase: TestCase, chosen: Sequence[tuple[Mutation, FieldSelection]]) -> None:
+        """Remember when ``testcase``'s last pinned mutation happened in the original run (see :meth:`run`)."""
+        with self._count:
+            self._anchors[id(testcase)] = (testcase, max((m.at for m, _ in chosen), default=None))
 
     def __call__(self, chosen: Sequence[tuple[Mutation, FieldSelection]]) -> TestResult:
         testcase = self.testcase(chosen)
         horizon = max([self.failure_at] + [m.at for m, _ in chosen]) + MARGIN_SECONDS
-        anchor = max((m.at for m, _ in chosen), default=None)
-        runs = [self.run(testcase, horizon, anchor=anchor) for _ in range(self.repeats)]
+        runs = [self.run(testcase, horizon) for _ in range(self.repeats)]
         told = [r for r in runs if r.failed is not None]
         fails = [r for r in told if r.failed]
         rate = len(fails) / len(told) if told else None
@@ -110,7 +117,7 @@ class LiveTester:
         return TestResult(Outcome.PASS, told[0].detail, rate)
 
     def run(self, testcase: TestCase, horizon: float, record: Path | None = None,
-            policy_file: Path | None = None, anchor: float | None = None) -> LiveRun:
+            policy_file: Path | None = None) -> LiveRun:
         """One whole-system run with ``testcase``: stopped at the failure or at ``horizon`` s.
 
         Every run is recorded and its verdict is the spec's monitors over
@@ -118,12 +125,15 @@ class LiveTester:
         could see. The online ones only stop a run early once they report the
         failure (or the module crashes).
 
-        ``anchor``: when the last pinned mutation happened in the original run
-        (s). Pinned policies hit the N-th message of a channel, which a stack
-        that starts late sends later: the horizon then counts from when the
+        For a test case made by :meth:`testcase` (or given to :meth:`pin`),
+        whose last pinned mutation happened at ``anchor`` s in the original
+        run: pinned policies hit the N-th message of a channel, which a stack
+        that starts late sends later, so the horizon then counts from when the
         last of them happened here (at least ``horizon - anchor`` after it),
         waiting up to PIN_WAIT_SECONDS past the horizon for them to happen.
         """
+        with self._count:
+            anchor = self._anchors.get(id(testcase), (None, None))[1]
         started = time.monotonic()
         with tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as tmp:
             log_path = record or Path(tmp) / "run.mcap"

@@ -237,7 +237,7 @@ def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure,
     say(f"reproducing the failure live with all {len(mutations)} mutations pinned")
     runs: list[LiveRun] = []
     while len(runs) < repeats or (len(runs) < FLAKY_CHECK_RUNS and not any(r.failed for r in runs)):
-        runs.append(live.run(testcase, horizon, anchor=max((m.at for m in mutations), default=None)))
+        runs.append(live.run(testcase, horizon))
         say(f"  run {len(runs)}: " + ("fail" if runs[-1].failed else "pass" if runs[-1].failed is False
                                       else f"could not tell ({runs[-1].detail})") + f" ({runs[-1].seconds:.1f} s)")
     told = [r for r in runs if r.failed is not None]
@@ -263,9 +263,9 @@ def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimi
     kept: Path | None = None
     records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None for n in range(runs)]
     with ThreadPoolExecutor(max(1, min(jobs, runs)), thread_name_prefix="confirm") as pool:
-        anchor = max((m.at for m, _ in result.chosen), default=None)
-        outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml,
-                                                         anchor=anchor), records))
+        live.pin(testcase, result.chosen)
+        outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml),
+                                 records))
     for n, (outcome, record) in enumerate(zip(outcomes, records, strict=True)):
         say(f"  run {n + 1}: " + ("fail" if outcome.failed else "pass" if outcome.failed is False
                                   else f"could not tell ({outcome.detail})") + f" ({outcome.seconds:.1f} s)")
