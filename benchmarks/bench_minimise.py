@@ -7,25 +7,26 @@ For each seeded defect (astaa_deft/demo/README.md) a run of the demo stack
 case of a dozen benign policies — sets on many fields of every channel,
 consumer-narrowed sets, delays, duplicates, drops; over a hundred mutations
 in all — plus the one policy that triggers the defect once. That log is
-minimised with `astaa-deft minimise` (planner replay for defect 1, whole-
-system re-runs for 2–4) and the minimal test case is run live to confirm.
+minimised with `astaa-deft minimise` (planner replay for defect 1, control's
+replay for 2–4; --live-only: whole-system re-runs) and the minimal test case
+is run live to confirm.
 Printed per defect: the tester, mutations / fields (/ frames) before →
 after, whether the survivor is the culprit, tests run and cache hits, the
 minimisation's seconds and seconds per test, and the confirmation rate.
 --quick confirms with one live run instead of three. Prints; asserts nothing.
 
-Figures from a loaded two-core machine (one run; whole-system runs vary):
+Figures from a two-core machine at load 8–11 (one run; whole-system runs vary). Before, defects 2–4
+had no replay (whole-system re-runs: 16 tests, 78–98 s, 4.9–6.1 s a test; 94–124 s whole). Now:
 
     defect  tester  mutations   fields     frames   culprit  tests  hits  seconds  s/test  confirmed
-    1       replay  155 → 1     176 → 1    21 → 1   yes         19     2      0.7    0.04  3/3
-    2       live    151 → 1     176 → 1    -        yes         16     1     97.8    6.11  3/3
-    3       live    148 → 1     173 → 1    -        yes         16     1     77.7    4.86  3/3
-    4       live    165 → 1     186 → 1    -        yes         16     1     84.2    5.26  3/3
+    1       replay  180 → 1     205 → 1    3 → 1    yes         14     2      0.8    0.06  3/3
+    2       replay  167 → 1     196 → 1    103 → 1  yes         15     2      4.2    0.28  3/3
+    3       replay   58 → 1      68 → 1    104 → 1  yes         10     2      0.4    0.04  2/3
+    4       replay  182 → 1     206 → 1    102 → 2  yes         19     2      0.7    0.04  1/3
 
-"seconds" is the three stages (s/test: per test; a live test is one whole-
-system run). With startup and the three confirmation runs: 25, 124, 94 and
-109 s. Each culprit was stacked on a benign set of the same message: stage 3
-reduced it to its one field.
+"seconds" is the three stages (s/test: per test). With startup and the three confirmation runs: 23, 34,
+25 and 28 s; with --jobs 2 (confirmations two at a time): 19, 22, 17 and 17 s. Each culprit was stacked
+on a benign set of the same message: stage 3 reduced it to its one field.
 """
 
 from __future__ import annotations

@@ -27,6 +27,7 @@ from astaa_deft.deft.workflow import run_params
 from astaa_deft.demo.control import ReplayControl
 from astaa_deft.errors import InputError
 from astaa_deft.log.reader import read_log
+from astaa_deft.monitor import check_log
 from astaa_deft.spec_loader import load_spec
 
 SPEC_TEXT = SPEC_PATH.read_text()
@@ -183,6 +184,9 @@ def test_a_control_crash_minimises_on_the_module_replay(crashed):
     assert body["mutations"]["before"] >= 50 and body["mutations"]["after"] == 1
     [event] = body["culprit_events"]
     assert (event["channel"], [f["path"] for f in event["fields"]]) == ("trajectory", ["points"])
+    # The minimal log shows the crash as `astaa-deft check` reads it: control's abnormal exit.
+    result = check_log(read_log(out / "minimal.mcap"), load_spec(SPEC_PATH))
+    assert result.verdict.first is not None and result.verdict.first.invariant == "modules_alive"
     # The module tests fail while control still crashes on the kept frames …
     res = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", str(out / "tests")],
                          capture_output=True, text=True, timeout=180)

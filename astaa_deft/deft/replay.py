@@ -25,7 +25,7 @@ from typing import Any, Literal, Protocol, TypeVar, overload
 
 from ..bus import zenoh_config as zc
 from ..bus.processes import stop_process, tail
-from ..errors import InputError, Problem
+from ..errors import AstaaDeftError, InputError, Problem
 from ..fields import get
 from ..spec.model import Spec
 from ..spec.planner import TrajectoryLayout, resolve_args
@@ -231,7 +231,7 @@ def compare_outputs(entry: ReplayModule, replayed: Any, recorded: Any) -> Compar
     return compare_messages(replayed, recorded, entry.ignore)
 
 
-class StepHang(Exception):
+class StepHang(AstaaDeftError):
     """A module's step ran past its ``hang_after``: the module hangs on this frame."""
 
 

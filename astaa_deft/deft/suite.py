@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,7 +46,7 @@ class Suite:
         self.entry: ReplayModule = replay_module_of(self.spec, self.manifest.get("module"),
                                                     self.manifest.get("output"))
         self._results: list[FrameResult] | None = None
-        self._by_channel: dict[str, list[Any]] | None = None
+        self._by_channel: dict[str, _Decoded] | None = None
 
     @property
     def frames(self) -> list[dict]:
@@ -121,15 +122,34 @@ class Suite:
         return FrameResult(index, compare_outputs(cfg, replayed_msg, expected_msg), replayed, expected, error,
                            replayed_msg, expected_msg, how)
 
-    def _messages(self) -> dict[str, list[Any]]:
+    def _messages(self) -> dict[str, _Decoded]:
         if self._by_channel is None:
             log = read_log(self.directory / FRAMES)
             cfg = self.entry
             self._by_channel = {}
             for name in list(cfg.inputs) + [cfg.output]:
                 codec = get_codec(self.spec.channel(name).encoding)
-                self._by_channel[name] = [codec.decode(m.data) for m in log.on(self.spec.channel(name).key)]
+                self._by_channel[name] = _Decoded([m.data for m in log.on(self.spec.channel(name).key)],
+                                                  codec.decode)
         return self._by_channel
 
     def decoded(self, channel: str, index: int) -> Any:
         return self._messages()[channel][index]
+
+
+class _Decoded:
+    """A channel's messages in the suite, each decoded when first asked for (an oracle run from a snapshot
+    needs one frame's, not the whole run's), then the same object every time."""
+
+    def __init__(self, payloads: list[bytes], decode: Callable[[bytes], Any]):
+        self._payloads = payloads
+        self._decode = decode
+        self._cache: dict[int, Any] = {}
+
+    def __getitem__(self, index: int) -> Any:
+        if index not in self._cache:
+            self._cache[index] = self._decode(self._payloads[index])
+        return self._cache[index]
+
+    def __len__(self) -> int:
+        return len(self._payloads)

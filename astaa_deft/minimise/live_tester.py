@@ -10,7 +10,9 @@ the star proxy with the test case that pins exactly the subset
   violation names one, the same module) — or, for a crash no invariant
   named, the same module exits abnormally;
 * PASS if the run reaches the horizon (the original failure's time, or the
-  last pinned mutation's, plus a margin) without it;
+  last pinned mutation's, plus a margin, counted from when the pinned
+  mutations happened in this run: a stack that starts late sends the pinned
+  messages late) without it;
 * UNRESOLVED when the run cannot start.
 
 Each run is recorded and judged by the spec's monitors over its log, as
@@ -53,6 +55,9 @@ from .mutations import FieldSelection, Mutation
 from .restrict import restricted_testcase, write_testcase
 
 MARGIN_SECONDS = 3.0  # a run goes on this long past the original failure (or the last mutation) before it passes
+# A run whose pinned mutations have not all happened by the horizon (the stack started late: the pinned
+# messages come later) waits this much longer for them before it passes.
+PIN_WAIT_SECONDS = 15.0
 
 
 @dataclass(frozen=True)
@@ -82,10 +87,18 @@ class LiveTester:
         self.runs = 0
         self.run_seconds = 0.0
         self._count = threading.Lock()  # tests may run in parallel sessions (--jobs)
+        self._anchors: dict[int, tuple[TestCase, float | None]] = {}  # id(testcase) → (it, last pinned at)
 
     def testcase(self, chosen: Sequence[tuple[Mutation, FieldSelection]], description: str = "") -> TestCase:
-        return restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
-                                   original=self.original)
+        testcase = restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
+                                       original=self.original)
+        self.pin(testcase, chosen)
+        return testcase
+
+    def pin(self, testcase: TestCase, chosen: Sequence[tuple[Mutation, FieldSelection]]) -> None:
+        """Remember when ``testcase``'s last pinned mutation happened in the original run (see :meth:`run`)."""
+        with self._count:
+            self._anchors[id(testcase)] = (testcase, max((m.at for m, _ in chosen), default=None))
 
     def __call__(self, chosen: Sequence[tuple[Mutation, FieldSelection]]) -> TestResult:
         testcase = self.testcase(chosen)
@@ -111,7 +124,16 @@ class LiveTester:
         that log (``check``): the same judgement whatever the online monitors
         could see. The online ones only stop a run early once they report the
         failure (or the module crashes).
+
+        For a test case made by :meth:`testcase` (or given to :meth:`pin`),
+        whose last pinned mutation happened at ``anchor`` s in the original
+        run: pinned policies hit the N-th message of a channel, which a stack
+        that starts late sends later, so the horizon then counts from when the
+        last of them happened here (at least ``horizon - anchor`` after it),
+        waiting up to PIN_WAIT_SECONDS past the horizon for them to happen.
         """
+        with self._count:
+            anchor = self._anchors.get(id(testcase), (None, None))[1]
         started = time.monotonic()
         with tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as tmp:
             log_path = record or Path(tmp) / "run.mcap"
@@ -123,15 +145,31 @@ class LiveTester:
             with self._count:
                 self.runs += 1
 
+            wanted = {p.id for p in testcase.policies}
+            fired: dict[str, int] = {}  # pinned policy id → when its mutation happened here (ns)
+
+            def on_event(record: rec.Record) -> None:
+                if isinstance(record, rec.MutationRecord):
+                    for policy in record.policy.split("+"):
+                        fired.setdefault(policy, record.time_ns)
+
             def stop_when(bus: BusRun) -> str | None:
                 if self._seen_online(bus):
                     return "the failure was seen"
-                if (time.time_ns() - bus.started_ns) / 1e9 >= horizon:
+                now = time.time_ns()
+                if (now - bus.started_ns) / 1e9 < horizon:
+                    return None
+                if anchor is None or not wanted:
                     return "horizon"
-                return None
+                happened = [fired.get(p) for p in wanted]
+                if None in happened:  # the stack started late: wait for the pinned messages
+                    return "horizon (a pinned mutation never happened)" if (
+                        now - bus.started_ns) / 1e9 >= horizon + PIN_WAIT_SECONDS else None
+                last = max(t for t in happened if t is not None)
+                return "horizon" if (now - last) / 1e9 >= horizon - anchor else None
 
             try:
-                run_session(self.spec, options, stop_when=stop_when)
+                run_session(self.spec, options, stop_when=stop_when, on_event=on_event)
             except InputError as exc:
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
             seconds = time.monotonic() - started

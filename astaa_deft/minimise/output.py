@@ -121,6 +121,13 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
                     "delivered_sequence": sequences.get(("mutation", mutation.number, _normal(selection, mutation)))}
             writer.message(events, mutation.original_time_ns, json.dumps(body, default=str).encode())
         end = max((r[0] for r in records), default=model.start_ns) + 1
+        crashed = [(frame, error) for frame, _, error in replayed if error and not error.startswith("StepHang")]
+        if crashed and cfg.per_trigger and cfg.exceptions == "crash":
+            # The module's process would have died of this exception: logged as its exit, as a run logs one.
+            frame, error = crashed[0]
+            end = max(end, model.output_time(frame) + 1)
+            writer.record(log_records.ProcessExitRecord(model.output_time(frame) + 1, cfg.module, 0, 1, None,
+                                                        False, True, error))
         writer.record(log_records.RunStopping(end))
     finally:
         writer.finish()

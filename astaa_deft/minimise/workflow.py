@@ -263,6 +263,7 @@ def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimi
     kept: Path | None = None
     records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None for n in range(runs)]
     with ThreadPoolExecutor(max(1, min(jobs, runs)), thread_name_prefix="confirm") as pool:
+        live.pin(testcase, result.chosen)
         outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml),
                                  records))
     for n, (outcome, record) in enumerate(zip(outcomes, records, strict=True)):
