@@ -228,11 +228,20 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
     if "factory" not in v and "command" not in v:
         src.at(node, "'planner.replay' needs 'factory', 'command' or both",
                "factory: in-process (pkg.module:Name); command: the planner's own process, fed over Zenoh")
+    return read_runner(src, v, "planner.replay", "mystack.planner:Planner", '["{python}", "-m", "mystack.planner"]')
+
+
+def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example: str,
+                command_example: str) -> tuple[str | None, dict[str, str], tuple[str, ...]]:
+    """A replayable module's ``factory`` (in-process), ``args`` and ``command`` (its own process).
+
+    Shared by the planner section and each entry of the ``replay:`` section.
+    """
     factory = None
     if "factory" in v:
         factory = v["factory"].value
         if not isinstance(factory, str) or not FACTORY_RE.match(factory):
-            src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", "e.g. mystack.planner:Planner")
+            src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", f"e.g. {factory_example}")
             factory = None
         elif not _module_found(factory.split(":")[0], src.name):
             src.at(v["factory"], f"factory module '{factory.split(':')[0]}' is neither on the Python path nor in "
@@ -241,7 +250,7 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
     args: dict[str, str] = {}
     if "args" in v:
         if not v["args"].is_map:
-            src.at(v["args"], "'replay.args' must be a mapping of keyword arguments", "e.g. {defects: '{defects}'}")
+            src.at(v["args"], f"'{where}.args' must be a mapping of keyword arguments", "e.g. {defects: '{defects}'}")
         else:
             args = {k: str(n.value) for k, n in v["args"].items()}
     command: tuple[str, ...] = ()
@@ -250,8 +259,7 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
         if c.is_list and c.value and all(isinstance(n.value, str) for n in c.value):
             command = tuple(n.value for n in c.value)
         else:
-            src.at(c, "'replay.command' must be a non-empty list of strings",
-                   'e.g. ["{python}", "-m", "mystack.planner"]')
+            src.at(c, f"'{where}.command' must be a non-empty list of strings", f"e.g. {command_example}")
     return factory, args, command
 
 

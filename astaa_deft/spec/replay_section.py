@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 from ..errors import did_you_mean
 from .model import Channel, Module
-from .planner import FACTORY_RE, CollisionOracle, PlannerSpec, TrajectoryLayout, _module_found
+from .planner import CollisionOracle, PlannerSpec, TrajectoryLayout, read_runner
 from ..yamlsource import Node, Source, describe_value
 
 PER_OUTPUT = "per_output"  # one frame per recorded output, found by DeFT's candidate search (the planner's)
@@ -168,30 +168,8 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
         if ch is not None and module in module_names and ch.producer != module:
             src.at(outs.value[0], f"channel '{output}' is produced by '{ch.producer}', not '{module}'",
                    "name a channel the module produces")
-    factory = None
-    if "factory" in v:
-        factory = v["factory"].value
-        if not isinstance(factory, str) or not FACTORY_RE.match(factory):
-            src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", "e.g. mystack.control:Replay")
-            factory = None
-        elif not _module_found(factory.split(":")[0], src.name):
-            src.at(v["factory"], f"factory module '{factory.split(':')[0]}' is neither on the Python path nor in "
-                   "the spec's directory", "install the package that provides it, put it in the spec's directory, "
-                   "add its directory to PYTHONPATH, or fix the name")
-    args: dict[str, str] = {}
-    if "args" in v:
-        if not v["args"].is_map:
-            src.at(v["args"], f"'{where}.args' must be a mapping of keyword arguments", "e.g. {defects: '{defects}'}")
-        else:
-            args = {k: str(n.value) for k, n in v["args"].items()}
-    command: tuple[str, ...] = ()
-    if "command" in v:
-        c = v["command"]
-        if c.is_list and c.value and all(isinstance(n.value, str) for n in c.value):
-            command = tuple(n.value for n in c.value)
-        else:
-            src.at(c, f"'{where}.command' must be a non-empty list of strings",
-                   'e.g. ["{python}", "-m", "mystack.control"]')
+    factory, args, command = read_runner(src, v, where, "mystack.control:Replay",
+                                         '["{python}", "-m", "mystack.control"]')
     frames = _choice(src, v.get("frames"), f"{where}.frames", FRAME_MODES)
     exceptions = _choice(src, v.get("exceptions"), f"{where}.exceptions", EXCEPTIONS)
     hang_after = _number(src, v.get("hang_after"), f"{where}.hang_after", 1.0, positive=True)
