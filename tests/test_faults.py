@@ -183,6 +183,26 @@ def test_a_stop_signal_ends_the_run_cleanly(tool_run, sig):
     assert delivered <= recorded  # everything delivered before the stop is in the log
 
 
+
+def test_a_recorder_stopped_before_the_dying_tool_is_reparented_still_notes_the_tool_lost(tool_run):
+    # The race behind a Pass on a killed run (seen under load): the reaper sees a killed tool's pipe close
+    # and stops the recorder before the kernel has moved the recorder to a new parent, so "my parent is
+    # still the tool" looked like an orderly end. Widened here: the recorder is stopped while the tool
+    # lives, without the tool's run_stopped announcement, and the tool is killed just after.
+    run = tool_run()
+    run.wait_flowing()
+    recorder = helper_pid(run.started, "astaa_deft.session.recorder")
+    os.kill(recorder, signal.SIGTERM)
+    time.sleep(0.2)
+    run.fault(run.proc.pid, signal.SIGKILL)
+    run.finish()
+    run.all_gone("a recorder stopped, then the tool killed")
+    contents = read_log(run.log)
+    assert contents.finished and not contents.damage
+    check = subprocess.run([str(TOOL), "check", str(run.log)], capture_output=True, text=True, timeout=60)
+    assert "verdict: Pass" not in check.stdout, check.stdout
+    assert check.returncode == 3 and "verdict withheld: the tool was lost" in check.stdout, check.stdout
+
 def test_a_recorder_behind_at_the_stop_still_records_everything_delivered(tool_run):
     """The stop waits for the recorder to catch up (it sees the run_stopped event), not a fixed 0.3 s."""
     run = tool_run()

@@ -50,6 +50,7 @@ except ImportError:  # pragma: no cover - a declared dependency; orjson and the 
     _simdjson = None  # type: ignore[assignment]
 
 _STOP = object()
+TOOL_GONE_WAIT_SECONDS = 2.0  # an unannounced stop: how long to wait for the dying tool to show
 CAUGHT_UP = "caught up"  # stdout line: the run_stopped event arrived, so did every message before it
 SHUTDOWN_LIMIT_SECONDS = 20.0
 
@@ -118,10 +119,13 @@ def main(argv: list[str] | None = None) -> int:
     mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
     twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
 
+    run_stopped: list[bool] = []  # the tool's orderly stop announced itself
+
     def on_tool_event(sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
         q.put((time.time_ns(), writer.events_channel, None, None, data, None))
         if b'"run_stopped"' in data:
+            run_stopped.append(True)
             # Everything the tool forwarded before this event has reached us (one link, in order):
             # the tool may stop us now without losing a backlog.
             _report(CAUGHT_UP)
@@ -149,13 +153,43 @@ def main(argv: list[str] | None = None) -> int:
         sub.undeclare()
     q.put(_STOP)
     write_thread.join()
-    if os.getppid() != tool_pid:
+    if _tool_lost(tool_pid, announced=bool(run_stopped)):
         writer.record(records.RunEnd(time.time_ns(), layout.TOOL_LOST))
     writer.finish()
     _report(json.dumps({"recorded": counts}))
     # No session.close(): the log is finished, and closing a session whose router is gone (the tool
     # killed, or the bus router) waits for Zenoh's timeouts; exiting drops the connection just as well.
     os._exit(0)  # the shutdown timer is a non-daemon thread
+
+
+def _tool_lost(tool_pid: int, announced: bool) -> bool:
+    """Whether the tool died (this process was stopped by its death, not by its orderly end).
+
+    A changed parent says so at once. But the stop can come before the kernel
+    has moved this process to a new parent: the reaper sees the tool's pipe
+    close, and a killed tool closes its files before it is reparented from.
+    So a stop the tool did not announce (no run_stopped event) waits, briefly,
+    for the tool to show itself gone or dying.
+    """
+    if os.getppid() != tool_pid:
+        return True
+    if announced:
+        return False
+    deadline = time.monotonic() + TOOL_GONE_WAIT_SECONDS
+    while time.monotonic() < deadline:
+        if os.getppid() != tool_pid or _state(tool_pid) in (None, "Z", "X"):
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def _state(pid: int) -> str | None:
+    """The process state letter from /proc (None: no such process)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rsplit(")", 1)[-1].split()[0]
 
 
 def _report(line: str) -> None:
