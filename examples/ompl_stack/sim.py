@@ -15,7 +15,7 @@ before its clock starts, then steps at 20 Hz of wall time:
   exit 0 when the ego reaches the goal, 1 at the first contact (after a few
   more steps, so the last poses reach the bus), 2 when time runs out.
 
-``--stopped-car D`` adds a car that stands D m ahead of the ego, in its way,
+``--stopped-car D`` adds a car that stands D m ahead of the ego, in its way (D < 0: overlapping it),
 from ``--stopped-at`` seconds on (a car that was hidden, or pulled in).
 ``--truth FILE`` writes what it measured (JSON) for anyone comparing.
 """
@@ -48,7 +48,8 @@ def main() -> int:
     ap.add_argument("--parked-x", type=float, default=20.0)
     ap.add_argument("--oncoming-x", type=float, default=120.0)
     ap.add_argument("--oncoming-speed", type=float, default=6.0)
-    ap.add_argument("--stopped-car", type=float, default=0.0, help="metres ahead of the ego (0: none)")
+    ap.add_argument("--stopped-car", type=float, default=0.0,
+                    help="metres ahead of the ego (0: none; negative: it appears overlapping the ego's front)")
     ap.add_argument("--stopped-at", type=float, default=5.0)
     ap.add_argument("--wait-planner", type=float, default=20.0, help="seconds to wait for its liveliness")
     ap.add_argument("--truth", default="")
@@ -159,7 +160,7 @@ class World:
                 "length": 4.5, "width": 1.9},
                {"id": 2, "kind": "car", "x": a.oncoming_x - a.oncoming_speed * t, "y": ONCOMING_Y,
                 "heading": math.pi, "vx": -a.oncoming_speed, "vy": 0.0, "length": 4.6, "width": 1.9}]
-        if a.stopped_car > 0 and t >= a.stopped_at:
+        if a.stopped_car != 0 and t >= a.stopped_at:
             if self.stopped is None:
                 ahead = a.stopped_car + EGO_LENGTH / 2 + 2.25  # centre to centre: D m between the bumpers
                 self.stopped = (self.x + ahead * math.cos(self.heading), self.y + ahead * math.sin(self.heading),
