@@ -174,8 +174,8 @@ class Interceptor:
             if done is _UNSELECTED:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
             elif done is not None:
-                if done.event is not None:  # counted as _deliver counts the general path's events
-                    self._touched[done.event.policy] = self._touched.get(done.event.policy, 0) + 1
+                if done.event is not None:
+                    self._count_touch(done.event)
                 out.append(done)
             else:  # the shortcut declined this message
                 info = MessageInfo(channel, index, now, state.codec, state.previous_message)
@@ -257,14 +257,18 @@ class Interceptor:
             items = after
         return items
 
+    def _count_touch(self, event: MutationEvent) -> None:
+        """One more message touched by each policy the event names (stacked policies share one event)."""
+        for policy in event.policy.split("+"):
+            self._touched[policy] = self._touched.get(policy, 0) + 1
+
     def _deliver(self, items: list[Pending], now: float) -> list[Delivery]:
         """Deliveries due now; later ones (delay) wait in the heap for on_tick."""
         out = []
         for item in items:
             delivery = item.to_delivery()
             if delivery.event is not None:
-                for policy in delivery.event.policy.split("+"):  # stacked policies share one event
-                    self._touched[policy] = self._touched.get(policy, 0) + 1
+                self._count_touch(delivery.event)
             if delivery.at > now and delivery.consumers:
                 assert delivery.event is not None  # only an action (delay) postpones a delivery
                 held = self._channels[delivery.event.channel].held
