@@ -21,7 +21,8 @@ import pytest
 import zenoh
 
 from astaa_deft.bus import zenoh_config as zc
-from astaa_deft.bus.star_requests import Ros2Token, StarLiveliness, parse_ros2_token, ros2_token_destinations
+from astaa_deft.bus.star_requests import StarLiveliness, ros2_token_destinations
+from astaa_deft.spec.ros2_tokens import parse_token
 from astaa_deft.spec.ros2_types import shared_types
 from astaa_deft.spec_loader import load_spec
 
@@ -100,21 +101,27 @@ def _zid(run_dir: Path, module: str) -> str:
 def test_token_parsing_and_wiring_follow_the_data_keys(tmp_path):
     spec = load_spec(_write_spec(tmp_path, "teleop"))
     zid = "0123456789abcdef0123456789abcdef"
-    publisher = parse_ros2_token(f"@ros2_lv/0/{zid}/0/1/MP/%/%/teleop/%cmd_vel/"
-                                 f"{TWIST_KEY.split('/', 2)[2]}/::,7:,:,:,,")
-    assert publisher == Ros2Token("MP", TWIST_KEY)
-    subscription = Ros2Token("MS", TWIST_KEY)
+    endpoint = f"{TWIST_KEY.split('/', 2)[2]}/::,7:,:,:,,"
+    publisher = parse_token(f"@ros2_lv/0/{zid}/0/1/MP/%/%/teleop/%cmd_vel/{endpoint}")
+    subscription = parse_token(f"@ros2_lv/0/{zid}/0/3/MS/%/%/listener/%cmd_vel/{endpoint}")
+    node = parse_token(f"@ros2_lv/0/{zid}/0/0/NN/%/%/teleop")
+    assert publisher is not None and subscription is not None and node is not None
+    assert publisher.kind == "MP" and publisher.data_key == TWIST_KEY
+    assert subscription.kind == "MS" and subscription.data_key == TWIST_KEY
+    assert node.kind == "NN" and node.data_key is None
     assert ros2_token_destinations(spec, "talker", publisher) == ("listener",)
     assert ros2_token_destinations(spec, "listener", publisher) == ()  # not its producer
     assert ros2_token_destinations(spec, "listener", subscription) == ("talker",)
-    assert set(ros2_token_destinations(spec, "talker", Ros2Token("NN", None))) == {"listener", "adder", "asker"}
-    service = parse_ros2_token(f"@ros2_lv/0/{zid}/0/2/SS/%/%/adder/%add_two_ints/"
-                               "example_interfaces::srv::dds_::AddTwoInts_/RIHS01_ab/::,10:,:,:,,")
-    assert service == Ros2Token("SS", "0/add_two_ints/example_interfaces::srv::dds_::AddTwoInts_/RIHS01_ab")
+    assert set(ros2_token_destinations(spec, "talker", node)) == {"listener", "adder", "asker"}
+    service = parse_token(f"@ros2_lv/0/{zid}/0/2/SS/%/%/adder/%add_two_ints/"
+                          "example_interfaces::srv::dds_::AddTwoInts_/RIHS01_ab/::,10:,:,:,,")
+    assert service is not None and service.kind == "SS"
+    assert service.data_key == "0/add_two_ints/example_interfaces::srv::dds_::AddTwoInts_/RIHS01_ab"
     assert set(ros2_token_destinations(spec, "adder", service)) == {"listener", "talker", "asker"}  # catch-all
-    assert parse_ros2_token("@ros2_lv/0/x/0/0/XX/%/%/n") is None
-    assert parse_ros2_token("@ros2_lv/zero/x/0/0/NN/%/%/n") is None
-    assert parse_ros2_token("node/planner/alive") is None
+    assert parse_token("@ros2_lv/0/x/0/0/XX/%/%/n") is None
+    assert parse_token("@ros2_lv/zero/x/0/0/NN/%/%/n") is None
+    assert parse_token(f"@ros2_lv/0/{zid}/0/1/MP/%/%/teleop/%/{endpoint}") is None  # an endpoint without a name
+    assert parse_token("node/planner/alive") is None
 
 
 def test_the_listener_sees_the_talker_in_its_graph_through_the_star(two_runs):

@@ -26,71 +26,42 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import zenoh
 
 from ..spec.model import Spec
+from ..spec.ros2_tokens import ADMIN_SPACE, PUBLISHER, SERVICE, Entity, parse_token
 from .topology import STAR_PREFIX, module_namespace, query_servers, split_star_key, token_destinations
 
 REMOTE = zenoh.Locality.REMOTE
 QUERY_TIMEOUT_S = 60.0  # the caller's own timeout governs; this only bounds a forwarded query's lifetime
 QUERY_QUEUE = 1024
 
-ROS2_ADMIN_SPACE = "@ros2_lv"
-ROS2_NODE, ROS2_PUBLISHER, ROS2_SUBSCRIPTION, ROS2_SERVICE, ROS2_CLIENT = "NN", "MP", "MS", "SS", "SC"
 # `**` never matches a verbatim chunk (one starting with '@'): the ROS 2 graph needs its own expression.
-ROS2_TOKENS = f"{STAR_PREFIX}/*/{ROS2_ADMIN_SPACE}/**"
+ROS2_TOKENS = f"{STAR_PREFIX}/*/{ADMIN_SPACE}/**"
 
 
-@dataclass(frozen=True)
-class Ros2Token:
-    """What the star needs of an rmw_zenoh liveliness token: its kind and, for an endpoint, its data key."""
-
-    kind: str  # NN, MP, MS, SS or SC
-    key: str | None  # <domain>/<name>/<dds type>/<type hash>, as rmw_zenoh puts or queries it; None for a node
-
-
-def parse_ros2_token(key: str) -> Ros2Token | None:
-    """The kind and data key of an rmw_zenoh token; None for anything else.
-
-    ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<kind>/<enclave>/<namespace>/<node>``, followed for
-    an endpoint by ``/<name>/<dds type>/<type hash>/<qos>``; names are mangled (``/`` written ``%``).
-    """
-    parts = key.split("/")
-    if len(parts) < 9 or parts[0] != ROS2_ADMIN_SPACE or not parts[1].isdigit():
-        return None
-    kind = parts[5]
-    if kind == ROS2_NODE:
-        return Ros2Token(kind, None)
-    if kind not in (ROS2_PUBLISHER, ROS2_SUBSCRIPTION, ROS2_SERVICE, ROS2_CLIENT) or len(parts) < 13:
-        return None
-    name = parts[9].replace("%", "/").strip("/")
-    if not name:
-        return None
-    return Ros2Token(kind, f"{parts[1]}/{name}/{parts[10]}/{parts[11]}")
-
-
-def ros2_hash_mismatch(spec: Spec, token: Ros2Token) -> str | None:
+def ros2_hash_mismatch(spec: Spec, token: Entity) -> str | None:
     """For a publisher whose topic a channel names with another key: that key and why, in one line.
 
     The usual cause is a node built from another definition of the type (a
     different RIHS01 hash): its messages then go on a key no channel
     declares. Reported as that undeclared key, with the channel it missed.
     """
-    if token.kind != ROS2_PUBLISHER or token.key is None or any(ch.key == token.key for ch in spec.channels):
+    key = token.data_key
+    if token.kind != PUBLISHER or key is None or any(ch.key == key for ch in spec.channels):
         return None
-    observed = token.key.split("/")  # domain, topic chunks…, dds type, hash
+    observed = key.split("/")  # domain, topic chunks…, dds type, hash
     for ch in spec.channels:
         declared = ch.key.split("/")
         if len(declared) >= 4 and declared[0] == observed[0] and declared[1:-2] == observed[1:-2]:
             what = "type hash" if declared[-2] == observed[-2] else "type"
-            return (f"{token.key} (the node's {what} differs from channel '{ch.name}''s key {ch.key}: "
+            return (f"{key} (the node's {what} differs from channel '{ch.name}''s key {ch.key}: "
                     f"another definition of the message? give the channel this key, or fix the definition)")
     return None
 
 
-def ros2_token_destinations(spec: Spec, module: str, token: Ros2Token) -> tuple[str, ...]:
+def ros2_token_destinations(spec: Spec, module: str, token: Entity) -> tuple[str, ...]:
     """Modules that see ``module``'s ROS 2 token: wired by the data key its entity puts or serves.
 
     A publisher's or a service server's token goes where its channel goes
@@ -100,11 +71,12 @@ def ros2_token_destinations(spec: Spec, module: str, token: Ros2Token) -> tuple[
     reaches every other module: a node's existence carries no data, and
     ``ros2 node list`` inside any module lists them all.
     """
-    if token.key is None:
+    key = token.data_key
+    if key is None:
         return tuple(m.name for m in spec.modules if m.name != module)
-    if token.kind in (ROS2_PUBLISHER, ROS2_SERVICE):
-        return token_destinations(spec, module, token.key)
-    return query_servers(spec, module, token.key)
+    if token.kind in (PUBLISHER, SERVICE):
+        return token_destinations(spec, module, key)
+    return query_servers(spec, module, key)
 
 
 class StarLiveliness:
@@ -154,13 +126,13 @@ class StarLiveliness:
             if parts is None or full_key in self._mirrors:
                 return
             module, key = parts
-            ros2 = parse_ros2_token(key) if key.startswith(ROS2_ADMIN_SPACE + "/") else None
-            if key.startswith(ROS2_ADMIN_SPACE + "/") and ros2 is None:
+            ros2 = parse_token(key) if key.startswith(ADMIN_SPACE + "/") else None
+            if key.startswith(ADMIN_SPACE + "/") and ros2 is None:
                 return  # not an rmw_zenoh entity: no wiring to follow
             destinations = (ros2_token_destinations(self.spec, module, ros2) if ros2 is not None
                             else token_destinations(self.spec, module, key))
-            if ros2 is not None and ros2.kind == ROS2_SERVICE and ros2.key is not None:
-                self.services.offer(full_key, module, ros2.key, destinations)
+            if ros2 is not None and ros2.kind == SERVICE and ros2.data_key is not None:
+                self.services.offer(full_key, module, ros2.data_key, destinations)
             tokens = []
             for consumer in destinations:
                 mirror_key = f"{module_namespace(consumer)}/{key}"

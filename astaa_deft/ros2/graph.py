@@ -1,44 +1,16 @@
-"""The ROS 2 graph as rmw_zenoh announces it: liveliness tokens parsed into nodes and endpoints.
+"""The ROS 2 graph as rmw_zenoh announces it: nodes and endpoints from parsed liveliness tokens.
 
-Every rmw_zenoh entity holds a liveliness token while it exists (rmw_zenoh's
-docs/design.md, "Graph Cache"; zenoh-ros2-sdk writes the same)::
-
-    @ros2_lv/<domain>/<zid>/<node id>/<entity id>/<kind>/<enclave>/<namespace>/<node name>
-            [/<topic>/<dds type>/<type hash>/<qos>]          (for MP, MS, SS, SC)
-
-``kind`` is NN (node), MP (publisher), MS (subscription), SS (service
-server) or SC (service client). Names are mangled: every ``/`` becomes
-``%`` and an empty namespace is ``%``.
-
-Pure: strings in, typed records out (no Zenoh).
+The tokens' format and parser live in ``spec/ros2_tokens.py`` (the star
+reads them too). Pure: typed records in, a graph out (no Zenoh).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-ADMIN_SPACE = "@ros2_lv"
-NODE, PUBLISHER, SUBSCRIPTION, SERVICE, CLIENT = "NN", "MP", "MS", "SS", "SC"
-ENDPOINT_KINDS = (PUBLISHER, SUBSCRIPTION, SERVICE, CLIENT)
+from ..spec.ros2_tokens import ADMIN_SPACE, CLIENT, PUBLISHER, SERVICE, SUBSCRIPTION, Entity, parse_token
 
-
-@dataclass(frozen=True)
-class Entity:
-    """One liveliness token, parsed."""
-
-    domain_id: int
-    zid: str
-    kind: str
-    namespace: str  # "/" or "/robot1"
-    node: str
-    topic: str | None = None  # "/cmd_vel" (endpoints only)
-    dds_type: str | None = None
-    type_hash: str | None = None
-    qos: str | None = None
-
-    @property
-    def node_path(self) -> str:
-        return (self.namespace.rstrip("/") + "/" + self.node) if self.namespace != "/" else "/" + self.node
+__all__ = ["ADMIN_SPACE", "Entity", "Graph", "Topic", "build_graph", "parse_token"]
 
 
 @dataclass
@@ -56,30 +28,6 @@ class Graph:
     nodes: list[str]  # node paths ("/teleop"), first seen first
     topics: list[Topic]
     services: list[str]
-
-
-def demangle(text: str) -> str:
-    return "/" if text in ("", "%") else text.replace("%", "/")
-
-
-def parse_token(key: str) -> Entity | None:
-    """The entity a liveliness key announces; None for anything else (another tool's tokens)."""
-    parts = key.split("/")
-    if len(parts) < 9 or parts[0] != ADMIN_SPACE or not parts[1].isdigit():
-        return None
-    domain, zid, _node_id, _entity_id, kind, _enclave, namespace, node = parts[1:9]
-    namespace = demangle(namespace)
-    if not namespace.startswith("/"):
-        namespace = "/" + namespace
-    if kind == NODE:
-        return Entity(int(domain), zid, kind, namespace, demangle(node).strip("/"))
-    if kind not in ENDPOINT_KINDS or len(parts) < 13:
-        return None
-    topic = demangle(parts[9])
-    if not topic.startswith("/"):
-        topic = "/" + topic
-    return Entity(int(domain), zid, kind, namespace, demangle(node).strip("/"), topic, parts[10], parts[11],
-                  "/".join(parts[12:]))
 
 
 def build_graph(entities: list[Entity], domain_id: int | None = None) -> Graph:
