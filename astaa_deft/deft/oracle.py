@@ -17,7 +17,7 @@ from ..codecs.base import DecodeError
 from ..fields import get
 from ..geometry import Box, interpolate_pose, overlap
 from ..spec.model import Spec
-from ..spec.planner import CollisionOracle, TrajectoryLayout
+from ..spec.replay_module import CollisionOracle, TrajectoryLayout
 from .extract import Extraction
 from .planner_section import planner_of
 from .replay import trajectory_points
@@ -61,7 +61,8 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
     """Oracle tests for frames whose recorded plan ran into a predicted obstacle shortly before a collision."""
     cfg = planner_of(spec)
     oracle: CollisionOracle | None = cfg.collision
-    if oracle is None or not collision_times_ns:
+    layout = cfg.trajectory  # the planner section always has one (outputs are trajectories)
+    if oracle is None or layout is None or not collision_times_ns:
         return []
     out_codec = get_codec(spec.channel(cfg.output).encoding)
     ob_codec = get_codec(spec.channel(oracle.channel).encoding)
@@ -72,7 +73,7 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
         if not any(0 <= t - f.output.log_time <= window_s * 1e9 for t in collision_times_ns):
             continue
         try:
-            plan = planned_poses(out_codec.decode(f.output.data), cfg.trajectory)
+            plan = planned_poses(out_codec.decode(f.output.data), layout)
             obstacles = ob_codec.decode(f.inputs[oracle.channel].data)
         except (DecodeError, KeyError):
             continue

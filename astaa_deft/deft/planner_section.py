@@ -10,11 +10,10 @@ from __future__ import annotations
 
 from ..errors import InputError, Problem
 from ..spec.model import Spec
-from ..spec.planner import PlannerSpec
-from ..spec.replay_section import ReplayModule, planner_entry
+from ..spec.replay_module import ReplayModule
 
 
-def planner_of(spec: Spec) -> PlannerSpec:
+def planner_of(spec: Spec) -> ReplayModule:
     """The spec's planner section (InputError naming the spec when it has none)."""
     if spec.planner is None:
         raise InputError(Problem(str(spec.path) if spec.path else spec.name, None, None,
@@ -25,7 +24,7 @@ def planner_of(spec: Spec) -> PlannerSpec:
 
 def replay_modules(spec: Spec) -> tuple[ReplayModule, ...]:
     """Every module of the spec that can run alone: the planner (if any) first, then ``replay.modules``."""
-    planner = (planner_entry(spec.planner),) if spec.planner is not None else ()
+    planner = (spec.planner,) if spec.planner is not None else ()
     return planner + tuple(spec.replay)
 
 
@@ -35,7 +34,7 @@ def replay_module_of(spec: Spec, module: str | None = None, output: str | None =
     ``output`` picks among a module's entries (one per output); default: its first.
     """
     if module is None:
-        return planner_entry(planner_of(spec))
+        return planner_of(spec)
     entries = replay_modules(spec)
     found = next((e for e in entries if e.module == module and output in (None, e.output)), None)
     if found is None:

@@ -28,7 +28,8 @@ from ..bus.processes import stop_process, tail
 from ..errors import AstaaDeftError, InputError, Problem
 from ..fields import get
 from ..spec.model import Spec
-from ..spec.planner import TrajectoryLayout, resolve_args
+from ..spec.planner import resolve_args
+from ..spec.replay_module import TrajectoryLayout
 from ..spec.replay_section import ReplayModule
 from .planner_section import replay_module_of
 from .validator import Comparison, Point, compare, compare_messages

@@ -13,8 +13,7 @@ from collections.abc import Mapping
 
 if TYPE_CHECKING:
     from .decictor_section import DecictorSection  # it imports fields, which imports this module
-    from .planner import PlannerSpec
-    from .replay_section import ReplayModule
+    from .replay_module import ReplayModule
     from ..run_section import RunSection
 
 FLOAT_KINDS = ("float32", "float64")
@@ -130,7 +129,7 @@ class Spec:
     # Typed by the spec loader: invariants are astaa_deft.monitor's Invariant objects (each kind's own
     # class; the spec layer sits below monitor, so it does not name the type), the planner section its record.
     invariants: tuple[Any, ...] = ()
-    planner: PlannerSpec | None = None
+    planner: ReplayModule | None = None  # the 'planner:' section (frames per output, trajectories)
     replay: tuple[ReplayModule, ...] = ()  # the 'replay:' section's modules that can run alone
     run: RunSection | None = None  # how a run ends (None: no 'run:' section)
     decictor: DecictorSection | None = None  # the 'decictor:' section (None: the spec has none)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from dataclasses import dataclass, field
 from typing import Any
 from collections.abc import Mapping, Sequence
 
@@ -16,53 +15,10 @@ from ..errors import did_you_mean
 from ..fields import FieldPathError, type_at
 from ..spec.model import Channel, MessageType, Module
 from ..yamlsource import Node, Source, describe_value
+from .replay_module import PER_OUTPUT, CollisionOracle, ReplayModule, TrajectoryLayout
 
 FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
-
-
-@dataclass(frozen=True)
-class TrajectoryLayout:
-    points: str = "points"  # field path of the array of points in the output message
-    x: str = "x"
-    y: str = "y"
-    t: str = "t"
-    heading: str = "heading"  # used by the collision oracle only
-    time: str = "absolute"  # "absolute" (the bus clock, s) or "relative" to `stamp`
-    stamp: str = "header.stamp"
-
-
-@dataclass(frozen=True)
-class CollisionOracle:
-    """A planned pose that, reached at its planned time, overlaps an obstacle as predicted in that frame."""
-
-    ego_length: float
-    ego_width: float
-    channel: str  # the input holding predicted obstacles
-    array: str = "obstacles"
-    length: str = "length"
-    width: str = "width"
-    id: str = "id"
-    trajectory: str = "trajectory"  # each obstacle's predicted poses: {t, x, y, heading}
-    margin: float = 0.0
-
-
-@dataclass(frozen=True)
-class PlannerSpec:
-    module: str
-    inputs: tuple[str, ...]  # channel names, the trigger among them
-    trigger: str
-    output: str
-    trajectory: TrajectoryLayout
-    factory: str | None = None  # "package.module:Name": in-process replay
-    factory_args: Mapping[str, str] = field(default_factory=dict)  # {placeholders} from params
-    command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
-    threshold: float = 0.0  # metres: the validator's acceptance
-    lookback_ms: float = 100.0  # candidate frame times this far before the trigger (delivery jitter, load)
-    # The recorder's receive times can lag the planner's by a little (its own
-    # scheduling): a trigger logged up to this long after the output is still a candidate.
-    skew_ms: float = 5.0
-    collision: CollisionOracle | None = None
 
 
 KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms", "skew_ms",
@@ -74,7 +30,7 @@ OBSTACLE_KEYS = ("channel", "array", "length", "width", "id", "trajectory")
 
 
 def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageType],
-                  channels: Sequence[Channel], modules: Sequence[Module]) -> PlannerSpec | None:
+                  channels: Sequence[Channel], modules: Sequence[Module]) -> ReplayModule | None:
     if node is None or node.value is None:
         return None
     if not node.is_map:
@@ -138,8 +94,11 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 100.0)
     skew = _number(src, v.get("skew_ms"), "planner.skew_ms", 5.0)
     collision = _oracle(src, v.get("oracle"), inputs)
-    return PlannerSpec(module, tuple(inputs), trigger, output, layout, factory, args, command, threshold, lookback,
-                       skew, collision)
+    # The planner is a module that runs alone like any other, with its extras: frames found per recorded
+    # output, outputs compared as trajectories; an exception from step() is not judged (unresolved).
+    return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames=PER_OUTPUT,
+                        exceptions="unresolved", hang_after=0.0, threshold=threshold, lookback_ms=lookback,
+                        skew_ms=skew, trajectory=layout, collision=collision, where="planner")
 
 
 def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracle | None:

@@ -16,8 +16,8 @@ replay:
       ignore: [header.stamp]                # output fields the comparison skips
 ```
 
-The ``planner:`` section is one such entry too (:func:`planner_entry`): its
-frames are found per recorded output by DeFT's candidate search and its
+The ``planner:`` section loads into the same record (``spec/replay_module.py``):
+its frames are found per recorded output by DeFT's candidate search and its
 outputs compared as trajectories. Every consumer of replayable modules goes
 through :class:`ReplayModule`; the loader calls :func:`build_replay_section`.
 """
@@ -25,58 +25,20 @@ through :class:`ReplayModule`; the loader calls :func:`build_replay_section`.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 
 from ..errors import did_you_mean
 from .model import Channel, Module
-from .planner import CollisionOracle, PlannerSpec, TrajectoryLayout, read_runner
+from .planner import read_runner
+from .replay_module import EXCEPTIONS, FRAME_MODES, ReplayModule
 from ..yamlsource import Node, Source, describe_value
 
-PER_OUTPUT = "per_output"  # one frame per recorded output, found by DeFT's candidate search (the planner's)
-PER_TRIGGER = "per_trigger"  # one frame per trigger message; the module answers with one output or none
-FRAME_MODES = (PER_TRIGGER, PER_OUTPUT)
-EXCEPTIONS = ("unresolved", "crash")
+__all__ = ["ReplayModule", "build_replay_section"]
+
 DOCS = "see docs/spec.md (replay:)"
 
 ENTRY_KEYS = ("module", "inputs", "trigger", "outputs", "factory", "args", "command", "frames", "exceptions",
               "hang_after", "threshold", "lookback_ms", "skew_ms", "ignore")
 REQUIRED = ("module", "inputs", "trigger", "outputs")
-
-
-@dataclass(frozen=True)
-class ReplayModule:
-    """A module that runs alone on reconstructed frames: what it reads, answers, and how to run it."""
-
-    module: str
-    inputs: tuple[str, ...]  # channel names, the trigger among them
-    trigger: str
-    output: str
-    factory: str | None = None  # "package.module:Name": in-process replay
-    factory_args: Mapping[str, str] = field(default_factory=dict)
-    command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
-    frames: str = PER_TRIGGER
-    # What an exception from step() means: "crash" (the module's own process would die of it: the replay
-    # shows a crash) or "unresolved" (the real module may never let such input reach the replayed code).
-    exceptions: str = "unresolved"
-    hang_after: float = 1.0  # s: a step still running then is a hang (the module answers nothing more)
-    threshold: float = 0.0
-    lookback_ms: float = 100.0
-    skew_ms: float = 5.0
-    ignore: tuple[str, ...] = ()  # dotted output field paths the comparison skips
-    trajectory: TrajectoryLayout | None = None  # outputs compared as trajectories (the planner) …
-    collision: CollisionOracle | None = None  # … with its collision oracle
-    where: str = "replay.modules"  # the spec section it came from (for messages)
-
-    @property
-    def per_trigger(self) -> bool:
-        return self.frames == PER_TRIGGER
-
-
-def planner_entry(planner: PlannerSpec) -> ReplayModule:
-    """The ``planner:`` section as a replay entry (frames per output, trajectories compared, errors unresolved)."""
-    return ReplayModule(planner.module, planner.inputs, planner.trigger, planner.output, planner.factory,
-                        planner.factory_args, planner.command, PER_OUTPUT, "unresolved", 0.0, planner.threshold,
-                        planner.lookback_ms, planner.skew_ms, (), planner.trajectory, planner.collision, "planner")
 
 
 def build_replay_section(src: Source, node: Node | None, channels: Sequence[Channel],
