@@ -35,6 +35,9 @@ SPEED_PREVIEW = 0.1  # s: react to where the plan will be, covering actuation de
 HOLD_BRAKE = -2.0  # m/s² while standing still
 FALLBACK_BRAKE = -3.0  # m/s² when the planner has no plan
 PLAUSIBLE_HEADING = 1000.0  # rad; even an unwrapped heading never gets near this
+# m/s; beyond it a measured speed is a corrupted message (its square or difference may overflow to inf,
+# and the PID's filtered derivative then turns NaN for good)
+PLAUSIBLE_SPEED = 100.0
 
 
 def normalize_angle_by_loop(angle: float) -> float:
@@ -71,6 +74,9 @@ class Controller:
         if not all(math.isfinite(v) for p in points for v in p):
             log(MODULE, f"ignored trajectory {self.plan_seq} with non-finite points")
             return
+        if not self.defects and any(abs(p.v) > PLAUSIBLE_SPEED for p in points):
+            log(MODULE, f"ignored trajectory {self.plan_seq} with a speed no car reaches")
+            return
         # Arrays: the nearest-point search and lookahead below are vectorised.
         columns = np.array([tuple(p) for p in points], dtype=np.float64).reshape(-1, len(TrajectoryPoint._fields))
         self.plan = {name: columns[:, i] for i, name in enumerate(TrajectoryPoint._fields)}
@@ -82,6 +88,8 @@ class Controller:
             return self.last_command  # a measurement we cannot use: keep the last command
         if not self.defects and abs(loc.heading) > PLAUSIBLE_HEADING:
             return self.last_command  # an angle this large has no usable fraction of a turn left
+        if not self.defects and abs(loc.speed) > PLAUSIBLE_SPEED:
+            return self.last_command  # no car measures this: a corrupted localization
         if self.plan is None:
             # Nothing to follow yet, or the planner has no plan; the cycle clock starts with a plan.
             if self.brake_for_missing_plan:

@@ -32,6 +32,9 @@ TRIGGER_CHANNEL = "prediction"
 
 MAX_CRUISE_SPEED = 20.0  # m/s the planner would drive if nothing limited it
 FALLBACK_SPEED_LIMIT = 8.0  # m/s, until a usable limit arrives (defects off)
+# The demo vehicle's operational design domain: urban roads, none signed above 54 km/h. A routing limit
+# beyond it is a corrupted message, not a road (defects off: ignored like a non-finite one).
+ODD_MAX_SPEED_LIMIT = 15.0  # m/s
 SPEED_LIMIT_MARGIN = 0.3  # m/s below the limit, so speed-control overshoot stays legal
 COMFORT_DECEL = 3.0  # m/s²
 MAX_PLAN_DECEL = 6.0  # m/s², the hardest braking it plans (the brakes can do more)
@@ -153,8 +156,9 @@ class Planner:
     # --- inputs --------------------------------------------------------------
     def _cruise_speed(self, limit: float) -> float:
         if not self.defects:
-            # A limit that is not a positive finite number is no limit at all: keep the last good one.
-            if math.isfinite(limit) and limit > 0.0:
+            # A limit that is not a positive finite number, or one no road of the ODD has, is no limit at
+            # all: keep the last good one.
+            if math.isfinite(limit) and 0.0 < limit <= ODD_MAX_SPEED_LIMIT:
                 self.speed_limit = limit
             limit = self.speed_limit if self.speed_limit is not None else FALLBACK_SPEED_LIMIT
         cruise = MAX_CRUISE_SPEED
