@@ -193,7 +193,11 @@ class Campaign:
 
     # -- generated cases -------------------------------------------------------
     def _main(self, pool) -> str:
-        for row in self.journal.cases(MUTATED):  # a resumed guided search learns its corpus again
+        rows = self.journal.cases(MUTATED)
+        resume = getattr(self.strategy, "resume", None)  # guided: its schedule goes on where it was
+        if resume is not None and rows:
+            resume([(row["case_id"], row["testcase_xml"], row["parent"]) for row in rows])
+        for row in rows:  # a resumed guided search learns its corpus again
             outcome = self.journal.outcome(row)
             if outcome is not None:
                 self.strategy.observe(row["case_id"], row["testcase_xml"], outcome)
