@@ -78,6 +78,7 @@ class Campaigned:
     first_xml: dict[str, str]  # bucket → its first case's test case XML
     started: float  # wall clock (time.time) at the start
     case_seconds: list[float]  # each finished run's seconds from launch to end
+    cpu_seconds: float  # CPU (user + system) of every process the campaign started and waited for
 
 
 class UntilAllFound(Campaign):
@@ -104,6 +105,7 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
                             minimise=False, report=False, workers=workers)
     journal = Journal(out)
     started = time.time()
+    cpu_before = _children_cpu()
     kind = UntilAllFound if until_all_found else Campaign
     try:
         result = kind(config, journal, say=lambda text: None).run()
@@ -113,7 +115,18 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
         case_seconds = [o.seconds for o in outcomes if o is not None and o.status == "done"]
     finally:
         journal.close()
-    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds)
+    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds,
+                      _children_cpu() - cpu_before)
+
+
+def _children_cpu() -> float:
+    """CPU seconds of this process's finished descendants (each waited for by its parent: case processes,
+    their recorders and SUT modules) plus this process's own — less load-sensitive than wall time."""
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def throughput(tmp: Path, cases: int) -> None:
@@ -132,7 +145,8 @@ def throughput(tmp: Path, cases: int) -> None:
         run_seconds = statistics.mean(done.case_seconds) if done.case_seconds else 0.0
         print(f"  {name:13} {workers} at once: {done.cases:3d} cases in {done.seconds:6.1f} s wall:"
               f" {rate:6.0f} cases per core-hour ({done.seconds / max(1, done.cases):.1f} s wall per case,"
-              f" a run {run_seconds:.1f} s from launch to end)")
+              f" a run {run_seconds:.1f} s from launch to end; {done.cpu_seconds / max(1, done.cases):.1f} CPU s"
+              f" per case{'' if cluster is None else ' in this process (the cluster workers are not counted)'})")
     pool = rates[("local pool", default)]
     print(f"  LocalCluster / local pool: {rates[('LocalCluster', default)] / pool:.2f}×;"
           f" {2 * default} / {default} at once: {rates[('local pool', 2 * default)] / pool:.2f}×;"
