@@ -1,6 +1,7 @@
 """Campaigns on the demo stack: throughput, time to first find per seeded defect, false alarms.
 
     python benchmarks/bench_campaign.py [--quick] [--keep DIR] [--skip throughput,find,false]
+                                        [--pool-workers 3,4,5]
 
 1. **Throughput**: the same short campaign (no minimisation) on the local
    process pool and on a Dask ``LocalCluster`` of worker processes; cases per
@@ -129,7 +130,7 @@ def _children_cpu() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def throughput(tmp: Path, cases: int) -> None:
+def throughput(tmp: Path, cases: int, pool_workers: list[int] | None = None) -> None:
     cores = os.cpu_count() or 1
     print(f"== throughput: {cases} generated cases (+1 baseline) per campaign, {cores} cores,"
           f" load average {_load()} ==")
@@ -137,6 +138,8 @@ def throughput(tmp: Path, cases: int) -> None:
     rates = {}
     runs = [("local pool", None, default), ("LocalCluster", f"local:{default}", default),
             ("local pool", None, 2 * default)]
+    if pool_workers:  # only local pools, these many cases at once (the first is the reference)
+        runs = [("local pool", None, k) for k in pool_workers]
     for name, cluster, workers in runs:
         done = campaign(tmp / f"throughput-{name.replace(' ', '-')}-{workers}", cases=cases, budget=None, seed=1,
                         cluster=cluster, workers=workers)
@@ -147,6 +150,11 @@ def throughput(tmp: Path, cases: int) -> None:
               f" {rate:6.0f} cases per core-hour ({done.seconds / max(1, done.cases):.1f} s wall per case,"
               f" a run {run_seconds:.1f} s from launch to end; {done.cpu_seconds / max(1, done.cases):.1f} CPU s"
               f" per case{'' if cluster is None else ' in this process (the cluster workers are not counted)'})")
+    if pool_workers:
+        first = rates[("local pool", pool_workers[0])]
+        print("  " + "; ".join(f"{k} / {pool_workers[0]} at once: {rates[('local pool', k)] / first:.2f}×"
+                               for k in pool_workers[1:]) + f"; load average now {_load()}")
+        return
     pool = rates[("local pool", default)]
     print(f"  LocalCluster / local pool: {rates[('LocalCluster', default)] / pool:.2f}×;"
           f" {2 * default} / {default} at once: {rates[('local pool', 2 * default)] / pool:.2f}×;"
@@ -242,6 +250,7 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, help="find campaigns per strategy (seeds 1..N)")
     ap.add_argument("--budget", type=float, help="seconds per find campaign")
     ap.add_argument("--clean", type=int, help="generated cases of the false-alarm campaign")
+    ap.add_argument("--pool-workers", help="throughput of local pools only, with these many cases at once (e.g. 3,4,5)")
     args = ap.parse_args()
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     pool_cases, seeds, budget, max_cases, clean = (12, [1, 2, 3, 4, 5], 150.0, 200, 30) if args.quick else \
@@ -255,7 +264,8 @@ def main() -> int:
         tmp = args.keep or Path(tmp_name)
         tmp.mkdir(parents=True, exist_ok=True)
         if "throughput" not in skip:
-            throughput(tmp, pool_cases)
+            throughput(tmp, pool_cases,
+                       [int(k) for k in args.pool_workers.split(",")] if args.pool_workers else None)
         if "find" not in skip:
             first_finds(tmp, seeds, budget, max_cases)
         if "false" not in skip:

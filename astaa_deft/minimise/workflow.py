@@ -31,6 +31,7 @@ from ..intercept.testcase import TestCase, parse_testcase
 from ..log import layout
 from ..log.reader import LogContents, read_log
 from ..monitor import with_typed_invariants
+from .anchoring import choose_anchor, pin_to_anchor
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
 from .mutations import Mutation, read_mutations
@@ -135,7 +136,12 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
     params = {**spec.params, **run_params(log)}
     original = original_testcase(log)
+    # Live tests pin each mutation counted from the running stack, not from the run's start (anchoring.py).
+    anchor = choose_anchor(log, mlog, original)
+    mlog = pin_to_anchor(mlog, log, anchor)
     say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
+    if anchor is not None:
+        say(f"pinned mutations count from the first '{anchor}' message on (the stack is live then)")
     say(f"tester: {tester_kind} ({why})")
 
     result: Minimisation | None = None
