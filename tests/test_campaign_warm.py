@@ -6,6 +6,8 @@ import json
 import subprocess
 from pathlib import Path
 
+import pytest
+
 from astaa_deft.campaign.runner import run_case
 from astaa_deft.log import layout
 from astaa_deft.log.reader import read_log
@@ -51,3 +53,44 @@ def test_an_unused_warm_recorder_exits_at_end_of_input():
     except subprocess.TimeoutExpired:
         recorder.kill()
         raise
+
+
+def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_full(tmp_path: Path):
+    # The worker (--warm) forks the case's recorder before its payload comes (campaign/forked.py).
+    from astaa_deft.bus.processes import python_module
+    from astaa_deft.campaign.model import BASELINE, CaseOutcome, PlannedCase
+
+    case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
+    payload = {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
+    done = subprocess.run([*python_module("astaa_deft.campaign.worker"), "--warm", str(ECHO)],
+                          input=json.dumps(payload), capture_output=True, text=True, timeout=60)
+    outcome = CaseOutcome.from_json(json.loads(done.stdout.splitlines()[-1]))
+    assert outcome.status == "done", (outcome, done.stderr[-2000:])
+    assert len(read_log(tmp_path / "a" / "run.mcap").on("test/data")) == 40
+    assert (tmp_path / "a" / "modules" / "recorder.log").is_file()
+
+
+def test_a_forked_recorder_is_its_own_process_group_and_exits_at_end_of_input():
+    from astaa_deft.bus.processes import python_module
+
+    code = ("import sys, os; from astaa_deft.campaign.forked import ForkedRecorder; from pathlib import Path; "
+            f"r = ForkedRecorder(Path({str(ECHO)!r}).read_text(), 'echo.yaml'); "
+            "print(os.getpgid(r.pid) == r.pid, r.pid != os.getpid()); r.stdin.close(); print(r.wait(timeout=20))")
+    done = subprocess.run([*python_module("astaa_deft")[:-2], "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.split() == ["True", "True", "0"], done.stderr[-2000:]
+
+
+def test_no_recorder_is_forked_from_a_process_with_other_threads():
+    import threading
+
+    from astaa_deft.campaign.forked import ForkedRecorder
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        with pytest.raises(RuntimeError):
+            ForkedRecorder(ECHO.read_text(), ECHO.name)
+    finally:
+        stop.set()
+        other.join()

@@ -190,6 +190,11 @@ def _warm(spec_files: list[str]) -> int:
         with contextlib.suppress(Exception):  # a spec that does not parse is reported when the run reads it
             text = Path(name).read_text()
             parsed[(text, Path(name).name)] = load_spec_text(text, name=Path(name).name)
+    return await_arguments(parsed)
+
+
+def await_arguments(parsed: dict[tuple[str, str], object]) -> int:
+    """A warm recorder's wait for its ARGS line on stdin, then its run (``parsed``: specs parsed ahead)."""
     line = sys.stdin.readline()
     if not line.strip():
         return 0
