@@ -79,7 +79,8 @@ class Campaigned:
     first_xml: dict[str, str]  # bucket → its first case's test case XML
     started: float  # wall clock (time.time) at the start
     case_seconds: list[float]  # each finished run's seconds from launch to end
-    cpu_seconds: float  # CPU (user + system) of every process the campaign started and waited for
+    cpu_seconds: float  # CPU (user + system) of every process the campaign started and waited for, and its own
+    own_cpu_seconds: float  # of which the campaign's own process (journal, generation, pool threads)
 
 
 class UntilAllFound(Campaign):
@@ -106,7 +107,7 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
                             minimise=False, report=False, workers=workers)
     journal = Journal(out)
     started = time.time()
-    cpu_before = _children_cpu()
+    cpu_before, own_before = _children_cpu(), _own_cpu()
     kind = UntilAllFound if until_all_found else Campaign
     try:
         result = kind(config, journal, say=lambda text: None).run()
@@ -117,7 +118,14 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
     finally:
         journal.close()
     return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds,
-                      _children_cpu() - cpu_before)
+                      _children_cpu() - cpu_before, _own_cpu() - own_before)
+
+
+def _own_cpu() -> float:
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    return own.ru_utime + own.ru_stime
 
 
 def _children_cpu() -> float:
@@ -146,10 +154,12 @@ def throughput(tmp: Path, cases: int, pool_workers: list[int] | None = None) -> 
         rate = done.cases / (done.seconds / 3600 * cores)
         rates[(name, workers)] = rate
         run_seconds = statistics.mean(done.case_seconds) if done.case_seconds else 0.0
+        cluster_note = "" if cluster is None else "; the cluster's workers counted only as far as reaped"
         print(f"  {name:13} {workers} at once: {done.cases:3d} cases in {done.seconds:6.1f} s wall:"
               f" {rate:6.0f} cases per core-hour ({done.seconds / max(1, done.cases):.1f} s wall per case,"
-              f" a run {run_seconds:.1f} s from launch to end; {done.cpu_seconds / max(1, done.cases):.1f} CPU s"
-              f" per case{'' if cluster is None else ' in this process (the cluster workers are not counted)'})")
+              f" a run {run_seconds:.1f} s from launch to end; {done.cpu_seconds / max(1, done.cases):.2f} CPU s"
+              f" per case, {done.own_cpu_seconds / max(1, done.cases):.2f} of them in the campaign's process"
+              f"{cluster_note})")
     if pool_workers:
         first = rates[("local pool", pool_workers[0])]
         print("  " + "; ".join(f"{k} / {pool_workers[0]} at once: {rates[('local pool', k)] / first:.2f}×"
