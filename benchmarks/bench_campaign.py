@@ -1,6 +1,7 @@
 """Campaigns on the demo stack: throughput, time to first find per seeded defect, false alarms.
 
     python benchmarks/bench_campaign.py [--quick] [--keep DIR] [--skip throughput,find,false]
+                                        [--pool-workers 3,4,5]
 
 1. **Throughput**: the same short campaign (no minimisation) on the local
    process pool and on a Dask ``LocalCluster`` of worker processes; cases per
@@ -78,6 +79,8 @@ class Campaigned:
     first_xml: dict[str, str]  # bucket → its first case's test case XML
     started: float  # wall clock (time.time) at the start
     case_seconds: list[float]  # each finished run's seconds from launch to end
+    cpu_seconds: float  # CPU (user + system) of every process the campaign started and waited for, and its own
+    own_cpu_seconds: float  # of which the campaign's own process (journal, generation, pool threads)
 
 
 class UntilAllFound(Campaign):
@@ -104,6 +107,7 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
                             minimise=False, report=False, workers=workers)
     journal = Journal(out)
     started = time.time()
+    cpu_before, own_before = _children_cpu(), _own_cpu()
     kind = UntilAllFound if until_all_found else Campaign
     try:
         result = kind(config, journal, say=lambda text: None).run()
@@ -113,10 +117,28 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
         case_seconds = [o.seconds for o in outcomes if o is not None and o.status == "done"]
     finally:
         journal.close()
-    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds)
+    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds,
+                      _children_cpu() - cpu_before, _own_cpu() - own_before)
 
 
-def throughput(tmp: Path, cases: int) -> None:
+def _own_cpu() -> float:
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    return own.ru_utime + own.ru_stime
+
+
+def _children_cpu() -> float:
+    """CPU seconds of this process's finished descendants (each waited for by its parent: case processes,
+    their recorders and SUT modules) plus this process's own — less load-sensitive than wall time."""
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def throughput(tmp: Path, cases: int, pool_workers: list[int] | None = None) -> None:
     cores = os.cpu_count() or 1
     print(f"== throughput: {cases} generated cases (+1 baseline) per campaign, {cores} cores,"
           f" load average {_load()} ==")
@@ -124,15 +146,25 @@ def throughput(tmp: Path, cases: int) -> None:
     rates = {}
     runs = [("local pool", None, default), ("LocalCluster", f"local:{default}", default),
             ("local pool", None, 2 * default)]
+    if pool_workers:  # only local pools, these many cases at once (the first is the reference)
+        runs = [("local pool", None, k) for k in pool_workers]
     for name, cluster, workers in runs:
         done = campaign(tmp / f"throughput-{name.replace(' ', '-')}-{workers}", cases=cases, budget=None, seed=1,
                         cluster=cluster, workers=workers)
         rate = done.cases / (done.seconds / 3600 * cores)
         rates[(name, workers)] = rate
         run_seconds = statistics.mean(done.case_seconds) if done.case_seconds else 0.0
+        cluster_note = "" if cluster is None else "; the cluster's workers counted only as far as reaped"
         print(f"  {name:13} {workers} at once: {done.cases:3d} cases in {done.seconds:6.1f} s wall:"
               f" {rate:6.0f} cases per core-hour ({done.seconds / max(1, done.cases):.1f} s wall per case,"
-              f" a run {run_seconds:.1f} s from launch to end)")
+              f" a run {run_seconds:.1f} s from launch to end; {done.cpu_seconds / max(1, done.cases):.2f} CPU s"
+              f" per case, {done.own_cpu_seconds / max(1, done.cases):.2f} of them in the campaign's process"
+              f"{cluster_note})")
+    if pool_workers:
+        first = rates[("local pool", pool_workers[0])]
+        print("  " + "; ".join(f"{k} / {pool_workers[0]} at once: {rates[('local pool', k)] / first:.2f}×"
+                               for k in pool_workers[1:]) + f"; load average now {_load()}")
+        return
     pool = rates[("local pool", default)]
     print(f"  LocalCluster / local pool: {rates[('LocalCluster', default)] / pool:.2f}×;"
           f" {2 * default} / {default} at once: {rates[('local pool', 2 * default)] / pool:.2f}×;"
@@ -228,6 +260,7 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, help="find campaigns per strategy (seeds 1..N)")
     ap.add_argument("--budget", type=float, help="seconds per find campaign")
     ap.add_argument("--clean", type=int, help="generated cases of the false-alarm campaign")
+    ap.add_argument("--pool-workers", help="throughput of local pools only, with these many cases at once (e.g. 3,4,5)")
     args = ap.parse_args()
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     pool_cases, seeds, budget, max_cases, clean = (12, [1, 2, 3, 4, 5], 150.0, 200, 30) if args.quick else \
@@ -241,7 +274,8 @@ def main() -> int:
         tmp = args.keep or Path(tmp_name)
         tmp.mkdir(parents=True, exist_ok=True)
         if "throughput" not in skip:
-            throughput(tmp, pool_cases)
+            throughput(tmp, pool_cases,
+                       [int(k) for k in args.pool_workers.split(",")] if args.pool_workers else None)
         if "find" not in skip:
             first_finds(tmp, seeds, budget, max_cases)
         if "false" not in skip:

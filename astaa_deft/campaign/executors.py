@@ -29,9 +29,11 @@ class LocalPool:
     """``workers`` cases at once, each in a fresh child process.
 
     Overlapped starts: each slot keeps its next case's process warm (started,
-    imports done, spec loaded, waiting for its payload) while the current case
-    runs — on a loaded two-core machine that start-up took ~3 s of a case's
-    ~12 (measured; benchmarks/bench_campaign.py).
+    imports done, spec loaded, its recorder started, waiting for its payload)
+    while the current case runs — on a loaded two-core machine that start-up
+    took ~3 s of a case's ~12 (measured; benchmarks/bench_campaign.py). The
+    first case fills every slot's next process, so the cases after a
+    campaign's baseline start warm as well.
     """
 
     def __init__(self, workers: int):
@@ -62,7 +64,8 @@ class LocalPool:
             if proc is None:
                 proc = self._spawn(key)
             self._procs.add(proc)
-            if len(self._warm) < self.workers:
+            # Fill every slot's next process at once: the first wave after the baseline starts warm too.
+            while len(self._warm) < self.workers:
                 self._warm.append((key, self._spawn(key)))
         return proc
 

@@ -12,6 +12,7 @@ Nothing else in the campaign package touches the bus.
 from __future__ import annotations
 
 import math
+import subprocess
 import threading
 import time
 from dataclasses import replace
@@ -50,13 +51,15 @@ def isolated(spec: Spec) -> Spec:
 
 
 def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, horizon: float,
-             dictionary: Dictionary | None = None, settle: float | None = None) -> CaseOutcome:
+             dictionary: Dictionary | None = None, settle: float | None = None, *,
+             warm_recorder: subprocess.Popen | None = None) -> CaseOutcome:
     """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
 
     ``settle``: a mutated run ends this many seconds after its test case can
     mutate no more (its last window closed or its last one-message policy
     acted) — what the SUT does with a bad message shows within seconds, and
     a run's remaining minutes would be spent for nothing.
+    ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
     """
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
@@ -69,7 +72,8 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
         interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
     options = RunOptions(mode="star", launch=True, record=log_path, params=dict(params),
                          command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
-                         interceptor=interceptor, stop_on_violation=True, attachments=attachments)
+                         interceptor=interceptor, stop_on_violation=True, attachments=attachments,
+                         warm_recorder=warm_recorder)
     options.time_limit = horizon
     watch = MarginWatch(spec)
     settled = SettleWatch(testcase, settle) if testcase is not None and settle is not None else None

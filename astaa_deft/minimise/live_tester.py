@@ -27,11 +27,14 @@ the cause), which is what "fails in some runs" means for ddmin here. Runs
 are one at a time unless asked (``minimise --jobs N``): two copies of the
 SUT on a two-core machine can change the very timing under test. Each run
 is its own session (router port, run directory, log), so parallel runs are
-isolated as a campaign's cases are; ``run`` is thread-safe.
+isolated as a campaign's cases are; ``run`` is thread-safe. Each run's
+recorder is started ahead, while the previous test runs (:meth:`_recorder`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import subprocess
 import tempfile
 import threading
 import time
@@ -49,6 +52,7 @@ from ..log.reader import read_log
 from ..monitor.offline import CheckResult, check_log
 from ..monitor.verdict import IMPLICIT
 from ..session import BusRun, RunOptions, run_session
+from ..session.bus_run import warm_recorder
 from ..spec.model import Spec
 from .ddmin import Outcome, TestResult
 from .mutations import FieldSelection, Mutation
@@ -88,6 +92,33 @@ class LiveTester:
         self.run_seconds = 0.0
         self._count = threading.Lock()  # tests may run in parallel sessions (--jobs)
         self._anchors: dict[int, tuple[TestCase, float | None]] = {}  # id(testcase) → (it, last pinned at)
+        self._recorders: list[subprocess.Popen] = []  # started ahead for the next runs (see _recorder)
+
+    def _recorder(self) -> subprocess.Popen | None:
+        """A recorder started ahead (imports done, spec parsed) for this run, and another for the next one.
+
+        A whole-system test waits for its recorder before any module starts;
+        started cold that took seconds of a loaded machine's wall time per
+        test (the same start a campaign's case saves, campaign/worker.py).
+        """
+        if self.spec.path is None:
+            return None
+        with self._count:
+            while self._recorders and self._recorders[0].poll() is not None:
+                self._recorders.pop(0)
+            taken = self._recorders.pop(0) if self._recorders else None
+            with contextlib.suppress(OSError):  # else the next run starts its own
+                self._recorders.append(warm_recorder([self.spec.path]))
+        return taken
+
+    def close(self) -> None:
+        """Let the recorders started ahead go (end of input: they exit)."""
+        with self._count:
+            recorders, self._recorders = self._recorders, []
+        for recorder in recorders:
+            if recorder.stdin is not None and not recorder.stdin.closed:
+                with contextlib.suppress(OSError):
+                    recorder.stdin.close()
 
     def testcase(self, chosen: Sequence[tuple[Mutation, FieldSelection]], description: str = "") -> TestCase:
         testcase = restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
@@ -141,7 +172,7 @@ class LiveTester:
             interceptor = Interceptor(testcase, self.spec, self.dictionary) if testcase.policies else None
             options = RunOptions(mode="star", interceptor=interceptor, record=log_path, params=self.params,
                                  run_dir=Path(tmp) / "run", attachments={layout.POLICY_ATTACHMENT: policy_file},
-                                 command_line=["astaa-deft", "minimise"])
+                                 command_line=["astaa-deft", "minimise"], warm_recorder=self._recorder())
             with self._count:
                 self.runs += 1
 

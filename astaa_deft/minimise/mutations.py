@@ -71,6 +71,16 @@ class Step:
 
 
 @dataclass(frozen=True)
+class AnchorPin:
+    """Where a pinned mutation's window opens: ``after`` seconds past message ``message`` of ``channel``
+    (see :mod:`.anchoring`)."""
+
+    channel: str
+    message: int  # 1-based, the anchor's own count (from the run's start: it has nothing before the stack is live)
+    after: float = 0.0  # 0: the mutated channel's first message after that one
+
+
+@dataclass(frozen=True)
 class Mutation:
     """One mutated, dropped or extra delivery of an intercepted run: an item to minimise."""
 
@@ -88,6 +98,7 @@ class Mutation:
     delivered_time_ns: int | None
     testcase: str = ""
     event: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)  # as logged
+    pin: AnchorPin | None = field(default=None, compare=False)  # None: pinned by its count from the run's start
 
     @property
     def action(self) -> str:

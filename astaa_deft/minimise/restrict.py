@@ -9,7 +9,10 @@ mutation becomes a policy of its own that pins the very message it hit:
   window at the arrival of the N-th real message on the channel (the engine
   counts that message inside its window, so N is the event's
   ``message_index`` itself) and ``<select limit="1"/>`` takes that one
-  message and no other;
+  message and no other; a mutation made once the stack was live is counted
+  from the running stack instead (``Mutation.pin``, :mod:`.anchoring`):
+  ``<window from="S"><after channel="ANCHOR" message="M"/></window>``, the
+  first message of C from S seconds after the anchor's M-th message;
 * the consumers are the ones that got the mutated delivery (see
   :mod:`.mutations`), so a mutation that reached only ``control`` stays that way;
 * each action pins itself (``ActionConfig.pinned``, in its own module):
@@ -96,10 +99,11 @@ def _copying_action(mutation: Mutation) -> type[ActionConfig]:
 
 def _pinned(mutation: Mutation, suffix: str, action: ActionConfig) -> Policy:
     """A policy doing ``action`` to the one message ``mutation`` hit, for its consumers only."""
+    pin = mutation.pin
+    window = Window(pin.after, None, pin.channel, pin.message) if pin is not None else \
+        Window(0.0, None, mutation.channel, max(mutation.message_index, 1))
     return Policy(id=f"m{mutation.number:04d}{suffix}", action=action, channels=(mutation.channel,),
-                  consumers=tuple(mutation.consumers),
-                  window=Window(0.0, None, mutation.channel, max(mutation.message_index, 1)),
-                  selection=Selection(limit=1))
+                  consumers=tuple(mutation.consumers), window=window, selection=Selection(limit=1))
 
 
 def _copy_key(mutation: Mutation, chosen: Sequence[tuple[Mutation, FieldSelection]]) -> tuple | None:

@@ -31,6 +31,7 @@ from ..intercept.testcase import TestCase, parse_testcase
 from ..log import layout
 from ..log.reader import LogContents, read_log
 from ..monitor import with_typed_invariants
+from .anchoring import choose_anchor, pin_to_anchor
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
 from .mutations import Mutation, read_mutations
@@ -135,7 +136,12 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
     params = {**spec.params, **run_params(log)}
     original = original_testcase(log)
+    # Live tests pin each mutation counted from the running stack, not from the run's start (anchoring.py).
+    anchor = choose_anchor(log, mlog, original)
+    mlog = pin_to_anchor(mlog, log, anchor)
     say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
+    if anchor is not None:
+        say(f"pinned mutations count from the first '{anchor}' message on (the stack is live then)")
     say(f"tester: {tester_kind} ({why})")
 
     result: Minimisation | None = None
@@ -172,40 +178,43 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     live = LiveTester(spec, params, failure.invariant, failure.module, failure_at=failure.at,
                       repeats=options.repeats, original=original, testcase_id=f"minimal-{_id(original)}",
                       progress=(lambda line: say(f"  {line}")))
-    if tester_kind == "live":
-        full, repeats_used = reproduce(live, mlog.mutations, failure, options.repeats, say)
-        if full is None:
-            return _stopped(out_dir, failure, started, log_path, (
-                f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
-                f"test case: nothing to minimise (a rare flaky failure? try --repeats N)"), notes=notes)
-        live.repeats = repeats_used
-        try:
-            result = minimise_live(live, mlog.mutations, failure, full, say, options.max_tests, jobs=options.jobs)
-        except FailsWithoutItems as exc:
-            return _no_mutation_needed(out_dir, failure, exc, started, log_path)
-    assert result is not None
-    result.notes[:0] = notes
+    try:
+        if tester_kind == "live":
+            full, repeats_used = reproduce(live, mlog.mutations, failure, options.repeats, say)
+            if full is None:
+                return _stopped(out_dir, failure, started, log_path, (
+                    f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
+                    f"test case: nothing to minimise (a rare flaky failure? try --repeats N)"), notes=notes)
+            live.repeats = repeats_used
+            try:
+                result = minimise_live(live, mlog.mutations, failure, full, say, options.max_tests, jobs=options.jobs)
+            except FailsWithoutItems as exc:
+                return _no_mutation_needed(out_dir, failure, exc, started, log_path)
+        assert result is not None
+        result.notes[:0] = notes
 
-    testcase = restricted_testcase(
-        result.chosen, testcase_id=f"minimal-{_id(original)}", original=original,
-        description=(f"minimised from {log_path.name}: {len(result.kept)} of {len(result.mutations)} mutations; "
-                     f"fails {failure.invariant}"))
-    xml = write_testcase_file(out_dir, testcase, spec)
-    files = {"test case": xml}
-    confirmation, confirm_log = confirm_live(live, testcase, xml, result, options.confirm, say, scratch,
-                                             jobs=options.jobs)
-    if result.tester == "replay" and model is not None:
-        files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
-        files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
-    elif confirm_log is not None:
-        files["log"] = copy_log(confirm_log, out_dir)
-    text, reproduced = verdict(result, confirmation)
-    files["summary"] = out_dir / "summary.json"
-    body = summary(result, log=log_path, why=why, seconds=time.monotonic() - started, confirm=confirmation,
-                   verdict=text, files=files, replay_tests=replays, replay_hits=replay_hits,
-                   live_runs=live.runs, live_seconds=live.run_seconds)
-    write_summary(out_dir, body)
-    return MinimiseReport(reproduced, text, body, files=files)
+        testcase = restricted_testcase(
+            result.chosen, testcase_id=f"minimal-{_id(original)}", original=original,
+            description=(f"minimised from {log_path.name}: {len(result.kept)} of {len(result.mutations)} mutations; "
+                         f"fails {failure.invariant}"))
+        xml = write_testcase_file(out_dir, testcase, spec)
+        files = {"test case": xml}
+        confirmation, confirm_log = confirm_live(live, testcase, xml, result, options.confirm, say, scratch,
+                                                 jobs=options.jobs)
+        if result.tester == "replay" and model is not None:
+            files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
+            files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
+        elif confirm_log is not None:
+            files["log"] = copy_log(confirm_log, out_dir)
+        text, reproduced = verdict(result, confirmation)
+        files["summary"] = out_dir / "summary.json"
+        body = summary(result, log=log_path, why=why, seconds=time.monotonic() - started, confirm=confirmation,
+                       verdict=text, files=files, replay_tests=replays, replay_hits=replay_hits,
+                       live_runs=live.runs, live_seconds=live.run_seconds)
+        write_summary(out_dir, body)
+        return MinimiseReport(reproduced, text, body, files=files)
+    finally:
+        live.close()  # the recorders started ahead for tests that will not come
 
 
 def _id(original: TestCase | None) -> str:

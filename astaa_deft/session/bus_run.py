@@ -18,7 +18,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import zenoh
 
@@ -187,7 +187,7 @@ class BusRun:
                 "started_ns": str(self.started_ns),
                 "params": json.dumps({**self.spec.params, **self.options.params}, sort_keys=True)}
         # The spec travels as its text on stdin: the recorder reads the session's spec, not a file.
-        args = [*python_module("astaa_deft.session.recorder"), "--out", str(path),
+        args = ["--out", str(path),
                 "--spec-name", self.spec.path.name if self.spec.path is not None else f"{self.spec.name}.yaml",
                 "--mode", self.options.mode, "--meta", json.dumps(meta)]
         for ep in self.bus_endpoints:
@@ -197,8 +197,15 @@ class BusRun:
                 args += ["--intercepted", name]
         for name, file in self.options.attachments.items():
             args += ["--attach", f"{name}={file}"]
-        self.recorder = self._spawn_ready("recorder", args, error_file=path, stdin_text=self.spec.source_text or (
-            self.spec.path.read_text() if self.spec.path is not None else ""))
+        spec_text = self.spec.source_text or (self.spec.path.read_text() if self.spec.path is not None else "")
+        warm = self.options.warm_recorder
+        if warm is not None and warm.poll() is None:  # started ahead (imports done): hand it its arguments
+            args = ["--log-file", str(self.run_dir / "recorder.log"), *args]
+            self.recorder = self._spawn_ready("recorder", args, error_file=path,
+                                              stdin_text=json.dumps(args) + "\n" + spec_text, warm=warm)
+        else:
+            self.recorder = self._spawn_ready("recorder", [*python_module("astaa_deft.session.recorder"), *args],
+                                              error_file=path, stdin_text=spec_text)
 
     def _wait_recorder_subscribed(self) -> None:
         """The recorder says 'ready' once it declared its subscribers; the router may learn of them a moment
@@ -216,13 +223,18 @@ class BusRun:
             time.sleep(0.005)
 
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None,
-                     stdin_text: str | None = None) -> subprocess.Popen:
-        """Start one of the tool's own helper processes (``stdin_text`` on its stdin) and wait for its 'ready' line."""
+                     stdin_text: str | None = None, warm: subprocess.Popen | None = None) -> subprocess.Popen:
+        """Start one of the tool's own helper processes (``stdin_text`` on its stdin) and wait for its 'ready' line.
+
+        ``warm``: the helper was started ahead (:func:`warm_recorder`) and is waiting for ``stdin_text``."""
         log_path = self.run_dir / f"{name.split()[-1]}.log"
-        with open(log_path, "wb") as err:
-            proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err,
-                                    stdin=subprocess.DEVNULL if stdin_text is None else subprocess.PIPE,
-                                    start_new_session=True, preexec_fn=die_with_parent, text=True)
+        if warm is not None:
+            proc = warm
+        else:
+            with open(log_path, "wb") as err:
+                proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err,
+                                        stdin=subprocess.DEVNULL if stdin_text is None else subprocess.PIPE,
+                                        start_new_session=True, preexec_fn=die_with_parent, text=True)
         self._helpers.append(proc)
         if stdin_text is not None:
             assert proc.stdin is not None
@@ -431,6 +443,18 @@ class BusRun:
     def _undeclared(self, module: str, key: str) -> None:
         note = "forwarded to every other module; declare it under 'channels' to route it precisely"
         self.emit(rec.UndeclaredKey(time.time_ns(), module, key, note))
+
+
+def warm_recorder(spec_files: Sequence[Path] = ()) -> subprocess.Popen:
+    """A recorder started ahead of its run: imports done, ``spec_files`` parsed, waiting for its arguments.
+
+    Give it to one run as ``RunOptions.warm_recorder``; a run whose warm
+    recorder died starts a fresh one. Its owner closes its stdin (or stops
+    it) when no run will take it; it dies with its parent either way.
+    """
+    return subprocess.Popen([*python_module("astaa_deft.session.recorder"), "--warm", *map(str, spec_files)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            start_new_session=True, preexec_fn=die_with_parent, text=True)
 
 
 def _concrete(endpoint: str) -> str:

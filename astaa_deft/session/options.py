@@ -22,6 +22,8 @@ class RunOptions:
     stop_on_violation: bool = False
     attachments: dict[str, Path] = field(default_factory=dict)  # name in the log → file (policy, dictionaries)
     time_limit: float | None = None  # seconds; None: no limit from the caller
+    # A recorder started ahead of the run (bus_run.warm_recorder), taken by this run if still alive.
+    warm_recorder: Any = None
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,14 @@ with the spec's text on stdin (the session's spec, not a file to re-read:
 it may have been built in code, or come out of a log); prints ``ready`` on
 stdout once subscribed and a JSON line of counts when done.
 
+Kept warm: ``python -m astaa_deft.session.recorder --warm [SPEC_FILE …]``
+imports everything (and parses those specs) first, then waits for one line
+on stdin — its ARGS as a JSON list — followed by the spec's text, and runs
+as above. A campaign's case or a live minimisation test starts it while the
+previous run still goes on, so a run does not wait for a Python start-up on
+its critical path (seconds on a loaded machine). EOF instead of the line:
+nobody needs it, it exits.
+
 It belongs to the session, not to ``log/``: it joins transport (the bus
 keys it subscribes to), interception (the events it records) and the file
 format, which ``log/`` alone owns.
@@ -37,6 +45,7 @@ from ..codecs.rmw_attachment import parse_attachment
 from ..log import layout, records
 from ..log.viewable import ViewableTwins
 from ..log.writer import LogWriter
+from ..spec.model import Spec
 from ..spec_loader import load_spec_text
 import contextlib
 
@@ -55,7 +64,11 @@ CAUGHT_UP = "caught up"  # stdout line: the run_stopped event arrived, so did ev
 SHUTDOWN_LIMIT_SECONDS = 20.0
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | None = None) -> int:
+    """``parsed``: specs parsed ahead (warm start), by (text, name); used only when the text is the same."""
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--warm"]:
+        return _warm(argv[1:])
     ap = argparse.ArgumentParser(prog="astaa-deft-recorder")
     ap.add_argument("--spec-name", default="spec.yaml",
                     help="the spec's file name, for messages (its text is on stdin)")
@@ -68,14 +81,22 @@ def main(argv: list[str] | None = None) -> int:
                     help="store this file in the log as an attachment (policy, dictionaries)")
     ap.add_argument("--intercepted", action="append", default=[],
                     help="a channel the proxy may alter: record what it delivered, and the originals")
+    ap.add_argument("--log-file", type=Path,
+                    help="write stderr here (a warm recorder was started before its run directory was known)")
     args = ap.parse_args(argv)
+    if args.log_file is not None:
+        fd = os.open(args.log_file, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        os.dup2(fd, 2)
+        os.close(fd)
 
     tool_pid = os.getppid()  # if this changes, the tool died (and its death signal is what stops us)
     stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, _frame: stopping.append(signum))
 
-    spec = load_spec_text(sys.stdin.read(), name=args.spec_name)
+    text = sys.stdin.read()
+    spec = (parsed or {}).get((text, args.spec_name)) or load_spec_text(text, name=args.spec_name)
+    assert isinstance(spec, Spec)
     writer = LogWriter(args.out, spec, chunk_size=args.chunk_size)
     writer.attachment(layout.SPEC_ATTACHMENT, spec.source_text.encode(), "application/yaml")
     for item in args.attach:
@@ -160,6 +181,24 @@ def main(argv: list[str] | None = None) -> int:
     # No session.close(): the log is finished, and closing a session whose router is gone (the tool
     # killed, or the bus router) waits for Zenoh's timeouts; exiting drops the connection just as well.
     os._exit(0)  # the shutdown timer is a non-daemon thread
+
+
+def _warm(spec_files: list[str]) -> int:
+    """Wait, imports done and ``spec_files`` parsed, for the ARGS line on stdin; then run (module doc)."""
+    parsed: dict[tuple[str, str], object] = {}
+    for name in spec_files:
+        with contextlib.suppress(Exception):  # a spec that does not parse is reported when the run reads it
+            text = Path(name).read_text()
+            parsed[(text, Path(name).name)] = load_spec_text(text, name=Path(name).name)
+    return await_arguments(parsed)
+
+
+def await_arguments(parsed: dict[tuple[str, str], object]) -> int:
+    """A warm recorder's wait for its ARGS line on stdin, then its run (``parsed``: specs parsed ahead)."""
+    line = sys.stdin.readline()
+    if not line.strip():
+        return 0
+    return main(json.loads(line), parsed)
 
 
 def _tool_lost(tool_pid: int, announced: bool) -> bool:

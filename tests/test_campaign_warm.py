@@ -1,0 +1,96 @@
+"""A case's recorder started ahead (warm): the same log as a cold one, and no process left behind."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.campaign.runner import run_case
+from astaa_deft.log import layout
+from astaa_deft.log.reader import read_log
+from astaa_deft.session.bus_run import warm_recorder
+from astaa_deft.spec_loader import load_spec
+
+ECHO = Path(__file__).parent / "sut" / "echo.yaml"
+PARAMS = {"count": "40", "rate": "100"}
+
+
+def test_a_warm_recorder_records_the_case_as_a_cold_one_does(tmp_path: Path):
+    spec = load_spec(ECHO)
+    cold = run_case(spec, None, PARAMS, tmp_path / "cold", 3.0)
+    recorder = warm_recorder([ECHO])
+    warm = run_case(spec, None, PARAMS, tmp_path / "warm", 3.0, warm_recorder=recorder)
+    assert cold.status == warm.status == "done", (cold, warm)
+    assert recorder.wait(timeout=10) == 0  # the warm process was the case's recorder, and it finished cleanly
+    logs = {name: read_log(tmp_path / name / "run.mcap") for name in ("cold", "warm")}
+    # The talker's messages, less their wall-clock stamps: the same sequence in both logs.
+    data = {name: [(d["header"]["seq"], d["value"]) for d in (json.loads(m.data) for m in log.on("test/data"))]
+            for name, log in logs.items()}
+    assert len(data["warm"]) == len(data["cold"]) == 40
+    assert data["warm"] == data["cold"]
+    assert logs["warm"].attachments[layout.SPEC_ATTACHMENT] == logs["cold"].attachments[layout.SPEC_ATTACHMENT]
+    assert (tmp_path / "warm" / "modules" / "recorder.log").is_file()  # its stderr went to the run's folder
+
+
+def test_a_dead_warm_recorder_is_replaced_by_a_fresh_one(tmp_path: Path):
+    recorder = warm_recorder([ECHO])
+    recorder.kill()
+    recorder.wait(timeout=10)
+    outcome = run_case(load_spec(ECHO), None, PARAMS, tmp_path / "case", 3.0, warm_recorder=recorder)
+    assert outcome.status == "done", outcome
+    assert len(read_log(tmp_path / "case" / "run.mcap").on("test/data")) == 40
+
+
+def test_an_unused_warm_recorder_exits_at_end_of_input():
+    recorder = warm_recorder([ECHO])
+    assert recorder.stdin is not None
+    recorder.stdin.close()
+    try:
+        assert recorder.wait(timeout=20) == 0
+    except subprocess.TimeoutExpired:
+        recorder.kill()
+        raise
+
+
+def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_full(tmp_path: Path):
+    # The worker (--warm) forks the case's recorder before its payload comes (campaign/forked.py).
+    from astaa_deft.bus.processes import python_module
+    from astaa_deft.campaign.model import BASELINE, CaseOutcome, PlannedCase
+
+    case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
+    payload = {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
+    done = subprocess.run([*python_module("astaa_deft.campaign.worker"), "--warm", str(ECHO)],
+                          input=json.dumps(payload), capture_output=True, text=True, timeout=60)
+    outcome = CaseOutcome.from_json(json.loads(done.stdout.splitlines()[-1]))
+    assert outcome.status == "done", (outcome, done.stderr[-2000:])
+    assert len(read_log(tmp_path / "a" / "run.mcap").on("test/data")) == 40
+    assert (tmp_path / "a" / "modules" / "recorder.log").is_file()
+
+
+def test_a_forked_recorder_is_its_own_process_group_and_exits_at_end_of_input():
+    from astaa_deft.bus.processes import python_module
+
+    code = ("import sys, os; from astaa_deft.campaign.forked import ForkedRecorder; from pathlib import Path; "
+            f"r = ForkedRecorder(Path({str(ECHO)!r}).read_text(), 'echo.yaml'); "
+            "print(os.getpgid(r.pid) == r.pid, r.pid != os.getpid()); r.stdin.close(); print(r.wait(timeout=20))")
+    done = subprocess.run([*python_module("astaa_deft")[:-2], "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.split() == ["True", "True", "0"], done.stderr[-2000:]
+
+
+def test_no_recorder_is_forked_from_a_process_with_other_threads():
+    import threading
+
+    from astaa_deft.campaign.forked import ForkedRecorder
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        with pytest.raises(RuntimeError):
+            ForkedRecorder(ECHO.read_text(), ECHO.name)
+    finally:
+        stop.set()
+        other.join()

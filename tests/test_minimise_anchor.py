@@ -1,0 +1,77 @@
+"""Pinned mutations hit the same message of the live run when the SUT starts later (minimise/anchoring.py).
+
+Regression: pins counted from the run's start made a minimised test case hit
+another message when the stack started a little later or earlier (one
+acceptance run called the demo's localization reorder "not reproduced").
+tests/sut/anchored.yaml: 'clock' ticks from its start, 'responder' joins after
+``delay`` seconds; each tick says how many acknowledgements the clock had,
+i.e. where in the live run it is.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from astaa_deft.intercept.dictionary import load_dictionary
+from astaa_deft.intercept.engine import Interceptor
+from astaa_deft.intercept.testcase import TestCase, parse_testcase
+from astaa_deft.log.reader import read_log
+from astaa_deft.minimise.anchoring import choose_anchor, pin_to_anchor
+from astaa_deft.minimise.mutations import Mutation, read_mutations
+from astaa_deft.minimise.restrict import restricted_testcase
+from astaa_deft.session import RunOptions, run_session
+from astaa_deft.spec_loader import load_spec
+
+ANCHORED = Path(__file__).parent / "sut" / "anchored.yaml"
+# One tick, 0.3 s into the live run (counted from the first acknowledgement), gets value 7.
+POLICY = (b'<testcase id="t" seed="1"><description>x</description><policy id="p1"><channel>tick</channel>'
+          b'<window from="0.3"><after channel="ack" message="1"/></window><select limit="1"/>'
+          b'<set><field path="value" value="7.0"/></set></policy></testcase>')
+
+
+def _run(spec, testcase: TestCase, delay: float, log: Path) -> list[Mutation]:
+    options = RunOptions(mode="star", interceptor=Interceptor(testcase, spec, load_dictionary()), record=log,
+                         params={"delay": str(delay)}, run_dir=log.parent / f"{log.stem}-modules",
+                         time_limit=delay + 2.5)
+    result = run_session(spec, options)
+    assert result.complete and result.mutations == 1, result
+    return read_mutations(read_log(log), spec).mutations
+
+
+def _acks(mutation: Mutation) -> int:
+    return json.loads(mutation.original)["acks"]
+
+
+def test_a_pinned_mutation_hits_the_same_live_message_when_the_stack_starts_later(tmp_path: Path):
+    spec = load_spec(ANCHORED)
+    original = parse_testcase(POLICY, "t", spec, load_dictionary())
+    first = _run(spec, original, 0.2, tmp_path / "original.mcap")
+    log = read_log(tmp_path / "original.mcap")
+    mlog = read_mutations(log, spec)
+    assert choose_anchor(log, mlog, original) == "ack"  # the test case's own anchor
+    assert choose_anchor(log, mlog, None) == "ack"  # else the channel that started last
+    pinned = pin_to_anchor(mlog, log, "ack").mutations
+    assert pinned[0].pin is not None and pinned[0].pin.channel == "ack"
+    at = _acks(first[0])
+    assert at >= 5  # hit inside the live run
+
+    # The stack now starts a second later: ~50 more ticks before the first acknowledgement.
+    again = _run(spec, restricted_testcase([(pinned[0], None)], testcase_id="min"), 1.2, tmp_path / "later.mcap")
+    # Counted from the running stack: the same tick, give or take one of message timing ...
+    assert abs(_acks(again[0]) - at) <= 2, (_acks(again[0]), at)
+    # ... which, counted from the run's start, is another message number.
+    assert again[0].message_index > first[0].message_index + 20
+
+
+def test_a_mutation_before_the_stack_is_live_keeps_its_count_from_the_start(tmp_path: Path):
+    spec = load_spec(ANCHORED)
+    early = POLICY.replace(b'<window from="0.3"><after channel="ack" message="1"/></window>',
+                           b'<window from="0"><after channel="tick" message="3"/></window>')
+    _run(spec, parse_testcase(early, "t", spec, load_dictionary()), 0.5, tmp_path / "early.mcap")
+    log = read_log(tmp_path / "early.mcap")
+    mlog = read_mutations(log, spec)
+    pinned = pin_to_anchor(mlog, log, "ack").mutations
+    assert pinned[0].pin is None and pinned[0].message_index == 3
+    xml = restricted_testcase([(pinned[0], None)], testcase_id="min").to_xml().decode()
+    assert '<after channel="tick" message="3"/>' in xml
