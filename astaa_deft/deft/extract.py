@@ -21,6 +21,7 @@ from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
 from .frames import Stream, candidates, trigger_candidates
+from .search_policy import StepBudget, WinningPatterns
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
@@ -49,6 +50,13 @@ class Extraction:
     planner_seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
     recorded_outputs: int | None = None  # per-trigger frames: the outputs in the log (``outputs`` counts frames)
+    # The candidate search (forked): candidates stopped by the tight per-candidate limit learned from the
+    # accepted steps, those run again under the full limit because no other candidate was accepted, and
+    # outputs whose kept frame was one of those.
+    candidates_cut: int = 0
+    cut_retried: int = 0
+    retried_kept: int = 0
+    reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -231,10 +239,14 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     previous: dict[str, int] = {}
     lookback = int(cfg.lookback_ms * 1e6)
     skew = int(cfg.skew_ms * 1e6)
+    winning = WinningPatterns()  # how the kept frames of earlier outputs were derived: tried first
+    budget = StepBudget()  # how long a right frame takes: wrong ones searching longer are cut
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
-        options = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
+        generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
                              outputs[out_index - 1].log_time + skew if out_index else None)
+        options = winning.rank(generic)
+        result.reordered += options[:1] != generic[:1]
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
         try:
@@ -251,13 +263,19 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         if not planner.can_snapshot:
             options = options[:1]
         if search is not None:
+            full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
+            window = _recorded_window_s(streams[cfg.trigger], options, output, outputs[out_index - 1]
+                                        if out_index else None, skew)
             kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points,
-                                  candidate_limit(_recorded_cycle_s(outputs, out_index)), result)
+                                  budget.limit(window, full_limit), full_limit, result)
             if kept is None:
                 result.skipped.append((out_index, "no candidate frame decodes or finishes within its time limit"))
                 progress(out_index + 1, len(outputs))
                 continue
-            cand, cmp, exact, tries = kept
+            cand, cmp, exact, tries, step_s = kept
+            if cmp.within(cfg.threshold):
+                winning.record(cand)
+                budget.record(step_s, window)
             previous = dict(cand.choice)
             result.frames.append(ExtractedFrame(
                 index=len(result.frames), output=output,
@@ -291,6 +309,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
                 best = (cmp, cand, replayed, None, tries)
+                winning.record(cand)
                 break
             if best is None or cmp.distance < best[0].distance:
                 state = planner.snapshot() if start_state is not None else None
@@ -317,12 +336,25 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             exact=_same(replayed, expected),
         ))
         progress(out_index + 1, len(outputs))
+    if search is not None:  # the counters as the last runner holds them (each winner takes them over)
+        result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
     return result
 
 
+def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
+                       skew_ns: int) -> float:
+    """The longest the recorded planner can have worked on this output: from the later of its earliest
+    candidate trigger and its previous output (a busy planner starts as it publishes) to the output."""
+    start = min(trigger.times[c.choice[trigger.channel]] for c in options)
+    if previous is not None:
+        start = max(start, previous.log_time)
+    return max(output.log_time + skew_ns - start, skew_ns) * 1e-9
+
+
 def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
-                   expected: Any, expected_points: list, limit_s: float, result: Extraction):
-    """(candidate, comparison, exact, tries) kept for one output, in the process that carries on; or None."""
+                   expected: Any, expected_points: list, limit_s: float, full_limit_s: float, result: Extraction):
+    """(candidate, comparison, exact, tries, step seconds) kept for one output, in the process that carries
+    on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted."""
     t0 = time.perf_counter()
     frames = [{name: decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
     result.reconstruction_seconds += time.perf_counter() - t0
@@ -331,11 +363,13 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
         frame = frames[index]
         if any(v is None for v in frame.values()):
             return None
+        started = time.perf_counter()
         try:
             replayed = planner.step(frame)
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
-        return _judge(cfg, replayed, expected, expected_points), _same(replayed, expected)
+        step_s = time.perf_counter() - started
+        return _judge(cfg, replayed, expected, expected_points), _same(replayed, expected), step_s
 
     t1 = time.perf_counter()
     if len(options) == 1:  # one candidate: nothing to keep apart, step right here
@@ -344,14 +378,14 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
     else:
         tried = search.search(len(options), run, accepted=lambda r: r[0].within(cfg.threshold),
                               closeness=lambda r: r[0].distance, limit_s=limit_s,
-                              settles=lambda r: r[1] and r[0].within(cfg.threshold))
+                              settles=lambda r: r[1] and r[0].within(cfg.threshold), retry_limit_s=full_limit_s)
         kept = None if tried is None else (tried.index, tried.result)
     result.planner_seconds += time.perf_counter() - t1
     if kept is None:
         return None
-    index, (cmp, exact) = kept
+    index, (cmp, exact, step_s) = kept
     tries = index + 1 if cmp.within(cfg.threshold) else len(options)
-    return options[index], cmp, exact, tries
+    return options[index], cmp, exact, tries, step_s
 
 
 def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list) -> Comparison:
