@@ -97,6 +97,13 @@ def test_the_tight_limit_follows_the_accepted_steps():
 
 
 # -- real forked searches ------------------------------------------------------------------------------
+def _busy(cpu_seconds: float) -> None:
+    """Use this much CPU time, as a planner searching does (limits count CPU time, not waiting)."""
+    end = time.process_time() + cpu_seconds
+    while time.process_time() < end:
+        pass
+
+
 needs_fork = pytest.mark.skipif(not can_fork(), reason="fork-based replay needs os.fork (POSIX)")
 
 
@@ -108,7 +115,7 @@ def test_a_cut_candidate_is_retried_under_the_full_limit_when_no_other_is_accept
 
         def run(index: int) -> str:
             if index == 0:
-                time.sleep(0.6)  # the right frame, slower than the tight limit guessed
+                _busy(0.6)  # the right frame, slower than the tight limit guessed
                 return "right"
             return "wrong"
 
@@ -128,7 +135,7 @@ def test_a_cut_candidate_is_not_retried_when_another_is_accepted():
 
         def run(index: int) -> str:
             if index == 0:
-                time.sleep(60)  # a wrong frame searching on and on
+                _busy(60)  # a wrong frame searching on and on
                 return "wrong"
             return "right"
 
@@ -141,6 +148,23 @@ def test_a_cut_candidate_is_not_retried_when_another_is_accepted():
     assert index == 1
     assert counters == {"timeouts": 1, "cut": 1, "retried": 0, "retried_kept": 0}
     assert time.monotonic() - started < 60  # the wrong frame was not waited for
+
+
+@needs_fork
+def test_a_candidate_waiting_for_the_cpu_is_not_out_of_time():
+    # Before: the limit counted wall time; on a loaded machine a right frame could run past it and the
+    # output was lost (seen: a first output at load 14). Limits count the CPU time a candidate used.
+    def body(send):
+        search = ForkedSearch(1, send)
+
+        def run(index: int) -> str:
+            time.sleep(1.0)  # off the CPU: as a step waiting for a core it does not get
+            return "right"
+
+        kept = search.search(2, run, accepted=lambda r: r == "right", closeness=lambda r: 0.0, limit_s=0.4)
+        return kept.index if kept else None, search.timeouts
+
+    assert run_supervised(body, on_message=lambda message: None) == (0, 0)
 
 
 SPEC = textwrap.dedent("""\

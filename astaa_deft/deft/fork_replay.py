@@ -21,7 +21,10 @@ How it runs (POSIX only):
   over a pipe.
 
 A candidate that runs past its time limit (derived from the recorded cycle
-time) is stopped and counts as not reproduced.
+time, in CPU seconds: load does not count against it) is stopped and counts
+as not reproduced — unless the limit was a tight one learned from the
+accepted steps and no other candidate is accepted: then it runs again under
+the full limit.
 """
 
 from __future__ import annotations
@@ -42,6 +45,20 @@ PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<Q")
 MIN_LIMIT_S = 2.0
 LIMIT_FACTOR = 10.0  # a candidate may take this many recorded cycles before it is stopped
+
+
+WALL_LIMIT_FACTOR = 10.0  # a candidate that uses no CPU (blocked) is stopped after this many limits of wall time
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
+def _cpu_seconds(pid: int, wall_s: float) -> float:
+    """CPU time (user + system) a child has used so far; its wall time where /proc cannot tell."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            fields = stat.read().rsplit(b")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / _CLOCK_TICKS  # utime, stime
+    except (OSError, IndexError, ValueError):
+        return wall_s
 
 
 def can_fork() -> bool:
@@ -215,11 +232,20 @@ class ForkedSearch:
         return pid, result_r, go_w, time.monotonic()
 
     def _collect(self, running: dict, done: dict, limit_s: float) -> None:
-        """Wait for at least one running child to report (or to run out of time)."""
+        """Wait for at least one running child to report (or to run out of time).
+
+        A candidate's time is the CPU time it used, not the wall time since
+        it started: on a loaded machine (other work, or the other candidates)
+        a right frame would otherwise run out of time. A child that uses no
+        CPU (blocked) is stopped after ``WALL_LIMIT_FACTOR`` times the limit.
+        """
         now = time.monotonic()
-        deadline = min(started + limit_s for (_, _, _, started) in running.values())
+        spent = {index: _cpu_seconds(pid, now - started) for index, (pid, _, _, started) in running.items()}
+        # CPU time grows no faster than wall time: no child can reach its limit before this.
+        wait = min(min(limit_s - spent[i], WALL_LIMIT_FACTOR * limit_s - (now - started))
+                   for i, (_, _, _, started) in running.items())
         fds = {result_fd: index for index, (_, result_fd, _, _) in running.items()}
-        ready, _, _ = select.select(list(fds), [], [], max(0.0, deadline - now))
+        ready, _, _ = select.select(list(fds), [], [], max(0.0, wait))
         for fd in ready:
             index = fds[fd]
             pid, result_fd, go_fd, _ = running.pop(index)
@@ -231,7 +257,8 @@ class ForkedSearch:
             done[index] = Tried(index, result, pid=pid, go_fd=go_fd)
         now = time.monotonic()
         for index, (pid, result_fd, go_fd, started) in list(running.items()):
-            if now - started >= limit_s:
+            wall = now - started
+            if wall >= WALL_LIMIT_FACTOR * limit_s or _cpu_seconds(pid, wall) >= limit_s:
                 os.kill(pid, signal.SIGKILL)
                 os.waitpid(pid, 0)
                 os.close(result_fd)
@@ -270,6 +297,59 @@ class ForkedSearch:
         os.close(go_fd)
         if not go:
             os.waitpid(pid, 0)
+
+
+@dataclass
+class Parked:
+    """A forked copy of the runner, blocked until woken: the planner state of the moment it was parked."""
+
+    pid: int
+    wake_fd: int
+
+
+@dataclass
+class Woken:
+    """Returned by :func:`park` in the copy once the runner woke it: the copy carries on as the runner."""
+
+    message: Any
+
+
+def park() -> Parked | Woken:
+    """Fork a parked copy of this process; in this process return its handle, in the copy (once woken) Woken.
+
+    Cheaper than a candidate search when the first candidate is usually
+    right: the runner steps it itself, and only when it is wrong wakes the
+    copy (which redoes, from the parked state, what the runner did since)
+    and exits. A copy never woken exits when the runner drops it or ends.
+    The runner must drop its copy before it forks anything else that could
+    outlive it (a candidate search's winner must not inherit the wake pipe).
+    """
+    wake_r, wake_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(wake_w)
+        try:
+            message = _receive(wake_r)
+        except (EOFError, OSError, pickle.UnpicklingError):
+            os._exit(0)  # dropped, or the runner ended
+        os.close(wake_r)
+        return Woken(message)
+    os.close(wake_r)
+    return Parked(pid, wake_w)
+
+
+def drop(parked: Parked) -> None:
+    """The copy is not needed: it reads end-of-file and exits."""
+    os.close(parked.wake_fd)
+    with contextlib.suppress(ChildProcessError):
+        os.waitpid(parked.pid, 0)
+
+
+def wake(parked: Parked, message: Any) -> None:
+    """Hand the run over to the parked copy and exit: this process's state is not the one to carry on."""
+    _send(parked.wake_fd, message)
+    os.close(parked.wake_fd)
+    os._exit(0)
 
 
 def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None]) -> Any:
