@@ -191,10 +191,8 @@ SPEC = textwrap.dedent("""\
 CYCLES = 8
 
 
-@pytest.fixture()
-def late_pose_log(tmp_path, monkeypatch):
-    """A real log of a planner that never got the pose logged with its tick in time: it used the one before."""
-    monkeypatch.syspath_prepend(str(SUT_DIR))
+def write_log(tmp_path, late: list[bool]):
+    """A real log of a planner that, on cycle k, got the pose logged with its tick too late if ``late[k]``."""
     from lossy_state_planner import LossyStatePlanner
 
     spec_path = tmp_path / "lossy.yaml"
@@ -205,7 +203,7 @@ def late_pose_log(tmp_path, monkeypatch):
     ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
     planner = LossyStatePlanner()
     t0, seq = 1_000_000_000, 0
-    for k in range(CYCLES):
+    for k, too_late in enumerate(late):
         base = t0 + k * 100 * MS
         poses = []
         for j, dt in enumerate((0, MS // 2)):
@@ -215,11 +213,18 @@ def late_pose_log(tmp_path, monkeypatch):
             poses.append(pose)
         tick = {"header": {"seq": k + 1, "stamp": 0.1 * k}}
         w.message(ids["tick"], base + MS, json.dumps(tick).encode())
-        plan = planner.step({"pose": poses[0], "tick": tick})  # the second pose always came too late
+        plan = planner.step({"pose": poses[0] if too_late else poses[1], "tick": tick})
         w.message(ids["plan"], base + 5 * MS, json.dumps(plan).encode())
     w.event("run_started", time_ns=t0)
     w.finish()
     return spec, log_path
+
+
+@pytest.fixture()
+def late_pose_log(tmp_path, monkeypatch):
+    """The planner never got the pose logged with its tick in time: it always used the one before."""
+    monkeypatch.syspath_prepend(str(SUT_DIR))
+    return write_log(tmp_path, [True] * CYCLES)
 
 
 @needs_fork
@@ -234,6 +239,22 @@ def test_forked_extraction_tries_first_what_won_before(late_pose_log, jobs):
     assert [f.candidates_tried for f in ex.frames] == [2] + [1] * (CYCLES - 1)
     assert ex.reordered == CYCLES - 1
     assert ex.candidates_cut == 0
+    # Cheap cycles: the replay process stepped each first candidate itself, a parked copy standing by;
+    # only the first output's was wrong (the copy then tried the others).
+    assert (ex.first_stepped_in_runner, ex.first_missed_in_runner) == (CYCLES - 1, 1)
+
+
+@needs_fork
+def test_a_miss_after_hits_is_searched_from_the_parked_state(tmp_path, monkeypatch):
+    # The runner steps several first candidates itself (accepted), then one is wrong: the parked copy,
+    # taken before those, redoes them and searches the missed output from the exact state before it.
+    monkeypatch.syspath_prepend(str(SUT_DIR))
+    late = [True, True, True, True, False, True, True, False]
+    spec, log_path = write_log(tmp_path, late)
+    ex = extract(read_log(log_path), spec, make_planner(spec, {}), jobs=2)
+    assert ex.accepted_at(0.0) == len(late) and all(f.exact for f in ex.frames)
+    assert [f.candidates_tried for f in ex.frames] == [2, 1, 1, 1, 2, 1, 1, 2]
+    assert ex.first_missed_in_runner == 3 and ex.first_stepped_in_runner == 5
 
 
 def test_in_process_extraction_learns_the_order_too(late_pose_log):
