@@ -19,8 +19,9 @@ from ..errors import InputError, Problem
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
-from .fork_replay import ForkedSearch, can_fork, candidate_limit, run_supervised
+from .fork_replay import ForkedSearch, Parked, Woken, can_fork, candidate_limit, drop, park, run_supervised, wake
 from .frames import Stream, candidates, trigger_candidates
+from .search_policy import StepBudget, WinningPatterns
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
@@ -49,6 +50,17 @@ class Extraction:
     planner_seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
     recorded_outputs: int | None = None  # per-trigger frames: the outputs in the log (``outputs`` counts frames)
+    # The candidate search (forked): candidates stopped by the tight per-candidate limit learned from the
+    # accepted steps, those run again under the full limit because no other candidate was accepted, and
+    # outputs whose kept frame was one of those.
+    candidates_cut: int = 0
+    cut_retried: int = 0
+    retried_kept: int = 0
+    reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
+    # Cheap outputs whose first candidate the replay process stepped itself, a parked copy standing by:
+    # accepted, and not (the copy then searched the others).
+    first_stepped_in_runner: int = 0
+    first_missed_in_runner: int = 0
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -231,10 +243,15 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     previous: dict[str, int] = {}
     lookback = int(cfg.lookback_ms * 1e6)
     skew = int(cfg.skew_ms * 1e6)
+    winning = WinningPatterns()  # how the kept frames of earlier outputs were derived: tried first
+    budget = StepBudget()  # how long a right frame takes: wrong ones searching longer are cut
+    speculation = Speculation()
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
-        options = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
+        generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
                              outputs[out_index - 1].log_time + skew if out_index else None)
+        options = winning.rank(generic)
+        result.reordered += options[:1] != generic[:1]
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
         try:
@@ -251,13 +268,20 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         if not planner.can_snapshot:
             options = options[:1]
         if search is not None:
+            full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
+            window = _recorded_window_s(streams[cfg.trigger], options, output, outputs[out_index - 1]
+                                        if out_index else None, skew)
             kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points,
-                                  candidate_limit(_recorded_cycle_s(outputs, out_index)), result)
+                                  budget.limit(window, full_limit), full_limit, result, out_index, speculation,
+                                  cheap=window <= SPECULATE_MAX_WINDOW_S)
             if kept is None:
                 result.skipped.append((out_index, "no candidate frame decodes or finishes within its time limit"))
                 progress(out_index + 1, len(outputs))
                 continue
-            cand, cmp, exact, tries = kept
+            cand, cmp, exact, tries, step_s = kept
+            if cmp.within(cfg.threshold):
+                winning.record(cand)
+                budget.record(step_s, window)
             previous = dict(cand.choice)
             result.frames.append(ExtractedFrame(
                 index=len(result.frames), output=output,
@@ -291,6 +315,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
                 best = (cmp, cand, replayed, None, tries)
+                winning.record(cand)
                 break
             if best is None or cmp.distance < best[0].distance:
                 state = planner.snapshot() if start_state is not None else None
@@ -317,12 +342,70 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             exact=_same(replayed, expected),
         ))
         progress(out_index + 1, len(outputs))
+    if search is not None:  # the counters as the last runner holds them (each winner takes them over)
+        speculation.let_go()
+        result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
+        result.first_stepped_in_runner, result.first_missed_in_runner = speculation.hits, speculation.misses
     return result
 
 
+def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
+                       skew_ns: int) -> float:
+    """The longest the recorded planner can have worked on this output: from the later of its earliest
+    candidate trigger and its previous output (a busy planner starts as it publishes) to the output."""
+    start = min(trigger.times[c.choice[trigger.channel]] for c in options)
+    if previous is not None:
+        start = max(start, previous.log_time)
+    return max(output.log_time + skew_ns - start, skew_ns) * 1e-9
+
+
+# The runner steps an output's first candidate itself, a parked copy standing by (see fork_replay.park),
+# when the recorded planner answered within this window: a cheap cycle, whose wrong frames are cheap too
+# (a wrong frame stepped in the runner cannot be cut). Forking a worker per candidate costs milliseconds per
+# output, as much as such a step.
+SPECULATE_MAX_WINDOW_S = 0.05
+# Steps the runner took since parking its copy: past this, redoing them after a miss would cost more than
+# parking a fresh copy.
+REPARK_AFTER_S = 0.02
+
+
+@dataclass
+class Speculation:
+    """The runner's parked copy (the state before the outputs it has stepped itself since) and what became of it."""
+
+    parked: Parked | None = None
+    since_parked_s: float = 0.0
+    redo_until: int | None = None  # in a woken copy: the output the runner's first candidate missed
+    # The last output kept was reproduced field for field: then a first candidate that reproduces only the
+    # trajectory (a standing ego: the same points from another pose message) does not count as a hit, the
+    # others are searched for the exact one. A stack whose outputs never match exactly is not held up.
+    expect_exact: bool = False
+    hits: int = 0  # outputs whose first candidate, stepped in the runner, was accepted
+    misses: int = 0  # … was not: the parked copy took over and searched the others
+
+    def park_here(self) -> int | None:
+        """Park a copy unless a fresh one stands by; in a copy woken later: the output where the runner missed."""
+        if self.parked is not None and self.since_parked_s <= REPARK_AFTER_S:
+            return None
+        self.let_go()
+        handle = park()
+        if isinstance(handle, Woken):
+            return int(handle.message)
+        self.parked, self.since_parked_s = handle, 0.0
+        return None
+
+    def let_go(self) -> None:
+        if self.parked is not None:
+            drop(self.parked)
+            self.parked = None
+
+
 def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
-                   expected: Any, expected_points: list, limit_s: float, result: Extraction):
-    """(candidate, comparison, exact, tries) kept for one output, in the process that carries on; or None."""
+                   expected: Any, expected_points: list, limit_s: float, full_limit_s: float, result: Extraction,
+                   out_index: int, speculation: Speculation, cheap: bool):
+    """(candidate, comparison, exact, tries, step seconds) kept for one output, in the process that carries
+    on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted.
+    For a ``cheap`` output the first candidate is stepped right here (see :class:`Speculation`)."""
     t0 = time.perf_counter()
     frames = [{name: decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
     result.reconstruction_seconds += time.perf_counter() - t0
@@ -331,27 +414,60 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
         frame = frames[index]
         if any(v is None for v in frame.values()):
             return None
+        started = time.process_time()  # CPU time, as the limits count it: the load does not count
         try:
             replayed = planner.step(frame)
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
-        return _judge(cfg, replayed, expected, expected_points), _same(replayed, expected)
+        step_s = time.process_time() - started
+        return _judge(cfg, replayed, expected, expected_points), _same(replayed, expected), step_s
+
+    def accepted(outcome) -> bool:
+        """Within θ; and field for field while the outputs before were (else the closest is kept)."""
+        return outcome is not None and outcome[0].within(cfg.threshold) and (
+            outcome[1] or not speculation.expect_exact)
 
     t1 = time.perf_counter()
+    kept = None
+    order = list(range(len(options)))
     if len(options) == 1:  # one candidate: nothing to keep apart, step right here
         outcome = run(0)
         kept = None if outcome is None else (0, outcome)
+    elif speculation.redo_until is not None and out_index < speculation.redo_until:
+        kept = (0, run(0))  # a woken copy redoing what the runner did: its first candidate was accepted
+        speculation.hits += 1
     else:
-        tried = search.search(len(options), run, accepted=lambda r: r[0].within(cfg.threshold),
-                              closeness=lambda r: r[0].distance, limit_s=limit_s,
-                              settles=lambda r: r[1] and r[0].within(cfg.threshold))
-        kept = None if tried is None else (tried.index, tried.result)
-    result.planner_seconds += time.perf_counter() - t1
+        missed = out_index if speculation.redo_until == out_index else (
+            speculation.park_here() if cheap else None)
+        if missed is not None and missed != out_index:  # woken: redo the runner's steps up to its miss
+            speculation.redo_until = missed
+            kept = (0, run(0))
+            speculation.hits += 1
+        elif missed == out_index:  # the first candidate was tried (and missed) by the runner: the others first
+            speculation.redo_until = None
+            speculation.misses += 1
+            order = order[1:] + order[:1]
+        elif cheap:
+            outcome = run(0)
+            if not accepted(outcome):
+                assert speculation.parked is not None
+                wake(speculation.parked, out_index)  # does not return: the copy carries on
+            kept = (0, outcome)
+            speculation.hits += 1
+            speculation.since_parked_s += outcome[2]
     if kept is None:
+        speculation.let_go()  # the search's winner carries on: it must not inherit a parked copy
+        tried = search.search(len(order), lambda k: run(order[k]), accepted=accepted,
+                              closeness=lambda r: r[0].distance, limit_s=limit_s,
+                              settles=lambda r: r[1] and r[0].within(cfg.threshold), retry_limit_s=full_limit_s)
+        kept = None if tried is None else (order[tried.index], tried.result)
+    result.planner_seconds += time.perf_counter() - t1
+    if kept is None or kept[1] is None:
         return None
-    index, (cmp, exact) = kept
+    index, (cmp, exact, step_s) = kept
+    speculation.expect_exact = exact
     tries = index + 1 if cmp.within(cfg.threshold) else len(options)
-    return options[index], cmp, exact, tries
+    return options[index], cmp, exact, tries, step_s
 
 
 def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list) -> Comparison:

@@ -21,7 +21,10 @@ How it runs (POSIX only):
   over a pipe.
 
 A candidate that runs past its time limit (derived from the recorded cycle
-time) is stopped and counts as not reproduced.
+time, in CPU seconds: load does not count against it) is stopped and counts
+as not reproduced — unless the limit was a tight one learned from the
+accepted steps and no other candidate is accepted: then it runs again under
+the full limit.
 """
 
 from __future__ import annotations
@@ -42,6 +45,20 @@ PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<Q")
 MIN_LIMIT_S = 2.0
 LIMIT_FACTOR = 10.0  # a candidate may take this many recorded cycles before it is stopped
+
+
+WALL_LIMIT_FACTOR = 10.0  # a candidate that uses no CPU (blocked) is stopped after this many limits of wall time
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
+def _cpu_seconds(pid: int, wall_s: float) -> float:
+    """CPU time (user + system) a child has used so far; its wall time where /proc cannot tell."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            fields = stat.read().rsplit(b")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / _CLOCK_TICKS  # utime, stime
+    except (OSError, IndexError, ValueError):
+        return wall_s
 
 
 def can_fork() -> bool:
@@ -99,11 +116,19 @@ class ForkedSearch:
     def __init__(self, jobs: int, send_to_caller: Callable[[Any], None]):
         self.jobs = max(1, jobs)
         self.send_to_caller = send_to_caller
-        self.timeouts = 0
+        self.timeouts = 0  # candidates stopped by a time limit
+        self.cut = 0  # of those, stopped by a tight limit (see search's retry_limit_s)
+        self.retried = 0  # cut candidates run again under the full limit (no other was accepted)
+        self.retried_kept = 0  # searches whose kept candidate was one of those
+
+    def _counters(self) -> dict[str, int]:
+        return {"timeouts": self.timeouts, "cut": self.cut, "retried": self.retried,
+                "retried_kept": self.retried_kept}
 
     def search(self, count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool],
                closeness: Callable[[Any], float], limit_s: float,
-               settles: Callable[[Any], bool] = lambda result: False) -> Tried | None:
+               settles: Callable[[Any], bool] = lambda result: False,
+               retry_limit_s: float | None = None) -> Tried | None:
         """Try candidates 0..count-1; return (in the surviving process) the one kept, or None.
 
         ``run(i)`` steps the planner on candidate i and returns a picklable
@@ -113,24 +138,46 @@ class ForkedSearch:
         search (the recorded output reproduced field for field: no earlier
         candidate can do better) is kept at once, without waiting for the
         earlier ones — a wrong frame may make the planner search for seconds.
+
+        ``limit_s`` may be a tight limit (a guess from the steps seen so far):
+        with ``retry_limit_s``, if no candidate is accepted, those cut by
+        ``limit_s`` run again from the same state under ``retry_limit_s`` —
+        the tight limit only saves time spent on wrong frames, it never costs
+        an output.
         """
         running: dict[int, tuple[int, int, int, float]] = {}  # index → (pid, result fd, go fd, started)
         done: dict[int, Tried] = {}
-        next_index = 0
+        queue = list(range(count))
+        limit, retrying = limit_s, False
         winner: int | None = None
-        while winner is None and (next_index < count or running):
-            while next_index < count and len(running) < self.jobs:
-                child = self._spawn(next_index, run, running, done)
-                if child is None:  # in the child: it won, and carries on as the runner
-                    return self._won
-                running[next_index] = child
-                next_index += 1
-            self._collect(running, done, limit_s)
-            winner = next((i for i in sorted(done) if done[i].result is not None and settles(done[i].result)), None)
-            if winner is None:
-                winner = self._decide(done, count, next_index, running, accepted, closeness)
+        while True:
+            timeouts_before = self.timeouts
+            while winner is None and (queue or running):
+                while queue and len(running) < self.jobs:
+                    index = queue.pop(0)
+                    child = self._spawn(index, run, running, done)
+                    if child is None:  # in the child: it won, and carries on as the runner
+                        return self._won
+                    running[index] = child
+                self._collect(running, done, limit)
+                winner = next((i for i in sorted(done) if done[i].result is not None
+                               and settles(done[i].result)), None)
+                if winner is None:
+                    winner = self._decide(done, count, accepted, closeness)
+            if retrying or retry_limit_s is None or retry_limit_s <= limit_s:
+                break
+            self.cut += self.timeouts - timeouts_before
+            cut = sorted(i for i, tried in done.items() if tried.timed_out)
+            if winner is not None or not cut:
+                break
+            for index in cut:  # nothing accepted: the cut candidates get the full limit after all
+                del done[index]
+            queue, limit, retrying = list(cut), retry_limit_s, True
+            self.retried += len(cut)
         if winner is None:
-            winner = self._decide(done, count, count, {}, accepted, closeness, final=True)
+            winner = self._decide(done, count, accepted, closeness, final=True)
+        if retrying and winner is not None and winner in cut:
+            self.retried_kept += 1
         for pid, result_fd, go_fd, _ in running.values():  # still running: not needed
             os.kill(pid, signal.SIGKILL)
             os.close(result_fd)
@@ -141,7 +188,7 @@ class ForkedSearch:
                 self._release(tried, go=False)
             return None  # nothing to keep: this process, untouched, carries on
         for index, tried in done.items():
-            self._release(tried, go=index == winner)
+            self._release(tried, go=index == winner, counters=self._counters())
         os._exit(0)  # the winner carries on from here; this runner's state is the old one
 
     # -- the pieces ------------------------------------------------------------
@@ -171,9 +218,13 @@ class ForkedSearch:
                 os._exit(0)
             os.close(result_w)
             verdict = os.read(go_r, 1)
-            os.close(go_r)
             if verdict != b"1":
                 os._exit(0)
+            try:  # the runner's counters: this child's copy is from before the search
+                self.__dict__.update(_receive(go_r))
+            except (EOFError, pickle.UnpicklingError):
+                pass
+            os.close(go_r)
             self._won = Tried(index, result)
             return None
         os.close(result_w)
@@ -181,11 +232,20 @@ class ForkedSearch:
         return pid, result_r, go_w, time.monotonic()
 
     def _collect(self, running: dict, done: dict, limit_s: float) -> None:
-        """Wait for at least one running child to report (or to run out of time)."""
+        """Wait for at least one running child to report (or to run out of time).
+
+        A candidate's time is the CPU time it used, not the wall time since
+        it started: on a loaded machine (other work, or the other candidates)
+        a right frame would otherwise run out of time. A child that uses no
+        CPU (blocked) is stopped after ``WALL_LIMIT_FACTOR`` times the limit.
+        """
         now = time.monotonic()
-        deadline = min(started + limit_s for (_, _, _, started) in running.values())
+        spent = {index: _cpu_seconds(pid, now - started) for index, (pid, _, _, started) in running.items()}
+        # CPU time grows no faster than wall time: no child can reach its limit before this.
+        wait = min(min(limit_s - spent[i], WALL_LIMIT_FACTOR * limit_s - (now - started))
+                   for i, (_, _, _, started) in running.items())
         fds = {result_fd: index for index, (_, result_fd, _, _) in running.items()}
-        ready, _, _ = select.select(list(fds), [], [], max(0.0, deadline - now))
+        ready, _, _ = select.select(list(fds), [], [], max(0.0, wait))
         for fd in ready:
             index = fds[fd]
             pid, result_fd, go_fd, _ = running.pop(index)
@@ -197,7 +257,8 @@ class ForkedSearch:
             done[index] = Tried(index, result, pid=pid, go_fd=go_fd)
         now = time.monotonic()
         for index, (pid, result_fd, go_fd, started) in list(running.items()):
-            if now - started >= limit_s:
+            wall = now - started
+            if wall >= WALL_LIMIT_FACTOR * limit_s or _cpu_seconds(pid, wall) >= limit_s:
                 os.kill(pid, signal.SIGKILL)
                 os.waitpid(pid, 0)
                 os.close(result_fd)
@@ -207,8 +268,7 @@ class ForkedSearch:
                 done[index] = Tried(index, None, timed_out=True)
 
     @staticmethod
-    def _decide(done: dict, count: int, started: int, running: dict, accepted, closeness,
-                final: bool = False) -> int | None:
+    def _decide(done: dict, count: int, accepted, closeness, final: bool = False) -> int | None:
         """The first candidate in order that is accepted, once all before it have reported."""
         for index in range(count):
             if index not in done:
@@ -226,15 +286,70 @@ class ForkedSearch:
         return min(reported, key=lambda t: (closeness(t.result), t.index)).index
 
     @staticmethod
-    def _release(tried: Tried, go: bool) -> None:
+    def _release(tried: Tried, go: bool, counters: dict[str, int] | None = None) -> None:
         pid, go_fd = tried.pid, tried.go_fd
         if pid is None or go_fd is None:
             return
         with contextlib.suppress(OSError):
             os.write(go_fd, b"1" if go else b"0")
+            if go:
+                _send(go_fd, counters or {})
         os.close(go_fd)
         if not go:
             os.waitpid(pid, 0)
+
+
+@dataclass
+class Parked:
+    """A forked copy of the runner, blocked until woken: the planner state of the moment it was parked."""
+
+    pid: int
+    wake_fd: int
+
+
+@dataclass
+class Woken:
+    """Returned by :func:`park` in the copy once the runner woke it: the copy carries on as the runner."""
+
+    message: Any
+
+
+def park() -> Parked | Woken:
+    """Fork a parked copy of this process; in this process return its handle, in the copy (once woken) Woken.
+
+    Cheaper than a candidate search when the first candidate is usually
+    right: the runner steps it itself, and only when it is wrong wakes the
+    copy (which redoes, from the parked state, what the runner did since)
+    and exits. A copy never woken exits when the runner drops it or ends.
+    The runner must drop its copy before it forks anything else that could
+    outlive it (a candidate search's winner must not inherit the wake pipe).
+    """
+    wake_r, wake_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(wake_w)
+        try:
+            message = _receive(wake_r)
+        except (EOFError, OSError, pickle.UnpicklingError):
+            os._exit(0)  # dropped, or the runner ended
+        os.close(wake_r)
+        return Woken(message)
+    os.close(wake_r)
+    return Parked(pid, wake_w)
+
+
+def drop(parked: Parked) -> None:
+    """The copy is not needed: it reads end-of-file and exits."""
+    os.close(parked.wake_fd)
+    with contextlib.suppress(ChildProcessError):
+        os.waitpid(parked.pid, 0)
+
+
+def wake(parked: Parked, message: Any) -> None:
+    """Hand the run over to the parked copy and exit: this process's state is not the one to carry on."""
+    _send(parked.wake_fd, message)
+    os.close(parked.wake_fd)
+    os._exit(0)
 
 
 def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None]) -> Any:

@@ -43,10 +43,20 @@ class Stream:
     times: Sequence[int]
 
 
+# How a candidate's trigger was chosen (see :func:`candidates`): the newest at the output, the newest when
+# the previous output was logged (a busy planner), the oldest not yet used, one between, or for a first
+# output one before the newest.
+NEWEST, BUSY, OLDEST, BETWEEN, EARLIER = "newest", "busy", "oldest", "between", "earlier"
+
+
 @dataclass(frozen=True)
 class Candidate:
     frame_time: int
     choice: Mapping[str, int]  # channel → index into its stream (trigger included)
+    # The ways this frame was derived, for learning which way wins in a run: one (trigger rule, offsets)
+    # per rule that names its trigger, offsets = each other input's index minus its index in the frame at
+    # the trigger's own time (-1: the planner got that input's newest message only after the trigger).
+    patterns: frozenset[tuple[str, tuple[tuple[str, int], ...]]] = frozenset()
 
 
 def newest_at_or_before(times: Sequence[int], t: int) -> int:
@@ -90,19 +100,31 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     order_of_triggers = list(dict.fromkeys(
         [newest] + ([busy] if oldest <= busy < newest else []) + ([oldest] if oldest < newest else [])
         + list(range(oldest + 1, newest))))
+    rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
+    rules[newest].add(NEWEST)
+    if oldest <= busy <= newest:
+        rules[busy].add(BUSY)
+    if trigger in previous and oldest <= newest:
+        rules[oldest].add(OLDEST)
+    for index in order_of_triggers:
+        if not rules[index]:
+            rules[index].add(BETWEEN if trigger in previous else EARLIER)
     out: list[Candidate] = []
-    seen: set[tuple] = set()
+    seen: dict[tuple, int] = {}
     for t_index in order_of_triggers:
-        for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns):
+        for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index]):
             key = tuple(sorted(cand.choice.items()))
             if key not in seen:
-                seen.add(key)
+                seen[key] = len(out)
                 out.append(cand)
+            else:  # the same frame reached another way: it carries both ways
+                first = out[seen[key]]
+                out[seen[key]] = Candidate(first.frame_time, first.choice, first.patterns | cand.patterns)
     return out
 
 
 def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p: int,
-                 previous: Mapping[str, int], lookback_ns: int) -> list[Candidate]:
+                 previous: Mapping[str, int], lookback_ns: int, rules: set[str]) -> list[Candidate]:
     t_t = streams[trigger].times[t_index]
     later: set[int] = set()
     earlier: set[int] = set()
@@ -116,10 +138,13 @@ def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p:
         # "Just before" each message logged shortly before (or with) the trigger.
         earlier.update(t - 1 for t in times[lo_back:lo])
     out = []
+    at_trigger = frame_at(streams, trigger, t_index, t_t, previous)
     for t_f in [t_t] + sorted(later) + sorted(earlier, reverse=True):
         choice = frame_at(streams, trigger, t_index, t_f, previous)
         if choice is not None:
-            out.append(Candidate(t_f, choice))
+            offsets = tuple(sorted((name, idx - at_trigger[name]) for name, idx in choice.items()
+                                   if name != trigger)) if at_trigger is not None else (("?", 0),)
+            out.append(Candidate(t_f, choice, frozenset((rule, offsets) for rule in rules)))
     return out
 
 

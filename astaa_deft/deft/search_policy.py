@@ -1,0 +1,94 @@
+"""Which candidate frame to try first, and how long one may run: learned from the run being extracted.
+
+Pure logic, no I/O. Extraction tries an output's candidate frames until one
+reproduces it; every wrong frame tried first costs a planner step (an RRT*
+search on a wrong frame can run for seconds). Two things about a run repeat
+from output to output, so the outputs already extracted predict the next:
+
+* **the way the right frame is derived** (:class:`WinningPatterns`): e.g.
+  a planner whose loop plans on the oldest trigger not yet answered, or one
+  that usually gets the pose before the trigger of the same simulator tick.
+  Each candidate carries the ways it was derived (``Candidate.patterns``);
+  the ways that won recently come first, the generic order breaks ties.
+* **how long a right frame takes** (:class:`StepBudget`): the planner had at
+  most the recorded window (from its trigger, or its previous output, to
+  the output) for the step that produced an output. Replayed steps of the
+  accepted frames show how replay speed compares with that window; a
+  candidate running several times longer than that is most likely a wrong
+  frame searching in vain, and is cut — and retried under the full limit
+  if no other candidate is accepted, so no output is lost to the cut.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, TypeVar
+
+
+class HasPatterns(Protocol):
+    @property
+    def patterns(self) -> Iterable[Hashable]: ...
+
+
+C = TypeVar("C", bound=HasPatterns)
+RECENCY = 0.9  # a win's weight shrinks by this factor with every later output: recent wins count more
+
+
+@dataclass
+class WinningPatterns:
+    """Scores of the ways candidates were derived, by the (recency-weighted) outputs they reproduced."""
+
+    recency: float = RECENCY
+    scores: dict[Hashable, float] = field(default_factory=dict)
+
+    def record(self, winner: HasPatterns) -> None:
+        """The kept candidate of one output (accepted): each way it was derived wins."""
+        for pattern in self.scores:
+            self.scores[pattern] *= self.recency
+        for pattern in winner.patterns:
+            self.scores[pattern] = self.scores.get(pattern, 0.0) + 1.0
+
+    def score(self, candidate: HasPatterns) -> float:
+        return max((self.scores.get(p, 0.0) for p in candidate.patterns), default=0.0)
+
+    def rank(self, candidates: Sequence[C]) -> list[C]:
+        """The candidates, best-scoring way first; equal scores keep the given (generic) order."""
+        return sorted(candidates, key=self.score, reverse=True)  # sorted() is stable
+
+
+LIMIT_FACTOR = 3.0  # a candidate may take this many times its expected step before it is cut
+MIN_TIGHT_S = 0.25  # never cut sooner: process start-up and scheduling noise on a loaded machine
+NOISE_S = 0.01  # steps shorter than this say more about timer and scheduler noise than about replay speed
+
+
+@dataclass
+class StepBudget:
+    """A tight per-candidate time limit from the steps accepted so far in this extraction.
+
+    ``window_s`` of an output is the longest the recorded planner can have
+    worked on it (output time minus the later of its earliest candidate
+    trigger and the previous output). ``slowdown`` is the largest ratio of
+    an accepted replayed step to its window seen so far (at least 1: replay
+    is assumed no faster than the recording).
+    """
+
+    factor: float = LIMIT_FACTOR
+    min_s: float = MIN_TIGHT_S
+    slowdown: float = 1.0
+    accepted_steps: int = 0
+
+    def record(self, step_s: float, window_s: float) -> None:
+        """An accepted candidate's replayed step time and its output's recorded window."""
+        self.accepted_steps += 1
+        if window_s > 0 and step_s >= NOISE_S:
+            self.slowdown = max(self.slowdown, step_s / window_s)
+
+    def limit(self, window_s: float, full_limit_s: float) -> float:
+        """Seconds a candidate of this output may run before it is cut (never more than the full limit).
+
+        Before any step was accepted nothing is known about replay speed: the full limit.
+        """
+        if self.accepted_steps == 0:
+            return full_limit_s
+        return min(full_limit_s, max(self.min_s, self.factor * self.slowdown * window_s))

@@ -1,0 +1,266 @@
+"""Extraction cost on a real run (issue 16): candidates tried in the order earlier outputs won, wrong ones cut.
+
+Measured on the OMPL stack: ~1 output in 5 needed a candidate other than
+the first (its planner gets the ego pose and the obstacles of one simulator
+tick in either order; when busy it plans on the oldest unanswered trigger,
+not the newest), and each wrong candidate tried first could make RRT*
+search for seconds. The run itself says which way of deriving a frame
+wins: the outputs already extracted (search_policy.WinningPatterns). A
+candidate running far longer than the accepted steps did is cut, and run
+again under the full limit only if no other candidate is accepted
+(search_policy.StepBudget, ForkedSearch's retry).
+"""
+
+from __future__ import annotations
+
+import json
+import textwrap
+import time
+from dataclasses import replace
+
+import pytest
+
+from astaa_deft.deft.extract import extract
+from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
+from astaa_deft.deft.frames import BUSY, NEWEST, OLDEST, Stream, candidates
+from astaa_deft.deft.replay import make_planner
+from astaa_deft.deft.search_policy import StepBudget, WinningPatterns
+from astaa_deft.log.reader import read_log
+from astaa_deft.log.writer import LogWriter
+from astaa_deft.spec_loader import load_spec
+
+from proxy_helpers import SUT_DIR
+
+MS = 1_000_000
+
+
+# -- the pure logic ----------------------------------------------------------------------------------
+def test_candidates_say_how_they_were_derived():
+    # Triggers at 0, 100, 200 ms; the previous frame used trigger 0; the previous output came at 150 ms.
+    streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS]),
+               "ego": Stream("ego", [k * 50 * MS for k in range(6)])}
+    found = candidates(streams, "obstacles", 240 * MS, previous={"obstacles": 0, "ego": 0}, lookback_ns=0,
+                       previous_output_ns=150 * MS)
+    first = found[0]  # the newest trigger with the ego pose at its own time
+    assert first.choice == {"obstacles": 2, "ego": 4}
+    assert first.patterns == {(NEWEST, (("ego", 0),))}
+    later = next(c for c in found if c.choice == {"obstacles": 1, "ego": 2})
+    # Trigger 1 was the newest when the previous output was logged, and the oldest not yet answered.
+    assert later.patterns == {(BUSY, (("ego", 0),)), (OLDEST, (("ego", 0),))}
+    # The ego pose logged after trigger 1 (at 150 ms) but before the output: the planner got it first.
+    assert any(c.patterns == {(BUSY, (("ego", 1),)), (OLDEST, (("ego", 1),))} for c in found)
+
+
+def test_the_way_that_won_for_earlier_outputs_is_tried_first():
+    # Before: candidates came in one fixed order whatever the run showed; a planner that always plans on
+    # the oldest unanswered trigger had its wrong newest-trigger frame tried first on every busy cycle.
+    streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS]),
+               "ego": Stream("ego", [k * 50 * MS for k in range(6)])}
+    found = candidates(streams, "obstacles", 240 * MS, previous={"obstacles": 0, "ego": 0}, lookback_ns=0,
+                       previous_output_ns=150 * MS)
+    winning = WinningPatterns()
+    assert winning.rank(found) == found  # nothing learned yet: the generic order
+    oldest_at_trigger = next(c for c in found if c.choice == {"obstacles": 1, "ego": 2})
+    winning.record(oldest_at_trigger)
+    ranked = winning.rank(found)
+    assert ranked[0] is oldest_at_trigger
+    assert sorted(ranked, key=found.index) == found  # the same candidates, none lost or added
+
+
+def test_recent_wins_outweigh_old_ones_and_ties_keep_the_generic_order():
+    class Cand:
+        def __init__(self, name):
+            self.patterns = {name}
+
+    a, b, c = Cand("a"), Cand("b"), Cand("c")
+    winning = WinningPatterns(recency=0.5)
+    winning.record(a)
+    winning.record(a)  # a: 1.5
+    winning.record(b)  # a: 0.75, b: 1
+    assert winning.rank([a, b, c]) == [b, a, c]
+    assert winning.rank([c, a]) == [a, c]
+    winning.record(a)  # a: 1.375, b: 0.5
+    assert winning.rank([c, b, a]) == [a, b, c]
+
+
+def test_the_tight_limit_follows_the_accepted_steps():
+    budget = StepBudget(factor=3.0, min_s=0.25)
+    assert budget.limit(window_s=0.2, full_limit_s=2.0) == 2.0  # nothing known yet: the full limit
+    budget.record(step_s=0.18, window_s=0.2)  # replay as fast as the recording
+    assert budget.limit(0.2, 2.0) == pytest.approx(0.6)  # three recorded windows
+    assert budget.limit(0.01, 2.0) == 0.25  # never below the floor
+    assert budget.limit(5.0, 2.0) == 2.0  # never above the full limit
+    budget.record(step_s=0.4, window_s=0.2)  # replay twice as slow as recorded (a loaded machine)
+    assert budget.limit(0.2, 2.0) == pytest.approx(1.2)
+    budget.record(step_s=0.002, window_s=0.0001)  # a tiny step: timer noise, not a slowdown
+    assert budget.limit(0.2, 2.0) == pytest.approx(1.2)
+
+
+# -- real forked searches ------------------------------------------------------------------------------
+def _busy(cpu_seconds: float) -> None:
+    """Use this much CPU time, as a planner searching does (limits count CPU time, not waiting)."""
+    end = time.process_time() + cpu_seconds
+    while time.process_time() < end:
+        pass
+
+
+needs_fork = pytest.mark.skipif(not can_fork(), reason="fork-based replay needs os.fork (POSIX)")
+
+
+@needs_fork
+def test_a_cut_candidate_is_retried_under_the_full_limit_when_no_other_is_accepted():
+    # Before: a candidate stopped by its limit counted as not reproduced: a tight limit would lose outputs.
+    def body(send):
+        search = ForkedSearch(2, send)
+
+        def run(index: int) -> str:
+            if index == 0:
+                _busy(0.6)  # the right frame, slower than the tight limit guessed
+                return "right"
+            return "wrong"
+
+        kept = search.search(3, run, accepted=lambda r: r == "right", closeness=lambda r: 0.0 if r == "right" else 1.0,
+                             limit_s=0.2, retry_limit_s=30.0)
+        return kept.index if kept else None, kept.result if kept else None, search._counters()
+
+    index, result, counters = run_supervised(body, on_message=lambda message: None)
+    assert (index, result) == (0, "right")
+    assert counters == {"timeouts": 1, "cut": 1, "retried": 1, "retried_kept": 1}
+
+
+@needs_fork
+def test_a_cut_candidate_is_not_retried_when_another_is_accepted():
+    def body(send):
+        search = ForkedSearch(2, send)
+
+        def run(index: int) -> str:
+            if index == 0:
+                _busy(60)  # a wrong frame searching on and on
+                return "wrong"
+            return "right"
+
+        kept = search.search(2, run, accepted=lambda r: r == "right", closeness=lambda r: 0.0 if r == "right" else 1.0,
+                             limit_s=0.3, retry_limit_s=120.0)
+        return kept.index if kept else None, search._counters()
+
+    started = time.monotonic()
+    index, counters = run_supervised(body, on_message=lambda message: None)
+    assert index == 1
+    assert counters == {"timeouts": 1, "cut": 1, "retried": 0, "retried_kept": 0}
+    assert time.monotonic() - started < 60  # the wrong frame was not waited for
+
+
+@needs_fork
+def test_a_candidate_waiting_for_the_cpu_is_not_out_of_time():
+    # Before: the limit counted wall time; on a loaded machine a right frame could run past it and the
+    # output was lost (seen: a first output at load 14). Limits count the CPU time a candidate used.
+    def body(send):
+        search = ForkedSearch(1, send)
+
+        def run(index: int) -> str:
+            time.sleep(1.0)  # off the CPU: as a step waiting for a core it does not get
+            return "right"
+
+        kept = search.search(2, run, accepted=lambda r: r == "right", closeness=lambda r: 0.0, limit_s=0.4)
+        return kept.index if kept else None, search.timeouts
+
+    assert run_supervised(body, on_message=lambda message: None) == (0, 0)
+
+
+SPEC = textwrap.dedent("""\
+    name: lossy
+    modules: [{name: sim, command: "true"}, {name: planner, command: "true"}]
+    channels:
+      - {name: pose, key: lossy/pose, producer: sim, consumers: [planner], type: Pose}
+      - {name: tick, key: lossy/tick, producer: sim, consumers: [planner], type: Tick}
+      - {name: plan, key: lossy/plan, producer: planner, consumers: [], type: Plan}
+    types:
+      Header: {seq: uint64, stamp: time}
+      Pose: {header: Header, x: float64, y: float64, speed: float64}
+      Tick: {header: Header}
+      Point: {t: time, x: float64, y: float64, heading: float64}
+      Plan: {header: Header, points: {array: Point}}
+    planner:
+      module: planner
+      inputs: [pose, tick]
+      trigger: tick
+      output: plan
+      trajectory: {points: points, x: x, y: y, t: t}
+      replay: {factory: "lossy_state_planner:LossyStatePlanner"}
+    """)
+CYCLES = 8
+
+
+def write_log(tmp_path, late: list[bool]):
+    """A real log of a planner that, on cycle k, got the pose logged with its tick too late if ``late[k]``."""
+    from lossy_state_planner import LossyStatePlanner
+
+    spec_path = tmp_path / "lossy.yaml"
+    spec_path.write_text(SPEC)
+    spec = load_spec(spec_path)
+    log_path = tmp_path / "late_pose.mcap"
+    w = LogWriter(log_path, spec)
+    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
+    planner = LossyStatePlanner()
+    t0, seq = 1_000_000_000, 0
+    for k, too_late in enumerate(late):
+        base = t0 + k * 100 * MS
+        poses = []
+        for j, dt in enumerate((0, MS // 2)):
+            seq += 1
+            pose = {"header": {"seq": seq, "stamp": 0.1 * k}, "x": 1.0 * k + 0.3 * j, "y": 0.0, "speed": 10.0}
+            w.message(ids["pose"], base + dt, json.dumps(pose).encode())
+            poses.append(pose)
+        tick = {"header": {"seq": k + 1, "stamp": 0.1 * k}}
+        w.message(ids["tick"], base + MS, json.dumps(tick).encode())
+        plan = planner.step({"pose": poses[0] if too_late else poses[1], "tick": tick})
+        w.message(ids["plan"], base + 5 * MS, json.dumps(plan).encode())
+    w.event("run_started", time_ns=t0)
+    w.finish()
+    return spec, log_path
+
+
+@pytest.fixture()
+def late_pose_log(tmp_path, monkeypatch):
+    """The planner never got the pose logged with its tick in time: it always used the one before."""
+    monkeypatch.syspath_prepend(str(SUT_DIR))
+    return write_log(tmp_path, [True] * CYCLES)
+
+
+@needs_fork
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_forked_extraction_tries_first_what_won_before(late_pose_log, jobs):
+    # Before: every output tried the pose at the tick's own time first, and it was wrong every time
+    # (candidates tried: 2, 2, 2, …); now only the first output pays for finding out.
+    spec, log_path = late_pose_log
+    ex = extract(read_log(log_path), spec, make_planner(spec, {}), jobs=jobs)
+    assert ex.outputs == CYCLES and not ex.skipped
+    assert ex.accepted_at(0.0) == CYCLES and all(f.exact for f in ex.frames)
+    assert [f.candidates_tried for f in ex.frames] == [2] + [1] * (CYCLES - 1)
+    assert ex.reordered == CYCLES - 1
+    assert ex.candidates_cut == 0
+    # Cheap cycles: the replay process stepped each first candidate itself, a parked copy standing by;
+    # only the first output's was wrong (the copy then tried the others).
+    assert (ex.first_stepped_in_runner, ex.first_missed_in_runner) == (CYCLES - 1, 1)
+
+
+@needs_fork
+def test_a_miss_after_hits_is_searched_from_the_parked_state(tmp_path, monkeypatch):
+    # The runner steps several first candidates itself (accepted), then one is wrong: the parked copy,
+    # taken before those, redoes them and searches the missed output from the exact state before it.
+    monkeypatch.syspath_prepend(str(SUT_DIR))
+    late = [True, True, True, True, False, True, True, False]
+    spec, log_path = write_log(tmp_path, late)
+    ex = extract(read_log(log_path), spec, make_planner(spec, {}), jobs=2)
+    assert ex.accepted_at(0.0) == len(late) and all(f.exact for f in ex.frames)
+    assert [f.candidates_tried for f in ex.frames] == [2, 1, 1, 1, 2, 1, 1, 2]
+    assert ex.first_missed_in_runner == 3 and ex.first_stepped_in_runner == 5
+
+
+def test_in_process_extraction_learns_the_order_too(late_pose_log):
+    # From deep copies this planner plans ~1e-9 m off (see test_deft_fork_replay): accept within 1e-6 m.
+    spec, log_path = late_pose_log
+    spec = replace(spec, planner=replace(spec.planner, threshold=1e-6))
+    ex = extract(read_log(log_path), spec, make_planner(spec, {}))
+    assert [f.candidates_tried for f in ex.frames] == [2] + [1] * (CYCLES - 1)
+    assert ex.accepted_at(1e-6) == CYCLES
