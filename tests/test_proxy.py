@@ -184,3 +184,97 @@ def test_router_configs_do_not_wait_to_scout():
     assert router["scouting"]["delay"] == 0 and router["scouting"]["multicast"]["enabled"] is False
     assert "delay" not in zc.config_dict(mode="client", connect=["tcp/127.0.0.1:7447"])["scouting"]
     assert "delay" not in zc.config_dict(mode="router", gossip=True)["scouting"]  # gossip may find peers
+
+
+# ---------------------------------------------------------------- bursts (in process, real Zenoh on loopback)
+
+def _wait_until(condition, limit: float = 30.0) -> None:
+    """Poll until ``condition()`` holds (bounded, so a failure ends the test instead of hanging it)."""
+    deadline = time.monotonic() + limit
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def test_bursts_hand_over_every_queued_sample_once_in_order_even_as_the_subscriber_closes():
+    import zenoh
+
+    from astaa_deft.bus import zenoh_config as zc
+    from astaa_deft.bus.proxy import BURST_LIMIT, run_bursts
+
+    session = zc.open_session(zc.config_dict(mode="peer", listen=[zc.loopback_endpoint()]))
+    try:
+        sub = session.declare_subscriber("burst/k", zenoh.handlers.FifoChannel(1000))
+        pub = session.declare_publisher("burst/k")
+        count = 3 * BURST_LIMIT + 4  # the last burst is cut short by the closed subscriber
+        for i in range(count):
+            pub.put(str(i))
+        _wait_until(lambda: False, 0.3)  # local delivery is immediate; a moment for the FIFO anyway
+        fifo = sub.handler
+        sub.undeclare()  # what is queued stays readable; then try_recv raises
+        bursts: list[list[int]] = []
+        idle: list[bool] = []
+        with pytest.raises(zenoh.ZError):
+            run_bursts(fifo, lambda samples: bursts.append([int(s.payload.to_string()) for s in samples]),
+                       lambda: idle.append(True))
+    finally:
+        session.close()
+    assert [i for burst in bursts for i in burst] == list(range(count))
+    assert [len(b) for b in bursts] == [BURST_LIMIT, BURST_LIMIT, BURST_LIMIT, 4]
+    assert not idle  # never ran empty before it closed
+
+
+def test_intercepted_bursts_deliver_and_record_each_message_once_in_order():
+    """set on every message through the star proxy, under a burst: the consumer gets each mutated message
+    once and in order, and the recorder's rows hold each delivery once, in order, with its original."""
+    import zenoh
+
+    from astaa_deft.bus import zenoh_config as zc
+    from astaa_deft.bus.interception import InterceptionBridge
+    from astaa_deft.bus.proxy import BURST_LIMIT, StarProxy
+    from astaa_deft.bus.topology import intercepted_key, unpack_deliveries, wire_event_parts
+    from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
+    from astaa_deft.spec_loader import load_spec_text
+
+    spec = load_spec_text("""
+name: bursts
+modules: [{name: src, command: "true"}, {name: dst, command: "true"}]
+channels:
+  - {name: data, key: b/data, producer: src, consumers: [dst], type: Msg}
+types:
+  Msg: {seq: uint64, value: float64}
+""")
+    testcase = parse_testcase(b'<testcase id="t" seed="1"><description/><policy id="p"><channel>data</channel>'
+                              b'<set><field path="value" value="-1.0"/></set></policy></testcase>', "t.xml", spec)
+    endpoint = zc.loopback_endpoint()
+    tool = zc.open_session(zc.config_dict(mode="router", listen=[endpoint]))
+    client = zc.open_session(zc.config_dict(mode="client", connect=[endpoint]))
+    count = 10 * BURST_LIMIT + 7
+    delivered: list[bytes] = []
+    rows: list[tuple] = []
+    try:
+        bridge = InterceptionBridge(tool, Interceptor(testcase, spec, load_dictionary()), time.monotonic())
+        proxy = StarProxy(tool, spec, make_forwarder=bridge.make_forwarder)
+        proxy.start()
+        bridge.start()
+        subs = [client.declare_subscriber("sut/dst/b/data", lambda s: delivered.append(s.payload.to_bytes())),
+                client.declare_subscriber(intercepted_key("b/data"),
+                                          lambda s: rows.extend(unpack_deliveries(s.payload.to_bytes())))]
+        _wait_until(lambda: False, 0.5)  # the router learns of the subscribers
+        pub = client.declare_publisher("sut/src/b/data", congestion_control=zenoh.CongestionControl.BLOCK)
+        for i in range(count):  # as fast as it goes: the forwarder's FIFO fills and it drains it in bursts
+            pub.put(json.dumps({"seq": i, "value": 0.5}))
+        _wait_until(lambda: len(delivered) >= count and len(rows) >= count)
+        proxy.stop()
+        bridge.stop()
+        for sub in subs:
+            sub.undeclare()
+    finally:
+        client.close()
+        tool.close()
+    assert [json.loads(p) for p in delivered] == [{"seq": i, "value": -1.0} for i in range(count)]
+    assert [json.loads(original) for _, _, original, _, _ in rows] == [{"seq": i, "value": 0.5} for i in range(count)]
+    assert [payload for _, payload, _, _, _ in rows] == delivered
+    assert all(was_delivered for _, _, _, was_delivered, _ in rows)
+    assert [wire_event_parts(event)["message_index"] for *_, event in rows] == list(range(1, count + 1))
+    times = [t for t, *_ in rows]
+    assert times == sorted(times)

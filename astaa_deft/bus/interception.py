@@ -122,22 +122,27 @@ class InterceptionBridge:
 
         last_meta, put, on_message = self._last_meta, self._put, interceptor.on_message
 
+        def forward_burst(samples: list[zenoh.Sample]) -> None:
+            live.count += len(samples)
+            with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
+                for sample in samples:
+                    meta = (sample.encoding, sample.attachment, sample.timestamp)
+                    payload = sample.payload.to_bytes()
+                    now = monotonic() - t0
+                    deliveries = on_message(name, consumers, payload, now)
+                    if len(deliveries) == 1 and deliveries[0].at <= now:  # the common case, without _dispatch
+                        put(live, deliveries[0], meta, sample)
+                    else:
+                        dispatch(live, deliveries, meta, now, sample)
+                    if len(outbox) >= OUTBOX_LIMIT:
+                        self._send()
+                last_meta[name] = meta  # what a tick's injected message on this channel goes out with
+
         def forward(sample: zenoh.Sample) -> None:
-            live.count += 1
-            meta = (sample.encoding, sample.attachment, sample.timestamp)
-            payload = sample.payload.to_bytes()
-            with lock:
-                last_meta[name] = meta
-                now = monotonic() - t0
-                deliveries = on_message(name, consumers, payload, now)
-                if len(deliveries) == 1 and deliveries[0].at <= now:  # the common case, without _dispatch
-                    put(live, deliveries[0], meta, sample)
-                else:
-                    dispatch(live, deliveries, meta, now, sample)
-                if len(outbox) >= OUTBOX_LIMIT:
-                    self._send()
+            forward_burst([sample])
 
         forward.on_idle = self.idle  # type: ignore[attr-defined]  # see StarProxy
+        forward.burst = forward_burst  # type: ignore[attr-defined]
         return forward
 
     def idle(self) -> None:

@@ -99,7 +99,7 @@ class _LivePolicy:
 
 class _ChannelState:
     __slots__ = ("name", "codec", "count", "first_at", "last_at", "previous_payload", "_previous_cache", "acting",
-                 "observers", "anchors", "held", "fast")
+                 "observers", "anchors", "held", "fast", "fast_selects")
 
     def __init__(self, name: str, codec: Codec):
         self.name = name
@@ -115,6 +115,7 @@ class _ChannelState:
         self.held: list[tuple[float, int, Delivery]] = []  # delayed deliveries, a heap by due time
         # The acting policy's shortcut when it alone acts here, for every consumer (see ActionRuntime.fast_path).
         self.fast: FastPath | None = None
+        self.fast_selects: Any = None  # with ``fast``: its policy's gate.selects, looked up once
 
     def previous_message(self) -> dict:
         """The previous real message, decoded once (derive rules like time.jump_back read it)."""
@@ -146,6 +147,7 @@ class Interceptor:
         for state in self._channels.values():
             if len(state.acting) == 1 and not state.observers and not state.acting[0].policy.consumers:
                 state.fast = state.acting[0].runtime.fast_path(state.name)
+                state.fast_selects = state.acting[0].gate.selects
 
     # -- the proxy's interface ---------------------------------------------------------
     def channels(self) -> set[str]:
@@ -169,8 +171,7 @@ class Interceptor:
                 gate.anchored_at(now)
         fast = state.fast
         if fast is not None:  # one acting policy, no observers (see __init__): the short way
-            done = fast(consumers, payload, channel, index, now) if state.acting[0].gate.selects(channel, now) \
-                else _UNSELECTED
+            done = fast(consumers, payload, channel, index, now) if state.fast_selects(channel, now) else _UNSELECTED
             if done is _UNSELECTED:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
             elif done is not None:

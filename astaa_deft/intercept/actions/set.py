@@ -394,7 +394,8 @@ class SetRuntime(ActionRuntime):
         if not all(plan.direct and plan.skip is None and json_fast.writes_alike(plan.value, codec.encode)
                    for plan in plans):
             return None
-        return partial(_fast_set, plans, self.context.testcase, self.context.policy.id)
+        steps = tuple((plan.path.segments, plan.value, plan.text) for plan in plans)
+        return partial(_fast_set, steps, self.context.testcase, self.context.policy.id)
 
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         decoded_here = item.message is None
@@ -417,8 +418,11 @@ class SetRuntime(ActionRuntime):
         return [item]
 
 
-def _fast_set(plans: tuple[FieldPlan, ...], testcase: str, policy: str, consumers: tuple[str, ...], payload: bytes,
-              channel: str, index: int, now: float) -> Delivery | None:
+_fast_loads, _fast_dumps, _exact_scalar = json_fast.loads, json_fast.dumps, json_fast.is_exact_scalar
+
+
+def _fast_set(steps: tuple[tuple[tuple, Any, str], ...], testcase: str, policy: str, consumers: tuple[str, ...],
+              payload: bytes, channel: str, index: int, now: float) -> Delivery | None:
     """The delivery ``SetRuntime.apply`` leads to when every field is set, through orjson; None: take the general path.
 
     None whenever the result might differ by a byte or a value: orjson
@@ -428,16 +432,16 @@ def _fast_set(plans: tuple[FieldPlan, ...], testcase: str, policy: str, consumer
     (``json_fast.dumps``). ``tests/test_json_fast.py`` holds it to the
     general path's deliveries and events.
     """
-    message = json_fast.loads(payload)
+    message = _fast_loads(payload)
     if message is None:
         return None
     changes = []
-    for plan in plans:
-        old = _set_one(message, plan.path.segments, plan.value)
-        if old is _MISSING or not json_fast.is_exact_scalar(old):
+    for segments, value, text in steps:  # each plan's path, value and rendered path (see fast_path)
+        old = _set_one(message, segments, value)
+        if old is _MISSING or not _exact_scalar(old):
             return None
-        changes.append(built(FieldChange, path=plan.text, old=old, new=plan.value))
-    out = json_fast.dumps(message)
+        changes.append(built(FieldChange, path=text, old=old, new=value))
+    out = _fast_dumps(message)
     if out is None:
         return None
     event = built(MutationEvent, testcase=testcase, policy=policy, action="set", channel=channel,
