@@ -36,6 +36,7 @@ from typing import Any
 from ..bus.processes import die_with_parent, python_module
 
 REAP_SECONDS = 0.5
+FORK_TIMEOUT = 60.0
 
 
 class Zygote:
@@ -51,6 +52,7 @@ class Zygote:
         finally:
             theirs.close()
         self._lock = threading.Lock()
+        self._control.settimeout(FORK_TIMEOUT)  # its start (imports, the spec) included, on a loaded machine
         self._answers = self._control.makefile("r", encoding="utf-8")
 
     def alive(self) -> bool:
@@ -63,6 +65,9 @@ class Zygote:
             with self._lock:
                 socket.send_fds(self._control, [b"f"], [theirs.fileno()])
                 line = self._answers.readline()
+        except OSError:  # a timeout included: a late answer would be the next request's, so no more requests
+            self.process.kill()
+            line = ""
         finally:
             theirs.close()
         if not line.strip().isdigit():
