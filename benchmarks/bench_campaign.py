@@ -79,6 +79,7 @@ class Campaigned:
     first_xml: dict[str, str]  # bucket → its first case's test case XML
     started: float  # wall clock (time.time) at the start
     case_seconds: list[float]  # each finished run's seconds from launch to end
+    generated_seconds: float  # from the first generated case's start to the campaign's end (after the baseline)
     cpu_seconds: float  # CPU (user + system) of every process the campaign started and waited for, and its own
     own_cpu_seconds: float  # of which the campaign's own process (journal, generation, pool threads)
 
@@ -114,10 +115,12 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
         buckets = journal.buckets()
         first_xml = {b.bucket: (journal.case(b.first_case)["testcase_xml"] or "") for b in buckets}
         outcomes = [journal.outcome(r) for r in journal.cases()]
+        generated = [r["started_at"] for r in journal.cases() if r["kind"] != "baseline" and r["started_at"]]
+        generated_seconds = started + result.seconds - min(generated) if generated else 0.0
         case_seconds = [o.seconds for o in outcomes if o is not None and o.status == "done"]
     finally:
         journal.close()
-    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds,
+    return Campaigned(result.seconds, result.cases_done, buckets, first_xml, started, case_seconds, generated_seconds,
                       _children_cpu() - cpu_before, _own_cpu() - own_before)
 
 
@@ -160,6 +163,10 @@ def throughput(tmp: Path, cases: int, pool_workers: list[int] | None = None) -> 
               f" a run {run_seconds:.1f} s from launch to end; {done.cpu_seconds / max(1, done.cases):.2f} CPU s"
               f" per case, {done.own_cpu_seconds / max(1, done.cases):.2f} of them in the campaign's process"
               f"{cluster_note})")
+        if done.generated_seconds > 0:
+            steady = (done.cases - 1) / (done.generated_seconds / 3600 * cores)
+            print(f"  {'':13} after the baseline: {done.cases - 1} generated cases in {done.generated_seconds:5.1f} s:"
+                  f" {steady:6.0f} cases per core-hour (a long campaign's rate: its one baseline run amortised)")
     if pool_workers:
         first = rates[("local pool", pool_workers[0])]
         print("  " + "; ".join(f"{k} / {pool_workers[0]} at once: {rates[('local pool', k)] / first:.2f}×"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -94,3 +95,61 @@ def test_no_recorder_is_forked_from_a_process_with_other_threads():
     finally:
         stop.set()
         other.join()
+
+
+def _echo_payload(tmp_path: Path, name: str) -> dict:
+    from astaa_deft.campaign.model import BASELINE, PlannedCase
+
+    case = PlannedCase(name, BASELINE, 1, 0, PARAMS, None)
+    return {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / name), "horizon": 3.0,
+            "dictionaries": []}
+
+
+def test_pool_cases_run_in_processes_forked_from_one_template(tmp_path: Path):
+    from astaa_deft.campaign.executors import LocalPool
+    from astaa_deft.campaign.zygote import Zygote
+
+    pool = LocalPool(2)
+    try:
+        for name in ("a", "b", "c"):
+            pool.submit(name, _echo_payload(tmp_path, name))
+        outcomes = {}
+        while pool.pending():
+            outcomes.update(dict(pool.done(timeout=1.0)))
+        templates = list(pool._zygotes.values())
+    finally:
+        pool.close()
+    assert len(templates) == 1 and isinstance(templates[0], Zygote)  # one template for the spec, all three forked
+    assert templates[0].process.returncode == 0  # it reaped its cases and exited when the pool closed
+    for name, outcome in outcomes.items():
+        assert outcome.status == "done", outcome
+        assert len(read_log(tmp_path / name / "run.mcap").on("test/data")) == 40
+        assert (tmp_path / name / "case.log").is_file()
+
+
+def test_a_forked_case_past_its_time_is_stopped_with_its_process_group(tmp_path: Path, monkeypatch):
+    from astaa_deft.campaign import executors
+    from astaa_deft.campaign.executors import LocalPool
+
+    monkeypatch.setattr(executors, "CASE_TIMEOUT_MARGIN", -2.0)  # 1 s for a case that runs 3 s
+    pool = LocalPool(1)
+    try:
+        pool.submit("slow", _echo_payload(tmp_path, "slow"))
+        outcomes = {}
+        while pool.pending():
+            outcomes.update(dict(pool.done(timeout=1.0)))
+    finally:
+        pool.close()
+    assert outcomes["slow"].status == "error" and outcomes["slow"].error == "timeout"
+    pids = list(json.loads((tmp_path / "slow" / "modules" / "processes.json").read_text()).values())
+    deadline = time.monotonic() + 20.0  # its modules die with it (each module's own shutdown takes a moment)
+    while time.monotonic() < deadline and any(_running(pid) for pid in pids):
+        time.sleep(0.1)
+    assert pids and not any(_running(pid) for pid in pids)
+
+
+def _running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False

@@ -35,8 +35,11 @@ DEFAULT_SETTLE = 3.0  # s a mutated case runs on after its last mutation could a
 # A run's modules mostly sleep: the demo's whole run (4 modules, proxy, recorder) used ~0.3 core on average
 # (user+sys over wall time); these leave headroom so deadline invariants do not starve on a loaded machine
 # (benchmarks/bench_campaign.py measures other counts).
-CORES_PER_MODULE = 0.1
-HELPER_CORES = 0.25  # the tool's own session, proxy and recorder per run
+# Measured with cases forked from a template (zygote.py) and recorders forked from the case: a demo case used
+# 2.0-2.2 CPU s over its ~6.5 s — 0.33 core, 0.05 per module and 0.12 for the tool's process and recorder — and
+# 6 at once ran 1.35x the cases of 3 (benchmarks/bench_campaign.py); 4 at once keeps a third of two cores spare.
+CORES_PER_MODULE = 0.08
+HELPER_CORES = 0.15  # the tool's own session, proxy and recorder per run
 
 
 @dataclass

@@ -12,28 +12,34 @@ from __future__ import annotations
 
 import base64
 import json
+import socket
 import subprocess
 import threading
+import time
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 from collections.abc import Iterator
 
-from ..bus.processes import die_with_parent, python_module, stop_process
+from ..bus.processes import die_with_parent, python_module, stop_process, tail
 from .model import CaseOutcome
+from .zygote import Zygote, stop_group
 
 CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
 
 
 class LocalPool:
-    """``workers`` cases at once, each in a fresh child process.
+    """``workers`` cases at once, each in a fresh process.
 
-    Overlapped starts: each slot keeps its next case's process warm (started,
-    imports done, spec loaded, its recorder started, waiting for its payload)
-    while the current case runs — on a loaded two-core machine that start-up
-    took ~3 s of a case's ~12 (measured; benchmarks/bench_campaign.py). The
-    first case fills every slot's next process, so the cases after a
-    campaign's baseline start warm as well.
+    Each case process is forked from a template that imported everything and
+    loaded the spec once (:mod:`.zygote`; its recorder is forked from it in
+    turn, :mod:`.forked`): a case starts in milliseconds and spends no CPU on
+    Python's start-up, ~1.2 CPU s of a demo case before. Without a template
+    (it could not start), each slot keeps its next case's process warm
+    (started, imports done, spec loaded, its recorder started, waiting for
+    its payload) while the current case runs — on a loaded two-core machine
+    that start-up took ~3 s of a case's ~12 (measured;
+    benchmarks/bench_campaign.py).
     """
 
     def __init__(self, workers: int):
@@ -41,11 +47,16 @@ class LocalPool:
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="case")
         self._procs: set[subprocess.Popen] = set()
         self._warm: list[tuple[tuple[str, ...], subprocess.Popen]] = []  # (what it preloaded, process)
+        self._zygotes: dict[tuple[str, ...], Zygote | None] = {}  # None: it could not start (processes instead)
+        self._forked: set[int] = set()  # case processes forked by a template, running
         self._lock = threading.Lock()
         self._closed = False
         self.futures: dict[Future, str] = {}
 
     def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+        # The template starts here, in the caller's thread: a process dies with the thread that started it
+        # (die_with_parent), and the pool's threads end before the template has reaped its last case.
+        self._zygote(_key(payload))
         self.futures[self._pool.submit(self._run, payload)] = case_id
 
     def _spawn(self, key: tuple[str, ...]) -> subprocess.Popen:
@@ -55,7 +66,7 @@ class LocalPool:
 
     def _take(self, payload: dict[str, Any]) -> subprocess.Popen:
         """A warm process for this payload's spec (or a new one), and a warm one for the slot's next case."""
-        key = (str(payload["spec"]), *map(str, payload.get("dictionaries", [])))
+        key = _key(payload)
         with self._lock:
             index = next((i for i, (k, p) in enumerate(self._warm) if k == key and p.poll() is None), None)
             proc = self._warm.pop(index)[1] if index is not None else None
@@ -69,7 +80,31 @@ class LocalPool:
                 self._warm.append((key, self._spawn(key)))
         return proc
 
+    def _zygote(self, key: tuple[str, ...]) -> Zygote | None:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the pool is closed")
+            zygote = self._zygotes.get(key)
+            if zygote is not None and not zygote.alive():
+                zygote.close()
+                zygote = self._zygotes[key] = None  # it died: processes of their own from now on
+            elif key not in self._zygotes:
+                try:
+                    zygote = self._zygotes[key] = Zygote(key[0], list(key[1:]))
+                except OSError:
+                    zygote = self._zygotes[key] = None
+            return zygote
+
     def _run(self, payload: dict[str, Any]) -> CaseOutcome:
+        with self._lock:
+            zygote = self._zygotes.get(_key(payload))
+        if zygote is not None and zygote.alive():
+            try:
+                pid, conn = zygote.fork()
+            except OSError:
+                pass  # a process of its own instead
+            else:
+                return self._run_forked(pid, conn, payload)
         proc = self._take(payload)
         try:
             out, err = proc.communicate(json.dumps(payload), timeout=float(payload["horizon"]) + CASE_TIMEOUT_MARGIN)
@@ -86,6 +121,37 @@ class LocalPool:
             return CaseOutcome("error", "?", "the case process failed", error=err.strip()[-2000:])
         return CaseOutcome.from_json(json.loads(lines[-1]))
 
+    def _run_forked(self, pid: int, conn: socket.socket, payload: dict[str, Any]) -> CaseOutcome:
+        """A case in a process forked by the template: payload out, outcome back on its socket."""
+        with self._lock:
+            self._forked.add(pid)
+        deadline = time.monotonic() + float(payload["horizon"]) + CASE_TIMEOUT_MARGIN
+        chunks = []
+        try:
+            conn.sendall(json.dumps(payload).encode())
+            conn.shutdown(socket.SHUT_WR)
+            while True:
+                conn.settimeout(max(0.001, deadline - time.monotonic()))
+                data = conn.recv(1 << 16)
+                if not data:
+                    break
+                chunks.append(data)
+        except TimeoutError:
+            stop_group(pid, grace=5.0)
+            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+        except OSError as exc:
+            stop_group(pid, grace=5.0)
+            return CaseOutcome("error", "?", "the case process failed", error=str(exc))
+        finally:
+            conn.close()
+            with self._lock:
+                self._forked.discard(pid)
+        lines = [line for line in b"".join(chunks).decode("utf-8", "replace").splitlines() if line.startswith("{")]
+        if not lines:
+            return CaseOutcome("error", "?", "the case process failed",
+                               error=tail(Path(payload["run_dir"]) / "case.log").strip()[-2000:])
+        return CaseOutcome.from_json(json.loads(lines[-1]))
+
     def pending(self) -> int:
         return len(self.futures)
 
@@ -98,6 +164,8 @@ class LocalPool:
     def close(self) -> None:
         with self._lock:
             self._closed = True
+            forked = list(self._forked)
+            zygotes = [z for z in self._zygotes.values() if z is not None]
             procs = list(self._procs)
             warm = [p for _, p in self._warm]
             self._warm.clear()
@@ -105,7 +173,16 @@ class LocalPool:
             stop_process(proc, grace=1.0)
         for proc in procs:
             stop_process(proc, grace=10.0)
+        for pid in forked:
+            stop_group(pid, grace=10.0)
         self._pool.shutdown(wait=True, cancel_futures=True)
+        for zygote in zygotes:  # after the cases: it reaps them, so their CPU is accounted to it, then to us
+            zygote.close()
+
+
+def _key(payload: dict[str, Any]) -> tuple[str, ...]:
+    """What a case process preloads: the spec and the dictionaries."""
+    return (str(payload["spec"]), *map(str, payload.get("dictionaries", [])))
 
 
 class DaskPool:

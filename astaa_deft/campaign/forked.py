@@ -29,11 +29,12 @@ from ..spec_loader import load_spec_text
 class ForkedRecorder(subprocess.Popen):
     """A warm recorder (see ``session/recorder.py``) forked from this process: call it while single-threaded."""
 
-    def __init__(self, spec_text: str, spec_name: str):
+    def __init__(self, spec_text: str, spec_name: str, parsed: object = None):
+        """``parsed``: ``spec_text`` parsed already, as ``load_spec_text(spec_text, name=spec_name)`` does."""
         if not single_threaded():  # another thread may hold a lock (Zenoh's runtime, logging) the child would need
             raise RuntimeError("a recorder is forked only from a single-threaded process")
-        # Parsed here, before the fork: the child finds it in memory, as --warm would have parsed it.
-        spec = load_spec_text(spec_text, name=spec_name)
+        # Parsed before the fork: the child finds it in memory, as --warm would have parsed it.
+        spec = parsed if parsed is not None else load_spec_text(spec_text, name=spec_name)
         self._parsed: dict[tuple[str, str], object] = {(spec_text, spec_name): spec}
         super().__init__(["astaa-deft-recorder"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                          stderr=subprocess.DEVNULL, text=True)

@@ -66,10 +66,13 @@ def execute_remote(payload: dict[str, Any]) -> dict[str, Any]:
         return body
 
 
-def _recorder_ahead(spec_path: Path) -> subprocess.Popen | None:
+def recorder_ahead(spec_path: Path, parsed: tuple[str, Any] | None = None) -> subprocess.Popen | None:
     """This case's recorder, started now: forked from this process (still one thread, no Zenoh session),
-    else a warm recorder process of its own, else none (the run starts one itself)."""
+    else a warm recorder process of its own, else none (the run starts one itself).
+    ``parsed``: (the spec file's text, that text parsed as the recorder parses it), from a template process."""
     try:
+        if parsed is not None:
+            return ForkedRecorder(parsed[0], spec_path.name, parsed[1])
         return ForkedRecorder(spec_path.read_text(), spec_path.name)
     except Exception:  # noqa: BLE001 - an unreadable spec is the case's error to report; no fork: a process
         try:
@@ -87,16 +90,20 @@ def main(argv: list[str] | None = None) -> int:
             preloaded = (argv[1], argv[2:], load_spec(Path(argv[1])), load_dictionary([Path(p) for p in argv[2:]]))
         except InputError:
             preloaded = None  # execute() loads it again and reports the problem as the case's outcome
-        recorder = _recorder_ahead(Path(argv[1]))
+        recorder = recorder_ahead(Path(argv[1]))
     payload = json.loads(sys.stdin.read())
     try:
         body = execute(payload, preloaded, recorder)
     finally:
-        if recorder is not None and recorder.poll() is None and recorder.stdin is not None \
-                and not recorder.stdin.closed:  # not taken (bad input): EOF tells it to exit
-            recorder.stdin.close()
+        let_go(recorder)
     print(json.dumps(body, default=str), flush=True)
     return 0
+
+
+def let_go(recorder: subprocess.Popen | None) -> None:
+    """A recorder started ahead that the case did not take (bad input): end of input tells it to exit."""
+    if recorder is not None and recorder.poll() is None and recorder.stdin is not None and not recorder.stdin.closed:
+        recorder.stdin.close()
 
 
 if __name__ == "__main__":

@@ -116,9 +116,7 @@ class LiveTester:
         with self._count:
             recorders, self._recorders = self._recorders, []
         for recorder in recorders:
-            if recorder.stdin is not None and not recorder.stdin.closed:
-                with contextlib.suppress(OSError):
-                    recorder.stdin.close()
+            _let_go(recorder)
 
     def testcase(self, chosen: Sequence[tuple[Mutation, FieldSelection]], description: str = "") -> TestCase:
         testcase = restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
@@ -203,6 +201,8 @@ class LiveTester:
                 run_session(self.spec, options, stop_when=stop_when, on_event=on_event)
             except InputError as exc:
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
+            finally:
+                _let_go(options.warm_recorder)
             seconds = time.monotonic() - started
             with self._count:
                 self.run_seconds += seconds
@@ -236,3 +236,10 @@ class LiveTester:
             return True
         return any(v.invariant == self.invariant and (self.module is None or v.module == self.module)
                    for v in list(bus.violations))
+
+
+def _let_go(recorder: subprocess.Popen | None) -> None:
+    """A recorder started ahead that no run took (a run that did not get that far): end of input, it exits."""
+    if recorder is not None and recorder.stdin is not None and not recorder.stdin.closed:
+        with contextlib.suppress(OSError):
+            recorder.stdin.close()
