@@ -102,9 +102,9 @@ class UntilAllFound(Campaign):
 
 def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, strategy: str = "random",
              cluster: str | None = None, params: dict[str, list[str]] | None = None,
-             workers: int | None = None, until_all_found: bool = False) -> Campaigned:
+             workers: int | None = None, until_all_found: bool = False, reruns: int = 0) -> Campaigned:
     config = CampaignConfig(demo_spec_path(), out, cases=cases, budget=budget, seed=seed, strategy=strategy,
-                            cluster=cluster, params=params or {}, horizon=HORIZON, baseline_runs=1, reruns=0,
+                            cluster=cluster, params=params or {}, horizon=HORIZON, baseline_runs=1, reruns=reruns,
                             minimise=False, report=False, workers=workers)
     journal = Journal(out)
     started = time.time()
@@ -247,16 +247,21 @@ def _fmt(find: tuple[float, int] | None) -> str:
     return "-" if find is None else f"{find[0]:.0f}s/{find[1]}c"
 
 
-def false_alarms(tmp: Path, cases: int) -> None:
-    print(f"== false alarms: {cases} generated cases with the defects off; load average {_load()} ==")
-    done = campaign(tmp / "false-alarms", cases=cases, budget=None, seed=7, params={"defects": ["off"]})
+def false_alarms(tmp: Path, cases: int, seed: int = 7) -> None:
+    """As `astaa-deft fuzz` runs it: each bucket's first failure re-run twice for its rate."""
+    print(f"== false alarms: {cases} generated cases with the defects off, seed {seed}; load average {_load()} ==")
+    done = campaign(tmp / "false-alarms", cases=cases, budget=None, seed=seed, params={"defects": ["off"]},
+                    reruns=2)
     real = [b for b in done.buckets if not b.without_mutation]
     flaky = [b for b in done.buckets if b.without_mutation]
+    unconfirmed = [b for b in real if b.reruns and not b.rerun_failures]
     print(f"  {done.cases} cases in {done.seconds:.0f} s: {len(real)} bucket(s) blamed on a mutation"
-          f" (target 0), {len(flaky)} without mutation (flaky clean runs)")
+          f" (target 0; {len(unconfirmed)} of them failed none of their re-runs), {len(flaky)} without mutation"
+          f" (flaky clean runs)")
     for b in real + flaky:
         note = " (without mutation)" if b.without_mutation else ""
-        print(f"    {b.bucket} {b.verdict} {b.invariant} {b.family}{note}")
+        print(f"    {b.bucket} {b.verdict} {b.invariant} {b.family}{note}"
+              f" — re-runs failed {b.rerun_failures}/{b.reruns}")
 
 
 def main() -> int:
