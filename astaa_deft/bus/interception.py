@@ -59,11 +59,10 @@ from .topology import intercepted_key, pack_deliveries
 
 TICK_SECONDS = 0.01
 BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of 200 B messages stays under 64 KiB)
-# Deliveries to consumers wait in an outbox while the forwarder has more samples queued, at
-# most this many: Zenoh's sending thread then wakes once per burst and sends it in one write
-# (woken per message, it cost as much CPU as the mutation itself). When the forwarder keeps
-# up, the outbox is emptied after every message: no added delay.
-OUTBOX_LIMIT = 16
+# Deliveries to consumers wait in an outbox until the end of the forwarder's burst (see
+# proxy.run_bursts): Zenoh's sending thread then wakes once per burst and sends it in one write
+# (woken per message, it cost as much CPU as the mutation itself). When the forwarder keeps up,
+# a burst is one message: no added delay.
 
 
 class Interceptor(Protocol):
@@ -98,7 +97,7 @@ class InterceptionBridge:
         self._record_pubs: dict[str, zenoh.Publisher] = {}
         # per channel: deliveries not yet sent to the recorder, (time ns, payload, original, delivered, event)
         self._batches: dict[str, list[tuple[int, bytes, bytes | None, bool, Any]]] = {}
-        self._outbox: list[tuple[zenoh.Publisher, Any, Any, Any, Any]] = []  # (publisher, payload, meta...) to put
+        self._outbox: list[tuple[zenoh.Publisher, Any, tuple]] = []  # (publisher, payload, meta) to put
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick_loop, name="interception-ticks", daemon=True)
         self.mutations = 0
@@ -115,28 +114,49 @@ class InterceptionBridge:
         self._record_pubs[name] = self.session.declare_publisher(
             intercepted_key(key), congestion_control=BLOCK, allowed_destination=REMOTE)
         consumers = tuple(c for c, _ in live.publishers)
-        self._batches[name] = []
-        lock, interceptor, dispatch = self._lock, self.interceptor, self._dispatch
-        t0, monotonic = self.t0, time.monotonic
-        outbox = self._outbox
-
-        last_meta, put, on_message = self._last_meta, self._put, interceptor.on_message
+        pubs = [pub for _consumer, pub in live.publishers]
+        reaches = bool(pubs)  # a delivery to every consumer reaches someone
+        rows: list[tuple[int, bytes, bytes | None, bool, Any]] = []
+        self._batches[name] = rows
+        record_pub = self._record_pubs[name]
+        lock, dispatch, outbox, on_mutation = self._lock, self._dispatch, self._outbox, self.on_mutation
+        t0, monotonic, time_ns = self.t0, time.monotonic, time.time_ns
+        last_meta, on_message = self._last_meta, self.interceptor.on_message
 
         def forward_burst(samples: list[zenoh.Sample]) -> None:
             live.count += len(samples)
             with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
                 for sample in samples:
+                    zpayload = sample.payload
                     meta = (sample.encoding, sample.attachment, sample.timestamp)
-                    payload = sample.payload.to_bytes()
+                    payload = zpayload.to_bytes()
                     now = monotonic() - t0
                     deliveries = on_message(name, consumers, payload, now)
-                    if len(deliveries) == 1 and deliveries[0].at <= now:  # the common case, without _dispatch
-                        put(live, deliveries[0], meta, sample)
-                    else:
+                    if len(deliveries) != 1 or (d := deliveries[0]).at > now or len(d.consumers) != len(pubs):
                         dispatch(live, deliveries, meta, now, sample)
-                    if len(outbox) >= OUTBOX_LIMIT:
-                        self._send()
+                        continue
+                    # The common case, one delivery now to every consumer: what _put does, inline.
+                    original, event = d.original, d.event
+                    if original is None:  # the very same Zenoh payload when nothing changed: no copy
+                        out, data = zpayload, payload
+                    else:
+                        out = data = d.payload
+                    for pub in pubs:
+                        outbox.append((pub, out, meta))
+                    if event is None:
+                        rows.append((time_ns(), data, None, True, None))
+                    else:
+                        self.mutations += 1
+                        rows.append((time_ns(), data, original, reaches, event))
+                        if on_mutation is not None:
+                            on_mutation(event)
+                    if len(rows) >= BATCH_LIMIT:
+                        record_pub.put(pack_deliveries(rows))
+                        rows.clear()
+                    if reaches and self.on_delivered is not None:
+                        self.on_delivered(name, data)
                 last_meta[name] = meta  # what a tick's injected message on this channel goes out with
+                self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
 
         def forward(sample: zenoh.Sample) -> None:
             forward_burst([sample])
@@ -150,10 +170,16 @@ class InterceptionBridge:
         with self._lock:
             self._send()
 
-    def _send(self) -> None:
-        for pub, payload, encoding, attachment, timestamp in self._outbox:
-            pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
+    def _deliver_outbox(self) -> None:
+        for pub, payload, (encoding, attachment, timestamp) in self._outbox:
+            if attachment is None and timestamp is None:  # the usual case: fewer arguments for pyo3 to parse
+                pub.put(payload, encoding=encoding)
+            else:
+                pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
         self._outbox.clear()
+
+    def _send(self) -> None:
+        self._deliver_outbox()
         for name, rows in self._batches.items():
             if rows:
                 self._record_pubs[name].put(pack_deliveries(rows))
@@ -199,17 +225,16 @@ class InterceptionBridge:
             self._put(live, d, meta, None)
 
     def _put(self, live: LiveRoute, d: Any, meta: tuple, sample: zenoh.Sample | None) -> None:
-        encoding, attachment, timestamp = meta
         # The very same Zenoh payload when nothing changed: no copy on the common path.
         payload = sample.payload if d.original is None and sample is not None else d.payload
-        if len(d.consumers) == len(live.publishers):  # all of them (the common case): no filtering
+        if len(d.consumers) == len(live.publishers):  # all of them: no filtering
             for _consumer, pub in live.publishers:
-                self._outbox.append((pub, payload, encoding, attachment, timestamp))
+                self._outbox.append((pub, payload, meta))
         elif d.consumers:
             wanted = set(d.consumers)
             for consumer, pub in live.publishers:
                 if consumer in wanted:
-                    self._outbox.append((pub, payload, encoding, attachment, timestamp))
+                    self._outbox.append((pub, payload, meta))
         name = live.route.channel.name
         data = payload if type(payload) is bytes else payload.to_bytes()
         event = d.event
