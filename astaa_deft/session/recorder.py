@@ -230,7 +230,8 @@ def _drain(q: queue.SimpleQueue, writer: LogWriter, counts: dict[str, int], muta
                 continue
             counts[name] += 1
             if codec.name == "json":
-                if b"NaN" in data or b"Infinity" in data:  # the twins' own first check, without two calls
+                # The twins' own first check, without their call (_may_hold_nan inline: it runs per message).
+                if (78 in data and b"NaN" in data) or (73 in data and b"Infinity" in data):
                     twins.add(name, log_time, data, publish_time)  # a NaN on the wire: viewable too
                 if json_object is not None and len(data) < FAST_JSON_LIMIT and json_object(data):
                     continue  # undecodable's first answer, without its call
@@ -309,6 +310,14 @@ def undecodable(codec: Codec, data: bytes) -> str | None:
     return None
 
 
+def _may_hold_nan(data: bytes) -> bool:
+    """The twins' own first check (NaN or Infinity in the bytes), each search only where its first letter occurs.
+
+    An int needle is one memchr: 0.06 µs against 0.6 for the two bytes searches on a 200 B message.
+    """
+    return (78 in data and b"NaN" in data) or (73 in data and b"Infinity" in data)  # 78: "N", 73: "I"
+
+
 def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, codec, name: str,
                  data: bytes, counts: dict[str, int], received_ns: int, twins: ViewableTwins) -> None:
     """The deliveries of one intercepted channel the proxy sent together (see ``topology.pack_deliveries``).
@@ -327,12 +336,12 @@ def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: 
             if _write_mutation(writer, cid, original_cid, mutations_cid, wire, original, delivered, time_ns, payload,
                                time_ns):
                 counts[name] += 1
-                if json_twins:
+                if json_twins and _may_hold_nan(payload):
                     twins.add(name, time_ns, payload, time_ns)  # a NaN mutation: viewable too
             continue
         seq = writer.message(cid, time_ns, payload, time_ns)
         counts[name] += 1
-        if json_twins:
+        if json_twins and _may_hold_nan(payload):
             twins.add(name, time_ns, payload, time_ns)
         reason = undecodable(codec, payload)
         if reason is not None:
