@@ -224,6 +224,9 @@ def interception(count: int) -> None:
           f"recorded); tool CPU {mutated['tool_cpu_us'] / plain['tool_cpu_us']:.2f}× passthrough's")
     print(f"  loss with set + recorder: sent {count:,}, delivered {mutated_rec['received']:,}, "
           f"recorded {recorded.get('data', 0):,}")
+    if mutated_rec.get("recorder_us"):
+        print(f"  recorder CPU with set on every message: {mutated_rec['recorder_us']:.1f} µs/msg "
+              f"(original, delivery and event per message; its own process)")
     print("  tool CPU by thread kind, µs/msg (python: forwarders, engine, puts; rx/tx: Zenoh's own):")
     for name, r in (("passthrough", plain), ("set on every", mutated), ("+ recorder", mutated_rec)):
         print(f"    {name:14} {fmt_threads(r)}")
