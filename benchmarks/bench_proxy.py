@@ -89,6 +89,27 @@ def thread_cpu() -> dict[str, float]:
     return out
 
 
+def process_cpu(pid: int) -> float | None:
+    """CPU seconds a live process has used so far (Linux /proc); None if it is gone or /proc is missing."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def settled_cpu(pid: int, quiet: float = 0.3, limit: float = 30.0) -> float | None:
+    """A process's CPU seconds once it stopped using CPU (a recorder that has written its backlog)."""
+    last, deadline = process_cpu(pid), time.monotonic() + limit
+    while last is not None and time.monotonic() < deadline:
+        time.sleep(quiet)
+        now = process_cpu(pid)
+        if now is None or now - last < 0.02:  # at most two clock ticks in the quiet time: idle
+            return now if now is not None else last
+        last = now
+    return last
+
+
 def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy: Path | None = None,
              timeout: float = RESULT_TIMEOUT) -> tuple[dict, dict]:
     """One run through the tool; the sink's result gains the CPU the tool (and its recorder) spent per message.
@@ -97,6 +118,11 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
     when other processes take the cores, CPU per message hardly moves. The
     tool's share is also split by thread kind (``tool_threads_us``), read
     just before the run's Zenoh session closes (its threads end with it).
+    With a recorder, ``recorder_startup_s`` is the CPU it spent before the
+    modules started (interpreter, imports, subscribing: nothing per message)
+    and ``recorder_us`` its CPU per message from then until it has written
+    what it received (its own process, read from /proc: the modules' CPU,
+    which changes when the recorder slows the star, stays out of it).
     """
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp)
@@ -105,15 +131,21 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
                              record=run_dir / "bench.mcap" if record else None, time_limit=timeout)
         sink = run_dir / "sink.json"
         threads0, at_end = thread_cpu(), {}
+        recorder_cpu: list[float | None] = []  # at the modules' start, once the recorder has caught up
+
+        def started(run) -> None:
+            recorder_cpu.append(process_cpu(run.recorder.pid) if run.recorder is not None else None)
 
         def sink_done(run) -> str | None:
             if not sink.exists():
                 return None
             at_end.update(thread_cpu())
+            if run.recorder is not None:
+                recorder_cpu.append(settled_cpu(run.recorder.pid))
             return "sink done"
 
         tool0, children0 = cpu_seconds(resource.RUSAGE_SELF), cpu_seconds(resource.RUSAGE_CHILDREN)
-        outcome = run_session(spec, options, stop_when=sink_done)
+        outcome = run_session(spec, options, stop_when=sink_done, on_start=started)
         result = dict(wait_result(sink, timeout))
         # Children: the recorder (and the modules, which are the same in every row).
         tool, children = cpu_seconds(resource.RUSAGE_SELF) - tool0, cpu_seconds(resource.RUSAGE_CHILDREN) - children0
@@ -122,6 +154,9 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
         result["children_cpu_us"] = children * per
         result["tool_threads_us"] = {kind: (seconds - threads0.get(kind, 0.0)) * per
                                      for kind, seconds in sorted(at_end.items())}
+        result["recorder_startup_s"] = recorder_cpu[0] if recorder_cpu else None
+        if len(recorder_cpu) == 2 and None not in recorder_cpu:
+            result["recorder_us"] = (recorder_cpu[1] - recorder_cpu[0]) * per  # type: ignore[operator]
         return result, outcome.recorded
 
 
@@ -148,9 +183,14 @@ def throughput(size: int, count: int) -> None:
     print(f"  star                 {fmt_rate(star)}   ratio {star['rate'] / direct['rate']:.2f}× direct")
     print(f"  star + recorder      {fmt_rate(star_rec)}   ratio {star_rec['rate'] / direct['rate']:.2f}× direct")
     print(f"  loss: sent {count:,}, delivered {star_rec['received']:,}, recorded {recorded.get('data', 0):,}")
-    recorder_us = star_rec["children_cpu_us"] - star["children_cpu_us"]  # children: the modules, + the recorder
-    if recorder_us > 0:
-        print(f"  recorder CPU {recorder_us:.1f} µs/msg: it alone could sustain {1e6 / recorder_us:,.0f} msg/s")
+    # Children: the modules and the recorder. Their difference counts the recorder's start-up and
+    # whatever the modules spend differently when the recorder slows the star (an earlier figure).
+    children_diff = star_rec["children_cpu_us"] - star["children_cpu_us"]
+    recorder_us = star_rec.get("recorder_us")
+    if recorder_us:
+        print(f"  recorder CPU {recorder_us:.1f} µs/msg while recording (its own process; start-up "
+              f"{star_rec['recorder_startup_s']:.2f} s CPU apart): alone it could sustain "
+              f"{1e6 / recorder_us:,.0f} msg/s  [children's difference: {children_diff:.1f} µs/msg]")
 
 
 def latency(count: int) -> None:
@@ -184,6 +224,9 @@ def interception(count: int) -> None:
           f"recorded); tool CPU {mutated['tool_cpu_us'] / plain['tool_cpu_us']:.2f}× passthrough's")
     print(f"  loss with set + recorder: sent {count:,}, delivered {mutated_rec['received']:,}, "
           f"recorded {recorded.get('data', 0):,}")
+    if mutated_rec.get("recorder_us"):
+        print(f"  recorder CPU with set on every message: {mutated_rec['recorder_us']:.1f} µs/msg "
+              f"(original, delivery and event per message; its own process)")
     print("  tool CPU by thread kind, µs/msg (python: forwarders, engine, puts; rx/tx: Zenoh's own):")
     for name, r in (("passthrough", plain), ("set on every", mutated), ("+ recorder", mutated_rec)):
         print(f"    {name:14} {fmt_threads(r)}")

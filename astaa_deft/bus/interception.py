@@ -7,36 +7,49 @@ original was and what it did — one entry per delivery, so the three records
 can never be mismatched. Entries that pile up while the forwarder is busy go
 out together in one message (see ``topology.pack_deliveries``); the batch is sent
 as soon as the forwarder has nothing more waiting, so at ordinary rates each
-delivery is recorded at once.
+delivery is recorded at once. Samples are handled in bursts (``proxy.run_bursts``),
+in arrival order: a burst is one sample whenever the forwarder keeps up.
 
 Where a mutated message's time goes (``set`` on every 200 B JSON message,
-benchmarks/bench_proxy.py with py-spy and per-thread CPU; absolute figures
-from a shared 2-core machine under load, so compare within a line):
+benchmarks/bench_proxy.py with py-spy --gil and per-thread CPU; a shared
+2-core machine under load, so the figures come from runs interleaved with
+the previous version, medians of three, and compare within a line):
 
-* before (tool 46-55 µs CPU/msg against 6 for passthrough): the forwarding
-  thread spent 35 µs CPU (50 µs wall) per message: the engine 21 µs (14 of
-  them the stdlib's JSON decode and encode), one ``marshal`` record per
-  delivery plus its framing 5-8 µs, the puts 5 µs CPU but 18 µs wall (each
-  put releases the GIL and wakes Zenoh's parked sending thread), and
-  Zenoh's own threads another 5-15 µs (the receiving thread is woken for
-  every slot the forwarder frees in its full FIFO; the sending thread for
-  puts that find it parked);
-* now (tool 31-33 µs against 5 for passthrough, the same moment): the
-  engine takes a shortcut for a lone ``set`` policy on JSON
-  (``SetRuntime.fast_path``: orjson, only where its bytes are the codec's;
-  38 -> 8 µs in the engine benchmark at the same moment), the recorder's
-  rows are one ``marshal`` call per batch (``pack_deliveries``), and the
-  single delivery skips ``_dispatch``. By thread kind (bench_proxy prints
-  it): Python 22.6 µs (passthrough 3.4), Zenoh's receiving thread 3.4 (1.0)
-  and sending thread 5.0 (0.2). Python's share is the forwarder's sample
-  objects, the engine (~8), the row and the lock, and the puts, each of
-  which releases the GIL; Zenoh's is being woken per message (the full FIFO
-  frees one slot at a time) or per burst of puts, where passthrough keeps
-  both threads busy without sleeping. Tried and measured worse: flushing
-  the outbox after every message (the sending thread woken per put: 12.8
-  µs/msg), and, in the recorder, Python callbacks run on Zenoh's own
-  receiving thread (indirect=False: 35 µs/msg against 18, likely a Python
-  thread state per callback), which is why the forwarders stay on FIFOs.
+* before this round (tool 53 µs CPU/msg against 12 for passthrough; by
+  thread kind Python 38, Zenoh's receiving thread 6.4, sending thread
+  6.0): of the forwarding thread's time, taking samples out of the FIFO
+  ~27 % (a full FIFO freed one slot per take: Zenoh's receiving thread
+  woken per message, each take contending with its refill), the engine
+  ~34 % (the ``set`` shortcut 25: orjson 1.2 µs, then five bytes searches
+  over the output, 1.5 µs, and three records built with keyword
+  arguments), puts and the recorder's rows ~17 %, sample attributes,
+  copies and the lock the rest;
+* now (tool 35 against 6; Python 30, receiving 2.4, sending 1.6; in
+  process, on a real FIFO with no other load, 13.8 -> 12.1 µs of the
+  forwarding thread per message): the forwarder takes up to
+  ``BURST_LIMIT`` samples out at once (``proxy.run_bursts``; on a FIFO
+  kept full by a real publisher, 4.7 µs of overhead per sample taken one
+  at a time, 0.8 in bursts of 128) and handles them under one lock; the
+  outbox is put once per burst (Zenoh's sending thread wakes once for
+  it), with only the arguments a message has; the common delivery is
+  handled inline, reusing the bytes already read (an untouched payload
+  was read twice); ``json_fast.dumps`` searches its output as text (1.4
+  -> 0.55 µs) and the shortcut builds its records from dict displays. Of
+  the forwarding thread now: taking samples 11-19 % (still contended with
+  the refill), the engine ~35 %, the recorder's rows ~10 % (the event's
+  attribute tuple and ``marshal``, 1.3 µs a row), puts ~9 %, sample
+  attributes and bytes ~8 %. The recorder writes a mutated delivery
+  (original, delivery, event) in 17 µs of its writing thread, from 28: it
+  no longer rebuilds the event to get its JSON form, and one JSON encoder
+  serves every event.
+
+Tried and measured worse: flushing the outbox after every message (the
+sending thread woken per put: 12.8 µs/msg), and, in the recorder, Python
+callbacks run on Zenoh's own receiving thread (indirect=False: 35 µs/msg
+against 18, likely a Python thread state per callback), which is why the
+forwarders stay on FIFOs. Not measurable in the noise: the catch-all's
+thread (it sees every producer's message and drops the declared ones)
+switched off entirely.
 
 Earlier (wave 1): the event travels as ``marshal`` data that the recorder
 turns into JSON in its own process, and the run's typed record is built only
@@ -59,11 +72,10 @@ from .topology import intercepted_key, pack_deliveries
 
 TICK_SECONDS = 0.01
 BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of 200 B messages stays under 64 KiB)
-# Deliveries to consumers wait in an outbox while the forwarder has more samples queued, at
-# most this many: Zenoh's sending thread then wakes once per burst and sends it in one write
-# (woken per message, it cost as much CPU as the mutation itself). When the forwarder keeps
-# up, the outbox is emptied after every message: no added delay.
-OUTBOX_LIMIT = 16
+# Deliveries to consumers wait in an outbox until the end of the forwarder's burst (see
+# proxy.run_bursts): Zenoh's sending thread then wakes once per burst and sends it in one write
+# (woken per message, it cost as much CPU as the mutation itself). When the forwarder keeps up,
+# a burst is one message: no added delay.
 
 
 class Interceptor(Protocol):
@@ -98,7 +110,7 @@ class InterceptionBridge:
         self._record_pubs: dict[str, zenoh.Publisher] = {}
         # per channel: deliveries not yet sent to the recorder, (time ns, payload, original, delivered, event)
         self._batches: dict[str, list[tuple[int, bytes, bytes | None, bool, Any]]] = {}
-        self._outbox: list[tuple[zenoh.Publisher, Any, Any, Any, Any]] = []  # (publisher, payload, meta...) to put
+        self._outbox: list[tuple[zenoh.Publisher, Any, tuple]] = []  # (publisher, payload, meta) to put
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick_loop, name="interception-ticks", daemon=True)
         self.mutations = 0
@@ -115,28 +127,49 @@ class InterceptionBridge:
         self._record_pubs[name] = self.session.declare_publisher(
             intercepted_key(key), congestion_control=BLOCK, allowed_destination=REMOTE)
         consumers = tuple(c for c, _ in live.publishers)
-        self._batches[name] = []
-        lock, interceptor, dispatch = self._lock, self.interceptor, self._dispatch
-        t0, monotonic = self.t0, time.monotonic
-        outbox = self._outbox
-
-        last_meta, put, on_message = self._last_meta, self._put, interceptor.on_message
+        pubs = [pub for _consumer, pub in live.publishers]
+        reaches = bool(pubs)  # a delivery to every consumer reaches someone
+        rows: list[tuple[int, bytes, bytes | None, bool, Any]] = []
+        self._batches[name] = rows
+        record_pub = self._record_pubs[name]
+        lock, dispatch, outbox, on_mutation = self._lock, self._dispatch, self._outbox, self.on_mutation
+        t0, monotonic, time_ns = self.t0, time.monotonic, time.time_ns
+        last_meta, on_message = self._last_meta, self.interceptor.on_message
 
         def forward_burst(samples: list[zenoh.Sample]) -> None:
             live.count += len(samples)
             with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
                 for sample in samples:
+                    zpayload = sample.payload
                     meta = (sample.encoding, sample.attachment, sample.timestamp)
-                    payload = sample.payload.to_bytes()
+                    payload = zpayload.to_bytes()
                     now = monotonic() - t0
                     deliveries = on_message(name, consumers, payload, now)
-                    if len(deliveries) == 1 and deliveries[0].at <= now:  # the common case, without _dispatch
-                        put(live, deliveries[0], meta, sample)
-                    else:
+                    if len(deliveries) != 1 or (d := deliveries[0]).at > now or len(d.consumers) != len(pubs):
                         dispatch(live, deliveries, meta, now, sample)
-                    if len(outbox) >= OUTBOX_LIMIT:
-                        self._send()
+                        continue
+                    # The common case, one delivery now to every consumer: what _put does, inline.
+                    original, event = d.original, d.event
+                    if original is None:  # the very same Zenoh payload when nothing changed: no copy
+                        out, data = zpayload, payload
+                    else:
+                        out = data = d.payload
+                    for pub in pubs:
+                        outbox.append((pub, out, meta))
+                    if event is None:
+                        rows.append((time_ns(), data, None, True, None))
+                    else:
+                        self.mutations += 1
+                        rows.append((time_ns(), data, original, reaches, event))
+                        if on_mutation is not None:
+                            on_mutation(event)
+                    if len(rows) >= BATCH_LIMIT:
+                        record_pub.put(pack_deliveries(rows))
+                        rows.clear()
+                    if reaches and self.on_delivered is not None:
+                        self.on_delivered(name, data)
                 last_meta[name] = meta  # what a tick's injected message on this channel goes out with
+                self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
 
         def forward(sample: zenoh.Sample) -> None:
             forward_burst([sample])
@@ -150,10 +183,16 @@ class InterceptionBridge:
         with self._lock:
             self._send()
 
-    def _send(self) -> None:
-        for pub, payload, encoding, attachment, timestamp in self._outbox:
-            pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
+    def _deliver_outbox(self) -> None:
+        for pub, payload, (encoding, attachment, timestamp) in self._outbox:
+            if attachment is None and timestamp is None:  # the usual case: fewer arguments for pyo3 to parse
+                pub.put(payload, encoding=encoding)
+            else:
+                pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
         self._outbox.clear()
+
+    def _send(self) -> None:
+        self._deliver_outbox()
         for name, rows in self._batches.items():
             if rows:
                 self._record_pubs[name].put(pack_deliveries(rows))
@@ -199,17 +238,16 @@ class InterceptionBridge:
             self._put(live, d, meta, None)
 
     def _put(self, live: LiveRoute, d: Any, meta: tuple, sample: zenoh.Sample | None) -> None:
-        encoding, attachment, timestamp = meta
         # The very same Zenoh payload when nothing changed: no copy on the common path.
         payload = sample.payload if d.original is None and sample is not None else d.payload
-        if len(d.consumers) == len(live.publishers):  # all of them (the common case): no filtering
+        if len(d.consumers) == len(live.publishers):  # all of them: no filtering
             for _consumer, pub in live.publishers:
-                self._outbox.append((pub, payload, encoding, attachment, timestamp))
+                self._outbox.append((pub, payload, meta))
         elif d.consumers:
             wanted = set(d.consumers)
             for consumer, pub in live.publishers:
                 if consumer in wanted:
-                    self._outbox.append((pub, payload, encoding, attachment, timestamp))
+                    self._outbox.append((pub, payload, meta))
         name = live.route.channel.name
         data = payload if type(payload) is bytes else payload.to_bytes()
         event = d.event

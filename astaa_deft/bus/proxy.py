@@ -21,7 +21,7 @@ from .topology import STAR_PREFIX, UNDECLARED_PREFIX, Route, module_namespace, s
 BLOCK = zenoh.CongestionControl.BLOCK
 REMOTE = zenoh.Locality.REMOTE
 FIFO_CAPACITY = 16384  # samples waiting per route; when full, Zenoh holds back the sender (no loss)
-BURST_LIMIT = 32  # samples a forwarder with a burst handler takes out of its FIFO at a time (see run_bursts)
+BURST_LIMIT = 128  # samples a forwarder with a burst handler takes out of its FIFO at a time (see run_bursts)
 
 
 class LiveRoute:
@@ -55,8 +55,11 @@ def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle
     Taking them out together, before handling any, frees FIFO slots in a
     burst: a full FIFO freed one slot per message wakes Zenoh's receiving
     thread once per message (a futex wake on this thread, a sleep and a
-    wake-up on that one). Returns when the subscriber is undeclared and
-    drained, after handling every sample it took out.
+    wake-up on that one), and each take then contends with that thread's
+    refill. Measured on a FIFO kept full by a real publisher, with 10 µs of
+    work per sample: 4.7 µs/sample on top of the work taken one at a time,
+    1.3 in bursts of 32, 0.8 in bursts of 128. Returns when the subscriber
+    is undeclared and drained, after handling every sample it took out.
     """
     try_recv, recv = fifo.try_recv, fifo.recv
     while True:

@@ -103,24 +103,9 @@ class McapWriter:
             self._chunk_index[channel_id] = [log_time, offset]
         else:
             index += (log_time, offset)
-        if self._chunk_messages:
-            if log_time < self._chunk_start:
-                self._chunk_start = log_time
-        else:
-            self._chunk_start = log_time
-        if log_time > self._chunk_end:
-            self._chunk_end = log_time
+        # Times and counts (the chunk's, the statistics') are taken from the index when the chunk
+        # closes: the same values, without a dozen attribute updates per message.
         self._chunk_messages += 1
-        if self._message_count:
-            if log_time < self._message_start:
-                self._message_start = log_time
-        else:
-            self._message_start = log_time
-        if log_time > self._message_end:
-            self._message_end = log_time
-        self._message_count += 1
-        counts = self._channel_counts
-        counts[channel_id] = counts.get(channel_id, 0) + 1
         if len(chunk) > self._chunk_size:
             self._finish_chunk()
 
@@ -161,6 +146,7 @@ class McapWriter:
     def _finish_chunk(self) -> None:
         if self._chunk_messages == 0:
             return
+        self._count_chunk_messages()
         self._chunk_count += 1
         chunk_data = bytes(self._chunk)
         compressed = self._compressor.compress(chunk_data) if self._compression == "zstd" else chunk_data
@@ -193,6 +179,23 @@ class McapWriter:
         self._chunk_messages = 0
         self._chunk_start = self._chunk_end = 0
         self._chunk_index = {}
+
+    def _count_chunk_messages(self) -> None:
+        """The open chunk's first and last log time, and the statistics, from its message index."""
+        counts = self._channel_counts
+        start = end = None
+        for channel_id, flat in self._chunk_index.items():
+            times = flat[0::2]
+            low, high = min(times), max(times)
+            start = low if start is None or low < start else start
+            end = high if end is None or high > end else end
+            counts[channel_id] = counts.get(channel_id, 0) + len(times)
+        assert start is not None and end is not None  # the chunk holds messages
+        self._chunk_start, self._chunk_end = start, end
+        if self._message_count == 0 or start < self._message_start:
+            self._message_start = start
+        self._message_end = max(self._message_end, end)
+        self._message_count += self._chunk_messages
 
     def finish(self) -> None:
         """The last chunk, the data end, the summary and the footer (the stream stays open)."""

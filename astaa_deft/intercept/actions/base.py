@@ -72,7 +72,7 @@ class FieldChange:
     new: Any
 
     def to_json(self) -> dict:
-        return {"path": self.path, "old": to_tagged(self.old), "new": to_tagged(self.new)}
+        return _change_json(self.path, self.old, self.new)
 
 
 @dataclass(frozen=True)
@@ -91,13 +91,30 @@ class MutationEvent:
 
     def to_json(self) -> dict:
         """Plain JSON types only; exceptional values are tagged (see ``to_tagged``)."""
-        return {
-            "testcase": self.testcase, "policy": self.policy, "action": self.action,
-            "channel": self.channel, "consumers": list(self.consumers),
-            "message_index": self.message_index, "time": self.time,
-            "fields": [change.to_json() for change in self.fields],
-            "detail": to_tagged(self.detail),
-        }
+        return event_json_form(self.testcase, self.policy, self.action, self.channel, self.consumers,
+                               self.message_index, self.time, [(c.path, c.old, c.new) for c in self.fields],
+                               self.detail)
+
+
+def event_json_form(testcase: str, policy: str, action: str, channel: str, consumers: tuple[str, ...],
+                    message_index: int, time: float, changes: list[tuple[str, Any, Any]], detail: dict) -> dict:
+    """``MutationEvent.to_json`` from the event's values (``changes``: (path, old, new) triples).
+
+    The recorder writes an event's JSON form from the values the proxy sent,
+    without building the event and its field changes first (measured: that
+    was half of what its JSON form cost, per mutated message).
+    """
+    return {
+        "testcase": testcase, "policy": policy, "action": action, "channel": channel, "consumers": list(consumers),
+        "message_index": message_index, "time": time,
+        "fields": [_change_json(path, old, new) for path, old, new in changes],
+        "detail": to_tagged(detail),
+    }
+
+
+def _change_json(path: str, old: Any, new: Any) -> dict:
+    """``FieldChange.to_json``'s form."""
+    return {"path": path, "old": to_tagged(old), "new": to_tagged(new)}
 
 
 @dataclass(frozen=True)

@@ -419,6 +419,7 @@ class SetRuntime(ActionRuntime):
 
 
 _fast_loads, _fast_dumps, _exact_scalar = json_fast.loads, json_fast.dumps, json_fast.is_exact_scalar
+_new, _set_dict = object.__new__, object.__setattr__  # see base.built: the frozen dataclasses without __init__
 
 
 def _fast_set(steps: tuple[tuple[tuple, Any, str], ...], testcase: str, policy: str, consumers: tuple[str, ...],
@@ -440,10 +441,18 @@ def _fast_set(steps: tuple[tuple[tuple, Any, str], ...], testcase: str, policy: 
         old = _set_one(message, segments, value)
         if old is _MISSING or not _exact_scalar(old):
             return None
-        changes.append(built(FieldChange, path=text, old=old, new=value))
+        change = _new(FieldChange)
+        _set_dict(change, "__dict__", {"path": text, "old": old, "new": value})
+        changes.append(change)
     out = _fast_dumps(message)
     if out is None:
         return None
-    event = built(MutationEvent, testcase=testcase, policy=policy, action="set", channel=channel,
-                  consumers=consumers, message_index=index, time=now, fields=tuple(changes), detail={})
-    return built(Delivery, consumers=consumers, payload=out, at=now, original=payload, event=event)
+    # ``built`` spelt out with dict displays: a quarter cheaper than its keyword arguments (measured).
+    event = _new(MutationEvent)
+    _set_dict(event, "__dict__", {"testcase": testcase, "policy": policy, "action": "set", "channel": channel,
+                                  "consumers": consumers, "message_index": index, "time": now,
+                                  "fields": tuple(changes), "detail": {}})
+    delivery = _new(Delivery)
+    _set_dict(delivery, "__dict__", {"consumers": consumers, "payload": out, "at": now, "original": payload,
+                                     "event": event})
+    return delivery
