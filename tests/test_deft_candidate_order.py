@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.deft.extract import extract
+from astaa_deft.deft.extract import extract, search_note
 from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.deft.frames import BUSY, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.deft.replay import make_planner
@@ -242,6 +242,9 @@ def test_forked_extraction_tries_first_what_won_before(late_pose_log, jobs):
     # Cheap cycles: the replay process stepped each first candidate itself, a parked copy standing by;
     # only the first output's was wrong (the copy then tried the others).
     assert (ex.first_stepped_in_runner, ex.first_missed_in_runner) == (CYCLES - 1, 1)
+    note = search_note(ex)  # the summary says what the search did
+    assert note is not None and f"{CYCLES - 1} output(s) tried first the way earlier outputs" in note
+    assert f"{CYCLES} cheap output(s) stepped their first candidate in the replay process (1 wrong" in note
 
 
 @needs_fork

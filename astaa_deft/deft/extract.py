@@ -477,6 +477,23 @@ def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: lis
     return compare_outputs(cfg, replayed, expected)
 
 
+def search_note(extraction: Extraction) -> str | None:
+    """What the candidate search did to save time, when it did anything: for the extraction summary."""
+    parts = []
+    if extraction.reordered:
+        parts.append(f"{extraction.reordered} output(s) tried first the way earlier outputs were reproduced "
+                     f"(trigger rule and input offsets)")
+    stepped = extraction.first_stepped_in_runner + extraction.first_missed_in_runner
+    if stepped:
+        parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
+                     f"({extraction.first_missed_in_runner} wrong: searched on from a parked copy)")
+    if extraction.candidates_cut:
+        parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
+                     f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "
+                     f"accepted), {extraction.retried_kept} kept after that")
+    return "candidate search: " + "; ".join(parts) if parts else None
+
+
 NEAR_MISS_M = 1e-9
 
 
