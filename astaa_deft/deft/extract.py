@@ -376,9 +376,10 @@ class Speculation:
     parked: Parked | None = None
     since_parked_s: float = 0.0
     redo_until: int | None = None  # in a woken copy: the output the runner's first candidate missed
-    # The last output kept was reproduced field for field: then a first candidate that reproduces only the
-    # trajectory (a standing ego: the same points from another pose message) does not count as a hit, the
-    # others are searched for the exact one. A stack whose outputs never match exactly is not held up.
+    # The last output kept was reproduced field for field: then a candidate that reproduces only the
+    # trajectory (a standing ego: the same points from another pose message, another stamp) does not end
+    # the search, the others are searched for the exact one (none: the closest is kept as before). A stack
+    # whose outputs never match exactly is not held up: after one such output this is off again.
     expect_exact: bool = False
     hits: int = 0  # outputs whose first candidate, stepped in the runner, was accepted
     misses: int = 0  # … was not: the parked copy took over and searched the others

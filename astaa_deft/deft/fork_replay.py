@@ -220,10 +220,8 @@ class ForkedSearch:
             verdict = os.read(go_r, 1)
             if verdict != b"1":
                 os._exit(0)
-            try:  # the runner's counters: this child's copy is from before the search
+            with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the runner's counters: ours predate it
                 self.__dict__.update(_receive(go_r))
-            except (EOFError, pickle.UnpicklingError):
-                pass
             os.close(go_r)
             self._won = Tried(index, result)
             return None
