@@ -21,7 +21,7 @@ from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .fork_replay import ForkedSearch, Parked, Woken, can_fork, candidate_limit, drop, park, run_supervised, wake
 from .frames import Stream, candidates, trigger_candidates
-from .search_policy import StepBudget, WinningPatterns
+from .search_policy import StepBudget, WinningPatterns, first_cycle_first
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
@@ -251,6 +251,8 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
                              outputs[out_index - 1].log_time + skew if out_index else None)
         options = winning.rank(generic)
+        if not previous and planner.can_snapshot:
+            options = first_cycle_first(options)
         result.reordered += options[:1] != generic[:1]
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
