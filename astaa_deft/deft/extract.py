@@ -436,6 +436,8 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
     if len(options) == 1:  # one candidate: nothing to keep apart, step right here
         outcome = run(0)
         kept = None if outcome is None else (0, outcome)
+        if outcome is not None:  # a parked copy would redo this step too
+            speculation.since_parked_s += outcome[2]
     elif speculation.redo_until is not None and out_index < speculation.redo_until:
         kept = (0, run(0))  # a woken copy redoing what the runner did: its first candidate was accepted
         speculation.hits += 1
