@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 from astaa_deft.codecs import get_codec
+from astaa_deft.deft.extract import search_note
 from astaa_deft.deft.planner_section import planner_of
 from astaa_deft.deft.replay import make_planner
 from astaa_deft.deft.workflow import extract_module_tests, run_params
@@ -126,9 +127,11 @@ def main() -> int:
     say(f"DeFT on {clean_log.name}: {ex.outputs} planning outputs; reproduced at θ = 0: {ex.accepted_at(0.0)} "
         f"({ex.accepted_at(0.0) / max(ex.outputs, 1):.1%}; target 100 %), field-for-field equal: {exact}; "
         f"module tests written: {report.accepted}")
+    say(search_note(ex) or "candidate search: nothing saved")
     replay_s, same = plain_replay_seconds(clean_log, [f for f in ex.frames if f.accepted])
     say(f"extraction wall time {extraction_s:.1f} s vs plain replay of all outputs {replay_s:.1f} s "
-        f"({same} equal to the recording): {extraction_s / replay_s:.2f}× (target ≤ 2×)")
+        f"({same} equal to the recording): {extraction_s / replay_s:.2f}× (target ≤ 2×; load average "
+        f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
     cycles = [json.loads(m.data) for m in read_log(clean_log).on("ompl/plan")]
     planned = [c for c in cycles if c["status"] != "reused"]
     say(f"planner cycles in that run: {len(planned)} searches (RRT* iterations "

@@ -20,11 +20,11 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.deft.extract import extract
+from astaa_deft.deft.extract import extract, search_note
 from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.deft.frames import BUSY, NEWEST, OLDEST, Stream, candidates
+from astaa_deft.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.deft.replay import make_planner
-from astaa_deft.deft.search_policy import StepBudget, WinningPatterns
+from astaa_deft.deft.search_policy import StepBudget, WinningPatterns, first_cycle_first
 from astaa_deft.log.reader import read_log
 from astaa_deft.log.writer import LogWriter
 from astaa_deft.spec_loader import load_spec
@@ -65,6 +65,24 @@ def test_the_way_that_won_for_earlier_outputs_is_tried_first():
     ranked = winning.rank(found)
     assert ranked[0] is oldest_at_trigger
     assert sorted(ranked, key=found.index) == found  # the same candidates, none lost or added
+
+
+def test_a_first_output_tries_first_the_first_trigger_the_planner_could_plan_from():
+    # Before: the newest trigger's frames came first; the OMPL planner's first cycle (building its state,
+    # ~0.3 s) answered the first trigger it could plan from in every run measured: 3-5 wrong searches first.
+    streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS, 300 * MS]),
+               "ego": Stream("ego", [50 * MS, 150 * MS, 250 * MS])}
+    found = candidates(streams, "obstacles", 320 * MS, previous={}, lookback_ns=100 * MS)
+    assert found[0].choice["obstacles"] == 3  # the generic order (a process replay tries only that one)
+    ordered = first_cycle_first(found)
+    assert ordered[0].choice == {"obstacles": 1, "ego": 0}  # trigger 0 came before any ego pose
+    assert (FIRST, (("ego", 0),)) in ordered[0].patterns
+    assert sorted(ordered, key=found.index) == found
+    # A log that starts after the planner's first triggers (the window does not reach back): no such guess.
+    later = {"obstacles": Stream("obstacles", [k * 100 * MS for k in range(20)]),
+             "ego": Stream("ego", [k * 50 * MS for k in range(40)])}
+    found = candidates(later, "obstacles", 1920 * MS, previous={}, lookback_ns=0)
+    assert first_cycle_first(found) == found
 
 
 def test_recent_wins_outweigh_old_ones_and_ties_keep_the_generic_order():
@@ -242,6 +260,9 @@ def test_forked_extraction_tries_first_what_won_before(late_pose_log, jobs):
     # Cheap cycles: the replay process stepped each first candidate itself, a parked copy standing by;
     # only the first output's was wrong (the copy then tried the others).
     assert (ex.first_stepped_in_runner, ex.first_missed_in_runner) == (CYCLES - 1, 1)
+    note = search_note(ex)  # the summary says what the search did
+    assert note is not None and f"{CYCLES - 1} output(s) tried first the way earlier outputs" in note
+    assert f"{CYCLES} cheap output(s) stepped their first candidate in the replay process (1 wrong" in note
 
 
 @needs_fork

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from ..spec.planner import PAPER_THRESHOLDS
-from ..deft.extract import Extraction, near_miss_note
+from ..deft.extract import Extraction, near_miss_note, search_note
 from ..deft.workflow import extract_module_tests
 from .console import say
 
@@ -47,6 +47,9 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
                                   ground_truth=ground_truth, jobs=jobs, progress=progress_bar, notice=say,
                                   module=module)
     say(summary_table(report.extraction))
+    searched = search_note(report.extraction)
+    if searched:
+        say(searched)
     note = near_miss_note(report.extraction)
     if note:
         say(note)

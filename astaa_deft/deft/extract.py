@@ -21,7 +21,7 @@ from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .fork_replay import ForkedSearch, Parked, Woken, can_fork, candidate_limit, drop, park, run_supervised, wake
 from .frames import Stream, candidates, trigger_candidates
-from .search_policy import StepBudget, WinningPatterns
+from .search_policy import StepBudget, WinningPatterns, first_cycle_first
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare
@@ -251,6 +251,8 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
                              outputs[out_index - 1].log_time + skew if out_index else None)
         options = winning.rank(generic)
+        if not previous and planner.can_snapshot:
+            options = first_cycle_first(options)
         result.reordered += options[:1] != generic[:1]
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
@@ -376,9 +378,10 @@ class Speculation:
     parked: Parked | None = None
     since_parked_s: float = 0.0
     redo_until: int | None = None  # in a woken copy: the output the runner's first candidate missed
-    # The last output kept was reproduced field for field: then a first candidate that reproduces only the
-    # trajectory (a standing ego: the same points from another pose message) does not count as a hit, the
-    # others are searched for the exact one. A stack whose outputs never match exactly is not held up.
+    # The last output kept was reproduced field for field: then a candidate that reproduces only the
+    # trajectory (a standing ego: the same points from another pose message, another stamp) does not end
+    # the search, the others are searched for the exact one (none: the closest is kept as before). A stack
+    # whose outputs never match exactly is not held up: after one such output this is off again.
     expect_exact: bool = False
     hits: int = 0  # outputs whose first candidate, stepped in the runner, was accepted
     misses: int = 0  # … was not: the parked copy took over and searched the others
@@ -433,6 +436,8 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
     if len(options) == 1:  # one candidate: nothing to keep apart, step right here
         outcome = run(0)
         kept = None if outcome is None else (0, outcome)
+        if outcome is not None:  # a parked copy would redo this step too
+            speculation.since_parked_s += outcome[2]
     elif speculation.redo_until is not None and out_index < speculation.redo_until:
         kept = (0, run(0))  # a woken copy redoing what the runner did: its first candidate was accepted
         speculation.hits += 1
@@ -475,6 +480,23 @@ def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: lis
     if cfg.trajectory is not None:
         return compare(trajectory_points(replayed, cfg.trajectory), expected_points)
     return compare_outputs(cfg, replayed, expected)
+
+
+def search_note(extraction: Extraction) -> str | None:
+    """What the candidate search did to save time, when it did anything: for the extraction summary."""
+    parts = []
+    if extraction.reordered:
+        parts.append(f"{extraction.reordered} output(s) tried first the way earlier outputs were reproduced "
+                     f"(trigger rule and input offsets)")
+    stepped = extraction.first_stepped_in_runner + extraction.first_missed_in_runner
+    if stepped:
+        parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
+                     f"({extraction.first_missed_in_runner} wrong: searched on from a parked copy)")
+    if extraction.candidates_cut:
+        parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
+                     f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "
+                     f"accepted), {extraction.retried_kept} kept after that")
+    return "candidate search: " + "; ".join(parts) if parts else None
 
 
 NEAR_MISS_M = 1e-9

@@ -61,6 +61,26 @@ def _cpu_seconds(pid: int, wall_s: float) -> float:
         return wall_s
 
 
+_unreaped: list[int] = []
+
+
+def reap_later(pid: int) -> None:
+    """A child told to exit (or killed) is reaped once it has, never waited for.
+
+    On a loaded machine the child may not run for a while; waiting for it
+    held the runner up for a scheduling round trip per child. Children not
+    reaped when this process exits go to the supervisor, which reaps them.
+    """
+    _unreaped.append(pid)
+    for waiting in list(_unreaped):
+        try:
+            finished, _ = os.waitpid(waiting, os.WNOHANG)
+        except ChildProcessError:  # not ours (a forked copy inherited the list) or already reaped
+            finished = waiting
+        if finished:
+            _unreaped.remove(waiting)
+
+
 def can_fork() -> bool:
     return hasattr(os, "fork")
 
@@ -182,7 +202,7 @@ class ForkedSearch:
             os.kill(pid, signal.SIGKILL)
             os.close(result_fd)
             os.close(go_fd)
-            os.waitpid(pid, 0)
+            reap_later(pid)
         if winner is None:
             for tried in done.values():
                 self._release(tried, go=False)
@@ -220,10 +240,8 @@ class ForkedSearch:
             verdict = os.read(go_r, 1)
             if verdict != b"1":
                 os._exit(0)
-            try:  # the runner's counters: this child's copy is from before the search
+            with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the runner's counters: ours predate it
                 self.__dict__.update(_receive(go_r))
-            except (EOFError, pickle.UnpicklingError):
-                pass
             os.close(go_r)
             self._won = Tried(index, result)
             return None
@@ -260,7 +278,7 @@ class ForkedSearch:
             wall = now - started
             if wall >= WALL_LIMIT_FACTOR * limit_s or _cpu_seconds(pid, wall) >= limit_s:
                 os.kill(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
+                reap_later(pid)
                 os.close(result_fd)
                 os.close(go_fd)
                 del running[index]
@@ -296,7 +314,7 @@ class ForkedSearch:
                 _send(go_fd, counters or {})
         os.close(go_fd)
         if not go:
-            os.waitpid(pid, 0)
+            reap_later(pid)
 
 
 @dataclass
@@ -341,8 +359,7 @@ def park() -> Parked | Woken:
 def drop(parked: Parked) -> None:
     """The copy is not needed: it reads end-of-file and exits."""
     os.close(parked.wake_fd)
-    with contextlib.suppress(ChildProcessError):
-        os.waitpid(parked.pid, 0)
+    reap_later(parked.pid)
 
 
 def wake(parked: Parked, message: Any) -> None:

@@ -45,8 +45,9 @@ class Stream:
 
 # How a candidate's trigger was chosen (see :func:`candidates`): the newest at the output, the newest when
 # the previous output was logged (a busy planner), the oldest not yet used, one between, or for a first
-# output one before the newest.
-NEWEST, BUSY, OLDEST, BETWEEN, EARLIER = "newest", "busy", "oldest", "between", "earlier"
+# output one before the newest — FIRST if it is the first the planner could plan from (every input had a
+# message) and the log reaches back to it.
+NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "between", "earlier", "first"
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,11 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     for index in order_of_triggers:
         if not rules[index]:
             rules[index].add(BETWEEN if trigger in previous else EARLIER)
+    if trigger not in previous and oldest == 0:  # a first output, and the log starts before its triggers
+        first_plannable = next((i for i in range(oldest, newest + 1)
+                      if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
+        if first_plannable is not None:
+            rules[first_plannable].add(FIRST)
     out: list[Candidate] = []
     seen: dict[tuple, int] = {}
     for t_index in order_of_triggers:

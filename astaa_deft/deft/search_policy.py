@@ -25,6 +25,8 @@ from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, TypeVar
 
+from .frames import FIRST, Candidate
+
 
 class HasPatterns(Protocol):
     @property
@@ -55,6 +57,21 @@ class WinningPatterns:
     def rank(self, candidates: Sequence[C]) -> list[C]:
         """The candidates, best-scoring way first; equal scores keep the given (generic) order."""
         return sorted(candidates, key=self.score, reverse=True)  # sorted() is stable
+
+
+def first_cycle_first(candidates: Sequence[Candidate]) -> list[Candidate]:
+    """For a first output (nothing learned yet): the frame at the first trigger the planner could plan from.
+
+    A first cycle is often the slowest (a planner building its state) and
+    answers the first trigger it could plan from: on the OMPL stack the
+    first output did so in every run measured, three or more triggers
+    later, after as many wrong frames of ~0.3 s each. A planner that keeps
+    up answers the newest, one more step. Only where several candidates are
+    tried (a process replay tries one: the generic order keeps the newest).
+    """
+    at_own_time = [c for c in candidates
+                   if any(rule == FIRST and all(offset == 0 for _, offset in offsets) for rule, offsets in c.patterns)]
+    return at_own_time + [c for c in candidates if c not in at_own_time]
 
 
 LIMIT_FACTOR = 3.0  # a candidate may take this many times its expected step before it is cut
