@@ -65,3 +65,31 @@ def test_a_killed_workers_cases_are_requeued(tmp_path: Path):
         pool.client.close()
     finally:
         cluster.close()
+
+
+def _profiling(dask_worker) -> bool:
+    pc = dask_worker.periodic_callbacks.get("profile")
+    return pc is not None and pc.is_running()
+
+
+def test_cases_run_on_workers_that_do_not_sample_their_stacks():
+    """Dask's 10 ms stack sampling can deadlock a case's Thread.start() on CPython 3.11 (seen on a
+    LocalCluster): the campaign's own LocalCluster starts without it, and a case turns it off on any worker."""
+    from astaa_deft.campaign.worker import stop_worker_profiler
+
+    pool = DaskPool("local:1", 1)
+    try:
+        assert not any(pool.client.run(_profiling).values())
+    finally:
+        pool.client.close()
+        assert pool.cluster is not None
+        pool.cluster.close()
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None)
+    try:
+        with Client(cluster) as client:
+            assert all(client.run(_profiling).values())  # Dask's default
+            assert client.submit(stop_worker_profiler, pure=False).result(timeout=60) is True
+            assert not any(client.run(_profiling).values())
+    finally:
+        cluster.close()

@@ -189,13 +189,16 @@ class DaskPool:
     """Cases on a Dask cluster: ``tcp://HOST:PORT`` (a running scheduler) or ``local:K`` (K worker processes)."""
 
     def __init__(self, address: str, workers: int):
+        import dask
         from dask.distributed import Client, LocalCluster
 
         self.cluster = None
         if address.startswith("local:"):
             count = int(address.split(":", 1)[1] or workers)
-            self.cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                        host="127.0.0.1", dashboard_address=None, protocol="tcp")
+            # Workers without stack sampling (see worker.stop_worker_profiler: it can deadlock a case).
+            with dask.config.set({"distributed.worker.profile.enabled": False}):
+                self.cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                                            host="127.0.0.1", dashboard_address=None, protocol="tcp")
             self.client = Client(self.cluster)
         else:
             self.client = Client(address)

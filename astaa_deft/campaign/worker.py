@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import threading
 import sys
 from pathlib import Path
 from typing import Any
@@ -54,11 +55,45 @@ def execute(payload: dict[str, Any], preloaded: _Preloaded | None = None,
     return outcome.to_json()
 
 
+def stop_worker_profiler() -> bool:
+    """Stop the Dask worker's stack sampling on this worker; True once it is off (False: not on a worker).
+
+    A Dask worker samples every thread's stack (``sys._current_frames``) from
+    its event loop every 10 ms. On CPython 3.11 that deadlocks, now and then,
+    with a thread being started while a gc callback runs (seen on a
+    LocalCluster: a case's ``Thread.start()`` waited forever, the worker's
+    event loop inside distributed's gc callback within ``_current_frames``).
+    A case starts dozens of threads, so a campaign meets it; it never looks
+    at Dask's profiles. Stopped from the event loop's own thread (tornado's
+    callbacks are not thread-safe), waited for before the case starts.
+    """
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):  # not inside a Dask task
+        return False
+    sampling = [pc for pc in (worker.periodic_callbacks.get(name) for name in ("profile", "profile-cycle"))
+                if pc is not None and pc.is_running()]
+    if not sampling:
+        return True
+    stopped = threading.Event()
+
+    def stop() -> None:
+        for pc in sampling:
+            pc.stop()
+        stopped.set()
+
+    worker.loop.add_callback(stop)
+    return stopped.wait(10.0)
+
+
 def execute_remote(payload: dict[str, Any]) -> dict[str, Any]:
     """On a Dask worker: run in a local temp dir, send the log back with the result."""
     import base64
     import tempfile
 
+    stop_worker_profiler()
     with tempfile.TemporaryDirectory(prefix="astaa-deft-case-") as tmp:
         body = execute({**payload, "run_dir": tmp})
         log = Path(tmp) / "run.mcap"
