@@ -75,3 +75,24 @@ def test_a_mutation_before_the_stack_is_live_keeps_its_count_from_the_start(tmp_
     assert pinned[0].pin is None and pinned[0].message_index == 3
     xml = restricted_testcase([(pinned[0], None)], testcase_id="min").to_xml().decode()
     assert '<after channel="tick" message="3"/>' in xml
+
+
+# A delay alone (no mutation delivered at once to calibrate the interceptor's clock by): where did the
+# delayed message really arrive? Regression: the run's start stood in for the interceptor's clock origin,
+# late by the recorder's start-up, so the reverted message landed after its successor — a campaign's
+# delayed-localization bucket then "failed without any mutation" and could not be minimised.
+DELAY = (b'<testcase id="d" seed="1"><description>x</description><policy id="p1"><channel>tick</channel>'
+         b'<window from="0.3"><after channel="ack" message="1"/></window><select limit="1"/>'
+         b'<delay ms="60"/></policy></testcase>')
+
+
+def test_a_reverted_delayed_message_arrives_between_its_neighbours(tmp_path: Path):
+    spec = load_spec(ANCHORED)
+    testcase = parse_testcase(DELAY, "d", spec, load_dictionary())
+    mutation = _run(spec, testcase, 0.2, tmp_path / "delayed.mcap")[0]
+    log = read_log(tmp_path / "delayed.mcap")
+    seq = json.loads(mutation.original)["seq"]
+    arrived = {json.loads(m.data)["seq"]: m.log_time for m in log.on("anchored/tick")
+               if m.data != mutation.original}  # the untouched ticks (the delayed one is logged late)
+    assert mutation.delivered_time_ns is not None and mutation.delivered_time_ns > arrived[seq + 1]
+    assert arrived[seq - 1] < mutation.original_time_ns < arrived[seq + 1]

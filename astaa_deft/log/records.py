@@ -30,6 +30,10 @@ class RunStarted:
     mode: str
     spec: str
     command_line: tuple[str, ...] = ()
+    # The interceptor's clock origin on the log's clock (ns): a mutation event's ``time`` counts from it. A
+    # delayed message's arrival is known only on that clock (minimise reverts it to there). None: no
+    # interceptor, or a log from before this field (then the run's start is the best guess).
+    interceptor_epoch_ns: int | None = None
     kind = "run_started"
 
 

@@ -263,7 +263,7 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
         delivered = message(channel.key, event.delivered_sequence)
         raw.append((record, event, dict(body), original, delivered))
 
-    offset_ns = _clock_offset(raw, start_ns)
+    offset_ns = _clock_offset(raw, start_ns, interceptor_epoch_ns(log))
     mutations = []
     record_times = {}
     for number, (record, event, body, original, delivered) in enumerate(raw):
@@ -314,15 +314,29 @@ def run_start_ns(log: LogContents) -> int:
     return min(bus) if bus else 0
 
 
+def interceptor_epoch_ns(log: LogContents) -> int | None:
+    """Where the interceptor's clock starts on the log's clock (the run_started event says), if known."""
+    for r in map(rec.decode, log.events("run_started")):
+        if isinstance(r, rec.RunStarted) and r.interceptor_epoch_ns:
+            return int(r.interceptor_epoch_ns)
+    return None
+
+
 def _clock_offset(raw: Sequence[tuple[LoggedMessage, rec.MutationRecord, dict, LoggedMessage, Any]],
-                  start_ns: int) -> int:
-    """Log time minus interceptor time, from mutations delivered the moment their message arrived.
+                  start_ns: int, epoch_ns: int | None = None) -> int:
+    """Log time minus interceptor time.
 
     A delayed or reordered message is logged when it was delivered; its
-    arrival is known only on the interceptor's clock (``time``). The median
-    offset of the immediate mutations maps that clock onto the log's; with
-    none, the run's start is the best guess.
+    arrival is known only on the interceptor's clock (``time``). The log
+    says where that clock starts (``RunStarted.interceptor_epoch_ns``). Older
+    logs: the median offset of the mutations delivered the moment their
+    message arrived; with none, the run's start — a guess late by the time
+    the recorder took to start, enough to put a reverted delayed message
+    after its successor (one campaign's delay bucket "failed without any
+    mutation" that way).
     """
+    if epoch_ns is not None:
+        return epoch_ns
     offsets = [record.log_time - round(event.time * 1e9)
                for record, event, _, _, _ in raw
                if not (set(event.action.split("+")) & (DEFERRING_ACTIONS | EXTRA_ACTIONS))]

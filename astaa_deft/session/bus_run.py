@@ -63,6 +63,7 @@ class BusRun:
         self.recorder: subprocess.Popen | None = None
         self.recorded: dict[str, int] = {}
         self.started_ns = 0
+        self.interceptor_epoch_ns: int | None = None  # the interceptor's clock origin, on the log's clock
         self._subs: list = []
         self._tmp: tempfile.TemporaryDirectory | None = None
         self._events_pub: zenoh.Publisher | None = None
@@ -129,7 +130,9 @@ class BusRun:
         if opts.mode == "star":
             make_forwarder = plain_forwarder
             if opts.interceptor is not None:
-                self.interception = InterceptionBridge(self.session, opts.interceptor, time.monotonic(),
+                # One instant on both clocks: event times count from it, the log says where it is.
+                epoch_monotonic, self.interceptor_epoch_ns = time.monotonic(), time.time_ns()
+                self.interception = InterceptionBridge(self.session, opts.interceptor, epoch_monotonic,
                                                        on_mutation=self._mutated if self._listening else None)
                 make_forwarder = self.interception.make_forwarder
             self.proxy = StarProxy(self.session, self.spec, on_undeclared=self._undeclared,
@@ -142,7 +145,8 @@ class BusRun:
         if opts.record is not None:
             self._start_recorder(opts.record)
             self._wait_recorder_subscribed()
-        started = self.emit(rec.RunStarted(time.time_ns(), opts.mode, self.spec.name, tuple(opts.command_line)))
+        started = self.emit(rec.RunStarted(time.time_ns(), opts.mode, self.spec.name, tuple(opts.command_line),
+                                           self.interceptor_epoch_ns))
         self.monitors = OnlineMonitors(self.spec, started.time_ns, self._violated)
         intercepted = self.interception.targets if self.interception is not None else set()
         self.monitors.subscribe(self.session, [(k, ch.name) for k, ch in topology.observed_keys(self.spec, opts.mode)
