@@ -14,7 +14,6 @@ again under the full limit only if no other candidate is accepted
 from __future__ import annotations
 
 import json
-import textwrap
 import time
 from dataclasses import replace
 
@@ -185,27 +184,7 @@ def test_a_candidate_waiting_for_the_cpu_is_not_out_of_time():
     assert run_supervised(body, on_message=lambda message: None) == (0, 0)
 
 
-SPEC = textwrap.dedent("""\
-    name: lossy
-    modules: [{name: sim, command: "true"}, {name: planner, command: "true"}]
-    channels:
-      - {name: pose, key: lossy/pose, producer: sim, consumers: [planner], type: Pose}
-      - {name: tick, key: lossy/tick, producer: sim, consumers: [planner], type: Tick}
-      - {name: plan, key: lossy/plan, producer: planner, consumers: [], type: Plan}
-    types:
-      Header: {seq: uint64, stamp: time}
-      Pose: {header: Header, x: float64, y: float64, speed: float64}
-      Tick: {header: Header}
-      Point: {t: time, x: float64, y: float64, heading: float64}
-      Plan: {header: Header, points: {array: Point}}
-    planner:
-      module: planner
-      inputs: [pose, tick]
-      trigger: tick
-      output: plan
-      trajectory: {points: points, x: x, y: y, t: t}
-      replay: {factory: "lossy_state_planner:LossyStatePlanner"}
-    """)
+SPEC = (SUT_DIR / "lossy.yaml").read_text()
 CYCLES = 8
 
 
