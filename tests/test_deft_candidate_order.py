@@ -13,7 +13,6 @@ again under the full limit only if no other candidate is accepted
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import replace
 
@@ -25,9 +24,8 @@ from astaa_deft.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidat
 from astaa_deft.deft.replay import make_planner
 from astaa_deft.deft.search_policy import StepBudget, WinningPatterns, first_cycle_first
 from astaa_deft.log.reader import read_log
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec_loader import load_spec
 
+from lossy_log import write_lossy_log
 from proxy_helpers import SUT_DIR
 
 MS = 1_000_000
@@ -184,44 +182,14 @@ def test_a_candidate_waiting_for_the_cpu_is_not_out_of_time():
     assert run_supervised(body, on_message=lambda message: None) == (0, 0)
 
 
-SPEC = (SUT_DIR / "lossy.yaml").read_text()
 CYCLES = 8
-
-
-def write_log(tmp_path, late: list[bool]):
-    """A real log of a planner that, on cycle k, got the pose logged with its tick too late if ``late[k]``."""
-    from lossy_state_planner import LossyStatePlanner
-
-    spec_path = tmp_path / "lossy.yaml"
-    spec_path.write_text(SPEC)
-    spec = load_spec(spec_path)
-    log_path = tmp_path / "late_pose.mcap"
-    w = LogWriter(log_path, spec)
-    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
-    planner = LossyStatePlanner()
-    t0, seq = 1_000_000_000, 0
-    for k, too_late in enumerate(late):
-        base = t0 + k * 100 * MS
-        poses = []
-        for j, dt in enumerate((0, MS // 2)):
-            seq += 1
-            pose = {"header": {"seq": seq, "stamp": 0.1 * k}, "x": 1.0 * k + 0.3 * j, "y": 0.0, "speed": 10.0}
-            w.message(ids["pose"], base + dt, json.dumps(pose).encode())
-            poses.append(pose)
-        tick = {"header": {"seq": k + 1, "stamp": 0.1 * k}}
-        w.message(ids["tick"], base + MS, json.dumps(tick).encode())
-        plan = planner.step({"pose": poses[0] if too_late else poses[1], "tick": tick})
-        w.message(ids["plan"], base + 5 * MS, json.dumps(plan).encode())
-    w.event("run_started", time_ns=t0)
-    w.finish()
-    return spec, log_path
 
 
 @pytest.fixture()
 def late_pose_log(tmp_path, monkeypatch):
     """The planner never got the pose logged with its tick in time: it always used the one before."""
     monkeypatch.syspath_prepend(str(SUT_DIR))
-    return write_log(tmp_path, [True] * CYCLES)
+    return write_lossy_log(tmp_path, [True] * CYCLES)
 
 
 @needs_fork
@@ -250,7 +218,7 @@ def test_a_miss_after_hits_is_searched_from_the_parked_state(tmp_path, monkeypat
     # taken before those, redoes them and searches the missed output from the exact state before it.
     monkeypatch.syspath_prepend(str(SUT_DIR))
     late = [True, True, True, True, False, True, True, False]
-    spec, log_path = write_log(tmp_path, late)
+    spec, log_path = write_lossy_log(tmp_path, late)
     ex = extract(read_log(log_path), spec, make_planner(spec, {}), jobs=2)
     assert ex.accepted_at(0.0) == len(late) and all(f.exact for f in ex.frames)
     assert [f.candidates_tried for f in ex.frames] == [2, 1, 1, 1, 2, 1, 1, 2]

@@ -10,7 +10,6 @@ forked, all do.
 
 from __future__ import annotations
 
-import json
 
 import pytest
 
@@ -18,47 +17,21 @@ from astaa_deft.deft.extract import extract, near_miss_note
 from astaa_deft.deft.fork_replay import can_fork
 from astaa_deft.deft.replay import make_planner
 from astaa_deft.log.reader import read_log
-from astaa_deft.log.writer import LogWriter
 from astaa_deft.spec_loader import load_spec
 
+from lossy_log import SPEC, write_lossy_log
 from proxy_helpers import SUT_DIR
 
 pytestmark = pytest.mark.skipif(not can_fork(), reason="fork-based replay needs os.fork (POSIX)")
 
-SPEC = (SUT_DIR / "lossy.yaml").read_text()
 CYCLES = 12
 
 
 @pytest.fixture()
 def crafted(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(SUT_DIR))
-    from lossy_state_planner import LossyStatePlanner
-
-    spec_path = tmp_path / "lossy.yaml"
-    spec_path.write_text(SPEC)
-    spec = load_spec(spec_path)
-    log_path = tmp_path / "lossy.mcap"
-    w = LogWriter(log_path, spec)
-    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
-    planner = LossyStatePlanner()
-    t0 = 1_000_000_000
-    seq = 0
-    for k in range(CYCLES):
-        base = t0 + k * 100_000_000
-        poses = []
-        for j, dt in enumerate((0, 500_000)):  # two poses shortly before each tick
-            seq += 1
-            pose = {"header": {"seq": seq, "stamp": 0.1 * k}, "x": 1.0 * k + 0.3 * j, "y": 0.0, "speed": 10.0}
-            w.message(ids["pose"], base + dt, json.dumps(pose).encode())
-            poses.append(pose)
-        tick = {"header": {"seq": k + 1, "stamp": 0.1 * k}}
-        w.message(ids["tick"], base + 1_000_000, json.dumps(tick).encode())
-        used = poses[0] if k % 2 else poses[1]  # the second pose came too late for odd cycles
-        plan = planner.step({"pose": used, "tick": tick})
-        w.message(ids["plan"], base + 5_000_000, json.dumps(plan).encode())
-    w.event("run_started", time_ns=t0)
-    w.finish()
-    return spec, log_path
+    # Every second cycle the pose logged with its tick came too late for the planner.
+    return write_lossy_log(tmp_path, [k % 2 == 1 for k in range(CYCLES)], "lossy.mcap")
 
 
 def test_deep_copies_of_a_lossy_state_do_not_reproduce_at_zero(crafted):

@@ -91,8 +91,9 @@ class StarProxy:
     less CPU per message and 1.3–1.6× the throughput, the catch-all included.
     Order is kept per channel. `make_forwarder` is where a later stage
     (interception) substitutes its own function for a route; a forwarder
-    with an ``on_idle`` attribute has it called whenever its queue runs
-    empty (interception sends its batched records to the recorder then).
+    with a ``burst`` attribute is handed its samples in bursts
+    (:func:`run_bursts`) and has its ``on_idle`` called whenever its queue
+    runs empty (interception sends its outbox and batched records then).
     """
 
     def __init__(self, session: zenoh.Session, spec: Spec,
@@ -126,29 +127,22 @@ class StarProxy:
         sub = self.session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(FIFO_CAPACITY), **options)
         self._subscribers.append(sub)
 
-        on_idle: Callable[[], None] | None = getattr(handle, "on_idle", None)
+        # A forwarder with a ``burst`` handler takes its samples in bursts and has ``on_idle`` called
+        # whenever its queue runs empty (interception); any other is handed one sample at a time.
         burst: Callable[[list[zenoh.Sample]], None] | None = getattr(handle, "burst", None)
+        on_idle: Callable[[], None] = getattr(handle, "on_idle", lambda: None)
         fifo = sub.handler
 
         def run() -> None:
             try:
-                if on_idle is None:
+                if burst is None:
                     for sample in sub:  # ends when the subscriber is undeclared
                         handle(sample)
                     return
-                if burst is None:
-                    while True:
-                        sample = fifo.try_recv()  # ZError once the subscriber is undeclared and drained
-                        if sample is None:
-                            on_idle()
-                            sample = fifo.recv()
-                        handle(sample)
-                else:
-                    run_bursts(fifo, burst, on_idle)
-            except zenoh.ZError:
-                if on_idle is not None:  # what the last samples left waiting goes out too
-                    with contextlib.suppress(zenoh.ZError):
-                        on_idle()
+                run_bursts(fifo, burst, on_idle)
+            except zenoh.ZError:  # undeclared and drained: what the last samples left waiting goes out too
+                with contextlib.suppress(zenoh.ZError):
+                    on_idle()
 
         thread = threading.Thread(target=run, name=name, daemon=True)
         thread.start()

@@ -26,7 +26,7 @@ from typing import Any
 from ..errors import InputError
 from ..intercept.dictionary import load_dictionary
 from ..intercept.testcase import parse_testcase
-from ..session.bus_run import warm_recorder
+from ..session.bus_run import release_warm_recorder, warm_recorder
 from ..spec_loader import load_spec
 from .forked import ForkedRecorder
 from .model import CaseOutcome, PlannedCase
@@ -130,15 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         body = execute(payload, preloaded, recorder)
     finally:
-        let_go(recorder)
+        release_warm_recorder(recorder)
     print(json.dumps(body, default=str), flush=True)
     return 0
-
-
-def let_go(recorder: subprocess.Popen | None) -> None:
-    """A recorder started ahead that the case did not take (bad input): end of input tells it to exit."""
-    if recorder is not None and recorder.poll() is None and recorder.stdin is not None and not recorder.stdin.closed:
-        recorder.stdin.close()
 
 
 if __name__ == "__main__":

@@ -185,7 +185,7 @@ def _case(fd: int, spec: str, preloaded: Any, for_recorder: Any, worker: Any) ->
         try:
             body = worker.execute(payload, preloaded, recorder)
         finally:
-            worker.let_go(recorder)
+            worker.release_warm_recorder(recorder)
         conn.sendall((json.dumps(body, default=str) + "\n").encode())
         conn.close()
         code = 0

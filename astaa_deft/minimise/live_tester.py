@@ -52,7 +52,7 @@ from ..log.reader import read_log
 from ..monitor.offline import CheckResult, check_log
 from ..monitor.verdict import IMPLICIT
 from ..session import BusRun, RunOptions, run_session
-from ..session.bus_run import warm_recorder
+from ..session.bus_run import release_warm_recorder, warm_recorder
 from ..spec.model import Spec
 from .ddmin import Outcome, TestResult
 from .mutations import FieldSelection, Mutation
@@ -116,7 +116,7 @@ class LiveTester:
         with self._count:
             recorders, self._recorders = self._recorders, []
         for recorder in recorders:
-            _let_go(recorder)
+            release_warm_recorder(recorder)
 
     def testcase(self, chosen: Sequence[tuple[Mutation, FieldSelection]], description: str = "") -> TestCase:
         testcase = restricted_testcase(chosen, testcase_id=self.testcase_id, description=description,
@@ -202,7 +202,7 @@ class LiveTester:
             except InputError as exc:
                 return LiveRun(None, f"the run did not start: {exc}", time.monotonic() - started)
             finally:
-                _let_go(options.warm_recorder)
+                release_warm_recorder(options.warm_recorder)
             seconds = time.monotonic() - started
             with self._count:
                 self.run_seconds += seconds
@@ -236,10 +236,3 @@ class LiveTester:
             return True
         return any(v.invariant == self.invariant and (self.module is None or v.module == self.module)
                    for v in list(bus.violations))
-
-
-def _let_go(recorder: subprocess.Popen | None) -> None:
-    """A recorder started ahead that no run took (a run that did not get that far): end of input, it exits."""
-    if recorder is not None and recorder.stdin is not None and not recorder.stdin.closed:
-        with contextlib.suppress(OSError):
-            recorder.stdin.close()

@@ -10,6 +10,7 @@ log is finished cleanly whatever ended the run.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import signal
@@ -460,6 +461,13 @@ def warm_recorder(spec_files: Sequence[Path] = ()) -> subprocess.Popen:
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                             start_new_session=True, preexec_fn=die_with_parent, text=True)
 
+
+
+def release_warm_recorder(recorder: subprocess.Popen | None) -> None:
+    """A recorder started ahead that no run took: end of its input, and it exits."""
+    if recorder is not None and recorder.stdin is not None and not recorder.stdin.closed:
+        with contextlib.suppress(OSError):
+            recorder.stdin.close()
 
 def _concrete(endpoint: str) -> str:
     """Replace port 0 by a free port (Zenoh itself would too, but we must know it)."""
