@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+import time
 from collections.abc import Callable
 
 import zenoh
@@ -22,6 +23,7 @@ BLOCK = zenoh.CongestionControl.BLOCK
 REMOTE = zenoh.Locality.REMOTE
 FIFO_CAPACITY = 16384  # samples waiting per route; when full, Zenoh holds back the sender (no loss)
 BURST_LIMIT = 128  # samples a forwarder with a burst handler takes out of its FIFO at a time (see run_bursts)
+CATCH_ALL_POLL_SECONDS = 0.002  # how often the catch-all looks into its FIFO (see StarProxy._catch_all_forwarder)
 
 
 class LiveRoute:
@@ -80,6 +82,34 @@ def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle
         handle_burst(samples)
 
 
+def run_polled(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], interval: float) -> None:
+    """Hand ``handle_burst`` what waits in ``fifo`` every ``interval`` seconds, never blocking on it.
+
+    A thread blocked on its FIFO wakes for every sample, taking the GIL
+    each time; one that sleeps between looks takes it once per look.
+    Returns when the subscriber is undeclared and drained.
+    """
+    try_recv = fifo.try_recv
+    while True:
+        samples: list[zenoh.Sample] = []
+        try:
+            while True:
+                sample = try_recv()  # ZError once the subscriber is undeclared and drained
+                if sample is None:
+                    break
+                samples.append(sample)
+                if len(samples) == BURST_LIMIT:
+                    handle_burst(samples)
+                    samples = []
+        except zenoh.ZError:
+            if samples:
+                handle_burst(samples)
+            raise
+        if samples:
+            handle_burst(samples)
+        time.sleep(interval)
+
+
 class StarProxy:
     """Forward every declared channel, plus a catch-all for undeclared keys.
 
@@ -119,7 +149,7 @@ class StarProxy:
             self.routes[route.source] = live
             self._pump(route.source, self.make_forwarder(live), f"fwd-{route.channel.name}")
         # allowed_origin=REMOTE keeps our own republished copies out of the catch-all.
-        self._pump(f"{STAR_PREFIX}/**", self._catch_all, "fwd-catch-all", allowed_origin=REMOTE)
+        self._pump(f"{STAR_PREFIX}/**", self._catch_all_forwarder(), "fwd-catch-all", allowed_origin=REMOTE)
         self.liveliness.start()
         self.queries.start()
 
@@ -131,10 +161,14 @@ class StarProxy:
         # whenever its queue runs empty (interception); any other is handed one sample at a time.
         burst: Callable[[list[zenoh.Sample]], None] | None = getattr(handle, "burst", None)
         on_idle: Callable[[], None] = getattr(handle, "on_idle", lambda: None)
+        poll: float | None = getattr(handle, "poll_interval", None)
         fifo = sub.handler
 
         def run() -> None:
             try:
+                if burst is not None and poll is not None:
+                    run_polled(fifo, burst, poll)
+                    return
                 if burst is None:
                     for sample in sub:  # ends when the subscriber is undeclared
                         handle(sample)
@@ -163,11 +197,31 @@ class StarProxy:
     def _publisher(self, key: str) -> zenoh.Publisher:
         return self.session.declare_publisher(key, congestion_control=BLOCK, allowed_destination=REMOTE)
 
-    def _catch_all(self, sample: zenoh.Sample) -> None:
-        full_key = str(sample.key_expr)
-        if full_key in self.routes:  # declared: its own subscriber forwards it
-            return
-        self._forward_undeclared(sample, full_key)
+    def _catch_all_forwarder(self) -> Callable[[zenoh.Sample], None]:
+        """The catch-all sees every producer's message and forwards only undeclared keys.
+
+        It looks into its FIFO every CATCH_ALL_POLL_SECONDS rather than
+        waiting on it (``run_polled``): waiting, it woke for every message
+        of every declared channel and took the GIL each time, which on a
+        busy channel handed the GIL to and fro with that channel's
+        forwarder (with ``set`` on every message, the forwarder's puts then
+        waited for this thread). An undeclared key's messages wait up to
+        that long more; declared channels, the traffic that matters, none.
+        """
+        routes = self.routes
+
+        def burst(samples: list[zenoh.Sample]) -> None:
+            for sample in samples:
+                full_key = str(sample.key_expr)
+                if full_key not in routes:  # declared: its own subscriber forwards it
+                    self._forward_undeclared(sample, full_key)
+
+        def forward(sample: zenoh.Sample) -> None:
+            burst([sample])
+
+        forward.burst = burst  # type: ignore[attr-defined]
+        forward.poll_interval = CATCH_ALL_POLL_SECONDS  # type: ignore[attr-defined]
+        return forward
 
     # -- catch-all ---------------------------------------------------------
     def _forward_undeclared(self, sample: zenoh.Sample, full_key: str) -> None:
