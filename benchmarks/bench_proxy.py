@@ -278,7 +278,7 @@ def main() -> None:
     if "latency" in wanted:
         latency(int(5_000 * scale))
     if "interception" in wanted:
-        interception(int(50_000 * scale))
+        interception(int(200_000 * scale))
     if "large" in wanted:
         large(max(30, int(300 * scale)))
 

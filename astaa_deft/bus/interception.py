@@ -83,6 +83,10 @@ class Interceptor(Protocol):
     def on_message(self, channel: str, consumers: tuple[str, ...], payload: bytes, now: float) -> list: ...
     def on_tick(self, now: float) -> list: ...
     def flush(self, now: float) -> list: ...
+    # on_message for one channel without objects, where it can (see intercept.engine.Interceptor.lane)
+    def lane(self, channel: str, consumers: tuple[str, ...]) -> Callable[[bytes, float], Any] | None: ...
+    # the typed event from a lane's event values
+    def event(self, values: tuple) -> Any: ...
 
 
 class _Pending:
@@ -136,6 +140,10 @@ class InterceptionBridge:
         t0, monotonic, time_ns = self.t0, time.monotonic, time.time_ns
         last_meta, on_message = self._last_meta, self.interceptor.on_message
 
+        lane = self.interceptor.lane(name, consumers) if pubs else None
+        if lane is not None:
+            return self._lane_forwarder(live, lane, rows, record_pub)
+
         def forward_burst(samples: list[zenoh.Sample]) -> None:
             live.count += len(samples)
             with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
@@ -164,9 +172,60 @@ class InterceptionBridge:
                         if on_mutation is not None:
                             on_mutation(event)
                     if len(rows) >= BATCH_LIMIT:
-                        record_pub.put(pack_deliveries(rows))
+                        record_pub.put(pack_deliveries(rows, self.interceptor.event))
                         rows.clear()
                     if reaches and self.on_delivered is not None:
+                        self.on_delivered(name, data)
+                last_meta[name] = meta  # what a tick's injected message on this channel goes out with
+                self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
+
+        def forward(sample: zenoh.Sample) -> None:
+            forward_burst([sample])
+
+        forward.on_idle = self.idle  # type: ignore[attr-defined]  # see StarProxy
+        forward.burst = forward_burst  # type: ignore[attr-defined]
+        return forward
+
+    def _lane_forwarder(self, live: LiveRoute, lane: Callable[[bytes, float], Any],
+                        rows: list[tuple[int, bytes, bytes | None, bool, Any]],
+                        record_pub: zenoh.Publisher) -> Callable[[zenoh.Sample], None]:
+        """The forwarder where the interceptor offers a lane: no objects for the messages it rewrites or passes."""
+        name = live.route.channel.name
+        pubs = [pub for _consumer, pub in live.publishers]
+        lock, dispatch, outbox, on_mutation, typed = (self._lock, self._dispatch, self._outbox, self.on_mutation,
+                                                      self.interceptor.event)
+        t0, monotonic, time_ns, last_meta = self.t0, time.monotonic, time.time_ns, self._last_meta
+        append_row, append_out = rows.append, outbox.append
+
+        def forward_burst(samples: list[zenoh.Sample]) -> None:
+            live.count += len(samples)
+            with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
+                for sample in samples:
+                    zpayload = sample.payload
+                    meta = (sample.encoding, sample.attachment, sample.timestamp)
+                    payload = zpayload.to_bytes()
+                    now = monotonic() - t0
+                    done = lane(payload, now)
+                    if done is None:  # untouched: the very same Zenoh payload, no copy
+                        for pub in pubs:
+                            append_out((pub, zpayload, meta))
+                        append_row((time_ns(), payload, None, True, None))
+                        data = payload
+                    elif type(done) is tuple:  # rewritten, for every consumer, now
+                        data, values = done
+                        for pub in pubs:
+                            append_out((pub, data, meta))
+                        self.mutations += 1
+                        append_row((time_ns(), data, payload, True, values))
+                        if on_mutation is not None:
+                            on_mutation(typed(values))
+                    else:
+                        dispatch(live, done, meta, now, sample)
+                        continue
+                    if len(rows) >= BATCH_LIMIT:
+                        record_pub.put(pack_deliveries(rows, typed))
+                        rows.clear()
+                    if self.on_delivered is not None:
                         self.on_delivered(name, data)
                 last_meta[name] = meta  # what a tick's injected message on this channel goes out with
                 self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
@@ -195,7 +254,7 @@ class InterceptionBridge:
         self._deliver_outbox()
         for name, rows in self._batches.items():
             if rows:
-                self._record_pubs[name].put(pack_deliveries(rows))
+                self._record_pubs[name].put(pack_deliveries(rows, self.interceptor.event))
                 rows.clear()
 
     def start(self) -> None:
@@ -260,7 +319,7 @@ class InterceptionBridge:
         else:
             rows.append((time.time_ns(), data, None, True, None))
         if len(rows) >= BATCH_LIMIT:
-            self._record_pubs[name].put(pack_deliveries(rows))
+            self._record_pubs[name].put(pack_deliveries(rows, self.interceptor.event))
             rows.clear()
         if d.consumers and self.on_delivered is not None:
             self.on_delivered(name, data)

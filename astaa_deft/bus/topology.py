@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import marshal
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from operator import attrgetter
 from typing import Any
@@ -109,19 +110,26 @@ _change_attrs = attrgetter("path", "old", "new")
 def _event_wire(event: Any) -> Any:
     """An event as a batch row carries it: its attribute tuple (see ``intercept_record``), or its JSON form.
 
-    (attrgetter: one C call where nine attribute reads and a comprehension cost a third of a row, measured.)
+    A tuple is that attribute tuple already (the interception lane's event
+    values). (attrgetter: one C call where nine attribute reads and a
+    comprehension cost a third of a row, measured.)
     """
-    if isinstance(event, dict):
+    kind = type(event)
+    if kind is tuple:
+        return event
+    if kind is dict:
         return json.dumps(event, default=str).encode()
     return (*_event_attrs(event), tuple(map(_change_attrs, event.fields)), event.detail)
 
 
-def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]]) -> bytes:
+def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]],
+                    typed: Callable[[tuple], Any] | None = None) -> bytes:
     """Intercepted deliveries of one channel in one message: (time ns, payload, original, delivered, event) each.
 
     ``original`` and ``event`` are None for a message delivered untouched;
     ``event`` is a mutation event (or its JSON form, a dict), duck-typed as in
-    ``intercept_record``. The whole batch is one ``marshal`` call (measured:
+    ``intercept_record``, or its attribute tuple, which ``typed`` turns into
+    the event where marshal cannot carry it. The whole batch is one ``marshal`` call (measured:
     a third of a per-row record's cost on the proxy's thread); an event
     whose values marshal cannot carry exactly travels as its JSON text.
     Under load the proxy sends what piled up while it was busy in one Zenoh
@@ -133,15 +141,19 @@ def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]]) -> b
     try:
         return marshal.dumps(wire, 4)
     except ValueError:  # some event holds a value of a type marshal does not carry exactly
-        return marshal.dumps([(t, payload, original, delivered, _marshal_safe(event, row[4]))
+        return marshal.dumps([(t, payload, original, delivered, _marshal_safe(event, row[4], typed))
                               for row, (t, payload, original, delivered, event) in zip(rows, wire, strict=True)], 4)
 
 
-def _marshal_safe(wire_event: Any, event: Any) -> Any:
+def _marshal_safe(wire_event: Any, event: Any, typed: Callable[[tuple], Any] | None) -> Any:
     try:
         marshal.dumps(wire_event, 4)
         return wire_event
     except ValueError:
+        if type(event) is tuple:
+            if typed is None:
+                raise
+            event = typed(event)
         return json.dumps(event.to_json(), default=str).encode()
 
 

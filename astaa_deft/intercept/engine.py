@@ -20,7 +20,7 @@ import heapq
 import itertools
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -34,7 +34,10 @@ from .applications import ChannelTraffic, PolicyApplications
 from .dictionary import Dictionary, NotApplicable, load_dictionary
 from .testcase import Policy, TestCase, load_testcase
 
-__all__ = ["Delivery", "FieldChange", "Interceptor", "MutationEvent", "PolicyGate", "load_interceptor"]
+__all__ = ["Delivery", "FieldChange", "Interceptor", "Lane", "MutationEvent", "PolicyGate", "load_interceptor"]
+
+# Interceptor.lane's shortcut for one channel: lane(payload, now) -> None | (payload, event values) | deliveries.
+Lane = Callable[[bytes, float], Any]
 
 
 _UNSELECTED: Any = object()  # on_message's shortcut: the policy did not select this message
@@ -171,13 +174,16 @@ class Interceptor:
                 gate.anchored_at(now)
         fast = state.fast
         if fast is not None:  # one acting policy, no observers (see __init__): the short way
-            done = fast(consumers, payload, channel, index, now) if state.fast_selects(channel, now) else _UNSELECTED
+            done = fast(payload) if state.fast_selects(channel, now) else _UNSELECTED
             if done is _UNSELECTED:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
             elif done is not None:
-                if done.event is not None:
-                    self._count_touch(done.event)
-                out.append(done)
+                live = state.acting[0]
+                event = MutationEvent.from_values((self.testcase.id, live.policy.id, live.policy.action.name, channel,
+                                                   consumers, index, now, done[1], {}))
+                self._count_touch(event)
+                out.append(built(Delivery, consumers=consumers, payload=done[0], at=now, original=payload,
+                                 event=event))
             else:  # the shortcut declined this message
                 info = MessageInfo(channel, index, now, state.codec, state.previous_message)
                 out.extend(self._deliver(self._apply(state.acting, consumers, payload, info), now))
@@ -195,6 +201,64 @@ class Interceptor:
                 out.extend(self._deliver(live.runtime.after_message(info, payload), now))
         state.previous_payload = payload
         return out
+
+    def lane(self, channel: str, consumers: tuple[str, ...]) -> Lane | None:
+        """``on_message`` for ``channel`` without the objects, where one policy alone rewrites it (else None).
+
+        The proxy's common case, a message that goes to all of ``consumers``
+        at once, rewritten or not, costs no ``Delivery``, event or field
+        change objects: ``lane(payload, now)`` keeps the engine's state as
+        ``on_message`` does and returns
+
+        * None: the message goes to every consumer untouched, now;
+        * (payload, event values): the rewritten message goes to every
+          consumer now; the event as ``MutationEvent.from_values`` takes it
+          (the proxy's record carries it as is);
+        * anything else as ``on_message`` returns it, a list of deliveries.
+
+        Offered where ``on_message`` takes its short way (one acting policy
+        with a fast path, no observers, every consumer); ``tests/test_json_fast.py``
+        holds the two to the same deliveries and events.
+        """
+        state = self._channels.get(channel)
+        if state is None or state.fast is None:
+            return None
+        fast, selects, anchors = state.fast, state.fast_selects, state.anchors
+        live = state.acting[0]
+        testcase, policy, action = self.testcase.id, live.policy.id, live.policy.action.name
+        touched, named = self._touched, policy.split("+")  # as _count_touch counts it
+
+        def run(payload: bytes, now: float) -> Any:
+            if state.held:  # something delayed on this channel may fall due first: the general way
+                return self.on_message(channel, consumers, payload, now)
+            state.count += 1
+            index = state.count
+            if index == 1:
+                state.first_at = now
+            state.last_at = now
+            for number, gate in anchors:
+                if number == index:
+                    gate.anchored_at(now)
+            if not selects(channel, now):
+                state.previous_payload = payload
+                return None
+            done = fast(payload)
+            if done is None:  # the shortcut declined this message
+                info = MessageInfo(channel, index, now, state.codec, state.previous_message)
+                out = self._deliver(self._apply(state.acting, consumers, payload, info), now)
+                state.previous_payload = payload
+                return out
+            state.previous_payload = payload
+            for name in named:
+                touched[name] = touched.get(name, 0) + 1
+            return done[0], (testcase, policy, action, channel, consumers, index, now, done[1], {})
+
+        return run
+
+    @staticmethod
+    def event(values: tuple) -> MutationEvent:
+        """The typed event of a lane's event values."""
+        return MutationEvent.from_values(values)
 
     def on_tick(self, now: float) -> list[Delivery]:
         out = [d for state in self._channels.values() if state.held for d in self._release_due(state, now)]

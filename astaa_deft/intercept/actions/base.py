@@ -89,6 +89,13 @@ class MutationEvent:
     fields: tuple[FieldChange, ...] = ()
     detail: dict = field(default_factory=dict)
 
+    @classmethod
+    def from_values(cls, values: tuple) -> MutationEvent:
+        """The event from its values in field order, changes as (path, old, new) triples (``Interceptor.lane``)."""
+        testcase, policy, action, channel, consumers, index, time, changes, detail = values
+        return cls(testcase, policy, action, channel, consumers, index, time,
+                   tuple(FieldChange(path, old, new) for path, old, new in changes), detail)
+
     def to_json(self) -> dict:
         """Plain JSON types only; exceptional values are tagged (see ``to_tagged``)."""
         return event_json_form(self.testcase, self.policy, self.action, self.channel, self.consumers,
@@ -401,10 +408,10 @@ class ActionConfig(ABC):
         raise NotImplementedError(f"'{cls.name}' does not make copies")
 
 
-# A runtime's shortcut for one channel (``ActionRuntime.fast_path``), called as
-# fast(consumers, payload, channel, message index, now): the one delivery ``apply``
-# would lead to, or None to take the general path for this message.
-FastPath = Callable[[tuple[str, ...], bytes, str, int, float], "Delivery | None"]
+# A runtime's shortcut for one channel (``ActionRuntime.fast_path``), called as fast(payload):
+# (the payload ``apply`` would send, its field changes as (path, old, new) triples), with an
+# event of the policy's action and no detail; or None to take the general path for this message.
+FastPath = Callable[[bytes], "tuple[bytes, tuple[tuple[str, Any, Any], ...]] | None"]
 
 
 class ActionRuntime:
@@ -417,9 +424,9 @@ class ActionRuntime:
         """A shortcut for messages of ``channel`` when this policy alone acts on it (and for all its consumers).
 
         The engine then calls it instead of ``apply`` (with no ``Pending``,
-        ``MessageInfo`` or stacking); it must return exactly the delivery
-        and event the general path would, or None for the general path.
-        Default: none.
+        ``MessageInfo`` or stacking, and no objects built: see ``FastPath``);
+        what it returns must be exactly the delivery and event the general
+        path would lead to, or None for the general path. Default: none.
         """
         return None
 
