@@ -25,7 +25,7 @@ def received(path: Path) -> list[tuple[str, bytes, str]]:
     if not path.exists():
         return []
     out = []
-    for line in path.read_text().splitlines():
+    for line in path.read_text().split("\n")[:-1]:  # the last piece: empty, or a line still being written
         key, payload, att = line.split(" ")
         out.append((key, bytes.fromhex(payload), att))
     return out
