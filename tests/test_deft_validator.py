@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from astaa_deft.deft.validator import compare
+from astaa_deft.deft.validator import compare, identical
 
 
 def line(n, dt=0.1, t0=0.0, y=0.0, dx=1.0):
@@ -64,3 +66,16 @@ def test_non_finite_points_match_only_if_identical():
     bad = [(float("nan"), 0.0, 0.0), (1.0, 0.0, 0.1)]
     assert compare(bad, list(bad)).distance == 0.0
     assert compare(bad, line(2)).distance == math.inf
+
+
+coordinates = st.one_of(st.floats(-1e6, 1e6), st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0]))
+trajectories = st.lists(st.tuples(coordinates, coordinates,
+                                  st.one_of(st.floats(0, 1e4), st.sampled_from([1.0, math.nan]))), max_size=8)
+
+
+@settings(max_examples=300, deadline=None)
+@given(trajectories, st.booleans())
+def test_identical_is_compare_of_a_trajectory_with_itself(points, increasing):
+    if increasing:  # the common case: strictly increasing times (else compare goes index by index)
+        points = [(x, y, float(i)) for i, (x, y, _) in enumerate(points)]
+    assert identical(points) == compare(points, list(points))
