@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.deft.extract import extract, search_note
+from astaa_deft.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.deft.replay import make_planner
@@ -204,8 +204,8 @@ def test_forked_extraction_tries_first_what_won_before(late_pose_log, jobs):
     assert [f.candidates_tried for f in ex.frames] == [2] + [1] * (CYCLES - 1)
     assert ex.reordered == CYCLES - 1
     assert ex.candidates_cut == 0
-    # Cheap cycles: the replay process stepped each first candidate itself, a parked copy standing by;
-    # only the first output's was wrong (the copy then tried the others).
+    # Cheap cycles: the replay process stepped each first candidate itself, a shadow following; only the
+    # first output's was wrong (the shadow then tried the next).
     assert (ex.first_stepped_in_runner, ex.first_missed_in_runner) == (CYCLES - 1, 1)
     note = search_note(ex)  # the summary says what the search did
     assert note is not None and f"{CYCLES - 1} output(s) tried first the way earlier outputs" in note
@@ -213,9 +213,9 @@ def test_forked_extraction_tries_first_what_won_before(late_pose_log, jobs):
 
 
 @needs_fork
-def test_a_miss_after_hits_is_searched_from_the_parked_state(tmp_path, monkeypatch):
-    # The runner steps several first candidates itself (accepted), then one is wrong: the parked copy,
-    # taken before those, redoes them and searches the missed output from the exact state before it.
+def test_a_miss_after_hits_is_searched_from_the_state_before_it(tmp_path, monkeypatch):
+    # The runner steps several first candidates itself (accepted), then one is wrong: its shadow, one
+    # output behind, tries the next candidate from the exact state before the missed output.
     monkeypatch.syspath_prepend(str(SUT_DIR))
     late = [True, True, True, True, False, True, True, False]
     spec, log_path = write_lossy_log(tmp_path, late)
@@ -232,3 +232,40 @@ def test_in_process_extraction_learns_the_order_too(late_pose_log):
     ex = extract(read_log(log_path), spec, make_planner(spec, {}))
     assert [f.candidates_tried for f in ex.frames] == [2] + [1] * (CYCLES - 1)
     assert ex.accepted_at(1e-6) == CYCLES
+
+
+@needs_fork
+def test_candidates_in_turn_carry_on_from_the_kept_ones_state_and_hand_long_searches_over():
+    # Three cheap outputs stepped in the replay process, a shadow one output behind: the first output's
+    # first candidate is right, the second's second, the third's third — past IN_TURN (2) candidates
+    # the forked search takes over. Whatever was stepped in vain ended with its process: the survivor's
+    # state holds exactly the kept candidates' steps.
+    assert IN_TURN == 2
+
+    def body(send):
+        state: list[tuple[int, int]] = []  # (output, candidate) stepped in this process
+        speculation = Speculation()
+        search = ForkedSearch(2, send)
+        searched = []
+        for output, right in enumerate([0, 1, 2]):
+            def run(index: int, output=output, right=right) -> str:
+                state.append((output, index))
+                return "right" if index == right else "wrong"
+
+            kept, in_vain = _step_in_turn(3, run, lambda r: r == "right", speculation, in_turn=True)
+            if kept is None:
+                speculation.let_go()
+                order = [i for i in range(3) if i not in in_vain] + in_vain
+                tried = search.search(3, lambda k, run=run, order=order: run(order[k]),
+                                      accepted=lambda r: r == "right", closeness=lambda r: 0.0, limit_s=60.0)
+                kept = (order[tried.index], tried.result)
+                searched.append((output, in_vain))
+            assert kept[1] == "right"
+        assert speculation.following is None
+        speculation.let_go()
+        return state, searched, (speculation.hits, speculation.misses)
+
+    state, searched, counters = run_supervised(body, on_message=lambda message: None)
+    assert state == [(0, 0), (1, 1), (2, 2)]
+    assert searched == [(2, [0, 1])]
+    assert counters == (1, 2)  # first candidates: one right, two wrong

@@ -7,6 +7,7 @@ import copy
 import functools
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -19,7 +20,10 @@ from ..errors import InputError, Problem
 from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
-from .fork_replay import ForkedSearch, Parked, Woken, can_fork, candidate_limit, drop, park, run_supervised, wake
+from .fork_replay import (
+    Following, ForkedSearch, Shadow, can_fork, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
+    tell,
+)
 from .frames import Stream, candidates, trigger_candidates
 from .search_policy import StepBudget, WinningPatterns, first_cycle_first
 from .planner_section import planner_of, replay_module_of
@@ -57,8 +61,8 @@ class Extraction:
     cut_retried: int = 0
     retried_kept: int = 0
     reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
-    # Cheap outputs whose first candidate the replay process stepped itself, a parked copy standing by:
-    # accepted, and not (the copy then searched the others).
+    # Cheap outputs whose first candidate the replay process stepped itself, a shadow copy following:
+    # accepted, and not (the shadow then searched the others).
     first_stepped_in_runner: int = 0
     first_missed_in_runner: int = 0
 
@@ -246,6 +250,11 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     winning = WinningPatterns()  # how the kept frames of earlier outputs were derived: tried first
     budget = StepBudget()  # how long a right frame takes: wrong ones searching longer are cut
     speculation = Speculation()
+
+    def report(done: int, total: int) -> None:  # a shadow follows the runner silently
+        if speculation.following is None:
+            progress(done, total)
+
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
         generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
@@ -266,7 +275,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         result.validation_seconds += time.perf_counter() - t1
         if not options:
             result.skipped.append((out_index, "an input had no message yet"))
-            progress(out_index + 1, len(outputs))
+            report(out_index + 1, len(outputs))
             continue
         if not planner.can_snapshot:
             options = options[:1]
@@ -279,7 +288,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
                                   cheap=window <= SPECULATE_MAX_WINDOW_S)
             if kept is None:
                 result.skipped.append((out_index, "no candidate frame decodes or finishes within its time limit"))
-                progress(out_index + 1, len(outputs))
+                report(out_index + 1, len(outputs))
                 continue
             cand, cmp, exact, tries, step_s = kept
             if cmp.within(cfg.threshold):
@@ -291,7 +300,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
                 trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
                 inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
                 comparison=cmp, accepted=cmp.within(cfg.threshold), candidates_tried=tries, exact=exact))
-            progress(out_index + 1, len(outputs))
+            report(out_index + 1, len(outputs))
             continue
         # Several candidates: each must start from the same planner state.
         t1 = time.perf_counter()
@@ -326,7 +335,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             result.planner_seconds += time.perf_counter() - t1
         if best is None:
             result.skipped.append((out_index, "no candidate frame decodes"))
-            progress(out_index + 1, len(outputs))
+            report(out_index + 1, len(outputs))
             continue
         cmp, cand, exact, state, _ = best
         if state is not None:
@@ -344,7 +353,9 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             candidates_tried=tries,
             exact=exact,
         ))
-        progress(out_index + 1, len(outputs))
+        report(out_index + 1, len(outputs))
+    if speculation.following is not None:  # a shadow told OK on the last output: the runner reports, not it
+        os._exit(0)
     if search is not None:  # the counters as the last runner holds them (each winner takes them over)
         speculation.let_go()
         result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
@@ -362,46 +373,108 @@ def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, pr
     return max(output.log_time + skew_ns - start, skew_ns) * 1e-9
 
 
-# The runner steps an output's first candidate itself, a parked copy standing by (see fork_replay.park),
-# when the recorded planner answered within this window: a cheap cycle, whose wrong frames are cheap too
-# (a wrong frame stepped in the runner cannot be cut). Forking a worker per candidate costs milliseconds per
-# output, as much as such a step.
+# A cheap output's candidates are stepped in the runner itself, one after another, a shadow copy following
+# one output behind (see fork_replay.shadow), when the recorded planner answered within this window: a cheap
+# cycle, whose wrong frames are cheap too (a wrong frame stepped in the runner cannot be cut). Forking a worker
+# per candidate costs milliseconds per output, as much as such a step.
 SPECULATE_MAX_WINDOW_S = 0.05
-# Steps the runner took since parking its copy: past this, redoing them after a miss would cost more than
-# parking a fresh copy.
-REPARK_AFTER_S = 0.02
+# The runner's word to its shadow on an output: (KEEP, i): candidate i is kept, step it and follow on;
+# (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
+# the candidates not tried yet. Each word also carries the runner's counters.
+KEEP, TRY_ON = "keep", "try on"
+IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
 
 
 @dataclass
 class Speculation:
-    """The runner's parked copy (the state before the outputs it has stepped itself since) and what became of it."""
+    """The runner's shadow (a copy one output behind, see fork_replay.shadow), or in a shadow what it follows."""
 
-    parked: Parked | None = None
-    since_parked_s: float = 0.0
-    redo_until: int | None = None  # in a woken copy: the output the runner's first candidate missed
+    shadow: Shadow | None = None  # in the runner
+    following: Following | None = None  # in a shadow: where the runner's word comes from
     # The last output kept was reproduced field for field: then a candidate that reproduces only the
     # trajectory (a standing ego: the same points from another pose message, another stamp) does not end
     # the search, the others are searched for the exact one (none: the closest is kept as before). A stack
     # whose outputs never match exactly is not held up: after one such output this is off again.
     expect_exact: bool = False
-    hits: int = 0  # outputs whose first candidate, stepped in the runner, was accepted
-    misses: int = 0  # … was not: the parked copy took over and searched the others
+    hits: int = 0  # cheap outputs whose first candidate was accepted
+    misses: int = 0  # … was not: the shadow took over and tried the others
 
-    def park_here(self) -> int | None:
-        """Park a copy unless a fresh one stands by; in a copy woken later: the output where the runner missed."""
-        if self.parked is not None and self.since_parked_s <= REPARK_AFTER_S:
-            return None
-        self.let_go()
-        handle = park()
-        if isinstance(handle, Woken):
-            return int(handle.message)
-        self.parked, self.since_parked_s = handle, 0.0
-        return None
+    def shadow_here(self) -> None:
+        """Fork a shadow unless one follows already (in the new shadow this returns with ``following`` set)."""
+        if self.shadow is None and self.following is None:
+            handle = shadow()
+            if isinstance(handle, Following):
+                self.following = handle
+            else:
+                self.shadow = handle
+
+    def word(self) -> tuple[str, Any]:
+        """In a shadow: the runner's word on the output at hand (it exits when the runner has none)."""
+        assert self.following is not None
+        kind, argument, (self.hits, self.misses) = next_word(self.following)
+        if kind != KEEP:  # from here on this process is the runner
+            os.close(self.following.word_fd)
+            self.following = None
+        return kind, argument
+
+    def tell(self, kind: str, argument: Any) -> None:
+        """In the runner: its word to the shadow; with any word but KEEP the runner ends here."""
+        if self.shadow is None:
+            assert kind == KEEP, "only a runner with a shadow hands an output over"
+            return
+        word = (kind, argument, (self.hits, self.misses))
+        if kind == KEEP:
+            tell(self.shadow, word)
+        else:
+            hand_over(self.shadow, word)
 
     def let_go(self) -> None:
-        if self.parked is not None:
-            drop(self.parked)
-            self.parked = None
+        if self.shadow is not None:
+            drop(self.shadow)
+            self.shadow = None
+
+
+def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
+                  in_turn: bool) -> tuple[tuple[int, Any] | None, list[int]]:
+    """(candidate and outcome kept, or None; candidates tried in vain) for one output, stepped in this process.
+
+    ``in_turn`` (a cheap output with several candidates): the first
+    ``IN_TURN`` candidates are stepped here in order, a shadow holding the
+    state from before the output; the first accepted is kept and the shadow
+    steps it too; a wrong one hands the output over to the shadow, which
+    tries the next (with a shadow of its own). A lone candidate is stepped
+    here (the shadow, if any, follows). Anything else (None) is left to the
+    forked search, whose time limits stop a wrong frame that searches long.
+    """
+    tried: dict[int, Any] = {}  # outcomes of the candidates tried so far on this output
+    while True:
+        if in_turn:
+            speculation.shadow_here()  # (in the new shadow this returns too: it waits for the word on this output)
+        if speculation.following is not None:
+            kind, argument = speculation.word()
+            if kind == TRY_ON:  # a candidate was wrong: this process, in the state from before, tries the next
+                tried = argument
+                if len(tried) >= IN_TURN:
+                    return None, sorted(tried)
+                continue
+            return (argument, run(argument)), []
+        if count == 1:
+            outcome = run(0)
+            if outcome is None:
+                return None, []
+            speculation.tell(KEEP, 0)
+            return (0, outcome), []
+        if not in_turn:
+            return None, []
+        index = len(tried)  # in turn: the candidates in order
+        outcome = run(index)
+        if accepted(outcome):
+            speculation.hits += index == 0
+            speculation.tell(KEEP, index)
+            return (index, outcome), []
+        speculation.misses += index == 0
+        tried[index] = outcome
+        speculation.tell(TRY_ON, tried)  # does not return: the shadow carries on from the state before
 
 
 def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
@@ -409,7 +482,7 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
                    result: Extraction, out_index: int, speculation: Speculation, cheap: bool):
     """(candidate, comparison, exact, tries, step seconds) kept for one output, in the process that carries
     on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted.
-    For a ``cheap`` output the first candidate is stepped right here (see :class:`Speculation`)."""
+    A ``cheap`` output's candidates are stepped right here, one after another (see :func:`_step_in_turn`)."""
     t0 = time.perf_counter()
     frames = [{name: decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
     result.reconstruction_seconds += time.perf_counter() - t0
@@ -432,37 +505,11 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
             outcome[1] or not speculation.expect_exact)
 
     t1 = time.perf_counter()
-    kept = None
-    order = list(range(len(options)))
-    if len(options) == 1:  # one candidate: nothing to keep apart, step right here
-        outcome = run(0)
-        kept = None if outcome is None else (0, outcome)
-        if outcome is not None:  # a parked copy would redo this step too
-            speculation.since_parked_s += outcome[2]
-    elif speculation.redo_until is not None and out_index < speculation.redo_until:
-        kept = (0, run(0))  # a woken copy redoing what the runner did: its first candidate was accepted
-        speculation.hits += 1
-    else:
-        missed = out_index if speculation.redo_until == out_index else (
-            speculation.park_here() if cheap else None)
-        if missed is not None and missed != out_index:  # woken: redo the runner's steps up to its miss
-            speculation.redo_until = missed
-            kept = (0, run(0))
-            speculation.hits += 1
-        elif missed == out_index:  # the first candidate was tried (and missed) by the runner: the others first
-            speculation.redo_until = None
-            speculation.misses += 1
-            order = order[1:] + order[:1]
-        elif cheap:
-            outcome = run(0)
-            if not accepted(outcome):
-                assert speculation.parked is not None
-                wake(speculation.parked, out_index)  # does not return: the copy carries on
-            kept = (0, outcome)
-            speculation.hits += 1
-            speculation.since_parked_s += outcome[2]
+    kept, in_vain = _step_in_turn(len(options), run, accepted, speculation, in_turn=cheap and len(options) > 1)
+    # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
+    order = [i for i in range(len(options)) if i not in in_vain] + in_vain
     if kept is None:
-        speculation.let_go()  # the search's winner carries on: it must not inherit a parked copy
+        speculation.let_go()  # the search's winner carries on: it must not inherit the shadow's pipe
         tried = search.search(len(order), lambda k: run(order[k]), accepted=accepted,
                               closeness=lambda r: r[0].distance, limit_s=limit_s,
                               settles=lambda r: r[1] and r[0].within(cfg.threshold), retry_limit_s=full_limit_s)
@@ -507,7 +554,7 @@ def search_note(extraction: Extraction) -> str | None:
     stepped = extraction.first_stepped_in_runner + extraction.first_missed_in_runner
     if stepped:
         parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
-                     f"({extraction.first_missed_in_runner} wrong: searched on from a parked copy)")
+                     f"({extraction.first_missed_in_runner} wrong: searched on by a copy one output behind)")
     if extraction.candidates_cut:
         parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
                      f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "

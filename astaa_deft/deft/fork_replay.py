@@ -318,54 +318,66 @@ class ForkedSearch:
 
 
 @dataclass
-class Parked:
-    """A forked copy of the runner, blocked until woken: the planner state of the moment it was parked."""
+class Shadow:
+    """In the runner: a forked copy of it that follows one output behind (see :func:`shadow`)."""
 
     pid: int
-    wake_fd: int
+    word_fd: int  # the runner's word on each output goes down this pipe
 
 
 @dataclass
-class Woken:
-    """Returned by :func:`park` in the copy once the runner woke it: the copy carries on as the runner."""
+class Following:
+    """Returned by :func:`shadow` in the copy: it follows the runner, reading its word from ``word_fd``."""
 
-    message: Any
+    word_fd: int
 
 
-def park() -> Parked | Woken:
-    """Fork a parked copy of this process; in this process return its handle, in the copy (once woken) Woken.
+def shadow() -> Shadow | Following:
+    """Fork a copy of this process that follows it; here the handle, in the copy :class:`Following`.
 
-    Cheaper than a candidate search when the first candidate is usually
-    right: the runner steps it itself, and only when it is wrong wakes the
-    copy (which redoes, from the parked state, what the runner did since)
-    and exits. A copy never woken exits when the runner drops it or ends.
-    The runner must drop its copy before it forks anything else that could
-    outlive it (a candidate search's winner must not inherit the wake pipe).
+    The runner steps an output's first candidate itself and tells the copy
+    what became of it (:func:`tell`): the copy, waiting at that output in
+    the state from before it, steps the same candidate when it was right —
+    on the other core, while the runner goes on — and takes over when it
+    was wrong (:func:`hand_over`), searching the others from the exact state
+    before the output. A right first candidate then costs one step in each
+    process and no fork; a wrong one, the copy's remaining lag (one output
+    at most). The runner must :func:`drop` its copy before it forks anything
+    else that could outlive it (a candidate search's winner must not inherit
+    the word pipe).
     """
-    wake_r, wake_w = os.pipe()
+    word_r, word_w = os.pipe()
     pid = os.fork()
     if pid == 0:
-        os.close(wake_w)
-        try:
-            message = _receive(wake_r)
-        except (EOFError, OSError, pickle.UnpicklingError):
-            os._exit(0)  # dropped, or the runner ended
-        os.close(wake_r)
-        return Woken(message)
-    os.close(wake_r)
-    return Parked(pid, wake_w)
+        os.close(word_w)
+        return Following(word_r)
+    os.close(word_r)
+    return Shadow(pid, word_w)
 
 
-def drop(parked: Parked) -> None:
+def tell(copy: Shadow, word: Any) -> None:
+    """The runner's word on the output the copy waits at; the copy reads it with :func:`next_word`."""
+    _send(copy.word_fd, word)
+
+
+def next_word(following: Following) -> Any:
+    """In the copy: the runner's next word; the copy exits when there is none (dropped, or the runner ended)."""
+    try:
+        return _receive(following.word_fd)
+    except (EOFError, OSError, pickle.UnpicklingError):
+        os._exit(0)
+
+
+def drop(copy: Shadow) -> None:
     """The copy is not needed: it reads end-of-file and exits."""
-    os.close(parked.wake_fd)
-    reap_later(parked.pid)
+    os.close(copy.word_fd)
+    reap_later(copy.pid)
 
 
-def wake(parked: Parked, message: Any) -> None:
-    """Hand the run over to the parked copy and exit: this process's state is not the one to carry on."""
-    _send(parked.wake_fd, message)
-    os.close(parked.wake_fd)
+def hand_over(copy: Shadow, word: Any) -> None:
+    """Tell the copy its last word and exit: this process's state is not the one to carry on."""
+    _send(copy.word_fd, word)
+    os.close(copy.word_fd)
     os._exit(0)
 
 
