@@ -104,3 +104,26 @@ def test_built_instances_are_the_dataclasses_own() -> None:
         assert fast == slow and repr(fast) == repr(slow)
         with pytest.raises(FrozenInstanceError):
             fast.__setattr__(fields(cls)[0].name, None)
+
+
+def test_the_recorders_event_text_reads_back_as_the_stdlibs():
+    # The recorder writes an event's JSON with orjson where it can (a fifth of the cost): the same
+    # object back, dates and dataclasses as the stdlib's default=str writes them, big integers exact.
+    import dataclasses
+    import datetime
+    import enum
+    import json
+
+    from astaa_deft.session.recorder import _EVENT_ENCODER, _event_text
+
+    class Gear(enum.IntEnum):
+        DRIVE = 3
+
+    @dataclasses.dataclass
+    class Point:
+        x: int
+
+    for body in ({"fields": [{"path": "v", "old": 1.5, "new": {"float": "nan"}}], "consumers": ["é"]},
+                 {"stamp": datetime.datetime(2020, 1, 1)}, {"point": Point(1)}, {"gear": Gear.DRIVE},
+                 {"seq": 2**70}, {"small": 1e-05}, {"sequence": None, "flag": True}):
+        assert json.loads(_event_text(body)) == json.loads(_EVENT_ENCODER.encode(body)), body
