@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from astaa_deft.deft.frames import Stream, candidates, frame_at, newest_at_or_before
+from astaa_deft.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_candidates
 
 MS = 1_000_000
 
@@ -71,3 +71,17 @@ def test_candidates_are_distinct_message_sets():
     sets = [tuple(sorted(x.choice.items())) for x in c]
     assert len(sets) == len(set(sets))
     assert len(c) == 3  # at 100, at 101 (pose #1 and speed #1 together), at 102
+
+
+def test_a_per_trigger_frame_may_use_an_input_logged_just_after_the_answer():
+    # Seen under load (control replayed from a demo run): the planner's trajectories 34-36 reached the
+    # recorder in one burst, 3.9 ms after the command that control had computed from trajectory 34. With
+    # the answer's log time as the bound, that frame was no candidate: the replay diverged from there on.
+    streams = {"localization": Stream("localization", [0, 20 * MS, 40 * MS]),
+               "trajectory": Stream("trajectory", [-50 * MS, 24 * MS, 26 * MS])}
+    answered = 20 * MS + 100_000  # the answer to localization 1, logged before trajectory 1
+    without = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, 0, answered)
+    assert {"localization": 1, "trajectory": 1} not in without
+    found = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, 0, answered, skew_ns=5 * MS)
+    assert found[0] == {"localization": 1, "trajectory": 0}  # the frame at the trigger still comes first
+    assert {"localization": 1, "trajectory": 1} in found and {"localization": 1, "trajectory": 2} not in found

@@ -112,7 +112,7 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
     answers with nothing (``step`` returns None) is plausible when the next
     output was logged after the next trigger. Like the planner's, a frame
     has candidates (each other input with a message logged between the
-    trigger and the answer, or without its messages logged up to
+    trigger and the answer, plus ``skew_ms``, or without its messages logged up to
     ``lookback_ms`` before the trigger: the module may have received them
     in another order than the recorder), tried from the same state, the
     first that matches kept (none: the closest). Inputs that do not decode are dropped, as the module's
@@ -157,7 +157,7 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
         nothing_plausible = output is None or t_next is None or output.log_time >= t_next
         t1 = time.perf_counter()
         options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback,
-                                     output.log_time if output is not None else None)
+                                     output.log_time if output is not None else None, int(cfg.skew_ms * 1e6))
         if not planner.can_snapshot:
             options = options[:1]
         start_state = planner.snapshot() if len(options) > 1 else None

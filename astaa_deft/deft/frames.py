@@ -175,11 +175,13 @@ def trigger_frame(streams: Mapping[str, Stream], trigger: str, trigger_index: in
 
 
 def trigger_candidates(streams: Mapping[str, Stream], trigger: str, trigger_index: int,
-                       previous: Mapping[str, int], lookback_ns: int, answered_at: int | None = None
-                       ) -> list[dict[str, int]]:
+                       previous: Mapping[str, int], lookback_ns: int, answered_at: int | None = None,
+                       skew_ns: int = 0) -> list[dict[str, int]]:
     """Per-trigger frames, most likely first: :func:`trigger_frame`; then, per other input, the frame
-    with each of its messages logged after the trigger but before the recorded answer (``answered_at``),
-    and the frame without each of its messages logged up to ``lookback_ns`` before the trigger: the
+    with each of its messages logged after the trigger but before the recorded answer (``answered_at``,
+    plus ``skew_ns``: the recorder may log the answer before an input the module had — seen under
+    load, a planner's burst of trajectories logged 4 ms after the command that used the first), and
+    the frame without each of its messages logged up to ``lookback_ns`` before the trigger: the
     recorder and the module each see their own arrival order."""
     first = trigger_frame(streams, trigger, trigger_index, previous)
     out = [first]
@@ -187,7 +189,7 @@ def trigger_candidates(streams: Mapping[str, Stream], trigger: str, trigger_inde
     for name, stream in streams.items():
         if name == trigger or answered_at is None:
             continue
-        for idx in range(bisect_right(stream.times, t), bisect_right(stream.times, answered_at)):
+        for idx in range(bisect_right(stream.times, t), bisect_right(stream.times, answered_at + skew_ns)):
             later = {**first, name: idx}
             if later not in out:
                 out.append(later)
