@@ -85,3 +85,19 @@ def test_a_per_trigger_frame_may_use_an_input_logged_just_after_the_answer():
     found = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, 0, answered, skew_ns=5 * MS)
     assert found[0] == {"localization": 1, "trajectory": 0}  # the frame at the trigger still comes first
     assert {"localization": 1, "trajectory": 1} in found and {"localization": 1, "trajectory": 2} not in found
+
+
+def test_a_burst_of_outputs_answers_the_last_triggers_before_it():
+    # Seen under load: control, still without a trajectory, queued three localizations and answered
+    # them all at once when its first trajectory came. Before, each of the first two was taken to be
+    # answered with nothing (its answer was logged after the next trigger) and the pairing slipped.
+    from types import SimpleNamespace
+
+    from astaa_deft.deft.extract import _answered_in_turn
+
+    triggers = [0, 20 * MS, 40 * MS, 60 * MS, 80 * MS]
+    burst = [SimpleNamespace(log_time=t) for t in (62 * MS, 62 * MS + 300_000, 62 * MS + 500_000, 81 * MS)]
+    assert [_answered_in_turn(triggers, i, burst, 0) for i in range(4)] == [False, True, True, True]
+    # One output a period: a trigger whose answer comes after the next trigger got none (as before).
+    steady = [SimpleNamespace(log_time=t) for t in (45 * MS, 65 * MS)]
+    assert [_answered_in_turn(triggers, i, steady, 0) for i in range(3)] == [False, False, True]

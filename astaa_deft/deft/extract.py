@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+from bisect import bisect_left, bisect_right
 import copy
 import functools
 import json
 import math
 import os
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any
@@ -154,7 +155,8 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
                 expected = codecs[cfg.output].decode(output.data)
             except DecodeError as exc:
                 result.warnings.append(f"output {next_output}: recorded output does not decode ({exc})")
-        nothing_plausible = output is None or t_next is None or output.log_time >= t_next
+        nothing_plausible = output is None or t_next is None or not _answered_in_turn(times, t_index, outputs,
+                                                                                      next_output)
         t1 = time.perf_counter()
         options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback,
                                      output.log_time if output is not None else None, int(cfg.skew_ms * 1e6))
@@ -211,6 +213,24 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
             result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))
             break
     return result
+
+
+def _answered_in_turn(times: Sequence[int], t_index: int, outputs: list[LoggedMessage], next_output: int) -> bool:
+    """Is the trigger at ``t_index`` answered by the next of the outputs not paired yet?
+
+    A module answers its triggers in order. The outputs logged within one
+    trigger period answer the last triggers before them, as many as there
+    are: one, normally; several when the module worked off a backlog (seen
+    under load: control answered three queued localizations at once when its
+    first trajectory came). A trigger before those got no answer.
+    """
+    first = outputs[next_output].log_time
+    newest = bisect_right(times, first) - 1  # the newest trigger at or before the first pending output
+    if newest <= t_index:
+        return True
+    end = times[newest + 1] if newest + 1 < len(times) else math.inf
+    burst = bisect_left([o.log_time for o in outputs[next_output:next_output + newest - t_index + 1]], end)
+    return t_index > newest - burst
 
 
 def log_start(log: LogContents) -> int:
