@@ -9,8 +9,9 @@ out together in one message (see ``topology.pack_deliveries``); the batch is sen
 as soon as the forwarder has nothing more waiting, so at ordinary rates each
 delivery is recorded at once. Samples are handled in bursts (``proxy.run_bursts``),
 in arrival order: a burst is one sample whenever the forwarder keeps up.
-Where the interceptor offers a lane for the channel (``Interceptor.lane``),
-the forwarder goes through it and builds no objects per message.
+The forwarder goes through a lane: the interceptor's own for the channel
+(``Interceptor.lane``: no objects built per message) where it offers one,
+else ``on_message`` put in the lane's terms (``_general_lane``).
 
 Where a mutated message's time goes (``set`` on every 200 B JSON message,
 benchmarks/bench_proxy.py with py-spy --gil and per-thread CPU; a shared
@@ -54,7 +55,9 @@ the previous version, medians of three, and compare within a line):
   only for a listener); and the catch-all looks into its FIFO every 2 ms
   instead of waking for every message (its CPU 1.4 -> 0.9 µs/msg).
   bench_proxy, three interleaved pairs of runs: 0.30x passthrough before
-  (0.28-0.42), 0.53-0.59x now (pairs 0.45-0.66). Of the ~9 µs left: the
+  (0.28-0.42); now the median of 9 pairs over three runs 0.55x (pairs
+  0.44-0.66; the runs' medians 0.59, 0.53 and 0.45, the last in a slow
+  phase of the machine). Of the ~9 µs left: the
   puts ~37 % (pyo3 lets the GIL go and takes it back around each, and
   Zenoh's sending thread is woken), the lane ~22 % (orjson's read and
   write 1.3 µs), taking samples ~10 %, the recorder's rows ~8 %.
@@ -147,65 +150,39 @@ class InterceptionBridge:
         self._record_pubs[name] = self.session.declare_publisher(
             intercepted_key(key), congestion_control=BLOCK, allowed_destination=REMOTE)
         consumers = tuple(c for c, _ in live.publishers)
-        pubs = [pub for _consumer, pub in live.publishers]
-        reaches = bool(pubs)  # a delivery to every consumer reaches someone
         rows: list[tuple[int, bytes, bytes | None, bool, Any]] = []
         self._batches[name] = rows
-        record_pub = self._record_pubs[name]
-        lock, dispatch, outbox, on_mutation = self._lock, self._dispatch, self._outbox, self.on_mutation
-        t0, monotonic, time_ns = self.t0, time.monotonic, time.time_ns
-        last_meta, on_message = self._last_meta, self.interceptor.on_message
+        lane = self.interceptor.lane(name, consumers) if consumers else None
+        if lane is None:
+            lane = self._general_lane(name, consumers)
+        return self._lane_forwarder(live, lane, rows, self._record_pubs[name])
 
-        lane = self.interceptor.lane(name, consumers) if pubs else None
-        if lane is not None:
-            return self._lane_forwarder(live, lane, rows, record_pub)
+    def _general_lane(self, name: str, consumers: tuple[str, ...]) -> Callable[[bytes, float], Any]:
+        """``on_message`` in the lane's terms (see ``Interceptor.lane``), where the interceptor offers no lane.
 
-        def forward_burst(samples: list[zenoh.Sample]) -> None:
-            live.count += len(samples)
-            with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
-                for sample in samples:
-                    zpayload = sample.payload
-                    meta = (sample.encoding, sample.attachment, sample.timestamp)
-                    payload = zpayload.to_bytes()
-                    now = monotonic() - t0
-                    deliveries = on_message(name, consumers, payload, now)
-                    if len(deliveries) != 1 or (d := deliveries[0]).at > now or len(d.consumers) != len(pubs):
-                        dispatch(live, deliveries, meta, now, sample)
-                        continue
-                    # The common case, one delivery now to every consumer: what _put does, inline.
-                    original, event = d.original, d.event
-                    if original is None:  # the very same Zenoh payload when nothing changed: no copy
-                        out, data = zpayload, payload
-                    else:
-                        out = data = d.payload
-                    for pub in pubs:
-                        outbox.append((pub, out, meta))
-                    if event is None:
-                        rows.append((time_ns(), data, None, True, None))
-                    else:
-                        self.mutations += 1
-                        rows.append((time_ns(), data, original, reaches, event))
-                        if on_mutation is not None:
-                            on_mutation(event)
-                    if len(rows) >= BATCH_LIMIT:
-                        record_pub.put(pack_deliveries(rows, self.interceptor.event))
-                        rows.clear()
-                    if reaches and self.on_delivered is not None:
-                        self.on_delivered(name, data)
-                last_meta[name] = meta  # what a tick's injected message on this channel goes out with
-                self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
+        Its common case, one delivery now to every consumer, takes the
+        forwarder's short way (an event object in place of the lane's values);
+        anything else goes back as the deliveries, for ``_dispatch``.
+        """
+        on_message, count = self.interceptor.on_message, len(consumers)
 
-        def forward(sample: zenoh.Sample) -> None:
-            forward_burst([sample])
+        def lane(payload: bytes, now: float) -> Any:
+            deliveries = on_message(name, consumers, payload, now)
+            if count and len(deliveries) == 1:
+                d = deliveries[0]
+                if d.at <= now and len(d.consumers) == count:
+                    if d.original is None and d.event is None:
+                        return None
+                    if d.original is not None and d.event is not None:
+                        return d.payload, d.event
+            return deliveries
 
-        forward.on_idle = self.idle  # type: ignore[attr-defined]  # see StarProxy
-        forward.burst = forward_burst  # type: ignore[attr-defined]
-        return forward
+        return lane
 
     def _lane_forwarder(self, live: LiveRoute, lane: Callable[[bytes, float], Any],
                         rows: list[tuple[int, bytes, bytes | None, bool, Any]],
                         record_pub: zenoh.Publisher) -> Callable[[zenoh.Sample], None]:
-        """The forwarder where the interceptor offers a lane: no objects for the messages it rewrites or passes."""
+        """An intercepting forwarder: through the lane, the common delivery handled here (what _put does)."""
         name = live.route.channel.name
         pubs = [pub for _consumer, pub in live.publishers]
         lock, dispatch, outbox, on_mutation, typed = (self._lock, self._dispatch, self._outbox, self.on_mutation,
@@ -228,13 +205,13 @@ class InterceptionBridge:
                         append_row((time_ns(), payload, None, True, None))
                         data = payload
                     elif type(done) is tuple:  # rewritten, for every consumer, now
-                        data, values = done
+                        data, event = done  # the lane's event values, or an event (the general lane)
                         for pub in pubs:
                             append_out((pub, data, meta))
                         self.mutations += 1
-                        append_row((time_ns(), data, payload, True, values))
+                        append_row((time_ns(), data, payload, True, event))
                         if on_mutation is not None:
-                            on_mutation(typed(values))
+                            on_mutation(typed(event) if type(event) is tuple else event)
                     else:
                         dispatch(live, done, meta, now, sample)
                         continue
