@@ -55,9 +55,8 @@ the previous version, medians of three, and compare within a line):
   only for a listener); and the catch-all looks into its FIFO every 2 ms
   instead of waking for every message (its CPU 1.4 -> 0.9 µs/msg).
   bench_proxy, three interleaved pairs of runs: 0.30x passthrough before
-  (0.28-0.42); now the median of 9 pairs over three runs 0.55x (pairs
-  0.44-0.66; the runs' medians 0.59, 0.53 and 0.45, the last in a slow
-  phase of the machine). Of the ~9 µs left: the
+  (0.28-0.42); now the median of 12 pairs over four runs 0.56x (pairs
+  0.44-0.72; the runs' medians 0.59, 0.53, 0.45 and 0.64). Of the ~9 µs left: the
   puts ~37 % (pyo3 lets the GIL go and takes it back around each, and
   Zenoh's sending thread is woken), the lane ~22 % (orjson's read and
   write 1.3 µs), taking samples ~10 %, the recorder's rows ~8 %.
