@@ -51,7 +51,8 @@ def plain_forwarder(live: LiveRoute) -> Callable[[zenoh.Sample], None]:
     return forward
 
 
-def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle: Callable[[], None]) -> None:
+def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle: Callable[[], None],
+               poll: float | None = None) -> None:
     """Hand ``handle_burst`` what waits in ``fifo``, up to BURST_LIMIT samples at a time, in arrival order.
 
     Taking them out together, before handling any, frees FIFO slots in a
@@ -60,8 +61,12 @@ def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle
     wake-up on that one), and each take then contends with that thread's
     refill. Measured on a FIFO kept full by a real publisher, with 10 µs of
     work per sample: 4.7 µs/sample on top of the work taken one at a time,
-    1.3 in bursts of 32, 0.8 in bursts of 128. Returns when the subscriber
-    is undeclared and drained, after handling every sample it took out.
+    1.3 in bursts of 32, 0.8 in bursts of 128. When the FIFO is empty,
+    ``on_idle`` is called, then this waits for the next sample — or, with
+    ``poll``, sleeps that many seconds and looks again: a thread waiting on
+    its FIFO wakes (and takes the GIL) for every sample, one that polls once
+    per look. Returns when the subscriber is undeclared and drained, after
+    handling every sample it took out.
     """
     try_recv, recv = fifo.try_recv, fifo.recv
     while True:
@@ -74,40 +79,15 @@ def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle
                 samples.append(sample)
             if not samples:
                 on_idle()
+                if poll is not None:
+                    time.sleep(poll)
+                    continue
                 samples.append(recv())
         except zenoh.ZError:
             if samples:
                 handle_burst(samples)
             raise
         handle_burst(samples)
-
-
-def run_polled(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], interval: float) -> None:
-    """Hand ``handle_burst`` what waits in ``fifo`` every ``interval`` seconds, never blocking on it.
-
-    A thread blocked on its FIFO wakes for every sample, taking the GIL
-    each time; one that sleeps between looks takes it once per look.
-    Returns when the subscriber is undeclared and drained.
-    """
-    try_recv = fifo.try_recv
-    while True:
-        samples: list[zenoh.Sample] = []
-        try:
-            while True:
-                sample = try_recv()  # ZError once the subscriber is undeclared and drained
-                if sample is None:
-                    break
-                samples.append(sample)
-                if len(samples) == BURST_LIMIT:
-                    handle_burst(samples)
-                    samples = []
-        except zenoh.ZError:
-            if samples:
-                handle_burst(samples)
-            raise
-        if samples:
-            handle_burst(samples)
-        time.sleep(interval)
 
 
 class StarProxy:
@@ -166,14 +146,11 @@ class StarProxy:
 
         def run() -> None:
             try:
-                if burst is not None and poll is not None:
-                    run_polled(fifo, burst, poll)
-                    return
                 if burst is None:
                     for sample in sub:  # ends when the subscriber is undeclared
                         handle(sample)
                     return
-                run_bursts(fifo, burst, on_idle)
+                run_bursts(fifo, burst, on_idle, poll)
             except zenoh.ZError:  # undeclared and drained: what the last samples left waiting goes out too
                 with contextlib.suppress(zenoh.ZError):
                     on_idle()
@@ -201,7 +178,7 @@ class StarProxy:
         """The catch-all sees every producer's message and forwards only undeclared keys.
 
         It looks into its FIFO every CATCH_ALL_POLL_SECONDS rather than
-        waiting on it (``run_polled``): waiting, it woke for every message
+        waiting on it (``run_bursts`` with ``poll``): waiting, it woke for every message
         of every declared channel and took the GIL each time, which on a
         busy channel handed the GIL to and fro with that channel's
         forwarder (with ``set`` on every message, the forwarder's puts then

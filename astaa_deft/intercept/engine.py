@@ -40,9 +40,6 @@ __all__ = ["Delivery", "FieldChange", "Interceptor", "Lane", "MutationEvent", "P
 Lane = Callable[[bytes, float], Any]
 
 
-_UNSELECTED: Any = object()  # on_message's shortcut: the policy did not select this message
-
-
 class PolicyGate:
     """A policy's window and selection: does it act on this message (or injection slot)?"""
 
@@ -102,7 +99,7 @@ class _LivePolicy:
 
 class _ChannelState:
     __slots__ = ("name", "codec", "count", "first_at", "last_at", "previous_payload", "_previous_cache", "acting",
-                 "observers", "anchors", "held", "fast", "fast_selects")
+                 "observers", "anchors", "held", "fast")
 
     def __init__(self, name: str, codec: Codec):
         self.name = name
@@ -118,7 +115,6 @@ class _ChannelState:
         self.held: list[tuple[float, int, Delivery]] = []  # delayed deliveries, a heap by due time
         # The acting policy's shortcut when it alone acts here, for every consumer (see ActionRuntime.fast_path).
         self.fast: FastPath | None = None
-        self.fast_selects: Any = None  # with ``fast``: its policy's gate.selects, looked up once
 
     def previous_message(self) -> dict:
         """The previous real message, decoded once (derive rules like time.jump_back read it)."""
@@ -150,7 +146,6 @@ class Interceptor:
         for state in self._channels.values():
             if len(state.acting) == 1 and not state.observers and not state.acting[0].policy.consumers:
                 state.fast = state.acting[0].runtime.fast_path(state.name)
-                state.fast_selects = state.acting[0].gate.selects
 
     # -- the proxy's interface ---------------------------------------------------------
     def channels(self) -> set[str]:
@@ -164,31 +159,17 @@ class Interceptor:
         # Delayed messages of this channel that fell due go first (others wait for on_tick:
         # the caller routes what on_message returns by the message's channel).
         out = self._release_due(state, now) if state.held else []
-        state.count += 1
-        index = state.count
-        if index == 1:
-            state.first_at = now
-        state.last_at = now
-        for number, gate in state.anchors:
-            if number == index:
-                gate.anchored_at(now)
-        fast = state.fast
-        if fast is not None:  # one acting policy, no observers (see __init__): the short way
-            done = fast(payload) if state.fast_selects(channel, now) else _UNSELECTED
-            if done is _UNSELECTED:
+        if state.fast is not None:  # one acting policy, no observers (see __init__): the short way
+            done = self._fast_message(state, consumers, payload, now)
+            if done is None:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
-            elif done is not None:
-                live = state.acting[0]
-                event = MutationEvent.from_values((self.testcase.id, live.policy.id, live.policy.action.name, channel,
-                                                   consumers, index, now, done[1], {}))
-                self._count_touch(event)
+            elif type(done) is tuple:
                 out.append(built(Delivery, consumers=consumers, payload=done[0], at=now, original=payload,
-                                 event=event))
-            else:  # the shortcut declined this message
-                info = MessageInfo(channel, index, now, state.codec, state.previous_message)
-                out.extend(self._deliver(self._apply(state.acting, consumers, payload, info), now))
-            state.previous_payload = payload
+                                 event=MutationEvent.from_values(done[1])))
+            else:
+                out.extend(done)
             return out
+        index = self._arrived(state, now)
         selected = [live for live in state.acting if live.gate.selects(channel, now)]
         if selected:
             info = MessageInfo(channel, index, now, state.codec, state.previous_message)
@@ -223,37 +204,45 @@ class Interceptor:
         state = self._channels.get(channel)
         if state is None or state.fast is None:
             return None
-        fast, selects, anchors = state.fast, state.fast_selects, state.anchors
-        live = state.acting[0]
-        testcase, policy, action = self.testcase.id, live.policy.id, live.policy.action.name
-        touched, named = self._touched, policy.split("+")  # as _count_touch counts it
+        fast_message, on_message = self._fast_message, self.on_message
 
         def run(payload: bytes, now: float) -> Any:
             if state.held:  # something delayed on this channel may fall due first: the general way
-                return self.on_message(channel, consumers, payload, now)
-            state.count += 1
-            index = state.count
-            if index == 1:
-                state.first_at = now
-            state.last_at = now
-            for number, gate in anchors:
-                if number == index:
-                    gate.anchored_at(now)
-            if not selects(channel, now):
-                state.previous_payload = payload
-                return None
-            done = fast(payload)
-            if done is None:  # the shortcut declined this message
-                info = MessageInfo(channel, index, now, state.codec, state.previous_message)
-                out = self._deliver(self._apply(state.acting, consumers, payload, info), now)
-                state.previous_payload = payload
-                return out
-            state.previous_payload = payload
-            for name in named:
-                touched[name] = touched.get(name, 0) + 1
-            return done[0], (testcase, policy, action, channel, consumers, index, now, done[1], {})
+                return on_message(channel, consumers, payload, now)
+            return fast_message(state, consumers, payload, now)
 
         return run
+
+    def _arrived(self, state: _ChannelState, now: float) -> int:
+        """A real message arrived on the channel: its traffic and the windows anchored to it; its index."""
+        state.count += 1
+        index = state.count
+        if index == 1:
+            state.first_at = now
+        state.last_at = now
+        for number, gate in state.anchors:
+            if number == index:
+                gate.anchored_at(now)
+        return index
+
+    def _fast_message(self, state: _ChannelState, consumers: tuple[str, ...], payload: bytes, now: float) -> Any:
+        """A message on a channel with a shortcut (``state.fast``), as ``lane`` answers (delayed ones released)."""
+        index = self._arrived(state, now)
+        channel, live = state.name, state.acting[0]
+        if not live.gate.selects(channel, now):
+            state.previous_payload = payload
+            return None
+        assert state.fast is not None  # (called only where it is)
+        done = state.fast(payload)
+        if done is None:  # the shortcut declined this message
+            info = MessageInfo(channel, index, now, state.codec, state.previous_message)
+            out = self._deliver(self._apply(state.acting, consumers, payload, info), now)
+            state.previous_payload = payload
+            return out
+        state.previous_payload = payload
+        policy = live.policy
+        self._count_touch(policy.id)
+        return done[0], (self.testcase.id, policy.id, policy.action.name, channel, consumers, index, now, done[1], {})
 
     @staticmethod
     def event(values: tuple) -> MutationEvent:
@@ -322,9 +311,9 @@ class Interceptor:
             items = after
         return items
 
-    def _count_touch(self, event: MutationEvent) -> None:
-        """One more message touched by each policy the event names (stacked policies share one event)."""
-        for policy in event.policy.split("+"):
+    def _count_touch(self, policies: str) -> None:
+        """One more message touched by each policy an event names (stacked policies share one event)."""
+        for policy in policies.split("+"):
             self._touched[policy] = self._touched.get(policy, 0) + 1
 
     def _deliver(self, items: list[Pending], now: float) -> list[Delivery]:
@@ -333,7 +322,7 @@ class Interceptor:
         for item in items:
             delivery = item.to_delivery()
             if delivery.event is not None:
-                self._count_touch(delivery.event)
+                self._count_touch(delivery.event.policy)
             if delivery.at > now and delivery.consumers:
                 assert delivery.event is not None  # only an action (delay) postpones a delivery
                 held = self._channels[delivery.event.channel].held
