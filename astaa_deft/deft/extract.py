@@ -374,7 +374,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             exact=exact,
         ))
         report(out_index + 1, len(outputs))
-    if speculation.following is not None:  # a shadow told OK on the last output: the runner reports, not it
+    if speculation.following is not None:  # a shadow told KEEP on the last output: the runner reports, not it
         os._exit(0)
     if search is not None:  # the counters as the last runner holds them (each winner takes them over)
         speculation.let_go()

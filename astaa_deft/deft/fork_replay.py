@@ -376,7 +376,7 @@ def drop(copy: Shadow) -> None:
 
 def hand_over(copy: Shadow, word: Any) -> None:
     """Tell the copy its last word and exit: this process's state is not the one to carry on."""
-    _send(copy.word_fd, word)
+    tell(copy, word)
     os.close(copy.word_fd)
     os._exit(0)
 
