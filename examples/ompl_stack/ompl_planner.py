@@ -62,7 +62,7 @@ def _release_all() -> None:
 
 class OmplPlanner:
     def __init__(self, seed: int = 7, iterations: int = 250, infeasible_iterations: int = 1250,
-                 goal_x: float = 50.0):
+                 goal_x: float = 50.0, reuse: bool | str = True):
         ou.setLogLevel(ou.LOG_WARN)
         # Before any planner exists: OMPL seeds each RNG it creates from this sequence. A second
         # planner in one process (a test suite's fresh replay) re-seeds it on purpose; OMPL calls that an
@@ -74,6 +74,8 @@ class OmplPlanner:
         # Numbers may come as text (a spec's replay args are strings).
         self.iterations, self.infeasible_iterations = int(iterations), int(infeasible_iterations)
         self.goal_x = float(goal_x)
+        # reuse=False plans afresh every cycle (a CPU-heavy planner: every cycle a full search).
+        self.reuse = reuse if isinstance(reuse, bool) else str(reuse).strip().lower() not in ("0", "false", "no", "")
         self.space = ob.ReedsSheppStateSpace(TURNING_RADIUS)
         self._set_bounds(0.0)
         self.si = ob.SpaceInformation(self.space)
@@ -135,7 +137,7 @@ class OmplPlanner:
         self._set_bounds(x)
         self.seq += 1
         status, iterations = "reused", 0
-        path = self._reusable(x, y)
+        path = self._reusable(x, y) if self.reuse else None
         if path is None:
             path, iterations = self._search(x, y, yaw)
             status = "planned" if path is not None else "stop"

@@ -31,13 +31,15 @@ def main() -> int:
     ap.add_argument("--iterations", type=int, default=250)
     ap.add_argument("--infeasible-iterations", type=int, default=1250)
     ap.add_argument("--goal-x", type=float, default=50.0)
+    ap.add_argument("--reuse", default="1", help="0: plan afresh every cycle instead of reusing a still-free plan")
     args = ap.parse_args()
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
 
     planner = OmplPlanner(seed=args.seed, iterations=args.iterations,
-                          infeasible_iterations=args.infeasible_iterations, goal_x=args.goal_x)
+                          infeasible_iterations=args.infeasible_iterations, goal_x=args.goal_x,
+                          reuse=args.reuse)
     session = zenoh.open(zenoh.Config.from_env())
     pub = session.declare_publisher("ompl/plan", congestion_control=zenoh.CongestionControl.BLOCK)
     wake = threading.Condition()
