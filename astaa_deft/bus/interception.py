@@ -13,65 +13,9 @@ The forwarder goes through a lane: the interceptor's own for the channel
 (``Interceptor.lane``: no objects built per message) where it offers one,
 else ``on_message`` put in the lane's terms (``_general_lane``).
 
-Where a mutated message's time goes (``set`` on every 200 B JSON message,
-benchmarks/bench_proxy.py with py-spy --gil and per-thread CPU; a shared
-2-core machine under load, so the figures come from runs interleaved with
-the previous version, medians of three, and compare within a line):
-
-* before this round (tool 53 µs CPU/msg against 12 for passthrough; by
-  thread kind Python 38, Zenoh's receiving thread 6.4, sending thread
-  6.0): of the forwarding thread's time, taking samples out of the FIFO
-  ~27 % (a full FIFO freed one slot per take: Zenoh's receiving thread
-  woken per message, each take contending with its refill), the engine
-  ~34 % (the ``set`` shortcut 25: orjson 1.2 µs, then five bytes searches
-  over the output, 1.5 µs, and three records built with keyword
-  arguments), puts and the recorder's rows ~17 %, sample attributes,
-  copies and the lock the rest;
-* now (tool 35 against 6; Python 30, receiving 2.4, sending 1.6; in
-  process, on a real FIFO with no other load, 13.8 -> 12.1 µs of the
-  forwarding thread per message): the forwarder takes up to
-  ``BURST_LIMIT`` samples out at once (``proxy.run_bursts``; on a FIFO
-  kept full by a real publisher, 4.7 µs of overhead per sample taken one
-  at a time, 0.8 in bursts of 128) and handles them under one lock; the
-  outbox is put once per burst (Zenoh's sending thread wakes once for
-  it), with only the arguments a message has; the common delivery is
-  handled inline, reusing the bytes already read (an untouched payload
-  was read twice); ``json_fast.dumps`` searches its output as text (1.4
-  -> 0.55 µs) and the shortcut builds its records from dict displays. Of
-  the forwarding thread now: taking samples 11-19 % (still contended with
-  the refill), the engine ~35 %, the recorder's rows ~10 % (the event's
-  attribute tuple and ``marshal``, 1.3 µs a row), puts ~9 %, sample
-  attributes and bytes ~8 %. The recorder writes a mutated delivery
-  (original, delivery, event) in 17 µs of its writing thread, from 28: it
-  no longer rebuilds the event to get its JSON form, and one JSON encoder
-  serves every event.
-
-* this round (the lane): the forwarder thread's CPU per mutated message
-  13.7 -> 8.6-9.6 µs (bench_proxy's run, 300k messages, per-thread CPU
-  from /proc). Where one policy with a fast path rewrites a channel, the
-  forwarder calls the engine's lane (``Interceptor.lane``): no
-  ``Delivery``, event or field-change objects per message, the event's
-  values go into the recorder's row as they are (a typed event is built
-  only for a listener); and the catch-all looks into its FIFO every 2 ms
-  instead of waking for every message (its CPU 1.4 -> 0.9 µs/msg).
-  bench_proxy, three interleaved pairs of runs: 0.30x passthrough before
-  (0.28-0.42); now the median of 12 pairs over four runs 0.56x (pairs
-  0.44-0.72; the runs' medians 0.59, 0.53, 0.45 and 0.64). Of the ~9 µs left: the
-  puts ~37 % (pyo3 lets the GIL go and takes it back around each, and
-  Zenoh's sending thread is woken), the lane ~22 % (orjson's read and
-  write 1.3 µs), taking samples ~10 %, the recorder's rows ~8 %.
-
-Tried and measured worse: flushing the outbox after every message (the
-sending thread woken per put: 12.8 µs/msg), and, in the recorder, Python
-callbacks run on Zenoh's own receiving thread (indirect=False: 35 µs/msg
-against 18, likely a Python thread state per callback), which is why the
-forwarders stay on FIFOs. Not measurable in the throughput's noise: the
-catch-all's thread (it sees every producer's message and drops the declared
-ones) switched off entirely; its CPU is (above).
-
-Earlier (wave 1): the event travels as ``marshal`` data that the recorder
-turns into JSON in its own process, and the run's typed record is built only
-if someone listens (``on_mutation``).
+Why the forwarder is shaped this way (bursts, one put per burst, the
+lane, FIFOs rather than callbacks on Zenoh's thread) and what each choice
+bought is measured in docs/performance.md ("Interception").
 """
 
 from __future__ import annotations

@@ -56,17 +56,13 @@ def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle
     """Hand ``handle_burst`` what waits in ``fifo``, up to BURST_LIMIT samples at a time, in arrival order.
 
     Taking them out together, before handling any, frees FIFO slots in a
-    burst: a full FIFO freed one slot per message wakes Zenoh's receiving
-    thread once per message (a futex wake on this thread, a sleep and a
-    wake-up on that one), and each take then contends with that thread's
-    refill. Measured on a FIFO kept full by a real publisher, with 10 µs of
-    work per sample: 4.7 µs/sample on top of the work taken one at a time,
-    1.3 in bursts of 32, 0.8 in bursts of 128. When the FIFO is empty,
-    ``on_idle`` is called, then this waits for the next sample — or, with
-    ``poll``, sleeps that many seconds and looks again: a thread waiting on
-    its FIFO wakes (and takes the GIL) for every sample, one that polls once
-    per look. Returns when the subscriber is undeclared and drained, after
-    handling every sample it took out.
+    burst rather than waking Zenoh's receiving thread once per message
+    (docs/performance.md, "Taking samples in bursts"). When the FIFO is
+    empty, ``on_idle`` is called, then this waits for the next sample — or,
+    with ``poll``, sleeps that many seconds and looks again (a waiting
+    thread takes the GIL for every sample, a polling one once per look).
+    Returns when the subscriber is undeclared and drained, after handling
+    every sample it took out. Runs on the caller's thread.
     """
     try_recv, recv = fifo.try_recv, fifo.recv
     while True:

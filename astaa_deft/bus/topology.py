@@ -111,8 +111,7 @@ def _event_wire(event: Any) -> Any:
     """An event as a batch row carries it: its attribute tuple (see ``intercept_record``), or its JSON form.
 
     A tuple is that attribute tuple already (the interception lane's event
-    values). (attrgetter: one C call where nine attribute reads and a
-    comprehension cost a third of a row, measured.)
+    values). (One ``attrgetter`` call: docs/performance.md, "The recorder's rows".)
     """
     kind = type(event)
     if kind is tuple:
@@ -129,8 +128,8 @@ def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]],
     ``original`` and ``event`` are None for a message delivered untouched;
     ``event`` is a mutation event (or its JSON form, a dict), duck-typed as in
     ``intercept_record``, or its attribute tuple, which ``typed`` turns into
-    the event where marshal cannot carry it. The whole batch is one ``marshal`` call (measured:
-    a third of a per-row record's cost on the proxy's thread); an event
+    the event where marshal cannot carry it. The whole batch is one ``marshal`` call
+    (docs/performance.md, "The recorder's rows"); an event
     whose values marshal cannot carry exactly travels as its JSON text.
     Under load the proxy sends what piled up while it was busy in one Zenoh
     message (one put, one recorder callback); when it keeps up, a batch holds

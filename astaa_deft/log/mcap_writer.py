@@ -1,8 +1,8 @@
 """An MCAP writer with a cheap per-message path: the bytes of ``mcap.writer.Writer``, at a tenth of its cost.
 
 ``mcap``'s writer builds a dataclass, a dozen small writes and an index
-entry per message (about 20 µs each, measured: most of what the recorder
-spent per message). Here a message is one ``struct`` pack appended to the
+entry per message (most of what the recorder spent per message:
+docs/performance.md, "The log writer"). Here a message is one ``struct`` pack appended to the
 open chunk; message indexes are packed once per chunk. Every other record
 (header, schemas, channels, chunks, attachments, metadata, the summary)
 is written by ``mcap``'s own record classes, in the same order and with the

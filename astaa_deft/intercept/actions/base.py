@@ -108,8 +108,8 @@ def event_json_form(testcase: str, policy: str, action: str, channel: str, consu
     """``MutationEvent.to_json`` from the event's values (``changes``: (path, old, new) triples).
 
     The recorder writes an event's JSON form from the values the proxy sent,
-    without building the event and its field changes first (measured: that
-    was half of what its JSON form cost, per mutated message).
+    without building the event and its field changes first (docs/performance.md,
+    "Mutation events").
     """
     return {
         "testcase": testcase, "policy": policy, "action": action, "channel": channel, "consumers": list(consumers),
