@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -19,31 +18,18 @@ from astaa_deft.deft.fork_replay import can_fork
 from astaa_deft.deft.workflow import extract_module_tests
 from astaa_deft.errors import InputError
 from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.spec_loader import load_spec
+from test_log import write_finished_log
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO_SPEC = ROOT / "astaa_deft" / "data" / "specs" / "demo_av.yaml"
 
 pytestmark = pytest.mark.skipif(not can_fork(), reason="the forked replay needs os.fork (POSIX)")
 
-OTHER_SPEC = textwrap.dedent("""\
-    name: other
-    modules: [{name: a, command: "true"}]
-    channels: [{name: data, key: t/data, producer: a, type: Sample}]
-    types:
-      Sample: {seq: uint64, value: float64}
-    """)
-
 
 def other_spec_log(path: Path) -> Path:
-    """An intact, finished log of another system: none of the demo planner's channels."""
-    spec = load_spec_text(OTHER_SPEC)
-    writer = LogWriter(path, spec)
-    channel = writer.bus_channel(spec.channel("data"))
-    for i in range(50):
-        writer.message(channel, 1_000_000_000 + i * 1_000_000, json.dumps({"seq": i, "value": 0.5}).encode())
-    writer.finish()
-    return path
+    """An intact, finished log of another system (tests/test_log.py's): none of the demo planner's channels."""
+    return write_finished_log(path)
 
 
 def outputs_only_log(path: Path) -> Path:

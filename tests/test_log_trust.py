@@ -45,7 +45,7 @@ def crafted_spec(command_marker: Path) -> str:
         name: crafted
         modules:
           - name: talker
-            command: ["{{python}}", "-c", "import pathlib, sys, time; pathlib.Path(sys.argv[1]).touch(); time.sleep(60)",
+            command: ["{{python}}", "-c", "import pathlib, sys; pathlib.Path(sys.argv[1]).touch()",
                       "{command_marker}"]
             cwd: /
             env: {{GREETING: hello}}
