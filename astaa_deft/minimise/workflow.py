@@ -30,8 +30,8 @@ from ..errors import InputError, Problem
 from ..intercept.testcase import TestCase, parse_testcase
 from ..log import layout
 from ..log.reader import LogContents, read_log
-from ..spec.executes import TRUST_FLAG, what_spec_runs
 from ..monitor import with_typed_invariants
+from ..spec.executes import TRUST_FLAG, what_spec_runs
 from .anchoring import choose_anchor, pin_to_anchor
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
@@ -119,11 +119,13 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
         say(f"warning: {warning}")
     spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None,
                                                trust_log_spec=options.trust_log_spec))
-    if spec.path is None:  # the log's own spec, trusted: live runs (their recorder) and replays need it as a file
+    if spec.path is None:  # the log's own spec (trusted): live runs (their recorder) and replays need it as a file
         from ..spec_loader import load_spec
 
-        say(f"running what the spec stored in the log names ({TRUST_FLAG}):")
-        for item in what_spec_runs(spec):
+        runs = what_spec_runs(spec)
+        if runs:
+            say(f"running what the spec stored in the log names ({TRUST_FLAG}):")
+        for item in runs:
             say(f"  {item}")
         spec_path = scratch / "spec.yaml"
         spec_path.write_text(spec.source_text)
