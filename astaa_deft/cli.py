@@ -116,7 +116,12 @@ def build_parser() -> argparse.ArgumentParser:
                           help="delta-debug a failing intercepted run down to the mutations, frames and fields "
                                "that cause it")
     mini.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy --policy …")
-    mini.add_argument("--spec", type=Path, help="the SUT spec (default: the one stored in the log)")
+    trust = mini.add_mutually_exclusive_group()
+    trust.add_argument("--spec", type=Path, help="the SUT spec (the one stored in the log runs only with "
+                                                 "--trust-log-spec)")
+    trust.add_argument("--trust-log-spec", action="store_true",
+                       help="run the module commands and replay factories the spec stored in the log names "
+                            "(without it, minimise lists them and stops: a log is data)")
     mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation)")
     mini.add_argument("-o", "--out", type=Path, required=True, help="directory for the minimised test case and tests")
     mini.add_argument("--repeats", type=int, default=1, help="whole-SUT re-runs per test when no replay applies")
@@ -132,7 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
     mini.set_defaults(func=lambda a: _cmd("minimise").run(a.log, a.spec, a.invariant, a.out, a.repeats,
                                                           a.parallel, a.live_only, confirm=a.confirm,
                                                           max_tests=a.max_tests,
-                                                          live_fallback=not a.no_live_fallback, jobs=a.jobs))
+                                                          live_fallback=not a.no_live_fallback, jobs=a.jobs,
+                                                          trust_log_spec=a.trust_log_spec))
 
     # fuzz, report (campaigns)
     fz = sub.add_parser("fuzz", help="a campaign: generated test cases, each a fresh run; failures bucketed, "

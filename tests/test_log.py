@@ -127,3 +127,51 @@ def test_fast_mcap_writer_writes_the_bytes_of_mcaps_writer(tmp_path, compression
         scenario(Writer(stream, chunk_size=1024, enable_data_crcs=True,
                         compression=CompressionType.ZSTD if compression else CompressionType.NONE))
     assert ours.read_bytes() == theirs.read_bytes()
+
+
+def write_finished_log(path: Path, count: int = 200) -> Path:
+    spec = load_spec_text(SPEC)
+    writer = LogWriter(path, spec)
+    writer.attachment("spec.yaml", SPEC.encode())
+    cid = writer.bus_channel(spec.channel("data"))
+    for i in range(count):
+        writer.message(cid, 1_000_000_000 + i * 1000, json.dumps({"seq": i, "value": 0.5}).encode())
+    writer.finish()
+    return path
+
+
+@pytest.mark.parametrize("tail, says", [
+    (None, "another MCAP log starts there"),  # the log written twice into one file
+    (b"name: appended\nmodules: []\n", "data appended to the file"),  # YAML after the footer
+    (b"\x00", "data appended to the file"),  # one stray byte
+], ids=["log-twice", "yaml-appended", "one-byte"])
+def test_bytes_after_the_log_end_are_damage(tmp_path, tail, says):
+    one = write_finished_log(tmp_path / "one.mcap")
+    assert read_log(one).intact
+    path = tmp_path / "run.mcap"
+    path.write_bytes(one.read_bytes() + (one.read_bytes() if tail is None else tail))
+    log = read_log(path)
+    assert log.finished and not log.intact and not log.truncated
+    (damage,) = log.damage
+    assert "follow the log's end" in damage and says in damage
+    assert len(log.on("t/data")) == 200  # the first log is read, nothing invented from the rest
+
+    info = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "log", "info", str(path)],
+                          capture_output=True, text=True)
+    assert info.returncode == 0, info.stderr
+    assert "finished cleanly: NO" in info.stdout and "follow the log's end" in info.stderr
+
+    check = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "check", str(path)],
+                           capture_output=True, text=True)
+    # As any damaged log with nothing broken in what was read: no Pass, the verdict withheld, exit 2.
+    assert check.returncode == 2, check.stdout + check.stderr
+    assert "verdict withheld" in check.stdout and "verdict: Pass" not in check.stdout
+    assert "Traceback" not in check.stderr
+
+
+def test_a_device_is_not_a_log(tmp_path):
+    with pytest.raises(InputError, match="not a regular file"):
+        read_log("/dev/zero")
+    res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "log", "info", "/dev/zero"],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "not a regular file" in res.stderr and "empty" not in res.stderr

@@ -22,6 +22,9 @@ from .topology import STAR_PREFIX, UNDECLARED_PREFIX, Route, module_namespace, s
 BLOCK = zenoh.CongestionControl.BLOCK
 REMOTE = zenoh.Locality.REMOTE
 FIFO_CAPACITY = 16384  # samples waiting per route; when full, Zenoh holds back the sender (no loss)
+# The bound is in samples, not bytes: a waiting 200 B sample holds ≈ 8 KiB of native memory, so one backlog that
+# fills a FIFO (its forwarder stalled on a loaded machine) lifts the tool's RSS by ≈ 130 MiB, kept by malloc
+# for the next backlog once drained: RSS levels off there (bench_soak.py --rate 25000; ≈ 47 MiB at 1,024).
 BURST_LIMIT = 128  # samples a forwarder with a burst handler takes out of its FIFO at a time (see run_bursts)
 CATCH_ALL_POLL_SECONDS = 0.002  # how often the catch-all looks into its FIFO (see StarProxy._catch_all_forwarder)
 

@@ -19,9 +19,9 @@ from .console import say as print_line
 
 def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: Path, repeats: int = 1,
         parallel: int = 2, live_only: bool = False, *, confirm: int = 3, max_tests: int | None = None,
-        live_fallback: bool = True, verbose: bool = True, jobs: int = 1) -> int:
+        live_fallback: bool = True, verbose: bool = True, jobs: int = 1, trust_log_spec: bool = False) -> int:
     options = MinimiseOptions(spec_path, invariant, repeats, parallel, live_only, confirm, max_tests, live_fallback,
-                              jobs)
+                              jobs, trust_log_spec)
     say: Callable[[str], None] = print_line if verbose else (lambda line: None)
     report = minimise_log(log_path, out_dir, options, progress=say)
     print_line(report.text())

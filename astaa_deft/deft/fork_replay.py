@@ -41,6 +41,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from ..errors import InputError
+
 PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<Q")
 MIN_LIMIT_S = 2.0
@@ -386,6 +388,9 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
 
     ``send(obj)`` passes a message to ``on_message`` in the caller (progress);
     the runner's return value comes back once the last runner finishes.
+    Raises the runner's ``InputError`` as the same InputError (its problems
+    cross the pipe), so bad input reaches the user as one clear message;
+    RuntimeError when the runner failed otherwise or died without a result.
     """
     read_fd, write_fd = os.pipe()
     supervisor = os.fork()
@@ -399,6 +404,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
             try:
                 result = body(lambda obj: _send(write_fd, ("message", obj)))
                 _send(write_fd, ("done", result))
+            except InputError as exc:  # bad input found by the runner: the caller raises it as it is
+                _send(write_fd, ("input_error", exc.problems))
             except BaseException as exc:  # noqa: BLE001 - reported to the caller, never raised here
                 try:
                     _send(write_fd, ("error", f"{type(exc).__name__}: {exc}"))
@@ -420,6 +427,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
                 raise RuntimeError("the replay process ended without a result (it crashed)") from None
             if kind == "message":
                 on_message(payload)
+            elif kind == "input_error":
+                raise InputError(payload)
             elif kind == "error":
                 raise RuntimeError(f"the replay process failed: {payload}")
             else:

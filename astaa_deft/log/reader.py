@@ -7,7 +7,9 @@ turn the cut into a warning instead of an exception.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import stat
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -118,7 +120,19 @@ class LogContents:
 
 
 def read_log(path: Path | str) -> LogContents:
+    """Every readable record of the MCAP log at ``path``, with what could not be read in ``damage``.
+
+    Raises InputError for a path that is not a log file at all: missing, a
+    directory, not a regular file (a device such as /dev/zero, a pipe),
+    empty, or not MCAP. A log that was cut, damaged inside, or followed by
+    other data is returned with its damage noted (``intact`` False).
+    """
     path = Path(path)
+    with contextlib.suppress(OSError):  # a missing or unreadable path gets its own message from open() below
+        mode = path.stat().st_mode
+        if not stat.S_ISREG(mode) and not stat.S_ISDIR(mode):
+            raise InputError(Problem(str(path), None, None, "is not a regular file (a device, a pipe or a socket), "
+                                     "so it cannot be a log", "give an MCAP log file"))
     try:
         stream = open(path, "rb")  # noqa: SIM115 - closed by the `with` below; each open error has its message
     except FileNotFoundError:
@@ -160,6 +174,7 @@ def _read_all(out: LogContents, stream, size: int) -> None:
         try:
             record = next(records)
         except StopIteration:
+            _check_nothing_follows(out, stream, size)
             break
         except InvalidMagic:
             out.note_damage(f"{path}: the log's closing magic is damaged (byte {offset:,}); "
@@ -270,6 +285,20 @@ def _check_index(out: LogContents, index: MessageIndex, chunk: _ChunkContent | N
 # opcode, record length, channel id, sequence, log time
 _MESSAGE_HEAD = struct.Struct("<BQHIQ")
 MAX_CHUNK_BYTES = 1 << 28
+
+
+def _check_nothing_follows(out: LogContents, stream, size: int) -> None:
+    """The log ends at its closing magic; bytes after it (a second log written into the file, junk, text
+    appended) are part of the evidence that was not read, so the log is damaged, never clean."""
+    end = stream.tell()
+    if end >= size:
+        return
+    stream.seek(end)
+    head = stream.read(len(MCAP_MAGIC))
+    what = ("another MCAP log starts there (a second run written into the same file)" if head == MCAP_MAGIC
+            else "they are not part of this log (data appended to the file)")
+    out.note_damage(f"{out.path}: {size - end:,} bytes follow the log's end (its closing magic at byte "
+                    f"{end - len(MCAP_MAGIC):,}): {what}; they were not read")
 
 
 def _check_summary(out: LogContents, footer: Footer, stream, footer_offset: int) -> None:

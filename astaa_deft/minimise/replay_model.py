@@ -53,6 +53,7 @@ from ..log.reader import LoggedMessage, read_log
 from ..monitor import MonitorSet, format_violation, with_typed_invariants
 from ..monitor.verdict import IMPLICIT
 from ..session.check import spec_from_log
+from ..spec.executes import untrusted_spec_refusal, what_spec_runs
 from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .ddmin import Outcome, TestResult
@@ -95,11 +96,12 @@ class ReplaySetup:
     """What a worker needs to build its own :class:`ReplayModel` (plain, picklable data)."""
 
     log_path: str
-    spec_path: str | None  # None: the spec stored in the log
+    spec_path: str | None  # None: the spec stored in the log, used only with trust_log_spec
     invariant: str
     module: str | None = None  # the replayed module (None: whichever entry can judge the failure)
     output: str | None = None  # its output (a module may have one entry per output)
     failure_module: str | None = None  # the module the failure names (a crash is judged for it only)
+    trust_log_spec: bool = False  # the user let the log's own spec run (--trust-log-spec)
 
 
 @dataclass(frozen=True)
@@ -114,7 +116,14 @@ class Frame:
         return tuple(d.key for _, d in self.inputs)
 
 
-def load_spec_for(log, spec_path: str | None) -> Spec:
+def load_spec_for(log, spec_path: str | None, *, trust_log_spec: bool) -> Spec:
+    """The spec a minimisation runs: the user's file, or (``spec_path`` None) the one stored in the log.
+
+    The log's own spec names programs (module commands, replay factories)
+    that a minimisation runs; it is used only with ``trust_log_spec``, else
+    InputError lists what it would run and the two ways on (spec/executes.py).
+    InputError too when the log holds no readable spec.
+    """
     if spec_path is not None:
         from ..spec_loader import load_spec
 
@@ -123,6 +132,9 @@ def load_spec_for(log, spec_path: str | None) -> Spec:
     if spec is None:
         raise InputError(Problem(str(log.path), None, None, "the log holds no spec",
                                  "give the SUT spec with --spec sut.yaml"))
+    if not trust_log_spec and what_spec_runs(spec):
+        raise untrusted_spec_refusal(spec, str(log.path), command="minimise",
+                                     why="module replays and whole-system re-runs")
     return spec
 
 
@@ -194,7 +206,7 @@ class ReplayModel:
 
     def __init__(self, setup: ReplaySetup, baseline: bool = True):
         log = read_log(setup.log_path)
-        spec = with_typed_invariants(load_spec_for(log, setup.spec_path))
+        spec = with_typed_invariants(load_spec_for(log, setup.spec_path, trust_log_spec=setup.trust_log_spec))
         if setup.module is not None:
             entry: ReplayModule | None = replay_module_of(spec, setup.module, setup.output)
             why_not = _why_not(spec, entry, setup.invariant, setup.failure_module) if entry else None

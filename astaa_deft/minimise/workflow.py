@@ -31,6 +31,7 @@ from ..intercept.testcase import TestCase, parse_testcase
 from ..log import layout
 from ..log.reader import LogContents, read_log
 from ..monitor import with_typed_invariants
+from ..spec.executes import TRUST_FLAG, what_spec_runs
 from .anchoring import choose_anchor, pin_to_anchor
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
@@ -69,6 +70,9 @@ class MinimiseOptions:
     max_tests: int | None = None  # stop after this many tests and keep the smallest failure
     live_fallback: bool = True  # re-run the SUT when the planner replay does not reproduce the failure
     jobs: int = 1  # whole-system runs at once (live tests, confirmations), each an isolated session
+    # Without spec_path: run what the log's own spec names (module commands, replay factories). Off, the
+    # workflow refuses and lists them: a log is data (docs/minimise.md, "Logs are data").
+    trust_log_spec: bool = False
 
     def check(self) -> None:
         """InputError naming the option when a value makes no sense."""
@@ -113,12 +117,19 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     log = read_log(log_path)
     for warning in log.warnings:
         say(f"warning: {warning}")
-    spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None))
-    if spec.path is None:  # the log's own spec: live runs (their recorder) need it as a file
+    spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None,
+                                               trust_log_spec=options.trust_log_spec))
+    if spec.path is None:  # the log's own spec (trusted): live runs (their recorder) and replays need it as a file
         from ..spec_loader import load_spec
 
-        (scratch / "spec.yaml").write_text(spec.source_text)
-        spec = with_typed_invariants(load_spec(scratch / "spec.yaml"))
+        runs = what_spec_runs(spec)
+        if runs:
+            say(f"running what the spec stored in the log names ({TRUST_FLAG}):")
+        for item in runs:
+            say(f"  {item}")
+        spec_path = scratch / "spec.yaml"
+        spec_path.write_text(spec.source_text)
+        spec = with_typed_invariants(load_spec(spec_path))
     recorded_with = log.metadata.get(layout.RUN_METADATA, {}).get("spec")
     if recorded_with and recorded_with != spec.name:
         raise InputError(Problem(str(log_path), None, None,
@@ -134,7 +145,10 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     failure = find_failure(log, spec, options.invariant)
     prepare_directory(out_dir)
     tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
-    params = {**spec.params, **run_params(log)}
+    recorded_params = run_params(log)
+    if recorded_params:  # they fill the spec's placeholders in the commands that run
+        say("the run's params (from the log): " + ", ".join(f"{k}={v}" for k, v in sorted(recorded_params.items())))
+    params = {**spec.params, **recorded_params}
     original = original_testcase(log)
     # Live tests pin each mutation counted from the running stack, not from the run's start (anchoring.py).
     anchor = choose_anchor(log, mlog, original)
