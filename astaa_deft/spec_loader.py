@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import did_you_mean
+from .inputfile import SPEC
 from .spec.planner import build_planner
 from .spec.replay_section import build_replay_section
 from .fields import FieldPathError, check_brittle_pattern
@@ -48,7 +49,7 @@ REQUIRED_TOP = ("name", "modules", "channels")
 
 def load_spec(path: Path | str) -> Spec:
     path = Path(path)
-    src = Source.from_file(path)
+    src = Source.from_file(path, SPEC)
     return _SpecBuilder(src, path).build()
 
 

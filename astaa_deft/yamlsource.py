@@ -16,6 +16,7 @@ from collections.abc import Iterator
 import yaml
 
 from .errors import InputError, Problem
+from .inputfile import InputKind, read_input
 
 
 @dataclass
@@ -56,16 +57,9 @@ class Source:
         self.problems: list[Problem] = []
 
     @classmethod
-    def from_file(cls, path: Path) -> Source:
-        try:
-            text = decode_utf8(path.read_bytes(), str(path))
-        except FileNotFoundError:
-            raise InputError(Problem(str(path), None, None, "file not found", "check the path")) from None
-        except IsADirectoryError:
-            raise InputError(Problem(str(path), None, None, "is a directory", "give a YAML file")) from None
-        except OSError as exc:
-            raise InputError(Problem(str(path), None, None, f"cannot read: {exc.strerror or exc}", "")) from None
-        return cls(text, str(path))
+    def from_file(cls, path: Path, kind: InputKind) -> Source:
+        """The file read through :func:`~astaa_deft.inputfile.read_input`; raises ``InputError``."""
+        return cls(decode_utf8(read_input(path, kind), str(path)), str(path))
 
     def parse(self) -> Node:
         try:
@@ -77,6 +71,11 @@ class Source:
             raise InputError(
                 Problem(self.name, line, col, f"not valid YAML: {exc.problem}", "fix the YAML syntax here")
             ) from None
+        except yaml.reader.ReaderError as exc:  # placed by character offset, not by a mark
+            line, col = line_column(self.text, exc.position)
+            code = ord(exc.character) if isinstance(exc.character, str) else exc.character
+            raise InputError(Problem(self.name, line, col, f"not valid YAML: the control character #x{code:04x}",
+                                     "remove it, or write it as an escape in a double-quoted string")) from None
         except yaml.YAMLError as exc:
             raise InputError(Problem(self.name, None, None, f"not valid YAML: {exc}", "")) from None
         if root is None:
@@ -192,6 +191,13 @@ _constructor = yaml.SafeLoader("")
 
 _EXPONENT_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
 _NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+
+
+def line_column(text: str, offset: int) -> tuple[int, int]:
+    """The 1-based line and column of a character offset into ``text``."""
+    offset = max(0, min(offset, len(text)))
+    line_start = text.rfind("\n", 0, offset) + 1
+    return text.count("\n", 0, offset) + 1, offset - line_start + 1
 
 
 def decode_utf8(data: bytes, name: str) -> str:

@@ -21,6 +21,7 @@ from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Message, 
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from ..errors import InputError, Problem
+from ..inputfile import LOG, open_input
 from . import layout
 from . import records as rec
 
@@ -119,14 +120,7 @@ class LogContents:
 
 def read_log(path: Path | str) -> LogContents:
     path = Path(path)
-    try:
-        stream = open(path, "rb")  # noqa: SIM115 - closed by the `with` below; each open error has its message
-    except FileNotFoundError:
-        raise InputError(Problem(str(path), None, None, "log file not found", "check the path")) from None
-    except IsADirectoryError:
-        raise InputError(Problem(str(path), None, None, "is a directory", "give an MCAP log file")) from None
-    except OSError as exc:
-        raise InputError(Problem(str(path), None, None, f"cannot read log: {exc.strerror}", "")) from None
+    stream = open_input(path, LOG)  # a regular file, or InputError; closed by the `with` below
     out = LogContents(path)
     size = path.stat().st_size
     out.size = size
