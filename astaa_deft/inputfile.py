@@ -40,6 +40,7 @@ SPEC = InputKind("spec", 64 * MiB, "a SUT spec (YAML file)")
 POLICY = InputKind("test case", 10 * MiB, "an XML test case file")
 DICTIONARY = InputKind("dictionary", 16 * MiB, "a dictionary (YAML file)")
 MESSAGE_TYPE = InputKind("message type file", 1 * MiB, "a ROS 2 .msg file")
+LANES = InputKind("lanes file", 16 * MiB, "a lanes file (YAML)")
 LOG = InputKind("log", None, "an MCAP log file")
 
 _SPECIAL = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISCHR, "a character device"),

@@ -41,6 +41,7 @@ import zenoh
 from ..bus import topology
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
+from ..inputfile import SPEC, read_input
 from ..codecs.base import Codec, DecodeError
 from ..codecs.rmw_attachment import parse_attachment
 from ..log import layout, records
@@ -192,7 +193,7 @@ def _warm(spec_files: list[str]) -> int:
     parsed: dict[tuple[str, str], object] = {}
     for name in spec_files:
         with contextlib.suppress(Exception):  # a spec that does not parse is reported when the run reads it
-            text = Path(name).read_text()
+            text = read_input(name, SPEC).decode("utf-8")
             parsed[(text, Path(name).name)] = load_spec_text(text, name=Path(name).name)
     return await_arguments(parsed)
 
