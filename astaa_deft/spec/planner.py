@@ -17,7 +17,7 @@ from ..spec.model import Channel, MessageType, Module
 from ..yamlsource import Node, Source, describe_value
 from .replay_module import PER_OUTPUT, CollisionOracle, ReplayModule, TrajectoryLayout
 
-FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
+FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*\Z")
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
 
 
@@ -59,8 +59,9 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     def channel_ref(n: Node, what: str) -> str:
         name = n.value if isinstance(n.value, str) else ""
         if name not in by_name:
-            src.at(n, f"{what} '{n.value}' is not a declared channel",
-                   did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
+            shown = f"'{n.value}'" if isinstance(n.value, str) else f"({describe_value(n.value)})"
+            src.at(n, f"{what} {shown} is not a declared channel",
+                   did_you_mean(name, by_name) or "declare it under 'channels'")
         return name
 
     module = text("module")
@@ -200,7 +201,9 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
     if "factory" in v:
         factory = v["factory"].value
         if not isinstance(factory, str) or not FACTORY_RE.match(factory):
-            src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", f"e.g. {factory_example}")
+            message = (f"factory '{factory}' is not 'package.module:Name'" if isinstance(factory, str)
+                       else f"'factory' must be text 'package.module:Name', not {describe_value(factory)}")
+            src.at(v["factory"], message, f"e.g. {factory_example}")
             factory = None
         elif not _module_found(factory.split(":")[0], src.name):
             src.at(v["factory"], f"factory module '{factory.split(':')[0]}' is neither on the Python path nor in "
@@ -211,7 +214,12 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
         if not v["args"].is_map:
             src.at(v["args"], f"'{where}.args' must be a mapping of keyword arguments", "e.g. {defects: '{defects}'}")
         else:
-            args = {k: str(n.value) for k, n in v["args"].items()}
+            for k, n in v["args"].items():
+                if n.is_map or n.is_list:
+                    src.at(n, f"'{where}.args.{k}' must be a single value, not {describe_value(n.value)}",
+                           "give a string, a number or a '{param}' placeholder")
+                else:
+                    args[k] = str(n.value)
     command: tuple[str, ...] = ()
     if "command" in v:
         c = v["command"]

@@ -102,8 +102,9 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
     def channel_ref(n: Node, what: str) -> str:
         name = n.value if isinstance(n.value, str) else ""
         if name not in by_name:
-            src.at(n, f"{what} '{n.value}' is not a declared channel",
-                   did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
+            shown = f"'{n.value}'" if isinstance(n.value, str) else f"({describe_value(n.value)})"
+            src.at(n, f"{what} {shown} is not a declared channel",
+                   did_you_mean(name, by_name) or "declare it under 'channels'")
         return name
 
     inputs: list[str] = []

@@ -28,9 +28,9 @@ from ..errors import AstaaDeftError, InputError
 from ..inputfile import MESSAGE_TYPE, read_input
 from .model import FieldType, MessageType
 
-ROS_TYPE_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*$")
+ROS_TYPE_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*\Z")
 _MSGDEF_SEPARATOR = "=" * 80 + "\n"
-TOPIC_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_/{}~]*$")
+TOPIC_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_/{}~]*\Z")
 
 # ROS 2 primitive names -> the spec's scalar kinds. byte/char/octet are one
 # unsigned byte each on the wire (REP-2011's type descriptions say the same).
