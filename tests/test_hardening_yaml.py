@@ -113,3 +113,53 @@ def test_spec_check_rejects_what_extract_would_fail_on(old, new, expect, tmp_pat
     code, text = run_in_process(capsys, "spec", "check", str(path))
     assert_clear_error(code, text, path.name)
     assert expect in text
+
+
+# (name, replace this in the demo spec, with this, what the message says) — issue 23, item 5
+SPEC_CHECK_GAPS = [
+    ("empty key before more channels", "key: demo/sim/obstacles", "key: ''", "channel 'obstacles' has an empty key"),
+    ("huge max_gap", "max_gap: 1.0,", "max_gap: 1.0e+308,", "'max_gap' must be at most 86400, got 1e+308"),
+    ("key ending in a newline", "key: demo/sim/obstacles", 'key: "demo/sim/obstacles\\n"',
+     "key 'demo/sim/obstacles\\n' is not a concrete Zenoh key"),
+    ("factory as a list", "factory: astaa_deft.demo.planner_core:Planner", "factory: [a, b]",
+     "'factory' must be text 'package.module:Name', not a list"),
+    ("planner threshold nan", "planner:\n", "planner:\n  threshold: .nan\n", "'planner.threshold' must be a finite number"),
+    ("lookback beyond an int64 of ns", "planner:\n", "planner:\n  lookback_ms: 1.0e+308\n",
+     "'planner.lookback_ms' must be a finite number ≥ 0 and at most 1e+09"),
+    ("control character deep in the file", "  - {name: planning_deadline,", "  - {name: \x00planning_deadline,",
+     "not valid YAML: the control character #x0000"),
+]
+
+
+@pytest.mark.parametrize("old,new,says", [g[1:] for g in SPEC_CHECK_GAPS], ids=[g[0] for g in SPEC_CHECK_GAPS])
+def test_spec_check_gap_is_one_clear_message(old, new, says, tmp_path, capsys):
+    assert old in DEMO_SPEC
+    path = tmp_path / "spec.yaml"
+    path.write_text(DEMO_SPEC.replace(old, new, 1))
+    code, text = run_in_process(capsys, "spec", "check", str(path))
+    assert_clear_error(code, text, path.name)
+    assert says in text, text
+    assert "Node(" not in text and "KeyError" not in text
+
+
+def test_yaml_syntax_errors_are_placed_by_line_and_column(tmp_path, capsys):
+    """PyYAML's reader places a bad character by offset ("position 9948"); the message gives line:column."""
+    lines = DEMO_SPEC.splitlines(keepends=True)
+    lines[150] = lines[150].replace(":", ": \x07", 1)
+    path = tmp_path / "spec.yaml"
+    path.write_text("".join(lines))
+    code, text = run_in_process(capsys, "spec", "check", str(path))
+    assert_clear_error(code, text, path.name)
+    assert f"{path}:151:" in text and "position" not in text, text
+
+
+def test_a_long_spec_is_read_in_one_pass(tmp_path, capsys):
+    """20,000 channels (issue 23): read without PyYAML's composer (quadratic in a sequence's length)."""
+    channels = "".join(f"  - {{name: c{i}, key: big/c{i}, producer: a, consumers: [b], type: S}}\n"
+                       for i in range(20_000))
+    path = tmp_path / "big.yaml"
+    path.write_text("name: big\nmodules: [{name: a, command: 'true'}, {name: b, command: 'true'}]\n"
+                    f"channels:\n{channels}types:\n  S: {{seq: uint64, value: float64}}\n")
+    code, text = run_in_process(capsys, "spec", "check", str(path))
+    assert code == 0, text
+    assert "20000 channels" in text
