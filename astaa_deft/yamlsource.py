@@ -117,9 +117,8 @@ class Source:
                 if stack and stack[-1].wants_key:
                     kind = "a mapping" if isinstance(event, yaml.MappingStartEvent) else "a list"
                     raise self._refuse(event, f"a key must be a plain word, not {kind}", "write the key as text")
-                mark = event.start_mark
                 value: dict | list = {} if isinstance(event, yaml.MappingStartEvent) else []
-                stack.append(_Open(Node(value, mark.line + 1, mark.column + 1), event.anchor))
+                stack.append(_Open(Node(value, *_place(event)), event.anchor))
             elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
                 done = stack.pop()
                 if done.anchor is not None:
@@ -128,21 +127,20 @@ class Source:
             elif isinstance(event, yaml.ScalarEvent):
                 if event.tag is None and event.value == "<<" and not event.style:
                     raise self._refuse(event, "merge keys ('<<') are not supported", "write the keys out")
-                mark = event.start_mark
-                node = yaml.ScalarNode(_scalar_tag(event), event.value, event.start_mark, event.end_mark,
-                                       event.style or None)
+                start: Any = event.start_mark  # libyaml's Mark or PyYAML's: the same fields
+                end: Any = event.end_mark
+                node = yaml.ScalarNode(_scalar_tag(event), event.value, start, end, event.style or None)
                 if stack and stack[-1].wants_key:
-                    self._key(stack[-1], self._scalar(node), mark.line + 1, mark.column + 1)
+                    self._key(stack[-1], self._scalar(node), *_place(event))
                     continue
-                built = Node(self._scalar(node), mark.line + 1, mark.column + 1)
+                built = Node(self._scalar(node), *_place(event))
                 if event.anchor is not None:
                     anchors[event.anchor] = (built, 1)
                 root = self._attach(stack, built, 1) or root
             elif isinstance(event, yaml.AliasEvent):
                 aliases += 1
-                mark = event.start_mark
                 if self._first_alias is None:
-                    self._first_alias = (mark.line + 1, mark.column + 1)
+                    self._first_alias = _place(event)
                 if aliases > MAX_ALIASES:
                     raise self._refuse(event, f"more than {MAX_ALIASES} aliases (*{event.anchor})",
                                        "write the values out instead of repeating anchors")
@@ -154,7 +152,7 @@ class Source:
                     if anchored.is_map or anchored.is_list:
                         raise self._refuse(event, "a key must be a plain word, not an alias of a collection",
                                            "write the key as text")
-                    self._key(stack[-1], anchored.value, mark.line + 1, mark.column + 1)
+                    self._key(stack[-1], anchored.value, *_place(event))
                     continue
                 self._spend(size)  # before the copy: a bomb is refused, never built
                 root = self._attach(stack, copy.deepcopy(anchored), size, counted=True) or root
@@ -196,8 +194,7 @@ class Source:
                                      "no spec, dictionary or scenario needs that many; check the file"))
 
     def _refuse(self, event: yaml.Event, message: str, fix: str) -> InputError:
-        mark = event.start_mark
-        return InputError(Problem(self.name, mark.line + 1, mark.column + 1, message, fix))
+        return InputError(Problem(self.name, *_place(event), message, fix))
 
     def report(self, line: int | None, column: int | None, message: str, fix: str = "") -> None:
         self.problems.append(Problem(self.name, line, column, message, fix))
@@ -212,7 +209,6 @@ class Source:
     def raise_if_problems(self) -> None:
         if self.problems:
             raise InputError(sorted(self.problems, key=lambda p: (p.line or 0, p.column or 0)))
-
 
     def _scalar(self, node: yaml.ScalarNode) -> Any:
         line, col = node.start_mark.line + 1, node.start_mark.column + 1
@@ -247,6 +243,13 @@ class _Open:
     @property
     def wants_key(self) -> bool:
         return self.node.is_map and self.key is None
+
+
+def _place(event: yaml.Event) -> tuple[int, int]:
+    """The event's 1-based line and column (the parser marks every event)."""
+    mark = event.start_mark
+    assert mark is not None
+    return mark.line + 1, mark.column + 1
 
 
 def _scalar_tag(event: yaml.ScalarEvent) -> str:
