@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     ext.add_argument("--ground-truth", metavar="FIELD",
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
     _bounded(ext, "--jobs", PROCESSES, metavar="N",
-                     help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
+             help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
     ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
                                                          a.ground_truth, jobs=a.jobs, module=a.module))
@@ -131,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="when the planner replay does not reproduce the failure, stop (exit 1) "
                            "instead of re-running the SUT")
     _bounded(mini, "--jobs", PROCESSES, default=1,
-                      help="whole-system runs at once (live tests, confirmations), each an isolated session")
+             help="whole-system runs at once (live tests, confirmations), each an isolated session")
     mini.set_defaults(func=lambda a: _cmd("minimise").run(a.log, a.spec, a.invariant, a.out, a.repeats,
                                                           a.parallel, a.live_only, confirm=a.confirm,
                                                           max_tests=a.max_tests,
@@ -154,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
     _bounded(fz, "--horizon", WINDOW_SECONDS, default=20.0, help="seconds a case runs at most")
     _bounded(fz, "--settle", WINDOW_SECONDS, default=3.0,
-                    help="seconds a mutated case runs on after its last mutation could act")
+             help="seconds a mutated case runs on after its last mutation could act")
     _bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first")
     _bounded(fz, "--reruns", RERUNS, default=2, help="re-runs of each bucket's first failure, for its rate")
     fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
