@@ -7,8 +7,11 @@ input error (printed as one line per problem, never a traceback).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from . import __version__
 from .errors import AstaaDeftError, InputError, Problem
@@ -32,10 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
     disc = spec.add_parser("discover", help="write a spec skeleton from a running ROS 2 system (rmw_zenoh)")
     disc.add_argument("--connect", action="append", required=True, metavar="ENDPOINT",
                       help="the running system's Zenoh router, e.g. tcp/127.0.0.1:7447")
-    disc.add_argument("--seconds", type=_positive, default=3.0, help="how long to listen (default 3)")
+    _bounded(disc, "--seconds", LISTEN_SECONDS, default=3.0, help="how long to listen (default 3)")
     disc.add_argument("-o", "--out", type=Path, required=True, help="the spec file to write")
     disc.add_argument("--name", default="discovered", help="the spec's name")
-    disc.add_argument("--domain", type=int, help="ROS_DOMAIN_ID to keep (default: the first one seen)")
+    _bounded(disc, "--domain", DOMAIN_ID, help="ROS_DOMAIN_ID to keep (default: the first one seen)")
     disc.add_argument("--all-topics", action="store_true", help="keep /rosout and /parameter_events too")
     disc.set_defaults(func=lambda a: _cmd("discover").run(a.out, a.connect, a.seconds, a.name, a.domain,
                                                           a.all_topics))
@@ -46,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     proxy.add_argument("--record", type=Path, help="write the MCAP test log here")
     proxy.add_argument("--passive", action="store_true",
                        help="observe only (no man in the middle): adds nothing to the SUT's message path")
-    proxy.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
+    _bounded(proxy, "--duration", RUN_SECONDS, help="stop after S seconds (default: until Ctrl-C)")
     proxy.add_argument("--launch", action=argparse.BooleanOptionalAction, default=True,
                        help="start the spec's modules (default) or attach to a running SUT (--no-launch)")
     proxy.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
@@ -62,10 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
     # generate
     gen = sub.add_parser("generate", help="write ASTAA test cases drawn from a spec and the dictionary")
     gen.add_argument("--spec", type=Path, required=True)
-    gen.add_argument("--count", type=int, required=True)
-    gen.add_argument("--seed", type=int, required=True)
+    _bounded(gen, "--count", CASES, required=True, help="test cases to write")
+    _bounded(gen, "--seed", SEED, required=True, help="the seed of the draw (the same seed, the same cases)")
     gen.add_argument("-o", "--out", type=Path, required=True)
-    gen.add_argument("--duration", type=_positive, default=30.0, help="windows fall inside this many seconds")
+    _bounded(gen, "--duration", WINDOW_SECONDS, default=30.0, help="windows fall inside this many seconds")
     gen.add_argument("--include-brittle", action="store_true", help="also target timestamps, sequence numbers…")
     gen.add_argument("--dictionary", type=Path, action="append", default=[])
     gen.set_defaults(func=lambda a: _cmd("generate").run(a.spec, a.count, a.seed, a.out, a.duration,
@@ -100,13 +103,13 @@ def build_parser() -> argparse.ArgumentParser:
     ext.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy")
     ext.add_argument("--spec", type=Path, required=True)
     ext.add_argument("-o", "--out", type=Path, required=True, help="directory for the module tests")
-    ext.add_argument("--threshold", type=float, help="accept a frame within this distance, m (default: the spec's)")
+    _bounded(ext, "--threshold", THRESHOLD_M, help="accept a frame within this distance, m (default: the spec's)")
     ext.add_argument("--process", action="store_true",
                      help="replay with the planner's own process in lock-step (needs planner.replay.command)")
     ext.add_argument("--ground-truth", metavar="FIELD",
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
-    ext.add_argument("--jobs", type=int, metavar="N",
-                     help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
+    _bounded(ext, "--jobs", PROCESSES, metavar="N",
+             help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
     ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
                                                          a.ground_truth, jobs=a.jobs, module=a.module))
@@ -124,16 +127,16 @@ def build_parser() -> argparse.ArgumentParser:
                             "(without it, minimise lists them and stops: a log is data)")
     mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation)")
     mini.add_argument("-o", "--out", type=Path, required=True, help="directory for the minimised test case and tests")
-    mini.add_argument("--repeats", type=int, default=1, help="whole-SUT re-runs per test when no replay applies")
-    mini.add_argument("--parallel", type=int, default=2, help="tests run at once where the replay allows")
+    _bounded(mini, "--repeats", REPEATS, default=1, help="whole-SUT re-runs per test when no replay applies")
+    _bounded(mini, "--parallel", PROCESSES, default=2, help="tests run at once where the replay allows")
     mini.add_argument("--live-only", action="store_true", help="always re-run the whole SUT (no module replay)")
-    mini.add_argument("--confirm", type=int, default=3, help="live re-runs of the final result, to report its rate")
-    mini.add_argument("--max-tests", type=int, help="stop after this many tests and keep the smallest failure")
+    _bounded(mini, "--confirm", RERUNS, default=3, help="live re-runs of the final result, to report its rate")
+    _bounded(mini, "--max-tests", CASES, help="stop after this many tests and keep the smallest failure")
     mini.add_argument("--no-live-fallback", action="store_true",
                       help="when the planner replay does not reproduce the failure, stop (exit 1) "
                            "instead of re-running the SUT")
-    mini.add_argument("--jobs", type=int, default=1,
-                      help="whole-system runs at once (live tests, confirmations), each an isolated session")
+    _bounded(mini, "--jobs", PROCESSES, default=1,
+             help="whole-system runs at once (live tests, confirmations), each an isolated session")
     mini.set_defaults(func=lambda a: _cmd("minimise").run(a.log, a.spec, a.invariant, a.out, a.repeats,
                                                           a.parallel, a.live_only, confirm=a.confirm,
                                                           max_tests=a.max_tests,
@@ -145,23 +148,25 @@ def build_parser() -> argparse.ArgumentParser:
                                      "re-run for their rate, minimised, reported")
     fz.add_argument("--spec", type=Path, help="the SUT spec (YAML)")
     fz.add_argument("-o", "--out", type=Path, required=True, help="the campaign directory (journal, logs, report)")
-    fz.add_argument("--cases", type=int, help="generated cases to run")
-    fz.add_argument("--budget", help="or a time budget: 90s, 30m, 2h")
-    fz.add_argument("--workers", type=int, help="cases at once (default: from the cores and the spec's modules)")
-    fz.add_argument("--seed", type=int, default=0)
+    _bounded(fz, "--cases", CASES, help="generated cases to run")
+    fz.add_argument("--budget", type=_budget,
+                    help=f"or a time budget: 90s, 30m, 2h [at most {MAX_BUDGET_S / DAY_S:g} days]")
+    _bounded(fz, "--workers", PROCESSES, help="cases at once (default: from the cores and the spec's modules)")
+    _bounded(fz, "--seed", CAMPAIGN_SEED, default=0, help="the campaign's seed (default 0)")
     fz.add_argument("--strategy", default="random",
                     help="random (ASTAA's weighted generation), guided, or decictor (non-optimal decisions; "
                          "baselines decictor-random, decictor-random-delta: docs/decictor.md)")
     fz.add_argument("--dictionary", type=Path, action="append", default=[])
     fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
-    fz.add_argument("--horizon", type=_positive, default=20.0, help="seconds a case runs at most")
-    fz.add_argument("--settle", type=_positive, default=3.0,
-                    help="seconds a mutated case runs on after its last mutation could act")
-    fz.add_argument("--baseline", type=int, default=2, help="clean runs first")
-    fz.add_argument("--reruns", type=int, default=2, help="re-runs of each bucket's first failure, for its rate")
+    _bounded(fz, "--horizon", WINDOW_SECONDS, default=20.0, help="seconds a case runs at most")
+    _bounded(fz, "--settle", WINDOW_SECONDS, default=3.0,
+             help="seconds a mutated case runs on after its last mutation could act")
+    _bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first")
+    _bounded(fz, "--reruns", RERUNS, default=2, help="re-runs of each bucket's first failure, for its rate")
     fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
     fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")
-    fz.add_argument("--cluster", help="tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes)")
+    fz.add_argument("--cluster", type=_cluster,
+                    help=f"tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes) [K {PROCESSES}]")
     fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit")
     fz.set_defaults(func=_fuzz)
     rep = sub.add_parser("report", help="regenerate a campaign's report.html")
@@ -183,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _demo_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
-    p.add_argument("--duration", type=_positive, help="stop after S seconds (default: the scenario's time limit)")
+    _bounded(p, "--duration", RUN_SECONDS, help="stop after S seconds (default: the scenario's time limit)")
     p.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off")
     p.add_argument("--passive", action="store_true", help="observe only, no star")
     p.add_argument("--record", type=Path, help="where to write the log (default: astaa-deft-demo/SCENARIO.mcap)")
@@ -221,7 +226,7 @@ def _fuzz(a: argparse.Namespace) -> int:
         raise InputError(Problem("astaa-deft fuzz", None, None, "no size given for the campaign",
                                  "give --cases N or --budget DURATION (e.g. 10m)"))
     config = CampaignConfig(a.spec or Path("."), a.out, cases=a.cases,
-                            budget=fuzz.parse_budget(a.budget) if a.budget else None, workers=a.workers,
+                            budget=a.budget, workers=a.workers,
                             seed=a.seed, strategy=a.strategy, dictionaries=a.dictionary,
                             params=fuzz.parse_params(a.params), cluster=a.cluster, horizon=a.horizon,
                             baseline_runs=a.baseline, reruns=a.reruns, minimise=not a.no_minimise,
@@ -241,14 +246,85 @@ def _cmd(name: str):
     return importlib.import_module(f".commands.{name}", __package__)
 
 
-def _positive(text: str) -> float:
+@dataclass(frozen=True)
+class NumberRange:
+    """An argparse ``type``: a finite int or float in [low, high] (``low`` excluded when ``above_low``).
+
+    Called with the option's text, returns the number or raises
+    ``argparse.ArgumentTypeError`` (a usage error, exit 2) saying the range.
+    """
+
+    kind: type[int] | type[float]
+    low: int | float
+    high: int | float
+    unit: str = ""
+    above_low: bool = False
+
+    def __call__(self, text: str) -> int | float:
+        try:
+            value = self.kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not {self._noun}") from None
+        if not math.isfinite(value) or value > self.high or value < self.low or (self.above_low and value == self.low):
+            raise argparse.ArgumentTypeError(f"'{text}' is out of range: give {self._noun} {self}")
+        return value
+
+    @property
+    def _noun(self) -> str:
+        return "a whole number" if self.kind is int else "a number"
+
+    def __str__(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        low = f"> {self.low:g}" if self.above_low else f"≥ {self.low:g}"
+        if self.kind is int:
+            return f"from {self.low:,} to {self.high:,}{unit}"
+        return f"{low} and ≤ {self.high:g}{unit}"
+
+
+DAY_S = 86_400.0
+CASES = NumberRange(int, 1, 1_000_000)
+SEED = NumberRange(int, 0, 2**64 - 1)  # the test case schema's seed range
+CAMPAIGN_SEED = NumberRange(int, 0, 2**63 - 1)  # kept in the journal's SQLite INTEGER column
+PROCESSES = NumberRange(int, 1, 256)
+RERUNS = NumberRange(int, 0, 100)
+REPEATS = NumberRange(int, 1, 100)
+DOMAIN_ID = NumberRange(int, 0, 232)  # ROS 2's valid domain ids
+LISTEN_SECONDS = NumberRange(float, 0, 3600, "s", above_low=True)
+WINDOW_SECONDS = NumberRange(float, 0, DAY_S, "s", above_low=True)
+RUN_SECONDS = NumberRange(float, 0, 7 * DAY_S, "s", above_low=True)
+THRESHOLD_M = NumberRange(float, 0, 1000, "m")
+MAX_BUDGET_S = 30 * DAY_S
+
+
+def _bounded(parser: argparse.ArgumentParser, flag: str, bounds: NumberRange, *, help: str = "",
+             **kwargs: Any) -> None:
+    """``parser.add_argument`` for a number option; its range is checked and said in ``--help``."""
+    parser.add_argument(flag, type=bounds, help=f"{help} [{bounds}]".strip(), **kwargs)
+
+
+def _budget(text: str) -> float:
+    """A fuzz campaign's time budget in seconds, at most MAX_BUDGET_S (argparse ``type``)."""
+    from .commands.fuzz import parse_budget
+
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"'{text}' must be a positive number of seconds")
-    return value
+        seconds = parse_budget(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError("; ".join(f"{p.message} ({p.fix})" for p in exc.problems)) from None
+    if not 0 < seconds <= MAX_BUDGET_S:
+        raise argparse.ArgumentTypeError(f"'{text}' is out of range: give more than 0 s and at most "
+                                         f"{MAX_BUDGET_S / DAY_S:g} days (e.g. 90s, 30m, 2h)")
+    return seconds
+
+
+def _cluster(text: str) -> str:
+    """``--cluster``: a scheduler address as given, or ``local:K`` with K in PROCESSES (argparse ``type``)."""
+    kind, sep, count = text.partition(":")
+    if sep and kind == "local":
+        if count:
+            PROCESSES(count)
+    elif "://" not in text:
+        raise argparse.ArgumentTypeError(f"'{text}' is neither local:K nor a scheduler address like tcp://HOST:8786")
+    return text
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -169,7 +169,10 @@ def _scan(text: str) -> Iterator[Segment]:
             index = _INDEX.match(text, position)
             if not index:
                 raise fail(_bad_index_reason(text, position), position)
-            yield WILDCARD if index.group(1) else int(index.group(2))
+            digits = index.group(2)
+            if digits is not None and (len(digits.lstrip("-")) > len(str(MAX_INDEX)) or abs(int(digits)) > MAX_INDEX):
+                raise fail(f"index {_shown_digits(digits)} is beyond any array (at most {MAX_INDEX})", position + 1)
+            yield WILDCARD if index.group(1) else int(digits)
             position = index.end()
         elif char == "*":
             raise fail("'*' is only allowed as an index: write [*] for every element", position)
@@ -181,12 +184,19 @@ def _scan(text: str) -> Iterator[Segment]:
             raise fail("expected '.' or '[' after ']'", position)
 
 
+MAX_INDEX = 2**31 - 1  # no codec carries a longer array
+
+
+def _shown_digits(digits: str) -> str:
+    return digits if len(digits) <= 30 else f"{digits[:12]}…({len(digits)} digits)"
+
+
 def _bad_index_reason(text: str, position: int) -> str:
     close = text.find("]", position)
     if close < 0:
         return "'[' is never closed"
     inside = text[position + 1:close]
-    if re.fullmatch(r"[+-]?[0-9]+", inside):
+    if re.fullmatch(r"[+-]?[0-9]+", inside) and len(inside) <= 30:
         return f"write [{int(inside)}], not [{inside}] (indices have no '+', leading zeros or -0)"
     return f"an index is an integer or *, got {inside!r}"
 
@@ -309,6 +319,11 @@ def _step_into(types: Mapping[str, MessageType], current: FieldType, segment: Se
         return f"{where!r} is {current.describe()}, which has no field {segment!r}"
     if current.kind != "array" or current.items is None:
         return f"{where!r} is {current.describe()}, not an array, so it cannot be indexed"
+    limit = current.max_length
+    if segment is not WILDCARD and limit is not None and not -limit <= segment < limit:  # type: ignore[operator]
+        return (f"index [{segment}] is outside {where!r} ({current.describe()}): "
+                f"valid indices are 0..{limit - 1}, or -{limit}..-1 from the end" if limit else
+                f"index [{segment}] is outside {where!r}, which is always empty ({current.describe()})")
     return current.items
 
 

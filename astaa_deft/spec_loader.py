@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import did_you_mean
+from .inputfile import SPEC
 from .spec.planner import build_planner
 from .spec.replay_section import build_replay_section
 from .fields import FieldPathError, check_brittle_pattern
@@ -33,10 +34,10 @@ from .spec.model import (
     ZenohSection,
 )
 
-NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
-TYPE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-FIELD_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-KEY_RE = re.compile(r"^[^*$?#\s]+$")  # a concrete Zenoh key: no wildcards, no DSL
+NAME_RE = re.compile(r"^[A-Za-z0-9_-]+\Z")
+TYPE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
+FIELD_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
+KEY_RE = re.compile(r"^[^*$?#\s]+\Z")  # a concrete Zenoh key: no wildcards, no DSL
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
 ENCODINGS = ("json", "cbor", "cdr")
 
@@ -48,7 +49,7 @@ REQUIRED_TOP = ("name", "modules", "channels")
 
 def load_spec(path: Path | str) -> Spec:
     path = Path(path)
-    src = Source.from_file(path)
+    src = Source.from_file(path, SPEC)
     return _SpecBuilder(src, path).build()
 
 
@@ -197,7 +198,7 @@ class _SpecBuilder:
     def endpoint(self, node: Node) -> str:
         if not self.expect(node, (str,), "an endpoint", 'a string like "tcp/127.0.0.1:0"'):
             return ""
-        m = re.match(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/(.+)$", node.value)
+        m = re.match(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/(.+)\Z", node.value)
         if not m:
             self.src.at(node, f"endpoint '{node.value}' is not a Zenoh locator",
                         'write it as "tcp/HOST:PORT" (port 0 picks a free port)')
@@ -358,20 +359,23 @@ class _SpecBuilder:
                 self.src.at(v["name"], f"channel '{name}' is declared twice", "give each channel a unique name")
             names.add(name)
             key = cdr[1] if cdr else ""
-            if key in keys:
+            if key and key in keys:
                 self.src.at(v["topic"], f"topic '{v['topic'].value}' is already used by channel '{keys[key]}'",
                             "give each channel its own topic")
             elif key:
                 keys[key] = name
             if "key" in v and self.expect(v["key"], (str,), "'key'", "a Zenoh key"):
                 key = v["key"].value
-                if not KEY_RE.match(key) or key.startswith("/") or key.endswith("/") or "//" in key:
-                    self.src.at(v["key"], f"key '{key}' is not a concrete Zenoh key",
+                if not key:
+                    self.src.at(v["key"], f"channel '{name}' has an empty key", "give a Zenoh key, e.g. 'demo/data'")
+                elif not KEY_RE.match(key) or key.startswith("/") or key.endswith("/") or "//" in key:
+                    self.src.at(v["key"], f"key {key!r} is not a concrete Zenoh key",
                                 "use '/'-separated chunks without wildcards (*, **), '$', '?', '#' or spaces")
                 elif key in keys:
                     self.src.at(v["key"], f"key '{key}' is already used by channel '{keys[key]}'",
                                 "give each channel its own key")
-                keys[key] = name
+                else:
+                    keys[key] = name
             producer = ""
             if "producer" in v and self.expect(v["producer"], (str,), "'producer'", "a module name"):
                 producer = v["producer"].value

@@ -98,6 +98,22 @@ def test_type_body_not_a_mapping_through_generate(tmp_path, capsys):
     assert "PerceivedObstacle' must map field names" in text
 
 
+# (name, replace this in the demo spec, with this, what the message says) — issue 23, item 5
+SPEC_CHECK_GAPS = [
+    ("empty key before more channels", "key: demo/sim/obstacles", "key: ''", "channel 'obstacles' has an empty key"),
+    ("huge max_gap", "max_gap: 1.0,", "max_gap: 1.0e+308,", "'max_gap' must be at most 86400, got 1e+308"),
+    ("key ending in a newline", "key: demo/sim/obstacles", 'key: "demo/sim/obstacles\\n"',
+     "key 'demo/sim/obstacles\\n' is not a concrete Zenoh key"),
+    ("factory as a list", "factory: astaa_deft.demo.planner_core:Planner", "factory: [a, b]",
+     "'factory' must be text 'package.module:Name', not a list"),
+    ("planner threshold nan", "planner:\n", "planner:\n  threshold: .nan\n", "'planner.threshold' must be a finite number"),
+    ("lookback beyond an int64 of ns", "planner:\n", "planner:\n  lookback_ms: 1.0e+308\n",
+     "'planner.lookback_ms' must be a finite number ≥ 0 and at most 1e+09"),
+    ("control character deep in the file", "  - {name: planning_deadline,", "  - {name: \x00planning_deadline,",
+     "not valid YAML: the control character #x0000"),
+]
+
+
 @pytest.mark.parametrize("old,new,expect", [
     ("obstacles: {channel: prediction, array: obstacles, id: id,",
      "obstacles: {channel: prediction, array: obstacles, id: {a: 1},", "'id' must be a field path"),
@@ -105,6 +121,7 @@ def test_type_body_not_a_mapping_through_generate(tmp_path, capsys):
      "obstacles: {channel: prediction, array: obstacles, id: id, length: [],", "'length' must be a field path"),
     ("astaa_deft.demo.planner_core:Planner", "astaa_deft.demo.no_such_module:Planner", "is neither on the Python path nor in the spec's directory"),
     ("astaa_deft.demo.planner_core:Planner", "astaa_deft.demo.planner_core:NoSuchPlanner", "no callable"),
+    *[gap[1:] for gap in SPEC_CHECK_GAPS],
 ])
 def test_spec_check_rejects_what_extract_would_fail_on(old, new, expect, tmp_path, capsys):
     assert old in DEMO_SPEC
@@ -112,4 +129,28 @@ def test_spec_check_rejects_what_extract_would_fail_on(old, new, expect, tmp_pat
     path.write_text(DEMO_SPEC.replace(old, new, 1))
     code, text = run_in_process(capsys, "spec", "check", str(path))
     assert_clear_error(code, text, path.name)
-    assert expect in text
+    assert expect in text, text
+    assert "Node(" not in text and "KeyError" not in text
+
+
+def test_yaml_syntax_errors_are_placed_by_line_and_column(tmp_path, capsys):
+    """PyYAML's reader places a bad character by offset ("position 9948"); the message gives line:column."""
+    lines = DEMO_SPEC.splitlines(keepends=True)
+    lines[150] = lines[150].replace(":", ": \x07", 1)
+    path = tmp_path / "spec.yaml"
+    path.write_text("".join(lines))
+    code, text = run_in_process(capsys, "spec", "check", str(path))
+    assert_clear_error(code, text, path.name)
+    assert f"{path}:151:" in text and "position" not in text, text
+
+
+def test_a_long_spec_is_read_in_one_pass(tmp_path, capsys):
+    """20,000 channels (issue 23): read without PyYAML's composer (quadratic in a sequence's length)."""
+    channels = "".join(f"  - {{name: c{i}, key: big/c{i}, producer: a, consumers: [b], type: S}}\n"
+                       for i in range(20_000))
+    path = tmp_path / "big.yaml"
+    path.write_text("name: big\nmodules: [{name: a, command: 'true'}, {name: b, command: 'true'}]\n"
+                    f"channels:\n{channels}types:\n  S: {{seq: uint64, value: float64}}\n")
+    code, text = run_in_process(capsys, "spec", "check", str(path))
+    assert code == 0, text
+    assert "20000 channels" in text

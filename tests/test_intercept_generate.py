@@ -14,7 +14,9 @@ from astaa_deft.errors import InputError
 from astaa_deft.fields import FieldPath
 from astaa_deft.intercept import load_dictionary, load_testcase
 from astaa_deft.intercept.dictionary import wire_value
-from astaa_deft.intercept.generate import generate, is_generation_brittle, mutation_targets, write_testcases
+from astaa_deft.intercept.generate import (
+    generate, generate_to_directory, is_generation_brittle, iter_testcases, mutation_targets, write_testcases,
+)
 from astaa_deft.spec_loader import load_spec, load_spec_text
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -149,3 +151,21 @@ def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
     assert [p.name for p in report.paths] == [f"tc-{n:04d}.xml" for n in range(1, 7)]
     assert sum(report.shapes.values()) == 6
     assert [p.read_bytes() for p in report.paths] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 6, 4, 10.0)]
+
+
+def test_cases_are_drawn_one_at_a_time_not_as_a_whole_list():
+    """A trillion asked for (issue 23) is no longer a list built before anything is written: each case is
+    drawn when reached, the same case as a short run draws at that number."""
+    cases = iter_testcases(SPEC, DICTIONARY, 10**12, seed=42)
+    first = [next(cases) for _ in range(3)]
+    assert [t.id for t in first] == ["tc-0000000000001", "tc-0000000000002", "tc-0000000000003"]
+    short = generate(SPEC, DICTIONARY, 3, seed=42)
+    assert [t.policies for t in first] == [t.policies for t in short]
+
+
+def test_generate_to_directory_writes_what_generate_draws(tmp_path):
+    report = generate_to_directory(SPEC, 25, 7, tmp_path / "out")
+    drawn = generate(SPEC, DICTIONARY, 25, seed=7)
+    assert report.count == 25 and sum(report.shapes.values()) == 25
+    assert [p.read_bytes() for p in report.paths] == [t.to_xml() for t in drawn]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [p.name for p in report.paths]

@@ -333,3 +333,47 @@ def test_the_documented_example_is_valid():
     example = re.search(r"```xml\n(.*?)```", text, re.S).group(1)
     testcase = parse_testcase(example.encode(), "docs/policies.md")
     assert [p.id for p in testcase.policies] == ["nan-speed", "stale-copies", "lossy"]
+
+
+# ---------------------------------------------------------------- indices and non-finite values (issue 23, item 5)
+
+DEMO = load_spec(ROOT / "astaa_deft" / "data" / "specs" / "demo_av.yaml")  # trajectory: points max_length 200
+
+
+def _set_on_trajectory(path: str, value: str = "1.5") -> bytes:
+    return _testcase(f'<policy id="p"><channel>trajectory</channel><set><field path="{path}" value="{value}"/>'
+                     f"</set></policy>").encode()
+
+
+@pytest.mark.parametrize("path,says", [
+    ("points[99999999999999999999999].v", "index 99999999999999999999999 is beyond any array (at most 2147483647)"),
+    ("points[200].v", "index [200] is outside 'points'"),
+    ("points[-9999].v", "index [-9999] is outside 'points'"),
+    ("points[-201].v", "valid indices are 0..199, or -200..-1 from the end"),
+])
+def test_an_index_beyond_the_arrays_max_length_is_refused(path, says):
+    with pytest.raises(InputError) as caught:
+        parse_testcase(_set_on_trajectory(path), "idx.xml", DEMO)
+    [problem] = caught.value.problems
+    assert says in problem.message, problem
+    assert problem.line == 3 and problem.column  # the policy's line in _testcase
+
+
+@pytest.mark.parametrize("path", ["points[199].v", "points[-200].v", "points[-1].v", "points[0].v", "points[*].v"])
+def test_indices_within_max_length_are_accepted(path):
+    parse_testcase(_set_on_trajectory(path), "idx.xml", DEMO)
+
+
+def test_a_float_literal_that_overflows_is_refused_but_inf_on_purpose_is_not():
+    with pytest.raises(InputError, match=r"'1e999' is beyond the largest float .* write inf or -inf"):
+        parse_testcase(_set_on_trajectory("points[1].v", "1e999"), "inf.xml", DEMO)
+    for spelled in ("inf", "-inf", "Infinity", "nan"):
+        parse_testcase(_set_on_trajectory("points[1].v", spelled), "inf.xml", DEMO)
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "1e999", "1.5"])
+def test_an_int_field_never_takes_a_non_integer(value):
+    xml = _testcase(f'<policy id="p"><channel>data</channel><set><field path="header.seq" value="{value}"/>'
+                    f"</set></policy>")
+    with pytest.raises(InputError, match="is not a whole number"):
+        parse_testcase(xml.encode(), "int.xml", ECHO)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..inputfile import SPEC, read_input
 from ..intercept.dictionary import load_dictionary
 from ..intercept.testcase import parse_testcase
 from ..session.bus_run import release_warm_recorder, warm_recorder
@@ -108,7 +109,7 @@ def recorder_ahead(spec_path: Path, parsed: tuple[str, Any] | None = None) -> su
     try:
         if parsed is not None:
             return ForkedRecorder(parsed[0], spec_path.name, parsed[1])
-        return ForkedRecorder(spec_path.read_text(), spec_path.name)
+        return ForkedRecorder(read_input(spec_path, SPEC).decode("utf-8"), spec_path.name)
     except Exception:  # noqa: BLE001 - an unreadable spec is the case's error to report; no fork: a process
         try:
             return warm_recorder([spec_path])

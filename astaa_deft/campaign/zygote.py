@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from ..bus.processes import die_with_parent, python_module
+from ..inputfile import SPEC, read_input
 
 REAP_SECONDS = 0.5
 FORK_TIMEOUT = 60.0
@@ -129,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.suppress(InputError):  # a bad spec is each case's error to report (execute loads it again)
         preloaded = (spec, dictionaries, load_spec(Path(spec)), load_dictionary([Path(p) for p in dictionaries]))
     with contextlib.suppress(Exception):  # the recorder's own parse of the text (see forked.py)
-        text = Path(spec).read_text()
+        text = read_input(spec, SPEC).decode("utf-8")
         for_recorder = (text, load_spec_text(text, name=Path(spec).name))
     while True:
         ready, _, _ = select.select([control], [], [], REAP_SECONDS)

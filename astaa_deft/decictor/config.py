@@ -27,6 +27,7 @@ from pathlib import Path
 import yaml
 
 from ..errors import InputError, Problem
+from ..inputfile import LANES, read_input
 from ..fields import FieldPath, get
 from ..intercept.actions.participant import ChannelMapping, MappingError, read_mappings
 from ..spec.decictor_section import EgoSection, FlagSection, LanesSection
@@ -85,7 +86,7 @@ def read_config(spec: Spec) -> DecictorConfig:
 
 def read_lanes_file(path: Path) -> tuple[Lane, ...]:
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(read_input(path, LANES).decode("utf-8"))
         lanes = tuple(Lane(str(item["id"]), tuple((float(x), float(y)) for x, y in item["centre"]),
                            float(item["width"])) for item in data["lanes"])
     except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:

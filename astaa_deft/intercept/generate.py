@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import random
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,33 +58,58 @@ class Target:
 
 def generate(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
              include_brittle: bool = False) -> list[TestCase]:
-    """``count`` test cases; InputError if the spec offers no field to mutate."""
+    """``count`` test cases in a list (see :func:`iter_testcases`)."""
+    return list(iter_testcases(spec, dictionary, count, seed, duration, include_brittle))
+
+
+def iter_testcases(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
+                   include_brittle: bool = False) -> Iterator[TestCase]:
+    """``count`` test cases, each drawn when the iterator reaches it (memory stays flat with the count).
+
+    Raises ``InputError`` at once (not on the first draw) if the spec offers no field to mutate.
+    """
     by_channel = _targets_by_channel(spec, dictionary, include_brittle)
     if not by_channel:
         raise InputError(Problem(str(spec.path or spec.name), None, None,
                                  "no field to mutate: every channel lacks consumers or non-brittle leaf fields",
                                  "use --include-brittle, or give channels consumers and typed fields"))
-    width = max(4, len(str(count)))
-    return [_testcase(f"tc-{number:0{width}d}", random.Random(f"{seed}/{number}"), by_channel, duration)
-            for number in range(1, count + 1)]
+    width = _id_width(count)
+    return (_testcase(_testcase_id(number, width), random.Random(f"{seed}/{number}"), by_channel, duration)
+            for number in range(1, count + 1))
 
 
-def write_testcases(testcases: Sequence[TestCase], directory: Path) -> list[Path]:
+def _id_width(count: int) -> int:
+    return max(4, len(str(count)))
+
+
+def _testcase_id(number: int, width: int) -> str:
+    return f"tc-{number:0{width}d}"
+
+
+def write_testcases(testcases: Iterable[TestCase], directory: Path) -> list[Path]:
     directory.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for testcase in testcases:
-        path = directory / f"{testcase.id}.xml"
-        path.write_bytes(testcase.to_xml())
-        paths.append(path)
-    return paths
+    return [_write_testcase(testcase, directory) for testcase in testcases]
+
+
+def _write_testcase(testcase: TestCase, directory: Path) -> Path:
+    path = directory / f"{testcase.id}.xml"
+    path.write_bytes(testcase.to_xml())
+    return path
 
 
 # ---------------------------------------------------------------- the workflow behind `astaa-deft generate`
 
 @dataclass(frozen=True)
 class GenerateReport:
-    paths: list[Path]  # the test case files written, in order
+    directory: Path
+    count: int  # test case files written
     shapes: Counter[str]  # test cases per shape: single, multi_field, repeated
+
+    @property
+    def paths(self) -> list[Path]:
+        """The test case files written, in order."""
+        width = _id_width(self.count)
+        return [self.directory / f"{_testcase_id(number, width)}.xml" for number in range(1, self.count + 1)]
 
 
 def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, duration: float = 30.0,
@@ -100,9 +125,13 @@ def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, dura
         raise InputError(Problem("--duration", None, None, f"{duration} s", "give a positive number of seconds"))
     _check_output_directory(out_dir)
     dictionary = load_dictionary(dictionaries)
-    testcases = generate(spec, dictionary, count, seed, duration, include_brittle)
-    paths = write_testcases(testcases, out_dir)
-    return GenerateReport(paths, Counter(_shape(testcase) for testcase in testcases))
+    testcases = iter_testcases(spec, dictionary, count, seed, duration, include_brittle)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    shapes: Counter[str] = Counter()
+    for testcase in testcases:  # each written as drawn: nothing of the whole set is held
+        _write_testcase(testcase, out_dir)
+        shapes[_shape(testcase)] += 1
+    return GenerateReport(out_dir, count, shapes)
 
 
 def _shape(testcase: TestCase) -> str:

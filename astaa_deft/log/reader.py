@@ -7,9 +7,7 @@ turn the cut into a warning instead of an exception.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import stat
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -23,6 +21,7 @@ from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Message, 
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from ..errors import InputError, Problem
+from ..inputfile import LOG, open_input
 from . import layout
 from . import records as rec
 
@@ -128,19 +127,7 @@ def read_log(path: Path | str) -> LogContents:
     other data is returned with its damage noted (``intact`` False).
     """
     path = Path(path)
-    with contextlib.suppress(OSError):  # a missing or unreadable path gets its own message from open() below
-        mode = path.stat().st_mode
-        if not stat.S_ISREG(mode) and not stat.S_ISDIR(mode):
-            raise InputError(Problem(str(path), None, None, "is not a regular file (a device, a pipe or a socket), "
-                                     "so it cannot be a log", "give an MCAP log file"))
-    try:
-        stream = open(path, "rb")  # noqa: SIM115 - closed by the `with` below; each open error has its message
-    except FileNotFoundError:
-        raise InputError(Problem(str(path), None, None, "log file not found", "check the path")) from None
-    except IsADirectoryError:
-        raise InputError(Problem(str(path), None, None, "is a directory", "give an MCAP log file")) from None
-    except OSError as exc:
-        raise InputError(Problem(str(path), None, None, f"cannot read log: {exc.strerror}", "")) from None
+    stream = open_input(path, LOG)  # a regular file, or InputError; closed by the `with` below
     out = LogContents(path)
     size = path.stat().st_size
     out.size = size

@@ -23,7 +23,7 @@ from .expression import (
     ty_of,
 )
 
-NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
+NAME_RE = re.compile(r"^[A-Za-z0-9_-]+\Z")
 
 
 class InvariantReader:
@@ -92,7 +92,7 @@ class InvariantReader:
         return value
 
     def number(self, node: Node | None, what: str, *, positive: bool = False,
-               minimum: float | None = None) -> float | None:
+               minimum: float | None = None, maximum: float | None = None) -> float | None:
         if node is None:
             return None
         value = node.value
@@ -105,6 +105,9 @@ class InvariantReader:
             return None
         if minimum is not None and value < minimum:
             self.problem(node, f"{what} must be at least {minimum:g}, got {value:g}", f"use a value ≥ {minimum:g}")
+            return None
+        if maximum is not None and value > maximum:
+            self.problem(node, f"{what} must be at most {maximum:g}, got {value:g}", f"use a value ≤ {maximum:g}")
             return None
         return float(value)
 

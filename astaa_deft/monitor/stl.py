@@ -39,7 +39,7 @@ from collections.abc import Sequence
 
 from ..errors import AstaaDeftError, did_you_mean
 
-SIGNAL_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+SIGNAL_NAME = re.compile(r"^[a-z][a-z0-9_]*\Z")
 # Words of rtamt's language a formula may use.
 OPERATORS = frozenset({
     "not", "and", "or", "implies", "iff", "xor", "rise", "fall", "abs", "true", "false",

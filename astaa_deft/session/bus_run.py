@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 import zenoh
 
 from ..errors import InputError, Problem
+from ..inputfile import SPEC, read_input
 from ..spec.model import Spec
 from ..bus import topology
 from ..bus import zenoh_config as zc
@@ -202,7 +203,8 @@ class BusRun:
                 args += ["--intercepted", name]
         for name, file in self.options.attachments.items():
             args += ["--attach", f"{name}={file}"]
-        spec_text = self.spec.source_text or (self.spec.path.read_text() if self.spec.path is not None else "")
+        spec_text = self.spec.source_text or \
+            (read_input(self.spec.path, SPEC).decode("utf-8") if self.spec.path is not None else "")
         warm = self.options.warm_recorder
         if warm is not None and warm.poll() is None:  # started ahead (imports done): hand it its arguments
             args = ["--log-file", str(self.run_dir / "recorder.log"), *args]

@@ -41,6 +41,7 @@ import zenoh
 from ..bus import topology
 from ..bus import zenoh_config as zc
 from ..codecs import get_codec
+from ..inputfile import DICTIONARY, POLICY, SPEC, read_input
 from ..codecs.base import Codec, DecodeError
 from ..codecs.rmw_attachment import parse_attachment
 from ..log import layout, records
@@ -105,8 +106,9 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
     writer.attachment(layout.SPEC_ATTACHMENT, spec.source_text.encode(), "application/yaml")
     for item in args.attach:
         name, _, path = item.partition("=")
-        media = "application/xml" if name.endswith(".xml") else "application/yaml"
-        writer.attachment(name, Path(path).read_bytes(), media)
+        policy = name.endswith(".xml")  # else a dictionary: both checked by the run before, read the same way
+        writer.attachment(name, read_input(path, POLICY if policy else DICTIONARY),
+                          "application/xml" if policy else "application/yaml")
     writer.metadata(layout.RUN_METADATA, {**json.loads(args.meta), "mode": args.mode})
 
     # Callbacks (one Python thread each, Zenoh's default) queue what they receive for one writing
@@ -192,7 +194,7 @@ def _warm(spec_files: list[str]) -> int:
     parsed: dict[tuple[str, str], object] = {}
     for name in spec_files:
         with contextlib.suppress(Exception):  # a spec that does not parse is reported when the run reads it
-            text = Path(name).read_text()
+            text = read_input(name, SPEC).decode("utf-8")
             parsed[(text, Path(name).name)] = load_spec_text(text, name=Path(name).name)
     return await_arguments(parsed)
 

@@ -17,7 +17,7 @@ from ..spec.model import Channel, MessageType, Module
 from ..yamlsource import Node, Source, describe_value
 from .replay_module import PER_OUTPUT, CollisionOracle, ReplayModule, TrajectoryLayout
 
-FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
+FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*\Z")
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
 
 
@@ -59,8 +59,9 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     def channel_ref(n: Node, what: str) -> str:
         name = n.value if isinstance(n.value, str) else ""
         if name not in by_name:
-            src.at(n, f"{what} '{n.value}' is not a declared channel",
-                   did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
+            shown = f"'{n.value}'" if isinstance(n.value, str) else f"({describe_value(n.value)})"
+            src.at(n, f"{what} {shown} is not a declared channel",
+                   did_you_mean(name, by_name) or "declare it under 'channels'")
         return name
 
     module = text("module")
@@ -90,9 +91,9 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
 
     layout = _trajectory(src, v.get("trajectory"), types, by_name.get(output))
     factory, args, command = _replay(src, v.get("replay"))
-    threshold = _number(src, v.get("threshold"), "planner.threshold", 0.0)
-    lookback = _number(src, v.get("lookback_ms"), "planner.lookback_ms", 100.0)
-    skew = _number(src, v.get("skew_ms"), "planner.skew_ms", 5.0)
+    threshold = read_setting(src, v.get("threshold"), "planner.threshold", 0.0)
+    lookback = read_setting(src, v.get("lookback_ms"), "planner.lookback_ms", 100.0)
+    skew = read_setting(src, v.get("skew_ms"), "planner.skew_ms", 5.0)
     collision = _oracle(src, v.get("oracle"), inputs)
     # The planner is a module that runs alone like any other, with its extras: frames found per recorded
     # output, outputs compared as trajectories; an exception from step() is not judged (unresolved).
@@ -118,8 +119,8 @@ def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracl
     if ego is None or obstacles is None or not ego.is_map or not obstacles.is_map:
         src.at(c, "the collision oracle needs 'ego: {length, width}' and 'obstacles: {channel, …}'", "")
         return None
-    length = _number(src, ego.value.get("length"), "oracle ego length", 0.0)
-    width = _number(src, ego.value.get("width"), "oracle ego width", 0.0)
+    length = read_setting(src, ego.value.get("length"), "oracle ego length", 0.0)
+    width = read_setting(src, ego.value.get("width"), "oracle ego width", 0.0)
     if length <= 0 or width <= 0:
         src.at(ego, "the ego's 'length' and 'width' must be positive numbers (m)", "e.g. {length: 4.6, width: 1.9}")
     fields = {}
@@ -136,7 +137,7 @@ def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracl
     if channel not in inputs:
         src.at(obstacles, f"the oracle's obstacle channel '{channel}' is not a planner input",
                "name the input that carries predicted obstacles")
-    margin = _number(src, c.value.get("margin"), "oracle margin", 0.0)
+    margin = read_setting(src, c.value.get("margin"), "oracle margin", 0.0)
     return CollisionOracle(length, width, channel, margin=margin, **fields)
 
 
@@ -200,7 +201,9 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
     if "factory" in v:
         factory = v["factory"].value
         if not isinstance(factory, str) or not FACTORY_RE.match(factory):
-            src.at(v["factory"], f"factory '{factory}' is not 'package.module:Name'", f"e.g. {factory_example}")
+            message = (f"factory '{factory}' is not 'package.module:Name'" if isinstance(factory, str)
+                       else f"'factory' must be text 'package.module:Name', not {describe_value(factory)}")
+            src.at(v["factory"], message, f"e.g. {factory_example}")
             factory = None
         elif not _module_found(factory.split(":")[0], src.name):
             src.at(v["factory"], f"factory module '{factory.split(':')[0]}' is neither on the Python path nor in "
@@ -211,7 +214,12 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
         if not v["args"].is_map:
             src.at(v["args"], f"'{where}.args' must be a mapping of keyword arguments", "e.g. {defects: '{defects}'}")
         else:
-            args = {k: str(n.value) for k, n in v["args"].items()}
+            for k, n in v["args"].items():
+                if n.is_map or n.is_list:
+                    src.at(n, f"'{where}.args.{k}' must be a single value, not {describe_value(n.value)}",
+                           "give a string, a number or a '{param}' placeholder")
+                else:
+                    args[k] = str(n.value)
     command: tuple[str, ...] = ()
     if "command" in v:
         c = v["command"]
@@ -222,13 +230,20 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
     return factory, args, command
 
 
-def _number(src: Source, node: Node | None, what: str, default: float) -> float:
+MAX_SETTING = 1e9  # beyond any sensible metres, milliseconds or seconds; keeps `x * 1e6` an int64
+
+
+def read_setting(src: Source, node: Node | None, what: str, default: float, positive: bool = False) -> float:
+    """A finite number in [0, MAX_SETTING] (> 0 when ``positive``), ``default`` when absent or reported."""
     if node is None:
         return default
-    if isinstance(node.value, bool) or not isinstance(node.value, (int, float)) or node.value < 0:
-        src.at(node, f"'{what}' must be a number ≥ 0", "")
+    value = node.value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_SETTING \
+            or (positive and value == 0):
+        src.at(node, f"'{what}' must be a finite number {'> 0' if positive else '≥ 0'} and at most {MAX_SETTING:g}, "
+               f"not {describe_value(value)}", f"e.g. {default:g}")
         return default
-    return float(node.value)
+    return float(value)
 
 
 def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str, Any]:

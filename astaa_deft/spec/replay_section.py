@@ -28,7 +28,7 @@ from collections.abc import Mapping, Sequence
 
 from ..errors import did_you_mean
 from .model import Channel, Module
-from .planner import read_runner
+from .planner import read_runner, read_setting
 from .replay_module import EXCEPTIONS, FRAME_MODES, ReplayModule
 from ..yamlsource import Node, Source, describe_value
 
@@ -102,8 +102,9 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
     def channel_ref(n: Node, what: str) -> str:
         name = n.value if isinstance(n.value, str) else ""
         if name not in by_name:
-            src.at(n, f"{what} '{n.value}' is not a declared channel",
-                   did_you_mean(str(n.value), by_name) or "declare it under 'channels'")
+            shown = f"'{n.value}'" if isinstance(n.value, str) else f"({describe_value(n.value)})"
+            src.at(n, f"{what} {shown} is not a declared channel",
+                   did_you_mean(name, by_name) or "declare it under 'channels'")
         return name
 
     inputs: list[str] = []
@@ -134,10 +135,10 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
                                          '["{python}", "-m", "mystack.control"]')
     frames = _choice(src, v.get("frames"), f"{where}.frames", FRAME_MODES)
     exceptions = _choice(src, v.get("exceptions"), f"{where}.exceptions", EXCEPTIONS)
-    hang_after = _number(src, v.get("hang_after"), f"{where}.hang_after", 1.0, positive=True)
-    threshold = _number(src, v.get("threshold"), f"{where}.threshold", 0.0)
-    lookback = _number(src, v.get("lookback_ms"), f"{where}.lookback_ms", 100.0)
-    skew = _number(src, v.get("skew_ms"), f"{where}.skew_ms", 5.0)
+    hang_after = read_setting(src, v.get("hang_after"), f"{where}.hang_after", 1.0, positive=True)
+    threshold = read_setting(src, v.get("threshold"), f"{where}.threshold", 0.0)
+    lookback = read_setting(src, v.get("lookback_ms"), f"{where}.lookback_ms", 100.0)
+    skew = read_setting(src, v.get("skew_ms"), f"{where}.skew_ms", 5.0)
     ignore: tuple[str, ...] = ()
     if "ignore" in v:
         n = v["ignore"]
@@ -164,15 +165,3 @@ def _choice(src: Source, node: Node | None, what: str, allowed: tuple[str, ...])
                did_you_mean(str(node.value), allowed) or f"write {allowed[0]}")
         return allowed[0]
     return str(node.value)
-
-
-def _number(src: Source, node: Node | None, what: str, default: float, positive: bool = False) -> float:
-    if node is None:
-        return default
-    value = node.value
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value or value < 0 \
-            or (positive and value == 0) or value == float("inf"):
-        src.at(node, f"'{what}' must be a finite number {'> 0' if positive else '≥ 0'}, not {describe_value(value)}",
-               f"e.g. {default:g}")
-        return default
-    return float(value)

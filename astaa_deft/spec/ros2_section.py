@@ -63,7 +63,7 @@ def read_ros2_section(src: Source, node: Node | None, base_dir: Path, from_file:
                     src.at(fnode, f"the file of '{type_name}' must be a path", "give a path relative to the spec")
                     continue
                 path = base_dir / fnode.value
-                if not path.is_file():
+                if not path.exists():  # a directory or a special file is refused by its kind when read
                     if from_file:
                         src.at(fnode, f"message file '{path}' does not exist", "give a path relative to the spec file")
                     continue

@@ -24,12 +24,13 @@ from pathlib import Path
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 from rosbags.typesys.base import Nodetype, TypesysError
 
-from ..errors import AstaaDeftError
+from ..errors import AstaaDeftError, InputError
+from ..inputfile import MESSAGE_TYPE, read_input
 from .model import FieldType, MessageType
 
-ROS_TYPE_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*$")
+ROS_TYPE_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*\Z")
 _MSGDEF_SEPARATOR = "=" * 80 + "\n"
-TOPIC_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_/{}~]*$")
+TOPIC_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_/{}~]*\Z")
 
 # ROS 2 primitive names -> the spec's scalar kinds. byte/char/octet are one
 # unsigned byte each on the wire (REP-2011's type descriptions say the same).
@@ -101,8 +102,10 @@ class Ros2Types:
 
     def register_msg_file(self, type_name: str, path: Path) -> None:
         try:
-            text = Path(path).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
+            text = read_input(path, MESSAGE_TYPE).decode("utf-8")
+        except InputError as exc:
+            raise Ros2TypeError("; ".join(p.message + (f" ({p.fix})" if p.fix else "") for p in exc.problems)) from None
+        except UnicodeDecodeError as exc:
             raise Ros2TypeError(f"cannot read '{path}': {exc}") from None
         self.register_msg(type_name, text)
 

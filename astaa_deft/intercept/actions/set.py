@@ -25,7 +25,9 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import math
 import re
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -179,10 +181,14 @@ def parse_literal(text: str, field_type: FieldType) -> Any:
     kind = field_type.kind
     if kind in FLOAT_KINDS or kind == "time":
         try:
-            return float(text.strip())
+            number = float(text.strip())
         except ValueError:
             raise ValueProblem(f"{text!r} is not a number",
                                'write e.g. 2.5, -1e16, nan or -inf; json:"..." sends a string on purpose') from None
+        if math.isinf(number) and not _SPELLS_INFINITY.fullmatch(text.strip()):
+            raise ValueProblem(f"{text!r} is beyond the largest float ({sys.float_info.max:.4g})",
+                               "write inf or -inf to send an infinity on purpose")
+        return number
     if kind in INT_KINDS:
         if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
             raise ValueProblem(f"{text!r} is not a whole number",
@@ -217,6 +223,9 @@ def parse_literal(text: str, field_type: FieldType) -> Any:
                                "write e.g. [] or [1, 2]" if kind == "array" else 'write e.g. {"x": 1}')
         return value
     return text  # string
+
+
+_SPELLS_INFINITY = re.compile(r"[+-]?inf(inity)?", re.IGNORECASE)
 
 
 def _json_literal(text: str) -> Any:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from ...inputfile import DICTIONARY
 from ...yamlsource import Source
 from .model import Dictionary, Entry
 from .yaml_format import DictionaryFile
@@ -21,7 +22,7 @@ def load_dictionary(files: Sequence[Path | str] = (), *, include_default: bool =
     paths = ([DEFAULT_DICTIONARY] if include_default else []) + [Path(f) for f in files]
     merged: dict[str, Entry] = {}
     for path in paths:
-        _merge(merged, DictionaryFile(Source.from_file(path)).read())
+        _merge(merged, DictionaryFile(Source.from_file(path, DICTIONARY)).read())
     return Dictionary(merged.values(), [str(p) for p in paths])
 
 

@@ -11,7 +11,7 @@ import re
 from typing import Any
 
 from ...errors import did_you_mean
-from ...yamlsource import Node, Source
+from ...yamlsource import Node, Source, describe_value
 from .model import GROUPS, KINDS_OF_GROUP, Entry
 from .rules import RULES
 
@@ -62,6 +62,10 @@ class DictionaryFile:
             value = self.plain(node)
             if value is not _REPORTED and group in _FLOAT_GROUPS:
                 value = self.as_float(node, value)
+            elif value is not _REPORTED and group == "int" and type(value) is not int:
+                self.src.at(node, f"the int group takes whole numbers, not {describe_value(value)}",
+                            "write an integer (e.g. -1), or {value: ...} to send another value on purpose")
+                value = _REPORTED
             return value if value is _REPORTED else Entry(group, name, value=value, origin=origin)
         keys = set(node.value)
         if keys == {"value"}:

@@ -23,14 +23,14 @@ from pathlib import Path
 
 from lxml import etree
 
-from ...errors import InputError, Problem, did_you_mean
+from ...errors import did_you_mean
+from ...inputfile import POLICY, read_input
 from ...spec.model import Channel, Spec
 from ..actions import ACTIONS
 from ..actions.base import decimal_text
 from ..dictionary import Dictionary, load_dictionary
 from .model import Policy, Selection, TestCase, Window
 from .xml_format import (
-    MAX_FILE_BYTES,
     Checker,
     parse_xml,
     required,
@@ -45,18 +45,7 @@ def load_testcase(path: Path | str, spec: Spec | None = None, dictionary: Dictio
     """Read and check a test case file (see the module doc). Without ``spec``,
     channel, consumer and field names are not checked."""
     path = Path(path)
-    try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise InputError(Problem(str(path), 1, 1, f"file larger than {MAX_FILE_BYTES // (1024 * 1024)} MB",
-                                     "a test case is a few kilobytes; check the file"))
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(Problem(str(path), None, None, "file not found", "check the path")) from None
-    except IsADirectoryError:
-        raise InputError(Problem(str(path), None, None, "is a directory", "give an XML test case file")) from None
-    except OSError as exc:
-        raise InputError(Problem(str(path), None, None, f"cannot read: {exc.strerror}", "")) from None
-    return parse_testcase(data, str(path), spec, dictionary)
+    return parse_testcase(read_input(path, POLICY), str(path), spec, dictionary)
 
 
 def parse_testcase(data: bytes, name: str = "<testcase>", spec: Spec | None = None,

@@ -20,13 +20,14 @@ from typing import Protocol, cast
 from lxml import etree
 
 from ...errors import AstaaDeftError, InputError, Problem
+from ...inputfile import POLICY
 from ...spec.model import Spec
 from ..actions.base import decimal_text
 from ..dictionary import Dictionary
 from .model import Selection, TestCase, Window
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent.parent / "data" / "policies" / "testcase.xsd"
-MAX_FILE_BYTES = 10 * 1024 * 1024
+MAX_FILE_BYTES = POLICY.max_bytes or 0  # the cap of a file read, applied to bytes given directly too
 DOCS = "docs/policies.md"
 
 

@@ -26,6 +26,7 @@ from ..violation import Violation
 
 KEYS = ("channel", "module", "max_gap", "after", "responds_to")
 REQUIRED = ("max_gap",)
+MAX_GAP_S = 86_400.0  # a day: beyond it a deadline is a typo, and its nanoseconds would not fit an int64
 AFTER = ("first", "start")
 
 
@@ -47,7 +48,7 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> DeadlineInvarian
         reader.problem(node, "a deadline watches either a 'channel' or a 'module'",
                        "give exactly one of channel: NAME or module: NAME")
         return None
-    max_gap = reader.number(v.get("max_gap"), "'max_gap'", positive=True)
+    max_gap = reader.number(v.get("max_gap"), "'max_gap'", positive=True, maximum=MAX_GAP_S)
     after = reader.choice(v.get("after"), "'after'", AFTER) if "after" in v else "first"
     if max_gap is None or after is None:
         return None
