@@ -41,6 +41,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from ..bus.process_launch import guarded_fork
+
 PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<Q")
 MIN_LIMIT_S = 2.0
@@ -83,6 +85,17 @@ def reap_later(pid: int) -> None:
 
 def can_fork() -> bool:
     return hasattr(os, "fork")
+
+
+def _fork(what: str) -> int:
+    """``os.fork`` from a process with one Python thread (else ``UnsafeFork``).
+
+    Native threads are let be: the forked processes run only the planner,
+    never what such a thread serves (a BLAS pool, which numpy starts on
+    import and which stops itself across a fork; the Zenoh runtime of a
+    caller that ran a session).
+    """
+    return guarded_fork(what, native_threads_ok=True)
 
 
 def candidate_limit(cycle_s: float) -> float:
@@ -216,7 +229,7 @@ class ForkedSearch:
                ) -> tuple[int, int, int, float] | None:
         result_r, result_w = os.pipe()
         go_r, go_w = os.pipe()
-        pid = os.fork()
+        pid = _fork("a candidate's replay")
         if pid == 0:
             os.close(result_r)
             os.close(go_w)
@@ -347,7 +360,7 @@ def shadow() -> Shadow | Following:
     the word pipe).
     """
     word_r, word_w = os.pipe()
-    pid = os.fork()
+    pid = _fork("the replay's shadow copy")
     if pid == 0:
         os.close(word_w)
         return Following(word_r)
@@ -388,12 +401,12 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     the runner's return value comes back once the last runner finishes.
     """
     read_fd, write_fd = os.pipe()
-    supervisor = os.fork()
+    supervisor = _fork("the replay's supervisor")
     if supervisor == 0:  # the supervisor: reap every descendant until none is left
         os.close(read_fd)
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
-        runner = os.fork()
+        runner = _fork("the replay's runner")
         if runner == 0:
             code = 0
             try:
