@@ -169,6 +169,8 @@ FORK_AFTER = textwrap.dedent("""
         return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
 
     print("alone", fork_once(), flush=True)
+    process_launch.run(["true"], timeout=30)  # the process starter's thread now runs, idle
+    print("after a start", fork_once(), flush=True)
     session = zc.open_session(zc.config_dict(mode="peer", listen=[zc.loopback_endpoint()]))
     try:
         fork_once()
@@ -184,7 +186,7 @@ FORK_AFTER = textwrap.dedent("""
 
 
 @needs_linux
-def test_a_single_threaded_process_forks_and_one_with_a_zenoh_runtime_does_not():
+def test_a_single_threaded_process_forks_also_after_starting_a_child_and_one_with_a_zenoh_runtime_does_not():
     done = subprocess.run([*python_module("astaa_deft")[:-2], "-c", FORK_AFTER], capture_output=True, text=True,
                           timeout=60, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
-    assert done.stdout.splitlines() == ["alone 7", "with zenoh True", "native ok"], done.stderr[-2000:]
+    assert done.stdout.splitlines() == ["alone 7", "after a start 7", "with zenoh True", "native ok"], done.stderr[-2000:]

@@ -77,12 +77,22 @@ class UnsafeFork(AstaaDeftError):
 
 
 class _Starter:
-    """One daemon thread, alive as long as the process, that runs every ``Popen`` of :func:`start`."""
+    """One daemon thread, alive as long as the process, that runs every ``Popen`` of :func:`start`.
+
+    Idle, it waits on its queue and holds nothing a forked child would need
+    (the child gets a starter of its own): a fork holds :attr:`working`, so
+    the starter is idle throughout, and does not count it as another thread.
+    """
 
     def __init__(self) -> None:
         self._jobs: SimpleQueue[tuple[Callable[[], Any], Future[Any]]] = SimpleQueue()
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
+        self.working = threading.Lock()  # held while a child is started, and by a fork
+
+    @property
+    def thread(self) -> threading.Thread | None:
+        return self._thread
 
     def call(self, job: Callable[[], Any]) -> Any:
         """``job()`` run in the starter thread; its result, or its exception raised here."""
@@ -100,10 +110,11 @@ class _Starter:
     def _serve(self) -> None:
         while True:
             job, future = self._jobs.get()
-            try:
-                future.set_result(job())
-            except BaseException as exc:  # noqa: BLE001 - handed to the caller, whatever it is
-                future.set_exception(exc)
+            with self.working:
+                try:
+                    future.set_result(job())
+                except BaseException as exc:  # noqa: BLE001 - handed to the caller, whatever it is
+                    future.set_exception(exc)
 
 
 _starter = _Starter()
@@ -198,9 +209,18 @@ def foreign_threads() -> int:
     return max(0, tasks - threading.active_count())
 
 
+def _other_python_threads() -> list[threading.Thread]:
+    """Python threads besides this one and the idle process starter."""
+    current, starter = threading.current_thread(), _starter.thread
+    return [t for t in threading.enumerate() if t is not current and t is not starter]
+
+
 def fork_is_safe(*, native_threads_ok: bool = False) -> bool:
-    """Whether this process may fork now: one Python thread and (unless ``native_threads_ok``) no native ones."""
-    return hasattr(os, "fork") and threading.active_count() == 1 and (native_threads_ok or foreign_threads() == 0)
+    """Whether this process may fork now: no other Python thread and (unless ``native_threads_ok``) no native one.
+
+    The process starter (:func:`start`'s thread) does not count: a fork waits until it is idle.
+    """
+    return hasattr(os, "fork") and not _other_python_threads() and (native_threads_ok or foreign_threads() == 0)
 
 
 def ensure_fork_safe(what: str, *, native_threads_ok: bool = False) -> None:
@@ -215,11 +235,11 @@ def ensure_fork_safe(what: str, *, native_threads_ok: bool = False) -> None:
     """
     if not hasattr(os, "fork"):
         raise UnsafeFork(f"{what}: this system cannot fork")
-    python_threads = threading.active_count()
+    others = _other_python_threads()
     native = foreign_threads()
-    if python_threads != 1 or (native and not native_threads_ok):
-        names = ", ".join(t.name for t in threading.enumerate() if t is not threading.current_thread())
-        raise UnsafeFork(f"{what}: forked only from a single-threaded process, but {python_threads} Python "
+    if others or (native and not native_threads_ok):
+        names = ", ".join(t.name for t in others)
+        raise UnsafeFork(f"{what}: forked only from a single-threaded process, but {len(others)} other Python "
                          f"thread(s) run" + (f" ({names})" if names else "")
                          + (f" and {native} native one(s)" if native else "")
                          + "; fork before starting threads or a Zenoh session, or start a process instead")
@@ -227,8 +247,9 @@ def ensure_fork_safe(what: str, *, native_threads_ok: bool = False) -> None:
 
 def guarded_fork(what: str, *, native_threads_ok: bool = False) -> int:
     """``os.fork()`` after :func:`ensure_fork_safe` (same arguments); 0 in the child, its pid in the parent."""
-    ensure_fork_safe(what, native_threads_ok=native_threads_ok)
-    return os.fork()
+    with _starter.working:  # no child being started meanwhile
+        ensure_fork_safe(what, native_threads_ok=native_threads_ok)
+        return os.fork()
 
 
 def die_with_parent(parent: int, sig: signal.Signals = signal.SIGTERM) -> None:
@@ -279,12 +300,16 @@ def fork_child(body: Callable[[], int], *, what: str) -> ForkedChild:
     leads its group before this returns. Call it while single-threaded
     (raises :class:`UnsafeFork` otherwise, naming ``what``).
     """
-    ensure_fork_safe(what)
     parent = os.getpid()
     stdin_read, stdin_write = os.pipe()
     stdout_read, stdout_write = os.pipe()
     started_read, started_write = os.pipe()  # the child says when it leads its own group (as Popen's does)
-    pid = os.fork()
+    try:
+        pid = guarded_fork(what)
+    except UnsafeFork:
+        for fd in (stdin_read, stdin_write, stdout_read, stdout_write, started_read, started_write):
+            os.close(fd)
+        raise
     if pid == 0:
         code = 1
         try:
