@@ -76,6 +76,15 @@ def stop_process(process: ChildProcess, grace: float, sig: signal.Signals = sign
         return None
 
 
+def process_running(pid: int) -> bool:
+    """Whether process ``pid`` runs (Linux ``/proc``; a zombie — exited, not yet reaped — does not)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
+
+
 def tail(path: Path, lines: int = 20) -> str:
     try:
         with open(path, "rb") as fh:

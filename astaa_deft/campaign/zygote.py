@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from ..bus.process_launch import die_with_parent, guarded_fork, start
-from ..bus.processes import python_module
+from ..bus.processes import process_running, python_module
 
 REAP_SECONDS = 0.5
 FORK_TIMEOUT = 60.0
@@ -96,17 +96,9 @@ def stop_group(pid: int, grace: float) -> None:
             return
         deadline = time.monotonic() + wait
         while time.monotonic() < deadline:
-            if not _exists(pid):
+            if not process_running(pid):
                 return
             time.sleep(0.05)
-
-
-def _exists(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
 
 
 # ---------------------------------------------------------------- the template process
