@@ -44,12 +44,12 @@ from ..errors import AstaaDeftError
 from .processes import stop_process
 
 PR_SET_PDEATHSIG = 1
-_EXEC_FAILED = 127  # the wrapper's exit code when the command could not be executed (as a shell's)
 
 # The wrapper (run as ``python -I -S -c``: no site, no environment, no current directory; only the standard
 # library): arm the parent-death signal, make sure the parent is still the one that started us — if it died
-# before prctl, nothing would ever signal us —, then become the command. Its argv: the tool's pid, the signal,
-# the fd to report an exec failure on (its errno), the command.
+# before prctl, nothing would ever signal us: exit as if the signal had come —, then become the command. Its argv:
+# the tool's pid, the signal, the fd to report an exec failure on (its errno; exit 127 then, as a shell's), the
+# command.
 _WRAPPER = """\
 import os, sys
 parent, sig, report = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
@@ -181,8 +181,7 @@ def run(argv: Sequence[str], *, timeout: float | None, cwd: str | None = None,
 
     Raises ``subprocess.TimeoutExpired`` after stopping the child's whole
     process group when it runs longer than ``timeout`` seconds (None: no
-    limit), and the
-    ``OSError`` of :func:`start`.
+    limit), and the ``OSError`` of :func:`start`.
     """
     process = start(argv, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
