@@ -74,8 +74,8 @@ def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_ful
 def test_a_forked_recorder_is_its_own_process_group_and_exits_at_end_of_input():
     from astaa_deft.bus.processes import python_module
 
-    code = ("import sys, os; from astaa_deft.campaign.forked import ForkedRecorder; from pathlib import Path; "
-            f"r = ForkedRecorder(Path({str(ECHO)!r}).read_text(), 'echo.yaml'); "
+    code = ("import sys, os; from astaa_deft.campaign.forked import fork_recorder; from pathlib import Path; "
+            f"r = fork_recorder(Path({str(ECHO)!r}).read_text(), 'echo.yaml'); "
             "print(os.getpgid(r.pid) == r.pid, r.pid != os.getpid()); r.stdin.close(); print(r.wait(timeout=20))")
     done = subprocess.run([*python_module("astaa_deft")[:-2], "-c", code], capture_output=True, text=True, timeout=60)
     assert done.stdout.split() == ["True", "True", "0"], done.stderr[-2000:]
@@ -84,14 +84,15 @@ def test_a_forked_recorder_is_its_own_process_group_and_exits_at_end_of_input():
 def test_no_recorder_is_forked_from_a_process_with_other_threads():
     import threading
 
-    from astaa_deft.campaign.forked import ForkedRecorder
+    from astaa_deft.bus.process_launch import UnsafeFork
+    from astaa_deft.campaign.forked import fork_recorder
 
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
     other.start()
     try:
-        with pytest.raises(RuntimeError):
-            ForkedRecorder(ECHO.read_text(), ECHO.name)
+        with pytest.raises(UnsafeFork, match="a case's recorder: forked only from a single-threaded process"):
+            fork_recorder(ECHO.read_text(), ECHO.name)
     finally:
         stop.set()
         other.join()

@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 
 from ..errors import InputError, Problem
 from ..spec.model import Module, Spec
+from . import process_launch
 from .processes import python_module, signal_group, tail
 import contextlib
 
@@ -99,8 +100,9 @@ class Launcher:
     # -- start ---------------------------------------------------------------
     def start(self, on_ready: Callable[[str], None] = lambda _m: None) -> None:
         """Start every module in spec order, each after the previous one is ready."""
-        self._reaper = subprocess.Popen(python_module("astaa_deft.bus.reaper"), stdin=subprocess.PIPE,
-                                        stdout=subprocess.DEVNULL, start_new_session=True, text=True)
+        # The reaper must outlive the tool (ending the groups is its job): no parent-death signal for it.
+        self._reaper = process_launch.start(python_module("astaa_deft.bus.reaper"), stdin=subprocess.PIPE,
+                                            text=True, die_with_tool=False)
         try:
             for module in self.spec.modules:
                 self._start_one(module)
@@ -135,15 +137,9 @@ class Launcher:
         log_path = output_file(self.run_dir, module.name)
         log = open(log_path, "wb")  # noqa: SIM115 - the module writes to it for its whole life; closed at its exit
         try:
-            process = subprocess.Popen(
-                argv,
-                cwd=str(module.cwd) if module.cwd else None,
-                env=env,
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,  # own process group: stop (or the reaper) takes its children too
-            )
+            # Its own process group (process_launch.start): stop (or the reaper) takes its children too.
+            process = process_launch.start(argv, cwd=str(module.cwd) if module.cwd else None, env=env,
+                                           stdout=log, stderr=subprocess.STDOUT)
         except FileNotFoundError:
             raise InputError(Problem(
                 str(self.spec.path or "<spec>"), None, None,

@@ -1,21 +1,20 @@
-"""Small process-control helpers shared by the launcher and the recorder spawn.
+"""Small process-control helpers: the argv of a helper, and stopping a child the tool started.
 
-Every helper acts on one process or process group the tool started itself,
-by its id; nothing here matches processes by name.
+Every helper acts on one process or process group the tool started itself
+(:mod:`.process_launch` starts them all), by its id; nothing here matches
+processes by name.
 """
 
 from __future__ import annotations
 
-import ctypes
 import os
 import signal
 import subprocess
 import sys
 from collections import deque
 from pathlib import Path
+from typing import IO, Any, Protocol
 import contextlib
-
-PR_SET_PDEATHSIG = 1
 
 # Python 3.10 has no -P: drop the current directory from sys.path by hand, then run the module as -m would.
 _RUN_INSTALLED = ("import runpy, sys; sys.path.pop(0); sys.argv[0] = '{m}'; "
@@ -36,19 +35,33 @@ def python_module(module: str) -> list[str]:
     return [sys.executable, "-c", _RUN_INSTALLED.format(m=module)]
 
 
-def die_with_parent() -> None:
-    """preexec_fn: SIGTERM this child when the tool dies, even by SIGKILL (Linux)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+class ChildProcess(Protocol):
+    """What the tool uses of a child it started: a ``subprocess.Popen`` or a forked child (process_launch)."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def returncode(self) -> int | None: ...
+
+    @property
+    def stdin(self) -> IO[Any] | None: ...
+
+    @property
+    def stdout(self) -> IO[Any] | None: ...
+
+    def poll(self) -> int | None: ...
+
+    def wait(self, timeout: float | None = None) -> int: ...
 
 
-def signal_group(process: subprocess.Popen, sig: signal.Signals) -> None:
-    """Signal the process group led by `process` (started with start_new_session)."""
+def signal_group(process: ChildProcess, sig: signal.Signals) -> None:
+    """Signal the process group led by `process` (every child the tool starts leads its own)."""
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(process.pid, sig)
 
 
-def stop_process(process: subprocess.Popen, grace: float, sig: signal.Signals = signal.SIGTERM) -> int | None:
+def stop_process(process: ChildProcess, grace: float, sig: signal.Signals = signal.SIGTERM) -> int | None:
     """Ask one process group to stop, kill it after `grace` seconds; returns the exit code."""
     if process.poll() is None:
         signal_group(process, sig)
@@ -61,6 +74,15 @@ def stop_process(process: subprocess.Popen, grace: float, sig: signal.Signals = 
         return process.wait(timeout=2.0)
     except subprocess.TimeoutExpired:
         return None
+
+
+def process_running(pid: int) -> bool:
+    """Whether process ``pid`` runs (Linux ``/proc``; a zombie — exited, not yet reaped — does not)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
 
 
 def tail(path: Path, lines: int = 20) -> str:

@@ -11,13 +11,13 @@ import itertools
 import json
 import os
 import shutil
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Callable
 
+from ..bus import process_launch
 from ..errors import AstaaDeftError, InputError, Problem
 from ..intercept.dictionary import load_dictionary
 from ..spec_loader import load_spec
@@ -379,8 +379,8 @@ class Campaign:
         verdict = ""
         if oracle:  # the suite must fail while the planner breaks the invariant: check it once
             suite = tests_dir.resolve()  # -o may be relative: pytest runs from inside the suite
-            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(suite)],
-                                  capture_output=True, text=True, timeout=600, cwd=suite)
+            done = process_launch.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(suite)],
+                                      timeout=600, cwd=str(suite))
             verdict = (f"; it fails as it should (oracle: {bucket.invariant})" if done.returncode == 1
                        else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
         self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")

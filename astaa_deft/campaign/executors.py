@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 from collections.abc import Iterator
 
-from ..bus.processes import die_with_parent, python_module, stop_process, tail
+from ..bus.process_launch import start
+from ..bus.processes import python_module, stop_process, tail
 from .model import CaseOutcome
 from .zygote import Zygote, stop_group
 
@@ -54,15 +55,13 @@ class LocalPool:
         self.futures: dict[Future, str] = {}
 
     def submit(self, case_id: str, payload: dict[str, Any]) -> None:
-        # The template starts here, in the caller's thread: a process dies with the thread that started it
-        # (die_with_parent), and the pool's threads end before the template has reaped its last case.
+        # The template starts here, before its first case is run by the pool.
         self._zygote(_key(payload))
         self.futures[self._pool.submit(self._run, payload)] = case_id
 
     def _spawn(self, key: tuple[str, ...]) -> subprocess.Popen:
-        return subprocess.Popen([*python_module("astaa_deft.campaign.worker"), "--warm", *key],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=True, preexec_fn=die_with_parent)
+        return start([*python_module("astaa_deft.campaign.worker"), "--warm", *key],
+                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
     def _take(self, payload: dict[str, Any]) -> subprocess.Popen:
         """A warm process for this payload's spec (or a new one), and a warm one for the slot's next case."""

@@ -14,7 +14,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..bus.processes import die_with_parent, python_module
+from ..bus import process_launch
+from ..bus.processes import python_module
 
 MINIMAL_XML = "minimal.xml"
 SUMMARY = "summary.json"
@@ -40,8 +41,7 @@ def minimise_run(log: Path, spec_path: Path, out_dir: Path, invariant: str | Non
     if invariant and not invariant.startswith("("):
         args += ["--invariant", invariant]
     try:
-        done = subprocess.run(args, capture_output=True, text=True, timeout=timeout, start_new_session=True,
-                              preexec_fn=die_with_parent)
+        done = process_launch.run(args, timeout=timeout)
         code, text = done.returncode, (done.stdout + done.stderr).strip()
     except subprocess.TimeoutExpired:
         code, text = 1, f"minimisation stopped after {timeout:.0f} s"

@@ -12,7 +12,6 @@ Nothing else in the campaign package touches the bus.
 from __future__ import annotations
 
 import math
-import subprocess
 import threading
 import time
 from dataclasses import replace
@@ -21,6 +20,7 @@ from pathlib import Path
 import zenoh
 
 from .. import fields
+from ..bus.processes import ChildProcess
 from ..codecs import get_codec
 from ..codecs.base import Codec
 from ..errors import InputError
@@ -52,7 +52,7 @@ def isolated(spec: Spec) -> Spec:
 
 def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, horizon: float,
              dictionary: Dictionary | None = None, settle: float | None = None, *,
-             warm_recorder: subprocess.Popen | None = None) -> CaseOutcome:
+             warm_recorder: ChildProcess | None = None) -> CaseOutcome:
     """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
 
     ``settle``: a mutated run ends this many seconds after its test case can

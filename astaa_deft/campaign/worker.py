@@ -17,19 +17,19 @@ loaded machine's wall time before any module could start, ~0.55 CPU s).
 from __future__ import annotations
 
 import json
-import subprocess
 import threading
 import sys
 from pathlib import Path
 from typing import Any
 
+from ..bus.processes import ChildProcess
 from ..errors import InputError
 from ..inputfile import SPEC, read_input
 from ..intercept.dictionary import load_dictionary
 from ..intercept.testcase import parse_testcase
 from ..session.bus_run import release_warm_recorder, warm_recorder
 from ..spec_loader import load_spec
-from .forked import ForkedRecorder
+from .forked import fork_recorder
 from .model import CaseOutcome, PlannedCase
 from .runner import run_case
 
@@ -38,7 +38,7 @@ _Preloaded = tuple[str, list[str], Any, Any]  # spec path, dictionary paths, spe
 
 
 def execute(payload: dict[str, Any], preloaded: _Preloaded | None = None,
-            warm_recorder: subprocess.Popen | None = None) -> dict[str, Any]:
+            warm_recorder: ChildProcess | None = None) -> dict[str, Any]:
     case = PlannedCase.from_json(payload["case"])
     try:
         if preloaded is not None and (preloaded[0], preloaded[1]) == (payload["spec"], payload.get("dictionaries", [])):
@@ -102,14 +102,14 @@ def execute_remote(payload: dict[str, Any]) -> dict[str, Any]:
         return body
 
 
-def recorder_ahead(spec_path: Path, parsed: tuple[str, Any] | None = None) -> subprocess.Popen | None:
+def recorder_ahead(spec_path: Path, parsed: tuple[str, Any] | None = None) -> ChildProcess | None:
     """This case's recorder, started now: forked from this process (still one thread, no Zenoh session),
     else a warm recorder process of its own, else none (the run starts one itself).
     ``parsed``: (the spec file's text, that text parsed as the recorder parses it), from a template process."""
     try:
         if parsed is not None:
-            return ForkedRecorder(parsed[0], spec_path.name, parsed[1])
-        return ForkedRecorder(read_input(spec_path, SPEC).decode("utf-8"), spec_path.name)
+            return fork_recorder(parsed[0], spec_path.name, parsed[1])
+        return fork_recorder(read_input(spec_path, SPEC).decode("utf-8"), spec_path.name)
     except Exception:  # noqa: BLE001 - an unreadable spec is the case's error to report; no fork: a process
         try:
             return warm_recorder([spec_path])

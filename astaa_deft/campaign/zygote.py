@@ -33,7 +33,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from ..bus.processes import die_with_parent, python_module
+from ..bus.process_launch import die_with_parent, guarded_fork, start
+from ..bus.processes import process_running, python_module
 from ..inputfile import SPEC, read_input
 
 REAP_SECONDS = 0.5
@@ -46,10 +47,8 @@ class Zygote:
     def __init__(self, spec: str, dictionaries: list[str]):
         self._control, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
-            self.process = subprocess.Popen(
-                [*python_module("astaa_deft.campaign.zygote"), str(theirs.fileno()), spec, *dictionaries],
-                pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL, start_new_session=True, preexec_fn=die_with_parent)
+            self.process = start([*python_module("astaa_deft.campaign.zygote"), str(theirs.fileno()), spec,
+                                  *dictionaries], pass_fds=(theirs.fileno(),))
         finally:
             theirs.close()
         self._lock = threading.Lock()
@@ -98,17 +97,9 @@ def stop_group(pid: int, grace: float) -> None:
             return
         deadline = time.monotonic() + wait
         while time.monotonic() < deadline:
-            if not _exists(pid):
+            if not process_running(pid):
                 return
             time.sleep(0.05)
-
-
-def _exists(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
 
 
 # ---------------------------------------------------------------- the template process
@@ -132,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.suppress(Exception):  # the recorder's own parse of the text (see forked.py)
         text = read_input(spec, SPEC).decode("utf-8")
         for_recorder = (text, load_spec_text(text, name=Path(spec).name))
+    zygote = os.getpid()
     while True:
         ready, _, _ = select.select([control], [], [], REAP_SECONDS)
         _reap()
@@ -143,10 +135,10 @@ def main(argv: list[str] | None = None) -> int:
             break
         if not fds:  # the campaign closed its end
             break
-        pid = os.fork()
+        pid = guarded_fork("a case process")  # this process runs one thread and no Zenoh session
         if pid == 0:
             control.close()
-            _case(fds[0], spec, preloaded, for_recorder, worker)  # never returns
+            _case(fds[0], spec, preloaded, for_recorder, worker, parent=zygote)  # never returns
         os.close(fds[0])
         control.sendall(f"{pid}\n".encode())
     while _reap(block=True):
@@ -167,12 +159,12 @@ def _reap(block: bool = False) -> bool:
             return True
 
 
-def _case(fd: int, spec: str, preloaded: Any, for_recorder: Any, worker: Any) -> None:
+def _case(fd: int, spec: str, preloaded: Any, for_recorder: Any, worker: Any, *, parent: int) -> None:
     """One case in a forked child: its recorder forked ahead, payload in, outcome out (module doc)."""
     code = 1
     try:
         os.setsid()
-        die_with_parent()
+        die_with_parent(parent)
         conn = socket.socket(fileno=fd)
         recorder = worker.recorder_ahead(Path(spec), for_recorder)
         with conn.makefile("rb") as stream:

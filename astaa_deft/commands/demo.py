@@ -12,11 +12,11 @@ Everything lands in ./astaa-deft-demo/ (or --out).
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
 from ..demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
+from ..bus import process_launch
 from ..demo.status import StatusWatch
 from ..session.summary import untouched_policies
 from ..intercept import load_interceptor
@@ -109,8 +109,8 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
     extract(clean_log, spec_path, tests_dir, threshold=None, process=False, ground_truth="debug.inputs")
     say(f"$ pytest {tests_dir.relative_to(Path.cwd()) if tests_dir.is_relative_to(Path.cwd()) else tests_dir}")
-    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
-                            capture_output=True, text=True, cwd=out_dir)
+    result = process_launch.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
+                                timeout=None, cwd=str(out_dir))
     say(result.stdout.strip().splitlines()[-1] if result.stdout.strip() else result.stderr.strip())
     if result.returncode != 0:
         problems.append("the extracted planner tests did not pass")

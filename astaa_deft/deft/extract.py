@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any
 
+from ..bus.process_launch import fork_is_safe
 from ..codecs import get_codec
 from ..codecs.base import DecodeError
 from ..errors import InputError, Problem
@@ -22,7 +23,7 @@ from ..log.reader import LogContents, LoggedMessage
 from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .fork_replay import (
-    Following, ForkedSearch, Shadow, can_fork, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
+    Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
     tell,
 )
 from .frames import Stream, candidates, trigger_candidates
@@ -91,13 +92,14 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
     ``entry`` names the module replayed (default: the planner). With ``jobs``
     (an in-process planner on a system that can fork), the candidates of an
     output are tried in forked processes, up to ``jobs`` at a time, from the
-    very same planner state (see fork_replay); otherwise from deep copies of
-    the planner, one after another.
+    very same planner state (see fork_replay); otherwise — or while this
+    process runs other Python threads, which a fork must not copy in the
+    middle of their work — from deep copies of the planner, one after another.
     """
     cfg = entry if entry is not None else replay_module_of(spec)
     if cfg.per_trigger:
         return _extract_per_trigger(log, spec, planner, cfg, progress)
-    if jobs is not None and planner.can_snapshot and can_fork():
+    if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
         return run_supervised(
             lambda send: _extract(log, spec, planner, lambda done, total: send((done, total)),
                                   ForkedSearch(jobs, send), cfg),

@@ -41,6 +41,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from ..bus.process_launch import guarded_fork
 from ..errors import InputError
 
 PR_SET_CHILD_SUBREAPER = 36
@@ -85,6 +86,17 @@ def reap_later(pid: int) -> None:
 
 def can_fork() -> bool:
     return hasattr(os, "fork")
+
+
+def _fork(what: str) -> int:
+    """``os.fork`` from a process with one Python thread (else ``UnsafeFork``).
+
+    Native threads are let be: the forked processes run only the planner,
+    never what such a thread serves (a BLAS pool, which numpy starts on
+    import and which stops itself across a fork; the Zenoh runtime of a
+    caller that ran a session).
+    """
+    return guarded_fork(what, native_threads_ok=True)
 
 
 def candidate_limit(cycle_s: float) -> float:
@@ -218,7 +230,7 @@ class ForkedSearch:
                ) -> tuple[int, int, int, float] | None:
         result_r, result_w = os.pipe()
         go_r, go_w = os.pipe()
-        pid = os.fork()
+        pid = _fork("a candidate's replay")
         if pid == 0:
             os.close(result_r)
             os.close(go_w)
@@ -349,7 +361,7 @@ def shadow() -> Shadow | Following:
     the word pipe).
     """
     word_r, word_w = os.pipe()
-    pid = os.fork()
+    pid = _fork("the replay's shadow copy")
     if pid == 0:
         os.close(word_w)
         return Following(word_r)
@@ -393,12 +405,12 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     RuntimeError when the runner failed otherwise or died without a result.
     """
     read_fd, write_fd = os.pipe()
-    supervisor = os.fork()
+    supervisor = _fork("the replay's supervisor")
     if supervisor == 0:  # the supervisor: reap every descendant until none is left
         os.close(read_fd)
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
-        runner = os.fork()
+        runner = _fork("the replay's runner")
         if runner == 0:
             code = 0
             try:

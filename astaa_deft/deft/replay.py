@@ -23,6 +23,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, Protocol, TypeVar, overload
 
+from ..bus import process_launch
 from ..bus import zenoh_config as zc
 from ..bus.processes import stop_process, tail
 from ..errors import AstaaDeftError, InputError, Problem
@@ -133,8 +134,8 @@ class LockstepPlanner:
                                                            congestion_control=zenoh.CongestionControl.BLOCK)
                       for name in planner.inputs}
         with open(self.log_path, "wb") as log:
-            self.proc = subprocess.Popen(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
-                                         stderr=subprocess.STDOUT, start_new_session=True)
+            self.proc = process_launch.start(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
+                                             stderr=subprocess.STDOUT)
         self._sent: dict[str, dict] = {}
         self._latencies: deque[float] = deque([0.0], maxlen=10)
         self._wait_connected()

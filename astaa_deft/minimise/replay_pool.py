@@ -27,7 +27,8 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from ..bus.processes import die_with_parent, python_module, stop_process
+from ..bus import process_launch
+from ..bus.processes import python_module, stop_process
 from ..errors import InputError, Problem
 from .ddmin import Outcome, TestResult
 from .replay_model import Job, ReplayAnswer, ReplayModel, ReplaySetup
@@ -77,10 +78,9 @@ class _Worker:
 
         job_read, job_write = os.pipe()
         answer_read, answer_write = os.pipe()
-        self.process = subprocess.Popen(
+        self.process = process_launch.start(
             [*python_module("astaa_deft.minimise.replay_pool"), str(job_read), str(answer_write)],
-            pass_fds=(job_read, answer_write), stdin=subprocess.DEVNULL, start_new_session=True,
-            preexec_fn=die_with_parent)
+            pass_fds=(job_read, answer_write), stdout=None, stderr=None)
         os.close(job_read)
         os.close(answer_write)
         self.jobs = Connection(job_write, readable=False)

@@ -34,7 +34,8 @@ from ..bus.launcher import Launcher, ModuleNotReady, ProcessExit, output_file
 from ..monitor.verdict import Verdict
 from ..monitor.violation import Violation
 from ..bus.observer import ChannelCounter
-from ..bus.processes import die_with_parent, python_module, stop_process, tail
+from ..bus import process_launch
+from ..bus.processes import ChildProcess, python_module, stop_process, tail
 from ..bus.interception import InterceptionBridge
 from ..bus.proxy import StarProxy, plain_forwarder
 from .module_output import ModuleOutputFollower
@@ -62,7 +63,7 @@ class BusRun:
         self.launcher: Launcher | None = None
         self.output: ModuleOutputFollower | None = None  # the modules' output lines, as they come
         self._judged_until_ns = 2**63  # set when the run begins to stop
-        self.recorder: subprocess.Popen | None = None
+        self.recorder: ChildProcess | None = None
         self.recorded: dict[str, int] = {}
         self.started_ns = 0
         self.interceptor_epoch_ns: int | None = None  # the interceptor's clock origin, on the log's clock
@@ -70,7 +71,7 @@ class BusRun:
         self._tmp: tempfile.TemporaryDirectory | None = None
         self._events_pub: zenoh.Publisher | None = None
         self._lock = threading.Lock()
-        self._helpers: list[subprocess.Popen] = []  # recorder, bus router: ours to stop
+        self._helpers: list[ChildProcess] = []  # recorder, bus router: ours to stop
         self._helper_output: dict[int, tuple[threading.Thread, list[str]]] = {}
         self._helper_names: dict[int, str] = {}  # pid → "recorder" | "bus router"
         self.lost: str = ""  # why a helper of ours stopped mid-run: the run is not fully observed or recorded
@@ -230,18 +231,18 @@ class BusRun:
             time.sleep(0.005)
 
     def _spawn_ready(self, name: str, args: list[str], error_file: Path | None = None,
-                     stdin_text: str | None = None, warm: subprocess.Popen | None = None) -> subprocess.Popen:
+                     stdin_text: str | None = None, warm: ChildProcess | None = None) -> ChildProcess:
         """Start one of the tool's own helper processes (``stdin_text`` on its stdin) and wait for its 'ready' line.
 
         ``warm``: the helper was started ahead (:func:`warm_recorder`) and is waiting for ``stdin_text``."""
         log_path = self.run_dir / f"{name.split()[-1]}.log"
+        proc: ChildProcess
         if warm is not None:
             proc = warm
         else:
             with open(log_path, "wb") as err:
-                proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err,
-                                        stdin=subprocess.DEVNULL if stdin_text is None else subprocess.PIPE,
-                                        start_new_session=True, preexec_fn=die_with_parent, text=True)
+                proc = process_launch.start(args, stdout=subprocess.PIPE, stderr=err, text=True,
+                                            stdin=subprocess.DEVNULL if stdin_text is None else subprocess.PIPE)
         self._helpers.append(proc)
         if stdin_text is not None:
             assert proc.stdin is not None
@@ -459,13 +460,12 @@ def warm_recorder(spec_files: Sequence[Path] = ()) -> subprocess.Popen:
     recorder died starts a fresh one. Its owner closes its stdin (or stops
     it) when no run will take it; it dies with its parent either way.
     """
-    return subprocess.Popen([*python_module("astaa_deft.session.recorder"), "--warm", *map(str, spec_files)],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                            start_new_session=True, preexec_fn=die_with_parent, text=True)
+    return process_launch.start([*python_module("astaa_deft.session.recorder"), "--warm", *map(str, spec_files)],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
 
 
 
-def release_warm_recorder(recorder: subprocess.Popen | None) -> None:
+def release_warm_recorder(recorder: ChildProcess | None) -> None:
     """A recorder started ahead that no run took: end of its input, and it exits."""
     if recorder is not None and recorder.stdin is not None and not recorder.stdin.closed:
         with contextlib.suppress(OSError):
