@@ -151,9 +151,12 @@ def build_parser() -> argparse.ArgumentParser:
     fz.add_argument("--horizon", type=_positive, default=20.0, help="seconds a case runs at most")
     fz.add_argument("--settle", type=_positive, default=3.0,
                     help="seconds a mutated case runs on after its last mutation could act")
-    fz.add_argument("--baseline", type=int, default=2, help="clean runs first")
-    fz.add_argument("--reruns", type=int, default=2, help="re-runs of each bucket's first failure, for its rate")
+    fz.add_argument("--baseline", type=int, default=2, help="clean runs first, per value of the --params grid")
+    fz.add_argument("--reruns", type=int, default=2,
+                    help="re-runs of a new failure and as many unmutated twins, before it is filed as a bug")
     fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
+    fz.add_argument("--minimise-timeout", type=_positive, default=300.0,
+                    help="seconds one bucket's minimisation may take (it holds a worker slot)")
     fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")
     fz.add_argument("--cluster", help="tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes)")
     fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit")
@@ -219,7 +222,7 @@ def _fuzz(a: argparse.Namespace) -> int:
                             seed=a.seed, strategy=a.strategy, dictionaries=a.dictionary,
                             params=fuzz.parse_params(a.params), cluster=a.cluster, horizon=a.horizon,
                             baseline_runs=a.baseline, reruns=a.reruns, minimise=not a.no_minimise,
-                            settle=a.settle)
+                            settle=a.settle, minimise_timeout=a.minimise_timeout)
     return fuzz.run(config, a.resume)
 
 
