@@ -58,11 +58,11 @@ def run_share(outcomes: list[CaseOutcome]) -> RunShare | None:
     return RunShare(max(o.cpu / o.wall for o in measured), max(o.rss_mb for o in measured), len(measured))
 
 
-def workers_for(share: RunShare, cores: int, memory_mb: float | None) -> int:
-    """Runs at once that fit ``cores`` (with headroom) and the available memory; at least 1."""
+def workers_for(share: RunShare, cores: int, memory_mb: float | None, most: int | None = None) -> int:
+    """Runs at once that fit ``cores`` (with headroom) and the available memory, at most ``most``; at least 1."""
     by_cpu = math.floor(cores * CORE_HEADROOM / max(share.cores, 0.01))
     by_memory = math.floor(memory_mb * MEMORY_HEADROOM / share.rss_mb) if memory_mb and share.rss_mb > 0 else by_cpu
-    return max(1, min(by_cpu, by_memory))
+    return max(1, min(by_cpu, by_memory, most if most is not None else by_cpu))
 
 
 def drift(solo: CaseOutcome, loaded: CaseOutcome) -> Drift:

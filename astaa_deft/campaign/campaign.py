@@ -185,7 +185,10 @@ class Campaign:
         if self.config.cluster:
             return DaskPool(self.config.cluster, self.workers)
         # Threads for as many runs as calibration may pick; the campaign keeps self.workers of them busy.
-        return LocalPool(self.workers if not self.calibrated else max(self.workers, MAX_WORKERS_PER_CORE * self.cores))
+        return LocalPool(self.workers if not self.calibrated else self._most_workers())
+
+    def _most_workers(self) -> int:
+        return max(self.workers, MAX_WORKERS_PER_CORE * self.cores)
 
     # -- baseline: clean runs of every param value, the runs at once, the live time, known findings -------------
     def _baseline(self, pool) -> None:
@@ -257,7 +260,7 @@ class Campaign:
             self._run_pending_baseline(pool)
             self.journal.set_meta(workers=self.workers)
             return
-        self._concurrency(workers_for(share, self.cores, available_memory_mb()),
+        self._concurrency(workers_for(share, self.cores, available_memory_mb(), most=self._most_workers()),
                           f"one run takes {share.describe()}; {self.cores} core(s), with headroom")
         first, last = alone + 1, max(per_value * alone, alone + self.workers)
         for _check in range(MAX_CALIBRATION_CHECKS):
