@@ -58,7 +58,7 @@ class Fixed:
 
 def campaign(out: Path, spec: Path, cases: list[str], *, workers: int | None = 1, **config) -> Journal:
     journal = Journal(out)
-    run = Campaign(CampaignConfig(spec, out, cases=len(cases), workers=workers, horizon=4.0, settle=1.0,
+    run = Campaign(CampaignConfig(spec, out, cases=len(cases), workers=workers, horizon=4.0, settle=2.0,
                                   minimise=False, report=False, **config), journal, say=lambda text: None)
     run.strategy = Fixed(cases)  # type: ignore[assignment]
     run.run()

@@ -51,16 +51,24 @@ class Drift:
 
 def run_share(outcomes: list[CaseOutcome]) -> RunShare | None:
     """The largest share measured over these runs (None: none measured): a run that happens to cost more
-    is what the concurrency must hold."""
+    is what the concurrency must hold. Its CPU and the CPU its CPU-bound threads waited for (a busy
+    machine gives a search less than the core it wants)."""
     measured = [o for o in outcomes if o.status == "done" and o.wall > 0 and o.cpu > 0]
     if not measured:
         return None
-    return RunShare(max(o.cpu / o.wall for o in measured), max(o.rss_mb for o in measured), len(measured))
+    return RunShare(max((o.cpu + o.cpu_waited) / o.wall for o in measured), max(o.rss_mb for o in measured),
+                    len(measured))
 
 
-def workers_for(share: RunShare, cores: int, memory_mb: float | None, most: int | None = None) -> int:
-    """Runs at once that fit ``cores`` (with headroom) and the available memory, at most ``most``; at least 1."""
-    by_cpu = math.floor(cores * CORE_HEADROOM / max(share.cores, 0.01))
+def workers_for(share: RunShare, cores: int, memory_mb: float | None, most: int | None = None,
+                other_load: float = 0.0) -> int:
+    """Runs at once that fit the cores other work leaves (``other_load``: runnable tasks not ours), with
+    headroom, and the available memory, at most ``most``; at least 1.
+
+    On a busy machine a CPU-bound module gets less than the core it wants, so its measured share is low;
+    counting the others' load keeps such a stack from being run many at once where no core is free."""
+    free = max(0.0, cores - other_load) * CORE_HEADROOM
+    by_cpu = math.floor(free / max(share.cores, 0.01))
     by_memory = math.floor(memory_mb * MEMORY_HEADROOM / share.rss_mb) if memory_mb and share.rss_mb > 0 else by_cpu
     return max(1, min(by_cpu, by_memory, most if most is not None else by_cpu))
 

@@ -206,8 +206,13 @@ class Campaign:
         failed = [o for o in outcomes if o is not None and o.status == "error"]
         if rows and len(failed) == len(rows):
             raise CampaignStopped(f"the SUT does not start: {failed[0].error or failed[0].summary}")
-        clean = [o for o in outcomes if o is not None and o.status == "done"]
-        self._calibrate([o for o in clean if o is not None])
+        # Runs of a batch whose timing drifted (too many at once) measured the campaign's load, not the SUT:
+        # neither its live time nor its baseline findings.
+        overloaded_runs = set(self.journal.meta().get("overloaded_runs", []))
+        clean = [o for r, o in zip(rows, outcomes, strict=False)
+                 if o is not None and o.status == "done" and r["case_id"] not in overloaded_runs]
+        self._calibrate(clean)
+        self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
         seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes, strict=False):
@@ -218,6 +223,17 @@ class Campaign:
         for name, finding in self.known.items():
             self.say(f"baseline finding: '{name}' breaks without mutation ({finding.rate} clean runs): from now on"
                      f" it counts in a case only where the case makes it worse (earlier, more often)")
+
+    def _file_baseline(self, rows, outcomes: list[CaseOutcome | None], overloaded_runs: set[str]) -> None:
+        """Failing baseline runs into baseline-finding buckets — except runs of a batch that overloaded the
+        machine (their failures are the campaign's doing)."""
+        for row, outcome in zip(rows, outcomes, strict=False):
+            if outcome is None or not outcome.failed or row["bucket"] or row["case_id"] in overloaded_runs:
+                continue
+            key = sig.failure_key(outcome)
+            signature = f"{key}|{sig.NO_MUTATION}"
+            self.journal.file_case(row["case_id"], signature, key,
+                                   self._bucket(signature, outcome, row["case_id"], BASELINE_FINDING))
 
     def _plan_baseline(self, count: int) -> None:
         """Baseline runs up to ``count``: run n has the grid's value (n-1) mod its size (every value in turn)."""
@@ -260,8 +276,11 @@ class Campaign:
             self._run_pending_baseline(pool)
             self.journal.set_meta(workers=self.workers)
             return
-        self._concurrency(workers_for(share, self.cores, available_memory_mb(), most=self._most_workers()),
-                          f"one run takes {share.describe()}; {self.cores} core(s), with headroom")
+        other = max(0.0, os.getloadavg()[0] - share.cores)  # the solo run's own part of the load apart
+        self._concurrency(workers_for(share, self.cores, available_memory_mb(), most=self._most_workers(),
+                                      other_load=other),
+                          f"one run takes {share.describe()}; {self.cores} core(s), load {other:.1f} from other"
+                          f" work, with headroom")
         first, last = alone + 1, max(per_value * alone, alone + self.workers)
         for _check in range(MAX_CALIBRATION_CHECKS):
             self._plan_baseline(last)
@@ -279,6 +298,8 @@ class Campaign:
             if self.workers == 1:  # alone already: the drift is the machine's (other load), nothing to lower
                 self._concurrency(1, f"timing drifted even one at a time: {worst.detail}, ×{worst.ratio:.1f}")
                 break
+            overloaded_runs = self.journal.meta().get("overloaded_runs", [])
+            self.journal.set_meta(overloaded_runs=overloaded_runs + [r["case_id"] for r, _ in loaded])
             self._concurrency(fewer_after_drift(self.workers, worst),
                               f"timing drifted at {self.workers} at once: {worst.detail}, ×{worst.ratio:.1f}")
             if self.workers == 1:
@@ -424,9 +445,9 @@ class Campaign:
             key = sig.failure_key(outcome)
             clean = kind == BASELINE or (kind == MUTATED and outcome.mutations == 0)
             if clean:  # no mutation acted: whatever failed, failed in a clean run — a baseline finding
-                signature = f"{key}|{sig.NO_MUTATION}"
-                bucket = self._bucket(signature, outcome, case_id, BASELINE_FINDING)
-                if kind != BASELINE:
+                if kind != BASELINE:  # baseline runs are filed once calibrated (_file_baseline)
+                    signature = f"{key}|{sig.NO_MUTATION}"
+                    bucket = self._bucket(signature, outcome, case_id, BASELINE_FINDING)
                     self._learn_clean_failure(outcome)
             elif kind == MUTATED:
                 signature = sig.signature(outcome, xml)

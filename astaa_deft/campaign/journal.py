@@ -146,6 +146,11 @@ class Journal:
                      failure_key, bucket, json.dumps(outcome.to_json(), default=str), time.time(), outcome.seconds,
                      outcome.log_path, case_id))
 
+    def file_case(self, case_id: str, signature: str, failure_key: str, bucket: str) -> None:
+        """File a finished case into a bucket decided after it finished (baseline runs, once calibrated)."""
+        self._write("UPDATE cases SET signature=?, failure_key=?, bucket=? WHERE case_id=?",
+                    (signature, failure_key, bucket, case_id))
+
     def cost(self, case_id: str, cpu: float, load: float, at_once: int) -> None:
         """What a finished case cost and how loaded the machine was when it ended."""
         self._write("UPDATE cases SET cpu=?, load=?, at_once=? WHERE case_id=?", (cpu, load, at_once, case_id))

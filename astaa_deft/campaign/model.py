@@ -72,6 +72,7 @@ class CaseOutcome:
     # What the run cost: CPU seconds of every process of the run (the case process, its recorder, the modules
     # and what they reaped), the case's wall seconds, the peak summed resident memory (clean runs only).
     cpu: float = 0.0
+    cpu_waited: float = 0.0  # CPU seconds its CPU-bound threads waited for a core (clean runs; cost.WantedCpu)
     wall: float = 0.0
     rss_mb: float = 0.0
     # Clean runs: per channel, its message rate (1/s) and its longest gap between two messages (s).

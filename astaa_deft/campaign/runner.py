@@ -135,7 +135,7 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     return CaseOutcome("done", result.verdict.klass, result.verdict.summary, findings, result.seconds,
                        str(log_path), reason, result.mutations, margins=watch.margins(result.violations),
                        first_seen=timing.seconds() if timing is not None else {},
-                       cpu=cost.cpu, wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
+                       cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
                        timing=timing.channels_timing() if timing is not None else {}, violating=violating)
 
 

@@ -3,8 +3,10 @@
 --burn 1: a busy loop (one core, like a sampling planner); 0: it sleeps.
 --counter-dir DIR --fail-launches 2,3: every start takes the next launch number
 (an atomically created file DIR/launch-N), and launches in the list exit with
-code 3 after --fail-after seconds — a SUT that fails on some runs and not on
-others, in an order a test fixes (one run at a time). Imports nothing from astaa-deft.
+code 3 --fail-after seconds after the first message on --fail-key (counted from
+the bus, so a test case's early mutation comes first, however slowly each
+process starts) — a SUT that fails on some runs and not on others, in an order
+a test fixes (one run at a time). Imports nothing from astaa-deft.
 """
 
 import argparse
@@ -19,6 +21,7 @@ ap.add_argument("--burn", default="0")
 ap.add_argument("--counter-dir", default="")
 ap.add_argument("--fail-launches", default="")
 ap.add_argument("--fail-after", type=float, default=0.8)
+ap.add_argument("--fail-key", default="")
 args = ap.parse_args()
 
 stop = threading.Event()
@@ -40,12 +43,22 @@ if args.counter_dir:
     number = launch_number(args.counter_dir)
     fail = str(number) in args.fail_launches.split(",")
     print(f"worker: launch {number}{' (fails)' if fail else ''}", flush=True)
+first_message = threading.Event()
+if fail and args.fail_key:
+    import zenoh
+
+    session = zenoh.open(zenoh.Config.from_env())
+    subscriber = session.declare_subscriber(args.fail_key, lambda sample: first_message.set())
+else:
+    first_message.set()
 print("worker ready", flush=True)
+first_message.wait()
 started = time.monotonic()
 while not stop.is_set():
     if fail and time.monotonic() - started >= args.fail_after:
         sys.stderr.write("worker: simulated crash\n")
-        sys.exit(3)
+        sys.stderr.flush()
+        os._exit(3)  # at once: an open Zenoh session would hold a normal exit
     if args.burn == "1":
         deadline = time.monotonic() + 0.05
         while time.monotonic() < deadline:
