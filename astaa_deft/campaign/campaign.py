@@ -458,6 +458,8 @@ class Campaign:
                 else:
                     bucket = self._bucket(signature, outcome, case_id, CONFIRMING)
                     new = self._plan_confirmation(bucket, row)
+                    if not new:  # --reruns 0: nothing to confirm it with, filed as it is
+                        self._decide(bucket)
             elif kind == RERUN:
                 signature = sig.signature(outcome, xml)
             elif kind == CONTROL:
@@ -509,7 +511,8 @@ class Campaign:
         return name
 
     def _controls(self) -> int:
-        return max(1, self.config.reruns)
+        """Unmutated twins of a new failure: as many as its re-runs (so the two rates compare)."""
+        return self.config.reruns
 
     def _plan_confirmation(self, bucket: str, row) -> list[PlannedCase]:
         """The failing case again (its rate) and its unmutated twins (same params, no test case): interleaved,
