@@ -56,10 +56,11 @@ class Fixed:
         pass
 
 
-def campaign(out: Path, spec: Path, cases: list[str], *, workers: int | None = 1, **config) -> Journal:
+def campaign(out: Path, spec: Path, cases: list[str], *, workers: int | None = 1, minimise: bool = False,
+             **config) -> Journal:
     journal = Journal(out)
     run = Campaign(CampaignConfig(spec, out, cases=len(cases), workers=workers, horizon=4.0, settle=2.0,
-                                  minimise=False, report=False, **config), journal, say=lambda text: None)
+                                  minimise=minimise, report=False, **config), journal, say=lambda text: None)
     run.strategy = Fixed(cases)  # type: ignore[assignment]
     run.run()
     return journal
@@ -179,5 +180,23 @@ def test_the_baseline_runs_every_param_value_and_calibrates_the_runs_at_once(tmp
         assert meta["calibrated"] and meta["workers"] >= 1
         notes = [n["text"] for n in journal.notes("concurrency")]
         assert notes and "one run takes" in notes[0], notes
+    finally:
+        journal.close()
+
+
+def test_a_confirmed_bucket_is_minimised_while_the_hunt_goes_on(tmp_path: Path):
+    # The worker crashes on a NaN 'aux' value: a bug the case's mutation causes (its twin passes). Two runs at
+    # once: the minimisation takes one slot as soon as the bucket is confirmed, cases go on in the other.
+    cases = [SET_AUX] + [DROP_AUX] * 7
+    journal = campaign(tmp_path / "c", STEADY, cases, workers=2, params={"crash_on_nan": ["1"]}, baseline_runs=1,
+                       reruns=1, minimise=True)
+    try:
+        bug = next(b for b in journal.buckets() if b.family == "aux:value:set")
+        assert bug.kind == "bug" and (bug.rerun_failures, bug.control_failures) == (1, 0)
+        row = journal.minimisations()[bug.bucket]
+        assert row["status"] in ("minimised", "not reproduced"), dict(row)
+        later = [r for r in journal.cases("mutated") if r["started_at"] > row["started_at"]]
+        assert later, "no case started after the minimisation: it did not run alongside the hunt"
+        assert row["status"] == "minimised" and "aux:value" in (row["culprit"] or ""), dict(row)
     finally:
         journal.close()

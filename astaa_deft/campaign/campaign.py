@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor
@@ -144,6 +145,7 @@ class Campaign:
         self._minimiser: ThreadPoolExecutor | None = None
         self._minimising: dict[Future, str] = {}  # minimisation in flight → its bucket
         self._running_cases: set[str] = set()
+        self._cancel = threading.Event()  # set: minimisations in flight stop (the campaign was interrupted)
 
     # -- the whole campaign --------------------------------------------------
     def run(self) -> CampaignResult:
@@ -153,6 +155,8 @@ class Campaign:
         requeued = self.journal.requeue_running()
         if requeued:
             self.say(f"resume: {requeued} case(s) that were in flight run again")
+        if self.journal.requeue_minimisations():
+            self.say("resume: the minimisations that were running start again")
         pool = self._pool()
         stopped = "done"
         try:
@@ -172,6 +176,8 @@ class Campaign:
             stopped = "interrupted"
         finally:
             if self._minimiser is not None:
+                if stopped == "interrupted":  # minimisations in flight stop now; a resume does them again
+                    self._cancel.set()
                 self._minimiser.shutdown(wait=True, cancel_futures=True)
         done = [r for r in self.journal.cases() if r["status"] in ("done", "error")]
         failures = sum(1 for r in done if r["kind"] == MUTATED and r["verdict"] not in ("Pass", None, "?"))
@@ -568,6 +574,7 @@ class Campaign:
                 self._minimiser = ThreadPoolExecutor(max_workers=max(self.workers, 1) + 1,
                                                      thread_name_prefix="minimise")
             self.say(f"minimising bucket {bucket.bucket} ({bucket.invariant}) …")
+            self.journal.minimisation_started(bucket.bucket)
             future = self._minimiser.submit(self._minimise_one, bucket, Path(row["log_path"]))
             self._minimising[future] = bucket.bucket
 
@@ -577,7 +584,8 @@ class Campaign:
         if out_dir.exists():
             shutil.rmtree(out_dir)
         result = minimise_run(log, self.config.spec_path, out_dir, bucket.invariant,
-                              max_tests=self.config.minimise_max_tests, timeout=self.config.minimise_timeout)
+                              max_tests=self.config.minimise_max_tests, timeout=self.config.minimise_timeout,
+                              cancel=self._cancel)
         tests_dir = None
         if result.tests_dir is not None:  # the minimiser's own: they fail on the culprit
             tests_dir = self.config.out / TESTS_DIR / bucket.bucket

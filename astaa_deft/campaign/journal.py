@@ -26,6 +26,7 @@ ADDED_COLUMNS = {
     "cases": (("cpu", "REAL"), ("load", "REAL"), ("at_once", "INTEGER")),
     "buckets": (("kind", "TEXT NOT NULL DEFAULT 'bug'"), ("controls", "INTEGER NOT NULL DEFAULT 0"),
                 ("control_failures", "INTEGER NOT NULL DEFAULT 0")),
+    "minimisations": (("started_at", "REAL"), ("finished_at", "REAL")),
 }
 
 SCHEMA = """
@@ -50,7 +51,8 @@ CREATE TABLE IF NOT EXISTS buckets (
 CREATE TABLE IF NOT EXISTS notes (time REAL NOT NULL, topic TEXT NOT NULL, text TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS minimisations (
     bucket TEXT PRIMARY KEY, status TEXT NOT NULL, exit_code INTEGER, minimal_xml TEXT, culprit TEXT,
-    out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT
+    out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT,
+    started_at REAL, finished_at REAL  -- status 'running' from the start to the end
 );
 """
 
@@ -240,11 +242,22 @@ class Journal:
         return next((b for b in self.buckets() if b.signature == signature), None)
 
     # -- minimisations ------------------------------------------------------
+    def minimisation_started(self, bucket: str) -> None:
+        self._write("INSERT OR REPLACE INTO minimisations(bucket, status, started_at) VALUES (?, 'running', ?)",
+                    (bucket, time.time()))
+
+    def requeue_minimisations(self) -> int:
+        """On resume: minimisations that were running start again."""
+        return self.db.execute("DELETE FROM minimisations WHERE status='running'").rowcount
+
     def minimised(self, bucket: str, status: str, exit_code: int | None, minimal_xml: str | None,
                   culprit: str | None, out_dir: str | None, tests_dir: str | None, seconds: float,
                   detail: str) -> None:
-        self._write("INSERT OR REPLACE INTO minimisations VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (bucket, status, exit_code, minimal_xml, culprit, out_dir, tests_dir, seconds, detail))
+        started = self.db.execute("SELECT started_at FROM minimisations WHERE bucket=?", (bucket,)).fetchone()
+        self._write("INSERT OR REPLACE INTO minimisations(bucket, status, exit_code, minimal_xml, culprit, out_dir,"
+                    " tests_dir, seconds, detail, started_at, finished_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (bucket, status, exit_code, minimal_xml, culprit, out_dir, tests_dir, seconds, detail,
+                     started[0] if started else None, time.time()))
 
     def minimisations(self) -> dict[str, sqlite3.Row]:
         return {r["bucket"]: r for r in self.db.execute("SELECT * FROM minimisations")}

@@ -22,6 +22,7 @@ class Snapshot:
     buckets: int
     running: int
     elapsed: float
+    bugs: int = 0  # buckets confirmed as bugs
     at_once: int | None = None  # runs the campaign keeps going at once now
     load: float | None = None  # the machine's 1-min load average
     cores: int | None = None
@@ -36,7 +37,7 @@ class Snapshot:
         if self.planned and self.done and self.rate_per_min > 0:
             eta = f", ETA {max(0.0, (self.planned - self.done) / self.rate_per_min):.1f} min"
         return (f"cases {self.done}{total} ({self.running} running), failures {self.failures}, "
-                f"buckets {self.buckets}, {self.rate_per_min:.1f} cases/min{eta}{self.machine()}")
+                f"buckets {self.buckets} ({self.bugs} bug), {self.rate_per_min:.1f} cases/min{eta}{self.machine()}")
 
     def machine(self) -> str:
         """How hard the machine works: runs at once, load over cores (empty when not known)."""
@@ -55,7 +56,8 @@ def snapshot(journal: Journal, planned: int | None, elapsed: float, at_once: int
     running = sum(v for k, v in counts.items() if k.endswith(":running"))
     failures = journal.db.execute("SELECT COUNT(*) FROM cases WHERE kind=? AND verdict NOT IN ('Pass', '?')",
                                   (MUTATED,)).fetchone()[0]
-    return Snapshot(done, planned, failures, len(journal.buckets(include_merged=False)), running, elapsed,
+    live = journal.buckets(include_merged=False)
+    return Snapshot(done, planned, failures, len(live), running, elapsed, sum(1 for b in live if b.is_bug),
                     at_once, os.getloadavg()[0], os.cpu_count())
 
 
@@ -88,7 +90,7 @@ class Progress:
                         getattr(campaign, "workers", None))
         if self.live is not None:
             self.bar.update(self.task, completed=snap.done,
-                            description=f"failures {snap.failures} · buckets {snap.buckets} · "
+                            description=f"failures {snap.failures} · buckets {snap.buckets} ({snap.bugs} bug) · "
                                         f"{snap.rate_per_min:.1f}/min{snap.machine().replace(', ', ' · ')}")
         elif time.monotonic() - self.last_plain >= PLAIN_EVERY_SECONDS:
             self.last_plain = time.monotonic()

@@ -1,6 +1,7 @@
 """A test-SUT module for campaign tests: it burns CPU or sleeps, and can crash on chosen launches.
 
 --burn 1: a busy loop (one core, like a sampling planner); 0: it sleeps.
+--crash-on-nan 1: exit with code 3 on a non-finite value on --fail-key (a bug a test case can trigger).
 --counter-dir DIR --fail-launches 2,3: every start takes the next launch number
 (an atomically created file DIR/launch-N), and launches in the list exit with
 code 3 --fail-after seconds after the first message on --fail-key (counted from
@@ -10,6 +11,8 @@ a test fixes (one run at a time). Imports nothing from astaa-deft.
 """
 
 import argparse
+import json
+import math
 import os
 import signal
 import sys
@@ -22,6 +25,7 @@ ap.add_argument("--counter-dir", default="")
 ap.add_argument("--fail-launches", default="")
 ap.add_argument("--fail-after", type=float, default=0.8)
 ap.add_argument("--fail-key", default="")
+ap.add_argument("--crash-on-nan", default="0", help="1: exit with code 3 on a non-finite 'value' on --fail-key")
 args = ap.parse_args()
 
 stop = threading.Event()
@@ -44,18 +48,32 @@ if args.counter_dir:
     fail = str(number) in args.fail_launches.split(",")
     print(f"worker: launch {number}{' (fails)' if fail else ''}", flush=True)
 first_message = threading.Event()
-if fail and args.fail_key:
+non_finite = threading.Event()
+
+
+def on_sample(sample) -> None:
+    first_message.set()
+    try:
+        value = json.loads(sample.payload.to_bytes())["value"]
+    except (ValueError, KeyError, TypeError):
+        return
+    if isinstance(value, float) and not math.isfinite(value):
+        non_finite.set()
+
+
+crash_on_nan = args.crash_on_nan == "1"
+if args.fail_key and (fail or crash_on_nan):
     import zenoh
 
     session = zenoh.open(zenoh.Config.from_env())
-    subscriber = session.declare_subscriber(args.fail_key, lambda sample: first_message.set())
-else:
+    subscriber = session.declare_subscriber(args.fail_key, on_sample)
+if not fail:
     first_message.set()
 print("worker ready", flush=True)
 first_message.wait()
 started = time.monotonic()
 while not stop.is_set():
-    if fail and time.monotonic() - started >= args.fail_after:
+    if (fail and time.monotonic() - started >= args.fail_after) or non_finite.is_set():
         sys.stderr.write("worker: simulated crash\n")
         sys.stderr.flush()
         os._exit(3)  # at once: an open Zenoh session would hold a normal exit
