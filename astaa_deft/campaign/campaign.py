@@ -474,7 +474,7 @@ class Campaign:
         if kind in (RERUN, CONTROL):
             bucket = row["parent"]
             first = self.journal.outcome(self.journal.planned(self.journal.bucket(bucket).first_case))
-            same = outcome.failed and first is not None and sig.failure_key(first) == key
+            same = outcome.failed and first is not None and shows_failure(outcome, first)
             if kind == RERUN and outcome.status == "done":
                 self.journal.bucket_rerun(bucket, same and outcome.mutations > 0)
             elif kind == CONTROL and outcome.status == "done":
@@ -660,6 +660,17 @@ class Campaign:
                        else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
         self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")
         return tests_dir
+
+
+def shows_failure(outcome: CaseOutcome, failing: CaseOutcome) -> bool:
+    """``outcome`` breaks what ``failing`` was filed under (its primary finding's invariant, in the same module),
+    first or among its other findings: a twin that collides after first grazing an obstacle shows the collision
+    too."""
+    wanted = sig.primary(failing)
+    if wanted is None:
+        return outcome.failed and outcome.verdict == failing.verdict
+    return outcome.failed and any(f.invariant == wanted.invariant and f.module == wanted.module
+                                  for f in outcome.findings)
 
 
 TESTS_DIR = "tests"
