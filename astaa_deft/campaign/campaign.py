@@ -274,6 +274,7 @@ class Campaign:
         one run of each param value alone, then the rest of the baseline (at least as many runs as go at
         once) at that concurrency, fewer at once while their timing drifts from the solo runs'."""
         alone = len(self.grid)
+        self.workers = 1  # the solo runs
         self._run_pending_baseline(pool, at_once=1, last=alone)
         self.journal.set_meta(calibrated=True)
         solo = self._solo_runs()
