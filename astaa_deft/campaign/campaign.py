@@ -450,7 +450,7 @@ class Campaign:
         bucket: str | None = None
         if outcome.failed:
             key = sig.failure_key(outcome)
-            clean = kind == BASELINE or (kind == MUTATED and outcome.mutations == 0)
+            clean = kind == BASELINE or (kind in (MUTATED, RERUN) and outcome.mutations == 0)
             if clean:  # no mutation acted: whatever failed, failed in a clean run — a baseline finding
                 if kind != BASELINE:  # baseline runs are filed once calibrated (_file_baseline)
                     signature = f"{key}|{sig.NO_MUTATION}"
@@ -472,19 +472,21 @@ class Campaign:
             elif kind == CONTROL:
                 signature = f"{key}|{sig.NO_MUTATION}"
                 self._learn_clean_failure(outcome)
-        if kind in (RERUN, CONTROL):
-            bucket = row["parent"]
-            first = self.journal.outcome(self.journal.planned(self.journal.bucket(bucket).first_case))
+        confirms = row["parent"] if kind in (RERUN, CONTROL) else None  # the bucket this run confirms
+        if confirms is not None:
+            first = self.journal.outcome(self.journal.planned(self.journal.bucket(confirms).first_case))
             same = outcome.failed and first is not None and shows_failure(outcome, first)
             if kind == RERUN and outcome.status == "done":
-                self.journal.bucket_rerun(bucket, same and outcome.mutations > 0)
+                self.journal.bucket_rerun(confirms, same and outcome.mutations > 0)
+                if bucket is None and outcome.mutations > 0:  # filed under the bucket it re-runs
+                    bucket = confirms
             elif kind == CONTROL and outcome.status == "done":
-                self.journal.bucket_control(bucket, same)
+                self.journal.bucket_control(confirms, same)
                 self._watch_timing(row, outcome)
         self.journal.finished(case_id, outcome, signature, key, bucket)
         self.journal.cost(case_id, outcome.cpu, os.getloadavg()[0], self.workers)
-        if kind in (RERUN, CONTROL) and bucket is not None and not self.journal.unfinished(bucket):
-            self._decide(bucket)
+        if confirms is not None and not self.journal.unfinished(confirms):
+            self._decide(confirms)
         if kind == MUTATED:
             self.strategy.observe(case_id, xml, outcome)
         return new
