@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from astaa_deft.campaign import known as known_mod
 from astaa_deft.campaign.calibration import run_share, workers_for
 from astaa_deft.campaign.campaign import Campaign, CampaignConfig
@@ -184,6 +186,7 @@ def test_the_baseline_runs_every_param_value_and_calibrates_the_runs_at_once(tmp
         journal.close()
 
 
+@pytest.mark.slow  # a live minimisation beside eight cases: ~90 s on a loaded machine
 def test_a_confirmed_bucket_is_minimised_while_the_hunt_goes_on(tmp_path: Path):
     # The worker crashes on a NaN 'aux' value: a bug the case's mutation causes (its twin passes). Two runs at
     # once: the minimisation takes one slot as soon as the bucket is confirmed, cases go on in the other.
