@@ -161,9 +161,12 @@ def build_parser() -> argparse.ArgumentParser:
     _bounded(fz, "--horizon", WINDOW_SECONDS, default=20.0, help="seconds a case runs at most")
     _bounded(fz, "--settle", WINDOW_SECONDS, default=3.0,
              help="seconds a mutated case runs on after its last mutation could act")
-    _bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first")
-    _bounded(fz, "--reruns", RERUNS, default=2, help="re-runs of each bucket's first failure, for its rate")
+    _bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first, per value of the --params grid")
+    _bounded(fz, "--reruns", RERUNS, default=2,
+             help="re-runs of a new failure and as many unmutated twins, before it is filed as a bug")
     fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
+    _bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
+             help="seconds one bucket's minimisation may take (it holds a worker slot)")
     fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")
     fz.add_argument("--cluster", type=_cluster,
                     help=f"tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes) [K {PROCESSES}]")
@@ -230,7 +233,7 @@ def _fuzz(a: argparse.Namespace) -> int:
                             seed=a.seed, strategy=a.strategy, dictionaries=a.dictionary,
                             params=fuzz.parse_params(a.params), cluster=a.cluster, horizon=a.horizon,
                             baseline_runs=a.baseline, reruns=a.reruns, minimise=not a.no_minimise,
-                            settle=a.settle)
+                            settle=a.settle, minimise_timeout=a.minimise_timeout)
     return fuzz.run(config, a.resume)
 
 

@@ -37,13 +37,17 @@ def test_campaign_finds_buckets_reruns_and_reports(tmp_path: Path):
                 "--horizon", "6", "--workers", "3", "--baseline", "1", "--reruns", "1", "--no-minimise")
     assert done.returncode == 1, done.stdout + done.stderr  # a finding
     cases = dict(rows(out, "SELECT case_id, status FROM cases"))
-    assert cases == {"b-0001": "done", "c-000001": "done", "c-000002": "done", "r-B001-1": "done"}
-    (bucket, verdict, invariant, module, family, first, without, reruns, fails), = rows(
+    # the failing case re-run once and its unmutated twin (same params, no test case) once
+    assert cases == {"b-0001": "done", "c-000001": "done", "c-000002": "done", "r-B001-1": "done",
+                     "t-B001-1": "done"}
+    (bucket, verdict, invariant, module, family, first, without, reruns, fails, kind, controls, control_fails), = rows(
         out, "SELECT bucket, verdict, invariant, module, family, first_case, without_mutation, reruns,"
-             " rerun_failures FROM buckets")
+             " rerun_failures, kind, controls, control_failures FROM buckets")
     assert (bucket, verdict, module, family, first, without) == ("B001", "Abort", "control", "trajectory:points:set",
                                                                  "c-000001", 0)
     assert reruns == 1 and fails in (0, 1)
+    assert (controls, control_fails) == (1, 0)  # the clean demo does not crash control
+    assert kind == ("bug" if fails else "flaky")  # a bug only where a re-run reproduced it
     # each case its own run dir and log
     assert (out / "cases" / "c-000001" / "run.mcap").is_file() and (out / "cases" / "c-000002" / "run.mcap").is_file()
     # the report is the journal's: the bucket, its culprit family, the minimal/generated XML, the log link, plots

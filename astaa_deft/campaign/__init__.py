@@ -9,8 +9,11 @@ One concern per module:
 * ``executors``: where cases run (a local process pool, or a Dask cluster);
 * ``journal``: the SQLite journal, the source of truth for resume, status and report;
 * ``signature``: a failure's signature, which groups failures into buckets;
+* ``cost``: what a run costs the machine (CPU of all its processes, CPU waited for, memory);
+* ``calibration``: how many runs at once, from those costs and the clean runs' timing (pure);
+* ``known``: known baseline findings, and when a case makes one worse (pure);
 * ``strategies``: how the next test case is drawn (random, guided);
-* ``campaign``: the workflow (baseline, cases, buckets, rates, minimisation);
+* ``campaign``: the workflow (baseline and calibration, cases, control runs, buckets, minimisation alongside);
 * ``progress``: a live bar on a terminal, plain lines otherwise;
 * ``report``: the static HTML report.
 """

@@ -17,9 +17,17 @@ from typing import Any
 from collections.abc import Iterator
 
 from ..errors import InputError, Problem
-from .model import CaseOutcome, PlannedCase
+from .model import BASELINE_FINDING, BUG, CONTROL, RERUN, CaseOutcome, PlannedCase
 
 FILE_NAME = "journal.sqlite"
+
+# Columns added since the first journals: added to an older journal when it is opened (resume, report).
+ADDED_COLUMNS = {
+    "cases": (("cpu", "REAL"), ("load", "REAL"), ("at_once", "INTEGER")),
+    "buckets": (("kind", "TEXT NOT NULL DEFAULT 'bug'"), ("controls", "INTEGER NOT NULL DEFAULT 0"),
+                ("control_failures", "INTEGER NOT NULL DEFAULT 0")),
+    "minimisations": (("started_at", "REAL"), ("finished_at", "REAL")),
+}
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -28,18 +36,23 @@ CREATE TABLE IF NOT EXISTS cases (
     params TEXT NOT NULL, testcase_xml TEXT, strategy TEXT NOT NULL, parent TEXT,
     status TEXT NOT NULL DEFAULT 'planned',  -- planned, running, done, error
     verdict TEXT, summary TEXT, signature TEXT, failure_key TEXT, bucket TEXT, outcome TEXT,
-    planned_at REAL, started_at REAL, finished_at REAL, seconds REAL, log_path TEXT, worker TEXT
+    planned_at REAL, started_at REAL, finished_at REAL, seconds REAL, log_path TEXT, worker TEXT,
+    cpu REAL, load REAL, at_once INTEGER  -- the run's CPU s, the 1-min load and the runs at once when it ended
 );
 CREATE INDEX IF NOT EXISTS cases_status ON cases(status);
 CREATE TABLE IF NOT EXISTS buckets (
     bucket TEXT PRIMARY KEY, signature TEXT NOT NULL, verdict TEXT NOT NULL, invariant TEXT NOT NULL,
     module TEXT, family TEXT NOT NULL, first_case TEXT NOT NULL, without_mutation INTEGER NOT NULL,
     cases INTEGER NOT NULL DEFAULT 1, reruns INTEGER NOT NULL DEFAULT 0, rerun_failures INTEGER NOT NULL DEFAULT 0,
-    merged_into TEXT, created_at REAL NOT NULL, created_after_cases INTEGER NOT NULL
+    merged_into TEXT, created_at REAL NOT NULL, created_after_cases INTEGER NOT NULL,
+    kind TEXT NOT NULL DEFAULT 'bug',  -- bug, flaky, baseline, confirming (model.py)
+    controls INTEGER NOT NULL DEFAULT 0, control_failures INTEGER NOT NULL DEFAULT 0  -- unmutated twins
 );
+CREATE TABLE IF NOT EXISTS notes (time REAL NOT NULL, topic TEXT NOT NULL, text TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS minimisations (
     bucket TEXT PRIMARY KEY, status TEXT NOT NULL, exit_code INTEGER, minimal_xml TEXT, culprit TEXT,
-    out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT
+    out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT,
+    started_at REAL, finished_at REAL  -- status 'running' from the start to the end
 );
 """
 
@@ -60,10 +73,18 @@ class Bucket:
     merged_into: str | None
     created_at: float
     created_after_cases: int
+    kind: str = BUG  # BUG, FLAKY, BASELINE_FINDING or CONFIRMING (model.py)
+    controls: int = 0  # unmutated twins run
+    control_failures: int = 0  # of those, how many failed the same way
 
     @property
     def rate(self) -> float | None:
         return self.rerun_failures / self.reruns if self.reruns else None
+
+    @property
+    def is_bug(self) -> bool:
+        """Confirmed: reproduced, and its unmutated twins did not fail that way."""
+        return self.kind == BUG
 
 
 class Journal:
@@ -75,6 +96,7 @@ class Journal:
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")
             self.db.executescript(SCHEMA)
+            self._add_columns()
         except (sqlite3.Error, OSError) as exc:
             raise InputError(Problem(str(self.path), None, None, f"cannot open the campaign journal: {exc}",
                                      "give a writable campaign directory (-o) with free space")) from None
@@ -82,6 +104,15 @@ class Journal:
 
     def close(self) -> None:
         self.db.close()
+
+    def _add_columns(self) -> None:
+        for table, columns in ADDED_COLUMNS.items():
+            have = {r[1] for r in self.db.execute(f"PRAGMA table_info({table})")}
+            for name, decl in columns:
+                if name not in have:
+                    self.db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {decl}")
+        # a journal from before bucket kinds: its clean-run buckets are baseline findings
+        self.db.execute("UPDATE buckets SET kind=? WHERE without_mutation=1 AND kind=?", (BASELINE_FINDING, BUG))
 
     def _write(self, sql: str, args: tuple = ()) -> None:
         try:
@@ -116,6 +147,15 @@ class Journal:
                     ("done" if outcome.status == "done" else "error", outcome.verdict, outcome.summary, signature,
                      failure_key, bucket, json.dumps(outcome.to_json(), default=str), time.time(), outcome.seconds,
                      outcome.log_path, case_id))
+
+    def file_case(self, case_id: str, signature: str, failure_key: str, bucket: str) -> None:
+        """File a finished case into a bucket decided after it finished (baseline runs, once calibrated)."""
+        self._write("UPDATE cases SET signature=?, failure_key=?, bucket=? WHERE case_id=?",
+                    (signature, failure_key, bucket, case_id))
+
+    def cost(self, case_id: str, cpu: float, load: float, at_once: int) -> None:
+        """What a finished case cost and how loaded the machine was when it ended."""
+        self._write("UPDATE cases SET cpu=?, load=?, at_once=? WHERE case_id=?", (cpu, load, at_once, case_id))
 
     def requeue_running(self) -> int:
         """On resume: cases that were in flight run again (their partial results are not trusted)."""
@@ -153,11 +193,25 @@ class Journal:
 
     # -- buckets ------------------------------------------------------------
     def add_bucket(self, bucket: str, signature: str, verdict: str, invariant: str, module: str | None,
-                   family: str, first_case: str, without_mutation: bool, after_cases: int) -> None:
+                   family: str, first_case: str, without_mutation: bool, after_cases: int, *,
+                   kind: str = BUG) -> None:
         self._write("INSERT OR IGNORE INTO buckets(bucket, signature, verdict, invariant, module, family, first_case,"
-                    " without_mutation, created_at, created_after_cases) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    " without_mutation, created_at, created_after_cases, kind)"
+                    " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (bucket, signature, verdict, invariant, module, family, first_case, int(without_mutation),
-                     time.time(), after_cases))
+                     time.time(), after_cases, kind))
+
+    def bucket_kind(self, bucket: str, kind: str) -> None:
+        self._write("UPDATE buckets SET kind=? WHERE bucket=?", (kind, bucket))
+
+    def bucket_control(self, bucket: str, failed: bool) -> None:
+        self._write("UPDATE buckets SET controls = controls + 1, control_failures = control_failures + ?"
+                    " WHERE bucket=?", (int(failed), bucket))
+
+    def unfinished(self, parent: str) -> int:
+        """Re-runs and control runs of a bucket not finished yet."""
+        return int(self.db.execute("SELECT COUNT(*) FROM cases WHERE parent=? AND kind IN (?, ?)"
+                                   " AND status IN ('planned', 'running')", (parent, RERUN, CONTROL)).fetchone()[0])
 
     def bucket_hit(self, bucket: str) -> None:
         self._write("UPDATE buckets SET cases = cases + 1 WHERE bucket=?", (bucket,))
@@ -168,6 +222,9 @@ class Journal:
 
     def merge_bucket(self, bucket: str, into: str) -> None:
         self._write("UPDATE buckets SET merged_into=? WHERE bucket=?", (into, bucket))
+
+    def bucket(self, name: str) -> Bucket:
+        return next(b for b in self.buckets() if b.bucket == name)
 
     def buckets(self, include_merged: bool = True) -> list[Bucket]:
         rows = self.db.execute("SELECT * FROM buckets ORDER BY created_at")
@@ -185,14 +242,33 @@ class Journal:
         return next((b for b in self.buckets() if b.signature == signature), None)
 
     # -- minimisations ------------------------------------------------------
+    def minimisation_started(self, bucket: str) -> None:
+        self._write("INSERT OR REPLACE INTO minimisations(bucket, status, started_at) VALUES (?, 'running', ?)",
+                    (bucket, time.time()))
+
+    def requeue_minimisations(self) -> int:
+        """On resume: minimisations that were running start again."""
+        return self.db.execute("DELETE FROM minimisations WHERE status='running'").rowcount
+
     def minimised(self, bucket: str, status: str, exit_code: int | None, minimal_xml: str | None,
                   culprit: str | None, out_dir: str | None, tests_dir: str | None, seconds: float,
                   detail: str) -> None:
-        self._write("INSERT OR REPLACE INTO minimisations VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (bucket, status, exit_code, minimal_xml, culprit, out_dir, tests_dir, seconds, detail))
+        started = self.db.execute("SELECT started_at FROM minimisations WHERE bucket=?", (bucket,)).fetchone()
+        self._write("INSERT OR REPLACE INTO minimisations(bucket, status, exit_code, minimal_xml, culprit, out_dir,"
+                    " tests_dir, seconds, detail, started_at, finished_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (bucket, status, exit_code, minimal_xml, culprit, out_dir, tests_dir, seconds, detail,
+                     started[0] if started else None, time.time()))
 
     def minimisations(self) -> dict[str, sqlite3.Row]:
         return {r["bucket"]: r for r in self.db.execute("SELECT * FROM minimisations")}
+
+    # -- notes: what the campaign decided about itself (runs at once, back-offs), with why -------------
+    def note(self, topic: str, text: str) -> None:
+        self._write("INSERT INTO notes(time, topic, text) VALUES (?, ?, ?)", (time.time(), topic, text))
+
+    def notes(self, topic: str | None = None) -> list[sqlite3.Row]:
+        sql = "SELECT * FROM notes" + (" WHERE topic=?" if topic else "") + " ORDER BY time"
+        return list(self.db.execute(sql, (topic,) if topic else ()))
 
 
 def _planned(row: sqlite3.Row) -> PlannedCase:

@@ -10,16 +10,19 @@ from __future__ import annotations
 
 import json
 import subprocess
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..bus import process_launch
-from ..bus.processes import python_module
+from ..bus.processes import python_module, stop_process
 
 MINIMAL_XML = "minimal.xml"
 SUMMARY = "summary.json"
 TESTS_DIR = "tests"
+OUTPUT_SUFFIX = ".out"  # what the minimiser printed, beside its folder
+POLL_SECONDS = 0.5
 
 
 @dataclass(frozen=True)
@@ -34,17 +37,33 @@ class Minimised:
 
 
 def minimise_run(log: Path, spec_path: Path, out_dir: Path, invariant: str | None = None,
-                 max_tests: int = 40, confirm: int = 1, timeout: float = 900.0) -> Minimised:
+                 max_tests: int = 40, confirm: int = 1, timeout: float = 900.0, *,
+                 cancel: threading.Event | None = None) -> Minimised:
+    """Minimise ``log`` into ``out_dir`` in a child process stopped after ``timeout`` seconds, or as soon as
+    ``cancel`` is set (the campaign was interrupted: exit code 130)."""
     started = time.monotonic()
     args = [*python_module("astaa_deft.cli"), "minimise", str(log), "--spec", str(spec_path),
             "-o", str(out_dir), "--repeats", "1", "--confirm", str(confirm), "--max-tests", str(max_tests)]
     if invariant and not invariant.startswith("("):
         args += ["--invariant", invariant]
-    try:
-        done = process_launch.run(args, timeout=timeout)
-        code, text = done.returncode, (done.stdout + done.stderr).strip()
-    except subprocess.TimeoutExpired:
-        code, text = 1, f"minimisation stopped after {timeout:.0f} s"
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    output = out_dir.parent / f"{out_dir.name}{OUTPUT_SUFFIX}"  # beside: the minimiser wants an empty -o
+    with output.open("w") as sink:
+        proc = process_launch.start(args, stdout=sink, stderr=subprocess.STDOUT, text=True)
+        code: int | None = None
+        while code is None:
+            try:
+                code = proc.wait(timeout=POLL_SECONDS)
+            except subprocess.TimeoutExpired:
+                if cancel is not None and cancel.is_set():
+                    stop_process(proc, grace=5.0)
+                    code = 130
+                elif time.monotonic() - started >= timeout:
+                    stop_process(proc, grace=5.0)
+                    code = 1
+    text = output.read_text(errors="replace").strip()
+    if code == 1 and time.monotonic() - started >= timeout:
+        text += f"\nminimisation stopped after {timeout:.0f} s"
     minimal = out_dir / MINIMAL_XML
     tests = out_dir / TESTS_DIR
     return Minimised(code, minimal.read_text() if minimal.is_file() else None, _culprit(minimal), out_dir,

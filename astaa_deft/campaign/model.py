@@ -2,20 +2,30 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
+
+from ..monitor.verdict import ORDER
 
 BASELINE = "baseline"  # a clean run, no mutation
 MUTATED = "mutated"  # a generated test case
 RERUN = "rerun"  # a bucket's first failure again, for its rate
+CONTROL = "control"  # a failing case's unmutated twin: same params, no test case, same concurrency
+CLEAN_KINDS = (BASELINE, CONTROL)  # runs without a test case: run to the scenario's end, timing measured
+
+# What a bucket is, once its control runs are in: the report tells them apart.
+BUG = "bug"  # reproduced by a re-run, and the unmutated twin did not fail that way
+FLAKY = "flaky"  # not reproduced, or the unmutated twin failed the same way: flaky SUT or environment
+BASELINE_FINDING = "baseline"  # fails without any mutation (a clean run, or a case that applied none)
+CONFIRMING = "confirming"  # its re-runs and twins are still running
 
 
 @dataclass(frozen=True)
 class PlannedCase:
     """One run to make: everything a worker needs, nothing it must look up."""
 
-    case_id: str  # "b-0001", "c-000042", "r-<bucket>-1"
-    kind: str  # BASELINE, MUTATED or RERUN
+    case_id: str  # "b-0001", "c-000042", "r-<bucket>-1", "t-<bucket>-1"
+    kind: str  # BASELINE, MUTATED, RERUN or CONTROL
     number: int  # order in the campaign
     seed: int  # the strategy's seed for this case (the test case's own is inside the XML)
     params: dict[str, str]
@@ -40,6 +50,7 @@ class Finding:
     module: str | None
     channel: str | None
     detail: str
+    at: float | None = None  # seconds from the run's start to the violation (None: not known)
 
 
 @dataclass
@@ -58,6 +69,16 @@ class CaseOutcome:
     error: str = ""
     # Clean runs: seconds from the modules' launch to each channel's first message (the live stack's timing).
     first_seen: dict[str, float] = field(default_factory=dict)
+    # What the run cost: CPU seconds of every process of the run (the case process, its recorder, the modules
+    # and what they reaped), the case's wall seconds, the peak summed resident memory (clean runs only).
+    cpu: float = 0.0
+    cpu_waited: float = 0.0  # CPU seconds its CPU-bound threads waited for a core (clean runs; cost.WantedCpu)
+    wall: float = 0.0
+    rss_mb: float = 0.0
+    # Clean runs: per channel, its message rate (1/s) and its longest gap between two messages (s).
+    timing: dict[str, dict[str, float]] = field(default_factory=dict)
+    # Per invariant: messages (or samples) that broke it — a known baseline finding is judged by these too.
+    violating: dict[str, int] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -72,3 +93,12 @@ class CaseOutcome:
     @property
     def failed(self) -> bool:
         return self.status == "done" and self.verdict != "Pass"
+
+    def keeping(self, kept: list[Finding], note: str) -> CaseOutcome:
+        """This outcome with only the ``kept`` findings (``note`` says why the rest do not count): its verdict
+        the most severe kept finding's class, Pass when none is left."""
+        if not kept:
+            return replace(self, verdict="Pass", findings=[], summary=f"Pass{note}")
+        klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c == "Pass")
+        return replace(self, verdict=klass if klass != "Pass" else self.verdict, findings=kept,
+                       summary=self.summary + note)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -21,6 +22,10 @@ class Snapshot:
     buckets: int
     running: int
     elapsed: float
+    bugs: int = 0  # buckets confirmed as bugs
+    at_once: int | None = None  # runs the campaign keeps going at once now
+    load: float | None = None  # the machine's 1-min load average
+    cores: int | None = None
 
     @property
     def rate_per_min(self) -> float:
@@ -32,17 +37,28 @@ class Snapshot:
         if self.planned and self.done and self.rate_per_min > 0:
             eta = f", ETA {max(0.0, (self.planned - self.done) / self.rate_per_min):.1f} min"
         return (f"cases {self.done}{total} ({self.running} running), failures {self.failures}, "
-                f"buckets {self.buckets}, {self.rate_per_min:.1f} cases/min{eta}")
+                f"buckets {self.buckets} ({self.bugs} bug), {self.rate_per_min:.1f} cases/min{eta}{self.machine()}")
+
+    def machine(self) -> str:
+        """How hard the machine works: runs at once, load over cores (empty when not known)."""
+        parts = []
+        if self.at_once is not None:
+            parts.append(f"{self.at_once} at once")
+        if self.load is not None:
+            parts.append(f"load {self.load:.1f}" + (f"/{self.cores} cores" if self.cores else ""))
+        return ", " + ", ".join(parts) if parts else ""
 
 
-def snapshot(journal: Journal, planned: int | None, elapsed: float) -> Snapshot:
+def snapshot(journal: Journal, planned: int | None, elapsed: float, at_once: int | None = None) -> Snapshot:
     counts = journal.counts()
     # generated cases against the plan; baseline runs and re-runs are extra work, shown as running
     done = sum(v for k, v in counts.items() if k.split(":")[0] == MUTATED and k.split(":")[1] in ("done", "error"))
     running = sum(v for k, v in counts.items() if k.endswith(":running"))
     failures = journal.db.execute("SELECT COUNT(*) FROM cases WHERE kind=? AND verdict NOT IN ('Pass', '?')",
                                   (MUTATED,)).fetchone()[0]
-    return Snapshot(done, planned, failures, len(journal.buckets(include_merged=False)), running, elapsed)
+    live = journal.buckets(include_merged=False)
+    return Snapshot(done, planned, failures, len(live), running, elapsed, sum(1 for b in live if b.is_bug),
+                    at_once, os.getloadavg()[0], os.cpu_count())
 
 
 class Progress:
@@ -69,12 +85,13 @@ class Progress:
         else:
             print(text, file=self.stream, flush=True)
 
-    def __call__(self, _campaign=None) -> None:
-        snap = snapshot(self.journal, self.planned, time.monotonic() - self.started)
+    def __call__(self, campaign=None) -> None:
+        snap = snapshot(self.journal, self.planned, time.monotonic() - self.started,
+                        getattr(campaign, "workers", None))
         if self.live is not None:
             self.bar.update(self.task, completed=snap.done,
-                            description=f"failures {snap.failures} · buckets {snap.buckets} · "
-                                        f"{snap.rate_per_min:.1f}/min")
+                            description=f"failures {snap.failures} · buckets {snap.buckets} ({snap.bugs} bug) · "
+                                        f"{snap.rate_per_min:.1f}/min{snap.machine().replace(', ', ' · ')}")
         elif time.monotonic() - self.last_plain >= PLAIN_EVERY_SECONDS:
             self.last_plain = time.monotonic()
             print(snap.line(), file=self.stream, flush=True)

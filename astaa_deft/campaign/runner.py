@@ -4,8 +4,9 @@ One call of :func:`astaa_deft.session.run_session`: a fresh run with its
 own router port (the spec's endpoints with port 0 → a free port), its own
 run directory and its own log, ended by the spec's own ``run:`` section (a
 module's exit, a channel's "done", its time limit — applied by the session
-for every caller, no SUT-specific logic here), the first broken invariant,
-a crashed module (as its on_crash says), every module gone, or the campaign's time horizon.
+for every caller, no SUT-specific logic here), a mutated case's first broken
+invariant (known baseline findings apart), a crashed module (as its on_crash
+says), every module gone, or the campaign's time horizon.
 Nothing else in the campaign package touches the bus.
 """
 
@@ -16,6 +17,7 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -33,6 +35,7 @@ from ..monitor.kinds.bound import BoundInvariant
 from ..monitor.verdict import IMPLICIT
 from ..session import BusRun, RunOptions, run_session
 from ..spec.model import Spec
+from .cost import RunCost
 from .model import CaseOutcome, Finding
 
 POLL_SECONDS = 0.05
@@ -52,15 +55,23 @@ def isolated(spec: Spec) -> Spec:
 
 def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, horizon: float,
              dictionary: Dictionary | None = None, settle: float | None = None, *,
-             warm_recorder: ChildProcess | None = None) -> CaseOutcome:
+             warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset()) -> CaseOutcome:
     """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
 
+    A mutated run ends at its first broken invariant, except those in
+    ``known`` (known baseline findings: the campaign judges them after the
+    run); a clean run (``testcase`` None) never ends at a violation: it runs
+    to the scenario's end, so it measures how long the SUT is live, and its
+    channels' timing (rates, longest gaps), and its memory.
     ``settle``: a mutated run ends this many seconds after its test case can
     mutate no more (its last window closed or its last one-message policy
     acted) — what the SUT does with a bad message shows within seconds, and
     a run's remaining minutes would be spent for nothing.
     ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
+    Every outcome carries the run's CPU seconds and wall seconds (:mod:`.cost`).
     """
+    cost = RunCost(sample_rss=testcase is None)
+    cost.start()
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
     attachments = {}
@@ -72,60 +83,91 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
         interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
     options = RunOptions(mode="star", launch=True, record=log_path, params=dict(params),
                          command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
-                         interceptor=interceptor, stop_on_violation=True, attachments=attachments,
+                         interceptor=interceptor, stop_on_violation=False, attachments=attachments,
                          warm_recorder=warm_recorder)
     options.time_limit = horizon
     watch = MarginWatch(spec)
     settled = SettleWatch(testcase, settle) if testcase is not None and settle is not None else None
-    starts = FirstMessages(spec) if testcase is None else None  # a clean run measures the stack's timing
+    timing = ChannelTiming(spec) if testcase is None else None  # a clean run measures the stack's timing
+    stop_at_violation = testcase is not None
+    started: dict[str, Any] = {}
 
     def on_start(bus: BusRun) -> None:
+        started["ns"] = time.time_ns()
+        started["monitors"] = bus.monitors.set if bus.monitors is not None else None
         watch.attach(bus)
         if settled is not None:
             settled.attach(bus)
-        if starts is not None:
-            starts.attach(bus)
+        if timing is not None:
+            timing.attach(bus)
+
+    def stop_when(bus: BusRun) -> str | None:
+        if stop_at_violation and any(v.invariant not in known for v in list(bus.violations)):
+            return VIOLATION
+        return settled.check(bus) if settled is not None else None
 
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
-        result = run_session(isolated(spec), options, on_start=on_start,
-                             stop_when=settled.check if settled is not None else None)
+        result = run_session(isolated(spec), options, on_start=on_start, stop_when=stop_when)
     except InputError as exc:
-        return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems))
-    reason = {"time limit": "horizon", SETTLED: "settled",
-              "violation (--stop-on-violation)": "violation"}.get(result.end_reason, result.end_reason)
+        cost.stop()
+        return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems),
+                           cpu=cost.cpu, wall=cost.wall)
+    cost.stop()
+    reason = {"time limit": "horizon", SETTLED: "settled", VIOLATION: "violation"}.get(result.end_reason,
+                                                                                      result.end_reason)
     if result.verdict is None or not result.observed or not result.complete:  # not fully observed: no Pass
         return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
                            log_path=str(log_path), reason=reason,
-                           error="no verdict" if result.verdict is None else "the log was not finished")
-    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail) for v in result.violations]
+                           error="no verdict" if result.verdict is None else "the log was not finished",
+                           cpu=cost.cpu, wall=cost.wall)
+    t0_ns = started.get("ns")
+    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail,
+                        round((v.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None)
+                for v in result.violations]
     for exit_ in result.crashes:
         if not any(f.module == exit_.module for f in findings):
-            findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe()))
+            findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
+                                    round((exit_.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None))
+    monitors = started.get("monitors")
+    violating = {name: s["violating"] for name, s in monitors.stats().items() if s["violating"]} \
+        if monitors is not None else {}
     return CaseOutcome("done", result.verdict.klass, result.verdict.summary, findings, result.seconds,
                        str(log_path), reason, result.mutations, margins=watch.margins(result.violations),
-                       first_seen=starts.seconds() if starts is not None else {})
+                       first_seen=timing.seconds() if timing is not None else {},
+                       cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
+                       timing=timing.channels_timing() if timing is not None else {}, violating=violating)
 
 
 SETTLED = "settled after the last mutation"
+VIOLATION = "violation"
 
 
-class FirstMessages:
-    """Seconds from the run's start to the first message on each channel a module consumes."""
+class ChannelTiming:
+    """Per channel a module consumes: seconds from the run's start to its first message, its rate and its
+    longest gap between two messages (from its first message on: a slow start is not a gap)."""
 
     def __init__(self, spec: Spec):
         self.channels = [c.name for c in spec.channels if c.consumers]
         self.t0 = 0.0
         self.first: dict[str, float] = {}
+        self.last: dict[str, float] = {}
+        self.count: dict[str, int] = {}
+        self.max_gap: dict[str, float] = {}
         self._lock = threading.Lock()
 
     def attach(self, bus: BusRun) -> None:
         self.t0 = time.monotonic()
         for channel in self.channels:
             def seen(sample: zenoh.Sample, channel: str = channel) -> None:
-                if channel not in self.first:
-                    with self._lock:
-                        self.first.setdefault(channel, time.monotonic() - self.t0)
+                now = time.monotonic()
+                with self._lock:
+                    if channel in self.last:
+                        self.max_gap[channel] = max(self.max_gap.get(channel, 0.0), now - self.last[channel])
+                    else:
+                        self.first[channel] = now - self.t0
+                    self.last[channel] = now
+                    self.count[channel] = self.count.get(channel, 0) + 1
 
             try:
                 bus.subscribe(channel, seen)
@@ -135,6 +177,15 @@ class FirstMessages:
     def seconds(self) -> dict[str, float]:
         with self._lock:
             return {k: round(v, 3) for k, v in self.first.items()}
+
+    def channels_timing(self) -> dict[str, dict[str, float]]:
+        with self._lock:
+            out = {}
+            for channel, count in self.count.items():
+                span = self.last[channel] - self.t0 - self.first[channel]
+                out[channel] = {"count": count, "rate": round((count - 1) / span, 3) if span > 0 else 0.0,
+                                "max_gap": round(self.max_gap.get(channel, 0.0), 4)}
+            return out
 
 
 class SettleWatch:

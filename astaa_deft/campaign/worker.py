@@ -52,7 +52,8 @@ def execute(payload: dict[str, Any], preloaded: _Preloaded | None = None,
         return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems))).to_json()
     settle = payload.get("settle")
     outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary,
-                       float(settle) if settle is not None else None, warm_recorder=warm_recorder)
+                       float(settle) if settle is not None else None, warm_recorder=warm_recorder,
+                       known=frozenset(payload.get("known", ())))
     return outcome.to_json()
 
 

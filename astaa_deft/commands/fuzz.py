@@ -7,10 +7,13 @@ from pathlib import Path
 
 from ..campaign.campaign import Campaign, CampaignConfig, CampaignStopped
 from ..campaign.journal import FILE_NAME, Journal, open_existing
+from ..campaign.model import BASELINE_FINDING, BUG, CONFIRMING, FLAKY
 from ..campaign.progress import Progress, snapshot
 from ..errors import InputError, Problem
 from .console import say
 
+KIND_LABEL = {BUG: "bug", FLAKY: "flaky/environment", BASELINE_FINDING: "baseline finding",
+              CONFIRMING: "confirming"}
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
 
@@ -44,9 +47,12 @@ def status(out: Path) -> int:
         rate = f"{fails}/{runs}" if runs else "-"
         m = minimised.get(b.bucket)
         extra = f" merged into {b.merged_into}" if b.merged_into else ""
-        say(f"  {b.bucket} {b.verdict:9} {b.invariant:22} {b.family:40} cases {b.cases:3} rate {rate:5}"
-            f" {m['status'] if m else ''}{' ' + m['culprit'] if m and m['culprit'] else ''}{extra}"
-            f"{' (without mutation)' if b.without_mutation else ''}")
+        twins = f" twins {b.control_failures}/{b.controls}" if b.controls else ""
+        say(f"  {b.bucket} {KIND_LABEL.get(b.kind, b.kind):17} {b.verdict:9} {b.invariant:22} {b.family:40}"
+            f" cases {b.cases:3} rate {rate:5}{twins}"
+            f" {m['status'] if m else ''}{' ' + m['culprit'] if m and m['culprit'] else ''}{extra}")
+    for note in journal.notes("concurrency"):
+        say(f"  {note['text']}")
     journal.close()
     return 0
 
@@ -71,9 +77,10 @@ def run(config: CampaignConfig, resume: bool) -> int:
     progress = Progress(journal, config.cases)
     try:
         campaign = Campaign(config, journal, on_progress=progress, say=progress.say)
+        workers = ("runs at once calibrated from the baseline" if campaign.calibrated
+                   else f"{campaign.workers} worker(s){' on ' + config.cluster if config.cluster else ''}")
         progress.say(f"astaa-deft fuzz: spec '{campaign.spec.name}', strategy {config.strategy}, seed {config.seed},"
-                     f" {campaign.workers} worker(s){' on ' + config.cluster if config.cluster else ''},"
-                     f" journal {journal.path}")
+                     f" {workers}, journal {journal.path}")
         result = campaign.run()
     except CampaignStopped as exc:
         progress.close()
@@ -86,7 +93,7 @@ def run(config: CampaignConfig, resume: bool) -> int:
 
         say(f"report: {write_report(config.out)}")
     say(f"campaign {result.stopped}: {result.cases_done} cases in {result.seconds:.0f} s, "
-        f"{result.failures} failing, {result.buckets} bucket(s)")
+        f"{result.failures} failing, {result.buckets} bucket(s), {result.bugs} of them confirmed bug(s)")
     if result.stopped == "interrupted":
         say(f"continue with: astaa-deft fuzz --spec {config.spec_path} -o {config.out} --resume")
         journal.close()
