@@ -40,6 +40,7 @@ class Finding:
     module: str | None
     channel: str | None
     detail: str
+    severity: str = "high"  # the invariant's (low … critical); a crash no invariant named: high
 
 
 @dataclass

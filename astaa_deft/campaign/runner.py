@@ -98,7 +98,8 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
         return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
                            log_path=str(log_path), reason=reason,
                            error="no verdict" if result.verdict is None else "the log was not finished")
-    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail) for v in result.violations]
+    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail, v.severity)
+                for v in result.violations]
     for exit_ in result.crashes:
         if not any(f.module == exit_.module for f in findings):
             findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe()))

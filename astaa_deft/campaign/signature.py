@@ -16,6 +16,7 @@ from pathlib import Path
 from ..intercept.testcase import TestCase, parse_testcase
 from ..monitor import MonitorSet
 from ..monitor.verdict import ORDER
+from ..monitor.violation import SEVERITIES
 from ..spec.model import Spec
 from .model import CaseOutcome, Finding
 from .originals import broken_on_originals
@@ -25,8 +26,21 @@ _INDEX = re.compile(r"\[\d+\]")
 
 
 def primary(outcome: CaseOutcome) -> Finding | None:
-    """The finding a run is filed under: its earliest (the monitors report in time order)."""
-    return outcome.findings[0] if outcome.findings else None
+    """The finding a run is filed under: its most severe, then the worst CRASH class, then the earliest.
+
+    A collision's clearance warning (medium) comes before the contact
+    (critical): the run is the contact's. The monitors report in time order.
+    """
+    if not outcome.findings:
+        return None
+    return min(enumerate(outcome.findings), key=lambda item: (*finding_rank(item[1]), item[0]))[1]
+
+
+def finding_rank(finding: Finding) -> tuple[int, int]:
+    """Sort key of a finding, most severe first: (severity, CRASH class); unknown names last."""
+    severity = SEVERITIES.index(finding.severity) if finding.severity in SEVERITIES else -1
+    crash = ORDER.index(finding.crash) if finding.crash in ORDER else len(ORDER)
+    return -severity, crash
 
 
 def mutation_family(testcase: TestCase | None) -> str:
