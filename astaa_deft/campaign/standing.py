@@ -13,9 +13,9 @@ by severity and names the most severe. Pure logic over journal rows.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+import sqlite3
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from ..monitor.violation import SEVERITIES
 from .journal import Bucket, Journal
@@ -86,7 +86,7 @@ def standings(journal: Journal) -> list[Standing]:
     return rank(out)
 
 
-def _severity(row: Mapping[str, Any] | None) -> str:
+def _severity(row: sqlite3.Row | None) -> str:
     """The severity of the finding a case was filed under ("?" when the journal does not say)."""
     if row is None or not row["outcome"]:
         return "?"
