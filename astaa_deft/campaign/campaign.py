@@ -11,8 +11,6 @@ import itertools
 import json
 import os
 import shutil
-import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +22,7 @@ from ..spec_loader import load_spec
 from . import signature as sig
 from .journal import Journal
 from .minimiser import minimise_run
+from .module_tests import add_failure_frame, is_crash_bucket, run_module_tests
 from .model import BASELINE, MUTATED, RERUN, CaseOutcome, PlannedCase
 from .strategies import STRATEGIES, Strategy
 from .strategies.base import Timing
@@ -345,6 +344,7 @@ class Campaign:
                 if tests_dir.exists():
                     shutil.rmtree(tests_dir)
                 shutil.copytree(result.tests_dir, tests_dir)
+                self.say(f"  the minimiser's module tests{self._check_module_tests(bucket, tests_dir)}")
             elif self._planner_caused(bucket):
                 tests_dir = self._planner_tests(bucket, Path(row["log_path"]))
             status = "minimised" if result.exit_code == 0 else "not reproduced" if result.exit_code == 1 else "error"
@@ -360,7 +360,12 @@ class Campaign:
         return planner is not None and bucket.module == planner.module
 
     def _planner_tests(self, bucket, log: Path) -> Path | None:
-        """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs)."""
+        """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
+
+        A crash bucket's suite also gets the frame of the cycle the planner
+        failed on (``module_tests.add_failure_frame``); the suite is run once
+        and the journal says whether it fails on the bucket's defect.
+        """
         from ..deft.workflow import extract_module_tests
 
         tests_dir = self.config.out / TESTS_DIR / f"{bucket.bucket}{REPLAY_TESTS_SUFFIX}"
@@ -375,16 +380,22 @@ class Campaign:
             self.say("  no module tests: no planner output of the run replayed exactly")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
-        oracle = add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
-        verdict = ""
-        if oracle:  # the suite must fail while the planner breaks the invariant: check it once
-            suite = tests_dir.resolve()  # -o may be relative: pytest runs from inside the suite
-            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(suite)],
-                                  capture_output=True, text=True, timeout=600, cwd=suite)
-            verdict = (f"; it fails as it should (oracle: {bucket.invariant})" if done.returncode == 1
-                       else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
-        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")
+        crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
+        if crash and add_failure_frame(tests_dir, log, self.spec, report, bucket.invariant):
+            self.say("  + the frame of the cycle the planner failed on")
+        add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
+        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}"
+                 f"{self._check_module_tests(bucket, tests_dir, crash)}")
         return tests_dir
+
+    def _check_module_tests(self, bucket, tests_dir: Path, crash: bool | None = None) -> str:
+        """Run a bucket's module tests once and journal whether they fail on its defect; a phrase saying so."""
+        if crash is None:
+            crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
+        verdict = run_module_tests(tests_dir, crash=crash)
+        self.journal.module_tests_checked(bucket.bucket, str(tests_dir), verdict.fails_on_defect, verdict.detail)
+        how = {True: "they fail on the defect", False: "they do NOT fail on the defect", None: "they could not run"}
+        return f"; {how[verdict.fails_on_defect]} ({verdict.detail})"
 
 
 TESTS_DIR = "tests"
