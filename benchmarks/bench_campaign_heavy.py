@@ -79,25 +79,38 @@ def culprit_reaches(defect: int, culprit: str | None) -> bool:
 
 
 def run_fuzz(out: Path, budget: str, wall: float, workers: int | None) -> tuple[str, float, bool]:
-    """The command's output, its wall seconds, and whether it had to be stopped at ``wall``."""
+    """The command's output, its wall seconds, and whether it had to be stopped at ``wall``.
+
+    The command runs in a process group of its own, its output to a file (a
+    process it leaves behind must not hold a pipe open); what is left of
+    that group once it has exited is stopped.
+    """
     args = [sys.executable, "-m", "astaa_deft.cli", "fuzz", "--spec", str(SPEC), "-o", str(out), "--budget", budget,
             "--params", *PARAMS]
     if workers:
         args += ["--workers", str(workers)]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    log = out.parent / f"{out.name}.fuzz.txt"
     started = time.monotonic()
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    stopped = False
-    try:
-        output, _ = proc.communicate(timeout=wall)
-    except subprocess.TimeoutExpired:
-        stopped = True
-        proc.send_signal(signal.SIGINT)  # as Ctrl-C: the campaign stops cleanly, its journal intact
+    with open(log, "w") as sink:
+        proc = subprocess.Popen(args, stdout=sink, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        stopped = False
         try:
-            output, _ = proc.communicate(timeout=120)
+            proc.wait(timeout=wall)
         except subprocess.TimeoutExpired:
-            proc.kill()
-            output, _ = proc.communicate()
-    return output, time.monotonic() - started, stopped
+            stopped = True
+            proc.send_signal(signal.SIGINT)  # as Ctrl-C: the campaign stops cleanly, its journal intact
+            try:
+                proc.wait(timeout=120)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)  # the group is the command's own: anything it left running
+        print("note: processes of the command were still running after it exited (stopped)")
+    except ProcessLookupError:
+        pass
+    return log.read_text(), time.monotonic() - started, stopped
 
 
 def report(out: Path, output: str, seconds: float, stopped: bool) -> None:
