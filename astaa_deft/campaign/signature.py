@@ -3,7 +3,9 @@
 CRASH class, the invariant (or monitor) that broke, the module held
 responsible, and the family of the mutation (channel, field, action) — two
 NaNs in the same routing field that both break the speed limit are one bug;
-the same invariant broken through another channel is another.
+the same invariant broken through another channel is another. A run is
+filed under its most severe finding; findings the test case inflicted on
+itself do not count (:func:`without_self_inflicted`).
 """
 
 from __future__ import annotations
