@@ -49,10 +49,12 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
         assert campaign._planner_caused(_bucket("B001", "planning"))
         assert not campaign._planner_caused(_bucket("B002", "control"))
         tests = campaign._planner_tests(_bucket("B001", "planning"), Path(outcome.log_path))
+        checked = journal.module_tests()["B001"]  # the campaign ran them once: they fail on the defect
+        assert checked["fails_on_defect"] == 1 and "its oracle fails" in checked["detail"], dict(checked)
     finally:
         journal.close()
     assert tests == out / "tests" / f"B001{REPLAY_TESTS_SUFFIX}" and (tests / "deft.json").is_file()
-    assert any("it fails as it should (oracle: planned_speed)" in line for line in said), said
+    assert any("they fail on the defect (its oracle fails" in line for line in said), said
     Path(outcome.log_path).unlink()  # the suite stands on its own
     run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
                          capture_output=True, text=True, cwd=tmp_path, timeout=300)

@@ -11,7 +11,6 @@ import itertools
 import json
 import os
 import shutil
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -20,7 +19,6 @@ from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..bus import process_launch
 from ..errors import AstaaDeftError, InputError, Problem
 from ..intercept.dictionary import load_dictionary
 from ..spec_loader import load_spec
@@ -30,6 +28,7 @@ from .cost import available_memory_mb
 from .journal import Bucket, Journal
 from .known import KnownFinding, judged, known_findings
 from .minimiser import Minimised, minimise_run
+from .module_tests import TestsVerdict, add_failure_frame, is_crash_bucket, run_module_tests
 from .model import (BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, CaseOutcome,
                     PlannedCase)
 from .strategies import STRATEGIES, Strategy
@@ -581,8 +580,9 @@ class Campaign:
             future = self._minimiser.submit(self._minimise_one, bucket, Path(row["log_path"]))
             self._minimising[future] = bucket.bucket
 
-    def _minimise_one(self, bucket: Bucket, log: Path) -> tuple[Minimised, Path | None]:
-        """One bucket's minimisation (a child process, time-boxed) and its tests copied: no journal, no output."""
+    def _minimise_one(self, bucket: Bucket, log: Path) -> tuple[Minimised, Path | None, TestsVerdict | None]:
+        """One bucket's minimisation (a child process, time-boxed), its tests copied and run once on the defect:
+        no journal, no output (it runs on a minimisation thread)."""
         out_dir = self.config.out / "minimised" / bucket.bucket
         if out_dir.exists():
             shutil.rmtree(out_dir)
@@ -595,7 +595,9 @@ class Campaign:
             if tests_dir.exists():
                 shutil.rmtree(tests_dir)
             shutil.copytree(result.tests_dir, tests_dir)
-        return result, tests_dir
+            verdict = run_module_tests(tests_dir, crash=is_crash_bucket(bucket.verdict, bucket.invariant, self.spec))
+            return result, tests_dir, verdict
+        return result, None, None
 
     def _collect_minimisations(self, wait: bool = False) -> None:
         if not self._minimising:
@@ -604,12 +606,14 @@ class Campaign:
                                    return_when=FIRST_COMPLETED)
         for future in finished:
             name = self._minimising.pop(future)
-            result, tests_dir = future.result()
+            result, tests_dir, verdict = future.result()
             status = "minimised" if result.exit_code == 0 else "not reproduced" if result.exit_code == 1 else "error"
             self.journal.minimised(name, status, result.exit_code, result.minimal_xml, result.culprit,
                                    str(result.out_dir), str(tests_dir) if tests_dir else None, result.seconds,
                                    result.detail)
             self.say(f"  {name} {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
+            if tests_dir is not None and verdict is not None:
+                self.say(f"  the minimiser's module tests{self._journal_module_tests(name, tests_dir, verdict)}")
 
     def _minimise_left(self) -> None:
         """After the hunt: the minimisations still running, then the confirmed buckets none took up, all the
@@ -638,7 +642,12 @@ class Campaign:
         return planner is not None and bucket.module == planner.module
 
     def _planner_tests(self, bucket, log: Path) -> Path | None:
-        """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs)."""
+        """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
+
+        A crash bucket's suite also gets the frame of the cycle the planner
+        failed on (``module_tests.add_failure_frame``); the suite is run once
+        and the journal says whether it fails on the bucket's defect.
+        """
         from ..deft.workflow import extract_module_tests
 
         tests_dir = self.config.out / TESTS_DIR / f"{bucket.bucket}{REPLAY_TESTS_SUFFIX}"
@@ -653,16 +662,25 @@ class Campaign:
             self.say("  no module tests: no planner output of the run replayed exactly")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
-        oracle = add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
-        verdict = ""
-        if oracle:  # the suite must fail while the planner breaks the invariant: check it once
-            suite = tests_dir.resolve()  # -o may be relative: pytest runs from inside the suite
-            done = process_launch.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(suite)],
-                                      timeout=600, cwd=str(suite))
-            verdict = (f"; it fails as it should (oracle: {bucket.invariant})" if done.returncode == 1
-                       else f"; its oracle ({bucket.invariant}) did not fail (pytest exit {done.returncode})")
-        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}{verdict}")
+        crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
+        if crash and add_failure_frame(tests_dir, log, self.spec, report, bucket.invariant):
+            self.say("  + the frame of the cycle the planner failed on")
+        add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
+        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}"
+                 f"{self._check_module_tests(bucket, tests_dir, crash)}")
         return tests_dir
+
+    def _check_module_tests(self, bucket, tests_dir: Path, crash: bool | None = None) -> str:
+        """Run a bucket's module tests once and journal whether they fail on its defect; a phrase saying so."""
+        if crash is None:
+            crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
+        return self._journal_module_tests(bucket.bucket, tests_dir, run_module_tests(tests_dir, crash=crash))
+
+    def _journal_module_tests(self, bucket: str, tests_dir: Path, verdict: TestsVerdict) -> str:
+        """Journal whether a bucket's module tests fail on its defect; a phrase saying so."""
+        self.journal.module_tests_checked(bucket, str(tests_dir), verdict.fails_on_defect, verdict.detail)
+        how = {True: "they fail on the defect", False: "they do NOT fail on the defect", None: "they could not run"}
+        return f"; {how[verdict.fails_on_defect]} ({verdict.detail})"
 
 
 def shows_failure(outcome: CaseOutcome, failing: CaseOutcome) -> bool:

@@ -54,6 +54,11 @@ CREATE TABLE IF NOT EXISTS minimisations (
     out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT,
     started_at REAL, finished_at REAL  -- status 'running' from the start to the end
 );
+CREATE TABLE IF NOT EXISTS module_tests (  -- a bucket's module tests, run once on its defect
+    bucket TEXT PRIMARY KEY, tests_dir TEXT NOT NULL,
+    fails_on_defect INTEGER,  -- 1: they fail as they should, 0: they do not, NULL: they could not run
+    detail TEXT NOT NULL
+);
 """
 
 
@@ -269,6 +274,15 @@ class Journal:
     def notes(self, topic: str | None = None) -> list[sqlite3.Row]:
         sql = "SELECT * FROM notes" + (" WHERE topic=?" if topic else "") + " ORDER BY time"
         return list(self.db.execute(sql, (topic,) if topic else ()))
+
+    # -- module tests -------------------------------------------------------
+    def module_tests_checked(self, bucket: str, tests_dir: str, fails_on_defect: bool | None, detail: str) -> None:
+        """Whether a bucket's module tests fail on its defect (None: they could not run), and why."""
+        self._write("INSERT OR REPLACE INTO module_tests VALUES (?, ?, ?, ?)",
+                    (bucket, tests_dir, None if fails_on_defect is None else int(fails_on_defect), detail))
+
+    def module_tests(self) -> dict[str, sqlite3.Row]:
+        return {r["bucket"]: r for r in self.db.execute("SELECT * FROM module_tests")}
 
 
 def _planned(row: sqlite3.Row) -> PlannedCase:

@@ -51,6 +51,7 @@ class Finding:
     channel: str | None
     detail: str
     at: float | None = None  # seconds from the run's start to the violation (None: not known)
+    severity: str = "high"  # the invariant's (low … critical); a crash no invariant named: high
 
 
 @dataclass

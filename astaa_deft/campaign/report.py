@@ -1,7 +1,11 @@
 """The campaign's report: one static, self-contained HTML page built from the journal alone.
 
-Summary, a table of buckets (verdict, invariant, culprit, rate, minimal XML,
-links to the log and the module tests), and plots (new buckets over cases
+A headline that counts confirmed bugs by severity apart from unconfirmed,
+flaky and clean-run failures and names the most severe finding
+(``standing.py``), a summary, a table of buckets ranked by status, severity
+and rate (status and its evidence, severity, verdict, invariant, culprit,
+rate, minimal XML, links to the log and the module tests, and whether those
+fail on the bucket's defect), and plots (new buckets over cases
 and over time, verdict classes, closest approach per invariant by strategy,
 time per case) as embedded base64 PNGs: the page opens from a file, offline.
 """
@@ -19,6 +23,7 @@ from pathlib import Path
 from .journal import Journal, open_existing
 from .campaign import REPLAY_TESTS_SUFFIX
 from .model import BASELINE, MUTATED
+from .standing import CONFIRMED, headline, most_severe, standings
 
 REPORT_NAME = "report.html"
 
@@ -67,22 +72,24 @@ def render(journal: Journal, out: Path) -> str:
     mutated = [r for r in done if r["kind"] == MUTATED]
     failing = [r for r in mutated if r["verdict"] not in ("Pass", "?", None)]
     errors = [r for r in done if r["status"] == "error"]
-    buckets = journal.buckets()
     minimised = journal.minimisations()
+    checked = journal.module_tests()
+    ranked = standings(journal)
+    by_bucket = {s.bucket.bucket: s for s in ranked}
+    buckets = [s.bucket for s in ranked] + [b for b in journal.buckets() if b.bucket not in by_bucket]  # merged last
     live = [b for b in buckets if b.merged_into is None]
     e = html.escape
     spec_name = Path(str(meta.get("spec") or "?")).stem
-    found = len([b for b in live if not b.without_mutation])
-    headline = (f"<span class='bad'>{found} bug bucket(s) found</span>" if found
-                else "<span class='ok'>no failure caused by a mutation</span>")
-    flaky = sum(1 for b in live if b.without_mutation)
-    if flaky:
-        headline += f", <span class='bad'>{flaky} failing without mutation</span>"
+    confirmed = any(s.status == CONFIRMED for s in ranked)
+    top = most_severe(ranked)
+    verdict_line = (f"<p>most severe: <b>{e(top.describe())}</b></p>" if top is not None
+                    else "<p class='ok'>no failure caused by a mutation</p>")
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>astaa-deft campaign: {e(spec_name)}</title>"
              f"<style>{CSS}</style></head><body>",
              f"<h1>astaa-deft campaign: {e(spec_name)}</h1>",
-             f"<p class='headline'>{headline} in {len(mutated)} generated case(s) and "
-             f"{len([r for r in done if r['kind'] == BASELINE])} clean run(s).</p>",
+             f"<p class='headline'><span class='{'bad' if confirmed else 'ok'}'>{e(headline(ranked))}</span> in"
+             f" {len(mutated)} generated case(s) and {len([r for r in done if r['kind'] == BASELINE])} clean"
+             f" run(s).</p>", verdict_line,
              "<h2>Summary</h2><table class='summary'>"]
     summary = [("spec", meta.get("spec")), ("strategy", meta.get("strategy")), ("seed", meta.get("seed")),
                ("params", json.dumps(meta.get("params")) if meta.get("params") else "the spec's defaults"),
@@ -100,11 +107,12 @@ def render(journal: Journal, out: Path) -> str:
     if not buckets:
         parts.append("<p class='ok'>No failures found.</p>")
     else:
-        parts.append("<table><tr><th>bucket</th><th>verdict</th><th>invariant</th><th>module</th>"
-                     "<th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
+        parts.append("<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>"
+                     "<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
                      "<th title='re-runs of the first failure that failed the same way'>rate</th>"
                      "<th>files</th></tr>")
         for b in buckets:
+            standing = by_bucket.get(b.bucket)
             first = journal.case(b.first_case)
             m = minimised.get(b.bucket)
             fails, runs = journal.rate(b)
@@ -118,7 +126,8 @@ def render(journal: Journal, out: Path) -> str:
                 kind = ("DeFT replay of the failing run" if str(m["tests_dir"]).endswith(REPLAY_TESTS_SUFFIX)
                         else "fail on the culprit")
                 links.append(f"<a href='{e(tests)}'>module tests</a> "
-                             f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>")
+                             f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>"
+                             f"{_tests_verdict(checked.get(b.bucket))}")
             minimisation = _rel(m["out_dir"], out) if m is not None else None
             if minimisation:
                 links.append(f"<a href='{e(minimisation)}'>minimisation</a>")
@@ -130,23 +139,42 @@ def render(journal: Journal, out: Path) -> str:
             merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""
             culprit = e(m["culprit"] or m["status"]) if m is not None else "<span class='muted'>not minimised</span>"
             colour = VERDICT_COLOURS.get(b.verdict, "#a00")
-            parts.append(f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td>"
+            status = (f"<span class='{'bad' if standing.status == CONFIRMED else 'muted'}'>{e(standing.status)}</span>"
+                      f"<br><span class='muted'>{e(standing.why)}</span>" if standing is not None else "")
+            parts.append(f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td><td>{status}</td>"
+                         f"<td>{e(standing.severity) if standing is not None else ''}</td>"
                          f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
                          f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
                          f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
                          f"<td>{'<br>'.join(links)}</td></tr>")
             if xml:
                 what = "minimal test case" if minimal else "first failing test case (not minimised)"
-                parts.append(f"<tr class='xml'><td></td><td colspan='8'><details{' open' if minimal else ''}>"
+                parts.append(f"<tr class='xml'><td></td><td colspan='10'><details{' open' if minimal else ''}>"
                              f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
-        parts.append("</table><p class='muted'>rate: re-runs of a bucket's first failure that failed the same way"
-                     " (for a bucket without mutation: clean runs that failed this way). cases: generated cases"
-                     " filed in the bucket.</p>")
+        parts.append("</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal"
+                     " test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky —"
+                     " the campaign's run without mutation failed too; without mutation — clean runs fail this way."
+                     " Ranked by status, severity, rate. rate: re-runs of a bucket's first failure that failed the"
+                     " same way (for a bucket without mutation: clean runs that failed this way). cases: generated"
+                     " cases filed in the bucket.</p>")
     parts.append("<h2>Plots</h2><div class='plots'>")
     for title, png in _plots(journal, done, buckets):
         parts.append(f"<img alt='{e(title)}' title='{e(title)}' src='data:image/png;base64,{png}'>")
     parts.append("</div></body></html>")
     return "\n".join(parts)
+
+
+def _tests_verdict(row) -> str:
+    """Whether a bucket's module tests fail on its defect, as the campaign found when it ran them once."""
+    if row is None:
+        return ""
+    if row["fails_on_defect"] == 1:
+        return (f"<br><span class='ok'>fail on the defect</span> "
+                f"<span class='muted'>({html.escape(row['detail'])})</span>")
+    if row["fails_on_defect"] == 0:
+        return (f"<br><span class='bad'>do not fail on the defect</span> "
+                f"<span class='muted'>({html.escape(row['detail'])})</span>")
+    return f"<br><span class='muted'>could not run ({html.escape(row['detail'])})</span>"
 
 
 def _end_reasons(done) -> str:

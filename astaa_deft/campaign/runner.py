@@ -123,7 +123,7 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                            cpu=cost.cpu, wall=cost.wall)
     t0_ns = started.get("ns")
     findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail,
-                        round((v.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None)
+                        at=round((v.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None, severity=v.severity)
                 for v in result.violations]
     for exit_ in result.crashes:
         if not any(f.module == exit_.module for f in findings):

@@ -7,13 +7,11 @@ from pathlib import Path
 
 from ..campaign.campaign import Campaign, CampaignConfig, CampaignStopped
 from ..campaign.journal import FILE_NAME, Journal, open_existing
-from ..campaign.model import BASELINE_FINDING, BUG, CONFIRMING, FLAKY
 from ..campaign.progress import Progress, snapshot
+from ..campaign.standing import headline, most_severe, standings
 from ..errors import InputError, Problem
 from .console import say
 
-KIND_LABEL = {BUG: "bug", FLAKY: "flaky/environment", BASELINE_FINDING: "baseline finding",
-              CONFIRMING: "confirming"}
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
 
@@ -42,15 +40,23 @@ def status(out: Path) -> int:
     say(f"campaign {out}: spec {meta.get('spec')}, strategy {meta.get('strategy')}, seed {meta.get('seed')}")
     say(snap.line().split(", 0.0 cases/min")[0])
     minimised = journal.minimisations()
-    for b in journal.buckets():
-        fails, runs = journal.rate(b)
-        rate = f"{fails}/{runs}" if runs else "-"
+    tests = journal.module_tests()
+    ranked = standings(journal)
+    say(headline(ranked))
+    merged = [b for b in journal.buckets() if b.merged_into]
+    for standing in ranked:
+        b = standing.bucket
+        rate = f"{standing.failures}/{standing.runs}" if standing.runs else "-"
         m = minimised.get(b.bucket)
-        extra = f" merged into {b.merged_into}" if b.merged_into else ""
+        t = tests.get(b.bucket)
+        checked = ("" if t is None else " module tests fail on it" if t["fails_on_defect"] == 1
+                   else " module tests do NOT fail on it" if t["fails_on_defect"] == 0 else " module tests did not run")
         twins = f" twins {b.control_failures}/{b.controls}" if b.controls else ""
-        say(f"  {b.bucket} {KIND_LABEL.get(b.kind, b.kind):17} {b.verdict:9} {b.invariant:22} {b.family:40}"
-            f" cases {b.cases:3} rate {rate:5}{twins}"
-            f" {m['status'] if m else ''}{' ' + m['culprit'] if m and m['culprit'] else ''}{extra}")
+        say(f"  {b.bucket} {standing.status:12} {standing.severity:8} {b.verdict:9} {b.invariant:22} {b.family:40}"
+            f" cases {b.cases:3} rate {rate:5}{twins} {m['status'] if m else ''}"
+            f"{' ' + m['culprit'] if m and m['culprit'] else ''}{checked}")
+    for b in merged:
+        say(f"  {b.bucket} merged into {b.merged_into}: {b.invariant} {b.family}")
     for note in journal.notes("concurrency"):
         say(f"  {note['text']}")
     journal.close()
@@ -92,8 +98,12 @@ def run(config: CampaignConfig, resume: bool) -> int:
         from ..campaign.report import write_report
 
         say(f"report: {write_report(config.out)}")
+    ranked = standings(journal)
     say(f"campaign {result.stopped}: {result.cases_done} cases in {result.seconds:.0f} s, "
-        f"{result.failures} failing, {result.buckets} bucket(s), {result.bugs} of them confirmed bug(s)")
+        f"{result.failures} failing, {result.buckets} bucket(s): {headline(ranked)}")
+    top = most_severe(ranked)
+    if top is not None:
+        say(f"most severe: {top.describe()}")
     if result.stopped == "interrupted":
         say(f"continue with: astaa-deft fuzz --spec {config.spec_path} -o {config.out} --resume")
         journal.close()

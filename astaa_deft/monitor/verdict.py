@@ -15,7 +15,9 @@ From worst to best, as this tool assigns them:
   while its output is empty);
 * **Pass** — none of the above.
 
-The verdict is the worst class found; ``first`` is the earliest finding.
+The verdict is the worst class found; its summary names that class's most
+severe finding (a critical collision before the clearance warning that came
+first), and ``first`` is the earliest finding.
 Crashes are always monitored: an abnormal exit counts even when no
 ``process`` invariant names the module.
 """
@@ -26,7 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 from collections.abc import Mapping, Sequence
 
-from .violation import Violation
+from .violation import SEVERITIES, Violation
 
 ORDER = ("Catastrophic", "Restart", "Abort", "Silent", "Hindering", "Pass")
 IMPLICIT = "(module exit)"  # the name of the finding made from an exit no invariant reported
@@ -70,7 +72,7 @@ def run_verdict(violations: Sequence[Violation], exits: Sequence[Mapping], modul
         classes["Catastrophic"].append("the bus was lost")
     if modules and set(modules) <= set(first_exit_ns):
         classes["Catastrophic"].append("every module exited during the run")
-    for v in findings:
+    for v in sorted(findings, key=_most_severe_first):  # stable: in time order within a severity
         klass = v.crash
         if klass == "Restart" and v.kind == "deadline" and _exited_before(v, first_exit_ns):
             continue  # silence after a crash is the crash's consequence, not a hang
@@ -80,6 +82,10 @@ def run_verdict(violations: Sequence[Violation], exits: Sequence[Mapping], modul
     klass = next(c for c in ORDER if classes[c] or c == "Pass")
     first = findings[0] if findings else None
     return Verdict(klass, first, _summary(klass, first, findings, classes[klass]), tuple(classes[klass]))
+
+
+def _most_severe_first(v: Violation) -> int:
+    return -SEVERITIES.index(v.severity) if v.severity in SEVERITIES else 0
 
 
 def _unreported_exits(mid_run: Sequence[Mapping], violations: Sequence[Violation]) -> list[Violation]:

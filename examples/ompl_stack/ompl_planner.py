@@ -21,6 +21,19 @@ What makes it a realistic replay target:
 
 ``OmplPlanner(**args).step(frame) -> plan`` is also the spec's replay
 factory: ``frame`` is ``{"ego": pose, "obstacles": obstacles}``.
+
+``defects=True`` switches on two of the stack's seeded defects (README.md,
+"Known defects"; the third is the planning node's); each is reached only by
+inputs a clean run never has:
+
+1. an obstacle whose length or width is not a positive number (NaN, 0,
+   negative) keeps its last good size, but held for ``CORRUPT_GRACE``
+   cycles in a row it raises :class:`CollisionCheckerFault` — the planning
+   node lets that kill the process, as a native collision checker's
+   segfault would;
+2. a non-finite ego heading makes the route's direction ``int(nan)``: a
+   ``ValueError`` (the node logs it and carries on, the cycle publishes
+   nothing).
 """
 
 from __future__ import annotations
@@ -47,6 +60,11 @@ SWEEP_S, SWEEP_STEP_S = 2.0, 0.5  # moving obstacles occupy where they will be o
 MARGIN = 0.3  # m of clearance the planner keeps
 REUSE_MIN_LENGTH = 12.0  # m of the previous plan left: below this, plan again
 POINT_SPACING = 0.5  # m between trajectory points
+CORRUPT_GRACE = 3  # defect 1: cycles in a row a corrupt obstacle size is bridged before the checker fails
+
+
+class CollisionCheckerFault(RuntimeError):
+    """Defect 1: a corrupt obstacle footprint reached the collision checker (the node dies of it)."""
 
 
 _LIVE: weakref.WeakSet = weakref.WeakSet()
@@ -62,7 +80,7 @@ def _release_all() -> None:
 
 class OmplPlanner:
     def __init__(self, seed: int = 7, iterations: int = 250, infeasible_iterations: int = 1250,
-                 goal_x: float = 50.0, reuse: bool | str = True):
+                 goal_x: float = 50.0, reuse: bool | str = True, defects: bool | str = False):
         ou.setLogLevel(ou.LOG_WARN)
         # Before any planner exists: OMPL seeds each RNG it creates from this sequence. A second
         # planner in one process (a test suite's fresh replay) re-seeds it on purpose; OMPL calls that an
@@ -75,7 +93,10 @@ class OmplPlanner:
         self.iterations, self.infeasible_iterations = int(iterations), int(infeasible_iterations)
         self.goal_x = float(goal_x)
         # reuse=False plans afresh every cycle (a CPU-heavy planner: every cycle a full search).
-        self.reuse = reuse if isinstance(reuse, bool) else str(reuse).strip().lower() not in ("0", "false", "no", "")
+        self.reuse = _flag(reuse)
+        self.defects = _flag(defects)  # the seeded defects of the module doc
+        self.sizes: dict[object, tuple[float, float]] = {}  # defect 1: each obstacle's last good (length, width)
+        self.corrupt_cycles = 0  # defect 1: cycles in a row with a corrupt obstacle size
         self.space = ob.ReedsSheppStateSpace(TURNING_RADIUS)
         self._set_bounds(0.0)
         self.si = ob.SpaceInformation(self.space)
@@ -118,21 +139,34 @@ class OmplPlanner:
 
     def _perceive(self, obstacles: list[dict]) -> None:
         boxes = []
+        corrupt = False
         for o in obstacles:
             x, y, heading = float(o["x"]), float(o["y"]), float(o.get("heading", 0.0))
             vx, vy = float(o.get("vx", 0.0)), float(o.get("vy", 0.0))
             hl, hw = float(o["length"]) / 2, float(o["width"]) / 2
+            if self.defects:
+                if hl > 0 and hw > 0:  # NaN fails both comparisons
+                    self.sizes[o.get("id")] = (hl, hw)
+                else:  # bridged with the last good size … for a few cycles only (defect 1)
+                    corrupt = True
+                    hl, hw = self.sizes.get(o.get("id"), (2.25, 0.95))
             steps = int(SWEEP_S / SWEEP_STEP_S) if (vx or vy) else 0
             for k in range(steps + 1):
                 t = k * SWEEP_STEP_S
                 boxes.append((x + vx * t, y + vy * t, heading, hl, hw))
         self.boxes = boxes
+        if self.defects:
+            self.corrupt_cycles = self.corrupt_cycles + 1 if corrupt else 0
+            if self.corrupt_cycles >= CORRUPT_GRACE:
+                raise CollisionCheckerFault(f"obstacle footprint corrupt for {self.corrupt_cycles} cycles")
 
     # -- one cycle -------------------------------------------------------------
     def step(self, frame: dict) -> dict:
         ego, obstacles = frame["ego"], frame["obstacles"]
         stamp = float(ego["header"]["stamp"])
         x, y, yaw, v0 = float(ego["x"]), float(ego["y"]), float(ego["heading"]), float(ego["v"])
+        if self.defects:
+            _route_direction(yaw)  # defect 2: int(nan) raises before the cycle changes any state
         self._perceive(obstacles.get("obstacles", []))
         self._set_bounds(x)
         self.seq += 1
@@ -208,6 +242,16 @@ class OmplPlanner:
         path = og.PathGeometric(pdef.getSolutionPath())
         path.interpolate(max(2, int(path.length() / POINT_SPACING) + 1))
         return path, iterations
+
+
+def _flag(value: bool | str) -> bool:
+    """A switch given as a bool or as text (a spec's replay args and the command line are strings)."""
+    return value if isinstance(value, bool) else str(value).strip().lower() not in ("0", "false", "no", "off", "")
+
+
+def _route_direction(yaw: float) -> int:
+    """Which way along the road the ego faces, in quarter turns (0: along +x). Defect 2: int(nan) raises."""
+    return int(round(yaw / (math.pi / 2))) % 4
 
 
 def _timed(poses: list[tuple[float, float, float]], v0: float, stamp: float) -> list[dict]:

@@ -1,0 +1,113 @@
+"""Honest campaign output (issue 24, item 7): confirmed bugs apart, ranked by severity, the most severe named.
+
+Journals are real SQLite files written the way a campaign writes them; the
+verdict is the monitors' own function over real violation records.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from astaa_deft.campaign import signature as sig
+from astaa_deft.campaign.journal import Journal
+from astaa_deft.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.campaign.report import write_report
+from astaa_deft.campaign.standing import (CONFIRMED, UNCONFIRMED, WITHOUT_MUTATION, headline, most_severe,
+                                          standings)
+from astaa_deft.monitor.verdict import run_verdict
+from astaa_deft.monitor.violation import Violation
+
+CLEARANCE = Finding("clearance", "Silent", None, "ego", "overlaps by 0.1 m with a 0.3 m margin", "medium")
+COLLISION = Finding("no_collision", "Silent", None, "ego", "overlaps obstacle 2 by 0.05 m", "critical")
+CRASH = Finding("(module exit)", "Abort", "planning", None, "killed by SIGABRT", "high")
+
+
+def test_a_run_is_filed_under_its_most_severe_finding_not_its_first():
+    outcome = CaseOutcome("done", "Silent", "…", [CLEARANCE, COLLISION])
+    assert sig.primary(outcome) == COLLISION
+    assert sig.failure_key(outcome) == "Silent|no_collision|-"
+    # same severity: the worse CRASH class, then the earlier
+    assert sig.primary(CaseOutcome("done", "Abort", "…", [CLEARANCE, CRASH, replace_severity(CRASH)])) == CRASH
+
+
+def replace_severity(finding: Finding) -> Finding:
+    return Finding(finding.invariant + "2", "Silent", finding.module, finding.channel, finding.detail, "high")
+
+
+def test_the_verdict_line_names_the_most_severe_finding_and_still_says_which_came_first():
+    clearance = Violation("clearance", "collision", "medium", 1_000, "ego", 1, None, "overlaps by 0.1 m", "Silent")
+    contact = Violation("no_collision", "collision", "critical", 2_000, "ego", 2, None, "overlaps by 0.05 m", "Silent")
+    verdict = run_verdict([clearance, contact], [], ["planning", "simulator"])
+    assert verdict.klass == "Silent"
+    assert verdict.summary.startswith("Silent: no_collision: overlaps by 0.05 m (2 findings)")
+    assert verdict.summary.endswith("first: clearance: overlaps by 0.1 m")
+    assert verdict.first == clearance
+
+
+def _bucket(journal: Journal, name: str, finding: Finding, *, reruns: int = 0, failures: int = 0,
+            without_mutation: bool = False) -> None:
+    case = f"c-{name}"
+    journal.plan(PlannedCase(case, MUTATED, int(name[1:]), 1, {}, None, "random"))
+    journal.finished(case, CaseOutcome("done", finding.crash, "…", [finding]), f"s-{name}", None, name)
+    journal.add_bucket(name, f"s-{name}", finding.crash, finding.invariant, finding.module, "ego:x:set", case,
+                       without_mutation, 1)
+    for k in range(reruns):
+        journal.bucket_rerun(name, k < failures)
+
+
+def test_buckets_rank_confirmed_first_by_severity_then_rate_and_unconfirmed_ones_are_no_bugs(tmp_path: Path):
+    out = tmp_path / "campaign"
+    journal = Journal(out)
+    try:
+        journal.set_meta(spec="/x/ompl_stack.yaml", seed=1, strategy="random", params={}, horizon=20.0)
+        _bucket(journal, "B001", CLEARANCE, reruns=2, failures=2)  # first found, least severe
+        _bucket(journal, "B002", Finding("plans_flow", "Restart", "planning", "plan", "silent 5 s", "high"),
+                reruns=2, failures=0)  # load: never came back
+        _bucket(journal, "B003", CRASH, reruns=2, failures=1)
+        _bucket(journal, "B004", COLLISION, reruns=2, failures=2)
+        _bucket(journal, "B005", Finding("plans_flow", "Restart", "planning", "plan", "silent", "high"),
+                without_mutation=True)
+        _bucket(journal, "B006", Finding("planner_errors", "Silent", "planning", None, "Traceback", "high"),
+                reruns=2, failures=2)
+        journal.module_tests_checked("B003", str(out / "tests" / "B003-replay"), True,
+                                     "the planner's replay raises CollisionCheckerFault")
+        journal.module_tests_checked("B006", str(out / "tests" / "B006-replay"), False, "they pass on the defect")
+        journal.minimised("B003", "minimised", 0, None, "obstacles:obstacles[].length = -1", None,
+                          str(out / "tests" / "B003-replay"), 30.0, "")
+        journal.minimised("B006", "minimised", 0, None, "ego:heading = nan", None,
+                          str(out / "tests" / "B006-replay"), 30.0, "")
+        ranked = standings(journal)
+        assert [(s.bucket.bucket, s.status, s.severity) for s in ranked] == [
+            ("B004", CONFIRMED, "critical"), ("B006", CONFIRMED, "high"), ("B003", CONFIRMED, "high"),
+            ("B001", CONFIRMED, "medium"), ("B002", UNCONFIRMED, "high"), ("B005", WITHOUT_MUTATION, "high")]
+        assert ranked[4].why == "0/2 re-runs failed the same way"
+        assert headline(ranked) == ("4 confirmed bugs (1 critical, 2 high, 1 medium); 1 unconfirmed (no re-run"
+                                    " reproduced it: not counted as bugs); 1 failing without mutation")
+        top = most_severe(ranked)
+        assert top is not None and top.describe() == ("B004 critical Silent: no_collision — confirmed"
+                                                      " (2/2 re-runs failed the same way)")
+    finally:
+        journal.close()
+    text = html.unescape(write_report(out).read_text())
+    assert "4 confirmed bugs (1 critical, 2 high, 1 medium)" in text and "bug bucket" not in text
+    assert "most severe: B004 critical Silent: no_collision" in text.replace("<b>", "")
+    assert text.index("id='B004'") < text.index("id='B006'") < text.index("id='B003'") < text.index("id='B001'") \
+        < text.index("id='B002'") < text.index("id='B005'")
+    assert "fail on the defect</span> <span class='muted'>(the planner's replay raises CollisionCheckerFault)" in text
+    assert "do not fail on the defect</span> <span class='muted'>(they pass on the defect)" in text
+
+
+def test_a_campaign_of_unconfirmed_buckets_finds_no_bug(tmp_path: Path):
+    journal = Journal(tmp_path / "c")
+    try:
+        _bucket(journal, "B001", COLLISION, reruns=2, failures=0)
+        _bucket(journal, "B002", CRASH)  # --reruns 0 and not minimised
+        ranked = standings(journal)
+        assert [s.status for s in ranked] == [UNCONFIRMED, UNCONFIRMED]
+        assert ranked[1].why == "not re-run"
+        assert headline(ranked).startswith("no confirmed bug; 2 unconfirmed")
+        top = most_severe(ranked)
+        assert top is not None and top.bucket.bucket == "B001"  # named, with its status
+    finally:
+        journal.close()
