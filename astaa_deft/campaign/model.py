@@ -50,8 +50,8 @@ class Finding:
     module: str | None
     channel: str | None
     detail: str
-    at: float | None = None  # seconds from the run's start to the violation (None: not known)
     severity: str = "high"  # the invariant's (low … critical); a crash no invariant named: high
+    at: float | None = None  # seconds from the run's start to the violation (None: not known)
 
 
 @dataclass
