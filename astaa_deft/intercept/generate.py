@@ -17,8 +17,8 @@ test bookkeeping, but a NaN stamp can stop a planner).
 
 Windows are random inside the scenario's duration (rounded to 0.1 s so
 the files read well). Brittle fields (the spec's list, plus stamps and
-sequence numbers in header-like structs) are left alone unless asked, but
-for the stamp family: mutating them mostly tests the middleware's
+sequence numbers in header-like structs) are left alone unless asked (the
+stamp family excepted): mutating them mostly tests the middleware's
 bookkeeping, not the robot.
 
 Deterministic: the same spec, dictionary, count, seed and duration give
