@@ -80,6 +80,14 @@ def test_a_lost_stretch_of_triggers_is_followed_not_taken_for_a_bad_stamp():
     assert planner.step(frame(stamp=4.0))["header"]["stamp"] == 4.0  # 3 s without triggers: real time
 
 
+def test_a_trigger_a_few_periods_old_is_planned_at_its_own_time():
+    """DeFT replaying a neighbouring trigger, or a reordered message: the plan is the one its stamp gives."""
+    planner = Planner(defects=True)
+    planner.step(frame(stamp=1.3))
+    late = planner.step(frame(stamp=1.0))
+    assert late["header"]["stamp"] == 1.0 and late["points"][0]["t"] == 1.0
+
+
 def _localizations(controller: Controller, stamps: list[float]) -> list[dict | None]:
     points = [{"t": 1.0 + 0.1 * k, "x": 10.0 * (1.0 + 0.1 * k), "y": 0.0, "heading": 0.0, "v": 10.0, "a": 2.0}
               for k in range(101)]
