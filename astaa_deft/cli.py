@@ -31,7 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     spec.required = True
     check = spec.add_parser("check", help="validate a SUT spec")
     check.add_argument("file", type=Path)
-    check.set_defaults(func=lambda a: _cmd("spec_check").run(a.file))
+    check.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                       help="also check a param value (against the param's declared choices)")
+    check.set_defaults(func=lambda a: _cmd("spec_check").run(a.file, a.param))
     disc = spec.add_parser("discover", help="write a spec skeleton from a running ROS 2 system (rmw_zenoh)")
     disc.add_argument("--connect", action="append", required=True, metavar="ENDPOINT",
                       help="the running system's Zenoh router, e.g. tcp/127.0.0.1:7447")

@@ -77,7 +77,7 @@ class _SpecBuilder:
         self.keys(root, TOP_KEYS, REQUIRED_TOP, "the spec")
         v = root.value
         name = self.name_of(v["name"], "spec name") if "name" in v else "spec"
-        params = self.params(v.get("params"))
+        params, param_choices = self.params(v.get("params"))
         zenoh = self.zenoh(v.get("zenoh"))
         types = self.types(v.get("types"))
         self.ros2 = read_ros2_section(self.src, v.get("ros2"), self.base_dir, self.from_file)
@@ -99,6 +99,7 @@ class _SpecBuilder:
             types=types,
             brittle=tuple(brittle),
             params=params,
+            param_choices=param_choices,
             invariants=tuple(invariants),
             planner=planner,
             replay=replay,
@@ -148,23 +149,65 @@ class _SpecBuilder:
         return node.value
 
     # -- sections ----------------------------------------------------------
-    def params(self, node: Node | None) -> dict[str, str]:
+    def params(self, node: Node | None) -> tuple[dict[str, str], dict[str, tuple[str, ...]]]:
+        """(each param's default, the declared choices of those that have some): ``name: value``, or
+        ``name: {default: value, choices: [value, …]}`` (default: the first choice)."""
         if node is None:
-            return {}
+            return {}, {}
         if not node.is_map:
             self.src.at(node, "'params' must be a mapping", "write 'params:' then 'key: value' lines")
-            return {}
-        out = {}
+            return {}, {}
+        out: dict[str, str] = {}
+        choices: dict[str, tuple[str, ...]] = {}
         for key, value in node.items():
             if not FIELD_NAME_RE.match(key):
                 self.src.at_key(node, key, f"param name '{key}' is not an identifier", "use letters, digits and '_'")
             if key in BUILTIN_PLACEHOLDERS:
                 self.src.at_key(node, key, f"param '{key}' shadows a built-in placeholder", "rename it")
-            if value.is_map or value.is_list or value.value is None:
-                self.src.at(value, f"param '{key}' must be a scalar", "give a string or number")
+            out[key] = ""  # declared, even if badly: its placeholders are not unknown as well
+            if value.is_map:
+                declared = self.param_with_choices(key, value)
+                if declared is not None:
+                    out[key], choices[key] = declared
                 continue
-            out[key] = value.value if isinstance(value.value, str) else _scalar_text(value.value)
-        return out
+            if value.is_list or value.value is None:
+                self.src.at(value, f"param '{key}' must be a scalar or {{default: …, choices: […]}}",
+                            "give a string or number, or e.g. {default: oracle, choices: [oracle, cv]}")
+                continue
+            out[key] = self.param_text(value)
+        return out, choices
+
+    def param_with_choices(self, key: str, node: Node) -> tuple[str, tuple[str, ...]] | None:
+        """``{default: value, choices: [value, …]}``: (the default, the choices); None after a problem."""
+        example = f"{key}: {{default: oracle, choices: [oracle, cv]}}"
+        if not self.keys(node, ("default", "choices"), ("choices",), f"param '{key}'") or "choices" not in node.value:
+            return None
+        listed = node.value["choices"]
+        if not listed.is_list or not listed.value or any(c.is_map or c.is_list or c.value is None
+                                                         for c in listed.value):
+            self.src.at(listed, f"param '{key}': 'choices' must be a non-empty list of values", f"e.g. {example}")
+            return None
+        choices = tuple(self.param_text(c) for c in listed.value)
+        repeated = sorted({c for c in choices if choices.count(c) > 1})
+        if repeated:
+            self.src.at(listed, f"param '{key}': choice '{repeated[0]}' is listed twice", "list each value once")
+            return None
+        default_node = node.value.get("default")
+        if default_node is None:
+            return choices[0], choices
+        if default_node.is_map or default_node.is_list or default_node.value is None:
+            self.src.at(default_node, f"param '{key}': 'default' must be a value", f"e.g. {example}")
+            return None
+        default = self.param_text(default_node)
+        if default not in choices:
+            self.src.at(default_node, f"param '{key}': default '{default}' is not one of its choices "
+                        f"({', '.join(choices)})", "add it to 'choices' or pick one of them")
+            return None
+        return default, choices
+
+    @staticmethod
+    def param_text(node: Node) -> str:
+        return node.value if isinstance(node.value, str) else _scalar_text(node.value)
 
     def zenoh(self, node: Node | None) -> ZenohSection:
         if node is None:

@@ -19,7 +19,7 @@ from astaa_deft.commands.fuzz import parse_budget, parse_params
 from astaa_deft.errors import InputError
 from astaa_deft.intercept import generate as gen
 from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.intercept.actions.set import Set
+from astaa_deft.intercept.actions.set import Assignment, Set
 from astaa_deft.intercept.testcase import parse_testcase
 from astaa_deft.spec_loader import load_spec
 
@@ -35,19 +35,26 @@ def test_random_strategy_covers_every_channel_and_field_first_with_values_class_
     targets = {(t.channel.name, str(t.path)): t for t in gen.mutation_targets(spec, dictionary)}
     channels = {channel for channel, _ in targets}
     length = strategy.round_length
-    assert length == len(targets) + len(channels)  # every field once, one message fault per channel
+    # every field once, one message fault per channel, stamp faults on about 7 % of a round (one per channel)
+    stamp_probes = round(gen.STAMP_SHARE * (len(targets) + len(channels)))
+    assert length == len(targets) + len(channels) + stamp_probes
     for round_number in (0, 1):
         cases = [parse_testcase(strategy.propose(n).testcase_xml.encode(), "t", spec, dictionary)
                  for n in range(1 + round_number * length, 1 + (round_number + 1) * length)]
-        fields, faults = {}, set()
+        fields, faults, stamps = {}, set(), set()
         for case in cases:
             [policy] = case.policies
-            if isinstance(policy.action, Set):
+            if case.description.startswith("stamp:"):
+                [assignment] = policy.action.fields
+                stamps.add(policy.channels[0])
+                if round_number == 0:  # the first round's stamp fault: NaN
+                    assert assignment == Assignment("header.stamp", "dict:time.nan")
+            elif isinstance(policy.action, Set):
                 [assignment] = policy.action.fields
                 fields[(policy.channels[0], assignment.path)] = assignment.value
             else:
                 faults.add(policy.channels[0])
-        assert set(fields) == set(targets) and faults == channels
+        assert set(fields) == set(targets) and faults == channels and len(stamps) == stamp_probes
         for key, ref in fields.items():  # the round's class of each field's values: non-finite first, then extreme
             classes = [c for c in gen.VALUE_CLASSES if any(gen.value_class(e) == c for e in targets[key].values)]
             entry = next(e for e in targets[key].values if e.ref == ref)

@@ -129,3 +129,50 @@ def test_rendering_does_not_touch_the_test_case():
     action = parse_testcase(policy_xml(MOVING).encode(), "tc.xml", SPEC).policies[0].action
     before = copy.deepcopy(action)
     assert action.pose_at(4.0).y == pytest.approx(5.25) and action == before
+
+
+# ---------------------------------------------------------------- participants on a wall-clock stack
+
+WALL = 1.8e9  # a stack stamping with epoch seconds (2027)
+
+
+def test_a_participant_at_epoch_seconds_is_accepted_and_applied():
+    at_wall = (f'<participant id="903" kind="vehicle" x="30" y="3.5" t="{WALL + 1:.1f}">'
+               f'<at t="{WALL + 3:.1f}" x="50" y="3.5"/></participant>')
+    case = parse_testcase(policy_xml(at_wall).encode(), "tc.xml", SPEC)  # the XSD, then the spec
+    [policy] = case.policies
+    assert policy.action.t == WALL + 1 and policy.action.path == (Waypoint(WALL + 3, 50.0, 3.5),)
+    assert parse_testcase(case.to_xml(), "again.xml", SPEC) == case  # written back without an exponent
+    assert 't="1800000001"' in case.to_xml().decode()
+    engine = Interceptor(case, SPEC, load_dictionary())
+    [delivery] = engine.on_message("prediction", ("planning",), prediction(WALL + 2), 0.5)
+    added = JSON.decode(delivery.payload)["obstacles"][-1]
+    assert added["id"] == 903 and added["trajectory"][0]["t"] == WALL + 2
+    assert added["trajectory"][0]["x"] == pytest.approx(40.0)  # halfway along its path at its own clock
+    assert delivery.event is not None and delivery.event.detail["x"] == pytest.approx(40.0)
+
+
+def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
+    from astaa_deft.campaign.strategies.decictor import area_around, scene_of, scene_xml
+    from astaa_deft.decictor.feasible import ForbiddenRegion, check_placement
+    from astaa_deft.decictor.oracle import LaneGrid, RunObservation, straight_lanes
+    from astaa_deft.decictor.paths import EgoPath, EgoState
+    from astaa_deft.decictor.search import Search
+
+    lanes = straight_lanes(2, 3.5, 300.0)
+    seed = RunObservation(EgoPath(tuple(EgoState(WALL + k * 0.1, 10.0 + k * 1.2, 0.0, 0.0, 12.0)
+                                        for k in range(101))), True)
+    search = Search("decictor", 1, seed, LaneGrid(lanes), area_around(seed, lanes),
+                    ForbiddenRegion(seed.ego, clearance=1.5))
+    participants = 0
+    for number in range(1, 9):
+        scene = search.propose(number)
+        xml = scene_xml(scene, f"tc-{number:06d}", number, "prediction")
+        parse_testcase(xml.encode(), "tc", SPEC, load_dictionary())  # valid against the XSD, spec and mapping
+        assert scene_of(xml).participants == scene.participants
+        for participant in scene.participants:
+            check_placement(participant, search.region)
+            assert WALL <= participant.t <= WALL + 10.0  # on the seed's clock
+            participants += 1
+        search.observe(scene, seed)
+    assert participants

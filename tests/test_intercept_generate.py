@@ -14,9 +14,11 @@ from astaa_deft.errors import InputError
 from astaa_deft.fields import FieldPath
 from astaa_deft.intercept import load_dictionary, load_testcase
 from astaa_deft.intercept.dictionary import wire_value
+from astaa_deft.intercept import generate as gen
 from astaa_deft.intercept.generate import (
     generate, generate_to_directory, is_generation_brittle, iter_testcases, mutation_targets, write_testcases,
 )
+from astaa_deft.intercept.testcase import Selection
 from astaa_deft.spec_loader import load_spec, load_spec_text
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -32,6 +34,9 @@ BRITTLE = {
     ("trajectory", "debug_note"),
     ("scan", "meta.seq"), ("scan", "meta.stamp"), ("scan", "meta.frame_id"),
 }
+# The stamp family's fields: stamps and sequence numbers by name, brittle or not (odometry's top-level stamp).
+STAMPS = {("trajectory", "header.seq"), ("trajectory", "header.stamp"), ("scan", "meta.seq"),
+          ("scan", "meta.stamp"), ("odometry", "stamp")}
 
 
 def assignments(testcases):
@@ -60,28 +65,57 @@ def test_brittle_fields_are_recognised():
 
 
 def test_never_brittle_by_default_and_only_when_asked():
-    touched = {(channel, a.path) for channel, a in assignments(generate(SPEC, DICTIONARY, 400, seed=1))}
+    testcases = generate(SPEC, DICTIONARY, 400, seed=1)
+    bulk = [t for t in testcases if not t.description.startswith("stamp:")]
+    touched = {(channel, a.path) for channel, a in assignments(bulk)}
     assert not touched & BRITTLE
     assert "status" not in {channel for channel, _ in touched}  # no consumers: nobody to test
     with_brittle = {(channel, a.path)
-                    for channel, a in assignments(generate(SPEC, DICTIONARY, 400, seed=1, include_brittle=True))}
+                    for channel, a in assignments(generate(SPEC, DICTIONARY, 400, seed=1, include_brittle=True))
+                    if (channel, a.path) not in STAMPS}
     assert with_brittle & BRITTLE
 
 
-def test_shapes_follow_astaa_findings():
-    """42 : 22 : 8 of bugs -> ~58 % one field of one message, ~31 % several fields, ~11 % repeated."""
+def test_the_stamp_family_touches_only_stamps_and_sequence_numbers_even_brittle_ones():
+    stamp_cases = [t for t in generate(SPEC, DICTIONARY, 400, seed=1) if t.description.startswith("stamp:")]
+    touched = {(channel, a.path, a.value) for channel, a in assignments(stamp_cases)}
+    fields = {(channel, path) for channel, path, _value in touched}
+    assert fields <= STAMPS and fields & BRITTLE  # header stamps are brittle, and still reached
+    assert {value for _, _, value in touched} <= {f"dict:{key}" for key in gen.STAMP_FAULTS}
+    # a sequence number only ever repeats the previous one; stamps get every fault
+    assert {value for _, path, value in touched if path.endswith("seq")} == {"dict:time.repeat_previous"}
+    assert {value for _, path, value in touched if path.endswith("stamp")} == {f"dict:{key}"
+                                                                              for key in gen.STAMP_FAULTS}
+
+
+def test_shapes_follow_astaa_findings_next_to_sustained_and_stamp_families():
+    """Weights 42 : 22 : 8 (ASTAA's bugs) : 20 sustained : 7 stamp -> of 1000 cases ~424 one field of one
+    message, ~222 several fields, ~81 repeated, ~202 sustained, ~71 stamp faults."""
     shapes = Counter()
     for testcase in generate(SPEC, DICTIONARY, 1000, seed=7):
         [policy] = testcase.policies
-        if policy.selection.limit is None:
+        family = testcase.description.split(":")[0]
+        if family == "stamp":
+            shapes["stamp"] += 1
+        elif family == "sustained":  # one field held: every message of a 1-5 s window, or 5-50 messages
+            assert len(policy.action.fields) == 1
+            if policy.selection.limit is None:
+                assert policy.selection == Selection() and policy.window.end - policy.window.start <= 5.0 + 1e-9
+            else:
+                assert 5 <= policy.selection.limit <= 50
+            shapes["sustained"] += 1
+        elif policy.selection.limit is None:
+            assert family == "repeated"
             shapes["repeated"] += 1
         else:
             assert policy.selection.limit == 1
             shapes["single" if len(policy.action.fields) == 1 else "multi"] += 1
     # multi_field draws on a channel with one usable field degrade to single, hence the ranges.
-    assert 520 <= shapes["single"] <= 680
-    assert 230 <= shapes["multi"] <= 360
-    assert 80 <= shapes["repeated"] <= 150
+    assert 360 <= shapes["single"] <= 500
+    assert 170 <= shapes["multi"] <= 290
+    assert 55 <= shapes["repeated"] <= 115
+    assert 160 <= shapes["sustained"] <= 250
+    assert 45 <= shapes["stamp"] <= 100
 
 
 def test_windows_fit_the_duration_and_cases_validate(tmp_path):

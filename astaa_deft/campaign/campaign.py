@@ -21,6 +21,8 @@ from pathlib import Path
 
 from ..errors import AstaaDeftError, InputError, Problem
 from ..intercept.dictionary import load_dictionary
+from ..spec.model import Spec
+from ..spec.params import check_param_values, spread_choices
 from ..spec_loader import load_spec
 from . import signature as sig
 from .calibration import DRIFT_TOLERANCE, drift, fewer_after_drift, overloaded, run_share, workers_for
@@ -112,7 +114,12 @@ def default_workers(module_count: int, cores: int | None = None) -> int:
     return max(1, int(cores / per_run))
 
 
-def param_grid(params: dict[str, list[str]]) -> list[dict[str, str]]:
+def param_grid(params: dict[str, list[str]], spec: Spec | None = None) -> list[dict[str, str]]:
+    """Every combination of the values given per param and (with ``spec``) of the declared choices of the
+    params given none; InputError for a given value outside its param's declared choices."""
+    if spec is not None:
+        check_param_values(spec, params, "--params")
+        params = spread_choices(spec, params)
     keys = sorted(params)
     return [dict(zip(keys, values, strict=False)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
 
@@ -130,7 +137,7 @@ class Campaign:
             raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
                                      f"use one of: {', '.join(STRATEGIES)}"))
         self.strategy: Strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed, config.horizon)
-        self.grid = param_grid(config.params)
+        self.grid = param_grid(config.params, self.spec)
         self.cores = os.cpu_count() or 1
         # Runs at once: the user's, else measured in the baseline (calibrate); this estimate until then.
         self.calibrated = config.workers is None and config.cluster is None

@@ -128,7 +128,7 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     for exit_ in result.crashes:
         if not any(f.module == exit_.module for f in findings):
             findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
-                                    round((exit_.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None))
+                                    at=round((exit_.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None))
     monitors = started.get("monitors")
     violating = {name: s["violating"] for name, s in monitors.stats().items() if s["violating"]} \
         if monitors is not None else {}

@@ -16,6 +16,7 @@ def run(spec_path: Path, count: int, seed: int, out_dir: Path, duration: float =
         include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> int:
     report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration, include_brittle, dictionaries)
     shapes = report.shapes
-    print(f"wrote {len(report.paths)} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "
-          f"message, {shapes['multi_field']} several fields of one message, {shapes['repeated']} repeated")
+    print(f"wrote {report.count} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "
+          f"message, {shapes['multi_field']} several fields of one message, {shapes['repeated']} repeated, "
+          f"{shapes['sustained']} sustained, {shapes['stamp']} stamp or sequence faults")
     return 0

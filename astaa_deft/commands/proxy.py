@@ -10,6 +10,7 @@ from ..log import records as rec
 from ..session import BusRun, RunOptions, RunResult, run_session
 from ..session.summary import untouched_policies
 from ..spec.model import Spec
+from ..spec.params import check_param_values
 from ..monitor.verdict import format_verdict
 from .console import RateMeter, StatusLine, StopSignal, format_event, say
 
@@ -70,6 +71,7 @@ def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
 def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, launch: bool,
         params: dict[str, str], command_line: list[str], run_dir: Path | None,
         stop_on_violation: bool = False, interceptor=None, attachments: dict | None = None) -> int:
+    check_param_values(spec, {name: [value] for name, value in params.items()}, "--param")
     options = RunOptions(mode="passive" if passive else "star", launch=launch, record=record, params=params,
                          command_line=command_line, run_dir=run_dir, stop_on_violation=stop_on_violation,
                          interceptor=interceptor, attachments=attachments or {})

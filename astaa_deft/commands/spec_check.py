@@ -4,18 +4,24 @@ from __future__ import annotations
 
 import importlib
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 from ..errors import InputError, Problem
 from ..deft.replay import importable_from
+from ..spec.params import check_param_values
 from ..spec_loader import load_spec
+from .console import parse_params
 
 
-def run(path: Path) -> int:
+def run(path: Path, params: Sequence[str] = ()) -> int:
     spec = load_spec(path)
     _check_factory(spec, path)
+    given = parse_params(params)
+    check_param_values(spec, {name: [value] for name, value in given.items()}, "--param")
+    choices = ", ".join(f"{name} one of {'/'.join(values)}" for name, values in spec.param_choices.items())
     print(f"{path}: ok — spec '{spec.name}': {len(spec.modules)} modules, {len(spec.channels)} channels, "
-          f"{len(spec.types)} types")
+          f"{len(spec.types)} types" + (f"; params: {choices}" if choices else ""))
     return 0
 
 

@@ -38,6 +38,12 @@ PLAUSIBLE_HEADING = 1000.0  # rad; even an unwrapped heading never gets near thi
 # m/s; beyond it a measured speed is a corrupted message (its square or difference may overflow to inf,
 # and the PID's filtered derivative then turns NaN for good)
 PLAUSIBLE_SPEED = 100.0
+# s: a localization stamp this far past the previous one is a corrupted message (defects off), not a gap: no
+# demo run is that long, and a real gap (messages lost for a while) must still be followed
+MAX_STAMP_STEP = 60.0
+# Defects off: localizations in a row it cannot use (corrupted, out of order) before it brakes instead of
+# keeping its last command — 0.2 s at 50 Hz; a held bad measurement must not keep it accelerating
+MAX_BLIND_CYCLES = 10
 
 
 def normalize_angle_by_loop(angle: float) -> float:
@@ -63,6 +69,7 @@ class Controller:
         self.integral = 0.0
         self.derivative = 0.0  # low-passed d(error)/dt
         self.last_command: dict | None = None
+        self.blind = 0  # localizations in a row it could not use
 
     def on_trajectory(self, message: dict) -> None:
         points = trajectory(message)
@@ -85,11 +92,11 @@ class Controller:
     def on_localization(self, loc: Localization) -> dict | None:
         """The command for this cycle (None before there is a plan)."""
         if not all(math.isfinite(v) for v in (loc.stamp, loc.x, loc.y, loc.heading, loc.speed)):
-            return self.last_command  # a measurement we cannot use: keep the last command
+            return self._blind()  # a measurement we cannot use: keep the last command
         if not self.defects and abs(loc.heading) > PLAUSIBLE_HEADING:
-            return self.last_command  # an angle this large has no usable fraction of a turn left
+            return self._blind()  # an angle this large has no usable fraction of a turn left
         if not self.defects and abs(loc.speed) > PLAUSIBLE_SPEED:
-            return self.last_command  # no car measures this: a corrupted localization
+            return self._blind()  # no car measures this: a corrupted localization
         if self.plan is None:
             # Nothing to follow yet, or the planner has no plan; the cycle clock starts with a plan.
             if self.brake_for_missing_plan:
@@ -105,13 +112,25 @@ class Controller:
             # derivative below divides by it (numpy: inf/nan, no exception).
             dt = max(stamp - self.prev_stamp, np.float64(0.0))
         else:
-            if stamp <= self.prev_stamp:
-                return self.last_command  # duplicate or out-of-order: nothing new to react to
+            if stamp == self.prev_stamp:
+                return self.last_command  # the same localization again: nothing new to react to
+            if stamp < self.prev_stamp or stamp - self.prev_stamp > MAX_STAMP_STEP:
+                # out of order, or a time jump (e.g. to 2100): taken, every later stamp would be "old"
+                return self._blind()
             dt = stamp - self.prev_stamp
         self.prev_stamp = stamp
+        self.blind = 0
         steering = self._steering(loc)
         acceleration = self._acceleration(loc, dt)
         return self._command(steering, acceleration)
+
+    def _blind(self) -> dict | None:
+        """The command for a localization it cannot use: the last one; with defects off, a brake once
+        MAX_BLIND_CYCLES came in a row."""
+        self.blind += 1
+        if not self.defects and self.blind > MAX_BLIND_CYCLES and self.last_command is not None:
+            return self._command(self.last_steering(), FALLBACK_BRAKE)
+        return self.last_command
 
     def last_steering(self) -> float:
         return self.last_command["steering"] if self.last_command else 0.0

@@ -31,6 +31,14 @@ INPUT_CHANNELS = ("routing", "localization", "traffic_light", "prediction")
 TRIGGER_CHANNEL = "prediction"
 
 MAX_CRUISE_SPEED = 20.0  # m/s the planner would drive if nothing limited it
+# The planning clock (not a seeded defect: both modes). A trigger stamp that is not finite, more than
+# CLOCK_BACK_TOLERANCE before the clock or more than CLOCK_MAX_STEP after it is a corrupted message, not
+# time: the clock steps on by one trigger period instead (a held bad stamp keeps the plans coming). Any
+# other stamp is the cycle's time, as it always was: a frame replayed out of order (DeFT trying a
+# neighbouring trigger) plans exactly as the recorded run did.
+TRIGGER_PERIOD = 0.1  # s, prediction's
+CLOCK_BACK_TOLERANCE = 0.5  # s: a few triggers (the stamp family's jump back is 1 s)
+CLOCK_MAX_STEP = 60.0  # s: longer than any demo run, so a real gap (triggers lost for a while) is followed
 FALLBACK_SPEED_LIMIT = 8.0  # m/s, until a usable limit arrives (defects off)
 # The demo vehicle's operational design domain: urban roads, none signed above 54 km/h. A routing limit
 # beyond it is a corrupted message, not a road (defects off: ignored like a non-finite one).
@@ -104,10 +112,15 @@ class Planner:
         self.stopping_for: set[int] = set()  # light ids it committed to stop for
         self.speed_limit: float | None = None  # last usable one (defects off)
         self.road: Road | None = None  # last usable routing
+        self.clock: float | None = None  # the time of the last cycle
 
     # --- the cycle ---------------------------------------------------------
     def step(self, frame: Mapping[str, dict]) -> dict[str, Any]:
-        now = messages.header(frame[TRIGGER_CHANNEL]).stamp
+        stamp = messages.header(frame[TRIGGER_CHANNEL]).stamp
+        now = self._tick(stamp)
+        if now is None:  # no usable time yet: nothing can be planned
+            self.seq += 1
+            return self._message(stamp, frame, [], self.lane_decision, "no_plan")
         routing = messages.routing(frame["routing"])
         road = self._road(routing)
         start = self._start(messages.localization(frame["localization"]), now)
@@ -154,6 +167,16 @@ class Planner:
         return self._message(now, frame, points, candidate.lane, behavior)
 
     # --- inputs --------------------------------------------------------------
+    def _tick(self, stamp: float) -> float | None:
+        """This cycle's time: the trigger's stamp if plausible, else the clock one period on (None before
+        any usable stamp)."""
+        last = self.clock
+        if math.isfinite(stamp) and (last is None or last - CLOCK_BACK_TOLERANCE <= stamp <= last + CLOCK_MAX_STEP):
+            self.clock = stamp
+        elif last is not None:
+            self.clock = last + TRIGGER_PERIOD
+        return self.clock
+
     def _cruise_speed(self, limit: float) -> float:
         if not self.defects:
             # A limit that is not a positive finite number, or one no road of the ODD has, is no limit at

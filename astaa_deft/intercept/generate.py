@@ -7,12 +7,19 @@ field's declared type. The mix follows what ASTAA's bugs needed
 field of one message, 22 % several fields of one message, only 8 %
 repeated injection. Normalised over those 72 %, about 58 % of test cases
 mutate one field of one message, 31 % several fields of one message and
-11 % one field over many messages.
+11 % one field over many messages. Two families come on top of ASTAA's
+shapes, for faults a real stack needs (docs/policies.md): *sustained*
+cases hold one bad value on every message of a 1–5 s window or on the next
+5–50 messages (a stack that ignores one bad message may not ignore it held),
+and *stamp* cases put a NaN, backwards, far-future or repeated value into a
+stamp or sequence number, brittle or not (a small share: such faults mostly
+test bookkeeping, but a NaN stamp can stop a planner).
 
 Windows are random inside the scenario's duration (rounded to 0.1 s so
 the files read well). Brittle fields (the spec's list, plus stamps and
-sequence numbers in header-like structs) are left alone unless asked:
-mutating them mostly tests the middleware's bookkeeping, not the robot.
+sequence numbers in header-like structs) are left alone unless asked (the
+stamp family excepted): mutating them mostly tests the middleware's
+bookkeeping, not the robot.
 
 Deterministic: the same spec, dictionary, count, seed and duration give
 byte-identical files.
@@ -29,7 +36,7 @@ from pathlib import Path
 from ..codecs import get_codec
 from ..errors import InputError, Problem
 from ..fields import FieldPath, is_brittle, leaf_fields, type_at
-from ..spec.model import Channel, Spec
+from ..spec.model import INT_KINDS, Channel, Spec
 from .actions.base import ActionConfig
 from .actions.delay import Delay
 from .actions.drop import Drop
@@ -41,6 +48,19 @@ from .testcase import Policy, Selection, TestCase, Window
 
 # (shape, weight in % of the bugs ASTAA found that needed it)
 SHAPES = (("single", 42), ("multi_field", 22), ("repeated", 8))
+# Families beyond ASTAA's shapes, weighted next to SHAPES' 72: of generate's cases about 20 % sustained and
+# 7 % stamp faults (17 % and 6 % when a campaign adds its message faults).
+SUSTAINED_WEIGHT = 20
+STAMP_WEIGHT = 7
+SUSTAINED_SECONDS = (1.0, 5.0)  # a held value: every message of a window this long …
+SUSTAINED_MESSAGES = (5, 50)  # … or this many messages in a row
+# Stamp and sequence fields, found by name anywhere in a message (brittle or not), and their faults: a
+# stamp (any non-integer field) gets NaN, a jump back (previous stamp - 1 s), the far future or the previous
+# stamp again; an integer (a sequence number, a stamp's seconds) the previous value again (a duplicate seq).
+# A fault the field's codec cannot carry is left out for that field.
+STAMP_NAMES = frozenset({"stamp", "timestamp", "seq", "sequence"})
+STAMP_FAULTS = ("time.nan", "time.jump_back", "time.far_future", "time.repeat_previous")
+SEQUENCE_FAULTS = ("time.repeat_previous",)
 # Field names that are bookkeeping when they sit in a header-like struct.
 HEADER_BOOKKEEPING = frozenset({"stamp", "timestamp", "seq", "sequence", "frame_id"})
 MAX_FIELDS_PER_MESSAGE = 4
@@ -68,14 +88,28 @@ def iter_testcases(spec: Spec, dictionary: Dictionary, count: int, seed: int, du
 
     Raises ``InputError`` at once (not on the first draw) if the spec offers no field to mutate.
     """
+    by_channel = targets_to_mutate(spec, dictionary, include_brittle)
+    return (testcase for _shape, testcase in _drawn(spec, dictionary, by_channel, count, seed, duration))
+
+
+def targets_to_mutate(spec: Spec, dictionary: Dictionary, include_brittle: bool = False) -> dict[str, list[Target]]:
+    """The bulk's targets by channel; InputError if the spec offers no field to mutate."""
     by_channel = _targets_by_channel(spec, dictionary, include_brittle)
     if not by_channel:
         raise InputError(Problem(str(spec.path or spec.name), None, None,
                                  "no field to mutate: every channel lacks consumers or non-brittle leaf fields",
                                  "use --include-brittle, or give channels consumers and typed fields"))
+    return by_channel
+
+
+def _drawn(spec: Spec, dictionary: Dictionary, by_channel: dict[str, list[Target]], count: int, seed: int,
+           duration: float) -> Iterator[tuple[str, TestCase]]:
+    """(family, test case) for each of ``count`` cases, drawn one at a time."""
+    stamps = stamp_targets_by_channel(spec, dictionary)
     width = _id_width(count)
-    return (_testcase(_testcase_id(number, width), random.Random(f"{seed}/{number}"), by_channel, duration)
-            for number in range(1, count + 1))
+    for number in range(1, count + 1):
+        yield _draw(_testcase_id(number, width), random.Random(f"{seed}/{number}"), by_channel, duration,
+                    stamps=stamps)
 
 
 def _id_width(count: int) -> int:
@@ -103,7 +137,7 @@ def _write_testcase(testcase: TestCase, directory: Path) -> Path:
 class GenerateReport:
     directory: Path
     count: int  # test case files written
-    shapes: Counter[str]  # test cases per shape: single, multi_field, repeated
+    shapes: Counter[str]  # test cases per family: single, multi_field, repeated, sustained, stamp
 
     @property
     def paths(self) -> list[Path]:
@@ -125,20 +159,13 @@ def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, dura
         raise InputError(Problem("--duration", None, None, f"{duration} s", "give a positive number of seconds"))
     _check_output_directory(out_dir)
     dictionary = load_dictionary(dictionaries)
-    testcases = iter_testcases(spec, dictionary, count, seed, duration, include_brittle)
+    drawn = _drawn(spec, dictionary, targets_to_mutate(spec, dictionary, include_brittle), count, seed, duration)
     out_dir.mkdir(parents=True, exist_ok=True)
     shapes: Counter[str] = Counter()
-    for testcase in testcases:  # each written as drawn: nothing of the whole set is held
+    for shape, testcase in drawn:  # each written as drawn: nothing of the whole set is held
         _write_testcase(testcase, out_dir)
-        shapes[_shape(testcase)] += 1
+        shapes[shape] += 1
     return GenerateReport(out_dir, count, shapes)
-
-
-def _shape(testcase: TestCase) -> str:
-    [policy] = testcase.policies
-    if policy.selection.limit is None:
-        return "repeated"
-    return "multi_field" if len(getattr(policy.action, "fields", ())) > 1 else "single"
 
 
 def _check_output_directory(out_dir: Path) -> None:
@@ -193,23 +220,71 @@ def is_generation_brittle(spec: Spec, type_name: str, path: FieldPath) -> bool:
 
 
 def _targets_by_channel(spec: Spec, dictionary: Dictionary, include_brittle: bool) -> dict[str, list[Target]]:
+    return _by_channel(mutation_targets(spec, dictionary, include_brittle))
+
+
+def _by_channel(targets: Sequence[Target]) -> dict[str, list[Target]]:
     grouped: dict[str, list[Target]] = {}
-    for target in mutation_targets(spec, dictionary, include_brittle):
+    for target in targets:
         grouped.setdefault(target.channel.name, []).append(target)
     return grouped
 
 
+def stamp_targets(spec: Spec, dictionary: Dictionary) -> list[Target]:
+    """Every stamp or sequence field (a name in ``STAMP_NAMES`` on its path, brittle or not) of a channel with
+    consumers, with the faults it can take (``STAMP_FAULTS``, or ``SEQUENCE_FAULTS`` for integers); per
+    channel the stamps first, then the integers, each in spec order. Faults missing from the dictionary
+    (a user's file removed them) are left out."""
+    stamp_faults = [dictionary.get(key) for key in STAMP_FAULTS if key in dictionary]
+    sequence_faults = [dictionary.get(key) for key in SEQUENCE_FAULTS if key in dictionary]
+    targets = []
+    for channel in spec.channels:
+        if not channel.consumers:
+            continue
+        codec = get_codec(channel.encoding)
+        found: list[Target] = []
+        for path, field_type in leaf_fields(spec.types, channel.type):
+            if not any(type(s) is str and s.lower() in STAMP_NAMES for s in path.segments):
+                continue
+            site = field_site(spec.types, channel.type, path)
+            faults = sequence_faults if field_type.kind in INT_KINDS else stamp_faults
+            usable, _skipped = dictionary.usable(site, codec, faults)
+            if usable:
+                found.append(Target(channel, path, site, tuple(usable)))
+        targets.extend(sorted(found, key=lambda t: t.site.field_type.kind in INT_KINDS))  # stable: spec order
+    return targets
+
+
+def stamp_targets_by_channel(spec: Spec, dictionary: Dictionary) -> dict[str, list[Target]]:
+    return _by_channel(stamp_targets(spec, dictionary))
+
+
 # ---------------------------------------------------------------- drawing one test case
 
-def _testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]],
-              duration: float, anchor: str | None = None, message_faults: bool = False) -> TestCase:
-    """ASTAA's weighted draw; ``anchor``: windows count from that channel's first message;
-    ``message_faults``: a share of cases reorder, delay, duplicate or drop messages instead."""
-    shapes = SHAPES + ((("message", MESSAGE_FAULT_WEIGHT),) if message_faults else ())
+def weighted_testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]],
+                      duration: float, anchor: str | None = None, *, message_faults: bool = False,
+                      stamps: dict[str, list[Target]] | None = None) -> TestCase:
+    """One weighted draw (:func:`_draw`) without its shape's name."""
+    return _draw(testcase_id, rng, by_channel, duration, anchor, message_faults=message_faults, stamps=stamps)[1]
+
+
+def _draw(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]], duration: float,
+          anchor: str | None = None, *, message_faults: bool = False,
+          stamps: dict[str, list[Target]] | None = None) -> tuple[str, TestCase]:
+    """ASTAA's weighted draw plus the sustained family and (given ``stamps``, the stamp targets by channel)
+    the stamp family; returns (shape, test case). ``anchor``: windows count from that channel's first
+    message; ``message_faults``: a share of cases reorder, delay, duplicate or drop messages instead."""
+    shapes = SHAPES + (("sustained", SUSTAINED_WEIGHT),) + ((("stamp", STAMP_WEIGHT),) if stamps else ()) \
+        + ((("message", MESSAGE_FAULT_WEIGHT),) if message_faults else ())
     shape = rng.choices([name for name, _ in shapes], weights=[weight for _, weight in shapes])[0]
     if shape == "message":
         channel = rng.choice(sorted(by_channel))
-        return fault_testcase(testcase_id, rng, channel, rng.choice(MESSAGE_FAULTS), duration, anchor)
+        return shape, fault_testcase(testcase_id, rng, channel, rng.choice(MESSAGE_FAULTS), duration, anchor)
+    if shape == "stamp":
+        assert stamps
+        channel = rng.choice(sorted(stamps))
+        target = rng.choice(stamps[channel])
+        return shape, stamp_testcase(testcase_id, rng, target, rng.choice(target.values), duration, anchor)
     channel = rng.choice(sorted(by_channel))  # channels equally likely, whatever their field count
     targets = by_channel[channel]
     if shape == "multi_field":
@@ -218,6 +293,9 @@ def _testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[T
         chosen = [rng.choice(targets)]
     assignments = tuple(Assignment(str(t.path), rng.choice(t.values).ref) for t in chosen)
     start = round(rng.uniform(0.0, duration * 0.8), 1)
+    if shape == "sustained":
+        return shape, _one_policy(testcase_id, rng, channel, assignments, start, _held(rng, start, duration),
+                                  duration, anchor, "sustained")
     if shape == "repeated":
         end = min(round(start + rng.uniform(1.0, 5.0), 1), duration)
         selection = rng.choice([Selection(), Selection(every=rng.choice([2, 5, 10])),
@@ -225,10 +303,37 @@ def _testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[T
     else:  # one message: the first one in the window
         end = duration
         selection = Selection(limit=1)
+    return shape, _one_policy(testcase_id, rng, channel, assignments, start, (end, selection), duration, anchor,
+                              shape)
+
+
+def _held(rng: random.Random, start: float, duration: float) -> tuple[float, Selection]:
+    """Where a held value's window ends and what it selects: every message of a 1–5 s window, or the
+    next 5–50 messages (the window stays open until ``duration``; the limit ends it)."""
+    if rng.random() < 0.5:
+        return min(round(start + rng.uniform(*SUSTAINED_SECONDS), 1), duration), Selection()
+    return duration, Selection(limit=rng.randint(*SUSTAINED_MESSAGES))
+
+
+def _one_policy(testcase_id: str, rng: random.Random, channel: str, assignments: tuple[Assignment, ...],
+                start: float, until: tuple[float, Selection], duration: float, anchor: str | None,
+                shape: str) -> TestCase:
+    """A test case of one ``set`` policy on ``channel`` from ``start`` s, ``until`` = (window end, selection)."""
+    end, selection = until
     window = Window(start, max(end, round(start + 0.1, 1)), *_anchored(anchor))
     policy = Policy("p1", Set(assignments), channels=(channel,), window=window, selection=selection)
     return TestCase(testcase_id, rng.getrandbits(32), _describe(shape, channel, assignments, window, selection),
                     (policy,))
+
+
+def stamp_testcase(testcase_id: str, rng: random.Random, target: Target, fault: Entry, duration: float,
+                   anchor: str | None = None, latest: float | None = None) -> TestCase:
+    """A stamp or sequence fault on one field: on one message, or (by chance, half of them) held;
+    starting by ``latest`` s (default: 80 % of ``duration``)."""
+    start = round(rng.uniform(0.0, duration * 0.8 if latest is None else latest), 1)
+    until = _held(rng, start, duration) if rng.random() < 0.5 else (duration, Selection(limit=1))
+    return _one_policy(testcase_id, rng, target.channel.name, (Assignment(str(target.path), fault.ref),), start,
+                       until, duration, anchor, "stamp")
 
 
 def _disjoint_sample(rng: random.Random, targets: list[Target], wanted: int) -> list[Target]:
@@ -250,6 +355,12 @@ def _overlaps(a: FieldPath, b: FieldPath) -> bool:
 def _describe(shape: str, channel: str, assignments: Sequence[Assignment], window: Window,
               selection: Selection) -> str:
     values = ", ".join(f"{a.path} = {a.value}" for a in assignments)
+    if shape in ("sustained", "stamp") and selection != Selection(limit=1):
+        held = (f"every message from {window.start} s to {window.end} s" if selection.limit is None else
+                f"the {selection.limit} messages from {window.start} s")
+        return f"{shape}: {channel}: {values} held on {held}"
+    if shape == "stamp":
+        return f"stamp: {channel}: {values}, first message after {window.start} s"
     if shape == "repeated":
         which = ("every message" if selection == Selection() else
                  f"every {_ordinal(selection.every)} message" if selection.every != 1 else
@@ -273,6 +384,9 @@ def _ordinal(number: int) -> str:
 # applies one message fault (no field changed) to every channel; round k
 # gives each field a value of its k-th value class, so round 0 tries the
 # non-finite (or empty) values everywhere, round 1 the extreme magnitudes, …
+# A third of the field probes hold their value (sustained); a round also
+# puts the round's stamp fault (NaN first) into a stamp or sequence field of
+# a few channels, about STAMP_SHARE of the round, the channels taking turns.
 
 # Message faults: timing and ordering bugs need no bad value (a stamp going
 # backwards after a reorder, a late message overtaken by newer ones).
@@ -283,6 +397,9 @@ DELAYS_MS = (50, 100, 200, 500)
 VALUE_CLASSES = ("non_finite", "empty", "extreme", "null", "bound", "zero", "tiny", "other")
 SPREAD_ROUNDS = 3  # round r's windows open in the first (r + 1) / 3 of the live run's 80 %
 EXTREME = 1e15  # magnitudes where float arithmetic stops behaving (2**53 ≈ 9e15: integers skip)
+SUSTAINED_PROBE_SHARE = 1 / 3  # field probes that hold their value instead of setting it on one message
+STAMP_SHARE = 0.07  # of a round: stamp and sequence probes (at least one, at most one per channel)
+STAMP_PROBE = "stamp"  # Probe.fault of a stamp probe
 
 
 def value_class(entry: Entry) -> str:
@@ -326,18 +443,22 @@ def value_for_round(target: Target, round_number: int, rng: random.Random) -> En
 
 @dataclass(frozen=True)
 class Probe:
-    """One case of a coverage round: a field with a value of the round's class, or a message fault."""
+    """One case of a coverage round: a field with a value of the round's class, a message fault, or
+    (``fault`` = ``STAMP_PROBE``) a stamp or sequence field with the round's stamp fault."""
 
     channel: str
     target: Target | None  # None: a message fault
     fault: str | None = None
 
 
-def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number: int) -> list[Probe]:
-    """Every (channel, field) once and one message fault per channel; channels interleaved.
+def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number: int,
+                   stamps: dict[str, list[Target]] | None = None) -> list[Probe]:
+    """Every (channel, field) once, one message fault per channel and a few stamp probes; channels interleaved.
 
     Channels take turns (in a seeded order), so the first cases of a round
-    touch every channel before any channel's second field.
+    touch every channel before any channel's second field. ``stamps`` (the
+    stamp targets by channel): about ``STAMP_SHARE`` of the round are stamp
+    probes, one per channel, the channels taking turns from round to round.
     """
     rng = random.Random(f"coverage/{seed}/{round_number}")
     per_channel: list[list[Probe]] = []
@@ -347,10 +468,26 @@ def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number:
         fault = MESSAGE_FAULTS[round_number % len(MESSAGE_FAULTS)]
         probes.insert(rng.randrange(min(len(probes), 2) + 1), Probe(channel, None, fault))
         per_channel.append(probes)
+    if stamps:
+        per_channel.append(_stamp_probes(stamps, round_number, sum(len(p) for p in per_channel)))
     ordered: list[Probe] = []
     for turn in range(max(len(p) for p in per_channel)):
         ordered.extend(p[turn] for p in per_channel if turn < len(p))
     return ordered
+
+
+def _stamp_probes(stamps: dict[str, list[Target]], round_number: int, round_length: int) -> list[Probe]:
+    """Round ``round_number``'s stamp probes: ``STAMP_SHARE`` of a round of ``round_length`` other probes
+    (at least one), on channels taken in turn; each channel's fields in turn too."""
+    channels = sorted(stamps)
+    wanted = min(len(channels), max(1, round(STAMP_SHARE * round_length)))
+    probes = []
+    for k in range(wanted):
+        turn = round_number * wanted + k
+        channel = channels[turn % len(channels)]
+        fields = stamps[channel]
+        probes.append(Probe(channel, fields[(turn // len(channels)) % len(fields)], STAMP_PROBE))
+    return probes
 
 
 def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,
@@ -362,14 +499,19 @@ def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_num
     if probe.target is None:
         return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], duration, anchor,
                               repeated=False, latest=latest)
+    if probe.fault == STAMP_PROBE:  # the round's stamp fault, NaN first (the field's own when it cannot take it)
+        wanted = STAMP_FAULTS[round_number % len(STAMP_FAULTS)]
+        fault = next((e for e in probe.target.values if e.key == wanted),
+                     probe.target.values[round_number % len(probe.target.values)])
+        return stamp_testcase(testcase_id, rng, probe.target, fault, duration, anchor, latest=latest)
     entry = value_for_round(probe.target, round_number, rng)
     assignments = (Assignment(str(probe.target.path), entry.ref),)
     start = round(rng.uniform(0.0, latest), 1)
-    window = Window(start, duration, *_anchored(anchor))
-    selection = Selection(limit=1)
-    policy = Policy("p1", Set(assignments), channels=(probe.channel,), window=window, selection=selection)
-    return TestCase(testcase_id, rng.getrandbits(32),
-                    _describe("single", probe.channel, assignments, window, selection), (policy,))
+    if rng.random() < SUSTAINED_PROBE_SHARE:
+        return _one_policy(testcase_id, rng, probe.channel, assignments, start, _held(rng, start, duration),
+                           duration, anchor, "sustained")
+    return _one_policy(testcase_id, rng, probe.channel, assignments, start, (duration, Selection(limit=1)),
+                       duration, anchor, "single")
 
 
 def fault_testcase(testcase_id: str, rng: random.Random, channel: str, fault: str, duration: float,

@@ -125,7 +125,8 @@ class Spec:
     channels: tuple[Channel, ...]
     types: Mapping[str, MessageType]
     brittle: tuple[str, ...] = ()
-    params: Mapping[str, str] = field(default_factory=dict)
+    params: Mapping[str, str] = field(default_factory=dict)  # every param's default value
+    param_choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # declared choices (some params)
     # Typed by the spec loader: invariants are astaa_deft.monitor's Invariant objects (each kind's own
     # class; the spec layer sits below monitor, so it does not name the type), the planner section its record.
     invariants: tuple[Any, ...] = ()

@@ -4,11 +4,13 @@ A campaign runs a few hundred cases, not ASTAA's thousands, so case ``n``
 comes from a schedule (:func:`astaa_deft.intercept.generate.coverage_round`):
 the first ``COVERAGE_ROUNDS`` rounds each visit every (channel, field) once
 with a value of the round's class (non-finite or empty first, then extreme
-magnitudes, …) and apply one message fault (reorder, delay, duplicate, drop)
-to every channel; after them, cases alternate between further rounds and
-ASTAA's weighted generation (one field, several fields, repeated; plus
-message faults). Windows fall inside the run's live part, counted from the
-first message of the channel that came last in the baseline runs (the
+magnitudes, …), a third of them holding the value (sustained), apply one
+message fault (reorder, delay, duplicate, drop) to every channel and a stamp
+or sequence fault to a few (about 7 % of a round, NaN first); after them,
+cases alternate between further rounds and the weighted generation (one
+field, several fields, repeated, sustained, stamp; plus message faults).
+Windows fall inside the run's live part, counted from the first message of
+the channel that came last in the baseline runs (the
 campaign's :class:`Timing`), so a case mutates the running SUT, not its
 start-up. Deterministic: case ``n`` depends on the seed, ``n`` and the
 timing only — the same cases locally and on a cluster, in any order.
@@ -32,9 +34,8 @@ class RandomStrategy:
     name = "random"
 
     def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float):
-        # generate() with count=0 checks the spec offers a field to mutate (InputError otherwise).
-        self.by_channel = gen._targets_by_channel(spec, dictionary, False)
-        gen.generate(spec, dictionary, 0, seed, duration)
+        self.by_channel = gen.targets_to_mutate(spec, dictionary)  # InputError: nothing to mutate
+        self.stamps = gen.stamp_targets_by_channel(spec, dictionary)
         self.seed = seed
         self.timing = Timing(None, duration)
         self._rounds: dict[int, list[gen.Probe]] = {}
@@ -49,7 +50,7 @@ class RandomStrategy:
 
     def _round(self, number: int) -> list[gen.Probe]:
         if number not in self._rounds:
-            self._rounds[number] = gen.coverage_round(self.by_channel, self.seed, number)
+            self._rounds[number] = gen.coverage_round(self.by_channel, self.seed, number, self.stamps)
         return self._rounds[number]
 
     def propose(self, number: int) -> Proposal:
@@ -59,8 +60,8 @@ class RandomStrategy:
         covered = COVERAGE_ROUNDS * self.round_length
         if index >= covered:  # after the pure rounds: every other case is a weighted draw
             if (index - covered) % 2:
-                testcase = gen._testcase(testcase_id, rng, self.by_channel, self.timing.live, self.timing.anchor,
-                                         message_faults=True)
+                testcase = gen.weighted_testcase(testcase_id, rng, self.by_channel, self.timing.live,
+                                                 self.timing.anchor, message_faults=True, stamps=self.stamps)
                 return Proposal(testcase.to_xml().decode())
             index = covered + (index - covered) // 2
         round_number, position = divmod(index, self.round_length)

@@ -87,8 +87,9 @@ class ParticipantDetail(ActionDetail):
 class Participant(ActionConfig):
     """A participant: id, kind, pose (x, y, heading), size, and a motion (static, or a timed path).
 
-    ``t`` is the time it is at its pose (on the channel's clock); ``path``
-    the later waypoints, times increasing. No path: static.
+    ``t`` is the time it is at its pose (on the channel's clock: any finite
+    time, seconds since the start or epoch seconds of a wall-clock stack);
+    ``path`` the later waypoints, times increasing. No path: static.
     """
 
     name: ClassVar[str] = "participant"

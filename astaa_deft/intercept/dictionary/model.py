@@ -148,14 +148,16 @@ class Dictionary:
         group = GROUP_OF_KIND.get(site.field_type.kind)
         return self.group(group) if group else []
 
-    def usable(self, site: FieldSite, codec: Codec) -> tuple[list[Entry], list[tuple[Entry, str]]]:
-        """The field's entries split into usable ones and (entry, reason) skipped ones.
+    def usable(self, site: FieldSite, codec: Codec, entries: Iterable[Entry] | None = None
+               ) -> tuple[list[Entry], list[tuple[Entry, str]]]:
+        """The field's entries (or ``entries``, from any group) split into usable ones and (entry, reason)
+        skipped ones.
 
         Dynamic entries are usable here; their value is checked per mutation.
         """
         usable: list[Entry] = []
         skipped: list[tuple[Entry, str]] = []
-        for entry in self.entries_for(site):
+        for entry in self.entries_for(site) if entries is None else entries:
             reason = entry.problem(site)
             if reason is None and not entry.is_dynamic:
                 reason = codec.carries(wire_value(entry.static_value(site), site.field_type, codec))

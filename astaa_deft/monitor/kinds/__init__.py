@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from types import ModuleType
 from collections.abc import Callable
 
-from . import bound, collision, deadline, expression, log, process, temporal
+from . import bound, collision, deadline, exceptions, expression, log, process, temporal
 
 
 @dataclass(frozen=True)
@@ -41,5 +41,6 @@ KINDS: dict[str, Kind] = {
         _kind(temporal, temporal.TemporalInvariant),
         _kind(collision, collision.CollisionInvariant),
         _kind(log, log.LogInvariant),
+        _kind(exceptions, exceptions.ExceptionsInvariant),
     )
 }

@@ -40,24 +40,50 @@ class LogInvariant(Invariant):
     pattern: re.Pattern
     max_count: int = 0
 
+    def what_matched(self) -> str:
+        """How a violation's detail says what the line was."""
+        return f"wrote a line matching /{self.pattern.pattern}/"
+
+
+@dataclass(frozen=True)
+class WatchedOutput:
+    """The keys every output-watching kind reads: which modules, which lines, how many tolerated."""
+
+    modules: tuple[str, ...]
+    pattern: re.Pattern
+    max_count: int
+
 
 def parse(reader: InvariantReader, node: Node, common: dict) -> LogInvariant | None:
-    v = node.value
+    watched = read_watched_output(reader, node.value)
+    if watched is None:
+        return None
+    return LogInvariant(modules=watched.modules, pattern=watched.pattern, max_count=watched.max_count, **common)
+
+
+def read_watched_output(reader: InvariantReader, v: dict[str, Node], built_in: str | None = None
+                        ) -> WatchedOutput | None:
+    """``modules`` (default: all), ``pattern`` and ``max_count`` (default 0) of an invariant's mapping ``v``;
+    None after reporting a problem. ``built_in``: lines it always matches, the ``pattern`` (then optional)
+    matching more lines."""
     modules = reader.module_list(v.get("modules"), "planning")
     if modules is None:
         return None
     text = reader.text(v.get("pattern"), "'pattern'", "Traceback|ERROR")
-    if text is None:
+    if text is None and ("pattern" in v or built_in is None):  # a bad one reported; a missing one by REQUIRED
         return None
-    if len(text) > MAX_PATTERN:
+    if text is not None and len(text) > MAX_PATTERN:
         reader.problem(v["pattern"], f"'pattern' is {len(text)} characters long", f"keep it under {MAX_PATTERN}")
         return None
     try:
-        pattern = re.compile(text)
+        pattern = re.compile(text) if text is not None else None
     except re.error as exc:
         reader.problem(v["pattern"], f"'pattern' is not a regular expression: {exc}",
                        "escape special characters with a backslash, e.g. 'ValueError\\\\('")
         return None
+    if built_in is not None:
+        pattern = re.compile(built_in if pattern is None else f"{built_in}|(?:{pattern.pattern})")
+    assert pattern is not None
     max_count = 0
     if "max_count" in v:
         value = v["max_count"].value
@@ -66,7 +92,7 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> LogInvariant | N
                            "the matching lines tolerated before it counts, e.g. max_count: 2")
             return None
         max_count = value
-    return LogInvariant(modules=modules, pattern=pattern, max_count=max_count, **common)
+    return WatchedOutput(modules, pattern, max_count)
 
 
 class LogMonitor(Monitor):
@@ -89,7 +115,7 @@ class LogMonitor(Monitor):
             return NO_VIOLATIONS
         self.violating += 1
         shown = line.text if len(line.text) <= 200 else line.text[:200] + "…"
-        detail = f"module '{line.module}' wrote a line matching /{self.inv.pattern.pattern}/: {shown}"
+        detail = f"module '{line.module}' {self.inv.what_matched()}: {shown}"
         return [self.violation(line.time_ns, detail, module=line.module, message={"line": line.text},
                                copy_message=False)]
 
