@@ -17,6 +17,7 @@ from typing import Any
 from collections.abc import Iterator
 
 from ..errors import InputError, Problem
+from ..output_place import OutputError
 from .model import CaseOutcome, PlannedCase
 
 FILE_NAME = "journal.sqlite"
@@ -87,7 +88,7 @@ class Journal:
         try:
             self.db.execute(sql, args)
         except sqlite3.OperationalError as exc:  # full disk, read-only file: the journal stays as it was
-            raise InputError(Problem(str(self.path), None, None, f"cannot write the campaign journal: {exc}",
+            raise OutputError(Problem(str(self.path), None, None, f"cannot write the campaign journal: {exc}",
                                      "free some space (or fix permissions) and run again with --resume")) from None
 
     # -- meta ---------------------------------------------------------------
