@@ -78,9 +78,13 @@ def ignore_file_size_signal() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 
 
-def refusal(exc: OSError, place: Place) -> OutputError:
-    """The :class:`OutputError` for an operating-system refusal while writing at ``place``."""
-    where = exc.filename if exc.filename else place.path
+def refusal(exc: OSError, place: Place, *, at_place: bool = False) -> OutputError:
+    """The :class:`OutputError` for an operating-system refusal while writing at ``place``.
+
+    The message names the file the refusal was about, or ``place.path`` itself with ``at_place``
+    (or when the error names no file).
+    """
+    where = exc.filename if exc.filename and not at_place else place.path
     if exc.errno == errno.ENOENT and exc.filename is None:  # tempfile's "No usable temporary directory"
         return _no_temp_dir(exc)
     what, fix = _REASONS.get(exc.errno or 0, (exc.strerror or str(exc), "give another place with {option}"))
@@ -129,7 +133,7 @@ def ready_dir(place: Place, *, temp: bool = False) -> Path:
         raise OutputError(Problem(str(path), None, None, "a file is in the way where a folder is needed",
                                   f"give a folder path with {place.option}")) from None
     except OSError as exc:  # whatever the reason (a folder under /proc, say), this place takes no files
-        raise refusal(exc, place) from None
+        raise refusal(exc, place, at_place=True) from None
     _check_room(path, place)
     if temp:
         check_temp_dir()
@@ -155,7 +159,7 @@ def ready_file(place: Place, *, overwrite: bool = True) -> Path:
     try:
         _probe(folder)
     except OSError as exc:
-        raise refusal(exc, Place(folder, place.option)) from None
+        raise refusal(exc, place, at_place=True) from None
     _check_room(folder, place)
     return path
 
@@ -210,9 +214,9 @@ def _check_room(folder: Path, place: Place) -> None:
 
 
 def _no_temp_dir(exc: OSError) -> OutputError:
-    where = os.environ.get("TMPDIR") or "TMPDIR, /tmp, /var/tmp, /usr/tmp or the current folder"
+    where = f"TMPDIR={os.environ['TMPDIR']}" if os.environ.get("TMPDIR") else "the temporary directory"
     why = exc.strerror or str(exc)
-    return OutputError(Problem(f"temporary directory ({where})", None, None, f"no usable temporary directory: {why}",
+    return OutputError(Problem(where, None, None, f"no usable temporary directory: {why}",
                                "set TMPDIR to a writable folder with free space (and no ulimit -f below 64 KiB)"))
 
 

@@ -76,9 +76,13 @@ class Journal:
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")
             self.db.executescript(SCHEMA)
-        except (sqlite3.Error, OSError) as exc:
-            raise InputError(Problem(str(self.path), None, None, f"cannot open the campaign journal: {exc}",
-                                     "give a writable campaign directory (-o) with free space")) from None
+        except (sqlite3.OperationalError, OSError) as exc:  # read-only, full, over the size limit
+            raise OutputError(Problem(str(self.path), None, None, f"cannot open the campaign journal: {exc}",
+                                      "give a writable campaign directory (-o) with free space")) from None
+        except sqlite3.Error as exc:  # not a database, or a damaged one
+            raise InputError(Problem(str(self.path), None, None, f"cannot read the campaign journal: {exc}",
+                                     "move the damaged journal away, or give another campaign directory (-o)")) \
+                from None
         self.db.row_factory = sqlite3.Row
 
     def close(self) -> None:

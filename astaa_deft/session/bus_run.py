@@ -101,6 +101,8 @@ class BusRun:
         if opts.interceptor is not None and opts.mode != "star":
             raise InputError("a policy needs the star: interception cannot run with --passive")
         # Both output places are checked before anything starts (OutputError: the place cannot take files).
+        if opts.record is not None:
+            _check_writable(opts.record)
         if opts.run_dir is None:
             check_temp_dir()
             self._tmp = tempfile.TemporaryDirectory(prefix=f"astaa-deft-{self.spec.name}-")
@@ -108,8 +110,6 @@ class BusRun:
         else:
             # Absolute: the paths handed to modules (ZENOH_CONFIG…) must hold from a module's own cwd too.
             self.run_dir = ready_dir(Place(opts.run_dir.resolve(), "--run-dir"))
-        if opts.record is not None:
-            _check_writable(opts.record)
         listen = [_concrete(ep) for ep in self.spec.zenoh.endpoints]
         if not opts.launch:
             # Attach to a running SUT: the user's own router or peers, as a client.
