@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.output_place import EXIT_CANNOT_WRITE
+from toy_run import toy_log
 
 ROOT = Path(__file__).resolve().parent.parent
 SUT = ROOT / "tests" / "sut"
@@ -216,37 +217,6 @@ def test_no_usable_temporary_directory_is_one_clear_error(inputs, tmp_path):
         shutil.rmtree(out, ignore_errors=True)
 
 
-def big_toy_log(directory: Path, cycles: int) -> tuple[Path, Path]:
-    """The crafted toy run of test_deft_oracle, ``cycles`` planning cycles long."""
-    from astaa_deft.log.writer import LogWriter
-    from astaa_deft.spec_loader import load_spec
-
-    sys.path[:0] = [str(SUT), str(Path(__file__).parent)]
-    try:
-        from test_deft_oracle import SPEC
-        from toy_planner import ToyPlanner
-    finally:
-        del sys.path[:2]
-    spec_path = directory / "toy.yaml"
-    spec_path.write_text(SPEC)
-    spec = load_spec(spec_path)
-    log_path = directory / "toy.mcap"
-    w = LogWriter(log_path, spec)
-    ids = {name: w.bus_channel(spec.channel(name)) for name in ("pose", "tick", "plan")}
-    planner = ToyPlanner()
-    for k in range(cycles):
-        now = 0.1 * k
-        pose = {"header": {"seq": k + 1, "stamp": now}, "x": 10.0 * now, "y": 0.0, "speed": 10.0}
-        tick = {"header": {"seq": k + 1, "stamp": now}, "obstacles": []}
-        base = 1_000_000_000 + k * 100_000_000
-        w.message(ids["pose"], base, json.dumps(pose).encode())
-        w.message(ids["tick"], base + 1_000_000, json.dumps(tick).encode())
-        w.message(ids["plan"], base + 5_000_000, json.dumps(planner.step({"pose": pose, "tick": tick})).encode())
-    w.metadata("astaa-deft.run", {"spec": "toy", "params": json.dumps({"stop": "off", "shift": "0"})})
-    w.finish()
-    return spec_path, log_path
-
-
 def test_a_write_past_the_size_limit_mid_extraction_keeps_what_was_written(tmp_path):
     """The up-front check passes (room above 64 KiB); the suite's files then outgrow the limit while written.
 
@@ -255,7 +225,7 @@ def test_a_write_past_the_size_limit_mid_extraction_keeps_what_was_written(tmp_p
     """
     from astaa_deft.log.reader import read_log
 
-    spec, log = big_toy_log(tmp_path, cycles=600)
+    spec, log = toy_log(tmp_path, cycles=600)
     full = tmp_path / "full"
     assert cli("extract", str(log), "--spec", str(spec), "-o", str(full), cwd=tmp_path).returncode == 0
     sizes = {p.name: p.stat().st_size for p in full.iterdir() if p.is_file()}
