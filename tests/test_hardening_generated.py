@@ -142,8 +142,6 @@ def damaged_logs(full: bytes, boundaries: list[int], count: int, rng: random.Ran
 
 def write_log(path: Path, spec_path: Path) -> list[int]:
     """A finished log of 3,000 messages in small chunks; returns the byte offsets of its records."""
-    from mcap.stream_reader import StreamReader
-
     from astaa_deft.log.writer import LogWriter
     from astaa_deft.spec_loader import load_spec
 
@@ -153,6 +151,13 @@ def write_log(path: Path, spec_path: Path) -> list[int]:
     for i in range(3000):
         w.message(cid, 1_000_000_000 + i * 1_000_000, json.dumps({"seq": i, "value": 0.5}).encode())
     w.finish()
+    return record_offsets(path)
+
+
+def record_offsets(path: Path) -> list[int]:
+    """The byte offsets of the records (chunks whole) of the MCAP file at ``path``."""
+    from mcap.stream_reader import StreamReader
+
     offsets = []
     with open(path, "rb") as f:
         records = StreamReader(f, emit_chunks=True).records
@@ -181,20 +186,8 @@ FUZZ_ARGS = ["--cases", "1", "--baseline", "1", "--reruns", "0", "--no-minimise"
 
 def log_and_damage(full_path: Path, count: int, rng: random.Random, work: Path) -> list[tuple[str, Path]]:
     """``count`` damaged copies of the log at ``full_path``, written under ``work``."""
-    from mcap.stream_reader import StreamReader
-
-    with open(full_path, "rb") as f:
-        records = StreamReader(f, emit_chunks=True).records
-        offsets = []
-        while True:
-            offsets.append(f.tell())
-            try:
-                next(records)
-            except StopIteration:
-                break
-    boundaries = sorted(set(offsets) - {0})
     out = []
-    for n, (name, data) in enumerate(damaged_logs(full_path.read_bytes(), boundaries, count, rng)):
+    for n, (name, data) in enumerate(damaged_logs(full_path.read_bytes(), record_offsets(full_path), count, rng)):
         path = work / f"case{n:05d}.mcap"
         path.write_bytes(data)
         out.append((name, path))
