@@ -431,6 +431,32 @@ def test_a_few_cases_through_the_installed_command(tmp_path):
     assert checked == 4 * len(FAMILIES)
 
 
+def test_extract_of_a_log_cut_before_its_channels_is_one_clear_error(tmp_path):
+    """Found by the extract family at 1,000: the replay process's InputError came back as a RuntimeError."""
+    from toy_run import toy_log
+
+    spec, log = toy_log(tmp_path, cycles=10, chunk_size=1024)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(log.read_bytes()[:50])  # the header only: no channel at all
+    res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "extract", str(cut), "--spec", str(spec),
+                          "-o", str(tmp_path / "out")], capture_output=True, text=True, timeout=120, env=_env())
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert f"{cut}: the log has no channel 'pose'" in res.stderr
+
+
+def test_a_replay_arg_the_factory_does_not_take_is_one_clear_error(tmp_path):
+    """Found by the extract family at 1,000: a misspelt replay arg reached the factory as a TypeError."""
+    from toy_run import toy_log
+
+    spec, log = toy_log(tmp_path, cycles=10)
+    spec.write_text(spec.read_text().replace('args: {stop: "{stop}"', 'args: {stop-: "{stop}"'))
+    res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "extract", str(log), "--spec", str(spec),
+                          "-o", str(tmp_path / "out")], capture_output=True, text=True, timeout=120, env=_env())
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert "planner.replay: replay factory 'toy_planner:ToyPlanner' does not take these args" in res.stderr
+    assert "stop-" in res.stderr
+
+
 def test_hypothesis_specs_never_traceback(tmp_path):
     """Structured YAML drawn by hypothesis in place of spec sections: each is loaded or refused with exit 2."""
     hypothesis = pytest.importorskip("hypothesis")

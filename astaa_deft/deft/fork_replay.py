@@ -41,6 +41,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from ..errors import InputError
+
 PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<Q")
 MIN_LIMIT_S = 2.0
@@ -385,7 +387,9 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     """Run ``body(send)`` in a forked runner under a reaping supervisor; return what it finally returned.
 
     ``send(obj)`` passes a message to ``on_message`` in the caller (progress);
-    the runner's return value comes back once the last runner finishes.
+    the runner's return value comes back once the last runner finishes. An
+    InputError in the runner is raised again here, with its problems; any
+    other failure is a RuntimeError.
     """
     read_fd, write_fd = os.pipe()
     supervisor = os.fork()
@@ -399,6 +403,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
             try:
                 result = body(lambda obj: _send(write_fd, ("message", obj)))
                 _send(write_fd, ("done", result))
+            except InputError as exc:  # bad input found while replaying: the caller's to report as such
+                _send(write_fd, ("input_error", exc.problems))
             except BaseException as exc:  # noqa: BLE001 - reported to the caller, never raised here
                 try:
                     _send(write_fd, ("error", f"{type(exc).__name__}: {exc}"))
@@ -420,6 +426,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
                 raise RuntimeError("the replay process ended without a result (it crashed)") from None
             if kind == "message":
                 on_message(payload)
+            elif kind == "input_error":
+                raise InputError(payload)
             elif kind == "error":
                 raise RuntimeError(f"the replay process failed: {payload}")
             else:
