@@ -402,6 +402,7 @@ def test_generated_bad_input_short(family, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(4 * 3600)  # 1,000 cases take longer than the suite's 300 s; each case has its own timeout
 @pytest.mark.parametrize("family", FAMILIES)
 def test_generated_bad_input_full(family, tmp_path):
     results = run_family(family, 1000, seed=1, work=tmp_path)
