@@ -1,7 +1,10 @@
 """The `astaa-deft` command line: parse arguments, call one command module.
 
 Exit codes: 0 ok, 1 a finding (a test failed, a module crashed), 2 usage or
-input error (printed as one line per problem, never a traceback).
+input error (printed as one line per problem, never a traceback), 3 a run not
+fully observed (verdict withheld), 4 the output cannot be written (read-only,
+full, over the file size limit, a file in the way, no temporary directory:
+``output_place.EXIT_CANNOT_WRITE``).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from typing import Any
 
 from . import __version__
 from .errors import AstaaDeftError, InputError, Problem
+from .output_place import ignore_file_size_signal
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -334,6 +338,7 @@ def _cluster(text: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    ignore_file_size_signal()  # past `ulimit -f` a write fails with EFBIG, reported, instead of killing the tool
     try:
         return args.func(args)
     except AstaaDeftError as exc:

@@ -21,6 +21,7 @@ from astaa_deft.intercept import generate as gen
 from astaa_deft.intercept.dictionary import load_dictionary
 from astaa_deft.intercept.actions.set import Assignment, Set
 from astaa_deft.intercept.testcase import parse_testcase
+from astaa_deft.output_place import OutputError
 from astaa_deft.spec_loader import load_spec
 
 
@@ -181,7 +182,7 @@ def test_journal_on_a_read_only_file_is_one_clear_message(tmp_path: Path):
     journal.close()
     ro = sqlite3.connect(f"file:{tmp_path / 'journal.sqlite'}?mode=ro", uri=True)
     journal.db = ro
-    with pytest.raises(InputError, match="cannot write the campaign journal"):
+    with pytest.raises(OutputError, match="cannot write the campaign journal"):  # exit 4: the place, not the input
         journal.started("c-1")
 
 

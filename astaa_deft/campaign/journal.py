@@ -17,6 +17,7 @@ from typing import Any
 from collections.abc import Iterator
 
 from ..errors import InputError, Problem
+from ..output_place import OutputError
 from .model import BASELINE_FINDING, BUG, CONTROL, RERUN, CaseOutcome, PlannedCase
 
 FILE_NAME = "journal.sqlite"
@@ -102,9 +103,13 @@ class Journal:
             self.db.execute("PRAGMA synchronous=NORMAL")
             self.db.executescript(SCHEMA)
             self._add_columns()
-        except (sqlite3.Error, OSError) as exc:
-            raise InputError(Problem(str(self.path), None, None, f"cannot open the campaign journal: {exc}",
-                                     "give a writable campaign directory (-o) with free space")) from None
+        except (sqlite3.OperationalError, OSError) as exc:  # read-only, full, over the size limit
+            raise OutputError(Problem(str(self.path), None, None, f"cannot open the campaign journal: {exc}",
+                                      "give a writable campaign directory (-o) with free space")) from None
+        except sqlite3.Error as exc:  # not a database, or a damaged one
+            raise InputError(Problem(str(self.path), None, None, f"cannot read the campaign journal: {exc}",
+                                     "move the damaged journal away, or give another campaign directory (-o)")) \
+                from None
         self.db.row_factory = sqlite3.Row
 
     def close(self) -> None:
@@ -123,7 +128,7 @@ class Journal:
         try:
             self.db.execute(sql, args)
         except sqlite3.OperationalError as exc:  # full disk, read-only file: the journal stays as it was
-            raise InputError(Problem(str(self.path), None, None, f"cannot write the campaign journal: {exc}",
+            raise OutputError(Problem(str(self.path), None, None, f"cannot write the campaign journal: {exc}",
                                      "free some space (or fix permissions) and run again with --resume")) from None
 
     # -- meta ---------------------------------------------------------------

@@ -20,6 +20,7 @@ import os
 import time
 from pathlib import Path
 
+from ..output_place import Place, ready_dir, write_atomic, writing
 from .journal import Journal, open_existing
 from .campaign import REPLAY_TESTS_SUFFIX
 from .model import BASELINE, MUTATED
@@ -44,15 +45,21 @@ VERDICT_COLOURS = {"Pass": "#2a9d4b", "Hindering": "#e0a030", "Silent": "#d05a1e
 
 
 def write_report(out: Path) -> Path:
+    """Render the campaign in ``out`` into ``out/report.html``; its path.
+
+    InputError when ``out`` holds no campaign; OutputError (before rendering)
+    when the folder cannot take the report, or when writing it fails.
+    """
     journal = open_existing(out)
+    place = Place(out, "the campaign folder (copy it somewhere writable)")
     try:
+        ready_dir(place)  # before rendering: OutputError if the report cannot be written there
         page = render(journal, out)
     finally:
         journal.close()
     path = out / REPORT_NAME
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page)
-    os.replace(tmp, path)  # never a half-written report
+    with writing(place):
+        write_atomic(path, page)  # never a half-written report
     return path
 
 

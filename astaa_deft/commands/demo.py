@@ -24,6 +24,7 @@ from ..log import layout
 from ..log.reader import read_log
 from ..session.summary import format_info
 from ..monitor.verdict import format_verdict
+from ..output_place import Place, ready_dir, writing
 from ..session import RunOptions, RunResult
 from ..spec_loader import load_spec
 from .console import say
@@ -73,10 +74,11 @@ def run(scenario: str, duration: float | None, defects: bool, passive: bool, rec
     """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well."""
     if record is None:
         record = Path("astaa-deft-demo") / f"{Path(scenario).stem}.mcap"
-        record.parent.mkdir(parents=True, exist_ok=True)
+        ready_dir(Place(record.parent, "--record"))
     say(f"demo: scenario '{scenario}', defects {'on' if defects else 'off'}, "
         f"{'passive' if passive else 'star'} proxy, log {record}")
-    outcome, watch = drive(scenario, defects, passive, record, command_line, duration)
+    with writing(Place(record, "--record")):
+        outcome, watch = drive(scenario, defects, passive, record, command_line, duration)
     say("")
     say("== summary ==")
     summarise(outcome, watch)
@@ -90,8 +92,13 @@ def run(scenario: str, duration: float | None, defects: bool, passive: bool, rec
 
 def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     """`demo`: record, extract DeFT tests and run them, intercept live, minimise. 0 if every step did its job."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    out_dir = out_dir.resolve()
+    place = Place(out_dir.resolve(), "--out")
+    out_dir = ready_dir(place, temp=True)
+    with writing(place):
+        return _run_all(scenario, out_dir, command_line)
+
+
+def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     spec_path = demo_spec_path()
     problems: list[str] = []
 

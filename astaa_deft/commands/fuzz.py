@@ -10,6 +10,7 @@ from ..campaign.journal import FILE_NAME, Journal, open_existing
 from ..campaign.progress import Progress, snapshot
 from ..campaign.standing import headline, most_severe, standings
 from ..errors import InputError, Problem
+from ..output_place import Place, ready_dir, writing
 from .console import say
 
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
@@ -64,6 +65,13 @@ def status(out: Path) -> int:
 
 
 def run(config: CampaignConfig, resume: bool) -> int:
+    place = Place(config.out, "-o")
+    ready_dir(place, temp=True)  # before the journal and the baseline runs
+    with writing(place):
+        return _run(config, resume)
+
+
+def _run(config: CampaignConfig, resume: bool) -> int:
     exists = (config.out / FILE_NAME).is_file()
     if exists and not resume:
         raise InputError(Problem(str(config.out), None, None, "a campaign is already here",

@@ -7,6 +7,7 @@ from pathlib import Path
 from collections.abc import Callable
 
 from ..log import records as rec
+from ..output_place import Place, writing
 from ..session import BusRun, RunOptions, RunResult, run_session
 from ..session.summary import untouched_policies
 from ..spec.model import Spec
@@ -77,7 +78,9 @@ def run(spec: Spec, record: Path | None, passive: bool, duration: float | None, 
                          interceptor=interceptor, attachments=attachments or {})
     say(f"astaa-deft proxy: spec '{spec.name}', {'passive' if passive else 'star'} mode"
         + (f", recording to {record}" if record else "") + " — Ctrl-C to stop")
-    outcome = run_bus(spec, options, duration)
+    places = [Place(path, option) for path, option in ((run_dir, "--run-dir"), (record, "--record")) if path]
+    with writing(*places):
+        outcome = run_bus(spec, options, duration)
     say(f"stopped ({outcome.end_reason}) after {outcome.seconds:.1f} s")
     for name, n in outcome.sent.items():
         # A recorder that did not finish never reported its counts: say so rather than "recorded 0".

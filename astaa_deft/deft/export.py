@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ..log.writer import LogWriter
+from ..output_place import write_atomic
 from ..spec.model import Spec
 from ..spec.replay_section import ReplayModule
 from .extract import ExtractedFrame
@@ -85,9 +86,9 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
     if cfg.where != "planner":  # a planner suite's manifest stays as it always was
         manifest["module"] = cfg.module
         manifest["output"] = cfg.output
-    (out_dir / PYTEST_INI).write_text(PYTEST_INI_TEXT)
+    write_atomic(out_dir / PYTEST_INI, PYTEST_INI_TEXT)
     path = out_dir / MANIFEST
-    path.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")
+    write_atomic(path, json.dumps(manifest, indent=1, default=_json_default) + "\n")
     return path
 
 

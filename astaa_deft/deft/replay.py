@@ -86,7 +86,9 @@ class InProcessPlanner:
     def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None,
                  where: str = "planner.replay"):
         self.factory = factory
-        self.obj = load_factory(factory, spec_dir, where)(**kwargs)
+        make = load_factory(factory, spec_dir, where)
+        _check_arguments(make, kwargs, factory, where)
+        self.obj = make(**kwargs)
         if not callable(getattr(self.obj, "step", None)):
             raise InputError(f"replay factory '{factory}' ({where}) returned an object without a step(frame) method")
 
@@ -101,6 +103,21 @@ class InProcessPlanner:
 
     def close(self) -> None:
         pass
+
+
+def _check_arguments(make: Callable[..., Any], kwargs: Mapping[str, Any], factory: str, where: str) -> None:
+    """InputError when the spec's args do not fit the factory's parameters (a misspelt or missing arg)."""
+    import inspect
+
+    try:
+        signature = inspect.signature(make)
+    except (TypeError, ValueError):  # no signature to read (a builtin): the call itself will tell
+        return
+    try:
+        signature.bind(**kwargs)
+    except TypeError as exc:
+        raise InputError(Problem(where, None, None, f"replay factory '{factory}' does not take these args: {exc}",
+                                 f"give the args its parameters name ({signature})")) from None
 
 
 class LockstepPlanner:

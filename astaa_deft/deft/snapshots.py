@@ -25,6 +25,7 @@ import json
 import pickle
 from pathlib import Path
 
+from ..output_place import write_atomic
 from .export import MANIFEST
 from .suite import Suite
 
@@ -70,7 +71,7 @@ def add_oracle_snapshots(directory: Path) -> int:
         if data is None:
             continue
         name = f"{SNAPSHOTS}/frame_{oracle['frame']:05d}.pickle"
-        (directory / name).write_bytes(data)
+        write_atomic(directory / name, data)
         fast = suite.result_from_snapshot(oracle["frame"], name)
         slow = sequential.get(oracle["frame"])
         if slow is not None and fast.error == slow.error and _same(fast.message, slow.message):
@@ -82,7 +83,7 @@ def add_oracle_snapshots(directory: Path) -> int:
     manifest_path = directory / MANIFEST
     manifest = json.loads(manifest_path.read_text())
     manifest["oracles"] = oracles
-    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
+    write_atomic(manifest_path, json.dumps(manifest, indent=1) + "\n")
     return kept
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, Problem
+from ..output_place import Place, ready_dir, writing
 from ..log import layout
 from ..log import records as rec
 from ..log.reader import LogContents, read_log
@@ -62,11 +63,17 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
                          module: str | None = None) -> ExtractReport:
     """Extract and write the module tests of one run (InputError on bad input).
 
+    ``out_dir`` is checked before the log is read (OutputError: a file in the
+    way, not writable, no room, no usable temporary directory); a write that
+    fails later raises OutputError too.
+
     ``module`` names a module of the spec's ``replay:`` section (default:
     the planner). ``progress(done, total)`` follows the outputs; ``notice``
     gets the log reader's warnings; ``jobs`` bounds the worker processes that
     try an output's candidate frames in parallel (default: one per core).
     """
+    place = Place(out_dir, "-o")
+    ready_dir(place, temp=True)
     spec = load_spec(spec_path)
     if module is None and spec.planner is None:
         raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
@@ -92,8 +99,9 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
     collisions = [v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant_kind == "collision"]
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
-    manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles, entry=entry)
-    if oracles:
-        add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
+    with writing(place):
+        manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles, entry=entry)
+        if oracles:
+            add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
     exact = ground_truth_rate(ex, spec, ground_truth) if ground_truth else None
     return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry)

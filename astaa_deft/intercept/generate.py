@@ -35,6 +35,7 @@ from pathlib import Path
 
 from ..codecs import get_codec
 from ..errors import InputError, Problem
+from ..output_place import Place, ready_dir, write_atomic, writing
 from ..fields import FieldPath, is_brittle, leaf_fields, type_at
 from ..spec.model import INT_KINDS, Channel, Spec
 from .actions.base import ActionConfig
@@ -126,8 +127,9 @@ def write_testcases(testcases: Iterable[TestCase], directory: Path) -> list[Path
 
 
 def _write_testcase(testcase: TestCase, directory: Path) -> Path:
+    """``directory/<id>.xml``, whole or absent (OSError propagates)."""
     path = directory / f"{testcase.id}.xml"
-    path.write_bytes(testcase.to_xml())
+    write_atomic(path, testcase.to_xml())
     return path
 
 
@@ -151,28 +153,29 @@ def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, dura
     """Write ``count`` test cases drawn from ``spec`` and the dictionaries into a new or empty ``out_dir``.
 
     InputError for a bad count or duration, an output directory holding test
-    cases already, or a dictionary that does not load.
+    cases already, or a dictionary that does not load; OutputError (checked
+    before drawing) when ``out_dir`` cannot take files, or when a write fails.
     """
     if count < 1:
         raise InputError(Problem("--count", None, None, f"{count} test cases", "ask for at least 1"))
     if not duration > 0:
         raise InputError(Problem("--duration", None, None, f"{duration} s", "give a positive number of seconds"))
     _check_output_directory(out_dir)
+    place = Place(out_dir, "-o")
+    ready_dir(place)
     dictionary = load_dictionary(dictionaries)
     drawn = _drawn(spec, dictionary, targets_to_mutate(spec, dictionary, include_brittle), count, seed, duration)
-    out_dir.mkdir(parents=True, exist_ok=True)
     shapes: Counter[str] = Counter()
-    for shape, testcase in drawn:  # each written as drawn: nothing of the whole set is held
-        _write_testcase(testcase, out_dir)
-        shapes[shape] += 1
+    with writing(place):
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for shape, testcase in drawn:  # each written as drawn: nothing of the whole set is held
+            _write_testcase(testcase, out_dir)
+            shapes[shape] += 1
     return GenerateReport(out_dir, count, shapes)
 
 
 def _check_output_directory(out_dir: Path) -> None:
     """Refuse to mix with earlier test cases: a stale tc-0042.xml would be run as if it were new."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(Problem(str(out_dir), None, None, "exists and is not a directory",
-                                 "give a new or empty directory with -o"))
     existing = sorted(out_dir.glob("tc-*.xml")) if out_dir.is_dir() else []
     if existing:
         raise InputError(Problem(str(out_dir), None, None,

@@ -35,6 +35,7 @@ from ..log import layout
 from ..log import records as log_records
 from ..log.reader import LoggedMessage
 from ..log.writer import LogWriter
+from ..output_place import write_atomic
 from .replay_model import Frame, ReplayModel
 from .stages import Minimisation
 
@@ -61,7 +62,7 @@ def prepare_directory(out_dir: Path) -> None:
 def write_testcase_file(out_dir: Path, testcase: TestCase, spec) -> Path:
     """DIR/minimal.xml, read back with the spec: what we write must pass ``policy check``."""
     path = out_dir / MINIMAL_XML
-    path.write_bytes(testcase.to_xml())
+    write_atomic(path, testcase.to_xml())
     load_testcase(path, spec)  # an InputError here is a bug in restrict.py, reported as such
     return path
 
@@ -221,7 +222,7 @@ def summary(result: Minimisation, *, log: Path, why: str, seconds: float, confir
 
 def write_summary(out_dir: Path, body: Mapping[str, Any]) -> Path:
     path = out_dir / SUMMARY_JSON
-    path.write_text(json.dumps(body, indent=1, default=str, allow_nan=False) + "\n")
+    write_atomic(path, json.dumps(body, indent=1, default=str, allow_nan=False) + "\n")
     return path
 
 

@@ -32,6 +32,7 @@ from ..log import layout
 from ..log.reader import LogContents, read_log
 from ..monitor import with_typed_invariants
 from ..spec.executes import TRUST_FLAG, what_spec_runs
+from ..output_place import Place, ready_dir, writing
 from .anchoring import choose_anchor, pin_to_anchor
 from .ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from .live_tester import MARGIN_SECONDS, LiveRun, LiveTester
@@ -104,9 +105,15 @@ class MinimiseReport:
 
 def minimise_log(log_path: Path, out_dir: Path, options: MinimiseOptions = MinimiseOptions(), *,
                  progress: Progress = lambda line: None) -> MinimiseReport:
-    """Minimise the failing intercepted run ``log_path`` into ``out_dir`` (InputError on bad input)."""
+    """Minimise the failing intercepted run ``log_path`` into ``out_dir`` (InputError on bad input).
+
+    ``out_dir`` and the temporary directory are checked before the log is
+    read; either refusing a write, then or later, raises OutputError.
+    """
     options.check()
-    with tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as scratch:
+    place = Place(out_dir, "-o")
+    ready_dir(place, temp=True)
+    with writing(place), tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as scratch:
         return _minimise(log_path, out_dir, options, progress, Path(scratch))
 
 

@@ -18,6 +18,7 @@ import zenoh
 
 from ..bus import zenoh_config as zc
 from ..errors import InputError, Problem
+from ..output_place import Place, ready_file, write_atomic, writing
 from ..spec_loader import load_spec_text
 from ..spec.ros2_types import shared_types
 from .graph import ADMIN_SPACE, Graph, build_graph, parse_token
@@ -72,7 +73,13 @@ def read_tokens(connect: list[str], seconds: float) -> list[str]:
 
 
 def discover_spec(out: Path, options: DiscoverOptions) -> DiscoverReport:
-    """Write a spec skeleton of the running system to ``out``; InputError when no ROS 2 node answers."""
+    """Write a spec skeleton of the running system to ``out``; InputError when no ROS 2 node answers.
+
+    OutputError, before listening, when ``out`` cannot be written (a folder,
+    a missing or read-only folder, no room), or when the write fails.
+    """
+    place = Place(out, "-o")
+    ready_file(place)
     keys = read_tokens(options.connect, options.seconds)
     entities = [e for e in map(parse_token, keys) if e is not None]
     graph = build_graph(entities, options.domain_id)
@@ -86,5 +93,6 @@ def discover_spec(out: Path, options: DiscoverOptions) -> DiscoverReport:
     skeleton = spec_skeleton(graph, shared_types(), name=options.name, connect=options.connect,
                              include_infrastructure=options.include_infrastructure)
     load_spec_text(skeleton.text, name=str(out), base_dir=out.parent)  # a bug if this raises
-    out.write_text(skeleton.text)
+    with writing(place):
+        write_atomic(out, skeleton.text)
     return DiscoverReport(out, graph, skeleton.modules, skeleton.channels, skeleton.notes)

@@ -25,6 +25,7 @@ import zenoh
 
 from ..errors import InputError, Problem
 from ..inputfile import SPEC, read_input
+from ..output_place import Place, check_temp_dir, ready_dir, ready_file
 from ..spec.model import Spec
 from ..bus import topology
 from ..bus import zenoh_config as zc
@@ -101,15 +102,16 @@ class BusRun:
         opts = self.options
         if opts.interceptor is not None and opts.mode != "star":
             raise InputError("a policy needs the star: interception cannot run with --passive")
+        # Both output places are checked before anything starts (OutputError: the place cannot take files).
+        if opts.record is not None:
+            _check_writable(opts.record)
         if opts.run_dir is None:
+            check_temp_dir()
             self._tmp = tempfile.TemporaryDirectory(prefix=f"astaa-deft-{self.spec.name}-")
             self.run_dir = Path(self._tmp.name)
         else:
             # Absolute: the paths handed to modules (ZENOH_CONFIG…) must hold from a module's own cwd too.
-            self.run_dir = opts.run_dir.resolve()
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-        if opts.record is not None:
-            _check_writable(opts.record)
+            self.run_dir = ready_dir(Place(opts.run_dir.resolve(), "--run-dir"))
         listen = [_concrete(ep) for ep in self.spec.zenoh.endpoints]
         if not opts.launch:
             # Attach to a running SUT: the user's own router or peers, as a client.
@@ -481,16 +483,8 @@ def _concrete(endpoint: str) -> str:
 
 
 def _check_writable(path: Path) -> None:
-    problem = None
-    if path.is_dir():
-        problem = "is a directory"
-    elif not path.parent.exists():
-        problem = f"folder '{path.parent}' does not exist"
-    else:
-        try:
-            with open(path, "ab"):
-                pass
-        except OSError as exc:
-            problem = f"cannot be written: {exc.strerror}"
-    if problem:
-        raise InputError(Problem(str(path), None, None, f"log path {problem}", "give a writable file path"))
+    """A log path in a missing folder is a usage error (InputError); a place that takes no file, OutputError."""
+    if not path.is_dir() and not path.parent.exists():
+        raise InputError(Problem(str(path), None, None, f"log path folder '{path.parent}' does not exist",
+                                 "give a writable file path"))
+    ready_file(Place(path, "--record"))
