@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 from ..campaign.campaign import Campaign, CampaignConfig, CampaignStopped
 from ..campaign.journal import FILE_NAME, Journal, open_existing
 from ..campaign.progress import Progress, snapshot
 from ..errors import InputError, Problem
-from .console import say
+from .console import PlainLines, say
 
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
@@ -69,8 +70,16 @@ def run(config: CampaignConfig, resume: bool) -> int:
         config.horizon = meta.get("horizon", config.horizon)
         config.cases = config.cases if config.cases is not None else meta.get("cases")
     progress = Progress(journal, config.cases)
+    lines = None if progress.live is not None else PlainLines("fuzz")  # not a terminal: the shared plain lines
+
+    def on_progress(campaign: Campaign) -> None:
+        if lines is None:
+            progress(campaign)
+        else:
+            lines.show(snapshot(journal, config.cases, time.monotonic() - progress.started).line())
+
     try:
-        campaign = Campaign(config, journal, on_progress=progress, say=progress.say)
+        campaign = Campaign(config, journal, on_progress=on_progress, say=progress.say)
         progress.say(f"astaa-deft fuzz: spec '{campaign.spec.name}', strategy {config.strategy}, seed {config.seed},"
                      f" {campaign.workers} worker(s){' on ' + config.cluster if config.cluster else ''},"
                      f" journal {journal.path}")
@@ -81,6 +90,8 @@ def run(config: CampaignConfig, resume: bool) -> int:
                                  "make the SUT start (try: astaa-deft proxy --spec … --duration 5)")) from None
     finally:
         progress.close()
+        if lines is not None:
+            lines.close()
     if config.report:
         from ..campaign.report import write_report
 
