@@ -44,7 +44,7 @@ def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None,
     if report.interrupted:
         ex = report.extraction
         decided = len(ex.frames) + len(ex.skipped)
-        say(f"interrupted after {decided}/{ex.outputs} outputs: {report.accepted} module tests of the outputs "
+        say(f"interrupted after {decided}/{ex.outputs} outputs: {report.accepted} module test(s) of the outputs "
             f"decided so far written to {out_dir}; continue with: astaa-deft extract {log_path} --spec {spec_path} "
             f"-o {out_dir}{' --module ' + module if module else ''}"
             f"{f' --threshold {threshold:g}' if threshold is not None else ''} --resume")
