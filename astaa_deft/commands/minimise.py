@@ -29,7 +29,7 @@ def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: 
         if verbose:
             print_line(line)
         if lines is not None:
-            lines.show(line.strip())
+            lines.show(line.strip().removeprefix("minimise: "))  # the label says it
 
     try:
         report = minimise_log(log_path, out_dir, options, progress=say)
