@@ -25,8 +25,8 @@ from .fork_replay import (
     Following, ForkedSearch, Shadow, can_fork, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
     tell,
 )
-from .frames import Candidate, Stream, candidates, trigger_candidates
-from .search_policy import StepBudget, WinningPatterns, first_cycle_first, nearest_first
+from .frames import Stream, candidates, trigger_candidates
+from .search_policy import EXPENSIVE_TRIES, SearchMemory
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare, identical
@@ -297,9 +297,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
     previous: dict[str, int] = {}
     lookback = int(cfg.lookback_ms * 1e6)
     skew = int(cfg.skew_ms * 1e6)
-    winning = WinningPatterns()  # how the kept frames of earlier outputs were derived: tried first
-    winning_expensive = WinningPatterns()  # … of the expensive ones (a busy planner plans otherwise than an idle one)
-    budget = StepBudget()  # how long a right frame takes: wrong ones searching longer are cut
+    memory = SearchMemory()  # how the kept frames of earlier outputs were derived (tried first), how long they took
     speculation = Speculation()
 
     def report(out_index: int, skipped: str | None = None) -> None:  # a shadow follows the runner silently
@@ -322,30 +320,18 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
             if before.frame is None or before.choice is None:
                 report(out_index, before.skipped or "skipped")
                 continue
-            started = time.process_time()
-            planner.step({name: decode(name, idx) for name, idx in before.choice.items()})
-            step_s = time.process_time() - started
             previous = dict(before.choice)
-            result.frames.append(replace(
-                before.frame, index=len(result.frames), output=output,
-                inputs={name: streams_msgs[name][idx] for name, idx in before.choice.items()}))
-            if before.frame.accepted:
-                expensive = search is not None and window > SPECULATE_MAX_WINDOW_S
-                budget.record(step_s, window, expensive)
-                for cand in generic:
-                    if dict(cand.choice) == previous:
-                        _learn(winning, winning_expensive if expensive else None, cand)
+            stepped, step_s = _step_decided(planner, before.frame, previous, decode, streams_msgs, output)
+            result.frames.append(replace(stepped, index=len(result.frames)))
+            for cand in generic if before.frame.accepted else ():
+                if dict(cand.choice) == previous:
+                    memory.learn(cand, step_s, window, expensive=search is not None and window > SPECULATE_MAX_WINDOW_S)
             report(out_index)
             continue
         # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
         # a planner step, so the frames nearest their trigger come first and only the first few are tried.
         expensive = search is not None and window > SPECULATE_MAX_WINDOW_S
-        options = winning_expensive.rank(nearest_first(generic), by_rule=True) if expensive else winning.rank(generic)
-        if not previous and planner.can_snapshot:
-            options = first_cycle_first(options)
-        capped = expensive and len(options) > EXPENSIVE_TRIES
-        if capped:
-            options = options[:EXPENSIVE_TRIES]
+        options, capped = memory.order(generic, expensive=expensive, first=not previous and planner.can_snapshot)
         result.reordered += options[:1] != generic[:1]
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
@@ -364,7 +350,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
             options = options[:1]
         if search is not None:
             full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
-            limit = budget.neighbour_limit(full_limit) if expensive else budget.limit(window, full_limit)
+            limit = memory.budget.neighbour_limit(full_limit) if expensive else memory.budget.limit(window, full_limit)
             kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points, expected_text,
                                   limit, full_limit, result, out_index, speculation, cheap=not expensive)
             if kept is None:
@@ -373,8 +359,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
             cand, cmp, exact, tries, step_s = kept
             result.capped += capped and not cmp.within(cfg.threshold)
             if cmp.within(cfg.threshold):
-                _learn(winning, winning_expensive if expensive else None, cand)
-                budget.record(step_s, window, expensive)
+                memory.learn(cand, step_s, window, expensive)
             previous = dict(cand.choice)
             result.frames.append(ExtractedFrame(
                 index=len(result.frames), output=output,
@@ -408,7 +393,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
             result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
                 best = (cmp, cand, exact, None, tries)
-                winning.record(cand)
+                memory.learn(cand)
                 break
             if best is None or cmp.distance < best[0].distance:
                 state = planner.snapshot() if start_state is not None else None
@@ -443,11 +428,15 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
     return result
 
 
-def _learn(winning: WinningPatterns, expensive: WinningPatterns | None, kept: Candidate) -> None:
-    """An accepted candidate's ways win for every output, and for the expensive ones if it was one."""
-    winning.record(kept)
-    if expensive is not None:
-        expensive.record(kept)
+def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
+                  decode: Callable[[str, int], Any], messages: Mapping[str, list[LoggedMessage]],
+                  output: LoggedMessage) -> tuple[ExtractedFrame, float]:
+    """(the frame, with its messages; the CPU seconds of its step) of an output decided by the extraction
+    resumed: the planner steps once on it, as the interrupted extraction left it."""
+    started = time.process_time()
+    planner.step({name: decode(name, idx) for name, idx in choice.items()})
+    step_s = time.process_time() - started
+    return replace(decided, output=output, inputs={name: messages[name][idx] for name, idx in choice.items()}), step_s
 
 
 def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
@@ -465,10 +454,6 @@ def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, pr
 # cycle, whose wrong frames are cheap too (a wrong frame stepped in the runner cannot be cut). Forking a worker
 # per candidate costs milliseconds per output, as much as such a step.
 SPECULATE_MAX_WINDOW_S = 0.05
-# An expensive output tries at most this many candidates (nearest their trigger, in the learned order), each
-# a planner step: extraction stays a few replays long even when no frame reproduces an output (a planner not
-# bit-stable across copies, or an input the log lacks); the closest of them is kept.
-EXPENSIVE_TRIES = 8
 # The runner's word to its shadow on an output: (KEEP, i): candidate i is kept, step it and follow on;
 # (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
 # the candidates not tried yet. Each word also carries the runner's counters.

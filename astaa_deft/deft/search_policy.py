@@ -166,3 +166,45 @@ class StepBudget:
         if not self.neighbours:
             return full_limit_s
         return min(full_limit_s, max(self.min_s, NEIGHBOUR_FACTOR * max(self.neighbours)))
+
+
+# An expensive output tries at most this many candidates (nearest their trigger, in the learned order), each
+# a planner step: extraction stays a few replays long even when no frame reproduces an output (a planner not
+# bit-stable across copies, or an input the log lacks); the closest of them is kept.
+EXPENSIVE_TRIES = 8
+
+
+@dataclass
+class SearchMemory:
+    """What an extraction learned from the outputs kept so far: the order and the time limit of the next.
+
+    The ways that won are learned twice: over every output, and over the
+    expensive ones alone (a busy planner plans otherwise than an idle one).
+    """
+
+    winning: WinningPatterns = field(default_factory=WinningPatterns)
+    winning_expensive: WinningPatterns = field(default_factory=WinningPatterns)
+    budget: StepBudget = field(default_factory=StepBudget)
+
+    def order(self, generic: Sequence[Candidate], *, expensive: bool, first: bool) -> tuple[list[Candidate], bool]:
+        """(the candidates to try, in order; whether some were left out): an expensive output's likeliest
+        ``EXPENSIVE_TRIES`` (:func:`nearest_first`, ranked by the expensive outputs' ways and rules), else
+        all, ranked by every output's ways; a ``first`` output's first plannable trigger first."""
+        if expensive:
+            options = self.winning_expensive.rank(nearest_first(generic), by_rule=True)
+        else:
+            options = self.winning.rank(generic)
+        if first:
+            options = first_cycle_first(options)
+        if expensive and len(options) > EXPENSIVE_TRIES:
+            return options[:EXPENSIVE_TRIES], True
+        return options, False
+
+    def learn(self, kept: Candidate, step_s: float | None = None, window_s: float = 0.0,
+              expensive: bool = False) -> None:
+        """An accepted candidate: its ways win; its step (CPU seconds, if measured) against its window."""
+        self.winning.record(kept)
+        if expensive:
+            self.winning_expensive.record(kept)
+        if step_s is not None:
+            self.budget.record(step_s, window_s, expensive)
