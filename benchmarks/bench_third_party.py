@@ -30,6 +30,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import shutil
 import sys
 import tempfile
@@ -75,6 +76,12 @@ def reported_collisions(log: Path) -> set[str]:
     return found
 
 
+def cpu_seconds() -> float:
+    """User + system CPU of this process and of its reaped descendants (the forked candidates included)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 PAIRS = 3  # extractions and plain replays of the clean run, interleaved
 
 
@@ -107,7 +114,8 @@ def main() -> int:
     out = args.keep or Path(tempfile.mkdtemp(prefix="bench-third-party-"))
     out.mkdir(parents=True, exist_ok=True)
     gaps = [] if args.log else [float(g) for g in args.gaps.split(",")]
-    say(f"third-party stack: {SPEC.parent} — {len(gaps)} runs, goal at x = {args.goal_x} m, {args.jobs or 'idle-core'} jobs"
+    say(f"third-party stack: {SPEC.parent} — {len(gaps)} runs, goal at x = {args.goal_x} m, "
+        f"{args.jobs or 'idle-core'} jobs"
         + (f", heavy planner ({', '.join(f'{k}={v}' for k, v in HEAVY.items())})" if args.heavy else ""))
 
     false_total = missed_total = 0
@@ -136,14 +144,16 @@ def main() -> int:
         return 0
     # Extraction and plain replay in interleaved pairs: on this shared machine one figure varies by up to
     # a third from run to run (measured); the median pair's ratio is the figure.
-    timings = []
+    timings, cpu = [], []
     for pair in range(PAIRS):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_seconds()
         report = extract_module_tests(clean_log, SPEC, out / f"module_tests{pair or ''}", jobs=args.jobs)
-        extraction_s = time.perf_counter() - t0
+        extraction_s, extraction_cpu = time.perf_counter() - t0, cpu_seconds() - c0
         # Every frame the extraction kept, accepted or not: the planner's state (its RNG) goes through each.
+        c0 = cpu_seconds()
         replay_s, same = plain_replay_seconds(clean_log, report.extraction.frames)
         timings.append((extraction_s / replay_s, extraction_s, replay_s, same))
+        cpu.append(extraction_cpu / max(cpu_seconds() - c0, 1e-9))
     ex = report.extraction
     exact = sum(1 for f in ex.frames if f.exact)
     say(f"DeFT on {clean_log.name}: {ex.outputs} planning outputs; reproduced at θ = 0: {ex.accepted_at(0.0)} "
@@ -155,6 +165,9 @@ def main() -> int:
         f"({same} equal to the recording): {ratio:.2f}× (median of {PAIRS} interleaved pairs: "
         f"{', '.join(f'{t[0]:.2f}' for t in sorted(timings))}; target ≤ 2×; load average "
         f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
+    say(f"CPU time (this process and every process it forked and reaped), extraction / plain replay: "
+        f"{sorted(cpu)[PAIRS // 2]:.2f}× (median; {', '.join(f'{c:.2f}' for c in sorted(cpu))}): the load does "
+        f"not count")
     cycles = [json.loads(m.data) for m in read_log(clean_log).on("ompl/plan")]
     planned = [c for c in cycles if c["status"] != "reused"]
     say(f"planner cycles in that run: {len(planned)} searches (RRT* iterations "
