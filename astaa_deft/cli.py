@@ -115,10 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
     ext.add_argument("--ground-truth", metavar="FIELD",
                      help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
     _bounded(ext, "--jobs", PROCESSES, metavar="N",
-             help="candidate frames tried at once, in forked processes (default: the number of CPUs)")
+             help="candidate frames tried at once, in forked processes (default: the idle cores)")
     ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
+    ext.add_argument("--resume", action="store_true",
+                     help="continue an interrupted extraction into the same -o directory")
     ext.set_defaults(func=lambda a: _cmd("extract").run(a.log, a.spec, a.out, a.threshold, a.process,
-                                                         a.ground_truth, jobs=a.jobs, module=a.module))
+                                                         a.ground_truth, jobs=a.jobs, module=a.module,
+                                                         resume=a.resume))
 
     # minimise
     mini = sub.add_parser("minimise", aliases=["minimize"],

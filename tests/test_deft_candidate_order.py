@@ -22,7 +22,9 @@ from astaa_deft.deft.extract import IN_TURN, Speculation, _step_in_turn, extract
 from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.deft.replay import make_planner
-from astaa_deft.deft.search_policy import StepBudget, WinningPatterns, first_cycle_first
+from astaa_deft.deft.search_policy import (
+    EXPENSIVE_TRIES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
+)
 from astaa_deft.log.reader import read_log
 
 from lossy_log import write_lossy_log
@@ -109,6 +111,65 @@ def test_the_tight_limit_follows_the_accepted_steps():
     assert budget.limit(0.2, 2.0) == pytest.approx(1.2)
     budget.record(step_s=0.002, window_s=0.0001)  # a tiny step: timer noise, not a slowdown
     assert budget.limit(0.2, 2.0) == pytest.approx(1.2)
+
+
+def _slow_planner_candidates():
+    """A planner slower than its trigger: two seconds of 20 Hz ego poses after each of several triggers."""
+    streams = {"obstacles": Stream("obstacles", [k * 100 * MS for k in range(30)]),
+               "ego": Stream("ego", [k * 50 * MS + 5 * MS for k in range(60)])}
+    return candidates(streams, "obstacles", 2900 * MS, previous={"obstacles": 5, "ego": 10}, lookback_ns=160 * MS,
+                      previous_output_ns=1500 * MS)
+
+
+def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
+    # Issue 25: a planner of ~0.5-1 s a cycle has hundreds of candidates per output; the generic order tried
+    # every later frame of one trigger (each an RRT* search) before the frame at the next trigger's own time.
+    found = _slow_planner_candidates()
+    assert len(found) > 100
+    ordered = nearest_first(found)
+    assert sorted(ordered, key=found.index) == found  # the same candidates, none lost or added
+
+    def spread(c):
+        return min(max(abs(o) for _, o in offsets) for _, offsets in c.patterns)
+
+    likely = [c for c in ordered if any(rule in (NEWEST, BUSY, OLDEST) for rule, _ in c.patterns)]
+    head = ordered[:len(likely)]
+    assert head == likely  # the newest, busy and oldest triggers' frames before those of triggers between
+    assert [spread(c) for c in head] == sorted(spread(c) for c in head)  # nearest their trigger's time first
+    assert spread(head[0]) == 0 and spread(head[-1]) > 2
+
+
+def test_an_expensive_output_learns_from_the_expensive_ones_and_tries_a_few():
+    found = _slow_planner_candidates()
+    memory = SearchMemory()
+    options, capped = memory.order(found, expensive=True, first=False)
+    assert capped and len(options) == EXPENSIVE_TRIES and options == nearest_first(found)[:EXPENSIVE_TRIES]
+    assert memory.order(found, expensive=False, first=False) == (found, False)  # a cheap output: all, generic
+    # The busy trigger's frame one ego pose before its own time won an expensive output: tried first now, and
+    # the busy trigger's other frames (its rule won) before the frames of the newest and oldest.
+    busy_before = next(c for c in found if (BUSY, (("ego", -1),)) in c.patterns)
+    memory.learn(busy_before, step_s=0.8, window_s=1.4, expensive=True)
+    options, _ = memory.order(found, expensive=True, first=False)
+    assert options[0] is busy_before
+    assert all(any(rule == BUSY for rule, _ in c.patterns) for c in options[:4])
+    # A cheap output's win teaches the cheap order, not the expensive one.
+    newest = found[0]
+    memory.learn(newest, step_s=0.001, window_s=0.01)
+    assert memory.order(found, expensive=True, first=False)[0][0] is busy_before
+
+
+def test_an_expensive_outputs_limit_is_about_one_step_of_its_neighbours():
+    budget = StepBudget()
+    assert budget.neighbour_limit(30.0) == 30.0  # no expensive output accepted yet: the full limit
+    budget.record(0.002, 0.005)  # a cheap output's step says nothing about an expensive one
+    assert budget.neighbour_limit(30.0) == 30.0
+    budget.record(0.6, 1.5, expensive=True)
+    budget.record(0.9, 1.2, expensive=True)
+    assert budget.neighbour_limit(30.0) == pytest.approx(1.8)  # twice the largest neighbour step (CPU)
+    assert budget.neighbour_limit(1.0) == 1.0  # never above the full limit
+    for _ in range(5):  # only the last five expensive outputs are neighbours
+        budget.record(0.3, 1.0, expensive=True)
+    assert budget.neighbour_limit(30.0) == pytest.approx(0.6)
 
 
 # -- real forked searches ------------------------------------------------------------------------------

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from types import FrameType
+from typing import TextIO
 
 from ..errors import InputError
 from ..log import records as rec
@@ -35,6 +38,20 @@ class StopSignal:
     def __exit__(self, *exc) -> None:
         for sig, old in self._old.items():
             signal.signal(sig, old)
+
+
+@contextlib.contextmanager
+def stop_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt, as Ctrl-C does, while this holds: a workflow that ends early with
+    what it has done on a KeyboardInterrupt does so under ``timeout`` or a CI job's cancel too."""
+    def interrupt(_signum: int, _frame: FrameType | None) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
 
 
 def parse_params(items: Iterable[str]) -> dict[str, str]:
@@ -94,6 +111,118 @@ class RateMeter:
         out = {k: (v - self._last.get(k, 0)) / dt for k, v in now.items()}
         self._last, self._last_t = now, t
         return out
+
+
+PLAIN_PERIOD_S = 10.0  # a command's progress on a stream that is not a terminal: a line this often
+
+
+def duration(seconds: float) -> str:
+    """Seconds as a person reads them: 42 s, 3m05s, 1h02m."""
+    seconds = max(0, round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    minutes, secs = divmod(seconds, 60)
+    if minutes < 60:
+        return f"{minutes}m{secs:02d}s"
+    return f"{minutes // 60}h{minutes % 60:02d}m"
+
+
+class PlainLines:
+    """Progress as plain lines on a stream that is not a terminal (a CI log, a pipe).
+
+    ``show(text)`` hands over the latest state: it is printed at once the
+    first time, then every ``period_s`` — whether or not it changed, so a
+    log shows the command is alive during a step that takes minutes — and by
+    ``close``. The printing thread starts at the first ``show``, so none
+    runs while a command forks its workers before that. Each line reads
+    ``label: text (elapsed)``.
+    """
+
+    def __init__(self, label: str, *, period_s: float = PLAIN_PERIOD_S, stream: TextIO | None = None) -> None:
+        self.label = label
+        self.period_s = period_s
+        self.stream = stream if stream is not None else sys.stderr
+        self.started = time.monotonic()
+        self.latest: str | None = None
+        self.printed: str | None = None
+        self._last_print = 0.0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def show(self, text: str) -> None:
+        """The latest state (printed at once the first time, else at the next period)."""
+        first = self.latest is None
+        self.latest = text
+        if first:
+            self._print()
+            self._thread = threading.Thread(target=self._run, daemon=True)
+            self._thread.start()
+        elif time.monotonic() - self._last_print >= self.period_s:
+            self._print()
+
+    def _run(self) -> None:
+        while not self._stop.wait(max(0.0, self.period_s - (time.monotonic() - self._last_print))):
+            if time.monotonic() - self._last_print >= self.period_s:
+                self._print()
+
+    def _print(self) -> None:
+        with self._lock:
+            text = self.latest
+            self._last_print = time.monotonic()
+            self.printed = text
+            self.stream.write(f"{self.label}: {text} ({duration(time.monotonic() - self.started)} elapsed)\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        """Stop the periodic lines; the latest state is printed once more if it was not yet."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+            if self.printed != self.latest:
+                self._print()
+
+
+class CountProgress:
+    """``progress(done, total)`` of a long command: a redrawn bar on a terminal, else :class:`PlainLines`;
+    both with the rate and the time left at that rate."""
+
+    def __init__(self, label: str, unit: str, *, period_s: float = PLAIN_PERIOD_S,
+                 stream: TextIO | None = None) -> None:
+        self.unit = unit
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = self.stream.isatty()
+        self.lines = PlainLines(label, period_s=period_s, stream=self.stream)
+        self.started = time.monotonic()
+
+    def text(self, done: int, total: int) -> str:
+        elapsed = time.monotonic() - self.started
+        rate = done / elapsed if elapsed > 0 else 0.0
+        pace = f"{rate:.2f} {self.unit}/s" if rate >= 0.1 else f"{rate * 60:.1f} {self.unit}/min"
+        eta = f", ETA {duration((total - done) / rate)}" if rate > 0 and done < total else ""
+        return f"{done}/{total} {self.unit}, {pace}{eta}"
+
+    def __call__(self, done: int, total: int) -> None:
+        text = self.text(done, total)
+        if not self.tty:
+            self.lines.show(text)
+            return
+        if total == 0:
+            return
+        width = 30
+        filled = int(width * done / total)
+        self.stream.write(f"\r\033[K  [{'#' * filled}{'.' * (width - filled)}] {text}")
+        if done == total:
+            self.stream.write("\r\033[K")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+        else:
+            self.lines.close()
 
 
 def say(message: str) -> None:

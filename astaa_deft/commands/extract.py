@@ -5,24 +5,12 @@ The work is :func:`astaa_deft.deft.workflow.extract_module_tests`; this prints i
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from ..spec.planner import PAPER_THRESHOLDS
 from ..deft.extract import Extraction, near_miss_note, search_note
 from ..deft.workflow import extract_module_tests
-from .console import say
-
-def progress_bar(done: int, total: int) -> None:
-    if not sys.stderr.isatty() or total == 0:
-        return
-    width = 30
-    filled = int(width * done / total)
-    sys.stderr.write(f"\r  [{'#' * filled}{'.' * (width - filled)}] {done}/{total} outputs")
-    if done == total:
-        sys.stderr.write("\r\033[K")
-    sys.stderr.flush()
-
+from .console import CountProgress, say, stop_as_interrupt
 
 def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
     lines = [f"planning outputs found: {ex.outputs}; frames reconstructed: {len(ex.frames)}; "
@@ -42,10 +30,25 @@ def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
 
 
 def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None, process: bool,
-        ground_truth: str | None, jobs: int | None = None, module: str | None = None) -> int:
-    report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=process,
-                                  ground_truth=ground_truth, jobs=jobs, progress=progress_bar, notice=say,
-                                  module=module)
+        ground_truth: str | None, jobs: int | None = None, module: str | None = None, resume: bool = False) -> int:
+    progress = CountProgress("extract", "outputs")
+    try:
+        with stop_as_interrupt():
+            report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=process,
+                                          ground_truth=ground_truth, jobs=jobs, progress=progress, notice=say,
+                                          module=module, resume=resume)
+    finally:
+        progress.close()
+    if report.resumed:
+        say(f"resumed: {report.resumed} output(s) decided before, stepped once each")
+    if report.interrupted:
+        ex = report.extraction
+        decided = len(ex.frames) + len(ex.skipped)
+        say(f"interrupted after {decided}/{ex.outputs} outputs: {report.accepted} module test(s) of the outputs "
+            f"decided so far written to {out_dir}; continue with: astaa-deft extract {log_path} --spec {spec_path} "
+            f"-o {out_dir}{' --module ' + module if module else ''}"
+            f"{f' --threshold {threshold:g}' if threshold is not None else ''} --resume")
+        return 130
     say(summary_table(report.extraction))
     searched = search_note(report.extraction)
     if searched:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 from ..campaign.campaign import Campaign, CampaignConfig, CampaignStopped
@@ -11,7 +12,7 @@ from ..campaign.progress import Progress, snapshot
 from ..campaign.standing import headline, most_severe, standings
 from ..errors import InputError, Problem
 from ..output_place import Place, ready_dir, writing
-from .console import say
+from .console import PlainLines, say
 
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
@@ -89,8 +90,16 @@ def _run(config: CampaignConfig, resume: bool) -> int:
         config.horizon = meta.get("horizon", config.horizon)
         config.cases = config.cases if config.cases is not None else meta.get("cases")
     progress = Progress(journal, config.cases)
+    lines = None if progress.live is not None else PlainLines("fuzz")  # not a terminal: the shared plain lines
+
+    def on_progress(campaign: Campaign) -> None:
+        if lines is None:
+            progress(campaign)
+        else:
+            lines.show(snapshot(journal, config.cases, time.monotonic() - progress.started).line())
+
     try:
-        campaign = Campaign(config, journal, on_progress=progress, say=progress.say)
+        campaign = Campaign(config, journal, on_progress=on_progress, say=progress.say)
         workers = ("runs at once calibrated from the baseline" if campaign.calibrated
                    else f"{campaign.workers} worker(s){' on ' + config.cluster if config.cluster else ''}")
         progress.say(f"astaa-deft fuzz: spec '{campaign.spec.name}', strategy {config.strategy}, seed {config.seed},"
@@ -102,6 +111,8 @@ def _run(config: CampaignConfig, resume: bool) -> int:
                                  "make the SUT start (try: astaa-deft proxy --spec … --duration 5)")) from None
     finally:
         progress.close()
+        if lines is not None:
+            lines.close()
     if config.report:
         from ..campaign.report import write_report
 

@@ -10,11 +10,11 @@ need the mutations), with the report; 2 bad input (InputError).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import sys
 from pathlib import Path
 
 from ..minimise.workflow import MinimiseOptions, minimise_log
-from .console import say as print_line
+from .console import PlainLines, say as print_line
 
 
 def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: Path, repeats: int = 1,
@@ -22,7 +22,19 @@ def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: 
         live_fallback: bool = True, verbose: bool = True, jobs: int = 1, trust_log_spec: bool = False) -> int:
     options = MinimiseOptions(spec_path, invariant, repeats, parallel, live_only, confirm, max_tests, live_fallback,
                               jobs, trust_log_spec)
-    say: Callable[[str], None] = print_line if verbose else (lambda line: None)
-    report = minimise_log(log_path, out_dir, options, progress=say)
+    # Not on a terminal (a CI log, a pipe): the latest step every few seconds on stderr too, a live test included.
+    lines = None if sys.stderr.isatty() else PlainLines("minimise")
+
+    def say(line: str) -> None:
+        if verbose:
+            print_line(line)
+        if lines is not None:
+            lines.show(line.strip().removeprefix("minimise: "))  # the label says it
+
+    try:
+        report = minimise_log(log_path, out_dir, options, progress=say)
+    finally:
+        if lines is not None:
+            lines.close()
     print_line(report.text())
     return 0 if report.reproduced else 1

@@ -11,7 +11,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import pairwise
 from typing import Any
 
@@ -27,7 +27,7 @@ from .fork_replay import (
     tell,
 )
 from .frames import Stream, candidates, trigger_candidates
-from .search_policy import StepBudget, WinningPatterns, first_cycle_first
+from .search_policy import EXPENSIVE_TRIES, SearchMemory
 from .planner_section import planner_of, replay_module_of
 from .replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from .validator import Comparison, compare, identical
@@ -46,6 +46,25 @@ class ExtractedFrame:
     exact: bool  # the replayed output message equals the recorded one, field for field
 
 
+@dataclass(frozen=True)
+class Decided:
+    """One output as the extraction decided it, passed on as soon as it is (partial results, ``--resume``).
+
+    ``frame`` is None for an output skipped (``skipped`` says why); ``choice``
+    names its inputs (channel → index among that channel's messages in the
+    log, by log time), which is all a resumed extraction needs to step the
+    planner through it again.
+    """
+
+    output_index: int
+    frame: ExtractedFrame | None
+    choice: Mapping[str, int] | None = None
+    skipped: str | None = None
+
+
+OnOutput = Callable[[int, int, Decided], None]  # (outputs done, outputs in all, the one just decided)
+
+
 @dataclass
 class Extraction:
     frames: list[ExtractedFrame] = field(default_factory=list)
@@ -62,6 +81,7 @@ class Extraction:
     candidates_cut: int = 0
     cut_retried: int = 0
     retried_kept: int = 0
+    capped: int = 0  # expensive outputs not reproduced by their EXPENSIVE_TRIES likeliest candidates (no others tried)
     reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
     # Cheap outputs whose first candidate the replay process stepped itself, a shadow copy following:
     # accepted, and not (the shadow then searched the others).
@@ -86,7 +106,9 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
             progress: Callable[[int, int], None] = lambda done, total: None,
-            jobs: int | None = None, entry: ReplayModule | None = None) -> Extraction:
+            jobs: int | None = None, entry: ReplayModule | None = None, *,
+            decided: Callable[[Decided, int], None] = lambda outcome, total: None,
+            resume: Sequence[Decided] = ()) -> Extraction:
     """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
 
     ``entry`` names the module replayed (default: the planner). With ``jobs``
@@ -95,20 +117,29 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
     very same planner state (see fork_replay); otherwise — or while this
     process runs other Python threads, which a fork must not copy in the
     middle of their work — from deep copies of the planner, one after another.
+    ``decided(outcome, outputs in all)`` gets each output as soon as it is
+    decided, in order. ``resume``: the outputs an earlier extraction of this
+    log decided (in order, from the first): their frames are stepped once
+    each, as decided, and the search goes on after them.
     """
     cfg = entry if entry is not None else replay_module_of(spec)
+
+    def on_output(done: int, total: int, outcome: Decided) -> None:
+        progress(done, total)
+        decided(outcome, total)
+
     if cfg.per_trigger:
-        return _extract_per_trigger(log, spec, planner, cfg, progress)
+        return _extract_per_trigger(log, spec, planner, cfg, on_output)
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
         return run_supervised(
-            lambda send: _extract(log, spec, planner, lambda done, total: send((done, total)),
-                                  ForkedSearch(jobs, send), cfg),
-            on_message=lambda message: progress(*message))
-    return _extract(log, spec, planner, progress, None, cfg)
+            lambda send: _extract(log, spec, planner, lambda *message: send(message),
+                                  ForkedSearch(jobs, send), cfg, resume),
+            on_message=lambda message: on_output(*message))
+    return _extract(log, spec, planner, on_output, None, cfg, resume)
 
 
 def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
-                         progress: Callable[[int, int], None]) -> Extraction:
+                         progress: OnOutput) -> Extraction:
     """One frame per trigger message, its replayed answer compared with the recorded one.
 
     Answers pair with the recorded outputs in order; a frame the module
@@ -210,7 +241,7 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
             accepted=error is None and cmp.within(cfg.threshold),
             candidates_tried=tries if cmp.within(cfg.threshold) else len(options),
             exact=error is None and _same(replayed, expected if answered else None)))
-        progress(done, len(triggers))
+        progress(done, len(triggers), Decided(done - 1, result.frames[-1], choice))
         if error is not None:
             result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))
             break
@@ -248,8 +279,8 @@ def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
     return max(median, (outputs[index].log_time - outputs[index - 1].log_time) * 1e-9)
 
 
-def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Callable[[int, int], None],
-             search: ForkedSearch | None, cfg: ReplayModule) -> Extraction:
+def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
+             search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = ()) -> Extraction:
     streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
     outputs = streams_msgs.pop(cfg.output)
     streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
@@ -269,21 +300,41 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
     previous: dict[str, int] = {}
     lookback = int(cfg.lookback_ms * 1e6)
     skew = int(cfg.skew_ms * 1e6)
-    winning = WinningPatterns()  # how the kept frames of earlier outputs were derived: tried first
-    budget = StepBudget()  # how long a right frame takes: wrong ones searching longer are cut
+    memory = SearchMemory()  # how the kept frames of earlier outputs were derived (tried first), how long they took
     speculation = Speculation()
 
-    def report(done: int, total: int) -> None:  # a shadow follows the runner silently
+    def report(out_index: int, skipped: str | None = None) -> None:  # a shadow follows the runner silently
+        if skipped is not None:
+            result.skipped.append((out_index, skipped))
+        frame = result.frames[-1] if skipped is None else None
         if speculation.following is None:
-            progress(done, total)
+            progress(out_index + 1, len(outputs), Decided(out_index, frame, None if frame is None else {
+                name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped))
 
+    index_of = {name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in streams_msgs.items()}
     for out_index, output in enumerate(outputs):
         t0 = time.perf_counter()
         generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
                              outputs[out_index - 1].log_time + skew if out_index else None)
-        options = winning.rank(generic)
-        if not previous and planner.can_snapshot:
-            options = first_cycle_first(options)
+        window = _recorded_window_s(streams[cfg.trigger], generic, output, outputs[out_index - 1]
+                                    if out_index else None, skew) if generic else 0.0
+        if out_index < len(resume):  # decided before: stepped once, as then; what it taught is learned again
+            before = resume[out_index]
+            if before.frame is None or before.choice is None:
+                report(out_index, before.skipped or "skipped")
+                continue
+            previous = dict(before.choice)
+            stepped, step_s = _step_decided(planner, before.frame, previous, decode, streams_msgs, output)
+            result.frames.append(replace(stepped, index=len(result.frames)))
+            for cand in generic if before.frame.accepted else ():
+                if dict(cand.choice) == previous:
+                    memory.learn(cand, step_s, window, expensive=search is not None and window > SPECULATE_MAX_WINDOW_S)
+            report(out_index)
+            continue
+        # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
+        # a planner step, so the frames nearest their trigger come first and only the first few are tried.
+        expensive = search is not None and window > SPECULATE_MAX_WINDOW_S
+        options, capped = memory.order(generic, expensive=expensive, first=not previous and planner.can_snapshot)
         result.reordered += options[:1] != generic[:1]
         t1 = time.perf_counter()
         result.reconstruction_seconds += t1 - t0
@@ -296,33 +347,29 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         expected_text = _text(expected)  # once per output: every candidate's output is checked against it
         result.validation_seconds += time.perf_counter() - t1
         if not options:
-            result.skipped.append((out_index, "an input had no message yet"))
-            report(out_index + 1, len(outputs))
+            report(out_index, "an input had no message yet")
             continue
         if not planner.can_snapshot:
             options = options[:1]
         if search is not None:
             full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
-            window = _recorded_window_s(streams[cfg.trigger], options, output, outputs[out_index - 1]
-                                        if out_index else None, skew)
+            limit = memory.budget.neighbour_limit(full_limit) if expensive else memory.budget.limit(window, full_limit)
             kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points, expected_text,
-                                  budget.limit(window, full_limit), full_limit, result, out_index, speculation,
-                                  cheap=window <= SPECULATE_MAX_WINDOW_S)
+                                  limit, full_limit, result, out_index, speculation, cheap=not expensive)
             if kept is None:
-                result.skipped.append((out_index, "no candidate frame decodes or finishes within its time limit"))
-                report(out_index + 1, len(outputs))
+                report(out_index, "no candidate frame decodes or finishes within its time limit")
                 continue
             cand, cmp, exact, tries, step_s = kept
+            result.capped += capped and not cmp.within(cfg.threshold)
             if cmp.within(cfg.threshold):
-                winning.record(cand)
-                budget.record(step_s, window)
+                memory.learn(cand, step_s, window, expensive)
             previous = dict(cand.choice)
             result.frames.append(ExtractedFrame(
                 index=len(result.frames), output=output,
                 trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
                 inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
                 comparison=cmp, accepted=cmp.within(cfg.threshold), candidates_tried=tries, exact=exact))
-            report(out_index + 1, len(outputs))
+            report(out_index)
             continue
         # Several candidates: each must start from the same planner state.
         t1 = time.perf_counter()
@@ -349,15 +396,14 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             result.validation_seconds += t1 - t2
             if cmp.within(cfg.threshold):
                 best = (cmp, cand, exact, None, tries)
-                winning.record(cand)
+                memory.learn(cand)
                 break
             if best is None or cmp.distance < best[0].distance:
                 state = planner.snapshot() if start_state is not None else None
                 best = (cmp, cand, exact, state, tries)
             result.planner_seconds += time.perf_counter() - t1
         if best is None:
-            result.skipped.append((out_index, "no candidate frame decodes"))
-            report(out_index + 1, len(outputs))
+            report(out_index, "no candidate frame decodes")
             continue
         cmp, cand, exact, state, _ = best
         if state is not None:
@@ -375,7 +421,7 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
             candidates_tried=tries,
             exact=exact,
         ))
-        report(out_index + 1, len(outputs))
+        report(out_index)
     if speculation.following is not None:  # a shadow told KEEP on the last output: the runner reports, not it
         os._exit(0)
     if search is not None:  # the counters as the last runner holds them (each winner takes them over)
@@ -383,6 +429,17 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: Cal
         result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
         result.first_stepped_in_runner, result.first_missed_in_runner = speculation.hits, speculation.misses
     return result
+
+
+def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
+                  decode: Callable[[str, int], Any], messages: Mapping[str, list[LoggedMessage]],
+                  output: LoggedMessage) -> tuple[ExtractedFrame, float]:
+    """(the frame, with its messages; the CPU seconds of its step) of an output decided by the extraction
+    resumed: the planner steps once on it, as the interrupted extraction left it."""
+    started = time.process_time()
+    planner.step({name: decode(name, idx) for name, idx in choice.items()})
+    step_s = time.process_time() - started
+    return replace(decided, output=output, inputs={name: messages[name][idx] for name, idx in choice.items()}), step_s
 
 
 def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
@@ -526,6 +583,13 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
         return outcome is not None and outcome[0].within(cfg.threshold) and (
             outcome[1] or not speculation.expect_exact)
 
+    def settles(outcome) -> bool:
+        """No other candidate can do better: the output reproduced field for field, or (outputs not expected
+        field for field) within floating-point noise of it — the right frame on a planner not bit-stable."""
+        cmp, exact = outcome[0], outcome[1]
+        return (exact and cmp.within(cfg.threshold)) or (
+            not speculation.expect_exact and 0.0 < cmp.distance <= NEAR_MISS_M)
+
     t1 = time.perf_counter()
     kept, in_vain = _step_in_turn(len(options), run, accepted, speculation, in_turn=cheap and len(options) > 1)
     # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
@@ -534,7 +598,7 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
         speculation.let_go()  # the search's winner carries on: it must not inherit the shadow's pipe
         tried = search.search(len(order), lambda k: run(order[k]), accepted=accepted,
                               closeness=lambda r: r[0].distance, limit_s=limit_s,
-                              settles=lambda r: r[1] and r[0].within(cfg.threshold), retry_limit_s=full_limit_s)
+                              settles=lambda r: settles(r), retry_limit_s=full_limit_s)
         kept = None if tried is None else (order[tried.index], tried.result)
     result.planner_seconds += time.perf_counter() - t1
     if kept is None or kept[1] is None:
@@ -577,6 +641,9 @@ def search_note(extraction: Extraction) -> str | None:
     if stepped:
         parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
                      f"({extraction.first_missed_in_runner} wrong: searched on by a copy one output behind)")
+    if extraction.capped:
+        parts.append(f"{extraction.capped} expensive output(s) not reproduced by their {EXPENSIVE_TRIES} likeliest "
+                     f"candidates (nearest their trigger, in the learned order), the others not tried")
     if extraction.candidates_cut:
         parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
                      f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "

@@ -408,6 +408,11 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     supervisor = _fork("the replay's supervisor")
     if supervisor == 0:  # the supervisor: reap every descendant until none is left
         os.close(read_fd)
+        # A group of its own, signals at their defaults: a stop (Ctrl-C, SIGTERM) reaches the caller, which
+        # ends the whole group (below); a forked copy must never run the caller's handlers.
+        os.setpgid(0, 0)
+        for stop in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(stop, signal.SIG_DFL)
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
         runner = _fork("the replay's runner")
@@ -430,6 +435,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
                 os.waitpid(-1, 0)
             except ChildProcessError:
                 os._exit(0)
+    with contextlib.suppress(OSError):  # (here too: a stop may come before the supervisor runs)
+        os.setpgid(supervisor, supervisor)
     os.close(write_fd)
     try:
         while True:
@@ -445,6 +452,10 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
                 raise RuntimeError(f"the replay process failed: {payload}")
             else:
                 return payload
+    except BaseException:  # stopped (KeyboardInterrupt) or failed: the runner and its candidates end now
+        with contextlib.suppress(OSError):
+            os.killpg(supervisor, signal.SIGKILL)
+        raise
     finally:
         os.close(read_fd)
         os.waitpid(supervisor, 0)
