@@ -11,6 +11,10 @@ import sys
 import time
 from pathlib import Path
 
+from concurrent.futures import ThreadPoolExecutor
+
+import distributed.utils
+import pytest
 from dask.distributed import Client, LocalCluster
 
 from astaa_deft.campaign.executors import DaskPool
@@ -21,6 +25,18 @@ from astaa_deft.intercept.dictionary import load_dictionary
 from astaa_deft.spec_loader import load_spec
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _leave_no_dask_thread_behind():
+    """An in-process Dask client starts distributed's offload thread, which would live on in this test process.
+    Tests that run after these fork planner replays in-process, and a fork is allowed only from a
+    single-threaded process (bus/process_launch.py), as in a real `astaa-deft extract`: the pool is shut down
+    and replaced by a fresh one (its thread starts only when used)."""
+    yield
+    old = distributed.utils._offload_executor
+    distributed.utils._offload_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="Dask-Offload")
+    old.shutdown(wait=True)
 
 
 def test_cluster_campaign_runs_the_same_cases_as_local_and_brings_logs_back(tmp_path: Path):

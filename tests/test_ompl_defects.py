@@ -97,7 +97,7 @@ def test_defect_2_a_nan_heading_is_a_logged_planner_exception_and_the_node_carri
     res, truth = drive(tmp_path, "d2", "--policy", str(STACK / "defects" / "2_nan_heading.xml"))
     assert res.returncode == 1, res.stdout + res.stderr
     # The finding, wherever the verdict ranks it (on a loaded machine a heavy cycle may also outlast plans_flow).
-    assert "[high] planner_errors (log) module 'planning'" in res.stdout, res.stdout
+    assert "[high] planner_errors (exceptions) module 'planning'" in res.stdout, res.stdout
     assert "ValueError" in (tmp_path / "d2" / "planning.log").read_text()
     assert "(module exit)" not in res.stdout  # logged, not fatal: the node planned on once headings were finite
     log = read_log(tmp_path / "d2.mcap")

@@ -30,7 +30,8 @@ from .cost import available_memory_mb
 from .journal import Bucket, Journal
 from .known import KnownFinding, judged, known_findings
 from .minimiser import Minimised, minimise_run
-from .module_tests import TestsVerdict, add_failure_frame, is_crash_bucket, run_module_tests
+from .module_tests import TestsVerdict, is_crash_bucket, run_module_tests
+from .planner_tests import build_in_child as build_planner_tests
 from .model import (BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, CaseOutcome,
                     PlannedCase)
 from .strategies import STRATEGIES, Strategy
@@ -651,29 +652,24 @@ class Campaign:
     def _planner_tests(self, bucket, log: Path) -> Path | None:
         """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
 
-        A crash bucket's suite also gets the frame of the cycle the planner
-        failed on (``module_tests.add_failure_frame``); the suite is run once
-        and the journal says whether it fails on the bucket's defect.
+        Built in a child process (``planner_tests``: this one runs threads, and
+        the replay forks); a crash bucket's suite also gets the frame of the
+        cycle the planner failed on. The suite is run once and the journal
+        says whether it fails on the bucket's defect.
         """
-        from ..deft.workflow import extract_module_tests
-
         tests_dir = self.config.out / TESTS_DIR / f"{bucket.bucket}{REPLAY_TESTS_SUFFIX}"
         if tests_dir.exists():
             shutil.rmtree(tests_dir)
-        try:
-            report = extract_module_tests(log, self.config.spec_path, tests_dir, jobs=1)
-        except InputError as exc:
-            self.say(f"  no module tests: {exc}")
-            return None
-        if not report.accepted:
-            self.say("  no module tests: no planner output of the run replayed exactly")
+        built = build_planner_tests(log, self.config.spec_path, tests_dir, verdict=bucket.verdict,
+                                    invariant=bucket.invariant)
+        if not built.accepted:
+            self.say(f"  no module tests: {built.error}")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
-        crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
-        if crash and add_failure_frame(tests_dir, log, self.spec, report, bucket.invariant):
+        if built.failure_frame:
             self.say("  + the frame of the cycle the planner failed on")
-        add_invariant_oracle(tests_dir, self.spec, bucket.invariant)
-        self.say(f"  {report.accepted} DeFT module test(s) of the planner: pytest {tests_dir}"
+        crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
+        self.say(f"  {built.accepted} DeFT module test(s) of the planner: pytest {tests_dir}"
                  f"{self._check_module_tests(bucket, tests_dir, crash)}")
         return tests_dir
 
@@ -703,31 +699,6 @@ def shows_failure(outcome: CaseOutcome, failing: CaseOutcome) -> bool:
 
 TESTS_DIR = "tests"
 REPLAY_TESTS_SUFFIX = "-replay"  # DeFT replays of the failing run (not the minimiser's failing oracle tests)
-
-
-def add_invariant_oracle(tests_dir: Path, spec, invariant: str) -> bool:
-    """Give an extracted suite an oracle that fails while the replayed plans break ``invariant``.
-
-    Only for an invariant on the planner's output channel (what a replay
-    produces); the frames alone only check that the replay matches the
-    recording, which a defect reproduced exactly passes. True if added.
-    """
-    from ..deft.export import MANIFEST
-    from ..deft.invariant_oracle import oracle_entry
-
-    planner = spec.planner
-    watched = next((inv for inv in spec.invariants if inv.name == invariant), None)
-    if planner is None or watched is None or getattr(watched, "channel", None) != planner.output:
-        return False
-    manifest_path = tests_dir / MANIFEST
-    manifest = json.loads(manifest_path.read_text())
-    frames = manifest.get("frames") or []
-    if not frames:
-        return False
-    manifest.setdefault("oracles", []).append(
-        oracle_entry(invariant, frames[-1]["index"], int(frames[0]["output_time_ns"])))
-    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
-    return True
 
 
 def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
