@@ -114,11 +114,13 @@ def run_fuzz(out: Path, budget: str, wall: float, workers: int | None) -> tuple[
 
 
 def report(out: Path, output: str, seconds: float, stopped: bool) -> None:
-    chosen = re.search(r"(\d+) worker\(s\)", output)
-    print(f"workers chosen: {chosen.group(1) if chosen else '?'} on {os.cpu_count()} cores;"
+    journal = Journal(out)
+    notes = [n["text"] for n in journal.notes("concurrency")]
+    print(f"runs at once: {journal.meta().get('workers', '?')} (the campaign's own choice) on {os.cpu_count()} cores;"
           f" load average at the end {os.getloadavg()[0]:.1f}; wall {seconds:.0f} s"
           f"{' (stopped at the wall limit: minimisation unfinished)' if stopped else ''}")
-    journal = Journal(out)
+    for text in notes:
+        print(f"  {text}")
     try:
         counts = journal.counts()
         kinds = {kind: sum(n for k, n in counts.items() if k.startswith(kind + ":")) for kind in

@@ -205,6 +205,24 @@ def test_a_confirmed_bucket_is_minimised_while_the_hunt_goes_on(tmp_path: Path):
         journal.close()
 
 
+@pytest.mark.slow  # a live minimisation and eight cases one at a time: ~2 min
+def test_a_minimisation_holding_the_only_slot_pauses_the_hunt_and_does_not_end_it(tmp_path: Path):
+    # One run at once (a heavy stack): the confirmed bucket's minimisation takes the only slot. The campaign
+    # waited for nothing then and ended "done" with most of its cases never run.
+    cases = [SET_AUX] + [DROP_AUX] * 7
+    journal = campaign(tmp_path / "c", STEADY, cases, workers=1, params={"crash_on_nan": ["1"]}, baseline_runs=1,
+                       reruns=1, minimise=True)
+    try:
+        bug = next(b for b in journal.buckets() if b.family == "aux:value:set")
+        row = journal.minimisations()[bug.bucket]
+        mutated = journal.cases("mutated")
+        assert len(mutated) == len(cases) and all(r["status"] in ("done", "error") for r in mutated), \
+            [(r["case_id"], r["status"]) for r in mutated]
+        assert [r for r in mutated if r["started_at"] > row["started_at"]], "the hunt did not go on after it"
+    finally:
+        journal.close()
+
+
 def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
     from astaa_deft.campaign.calibration import RunShare, drift, fewer_after_drift
 

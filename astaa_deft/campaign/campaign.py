@@ -373,19 +373,22 @@ class Campaign:
             self._watch_load()
             self._collect_minimisations()
             self._start_minimisations(hunting=True)
+            hunt_over = False  # the budget or the case count reached (not just every slot taken)
             while self._busy() < self.workers:
                 if queue:
                     self._submit(pool, queue.pop(0))
                     continue
                 if self._budget_over():
-                    stopped = "budget"
+                    stopped, hunt_over = "budget", True
                     break
                 if self.config.cases is not None and number >= self.config.cases:
+                    hunt_over = True
                     break
                 number += 1
                 case = self._plan_mutated(number)
                 self._submit(pool, case)
-            if not pool.pending() and not queue:
+            # Minimisations may hold every slot (one run at once on a heavy stack): the hunt waits for a slot.
+            if not pool.pending() and not queue and (hunt_over or not self._minimising):
                 return stopped
             for case_id, outcome in pool.done(timeout=0.5):
                 queue.extend(self._finished(case_id, outcome))
