@@ -178,3 +178,15 @@ def test_a_participant_only_the_planner_sees_blocks_the_road_and_the_verdict_say
     assert "long search" in planning_log  # the infeasible cycle
     perceived = [json.loads(m.data) for m in read_log(log).on("ompl/obstacles")]
     assert perceived and all(any(o["id"] == 901 for o in msg["obstacles"]) for msg in perceived)
+
+
+def test_a_planner_that_cannot_be_snapshotted_is_not_a_replay_tester_and_minimise_says_so(clean_run):
+    # OMPL's native state cannot be deep-copied, and the minimiser's replay keeps snapshots of the planner: the
+    # replay is unavailable (not bad input), so a minimisation re-runs the whole system instead of stopping
+    # with exit 2 (seen on a heavy-stack campaign: a plan_not_empty bucket's minimisation ended in that error).
+    from astaa_deft.minimise.replay_pool import ReplayPool, ReplayUnavailable
+    from astaa_deft.minimise.replay_tester import default_setup
+
+    _, _, log, _ = clean_run
+    with pytest.raises(ReplayUnavailable, match="cannot start.*ReedsSheppStateSpace"):
+        ReplayPool(default_setup(log, SPEC, "plan_not_empty"), workers=1)

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 
 from ..bus import process_launch
 from ..bus.processes import python_module, stop_process
-from ..errors import InputError, Problem
+from ..errors import AstaaDeftError, InputError, Problem
 from .ddmin import Outcome, TestResult
 from .replay_model import Job, ReplayAnswer, ReplayModel, ReplaySetup
 
@@ -55,9 +55,8 @@ def _worker_main(argv: Sequence[str]) -> int:
     except InputError as exc:
         answers.send(("error", exc.problems))
         return 2
-    except Exception as exc:  # reported by the parent as a clear error, not a traceback
-        answers.send(("error", [Problem(setup.log_path, None, None, f"the planner replay cannot start: "
-                                                                    f"{type(exc).__name__}: {exc}")]))
+    except Exception as exc:  # the planner cannot be replayed here: the parent re-runs the system instead
+        answers.send(("unavailable", f"{type(exc).__name__}: {exc}"))
         return 2
     answers.send(("ready", model.baseline_seconds))
     while True:
@@ -68,6 +67,11 @@ def _worker_main(argv: Sequence[str]) -> int:
         if job is None:
             return 0
         answers.send(model.run(job))
+
+
+class ReplayUnavailable(AstaaDeftError):
+    """The module cannot be replayed in a worker (its state cannot be snapshotted, its factory fails): the input
+    is fine, the tester is not available; the minimisation re-runs the whole system instead."""
 
 
 class _Worker:
@@ -102,6 +106,9 @@ class _Worker:
         if kind == "error":
             self.kill()
             raise InputError(value)
+        if kind == "unavailable":
+            self.kill()
+            raise ReplayUnavailable(f"the planner replay cannot start: {value}")
         return float(value)
 
     def kill(self) -> None:

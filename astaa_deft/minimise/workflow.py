@@ -50,7 +50,7 @@ from .output import (
     write_testcase_file,
 )
 from .replay_model import ReplayModel, load_spec_for, run_params
-from .replay_pool import ReplayPool
+from .replay_pool import ReplayPool, ReplayUnavailable
 from .replay_tester import DeftTester, default_setup
 from .restrict import restricted_testcase
 from .stages import Failure, Minimisation, choose_replay, find_failure, minimise_live, minimise_replay
@@ -175,7 +175,19 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
         if entry.where != "planner":
             setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
         workers = max(1, min(options.parallel, os.cpu_count() or 1))
-        with ReplayPool(setup, workers=workers) as pool:
+        try:
+            pool = ReplayPool(setup, workers=workers)  # starts the workers: their baseline replay is done
+        except ReplayUnavailable as exc:
+            if not options.live_fallback:
+                return _stopped(out_dir, failure, started, log_path, (
+                    f"{exc} (whole-system re-runs were not tried: --no-live-fallback)"))
+            note = f"{exc}; whole-system re-runs instead"
+            say(f"note: {note}")
+            notes.append(note)
+            tester_kind, why = "live", "the module cannot be replayed here"
+    if tester_kind == "replay":
+        assert entry is not None
+        with pool:
             what = "planner replay" if entry.where == "planner" else f"module replay ({entry.module})"
             say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
                 f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
