@@ -52,7 +52,7 @@ DEFECTS = {
     2: "non-finite ego heading → planner exception",
     3: "ego stamp jump back → empty plan",
 }
-OBSTACLE_SIZE = re.compile(r"obstacles:obstacles\[\]\.(length|width)")
+OBSTACLE_SIZE = re.compile(r"obstacles:obstacles\[\*?\]\.(length|width)")
 HEADING = re.compile(r"ego:heading")
 STAMP_BACK = re.compile(r"ego:(\*:(reorder|delay)|header\.stamp)")
 
