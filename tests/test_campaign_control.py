@@ -224,7 +224,7 @@ def test_a_minimisation_holding_the_only_slot_pauses_the_hunt_and_does_not_end_i
 
 
 def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
-    from astaa_deft.campaign.calibration import RunShare, drift, fewer_after_drift
+    from astaa_deft.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
 
     def timed(gap: float, rate: float) -> CaseOutcome:
         return CaseOutcome("done", "Pass", "", timing={"plan": {"count": 40, "rate": rate, "max_gap": gap}})
@@ -234,6 +234,8 @@ def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
     slow = drift(solo, timed(2.7, 0.5))  # planning cycles 0.3-0.6 s -> 2.5-2.8 s: the heavy stack overloaded
     assert slow.drifted and slow.channel == "plan" and slow.ratio >= 4
     assert fewer_after_drift(6, slow) == 1 and fewer_after_drift(4, drift(solo, timed(3.0, 2.0))) == 2
+    # a machine in full use swings above its cores; only a clear overload backs off without the twins' timing
+    assert not overloaded(2.4, cores=2) and overloaded(3.2, cores=2)
     # the cores other work takes are not there for the runs
     share = RunShare(cores=0.3, rss_mb=300.0, runs=1)
     assert workers_for(share, cores=2, memory_mb=None) == 5
