@@ -35,8 +35,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from astaa_deft.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
+from astaa_deft.orchestration.campaign.journal import Bucket, Journal
 from astaa_deft.demo.bundled import demo_spec_path
 
 HORIZON = 20.0  # seconds a case runs at most (the spec's run: section and --settle end it sooner)
@@ -183,8 +183,8 @@ def _load() -> str:
 
 
 def _workers_used() -> int:
-    from astaa_deft.campaign.campaign import default_workers
-    from astaa_deft.spec_loader import load_spec
+    from astaa_deft.orchestration.campaign.campaign import default_workers
+    from astaa_deft.engine.spec.loader import load_spec
 
     return default_workers(len(load_spec(demo_spec_path()).modules))
 

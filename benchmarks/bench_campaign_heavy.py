@@ -38,9 +38,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.campaign.journal import Bucket, Journal
-from astaa_deft.campaign.standing import CONFIRMED, standings
-from astaa_deft.commands.fuzz import parse_budget
+from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.campaign.standing import CONFIRMED, standings
+from astaa_deft.cli.commands.fuzz import parse_budget
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC = ROOT / "examples" / "ompl_stack" / "spec.yaml"

@@ -16,7 +16,7 @@ import statistics
 import time
 from typing import Sequence
 
-from astaa_deft.minimise import Outcome, TestResult, ddmin
+from astaa_deft.analysis.minimise import Outcome, TestResult, ddmin
 
 
 def conjunction(culprits: set[int], delay: float = 0.0):

@@ -41,13 +41,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from decictor_loop import observe_closed_loop  # noqa: E402 - this directory, put on the path above
 
-from astaa_deft.campaign.strategies.decictor import area_around  # noqa: E402
-from astaa_deft.decictor.config import read_config  # noqa: E402
-from astaa_deft.decictor.feasible import ForbiddenRegion  # noqa: E402
-from astaa_deft.decictor.oracle import LaneGrid, straight_lanes  # noqa: E402
-from astaa_deft.decictor.search import MODES, Search  # noqa: E402
-from astaa_deft.intercept.actions.participant import Participant  # noqa: E402
-from astaa_deft.spec_loader import load_spec  # noqa: E402
+from astaa_deft.orchestration.campaign.strategies.decictor import area_around  # noqa: E402
+from astaa_deft.analysis.decictor.config import read_config  # noqa: E402
+from astaa_deft.analysis.decictor.feasible import ForbiddenRegion  # noqa: E402
+from astaa_deft.analysis.decictor.oracle import LaneGrid, straight_lanes  # noqa: E402
+from astaa_deft.analysis.decictor.search import MODES, Search  # noqa: E402
+from astaa_deft.engine.intercept.actions.participant import Participant  # noqa: E402
+from astaa_deft.engine.spec.loader import load_spec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC = ROOT / "specs" / "demo_av.yaml"
@@ -88,11 +88,11 @@ def search_once(mode: str, seed: int, scenarios: int, defects: bool, first_only:
 
 def live_cost(count: int) -> list[float]:
     """Seconds per scenario through the proxy (real processes), one scenario at a time, as fuzz runs them."""
-    from astaa_deft.campaign.runner import run_case
-    from astaa_deft.campaign.strategies.decictor import scene_xml
-    from astaa_deft.decictor.search import Scene
-    from astaa_deft.intercept.dictionary import load_dictionary
-    from astaa_deft.intercept.testcase import parse_testcase
+    from astaa_deft.orchestration.campaign.runner import run_case
+    from astaa_deft.orchestration.campaign.strategies.decictor import scene_xml
+    from astaa_deft.analysis.decictor.search import Scene
+    from astaa_deft.engine.intercept.dictionary import load_dictionary
+    from astaa_deft.engine.intercept.testcase import parse_testcase
 
     spec = load_spec(SPEC)
     cone = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)

@@ -28,9 +28,9 @@ import time
 
 import cbor2
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
-from astaa_deft.spec_loader import load_spec_text
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.engine.intercept import Interceptor, load_dictionary, parse_testcase
+from astaa_deft.engine.spec.loader import load_spec_text
 
 SPEC = load_spec_text("""
 name: bench_intercept

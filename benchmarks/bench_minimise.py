@@ -40,13 +40,13 @@ import time
 from pathlib import Path
 
 from astaa_deft.demo.bundled import demo_noise_policies, demo_spec_path
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.intercept import load_interceptor
-from astaa_deft.log import layout
-from astaa_deft.log.reader import read_log
-from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
-from astaa_deft.monitor import check_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.intercept import load_interceptor
+from astaa_deft.io.log import layout
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.analysis.minimise.workflow import MinimiseOptions, minimise_log
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.spec.loader import load_spec
 
 RECORD_SECONDS = 7.0
 RECORD_ATTEMPTS = 3

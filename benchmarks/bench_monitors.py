@@ -21,11 +21,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.log.reader import read_log
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.monitor import MonitorSet, check_log, with_typed_invariants
-from astaa_deft.spec_loader import load_spec_text
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.engine.monitor import MonitorSet, check_log, with_typed_invariants
+from astaa_deft.engine.spec.loader import load_spec_text
 
 # The driving stack the monitor tests use too (one copy, under tests/data).
 BASE = (Path(__file__).resolve().parent.parent / "tests" / "data" / "driving_stack.yaml").read_text() + "invariants:\n"

@@ -20,11 +20,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.bus import zenoh_config as zc
-from astaa_deft.bus.processes import stop_process
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.intercept import load_interceptor
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.bus import zenoh_config as zc
+from astaa_deft.engine.bus.processes import stop_process
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.intercept import load_interceptor
+from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
 SPEC = load_spec(SUT / "bench.yaml")

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.fields import set_field
-from astaa_deft.spec_loader import load_spec
-from astaa_deft.spec.ros2_types import shared_types
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.model.fields import set_field
+from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.io.ros2.types import shared_types
 
 import bench_proxy  # the same direct and through-the-tool runs, on the ROS 2 bench spec
 

@@ -42,9 +42,9 @@ import time
 import tracemalloc
 from pathlib import Path
 
-from astaa_deft.log.reader import read_log
-from astaa_deft.session import BusRun, RunOptions, run_session
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.session import BusRun, RunOptions, run_session
+from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
 SPEC = load_spec(SUT / "bench.yaml")

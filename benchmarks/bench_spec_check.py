@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.spec.loader import load_spec
 
 
 def spec_text(channels: int) -> str:

@@ -37,15 +37,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.deft.extract import search_note
-from astaa_deft.deft.planner_section import planner_of
-from astaa_deft.deft.replay import make_planner
-from astaa_deft.deft.workflow import extract_module_tests, run_params
-from astaa_deft.log import records as rec
-from astaa_deft.log.reader import read_log
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.analysis.deft.extract import search_note
+from astaa_deft.analysis.deft.planner_section import planner_of
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.analysis.deft.workflow import extract_module_tests, run_params
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.spec.loader import load_spec
 
 SPEC = Path(__file__).resolve().parent.parent / "examples" / "ompl_stack" / "spec.yaml"
 OBSTACLE = re.compile(r"obstacle (\S+)")

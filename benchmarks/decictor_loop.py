@@ -12,10 +12,10 @@ scenarios; the live path is ``astaa-deft fuzz --strategy decictor``.
 
 from __future__ import annotations
 
-from astaa_deft.decictor.oracle import RunObservation
-from astaa_deft.decictor.paths import EgoPath, EgoState
+from astaa_deft.analysis.decictor.oracle import RunObservation
+from astaa_deft.analysis.decictor.paths import EgoPath, EgoState
 from astaa_deft.demo.closed_loop import run_closed_loop
-from astaa_deft.intercept.actions.participant import ChannelMapping, Participant, render
+from astaa_deft.engine.intercept.actions.participant import ChannelMapping, Participant, render
 
 
 def observe_closed_loop(scenario: str, participants: tuple[Participant, ...], mapping: ChannelMapping,

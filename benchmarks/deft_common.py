@@ -16,15 +16,15 @@ from pathlib import Path
 from typing import Any
 from collections.abc import Sequence
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.deft.replay import trajectory_points
-from astaa_deft.deft.validator import Point, compare
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.analysis.deft.replay import trajectory_points
+from astaa_deft.analysis.deft.validator import Point, compare
 from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.demo.status import StatusWatch
-from astaa_deft.log.reader import LogContents
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.spec_loader import load_spec
-from astaa_deft.spec.model import Spec
+from astaa_deft.io.log.reader import LogContents
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.model.sut import Spec
 
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
 RUN_TIME_LIMIT = 60.0  # wall s; every bundled scenario is done in < 25 s of sim time

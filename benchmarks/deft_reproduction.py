@@ -21,7 +21,7 @@ stopped when the simulator's status says done (goal, collision, time limit):
   collided (`pytest DIR -x` in a subprocess, until its first failure): first
   as exported (frame tests in order, the oracle last), then with the oracle
   test first, run in one step from a snapshot of the planner just before its
-  frame (astaa_deft/deft/snapshots.py), as `astaa-deft extract` writes it.
+  frame (astaa_deft/analysis/deft/snapshots.py), as `astaa-deft extract` writes it.
 
 Prints figures and a table against the targets; asserts nothing.
 """
@@ -44,14 +44,14 @@ sys.path.insert(0, str(Path(__file__).parent))
 from deft_common import (PAPER_THRESHOLDS, RunRecord, collision_times_ns, demo_spec,  # noqa: E402
                          planning_outputs, quartiles, record_run, rerun_distances)
 
-from astaa_deft.codecs import get_codec  # noqa: E402
-from astaa_deft.deft.workflow import run_params  # noqa: E402
-from astaa_deft.deft.export import export_suite  # noqa: E402
-from astaa_deft.deft.extract import Extraction, extract, ground_truth_rate  # noqa: E402
-from astaa_deft.deft.oracle import oracle_entries  # noqa: E402
-from astaa_deft.deft.replay import make_planner  # noqa: E402
-from astaa_deft.deft.snapshots import add_oracle_snapshots  # noqa: E402
-from astaa_deft.log.reader import read_log  # noqa: E402
+from astaa_deft.io.codecs import get_codec  # noqa: E402
+from astaa_deft.analysis.deft.workflow import run_params  # noqa: E402
+from astaa_deft.analysis.deft.export import export_suite  # noqa: E402
+from astaa_deft.analysis.deft.extract import Extraction, extract, ground_truth_rate  # noqa: E402
+from astaa_deft.analysis.deft.oracle import oracle_entries  # noqa: E402
+from astaa_deft.analysis.deft.replay import make_planner  # noqa: E402
+from astaa_deft.analysis.deft.snapshots import add_oracle_snapshots  # noqa: E402
+from astaa_deft.io.log.reader import read_log  # noqa: E402
 
 FLAKY = "flaky_cut_in"
 TARGETS = {"theta0": 0.995, "exact_inputs": 0.99, "recon_ms": 0.5, "ttrf_cut": 0.90}

@@ -9,7 +9,7 @@ from typing import Callable
 
 import pytest
 
-from astaa_deft.bus import zenoh_config as zc
+from astaa_deft.engine.bus import zenoh_config as zc
 
 
 @pytest.fixture

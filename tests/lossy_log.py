@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.engine.spec.loader import load_spec
 
 from proxy_helpers import SUT_DIR
 

@@ -13,12 +13,12 @@ from typing import Any
 
 import pytest
 
-from astaa_deft.errors import InputError, Problem
-from astaa_deft.log.reader import LogContents, read_log
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.monitor import with_typed_invariants
-from astaa_deft.spec_loader import load_spec_text
-from astaa_deft.spec.model import Spec
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.log.reader import LogContents, read_log
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.engine.monitor import with_typed_invariants
+from astaa_deft.engine.spec.loader import load_spec_text
+from astaa_deft.model.sut import Spec
 
 T0 = 1_700_000_000_000_000_000  # ns: the run's start in every hand-made log
 

@@ -17,12 +17,12 @@ import distributed.utils
 import pytest
 from dask.distributed import Client, LocalCluster
 
-from astaa_deft.campaign.executors import DaskPool
-from astaa_deft.campaign.model import BASELINE, PlannedCase
-from astaa_deft.campaign.strategies import STRATEGIES
-from astaa_deft.campaign.strategies.base import Timing
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign.executors import DaskPool
+from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.campaign.strategies import STRATEGIES
+from astaa_deft.orchestration.campaign.strategies.base import Timing
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.spec.loader import load_spec
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"
 
@@ -91,7 +91,7 @@ def _profiling(dask_worker) -> bool:
 def test_cases_run_on_workers_that_do_not_sample_their_stacks():
     """Dask's 10 ms stack sampling can deadlock a case's Thread.start() on CPython 3.11 (seen on a
     LocalCluster): the campaign's own LocalCluster starts without it, and a case turns it off on any worker."""
-    from astaa_deft.campaign.worker import stop_worker_profiler
+    from astaa_deft.orchestration.campaign.worker import stop_worker_profiler
 
     pool = DaskPool("local:1", 1)
     try:

@@ -15,14 +15,14 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign import known as known_mod
-from astaa_deft.campaign.calibration import run_share, workers_for
-from astaa_deft.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.campaign.journal import Journal
-from astaa_deft.campaign.model import CaseOutcome, Finding
-from astaa_deft.campaign.runner import run_case
-from astaa_deft.campaign.strategies.base import Proposal
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign import known as known_mod
+from astaa_deft.orchestration.campaign.calibration import run_share, workers_for
+from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.strategies.base import Proposal
+from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
 STEADY = SUT / "steady.yaml"
@@ -224,7 +224,7 @@ def test_a_minimisation_holding_the_only_slot_pauses_the_hunt_and_does_not_end_i
 
 
 def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
-    from astaa_deft.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
+    from astaa_deft.orchestration.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
 
     def timed(gap: float, rate: float) -> CaseOutcome:
         return CaseOutcome("done", "Pass", "", timing={"plan": {"count": 40, "rate": rate, "max_gap": gap}})

@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from astaa_deft.commands.demo import demo_spec_path
+from astaa_deft.cli.commands.demo import demo_spec_path
 
 # Seed 25: generated case 1 empties trajectory.points (seeded defect 3: control crashes);
 # case 2 sets a non-finite steering value (the simulator ignores it; the finding on the mutated channel

@@ -9,11 +9,11 @@ import re
 
 import pytest
 
-from astaa_deft.campaign.model import CaseOutcome
-from astaa_deft.campaign.strategies import STRATEGIES
+from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.demo.bundled import demo_spec_path
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.spec.loader import load_spec
 
 BASELINE = CaseOutcome("done", "Pass", "", margins={"planned_speed": 2.0, "finite_command": 0.5})
 

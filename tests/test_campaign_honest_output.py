@@ -9,14 +9,14 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from astaa_deft.campaign import signature as sig
-from astaa_deft.campaign.journal import Journal
-from astaa_deft.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
-from astaa_deft.campaign.report import write_report
-from astaa_deft.campaign.standing import (CONFIRMED, UNCONFIRMED, WITHOUT_MUTATION, headline, most_severe,
+from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.report import write_report
+from astaa_deft.orchestration.campaign.standing import (CONFIRMED, UNCONFIRMED, WITHOUT_MUTATION, headline, most_severe,
                                           standings)
-from astaa_deft.monitor.verdict import run_verdict
-from astaa_deft.monitor.violation import Violation
+from astaa_deft.engine.monitor.verdict import run_verdict
+from astaa_deft.engine.monitor.violation import Violation
 
 CLEARANCE = Finding("clearance", "Silent", None, "ego", "overlaps by 0.1 m with a 0.3 m margin", "medium")
 COLLISION = Finding("no_collision", "Silent", None, "ego", "overlaps obstacle 2 by 0.05 m", "critical")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from astaa_deft.campaign.executors import LocalPool
-from astaa_deft.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.campaign.executors import LocalPool
+from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"
 
@@ -37,10 +37,10 @@ def test_two_concurrent_cases_never_hear_each_other(tmp_path: Path):
 def test_an_anchored_case_mutates_once_then_ends_settle_seconds_later(tmp_path: Path):
     # The window counts from the first 'data' message (whenever the talker gets going), so the one
     # mutation always lands; then the run ends --settle seconds later, not at its 30 s horizon.
-    from astaa_deft.campaign.runner import run_case
-    from astaa_deft.intercept.dictionary import load_dictionary
-    from astaa_deft.intercept.testcase import parse_testcase
-    from astaa_deft.spec_loader import load_spec
+    from astaa_deft.orchestration.campaign.runner import run_case
+    from astaa_deft.engine.intercept.dictionary import load_dictionary
+    from astaa_deft.engine.intercept.testcase import parse_testcase
+    from astaa_deft.engine.spec.loader import load_spec
 
     spec, dictionary = load_spec(ECHO), load_dictionary()
     xml = (b'<testcase id="t" seed="1"><description>x</description><policy id="p1"><channel>data</channel>'

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign.module_tests import add_failure_frame, is_crash_bucket, judge_pytest, run_module_tests
-from astaa_deft.deft.workflow import extract_module_tests
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign.module_tests import add_failure_frame, is_crash_bucket, judge_pytest, run_module_tests
+from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.engine.spec.loader import load_spec
 
 STACK = Path(__file__).resolve().parent.parent / "examples" / "ompl_stack"
 SPEC = STACK / "spec.yaml"

@@ -13,13 +13,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-from astaa_deft.campaign.campaign import REPLAY_TESTS_SUFFIX, Campaign, CampaignConfig
-from astaa_deft.campaign.journal import Bucket, Journal
-from astaa_deft.campaign.runner import run_case
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.intercept.testcase import parse_testcase
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX, Campaign, CampaignConfig
+from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.testcase import parse_testcase
+from astaa_deft.engine.spec.loader import load_spec
 
 NAN_LIMIT = b"""<testcase id="nan-limit" seed="1"><description>defect 1</description>
   <policy id="p1"><channel>routing</channel><window from="0.5"><after channel="command" message="1"/></window>

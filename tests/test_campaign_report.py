@@ -5,9 +5,9 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from astaa_deft.campaign.journal import Journal
-from astaa_deft.campaign.model import BASELINE, MUTATED, CaseOutcome, Finding, PlannedCase
-from astaa_deft.campaign.report import write_report
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.report import write_report
 
 XML = '<testcase id="tc-{n}" seed="{n}"><policy id="p"><channel>routing</channel>' \
       '<set><field path="speed_limit" value="dict:float.nan"/></set></policy></testcase>'

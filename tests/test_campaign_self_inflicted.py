@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign import signature as sig
-from astaa_deft.campaign.model import CaseOutcome, Finding
-from astaa_deft.campaign.originals import broken_on_originals
-from astaa_deft.session.check import check_recorded_run
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.originals import broken_on_originals
+from astaa_deft.engine.session.check import check_recorded_run
+from astaa_deft.engine.spec.loader import load_spec
 
 pytest.importorskip("ompl", reason="OMPL (pip install ompl, in the test extra) is not importable here")
 

@@ -9,20 +9,20 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign import signature as sig
-from astaa_deft.campaign.campaign import default_workers, param_grid
-from astaa_deft.campaign.journal import Journal
-from astaa_deft.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
-from astaa_deft.campaign.strategies import STRATEGIES
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.commands.fuzz import parse_budget, parse_params
-from astaa_deft.errors import InputError
-from astaa_deft.intercept import generate as gen
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.intercept.actions.set import Assignment, Set
-from astaa_deft.intercept.testcase import parse_testcase
-from astaa_deft.output_place import OutputError
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.orchestration.campaign.campaign import default_workers, param_grid
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.strategies import STRATEGIES
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.cli.commands.fuzz import parse_budget, parse_params
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept import generate as gen
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.actions.set import Assignment, Set
+from astaa_deft.engine.intercept.testcase import parse_testcase
+from astaa_deft.io.output_place import OutputError
+from astaa_deft.engine.spec.loader import load_spec
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_random_strategy_covers_every_channel_and_field_first_with_values_class_
 
 
 def test_value_classes_come_from_the_values_not_their_names():
-    from astaa_deft.intercept.dictionary.model import Entry
+    from astaa_deft.engine.intercept.dictionary.model import Entry
 
     assert gen.value_class(Entry("float", "x", float("nan"))) == "non_finite"
     assert gen.value_class(Entry("float", "x", -float("inf"))) == "non_finite"
@@ -83,7 +83,7 @@ def test_value_classes_come_from_the_values_not_their_names():
 
 
 def test_calibrated_windows_count_from_the_anchor_and_fall_inside_the_live_run(demo):
-    from astaa_deft.campaign.strategies.base import Timing
+    from astaa_deft.orchestration.campaign.strategies.base import Timing
 
     spec, dictionary = demo
     for name in ("random", "guided"):
@@ -97,8 +97,8 @@ def test_calibrated_windows_count_from_the_anchor_and_fall_inside_the_live_run(d
 
 
 def test_live_timing_takes_the_channel_that_came_last_and_the_shortest_live_run():
-    from astaa_deft.campaign.campaign import live_timing
-    from astaa_deft.campaign.strategies.base import Timing
+    from astaa_deft.orchestration.campaign.campaign import live_timing
+    from astaa_deft.orchestration.campaign.strategies.base import Timing
 
     clean = [CaseOutcome("done", "Pass", "", seconds=12.3, first_seen={"a": 0.1, "b": 1.5, "c": 1.6}),
              CaseOutcome("done", "Pass", "", seconds=13.0, first_seen={"a": 0.2, "b": 1.4, "c": 2.1})]
@@ -225,7 +225,7 @@ def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
 
 
 def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp_path: Path):
-    from astaa_deft.campaign.campaign import culprit_family, merge_same_culprits
+    from astaa_deft.orchestration.campaign.campaign import culprit_family, merge_same_culprits
 
     journal = Journal(tmp_path)
     try:

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign.runner import run_case
-from astaa_deft.log import layout
-from astaa_deft.log.reader import read_log
-from astaa_deft.session.bus_run import warm_recorder
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.io.log import layout
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.session.bus_run import warm_recorder
+from astaa_deft.engine.spec.loader import load_spec
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"
 PARAMS = {"count": "40", "rate": "100"}
@@ -58,12 +58,12 @@ def test_an_unused_warm_recorder_exits_at_end_of_input():
 
 def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_full(tmp_path: Path):
     # The worker (--warm) forks the case's recorder before its payload comes (campaign/forked.py).
-    from astaa_deft.bus.processes import python_module
-    from astaa_deft.campaign.model import BASELINE, CaseOutcome, PlannedCase
+    from astaa_deft.engine.bus.processes import python_module
+    from astaa_deft.orchestration.campaign.model import BASELINE, CaseOutcome, PlannedCase
 
     case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
     payload = {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
-    done = subprocess.run([*python_module("astaa_deft.campaign.worker"), "--warm", str(ECHO)],
+    done = subprocess.run([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", str(ECHO)],
                           input=json.dumps(payload), capture_output=True, text=True, timeout=60)
     outcome = CaseOutcome.from_json(json.loads(done.stdout.splitlines()[-1]))
     assert outcome.status == "done", (outcome, done.stderr[-2000:])
@@ -72,9 +72,9 @@ def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_ful
 
 
 def test_a_forked_recorder_is_its_own_process_group_and_exits_at_end_of_input():
-    from astaa_deft.bus.processes import python_module
+    from astaa_deft.engine.bus.processes import python_module
 
-    code = ("import sys, os; from astaa_deft.campaign.forked import fork_recorder; from pathlib import Path; "
+    code = ("import sys, os; from astaa_deft.orchestration.campaign.forked import fork_recorder; from pathlib import Path; "
             f"r = fork_recorder(Path({str(ECHO)!r}).read_text(), 'echo.yaml'); "
             "print(os.getpgid(r.pid) == r.pid, r.pid != os.getpid()); r.stdin.close(); print(r.wait(timeout=20))")
     done = subprocess.run([*python_module("astaa_deft")[:-2], "-c", code], capture_output=True, text=True, timeout=60)
@@ -84,8 +84,8 @@ def test_a_forked_recorder_is_its_own_process_group_and_exits_at_end_of_input():
 def test_no_recorder_is_forked_from_a_process_with_other_threads():
     import threading
 
-    from astaa_deft.bus.process_launch import UnsafeFork
-    from astaa_deft.campaign.forked import fork_recorder
+    from astaa_deft.engine.bus.process_launch import UnsafeFork
+    from astaa_deft.orchestration.campaign.forked import fork_recorder
 
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
@@ -99,7 +99,7 @@ def test_no_recorder_is_forked_from_a_process_with_other_threads():
 
 
 def _echo_payload(tmp_path: Path, name: str) -> dict:
-    from astaa_deft.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
 
     case = PlannedCase(name, BASELINE, 1, 0, PARAMS, None)
     return {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / name), "horizon": 3.0,
@@ -107,8 +107,8 @@ def _echo_payload(tmp_path: Path, name: str) -> dict:
 
 
 def test_pool_cases_run_in_processes_forked_from_one_template(tmp_path: Path):
-    from astaa_deft.campaign.executors import LocalPool
-    from astaa_deft.campaign.zygote import Zygote
+    from astaa_deft.orchestration.campaign.executors import LocalPool
+    from astaa_deft.orchestration.campaign.zygote import Zygote
 
     pool = LocalPool(2)
     try:
@@ -129,8 +129,8 @@ def test_pool_cases_run_in_processes_forked_from_one_template(tmp_path: Path):
 
 
 def test_a_forked_case_past_its_time_is_stopped_with_its_process_group(tmp_path: Path, monkeypatch):
-    from astaa_deft.campaign import executors
-    from astaa_deft.campaign.executors import LocalPool
+    from astaa_deft.orchestration.campaign import executors
+    from astaa_deft.orchestration.campaign.executors import LocalPool
 
     monkeypatch.setattr(executors, "CASE_TIMEOUT_MARGIN", -2.0)  # 1 s for a case that runs 3 s
     pool = LocalPool(1)

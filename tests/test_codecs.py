@@ -9,12 +9,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from astaa_deft.codecs import (
+from astaa_deft.io.codecs import (
     Codec, DecodeError, EncodeError, UnknownCodecError, available_codecs, get_codec,
     register_codec, same_value,
 )
-from astaa_deft.codecs.json_codec import JsonCodec
-from astaa_deft.fields import FieldPath, get, set_field
+from astaa_deft.io.codecs.json_codec import JsonCodec
+from astaa_deft.model.fields import FieldPath, get, set_field
 
 JSON = get_codec("json")
 CBOR = get_codec("cbor")

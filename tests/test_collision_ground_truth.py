@@ -12,8 +12,8 @@ none wrong.
 
 from __future__ import annotations
 
-from astaa_deft.geometry import Box, overlap
-from astaa_deft.monitor.offline import check_log
+from astaa_deft.model.geometry import Box, overlap
+from astaa_deft.engine.monitor.offline import check_log
 from monitor_helpers import HandMadeLog, load, obstacle, obstacles, pose
 
 EGO_SPEED, CROSSING_SPEED, STEP = 10.0, 5.0, 0.05

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.decictor.feasible import ForbiddenRegion, PlacementError, check_placement
-from astaa_deft.decictor.oracle import LaneGrid, judge, straight_lanes
-from astaa_deft.intercept.actions.participant import Participant, read_mappings
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.analysis.decictor.feasible import ForbiddenRegion, PlacementError, check_placement
+from astaa_deft.analysis.decictor.oracle import LaneGrid, judge, straight_lanes
+from astaa_deft.engine.intercept.actions.participant import Participant, read_mappings
+from astaa_deft.engine.spec.loader import load_spec
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 from decictor_loop import observe_closed_loop  # noqa: E402 - the benchmarks' closed loop, found on the path above

@@ -8,18 +8,18 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign.journal import Journal
-from astaa_deft.campaign.model import MUTATED, PlannedCase
-from astaa_deft.campaign.runner import run_case
-from astaa_deft.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_xml
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.decictor.module_test import check_suite
-from astaa_deft.decictor.search import Scene
-from astaa_deft.errors import InputError
-from astaa_deft.intercept.actions.participant import Participant
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.intercept.testcase import parse_testcase
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import MUTATED, PlannedCase
+from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_xml
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.analysis.decictor.module_test import check_suite
+from astaa_deft.analysis.decictor.search import Scene
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept.actions.participant import Participant
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.testcase import parse_testcase
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 SPEC_PATH = demo_spec_path()
 CONE = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)

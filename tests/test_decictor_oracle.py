@@ -8,11 +8,11 @@ import random
 
 import pytest
 
-from astaa_deft.decictor.feasible import Area, ForbiddenRegion, PlacementError, check_placement, perturb, \
+from astaa_deft.analysis.decictor.feasible import Area, ForbiddenRegion, PlacementError, check_placement, perturb, \
     sample_participant
-from astaa_deft.decictor.oracle import LaneGrid, RunObservation, consistency, judge, straight_lanes, touches
-from astaa_deft.decictor.paths import EgoPath, EgoState, behaviour_mmd, path_distance
-from astaa_deft.intercept.actions.participant import Participant, Waypoint
+from astaa_deft.analysis.decictor.oracle import LaneGrid, RunObservation, consistency, judge, straight_lanes, touches
+from astaa_deft.analysis.decictor.paths import EgoPath, EgoState, behaviour_mmd, path_distance
+from astaa_deft.engine.intercept.actions.participant import Participant, Waypoint
 
 LANES = straight_lanes(2, 3.5, 300.0)
 GRID = LaneGrid(LANES)

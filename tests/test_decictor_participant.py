@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.errors import InputError
-from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
-from astaa_deft.intercept.actions.participant import MappingError, Participant, Waypoint, read_mappings
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept import Interceptor, load_dictionary, parse_testcase
+from astaa_deft.engine.intercept.actions.participant import MappingError, Participant, Waypoint, read_mappings
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC_PATH = ROOT / "specs" / "demo_av.yaml"
@@ -153,11 +153,11 @@ def test_a_participant_at_epoch_seconds_is_accepted_and_applied():
 
 
 def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
-    from astaa_deft.campaign.strategies.decictor import area_around, scene_of, scene_xml
-    from astaa_deft.decictor.feasible import ForbiddenRegion, check_placement
-    from astaa_deft.decictor.oracle import LaneGrid, RunObservation, straight_lanes
-    from astaa_deft.decictor.paths import EgoPath, EgoState
-    from astaa_deft.decictor.search import Search
+    from astaa_deft.orchestration.campaign.strategies.decictor import area_around, scene_of, scene_xml
+    from astaa_deft.analysis.decictor.feasible import ForbiddenRegion, check_placement
+    from astaa_deft.analysis.decictor.oracle import LaneGrid, RunObservation, straight_lanes
+    from astaa_deft.analysis.decictor.paths import EgoPath, EgoState
+    from astaa_deft.analysis.decictor.search import Search
 
     lanes = straight_lanes(2, 3.5, 300.0)
     seed = RunObservation(EgoPath(tuple(EgoState(WALL + k * 0.1, 10.0 + k * 1.2, 0.0, 0.0, 12.0)

@@ -9,17 +9,17 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign.strategies.decictor import DecictorStrategy, area_around, scene_of, scene_xml
-from astaa_deft.decictor.config import read_config
-from astaa_deft.decictor.feasible import ForbiddenRegion, check_placement
-from astaa_deft.decictor.oracle import LaneGrid, RunObservation, straight_lanes
-from astaa_deft.decictor.paths import EgoPath, EgoState
-from astaa_deft.decictor.search import MODES, Search
-from astaa_deft.errors import InputError
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.intercept.testcase import parse_testcase
-from astaa_deft.spec.decictor_section import DecictorSection
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.orchestration.campaign.strategies.decictor import DecictorStrategy, area_around, scene_of, scene_xml
+from astaa_deft.analysis.decictor.config import read_config
+from astaa_deft.analysis.decictor.feasible import ForbiddenRegion, check_placement
+from astaa_deft.analysis.decictor.oracle import LaneGrid, RunObservation, straight_lanes
+from astaa_deft.analysis.decictor.paths import EgoPath, EgoState
+from astaa_deft.analysis.decictor.search import MODES, Search
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.testcase import parse_testcase
+from astaa_deft.engine.spec.decictor_section import DecictorSection
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 SPEC_PATH = Path(__file__).resolve().parent.parent / "specs" / "demo_av.yaml"
 SPEC = load_spec(SPEC_PATH)

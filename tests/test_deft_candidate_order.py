@@ -18,14 +18,14 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
-from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
-from astaa_deft.deft.replay import make_planner
-from astaa_deft.deft.search_policy import (
+from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
+from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
+from astaa_deft.analysis.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.analysis.deft.search_policy import (
     EXPENSIVE_TRIES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
 )
-from astaa_deft.log.reader import read_log
+from astaa_deft.io.log.reader import read_log
 
 from lossy_log import write_lossy_log
 from proxy_helpers import SUT_DIR

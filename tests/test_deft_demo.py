@@ -10,14 +10,14 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.commands.proxy import run_bus
-from astaa_deft.session import RunOptions
-from astaa_deft.deft.extract import extract, ground_truth_rate
-from astaa_deft.deft.replay import make_planner
-from astaa_deft.errors import InputError
-from astaa_deft.log.reader import read_log
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.cli.commands.proxy import run_bus
+from astaa_deft.engine.session import RunOptions
+from astaa_deft.analysis.deft.extract import extract, ground_truth_rate
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 PARAMS = {"scenario": "lane_follow", "defects": "off"}
 
@@ -25,7 +25,7 @@ PARAMS = {"scenario": "lane_follow", "defects": "off"}
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """One passive recording of the demo's lane_follow scenario, shared by the tests below."""
-    from astaa_deft.commands.demo import StatusWatch
+    from astaa_deft.cli.commands.demo import StatusWatch
 
     spec = load_spec(demo_spec_path())
     path = tmp_path_factory.mktemp("deft") / "lane_follow.mcap"

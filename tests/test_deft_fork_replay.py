@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import pytest
 
-from astaa_deft.deft.extract import extract, near_miss_note
-from astaa_deft.deft.fork_replay import can_fork
-from astaa_deft.deft.replay import make_planner
-from astaa_deft.log.reader import read_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.analysis.deft.extract import extract, near_miss_note
+from astaa_deft.analysis.deft.fork_replay import can_fork
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.spec.loader import load_spec
 
 from lossy_log import SPEC, write_lossy_log
 from proxy_helpers import SUT_DIR
@@ -72,7 +72,7 @@ def test_factory_next_to_the_spec_is_found_without_pythonpath(tmp_path):
 
 
 def test_factory_nowhere_is_one_clear_error(tmp_path):
-    from astaa_deft.errors import InputError
+    from astaa_deft.model.errors import InputError
 
     spec_path = tmp_path / "lossy.yaml"
     spec_path.write_text(SPEC.replace("lossy_state_planner:LossyStatePlanner", "no_such_planner_mod:P"))

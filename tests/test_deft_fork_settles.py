@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from astaa_deft.deft.fork_replay import ForkedSearch, can_fork, run_supervised
+from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 
 pytestmark = pytest.mark.skipif(not can_fork(), reason="fork-based replay needs os.fork (POSIX)")
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from astaa_deft.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_candidates
+from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_candidates
 
 MS = 1_000_000
 
@@ -93,7 +93,7 @@ def test_a_burst_of_outputs_answers_the_last_triggers_before_it():
     # answered with nothing (its answer was logged after the next trigger) and the pairing slipped.
     from types import SimpleNamespace
 
-    from astaa_deft.deft.extract import _answered_in_turn
+    from astaa_deft.analysis.deft.extract import _answered_in_turn
 
     triggers = [0, 20 * MS, 40 * MS, 60 * MS, 80 * MS]
     burst = [SimpleNamespace(log_time=t) for t in (62 * MS, 62 * MS + 300_000, 62 * MS + 500_000, 81 * MS)]

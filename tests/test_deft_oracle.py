@@ -16,9 +16,9 @@ import sys
 import textwrap
 from pathlib import Path
 
-from astaa_deft.deft.export import MANIFEST
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.analysis.deft.export import MANIFEST
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
 
@@ -137,8 +137,8 @@ def test_frame_tests_fail_with_a_readable_diff_when_the_output_changes(tmp_path)
 
 def test_oracle_tests_run_first_from_a_snapshot_before_their_frame(tmp_path):
     """TTRF: a suite that reproduces a collision fails at its first test, one planner step from a snapshot."""
-    from astaa_deft.deft.snapshots import usable_snapshot
-    from astaa_deft.deft.suite import Suite
+    from astaa_deft.analysis.deft.snapshots import usable_snapshot
+    from astaa_deft.analysis.deft.suite import Suite
 
     spec_path, log_path = crafted_log(tmp_path)
     suite_dir = tmp_path / "suite"

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.commands.console import PLAIN_PERIOD_S, PlainLines
-from astaa_deft.deft.checkpoint import STATE
-from astaa_deft.deft.workflow import extract_module_tests
+from astaa_deft.cli.commands.console import PLAIN_PERIOD_S, PlainLines
+from astaa_deft.analysis.deft.checkpoint import STATE
+from astaa_deft.analysis.deft.workflow import extract_module_tests
 
 STACK = Path(__file__).resolve().parent.parent / "examples" / "ompl_stack"
 SPEC = STACK / "spec.yaml"

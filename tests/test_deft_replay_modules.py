@@ -18,17 +18,17 @@ from pathlib import Path
 import pytest
 from test_minimise_demo import NOISE, SPEC_PATH, record
 
-from astaa_deft.commands import minimise as command
-from astaa_deft.deft.extract import extract
-from astaa_deft.deft.export import export_suite
-from astaa_deft.deft.planner_section import replay_module_of, replay_modules
-from astaa_deft.deft.replay import StepHang, make_planner, within_limit
-from astaa_deft.deft.workflow import run_params
+from astaa_deft.cli.commands import minimise as command
+from astaa_deft.analysis.deft.extract import extract
+from astaa_deft.analysis.deft.export import export_suite
+from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
+from astaa_deft.analysis.deft.replay import StepHang, make_planner, within_limit
+from astaa_deft.analysis.deft.workflow import run_params
 from astaa_deft.demo.control import ReplayControl
-from astaa_deft.errors import InputError
-from astaa_deft.log.reader import read_log
-from astaa_deft.monitor import check_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.spec.loader import load_spec
 
 SPEC_TEXT = SPEC_PATH.read_text()
 ENTRY = SPEC_TEXT[SPEC_TEXT.index("replay:\n  modules:"):SPEC_TEXT.index("\n# Decictor")]

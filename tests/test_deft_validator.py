@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from astaa_deft.deft.validator import compare, identical
+from astaa_deft.analysis.deft.validator import compare, identical
 
 
 def line(n, dt=0.1, t0=0.0, y=0.0, dx=1.0):

@@ -14,10 +14,10 @@ import os
 
 import pytest
 
-from astaa_deft.commands.demo import demo_policy_path, demo_spec_path, drive
-from astaa_deft.log.reader import read_log
-from astaa_deft.monitor import check_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.cli.commands.demo import demo_policy_path, demo_spec_path, drive
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.spec.loader import load_spec
 
 REPEATS = int(os.environ.get("ASTAA_DEFT_REPEATS", "1"))
 CLEAN = ["lane_follow", *(pytest.param(name, marks=pytest.mark.slow) for name in ("static_obstacle", "cut_in",

@@ -7,7 +7,7 @@ import pkgutil
 
 import astaa_deft
 from astaa_deft import cli
-from astaa_deft.errors import AstaaDeftError
+from astaa_deft.model.errors import AstaaDeftError
 
 
 def _tool_modules():
@@ -37,7 +37,7 @@ def test_cli_prints_user_errors_once_and_exits_with_their_code(tmp_path, capsys)
 
 def test_a_huge_value_quoted_in_a_message_is_shortened_and_says_how_long():
     """Found by the generated bad input: a 5,000-digit type name made a 5 KB error line."""
-    from astaa_deft.errors import Problem
+    from astaa_deft.model.errors import Problem
 
     line = str(Problem("sut.yaml", 3, 4, f"unknown type '{'9' * 5000}' — did you mean 'bool'?", "fix the name"))
     assert len(line) < 300

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.deft.fork_replay import can_fork
-from astaa_deft.deft.workflow import extract_module_tests
-from astaa_deft.errors import InputError
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.analysis.deft.fork_replay import can_fork
+from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.engine.spec.loader import load_spec
 from test_log import write_finished_log
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.campaign.strategies import STRATEGIES
-from astaa_deft.intercept import generate as gen
-from astaa_deft.intercept import load_dictionary, load_testcase
-from astaa_deft.intercept.testcase import Selection, parse_testcase
-from astaa_deft.log.reader import read_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.orchestration.campaign.strategies import STRATEGIES
+from astaa_deft.engine.intercept import generate as gen
+from astaa_deft.engine.intercept import load_dictionary, load_testcase
+from astaa_deft.engine.intercept.testcase import Selection, parse_testcase
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.spec.loader import load_spec
 from proxy_helpers import ECHO_SPEC, received, run_proxy
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.log.reader import read_log
+from astaa_deft.io.log.reader import read_log
 from proxy_helpers import ECHO_SPEC, SUT_DIR, alive, received
 
 TOOL = Path(sys.executable).with_name("astaa-deft")  # the installed entry point: no cwd on sys.path
@@ -143,7 +143,7 @@ def logged_seqs(log: Path) -> set[int]:
 def test_kill_9_of_the_tool_leaves_nothing_running_and_a_finished_log(tool_run):
     run = tool_run()
     run.wait_flowing()
-    recorder = helper_pid(run.started, "astaa_deft.session.recorder")
+    recorder = helper_pid(run.started, "astaa_deft.engine.session.recorder")
     run.fault(run.proc.pid, signal.SIGKILL)
     assert run.finish() == -signal.SIGKILL
     run.all_gone("kill -9 of the tool")
@@ -191,7 +191,7 @@ def test_a_recorder_stopped_before_the_dying_tool_is_reparented_still_notes_the_
     # lives, without the tool's run_stopped announcement, and the tool is killed just after.
     run = tool_run()
     run.wait_flowing()
-    recorder = helper_pid(run.started, "astaa_deft.session.recorder")
+    recorder = helper_pid(run.started, "astaa_deft.engine.session.recorder")
     os.kill(recorder, signal.SIGTERM)
     time.sleep(0.2)
     run.fault(run.proc.pid, signal.SIGKILL)
@@ -207,7 +207,7 @@ def test_a_recorder_behind_at_the_stop_still_records_everything_delivered(tool_r
     """The stop waits for the recorder to catch up (it sees the run_stopped event), not a fixed 0.3 s."""
     run = tool_run()
     run.wait_flowing()
-    recorder = helper_pid(run.started, "astaa_deft.session.recorder")
+    recorder = helper_pid(run.started, "astaa_deft.engine.session.recorder")
     os.kill(recorder, signal.SIGSTOP)  # the recorder falls behind: what it has not read waits in its socket
     try:
         time.sleep(1.0)
@@ -242,7 +242,7 @@ def test_silence_while_the_run_stops_is_no_finding(tmp_path):
 def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):
     run = tool_run()
     run.wait_flowing(1500)  # a few 64 KiB chunks in the file: a recorder killed outright loses only the last
-    run.fault(helper_pid(run.started, "astaa_deft.session.recorder"), signal.SIGKILL)
+    run.fault(helper_pid(run.started, "astaa_deft.engine.session.recorder"), signal.SIGKILL)
     code = run.finish()
     out = run.output()
     assert code == 3, out
@@ -258,7 +258,7 @@ def test_kill_9_of_the_recorder_is_reported_and_is_no_pass(tool_run):
 def test_kill_9_of_the_bus_router_is_reported_and_is_no_pass(tool_run):
     run = tool_run("--passive")
     run.wait_flowing()
-    run.fault(helper_pid(run.started, "astaa_deft.bus.router"), signal.SIGKILL)
+    run.fault(helper_pid(run.started, "astaa_deft.engine.bus.router"), signal.SIGKILL)
     code = run.finish()
     out = run.output()
     assert code == 3, out
@@ -276,7 +276,7 @@ def test_a_full_disk_for_the_log_is_reported_and_is_no_pass(tool_run):
     run.wait_flowing()
     # A full disk for the log alone: cap the size of the files the recorder may write (RLIMIT_FSIZE)
     # a few chunks beyond what it has written so far; the SUT's own files stay unlimited.
-    recorder = helper_pid(run.started, "astaa_deft.session.recorder")
+    recorder = helper_pid(run.started, "astaa_deft.engine.session.recorder")
     cap = run.log.stat().st_size + 48 * 1024
     resource.prlimit(recorder, resource.RLIMIT_FSIZE, (cap, cap))
     run.fault_at = time.monotonic()
@@ -395,8 +395,8 @@ def _strict(data: bytes):
 
 
 def test_non_finite_mutations_stay_exact_on_the_bus_and_every_logged_message_is_strict_json(tmp_path):
-    from astaa_deft.intercept.actions.base import from_tagged
-    from astaa_deft.log.viewable import VIEWABLE_PREFIX
+    from astaa_deft.engine.intercept.actions.base import from_tagged
+    from astaa_deft.io.log.viewable import VIEWABLE_PREFIX
 
     policy = tmp_path / "tc.xml"
     policy.write_text("""<?xml version="1.0" encoding="UTF-8"?>

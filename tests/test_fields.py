@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from astaa_deft.codecs import same_value
-from astaa_deft.fields import (
+from astaa_deft.io.codecs import same_value
+from astaa_deft.model.fields import (
     WILDCARD, FieldPath, FieldPathError, check_brittle_pattern, get, is_brittle, leaf_fields,
     parse_brittle_pattern, set_field, type_at,
 )
-from astaa_deft.spec.model import FieldType, MessageType
+from astaa_deft.model.sut import FieldType, MessageType
 
 FAST = settings(max_examples=100, deadline=None)
 

@@ -142,8 +142,8 @@ def damaged_logs(full: bytes, boundaries: list[int], count: int, rng: random.Ran
 
 def write_log(path: Path, spec_path: Path) -> list[int]:
     """A finished log of 3,000 messages in small chunks; returns the byte offsets of its records."""
-    from astaa_deft.log.writer import LogWriter
-    from astaa_deft.spec_loader import load_spec
+    from astaa_deft.io.log.writer import LogWriter
+    from astaa_deft.engine.spec.loader import load_spec
 
     spec = load_spec(spec_path)
     w = LogWriter(path, spec, chunk_size=2048)

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.cli import main
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.inputfile import DICTIONARY, POLICY, SPEC
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.io.inputfile import DICTIONARY, POLICY, SPEC
 
 ROOT = Path(__file__).resolve().parent.parent
 POLICY_FILE = ROOT / "policies" / "examples" / "demo_huge_heading.xml"

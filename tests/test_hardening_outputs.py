@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.output_place import EXIT_CANNOT_WRITE
+from astaa_deft.io.output_place import EXIT_CANNOT_WRITE
 from toy_run import toy_log
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -64,7 +64,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
         from test_deft_oracle import crafted_log
     finally:
         sys.path.remove(str(Path(__file__).parent))
-    from astaa_deft.campaign.journal import Journal
+    from astaa_deft.orchestration.campaign.journal import Journal
 
     base = tmp_path_factory.mktemp("inputs")
     spec, log = crafted_log(base)
@@ -223,7 +223,7 @@ def test_a_write_past_the_size_limit_mid_extraction_keeps_what_was_written(tmp_p
     Exit 4 naming the file, and what was written stays readable: the frames
     log up to its last complete chunk, no half-written manifest.
     """
-    from astaa_deft.log.reader import read_log
+    from astaa_deft.io.log.reader import read_log
 
     spec, log = toy_log(tmp_path, cycles=600)
     full = tmp_path / "full"

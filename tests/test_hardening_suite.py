@@ -8,9 +8,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.deft.export import export_suite
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.analysis.deft.export import export_suite
+from astaa_deft.engine.spec.loader import load_spec
 
 HOSTILE_PYPROJECT = """\
 [tool.pytest.ini_options]

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.cli import main
-from astaa_deft.commands.demo import demo_spec_path
+from astaa_deft.cli.commands.demo import demo_spec_path
 
 BAD = Path(__file__).parent / "data" / "bad_inputs"
 DEMO_SPEC = demo_spec_path().read_text()

@@ -8,15 +8,15 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-from astaa_deft.intercept.actions import ACTIONS
-from astaa_deft.intercept.actions.base import ActionConfig, FieldChange, PinnedStep
-from astaa_deft.intercept.actions.corrupt import Corrupt, CorruptDetail
-from astaa_deft.intercept.actions.delay import Delay, DelayDetail
-from astaa_deft.intercept.actions.duplicate import DuplicateDetail
-from astaa_deft.intercept.actions.interleave import Interleave
-from astaa_deft.intercept.actions.reorder import Reorder
-from astaa_deft.intercept.actions.set import Assignment, Set
-from astaa_deft.minimise import mutations, restrict
+from astaa_deft.engine.intercept.actions import ACTIONS
+from astaa_deft.engine.intercept.actions.base import ActionConfig, FieldChange, PinnedStep
+from astaa_deft.engine.intercept.actions.corrupt import Corrupt, CorruptDetail
+from astaa_deft.engine.intercept.actions.delay import Delay, DelayDetail
+from astaa_deft.engine.intercept.actions.duplicate import DuplicateDetail
+from astaa_deft.engine.intercept.actions.interleave import Interleave
+from astaa_deft.engine.intercept.actions.reorder import Reorder
+from astaa_deft.engine.intercept.actions.set import Assignment, Set
+from astaa_deft.analysis.minimise import mutations, restrict
 
 PACKAGE = Path(restrict.__file__).resolve().parent.parent
 

@@ -9,12 +9,12 @@ import textwrap
 
 import pytest
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.errors import InputError
-from astaa_deft.intercept.dictionary import (
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept.dictionary import (
     DYNAMIC, GROUPS, FieldSite, NotApplicable, ValueContext, dictionary_from_text, load_dictionary, wire_value,
 )
-from astaa_deft.spec.model import INT_RANGES, FieldType, MessageType
+from astaa_deft.model.sut import INT_RANGES, FieldType, MessageType
 
 DEFAULT = load_dictionary()
 JSON, CBOR = get_codec("json"), get_codec("cbor")

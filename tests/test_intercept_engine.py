@@ -10,13 +10,13 @@ from pathlib import Path
 import cbor2
 import pytest
 
-from astaa_deft.codecs import get_codec, same_value
-from astaa_deft.errors import InputError
-from astaa_deft.intercept import Delivery, Interceptor, TestCase, load_dictionary, parse_testcase
-from astaa_deft.intercept.actions.base import from_tagged, to_tagged
-from astaa_deft.intercept.actions.set import Assignment, Set
-from astaa_deft.intercept.testcase import Policy
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.codecs import get_codec, same_value
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept import Delivery, Interceptor, TestCase, load_dictionary, parse_testcase
+from astaa_deft.engine.intercept.actions.base import from_tagged, to_tagged
+from astaa_deft.engine.intercept.actions.set import Assignment, Set
+from astaa_deft.engine.intercept.testcase import Policy
+from astaa_deft.engine.spec.loader import load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC = load_spec(ROOT / "tests" / "data" / "intercept_sut.yaml")
@@ -426,7 +426,7 @@ def test_held_back_messages_name_their_payload_and_come_back_on_their_own_channe
 
 
 def test_load_interceptor_reads_checks_and_merges_dictionaries(tmp_path):
-    from astaa_deft.intercept import load_interceptor
+    from astaa_deft.engine.intercept import load_interceptor
 
     mine = tmp_path / "mine.yaml"
     mine.write_text("enum:\n  sport: sport\n")

@@ -8,18 +8,18 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.commands import generate as generate_command
-from astaa_deft.errors import InputError
-from astaa_deft.fields import FieldPath
-from astaa_deft.intercept import load_dictionary, load_testcase
-from astaa_deft.intercept.dictionary import wire_value
-from astaa_deft.intercept import generate as gen
-from astaa_deft.intercept.generate import (
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.cli.commands import generate as generate_command
+from astaa_deft.model.errors import InputError
+from astaa_deft.model.fields import FieldPath
+from astaa_deft.engine.intercept import load_dictionary, load_testcase
+from astaa_deft.engine.intercept.dictionary import wire_value
+from astaa_deft.engine.intercept import generate as gen
+from astaa_deft.engine.intercept.generate import (
     generate, generate_to_directory, is_generation_brittle, iter_testcases, mutation_targets, write_testcases,
 )
-from astaa_deft.intercept.testcase import Selection
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.engine.intercept.testcase import Selection
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC_PATH = ROOT / "tests" / "data" / "intercept_sut.yaml"
@@ -178,7 +178,7 @@ def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
 
 
 def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
-    from astaa_deft.intercept.generate import generate_to_directory
+    from astaa_deft.engine.intercept.generate import generate_to_directory
 
     report = generate_to_directory(load_spec(SPEC_PATH), 6, 4, tmp_path / "cases", duration=10.0)
     assert capsys.readouterr().out == ""

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.log.reader import read_log
+from astaa_deft.io.log.reader import read_log
 from proxy_helpers import ECHO_SPEC, received, run_proxy
 
 COUNT = 200

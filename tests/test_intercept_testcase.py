@@ -11,21 +11,21 @@ from pathlib import Path
 import pytest
 from lxml import etree
 
-from astaa_deft.commands import policy_check
-from astaa_deft.errors import InputError
-from astaa_deft.intercept.actions import ACTIONS
-from astaa_deft.intercept.actions.corrupt import Corrupt
-from astaa_deft.intercept.actions.delay import Delay
-from astaa_deft.intercept.actions.drop import Drop
-from astaa_deft.intercept.actions.duplicate import Duplicate
-from astaa_deft.intercept.actions.interleave import Interleave
-from astaa_deft.intercept.actions.reorder import Reorder
-from astaa_deft.intercept.actions.set import Assignment, Set
-from astaa_deft.intercept.testcase import (
+from astaa_deft.cli.commands import policy_check
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept.actions import ACTIONS
+from astaa_deft.engine.intercept.actions.corrupt import Corrupt
+from astaa_deft.engine.intercept.actions.delay import Delay
+from astaa_deft.engine.intercept.actions.drop import Drop
+from astaa_deft.engine.intercept.actions.duplicate import Duplicate
+from astaa_deft.engine.intercept.actions.interleave import Interleave
+from astaa_deft.engine.intercept.actions.reorder import Reorder
+from astaa_deft.engine.intercept.actions.set import Assignment, Set
+from astaa_deft.engine.intercept.testcase import (
     SCHEMA_PATH, Policy, Selection, TestCase, Window, load_testcase, parse_testcase,
 )
-from astaa_deft.intercept.testcase.xml_format import hardened_parser, parse_xml
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.intercept.testcase.xml_format import hardened_parser, parse_xml
+from astaa_deft.engine.spec.loader import load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
 ECHO = load_spec(ROOT / "tests" / "sut" / "echo.yaml")

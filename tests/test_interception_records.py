@@ -13,11 +13,11 @@ from collections import OrderedDict
 
 import pytest
 
-from astaa_deft.bus.topology import (
+from astaa_deft.engine.bus.topology import (
     EVENT_JSON, EVENT_MARSHAL, intercept_record, pack_deliveries, read_intercept_record, unpack_deliveries,
 )
-from astaa_deft.intercept.actions.base import FieldChange, MutationEvent
-from astaa_deft.session.recorder import event_json
+from astaa_deft.engine.intercept.actions.base import FieldChange, MutationEvent
+from astaa_deft.engine.session.recorder import event_json
 
 
 def _event(old, new, detail=None) -> MutationEvent:
@@ -94,7 +94,7 @@ def test_built_instances_are_the_dataclasses_own() -> None:
     """``built`` (the engine's per-message constructor) gives what ``__init__`` gives, every field included."""
     from dataclasses import FrozenInstanceError, fields
 
-    from astaa_deft.intercept.actions.base import Delivery, built
+    from astaa_deft.engine.intercept.actions.base import Delivery, built
 
     for cls, values in ((MutationEvent, _event(1, 2).__dict__),
                         (FieldChange, {"path": "a", "old": 1, "new": float("inf")}),
@@ -114,7 +114,7 @@ def test_the_recorders_event_text_reads_back_as_the_stdlibs():
     import enum
     import json
 
-    from astaa_deft.session.recorder import _EVENT_ENCODER, _event_text
+    from astaa_deft.engine.session.recorder import _EVENT_ENCODER, _event_text
 
     class Gear(enum.IntEnum):
         DRIVE = 3

@@ -15,9 +15,9 @@ from pathlib import Path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from astaa_deft.codecs import DecodeError, get_codec, json_fast, same_value
-from astaa_deft.intercept import Delivery, Interceptor, load_dictionary, parse_testcase
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.codecs import DecodeError, get_codec, json_fast, same_value
+from astaa_deft.engine.intercept import Delivery, Interceptor, load_dictionary, parse_testcase
+from astaa_deft.engine.spec.loader import load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC = load_spec(ROOT / "tests" / "data" / "intercept_sut.yaml")

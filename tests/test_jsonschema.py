@@ -13,9 +13,9 @@ from typing import Any
 
 import pytest
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.codecs.jsonschema import DRAFT_2020_12, json_schema
-from astaa_deft.spec.model import FieldType, MessageType
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.codecs.jsonschema import DRAFT_2020_12, json_schema
+from astaa_deft.model.sut import FieldType, MessageType
 
 
 def struct(ref: str) -> FieldType:

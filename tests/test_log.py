@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.errors import InputError
-from astaa_deft.log.reader import read_log
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.spec_loader import load_spec_text
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.engine.spec.loader import load_spec_text
 
 SPEC = textwrap.dedent("""\
     name: t
@@ -32,8 +32,8 @@ def write_killed_log(path: Path) -> None:
     code = textwrap.dedent(f"""
         import json, os
         from pathlib import Path
-        from astaa_deft.log.writer import LogWriter
-        from astaa_deft.spec_loader import load_spec_text
+        from astaa_deft.io.log.writer import LogWriter
+        from astaa_deft.engine.spec.loader import load_spec_text
         spec = load_spec_text({SPEC!r})
         w = LogWriter(Path({str(path)!r}), spec)
         cid = w.bus_channel(spec.channel("data"))
@@ -104,7 +104,7 @@ def test_fast_mcap_writer_writes_the_bytes_of_mcaps_writer(tmp_path, compression
     """log/mcap_writer.py replaces mcap's per-message path only: the file must be byte for byte the same."""
     from mcap.writer import CompressionType, Writer
 
-    from astaa_deft.log.mcap_writer import McapWriter
+    from astaa_deft.io.log.mcap_writer import McapWriter
 
     def scenario(writer) -> None:
         writer.start(profile="astaa-deft", library="same")

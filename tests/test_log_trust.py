@@ -19,12 +19,12 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.errors import InputError
-from astaa_deft.log.reader import read_log
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.minimise.replay_model import load_spec_for
-from astaa_deft.spec.executes import what_spec_runs
-from astaa_deft.spec_loader import load_spec_text
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.analysis.minimise.replay_model import load_spec_for
+from astaa_deft.engine.spec.executes import what_spec_runs
+from astaa_deft.engine.spec.loader import load_spec_text
 
 SUT_DIR = Path(__file__).parent / "sut"
 

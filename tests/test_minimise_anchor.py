@@ -13,15 +13,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from astaa_deft.intercept.dictionary import load_dictionary
-from astaa_deft.intercept.engine import Interceptor
-from astaa_deft.intercept.testcase import TestCase, parse_testcase
-from astaa_deft.log.reader import read_log
-from astaa_deft.minimise.anchoring import choose_anchor, pin_to_anchor
-from astaa_deft.minimise.mutations import Mutation, read_mutations
-from astaa_deft.minimise.restrict import restricted_testcase
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.engine import Interceptor
+from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.analysis.minimise.anchoring import choose_anchor, pin_to_anchor
+from astaa_deft.analysis.minimise.mutations import Mutation, read_mutations
+from astaa_deft.analysis.minimise.restrict import restricted_testcase
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.spec.loader import load_spec
 
 ANCHORED = Path(__file__).parent / "sut" / "anchored.yaml"
 # One tick, 0.3 s into the live run (counted from the first acknowledgement), gets value 7.

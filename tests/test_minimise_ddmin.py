@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from astaa_deft.minimise import (
+from astaa_deft.analysis.minimise import (
     FailsWithoutItems,
     NotReproducible,
     Outcome,

@@ -23,20 +23,20 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.commands import minimise as command
-from astaa_deft.commands.demo import demo_noise_policies, demo_spec_path
-from astaa_deft.deft.suite import Suite
-from astaa_deft.errors import InputError
-from astaa_deft.intercept import load_interceptor, load_testcase
-from astaa_deft.log import layout
-from astaa_deft.log.reader import read_log
-from astaa_deft.deft.invariant_oracle import check_invariant_oracle
-from astaa_deft.minimise.replay_model import Job, ReplaySetup
-from astaa_deft.minimise.replay_pool import ReplayPool
-from astaa_deft.minimise.mutations import ReceivedStreams, read_mutations, sent_stream
-from astaa_deft.monitor import check_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.cli.commands import minimise as command
+from astaa_deft.cli.commands.demo import demo_noise_policies, demo_spec_path
+from astaa_deft.analysis.deft.suite import Suite
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept import load_interceptor, load_testcase
+from astaa_deft.io.log import layout
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.analysis.deft.invariant_oracle import check_invariant_oracle
+from astaa_deft.analysis.minimise.replay_model import Job, ReplaySetup
+from astaa_deft.analysis.minimise.replay_pool import ReplayPool
+from astaa_deft.analysis.minimise.mutations import ReceivedStreams, read_mutations, sent_stream
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.spec.loader import load_spec
 
 SPEC_PATH = demo_spec_path()
 SPEC = load_spec(SPEC_PATH)
@@ -134,10 +134,10 @@ def test_module_tests_fail_on_the_culprit_and_pass_once_the_planner_is_fixed(min
 
 
 def test_pytest_runs_the_module_tests(minimised):
-    from astaa_deft.deft import oracle as deft_oracle
+    from astaa_deft.analysis.deft import oracle as deft_oracle
 
     if "invariant" not in inspect.getsource(deft_oracle.check_oracle):
-        pytest.skip("astaa_deft/deft/oracle.py does not dispatch 'invariant' oracles yet (see the lead's wiring)")
+        pytest.skip("astaa_deft/analysis/deft/oracle.py does not dispatch 'invariant' oracles yet (see the lead's wiring)")
     _, out, _ = minimised
     res = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", str(out / "tests")],
                          capture_output=True, text=True, timeout=120)
@@ -218,7 +218,7 @@ def test_a_failure_the_mutations_do_not_cause_is_reported_not_minimised(runs, tm
 
 def test_minimisation_is_a_library_call_reporting_through_its_callback(runs, tmp_path, capsys):
     """The same undone culprit through minimise_log: progress goes to the callback, nothing is printed."""
-    from astaa_deft.minimise.workflow import MinimiseOptions, minimise_log
+    from astaa_deft.analysis.minimise.workflow import MinimiseOptions, minimise_log
 
     log = read_log(runs["failing"])
     [culprit] = [e for e in (json.loads(m.data) for m in log.on(layout.MUTATIONS_TOPIC)) if "culprit" in e["policy"]]

@@ -13,7 +13,7 @@ import json
 import pytest
 from test_minimise_demo import NOISE, SPEC_PATH, record
 
-from astaa_deft.commands import minimise as command
+from astaa_deft.cli.commands import minimise as command
 
 CULPRITS = {  # defect → (its policy, the field it sets, the invariant that breaks first)
     2: ("""<policy id="culprit"><channel>localization</channel><consumer>control</consumer><window from="3"/>

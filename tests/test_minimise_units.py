@@ -16,28 +16,28 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.bus.topology import intercept_record
-from astaa_deft.commands.demo import demo_spec_path
-from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
-from astaa_deft.intercept.actions.base import FieldChange
-from astaa_deft.intercept.actions.set import value_text
-from astaa_deft.log import layout
-from astaa_deft.log.reader import read_log
-from astaa_deft.session.recorder import _write_intercepted
-from astaa_deft.log.writer import LogWriter
-from astaa_deft.minimise.ddmin import Outcome
-from astaa_deft.minimise.live_tester import LiveRun, LiveTester
-from astaa_deft.minimise.mutations import (
+from astaa_deft.engine.bus.topology import intercept_record
+from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.engine.intercept import Interceptor, load_dictionary, parse_testcase
+from astaa_deft.engine.intercept.actions.base import FieldChange
+from astaa_deft.engine.intercept.actions.set import value_text
+from astaa_deft.io.log import layout
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.session.recorder import _write_intercepted
+from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.analysis.minimise.ddmin import Outcome
+from astaa_deft.analysis.minimise.live_tester import LiveRun, LiveTester
+from astaa_deft.analysis.minimise.mutations import (
     Mutation,
     ReceivedStreams,
     Step,
     read_mutations,
     sent_stream,
 )
-from astaa_deft.minimise.restrict import restricted_testcase
-from astaa_deft.minimise import workflow
-from astaa_deft.minimise.stages import Failure, Minimisation
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.analysis.minimise.restrict import restricted_testcase
+from astaa_deft.analysis.minimise import workflow
+from astaa_deft.analysis.minimise.stages import Failure, Minimisation
+from astaa_deft.engine.spec.loader import load_spec
 
 SPEC = load_spec(demo_spec_path())
 START_NS = 1_000_000_000_000
@@ -200,8 +200,8 @@ def test_a_field_subset_sets_only_those_fields(rich):
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, None, 0, 1.0, -0.0, 2**70, "fast", "\x00\x1b[31m",
                                    "\udc80", "", [1, {"a": None}], {"float": 1}, True])
 def test_value_text_reads_back_as_the_same_value(value):
-    from astaa_deft.intercept.actions.set import parse_literal
-    from astaa_deft.spec.model import FieldType
+    from astaa_deft.engine.intercept.actions.set import parse_literal
+    from astaa_deft.model.sut import FieldType
 
     text = value_text(value)
     back = parse_literal(text, FieldType("float64"))
@@ -328,8 +328,8 @@ def test_verdicts_and_exit_codes():
 
 
 def test_jobs_below_one_is_an_input_error_naming_the_option():
-    from astaa_deft.errors import InputError
-    from astaa_deft.minimise.workflow import MinimiseOptions
+    from astaa_deft.model.errors import InputError
+    from astaa_deft.analysis.minimise.workflow import MinimiseOptions
 
     with pytest.raises(InputError, match="--jobs"):
         MinimiseOptions(jobs=0).check()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from astaa_deft.monitor import with_typed_invariants
-from astaa_deft.spec_loader import load_spec_text
+from astaa_deft.engine.monitor import with_typed_invariants
+from astaa_deft.engine.spec.loader import load_spec_text
 
 DOCS = Path(__file__).parent.parent / "docs" / "monitors.md"
 

@@ -9,10 +9,10 @@ import textwrap
 
 import pytest
 
-from astaa_deft.log.reader import read_log
-from astaa_deft.monitor import check_log
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.spec.loader import load_spec
 
 from monitor_helpers import HandMadeLog, line_of, load, spec_problems, spec_text
 

@@ -7,7 +7,7 @@ import math
 import pytest
 from monitor_helpers import load
 
-from astaa_deft.monitor.expression import (
+from astaa_deft.engine.monitor.expression import (
     RUNTIME_ERRORS,
     ExpressionError,
     compile_expression,

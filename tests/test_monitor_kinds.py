@@ -17,8 +17,8 @@ from monitor_helpers import (
     trajectory,
 )
 
-from astaa_deft.monitor import check_log
-from astaa_deft.geometry import Box, overlap, separation
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.model.geometry import Box, overlap, separation
 
 
 def check(tmp_path, invariants: str, write) -> list:

@@ -11,10 +11,10 @@ from __future__ import annotations
 import threading
 import time
 
-from astaa_deft.bus import zenoh_config as zc
-from astaa_deft.monitor import check_log
-from astaa_deft.monitor.online import OnlineMonitors
-from astaa_deft.monitor.order import REORDER_WINDOW_NS
+from astaa_deft.engine.bus import zenoh_config as zc
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.monitor.online import OnlineMonitors
+from astaa_deft.engine.monitor.order import REORDER_WINDOW_NS
 
 from monitor_helpers import HandMadeLog, command, load, ns
 

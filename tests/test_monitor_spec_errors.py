@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from monitor_helpers import line_of, spec_problems, spec_text
 
-from astaa_deft.errors import Problem
+from astaa_deft.model.errors import Problem
 
 
 def only_problem(invariants: str) -> Problem:

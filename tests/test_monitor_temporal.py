@@ -9,8 +9,8 @@ from fractions import Fraction
 import pytest
 from monitor_helpers import HandMadeLog, lights, load, ns, obstacle, obstacles, pose
 
-from astaa_deft.monitor import check_log
-from astaa_deft.monitor.stl import _rtamt, check_formula
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.engine.monitor.stl import _rtamt, check_formula
 
 STOP_AT_RED = """
 - name: stop_at_red

@@ -20,12 +20,12 @@ from monitor_helpers import (
     trajectory,
 )
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.commands import check as check_command
-from astaa_deft.errors import InputError
-from astaa_deft.log import layout
-from astaa_deft.monitor import MonitorSet, Violation, check_log, run_verdict
-from astaa_deft.monitor.verdict import IMPLICIT
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.cli.commands import check as check_command
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log import layout
+from astaa_deft.engine.monitor import MonitorSet, Violation, check_log, run_verdict
+from astaa_deft.engine.monitor.verdict import IMPLICIT
 
 MODULES = ("sim", "planning", "control")
 
@@ -123,7 +123,7 @@ def test_check_input_errors(tmp_path):
 
 
 def test_the_offline_check_is_a_library_call_that_prints_nothing(tmp_path, capsys):
-    from astaa_deft.session.check import check_recorded_run
+    from astaa_deft.engine.session.check import check_recorded_run
 
     checked = check_recorded_run(write_run(tmp_path / "nan.mcap", nan_at=12))
     assert capsys.readouterr().out == ""

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.log import records as rec
-from astaa_deft.log.reader import read_log
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import read_log
 
 ompl = pytest.importorskip("ompl", reason="OMPL (pip install ompl, in the test extra) is not importable here")
 

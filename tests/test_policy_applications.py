@@ -6,10 +6,10 @@ nothing, nor that the SUT had started after the window closed.
 
 from __future__ import annotations
 
-from astaa_deft.intercept.applications import ChannelTraffic, PolicyApplications, untouched_reason
-from astaa_deft.log import records as rec
-from astaa_deft.log.reader import read_log
-from astaa_deft.session.summary import format_info
+from astaa_deft.engine.intercept.applications import ChannelTraffic, PolicyApplications, untouched_reason
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.session.summary import format_info
 from proxy_helpers import ECHO_SPEC, run_proxy
 
 

@@ -1,4 +1,4 @@
-"""The one process launcher (astaa_deft/bus/process_launch.py): children that die with the tool, guarded forks.
+"""The one process launcher (astaa_deft/engine/bus/process_launch.py): children that die with the tool, guarded forks.
 
 Real processes throughout: a stand-in "tool" runs as a Python child of the
 test, starts its own children through the launcher and is killed with
@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.bus import process_launch
-from astaa_deft.bus.process_launch import UnsafeFork
-from astaa_deft.bus.processes import process_running as _alive, python_module
+from astaa_deft.engine.bus import process_launch
+from astaa_deft.engine.bus.process_launch import UnsafeFork
+from astaa_deft.engine.bus.processes import process_running as _alive, python_module
 
 from conftest import wait_for
 
@@ -30,7 +30,7 @@ needs_linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="t
 # has ended, then waits to be killed. START picks how the child is started.
 TOOL = textwrap.dedent("""
     import ctypes, os, signal, subprocess, sys, threading
-    from astaa_deft.bus import process_launch
+    from astaa_deft.engine.bus import process_launch
 
     def launcher():
         return process_launch.start(["sleep", "120"])
@@ -150,8 +150,8 @@ def test_the_fork_guard_raises_while_a_second_thread_runs():
 
 FORK_AFTER = textwrap.dedent("""
     import os, sys
-    from astaa_deft.bus import process_launch
-    from astaa_deft.bus import zenoh_config as zc
+    from astaa_deft.engine.bus import process_launch
+    from astaa_deft.engine.bus import zenoh_config as zc
 
     def fork_once():
         pid = process_launch.guarded_fork("a test fork")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.log.reader import read_log
+from astaa_deft.io.log.reader import read_log
 from proxy_helpers import ECHO_SPEC, SUT_DIR, alive, proxy_cmd, received, run_proxy, started_pids
 
 
@@ -178,7 +178,7 @@ def test_missing_module_command_is_one_clear_error_and_stops_the_others(tmp_path
 
 def test_router_configs_do_not_wait_to_scout():
     """Scouting is off, so a router must not spend scouting.delay (500 ms by default) at open."""
-    from astaa_deft.bus import zenoh_config as zc
+    from astaa_deft.engine.bus import zenoh_config as zc
 
     router = zc.config_dict(mode="router", listen=[zc.loopback_endpoint()])
     assert router["scouting"]["delay"] == 0 and router["scouting"]["multicast"]["enabled"] is False
@@ -198,8 +198,8 @@ def _wait_until(condition, limit: float = 30.0) -> None:
 def test_bursts_hand_over_every_queued_sample_once_in_order_even_as_the_subscriber_closes():
     import zenoh
 
-    from astaa_deft.bus import zenoh_config as zc
-    from astaa_deft.bus.proxy import BURST_LIMIT, run_bursts
+    from astaa_deft.engine.bus import zenoh_config as zc
+    from astaa_deft.engine.bus.proxy import BURST_LIMIT, run_bursts
 
     session = zc.open_session(zc.config_dict(mode="peer", listen=[zc.loopback_endpoint()]))
     try:
@@ -228,12 +228,12 @@ def test_intercepted_bursts_deliver_and_record_each_message_once_in_order():
     once and in order, and the recorder's rows hold each delivery once, in order, with its original."""
     import zenoh
 
-    from astaa_deft.bus import zenoh_config as zc
-    from astaa_deft.bus.interception import InterceptionBridge
-    from astaa_deft.bus.proxy import BURST_LIMIT, StarProxy
-    from astaa_deft.bus.topology import intercepted_key, unpack_deliveries, wire_event_parts
-    from astaa_deft.intercept import Interceptor, load_dictionary, parse_testcase
-    from astaa_deft.spec_loader import load_spec_text
+    from astaa_deft.engine.bus import zenoh_config as zc
+    from astaa_deft.engine.bus.interception import InterceptionBridge
+    from astaa_deft.engine.bus.proxy import BURST_LIMIT, StarProxy
+    from astaa_deft.engine.bus.topology import intercepted_key, unpack_deliveries, wire_event_parts
+    from astaa_deft.engine.intercept import Interceptor, load_dictionary, parse_testcase
+    from astaa_deft.engine.spec.loader import load_spec_text
 
     spec = load_spec_text("""
 name: bursts

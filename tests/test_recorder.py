@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from astaa_deft.codecs import DecodeError, get_codec
-from astaa_deft.session.recorder import FAST_JSON_LIMIT, undecodable
+from astaa_deft.io.codecs import DecodeError, get_codec
+from astaa_deft.engine.session.recorder import FAST_JSON_LIMIT, undecodable
 
 JSON = get_codec("json")
 
@@ -49,7 +49,7 @@ def test_cbor_verdict_is_the_codecs() -> None:
 
 @pytest.mark.parametrize("data", EDGES)
 def test_simdjsons_quick_answer_never_accepts_what_the_codec_rejects(data: bytes) -> None:
-    from astaa_deft.session.recorder import _JsonObjectCheck
+    from astaa_deft.engine.session.recorder import _JsonObjectCheck
 
     check = _JsonObjectCheck()
     accepted = check(data)
@@ -63,7 +63,7 @@ def test_simdjsons_quick_answer_agrees_with_the_codec_on_damaged_json() -> None:
     """Random byte edits of JSON objects (seeded): whatever simdjson accepts, the codec decodes."""
     import random
 
-    from astaa_deft.session.recorder import _JsonObjectCheck
+    from astaa_deft.engine.session.recorder import _JsonObjectCheck
 
     check, rnd = _JsonObjectCheck(), random.Random(1)
     bases = [b'{"a": 1, "b": [1.5, -2e3, "x\\u00e9"], "c": {"d": null, "e": true}}', b'{"header": {"seq": 1}}']

@@ -13,12 +13,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from astaa_deft.codecs import DecodeError, EncodeError, UnknownCodecError, get_codec
-from astaa_deft.errors import InputError
-from astaa_deft.fields import FieldPathError, set_field, type_at
-from astaa_deft.intercept.testcase import load_testcase
-from astaa_deft.spec_loader import load_spec, load_spec_text
-from astaa_deft.spec.ros2_types import dds_type_name, ros_type_name, shared_types, topic_key
+from astaa_deft.io.codecs import DecodeError, EncodeError, UnknownCodecError, get_codec
+from astaa_deft.model.errors import InputError
+from astaa_deft.model.fields import FieldPathError, set_field, type_at
+from astaa_deft.engine.intercept.testcase import load_testcase
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
+from astaa_deft.io.ros2.types import dds_type_name, ros_type_name, shared_types, topic_key
 
 STORE = shared_types().store
 T = STORE.types

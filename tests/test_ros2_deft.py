@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.deft.replay import trajectory_points
-from astaa_deft.log.reader import read_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.analysis.deft.replay import trajectory_points
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.spec.loader import load_spec
 
 pytest.importorskip("zenoh_ros2_sdk")
 

@@ -17,12 +17,12 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from astaa_deft.bus.zenoh_config import free_port
-from astaa_deft.codecs.rmw_attachment import parse_attachment
-from astaa_deft.ros2.graph import build_graph, parse_token
-from astaa_deft.ros2.skeleton import spec_skeleton
-from astaa_deft.spec_loader import load_spec, load_spec_text
-from astaa_deft.spec.ros2_types import shared_types
+from astaa_deft.engine.bus.zenoh_config import free_port
+from astaa_deft.io.codecs.rmw_attachment import parse_attachment
+from astaa_deft.analysis.ros2.graph import build_graph, parse_token
+from astaa_deft.analysis.ros2.skeleton import spec_skeleton
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
+from astaa_deft.io.ros2.types import shared_types
 
 pytest.importorskip("zenoh_ros2_sdk")
 
@@ -90,7 +90,7 @@ def test_a_hash_mismatch_is_noted_and_the_observed_key_kept():
 
 def test_discovery_with_no_ros2_nodes_is_one_clear_error(tmp_path):
     port = free_port()
-    router = subprocess.Popen([sys.executable, "-m", "astaa_deft.bus.router", "--listen", f"tcp/127.0.0.1:{port}"],
+    router = subprocess.Popen([sys.executable, "-m", "astaa_deft.engine.bus.router", "--listen", f"tcp/127.0.0.1:{port}"],
                               stdout=subprocess.PIPE, text=True)
     try:
         assert router.stdout.readline().strip() == "ready"

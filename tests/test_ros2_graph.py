@@ -20,11 +20,11 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from astaa_deft.bus import zenoh_config as zc
-from astaa_deft.bus.star_requests import StarLiveliness, ros2_token_destinations
-from astaa_deft.spec.ros2_tokens import parse_token
-from astaa_deft.spec.ros2_types import shared_types
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.bus import zenoh_config as zc
+from astaa_deft.engine.bus.star_requests import StarLiveliness, ros2_token_destinations
+from astaa_deft.io.ros2.tokens import parse_token
+from astaa_deft.io.ros2.types import shared_types
+from astaa_deft.engine.spec.loader import load_spec
 
 pytest.importorskip("zenoh_ros2_sdk")
 

@@ -18,9 +18,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from astaa_deft.codecs import get_codec
-from astaa_deft.codecs.rmw_attachment import parse_attachment
-from astaa_deft.spec.ros2_types import shared_types
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.codecs.rmw_attachment import parse_attachment
+from astaa_deft.io.ros2.types import shared_types
 
 pytest.importorskip("zenoh_ros2_sdk")
 

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.errors import InputError
-from astaa_deft.session import RunOptions, run_session
-from astaa_deft.spec_loader import load_spec, load_spec_text
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 ENDER = Path(__file__).parent / "sut" / "ender.py"
 SAFETY_LIMIT = 30.0  # the caller's own limit: a run that ignored its end would hit this
@@ -53,8 +53,8 @@ def _spec(tmp_path: Path, run: str, exit_code: int = -1, done_after: int = 8, ex
 
 def _offline(spec_path: Path, tmp_path: Path):
     """`check` over the run's log: it must name the same verdict and findings as the online monitors."""
-    from astaa_deft.log.reader import read_log
-    from astaa_deft.monitor import check_log
+    from astaa_deft.io.log.reader import read_log
+    from astaa_deft.engine.monitor import check_log
 
     return check_log(read_log(tmp_path / "run.mcap"), load_spec(spec_path))
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.errors import InputError
-from astaa_deft.log import records as rec
-from astaa_deft.log.reader import read_log
-from astaa_deft.session import RunOptions, RunResult, run_session
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.model.errors import InputError
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.session import RunOptions, RunResult, run_session
+from astaa_deft.engine.spec.loader import load_spec
 
 from proxy_helpers import ECHO_SPEC
 
@@ -96,7 +96,7 @@ def test_a_relative_run_dir_still_hands_modules_a_config_they_can_open(tmp_path,
     import sys
     import textwrap
 
-    from astaa_deft.spec_loader import load_spec_text
+    from astaa_deft.engine.spec.loader import load_spec_text
 
     elsewhere = tmp_path / "module_home"
     elsewhere.mkdir()

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.errors import InputError
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.spec.loader import load_spec
 
 GOOD = textwrap.dedent("""\
     name: mini

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from astaa_deft.bus.topology import query_servers, token_destinations
-from astaa_deft.log.reader import read_log
-from astaa_deft.spec_loader import load_spec
+from astaa_deft.engine.bus.topology import query_servers, token_destinations
+from astaa_deft.io.log.reader import read_log
+from astaa_deft.engine.spec.loader import load_spec
 from proxy_helpers import SUT_DIR, run_proxy
 
 SERVICES_SPEC = SUT_DIR / "services.yaml"

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.deft.frames import Stream, candidates
-from astaa_deft.deft.workflow import extract_module_tests
-from astaa_deft.log import records as rec
-from astaa_deft.log.reader import read_log
+from astaa_deft.analysis.deft.frames import Stream, candidates
+from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import read_log
 
 ompl = pytest.importorskip("ompl", reason="OMPL (pip install ompl, in the test extra) is not importable here")
 
@@ -184,8 +184,8 @@ def test_a_planner_that_cannot_be_snapshotted_is_not_a_replay_tester_and_minimis
     # OMPL's native state cannot be deep-copied, and the minimiser's replay keeps snapshots of the planner: the
     # replay is unavailable (not bad input), so a minimisation re-runs the whole system instead of stopping
     # with exit 2 (seen on a heavy-stack campaign: a plan_not_empty bucket's minimisation ended in that error).
-    from astaa_deft.minimise.replay_pool import ReplayPool, ReplayUnavailable
-    from astaa_deft.minimise.replay_tester import default_setup
+    from astaa_deft.analysis.minimise.replay_pool import ReplayPool, ReplayUnavailable
+    from astaa_deft.analysis.minimise.replay_tester import default_setup
 
     _, _, log, _ = clean_run
     with pytest.raises(ReplayUnavailable, match="cannot start.*ReedsSheppStateSpace"):

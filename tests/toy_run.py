@@ -17,8 +17,8 @@ SUT = Path(__file__).resolve().parent / "sut"
 
 def toy_log(directory: Path, cycles: int, *, chunk_size: int | None = None) -> tuple[Path, Path]:
     """Write ``directory/toy.yaml`` and ``directory/toy.mcap``; returns (spec, log)."""
-    from astaa_deft.log.writer import LogWriter
-    from astaa_deft.spec_loader import load_spec
+    from astaa_deft.io.log.writer import LogWriter
+    from astaa_deft.engine.spec.loader import load_spec
 
     sys.path[:0] = [str(SUT), str(SUT.parent)]
     try:

@@ -17,13 +17,13 @@ from dataclasses import dataclass, field
 from typing import Any
 from collections.abc import Callable
 
-from . import messages
-from .control import Controller
-from .planner_core import INPUT_CHANNELS, TRIGGER_CHANNEL, Planner
-from .prediction import predict
-from .scenario import Scenario, load_scenario
-from .simulator import PERIOD_STEPS, PHYSICS_DT
-from .world import World
+from astaa_deft.demo import messages
+from astaa_deft.demo.control import Controller
+from astaa_deft.demo.planner_core import INPUT_CHANNELS, TRIGGER_CHANNEL, Planner
+from astaa_deft.demo.prediction import predict
+from astaa_deft.demo.scenario import Scenario, load_scenario
+from astaa_deft.demo.simulator import PERIOD_STEPS, PHYSICS_DT
+from astaa_deft.demo.world import World
 
 
 @dataclass

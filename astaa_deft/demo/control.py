@@ -19,11 +19,11 @@ import sys
 import numpy as np
 import zenoh
 
-from . import vehicle
-from .common import KEYS, Inbox, JsonPublisher, log, run_module
-from .common import header as common_header
-from .geometry import wrap_angle
-from .messages import BadMessage, Localization, TrajectoryPoint, header, localization, trajectory
+from astaa_deft.demo import vehicle
+from astaa_deft.demo.common import KEYS, Inbox, JsonPublisher, log, run_module
+from astaa_deft.demo.common import header as common_header
+from astaa_deft.demo.geometry import wrap_angle
+from astaa_deft.demo.messages import BadMessage, Localization, TrajectoryPoint, header, localization, trajectory
 
 MODULE = "control"
 NOMINAL_DT = 0.02  # s between localizations (50 Hz); used before two stamps are known

@@ -13,8 +13,8 @@ import math
 from typing import NamedTuple
 from collections.abc import Sequence
 
-from .geometry import Box
-from .messages import PredictedObstacle
+from astaa_deft.demo.geometry import Box
+from astaa_deft.demo.messages import PredictedObstacle
 
 DT = 0.1  # s between trajectory points (prediction uses the same step)
 STEPS = 50  # points after the first: a 5 s horizon

@@ -22,10 +22,10 @@ import math
 from typing import Any, NamedTuple
 from collections.abc import Mapping, Sequence
 
-from . import messages, vehicle
-from .frenet import (DT, STEPS, LateralPath, SpeedProfile, forecast_boxes, interpolate,
+from astaa_deft.demo import messages, vehicle
+from astaa_deft.demo.frenet import (DT, STEPS, LateralPath, SpeedProfile, forecast_boxes, interpolate,
                      speed_profile, stop_profile)
-from .geometry import Box, boxes_overlap, wrap_angle
+from astaa_deft.demo.geometry import Box, boxes_overlap, wrap_angle
 
 INPUT_CHANNELS = ("routing", "localization", "traffic_light", "prediction")
 TRIGGER_CHANNEL = "prediction"

@@ -14,9 +14,9 @@ from collections.abc import Callable
 
 import zenoh
 
-from . import messages
-from .common import KEYS, Inbox, JsonPublisher, log, run_module
-from .planner_core import INPUT_CHANNELS, TRIGGER_CHANNEL, Planner
+from astaa_deft.demo import messages
+from astaa_deft.demo.common import KEYS, Inbox, JsonPublisher, log, run_module
+from astaa_deft.demo.planner_core import INPUT_CHANNELS, TRIGGER_CHANNEL, Planner
 
 MODULE = "planning"
 # Shape checks per input, so the planner only ever sees well-formed messages.

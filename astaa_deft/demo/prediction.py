@@ -14,8 +14,8 @@ import sys
 
 import zenoh
 
-from .common import KEYS, Inbox, JsonPublisher, log, run_module
-from .messages import BadMessage, PerceivedObstacle, perception
+from astaa_deft.demo.common import KEYS, Inbox, JsonPublisher, log, run_module
+from astaa_deft.demo.messages import BadMessage, PerceivedObstacle, perception
 
 MODULE = "prediction"
 HORIZON = 5.0  # s

@@ -20,10 +20,10 @@ import time
 
 import zenoh
 
-from .common import KEYS, ConfigError, Inbox, JsonPublisher, log, run_module
-from .messages import BadMessage, command as read_command
-from .scenario import ScenarioError, load_scenario
-from .world import World
+from astaa_deft.demo.common import KEYS, ConfigError, Inbox, JsonPublisher, log, run_module
+from astaa_deft.demo.messages import BadMessage, command as read_command
+from astaa_deft.demo.scenario import ScenarioError, load_scenario
+from astaa_deft.demo.world import World
 
 MODULE = "simulator"
 PHYSICS_DT = 0.01  # s, 100 Hz

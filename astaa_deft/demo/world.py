@@ -12,9 +12,9 @@ from dataclasses import dataclass
 from typing import Any
 from collections.abc import Callable
 
-from . import vehicle
-from .geometry import Box, separation, smoothstep5, wrap_angle
-from .scenario import Maneuver, ObjectSpec, Scenario
+from astaa_deft.demo import vehicle
+from astaa_deft.demo.geometry import Box, separation, smoothstep5, wrap_angle
+from astaa_deft.demo.scenario import Maneuver, ObjectSpec, Scenario
 
 
 @dataclass

@@ -1,0 +1,707 @@
+"""Extraction: from a recorded log to validated frames, replaying the planner in order."""
+
+from __future__ import annotations
+
+import contextlib
+from bisect import bisect_left, bisect_right
+import copy
+import functools
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from itertools import pairwise
+from typing import Any
+
+from astaa_deft.engine.bus.process_launch import fork_is_safe
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.codecs.base import DecodeError
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.log.reader import LogContents, LoggedMessage
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.spec.replay_section import ReplayModule
+from astaa_deft.analysis.deft.fork_replay import (
+    Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
+    tell,
+)
+from astaa_deft.analysis.deft.frames import Stream, candidates, trigger_candidates
+from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
+from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
+from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
+from astaa_deft.analysis.deft.validator import Comparison, compare, identical
+
+
+@dataclass
+class ExtractedFrame:
+    index: int  # 0-based, in output order
+    output: LoggedMessage | None  # None: the module answered this frame with nothing (per-trigger frames)
+    trigger_time: int
+    frame_time: int
+    inputs: dict[str, LoggedMessage]  # channel → the message used
+    comparison: Comparison
+    accepted: bool
+    candidates_tried: int
+    exact: bool  # the replayed output message equals the recorded one, field for field
+
+
+@dataclass(frozen=True)
+class Decided:
+    """One output as the extraction decided it, passed on as soon as it is (partial results, ``--resume``).
+
+    ``frame`` is None for an output skipped (``skipped`` says why); ``choice``
+    names its inputs (channel → index among that channel's messages in the
+    log, by log time), which is all a resumed extraction needs to step the
+    planner through it again.
+    """
+
+    output_index: int
+    frame: ExtractedFrame | None
+    choice: Mapping[str, int] | None = None
+    skipped: str | None = None
+
+
+OnOutput = Callable[[int, int, Decided], None]  # (outputs done, outputs in all, the one just decided)
+
+
+@dataclass
+class Extraction:
+    frames: list[ExtractedFrame] = field(default_factory=list)
+    skipped: list[tuple[int, str]] = field(default_factory=list)  # (output index, why)
+    outputs: int = 0
+    reconstruction_seconds: float = 0.0  # candidate search + decoding the chosen inputs
+    validation_seconds: float = 0.0  # reading the recorded and replayed trajectories, comparing them
+    planner_seconds: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+    recorded_outputs: int | None = None  # per-trigger frames: the outputs in the log (``outputs`` counts frames)
+    # The candidate search (forked): candidates stopped by the tight per-candidate limit learned from the
+    # accepted steps, those run again under the full limit because no other candidate was accepted, and
+    # outputs whose kept frame was one of those.
+    candidates_cut: int = 0
+    cut_retried: int = 0
+    retried_kept: int = 0
+    capped: int = 0  # expensive outputs not reproduced by their EXPENSIVE_TRIES likeliest candidates (no others tried)
+    reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
+    # Cheap outputs whose first candidate the replay process stepped itself, a shadow copy following:
+    # accepted, and not (the shadow then searched the others).
+    first_stepped_in_runner: int = 0
+    first_missed_in_runner: int = 0
+
+    def accepted_at(self, threshold: float) -> int:
+        return sum(1 for f in self.frames if f.comparison.distance <= threshold)
+
+
+def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str, list[LoggedMessage]]:
+    out: dict[str, list[LoggedMessage]] = {}
+    for name in names:
+        key = spec.channel(name).key
+        if key not in log.channels:
+            raise InputError(Problem(str(log.path), None, None,
+                                     f"the log has no channel '{name}' (key '{key}')",
+                                     "record the run with this spec, or check that the log belongs to it"))
+        out[name] = sorted(log.on(key), key=lambda m: m.log_time)
+    return out
+
+
+def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
+            progress: Callable[[int, int], None] = lambda done, total: None,
+            jobs: int | None = None, entry: ReplayModule | None = None, *,
+            decided: Callable[[Decided, int], None] = lambda outcome, total: None,
+            resume: Sequence[Decided] = ()) -> Extraction:
+    """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
+
+    ``entry`` names the module replayed (default: the planner). With ``jobs``
+    (an in-process planner on a system that can fork), the candidates of an
+    output are tried in forked processes, up to ``jobs`` at a time, from the
+    very same planner state (see fork_replay); otherwise — or while this
+    process runs other Python threads, which a fork must not copy in the
+    middle of their work — from deep copies of the planner, one after another.
+    ``decided(outcome, outputs in all)`` gets each output as soon as it is
+    decided, in order. ``resume``: the outputs an earlier extraction of this
+    log decided (in order, from the first): their frames are stepped once
+    each, as decided, and the search goes on after them.
+    """
+    cfg = entry if entry is not None else replay_module_of(spec)
+
+    def on_output(done: int, total: int, outcome: Decided) -> None:
+        progress(done, total)
+        decided(outcome, total)
+
+    if cfg.per_trigger:
+        return _extract_per_trigger(log, spec, planner, cfg, on_output)
+    if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
+        return run_supervised(
+            lambda send: _extract(log, spec, planner, lambda *message: send(message),
+                                  ForkedSearch(jobs, send), cfg, resume),
+            on_message=lambda message: on_output(*message))
+    return _extract(log, spec, planner, on_output, None, cfg, resume)
+
+
+def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
+                         progress: OnOutput) -> Extraction:
+    """One frame per trigger message, its replayed answer compared with the recorded one.
+
+    Answers pair with the recorded outputs in order; a frame the module
+    answers with nothing (``step`` returns None) is plausible when the next
+    output was logged after the next trigger. Like the planner's, a frame
+    has candidates (each other input with a message logged between the
+    trigger and the answer, plus ``skew_ms``, or without its messages logged up to
+    ``lookback_ms`` before the trigger: the module may have received them
+    in another order than the recorder), tried from the same state, the
+    first that matches kept (none: the closest). Inputs that do not decode are dropped, as the module's
+    deserialiser would. Triggers logged after the module's last recorded
+    output (plus ``skew_ms``) are not replayed: nothing recorded says what
+    it answered. The module's crash or hang ends the replay (it answers
+    nothing more).
+    """
+    msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
+    outputs = msgs.pop(cfg.output)
+    codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
+    t0 = time.perf_counter()
+    usable: dict[str, list[tuple[LoggedMessage, Any]]] = {}
+    for name, stream in msgs.items():
+        usable[name] = []
+        for m in stream:
+            with contextlib.suppress(DecodeError):  # dropped, as the module's deserialiser would
+                usable[name].append((m, codecs[name].decode(m.data)))
+    streams = {name: Stream(name, [m.log_time for m, _ in items]) for name, items in usable.items()}
+    result = Extraction(outputs=len(outputs))
+    result.reconstruction_seconds += time.perf_counter() - t0
+    last = (outputs[-1].log_time if outputs else log_start(log)) + int(cfg.skew_ms * 1e6)
+    triggers = [i for i, t in enumerate(streams[cfg.trigger].times) if t <= last]
+    result.outputs, result.recorded_outputs = len(triggers), len(outputs)
+    times = streams[cfg.trigger].times
+    lookback = int(cfg.lookback_ms * 1e6)
+    previous: dict[str, int] = {}
+    next_output = 0
+    for done, t_index in enumerate(triggers, start=1):
+        t_t = times[t_index]
+        t_next = times[t_index + 1] if t_index + 1 < len(times) else None
+        # Answers are paired with recorded outputs in order: a replayed answer is compared with the next
+        # output; a frame answered with nothing leaves it to a later frame, which is plausible only when it
+        # was logged after the next trigger (a module answers within its cycle, but may lag under load).
+        output = outputs[next_output] if next_output < len(outputs) else None
+        expected = None
+        if output is not None:
+            try:
+                expected = codecs[cfg.output].decode(output.data)
+            except DecodeError as exc:
+                result.warnings.append(f"output {next_output}: recorded output does not decode ({exc})")
+        nothing_plausible = output is None or t_next is None or not _answered_in_turn(times, t_index, outputs,
+                                                                                      next_output)
+        t1 = time.perf_counter()
+        options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback,
+                                     output.log_time if output is not None else None, int(cfg.skew_ms * 1e6))
+        if not planner.can_snapshot:
+            options = options[:1]
+        start_state = planner.snapshot() if len(options) > 1 else None
+        result.reconstruction_seconds += time.perf_counter() - t1
+        # (comparison, choice, replayed, error, the state after it or None if current, tries)
+        best: tuple[Comparison, dict[str, int], Any, str | None, Any, int] | None = None
+        for tries, choice in enumerate(options, start=1):
+            frame = {name: usable[name][i][1] for name, i in choice.items()}
+            if tries > 1 and start_state is not None:
+                planner.restore(copy.deepcopy(start_state))
+            t2 = time.perf_counter()
+            error = None
+            try:
+                replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
+            except StepHang as exc:
+                replayed, error = None, f"the module hangs: {exc}"
+            except Exception as exc:  # the module under test may crash on a frame: that is data
+                replayed, error = None, f"{type(exc).__name__}: {exc}"
+            t3 = time.perf_counter()
+            result.planner_seconds += t3 - t2
+            if error is not None:
+                cmp = Comparison(math.inf, math.inf, 0, "error")
+            elif replayed is None:
+                cmp = Comparison(0.0, 0.0, 0, "both empty") if nothing_plausible else Comparison(
+                    math.inf, math.inf, 0, "one empty")
+            else:
+                cmp = compare_outputs(cfg, replayed, expected)
+            result.validation_seconds += time.perf_counter() - t3
+            if error is None and cmp.within(cfg.threshold):
+                best = (cmp, choice, replayed, error, None, tries)
+                break
+            if best is None or cmp.distance < best[0].distance:
+                state = planner.snapshot() if start_state is not None else None
+                best = (cmp, choice, replayed, error, state, tries)
+        assert best is not None
+        cmp, choice, replayed, error, state, tries = best
+        if state is not None:
+            planner.restore(state)  # carry on from the state the kept frame produced
+        previous = choice
+        answered = replayed is not None and output is not None
+        if answered:
+            next_output += 1
+        result.frames.append(ExtractedFrame(
+            index=len(result.frames), output=output if answered else None, trigger_time=t_t, frame_time=t_t,
+            inputs={name: usable[name][i][0] for name, i in choice.items()}, comparison=cmp,
+            accepted=error is None and cmp.within(cfg.threshold),
+            candidates_tried=tries if cmp.within(cfg.threshold) else len(options),
+            exact=error is None and _same(replayed, expected if answered else None)))
+        progress(done, len(triggers), Decided(done - 1, result.frames[-1], choice))
+        if error is not None:
+            result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))
+            break
+    return result
+
+
+def _answered_in_turn(times: Sequence[int], t_index: int, outputs: list[LoggedMessage], next_output: int) -> bool:
+    """Is the trigger at ``t_index`` answered by the next of the outputs not paired yet?
+
+    A module answers its triggers in order. The outputs logged within one
+    trigger period answer the last triggers before them, as many as there
+    are: one, normally; several when the module worked off a backlog (seen
+    under load: control answered three queued localizations at once when its
+    first trajectory came). A trigger before those got no answer.
+    """
+    first = outputs[next_output].log_time
+    newest = bisect_right(times, first) - 1  # the newest trigger at or before the first pending output
+    if newest <= t_index:
+        return True
+    end = times[newest + 1] if newest + 1 < len(times) else math.inf
+    burst = bisect_left([o.log_time for o in outputs[next_output:next_output + newest - t_index + 1]], end)
+    return t_index > newest - burst
+
+
+def log_start(log: LogContents) -> int:
+    return min((m.log_time for key in log.channels for m in log.on(key)), default=0)
+
+
+def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
+    """The time the recorded planner took for this output: the gap since its previous one (or the median)."""
+    gaps = sorted(b.log_time - a.log_time for a, b in pairwise(outputs))
+    median = gaps[len(gaps) // 2] * 1e-9 if gaps else 0.0
+    if index == 0:
+        return median
+    return max(median, (outputs[index].log_time - outputs[index - 1].log_time) * 1e-9)
+
+
+def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
+             search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = ()) -> Extraction:
+    streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
+    outputs = streams_msgs.pop(cfg.output)
+    streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
+    codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
+    decoded: dict[tuple[str, int], Any] = {}
+
+    def decode(name: str, idx: int) -> Any:
+        k = (name, idx)
+        if k not in decoded:
+            try:
+                decoded[k] = codecs[name].decode(streams_msgs[name][idx].data)
+            except DecodeError:
+                decoded[k] = None
+        return decoded[k]
+
+    result = Extraction(outputs=len(outputs))
+    previous: dict[str, int] = {}
+    lookback = int(cfg.lookback_ms * 1e6)
+    skew = int(cfg.skew_ms * 1e6)
+    memory = SearchMemory()  # how the kept frames of earlier outputs were derived (tried first), how long they took
+    speculation = Speculation()
+
+    def report(out_index: int, skipped: str | None = None) -> None:  # a shadow follows the runner silently
+        if skipped is not None:
+            result.skipped.append((out_index, skipped))
+        frame = result.frames[-1] if skipped is None else None
+        if speculation.following is None:
+            progress(out_index + 1, len(outputs), Decided(out_index, frame, None if frame is None else {
+                name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped))
+
+    index_of = {name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in streams_msgs.items()}
+    for out_index, output in enumerate(outputs):
+        t0 = time.perf_counter()
+        generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
+                             outputs[out_index - 1].log_time + skew if out_index else None)
+        window = _recorded_window_s(streams[cfg.trigger], generic, output, outputs[out_index - 1]
+                                    if out_index else None, skew) if generic else 0.0
+        if out_index < len(resume):  # decided before: stepped once, as then; what it taught is learned again
+            before = resume[out_index]
+            if before.frame is None or before.choice is None:
+                report(out_index, before.skipped or "skipped")
+                continue
+            previous = dict(before.choice)
+            stepped, step_s = _step_decided(planner, before.frame, previous, decode, streams_msgs, output)
+            result.frames.append(replace(stepped, index=len(result.frames)))
+            for cand in generic if before.frame.accepted else ():
+                if dict(cand.choice) == previous:
+                    memory.learn(cand, step_s, window, expensive=search is not None and window > SPECULATE_MAX_WINDOW_S)
+            report(out_index)
+            continue
+        # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
+        # a planner step, so the frames nearest their trigger come first and only the first few are tried.
+        expensive = search is not None and window > SPECULATE_MAX_WINDOW_S
+        options, capped = memory.order(generic, expensive=expensive, first=not previous and planner.can_snapshot)
+        result.reordered += options[:1] != generic[:1]
+        t1 = time.perf_counter()
+        result.reconstruction_seconds += t1 - t0
+        try:
+            expected = codecs[cfg.output].decode(output.data)
+        except DecodeError as exc:
+            expected = None
+            result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
+        expected_points = trajectory_points(expected, cfg.trajectory) if cfg.trajectory is not None else []
+        expected_text = _text(expected)  # once per output: every candidate's output is checked against it
+        result.validation_seconds += time.perf_counter() - t1
+        if not options:
+            report(out_index, "an input had no message yet")
+            continue
+        if not planner.can_snapshot:
+            options = options[:1]
+        if search is not None:
+            full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
+            limit = memory.budget.neighbour_limit(full_limit) if expensive else memory.budget.limit(window, full_limit)
+            kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points, expected_text,
+                                  limit, full_limit, result, out_index, speculation, cheap=not expensive)
+            if kept is None:
+                report(out_index, "no candidate frame decodes or finishes within its time limit")
+                continue
+            cand, cmp, exact, tries, step_s = kept
+            result.capped += capped and not cmp.within(cfg.threshold)
+            if cmp.within(cfg.threshold):
+                memory.learn(cand, step_s, window, expensive)
+            previous = dict(cand.choice)
+            result.frames.append(ExtractedFrame(
+                index=len(result.frames), output=output,
+                trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
+                inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
+                comparison=cmp, accepted=cmp.within(cfg.threshold), candidates_tried=tries, exact=exact))
+            report(out_index)
+            continue
+        # Several candidates: each must start from the same planner state.
+        t1 = time.perf_counter()
+        start_state = planner.snapshot() if len(options) > 1 else None
+        result.planner_seconds += time.perf_counter() - t1
+        best = None  # (comparison, candidate, equal to the recording, state after it or None if current, tries)
+        for tries, cand in enumerate(options, start=1):
+            t0 = time.perf_counter()
+            frame = {name: decode(name, idx) for name, idx in cand.choice.items()}
+            result.reconstruction_seconds += time.perf_counter() - t0
+            if any(v is None for v in frame.values()):
+                continue
+            t1 = time.perf_counter()
+            if tries > 1 and start_state is not None:
+                planner.restore(copy.deepcopy(start_state))
+            try:
+                replayed = planner.step(frame)
+            except Exception as exc:  # the planner under test may crash on a frame: that is data
+                replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+            t2 = time.perf_counter()
+            result.planner_seconds += t2 - t1
+            cmp, exact = _judged(cfg, replayed, expected, expected_points, expected_text)
+            t1 = time.perf_counter()
+            result.validation_seconds += t1 - t2
+            if cmp.within(cfg.threshold):
+                best = (cmp, cand, exact, None, tries)
+                memory.learn(cand)
+                break
+            if best is None or cmp.distance < best[0].distance:
+                state = planner.snapshot() if start_state is not None else None
+                best = (cmp, cand, exact, state, tries)
+            result.planner_seconds += time.perf_counter() - t1
+        if best is None:
+            report(out_index, "no candidate frame decodes")
+            continue
+        cmp, cand, exact, state, _ = best
+        if state is not None:
+            planner.restore(state)  # carry on from the state the kept frame produced
+        tries = len(options) if not cmp.within(cfg.threshold) else best[4]
+        previous = dict(cand.choice)
+        result.frames.append(ExtractedFrame(
+            index=len(result.frames),
+            output=output,
+            trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]],
+            frame_time=cand.frame_time,
+            inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
+            comparison=cmp,
+            accepted=cmp.within(cfg.threshold),
+            candidates_tried=tries,
+            exact=exact,
+        ))
+        report(out_index)
+    if speculation.following is not None:  # a shadow told KEEP on the last output: the runner reports, not it
+        os._exit(0)
+    if search is not None:  # the counters as the last runner holds them (each winner takes them over)
+        speculation.let_go()
+        result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
+        result.first_stepped_in_runner, result.first_missed_in_runner = speculation.hits, speculation.misses
+    return result
+
+
+def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
+                  decode: Callable[[str, int], Any], messages: Mapping[str, list[LoggedMessage]],
+                  output: LoggedMessage) -> tuple[ExtractedFrame, float]:
+    """(the frame, with its messages; the CPU seconds of its step) of an output decided by the extraction
+    resumed: the planner steps once on it, as the interrupted extraction left it."""
+    started = time.process_time()
+    planner.step({name: decode(name, idx) for name, idx in choice.items()})
+    step_s = time.process_time() - started
+    return replace(decided, output=output, inputs={name: messages[name][idx] for name, idx in choice.items()}), step_s
+
+
+def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
+                       skew_ns: int) -> float:
+    """The longest the recorded planner can have worked on this output: from the later of its earliest
+    candidate trigger and its previous output (a busy planner starts as it publishes) to the output."""
+    start = min(trigger.times[c.choice[trigger.channel]] for c in options)
+    if previous is not None:
+        start = max(start, previous.log_time)
+    return max(output.log_time + skew_ns - start, skew_ns) * 1e-9
+
+
+# A cheap output's candidates are stepped in the runner itself, one after another, a shadow copy following
+# one output behind (see fork_replay.shadow), when the recorded planner answered within this window: a cheap
+# cycle, whose wrong frames are cheap too (a wrong frame stepped in the runner cannot be cut). Forking a worker
+# per candidate costs milliseconds per output, as much as such a step.
+SPECULATE_MAX_WINDOW_S = 0.05
+# The runner's word to its shadow on an output: (KEEP, i): candidate i is kept, step it and follow on;
+# (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
+# the candidates not tried yet. Each word also carries the runner's counters.
+KEEP, TRY_ON = "keep", "try on"
+IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
+
+
+@dataclass
+class Speculation:
+    """The runner's shadow (a copy one output behind, see fork_replay.shadow), or in a shadow what it follows."""
+
+    shadow: Shadow | None = None  # in the runner
+    following: Following | None = None  # in a shadow: where the runner's word comes from
+    # The last output kept was reproduced field for field: then a candidate that reproduces only the
+    # trajectory (a standing ego: the same points from another pose message, another stamp) does not end
+    # the search, the others are searched for the exact one (none: the closest is kept as before). A stack
+    # whose outputs never match exactly is not held up: after one such output this is off again.
+    expect_exact: bool = False
+    hits: int = 0  # cheap outputs whose first candidate was accepted
+    misses: int = 0  # … was not: the shadow took over and tried the others
+
+    def shadow_here(self) -> None:
+        """Fork a shadow unless one follows already (in the new shadow this returns with ``following`` set)."""
+        if self.shadow is None and self.following is None:
+            handle = shadow()
+            if isinstance(handle, Following):
+                self.following = handle
+            else:
+                self.shadow = handle
+
+    def word(self) -> tuple[str, Any]:
+        """In a shadow: the runner's word on the output at hand (it exits when the runner has none)."""
+        assert self.following is not None
+        kind, argument, (self.hits, self.misses) = next_word(self.following)
+        if kind != KEEP:  # from here on this process is the runner
+            os.close(self.following.word_fd)
+            self.following = None
+        return kind, argument
+
+    def tell(self, kind: str, argument: Any) -> None:
+        """In the runner: its word to the shadow; with any word but KEEP the runner ends here."""
+        if self.shadow is None:
+            assert kind == KEEP, "only a runner with a shadow hands an output over"
+            return
+        word = (kind, argument, (self.hits, self.misses))
+        if kind == KEEP:
+            tell(self.shadow, word)
+        else:
+            hand_over(self.shadow, word)
+
+    def let_go(self) -> None:
+        if self.shadow is not None:
+            drop(self.shadow)
+            self.shadow = None
+
+
+def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
+                  in_turn: bool) -> tuple[tuple[int, Any] | None, list[int]]:
+    """(candidate and outcome kept, or None; candidates tried in vain) for one output, stepped in this process.
+
+    ``in_turn`` (a cheap output with several candidates): the first
+    ``IN_TURN`` candidates are stepped here in order, a shadow holding the
+    state from before the output; the first accepted is kept and the shadow
+    steps it too; a wrong one hands the output over to the shadow, which
+    tries the next (with a shadow of its own). A lone candidate is stepped
+    here (the shadow, if any, follows). Anything else (None) is left to the
+    forked search, whose time limits stop a wrong frame that searches long.
+    """
+    tried: dict[int, Any] = {}  # outcomes of the candidates tried so far on this output
+    while True:
+        if in_turn:
+            speculation.shadow_here()  # (in the new shadow this returns too: it waits for the word on this output)
+        if speculation.following is not None:
+            kind, argument = speculation.word()
+            if kind == TRY_ON:  # a candidate was wrong: this process, in the state from before, tries the next
+                tried = argument
+                if len(tried) >= IN_TURN:
+                    return None, sorted(tried)
+                continue
+            return (argument, run(argument)), []
+        if count == 1:
+            outcome = run(0)
+            if outcome is None:
+                return None, []
+            speculation.tell(KEEP, 0)
+            return (0, outcome), []
+        if not in_turn:
+            return None, []
+        index = len(tried)  # in turn: the candidates in order
+        outcome = run(index)
+        if accepted(outcome):
+            speculation.hits += index == 0
+            speculation.tell(KEEP, index)
+            return (index, outcome), []
+        speculation.misses += index == 0
+        tried[index] = outcome
+        speculation.tell(TRY_ON, tried)  # does not return: the shadow carries on from the state before
+
+
+def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
+                   expected: Any, expected_points: list, expected_text: str, limit_s: float, full_limit_s: float,
+                   result: Extraction, out_index: int, speculation: Speculation, cheap: bool):
+    """(candidate, comparison, exact, tries, step seconds) kept for one output, in the process that carries
+    on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted.
+    A ``cheap`` output's candidates are stepped right here, one after another (see :func:`_step_in_turn`)."""
+    t0 = time.perf_counter()
+    frames = [{name: decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
+    result.reconstruction_seconds += time.perf_counter() - t0
+
+    def run(index: int):
+        frame = frames[index]
+        if any(v is None for v in frame.values()):
+            return None
+        started = time.process_time()  # CPU time, as the limits count it: the load does not count
+        try:
+            replayed = planner.step(frame)
+        except Exception as exc:  # the planner under test may crash on a frame: that is data
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        step_s = time.process_time() - started
+        return (*_judged(cfg, replayed, expected, expected_points, expected_text), step_s)
+
+    def accepted(outcome) -> bool:
+        """Within θ; and field for field while the outputs before were (else the closest is kept)."""
+        return outcome is not None and outcome[0].within(cfg.threshold) and (
+            outcome[1] or not speculation.expect_exact)
+
+    def settles(outcome) -> bool:
+        """No other candidate can do better: the output reproduced field for field, or (outputs not expected
+        field for field) within floating-point noise of it — the right frame on a planner not bit-stable."""
+        cmp, exact = outcome[0], outcome[1]
+        return (exact and cmp.within(cfg.threshold)) or (
+            not speculation.expect_exact and 0.0 < cmp.distance <= NEAR_MISS_M)
+
+    t1 = time.perf_counter()
+    kept, in_vain = _step_in_turn(len(options), run, accepted, speculation, in_turn=cheap and len(options) > 1)
+    # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
+    order = [i for i in range(len(options)) if i not in in_vain] + in_vain
+    if kept is None:
+        speculation.let_go()  # the search's winner carries on: it must not inherit the shadow's pipe
+        tried = search.search(len(order), lambda k: run(order[k]), accepted=accepted,
+                              closeness=lambda r: r[0].distance, limit_s=limit_s,
+                              settles=lambda r: settles(r), retry_limit_s=full_limit_s)
+        kept = None if tried is None else (order[tried.index], tried.result)
+    result.planner_seconds += time.perf_counter() - t1
+    if kept is None or kept[1] is None:
+        return None
+    index, (cmp, exact, step_s) = kept
+    speculation.expect_exact = exact
+    tries = index + 1 if cmp.within(cfg.threshold) else len(options)
+    return options[index], cmp, exact, tries, step_s
+
+
+def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list) -> Comparison:
+    """The planner's trajectories (points decoded once per output), or any module's output field by field."""
+    if cfg.trajectory is not None:
+        return compare(trajectory_points(replayed, cfg.trajectory), expected_points)
+    return compare_outputs(cfg, replayed, expected)
+
+
+def _judged(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list, expected_text: str
+            ) -> tuple[Comparison, bool]:
+    """(comparison, equal to the recorded output field for field) of one replayed output.
+
+    Most replayed outputs equal the recording: then the trajectories are
+    the same points, and their comparison is known without measuring
+    (``validator.identical``; measured on the OMPL stack, the measuring took
+    a third of a cheap cycle's replay).
+    """
+    exact = _text(replayed) == expected_text
+    if exact and cfg.trajectory is not None:
+        return identical(expected_points), True
+    return _judge(cfg, replayed, expected, expected_points), exact
+
+
+def search_note(extraction: Extraction) -> str | None:
+    """What the candidate search did to save time, when it did anything: for the extraction summary."""
+    parts = []
+    if extraction.reordered:
+        parts.append(f"{extraction.reordered} output(s) tried first the way earlier outputs were reproduced "
+                     f"(trigger rule and input offsets)")
+    stepped = extraction.first_stepped_in_runner + extraction.first_missed_in_runner
+    if stepped:
+        parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
+                     f"({extraction.first_missed_in_runner} wrong: searched on by a copy one output behind)")
+    if extraction.capped:
+        parts.append(f"{extraction.capped} expensive output(s) not reproduced by their {EXPENSIVE_TRIES} likeliest "
+                     f"candidates (nearest their trigger, in the learned order), the others not tried")
+    if extraction.candidates_cut:
+        parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
+                     f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "
+                     f"accepted), {extraction.retried_kept} kept after that")
+    return "candidate search: " + "; ".join(parts) if parts else None
+
+
+NEAR_MISS_M = 1e-9
+
+
+def near_miss_note(extraction: Extraction) -> str | None:
+    """Why outputs that match at 1e-9 m are not counted at θ = 0: the distances, and the flag that sets θ."""
+    near = sorted(f.comparison.distance for f in extraction.frames if 0.0 < f.comparison.distance <= NEAR_MISS_M)
+    if not near:
+        return None
+    quantiles = ", ".join(f"{name} {near[min(len(near) - 1, int(q * len(near)))]:.3g} m"
+                          for name, q in (("min", 0.0), ("median", 0.5), ("p90", 0.9)))
+    return (f"{len(near)} output(s) match within {NEAR_MISS_M:g} m but not exactly (distances: {quantiles}, "
+            f"max {near[-1]:.3g} m): floating-point noise, e.g. a planner state that does not survive copying "
+            f"bit for bit. If that is acceptable, set θ with --threshold {NEAR_MISS_M:g} "
+            f"(or planner.threshold in the spec).")
+
+
+def _text(value: Any) -> str:
+    """A decoded message as text that is equal exactly when the messages are equal field for field."""
+    return json.dumps(value, sort_keys=True, default=str)
+
+
+def _same(a: Any, b: Any) -> bool:
+    return _text(a) == _text(b)
+
+
+def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "debug.inputs") -> tuple[int, int]:
+    """(frames whose chosen inputs match the planner's own debug record, frames checked).
+
+    Evaluation only: reads the demo planner's debug block naming the header
+    sequence numbers of the inputs it used.
+    """
+    from astaa_deft.model.fields import get
+
+    codec = get_codec(spec.channel(planner_of(spec).output).encoding)
+    exact = checked = 0
+    for f in extraction.frames:
+        if f.output is None:
+            continue
+        try:
+            truth = get(codec.decode(f.output.data), debug_path)
+        except DecodeError:
+            continue
+        if not truth or not isinstance(truth[0][1], Mapping):
+            continue
+        checked += 1
+        used = {}
+        for name, msg in f.inputs.items():
+            try:
+                used[name] = get_codec(spec.channel(name).encoding).decode(msg.data)["header"]["seq"]
+            except (DecodeError, KeyError, TypeError):
+                used[name] = None
+        if all(used.get(name) == seq for name, seq in truth[0][1].items()):
+            exact += 1
+    return exact, checked

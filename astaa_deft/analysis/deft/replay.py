@@ -1,0 +1,350 @@
+"""Run the planner alone on frames: in-process (a factory) or its own process (lock-step over Zenoh).
+
+Both take a frame as {channel name: decoded message} and return the decoded
+output message. In-process planners can be snapshotted (deep copy), which is
+what lets extraction try several candidate frames from the same state.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+import json
+import queue
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, Literal, Protocol, TypeVar, overload
+
+from astaa_deft.engine.bus import process_launch
+from astaa_deft.engine.bus import zenoh_config as zc
+from astaa_deft.engine.bus.processes import stop_process, tail
+from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
+from astaa_deft.model.fields import get
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.spec.planner import resolve_args
+from astaa_deft.engine.spec.replay_module import TrajectoryLayout
+from astaa_deft.engine.spec.replay_section import ReplayModule
+from astaa_deft.analysis.deft.planner_section import replay_module_of
+from astaa_deft.analysis.deft.validator import Comparison, Point, compare, compare_messages
+
+OUTPUT_TIMEOUT = 10.0
+SETTLE_SECONDS = 0.01
+SETTLE_MAX = 0.2
+
+
+class ReplayPlanner(Protocol):
+    can_snapshot: bool
+
+    def step(self, frame: Mapping[str, dict]) -> dict: ...
+    def snapshot(self) -> Any: ...
+    def restore(self, snap: Any) -> None: ...
+    def close(self) -> None: ...
+
+
+def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.replay") -> Any:
+    """The factory named 'module:attr', imported from sys.path or else from the spec's directory.
+
+    A planner that sits next to its spec (a user's own stack, not an installed
+    package) is found without setting PYTHONPATH by hand.
+    """
+    module_name, _, attr = path.partition(":")
+    try:
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            top = module_name.split(".")[0]
+            if spec_dir is None or exc.name != top or not importable_from(spec_dir, top):
+                raise
+            if str(spec_dir) not in sys.path:
+                sys.path.append(str(spec_dir))  # after installed packages: never shadows them
+            module = importlib.import_module(module_name)
+        return getattr(module, attr)
+    except (ImportError, AttributeError) as exc:
+        beside = f" or the spec's directory {spec_dir}" if spec_dir is not None else ""
+        raise InputError(Problem("<spec>", None, None, f"replay factory '{path}' cannot be loaded: {exc}",
+                                 f"check '{where}.factory': its module must be importable from sys.path"
+                                 f"{beside} (set PYTHONPATH, or install its package)")) from None
+
+
+def importable_from(directory: Path, top: str) -> bool:
+    """A module or package named ``top`` sits in ``directory``."""
+    return (directory / f"{top}.py").is_file() or (directory / top / "__init__.py").is_file() \
+        or (directory / top).is_dir()
+
+
+class InProcessPlanner:
+    can_snapshot = True
+
+    def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None,
+                 where: str = "planner.replay"):
+        self.factory = factory
+        make = load_factory(factory, spec_dir, where)
+        _check_arguments(make, kwargs, factory, where)
+        self.obj = make(**kwargs)
+        if not callable(getattr(self.obj, "step", None)):
+            raise InputError(f"replay factory '{factory}' ({where}) returned an object without a step(frame) method")
+
+    def step(self, frame: Mapping[str, dict]) -> dict:
+        return self.obj.step(frame)
+
+    def snapshot(self) -> Any:
+        return copy.deepcopy(self.obj)
+
+    def restore(self, snap: Any) -> None:
+        self.obj = snap
+
+    def close(self) -> None:
+        pass
+
+
+def _check_arguments(make: Callable[..., Any], kwargs: Mapping[str, Any], factory: str, where: str) -> None:
+    """InputError when the spec's args do not fit the factory's parameters (a misspelt or missing arg)."""
+    import inspect
+
+    try:
+        signature = inspect.signature(make)
+    except (TypeError, ValueError):  # no signature to read (a builtin): the call itself will tell
+        return
+    try:
+        signature.bind(**kwargs)
+    except TypeError as exc:
+        raise InputError(Problem(where, None, None, f"replay factory '{factory}' does not take these args: {exc}",
+                                 f"give the args its parameters name ({signature})")) from None
+
+
+class LockstepPlanner:
+    """The planner's own process on a private Zenoh router, one frame at a time.
+
+    For each frame: publish the non-trigger inputs, then the trigger, then wait
+    for one output. Its state lives in the process, so no snapshots: only the
+    most likely candidate frame can be tried.
+    """
+
+    can_snapshot = False
+
+    def __init__(self, spec: Spec, planner: ReplayModule, params: Mapping[str, str]):
+        import zenoh
+
+        self.spec, self.planner = spec, planner
+        self._dir = tempfile.TemporaryDirectory(prefix="astaa-deft-replay-")
+        run_dir = Path(self._dir.name)
+        endpoint = zc.loopback_endpoint()
+        self.session = zc.open_session(zc.config_dict(mode="router", listen=[endpoint]))
+        config = zc.write_config_file(zc.config_dict(mode="client", connect=[endpoint]), run_dir / "zenoh.json5")
+        values = {**spec.params, **params, "python": sys.executable, "zenoh_config": str(config),
+                  "module": planner.module, "run_dir": str(run_dir),
+                  "spec_dir": str(spec.path.parent if spec.path else Path.cwd())}
+        argv = [part.format_map(values) for part in planner.command]
+        self.log_path = run_dir / "planner.log"
+        self.outputs: queue.Queue[bytes] = queue.Queue()
+        out_key = spec.channel(planner.output).key
+        self._sub = self.session.declare_subscriber(out_key, lambda s: self.outputs.put(s.payload.to_bytes()))
+        self._pubs = {name: self.session.declare_publisher(spec.channel(name).key,
+                                                           congestion_control=zenoh.CongestionControl.BLOCK)
+                      for name in planner.inputs}
+        with open(self.log_path, "wb") as log:
+            self.proc = process_launch.start(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
+                                             stderr=subprocess.STDOUT)
+        self._sent: dict[str, dict] = {}
+        self._latencies: deque[float] = deque([0.0], maxlen=10)
+        self._wait_connected()
+
+    def _wait_connected(self) -> None:
+        deadline = time.monotonic() + 20.0
+        trigger_pub = self._pubs[self.planner.trigger]
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise InputError(f"the planner process exited while starting:\n{tail(self.log_path)}")
+            # zenoh's stub types Publisher.matching_status as bool; at run time it is a MatchingStatus.
+            if trigger_pub.matching_status.matching:  # type: ignore[attr-defined]
+                time.sleep(0.3)  # its other subscriptions follow the first within moments
+                return
+            time.sleep(0.05)
+        raise InputError("the planner process never subscribed to its trigger channel")
+
+    def step(self, frame: Mapping[str, dict]) -> dict:
+        changed = False
+        for name, message in frame.items():
+            if name != self.planner.trigger and self._sent.get(name) != message:
+                self._pubs[name].put(json.dumps(message))
+                self._sent[name] = message
+                changed = True
+        if changed:
+            # A module may take each key's messages on a thread of its own: let the inputs
+            # land before the trigger, or it plans on the previous ones. The busier the
+            # module (the longer it takes to answer), the longer the wait.
+            time.sleep(min(SETTLE_MAX, max(SETTLE_SECONDS, 2.0 * statistics.median(self._latencies))))
+        sent = time.monotonic()
+        self._pubs[self.planner.trigger].put(json.dumps(frame[self.planner.trigger]))
+        try:
+            output = json.loads(self.outputs.get(timeout=OUTPUT_TIMEOUT))
+            self._latencies.append(time.monotonic() - sent)
+            return output
+        except queue.Empty:
+            raise InputError(f"the planner process gave no output within {OUTPUT_TIMEOUT:g} s:\n"
+                             f"{tail(self.log_path)}") from None
+
+    def snapshot(self) -> Any:
+        raise NotImplementedError
+
+    def restore(self, snap: Any) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        stop_process(self.proc, grace=5.0)
+        self._sub.undeclare()
+        self.session.close()
+        self._dir.cleanup()
+
+
+def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False,
+                 entry: ReplayModule | None = None, spec_dir: Path | None = None) -> ReplayPlanner:
+    """The module of ``entry`` (default: the planner) ready to step, in-process or as its own process.
+
+    Its factory is looked for beside the spec (``spec_dir`` for a spec not read from a file).
+    """
+    planner = entry if entry is not None else replay_module_of(spec)
+    if planner.factory and not (prefer_process and planner.command):
+        where = "planner.replay" if planner.where == "planner" else planner.where
+        return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
+                                spec.path.parent.resolve() if spec.path else spec_dir, where)
+    return LockstepPlanner(spec, planner, params)
+
+
+def code_fingerprint(entry: ReplayModule, spec: Spec) -> str | None:
+    """A hash of the sources beside the factory's module (its package's own files); None if not found.
+
+    A snapshot of the module's state is only as good as the code that made
+    it: a fixed module must be replayed from the start.
+    """
+    import hashlib
+    import inspect
+
+    if not entry.factory:
+        return None
+    try:
+        factory = load_factory(entry.factory, spec.path.parent.resolve() if spec.path else None)
+        source = inspect.getsourcefile(factory)
+    except (InputError, TypeError, OSError):
+        return None
+    if source is None:
+        return None
+    digest = hashlib.sha256()
+    for path in sorted(Path(source).parent.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+def compare_outputs(entry: ReplayModule, replayed: Any, recorded: Any) -> Comparison:
+    """A replayed output against the recorded one: as trajectories (the planner), else field by field."""
+    if entry.trajectory is not None:
+        return compare(trajectory_points(replayed, entry.trajectory), trajectory_points(recorded, entry.trajectory))
+    return compare_messages(replayed, recorded, entry.ignore)
+
+
+class StepHang(AstaaDeftError):
+    """A module's step ran past its ``hang_after``: the module hangs on this frame."""
+
+
+T = TypeVar("T")
+
+
+def within_limit(call: Callable[[], T], seconds: float) -> T:
+    """``call()``, interrupted by StepHang after ``seconds`` (0: no limit).
+
+    A SIGALRM timer interrupts Python code that never returns (a loop that
+    cannot end), in the main thread of a POSIX process; elsewhere, or inside
+    native code that never returns to the interpreter, the call is not
+    limited here (the replay pool's per-test timeout still stops it).
+    """
+    if seconds <= 0 or not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+        return call()
+
+    def expired(signum, frame):
+        raise StepHang(f"the step did not return within {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        return call()
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _getter(path: str):
+    """A fast reader for a field path: plain keys are indexed directly (the common case)."""
+    if path.replace("_", "").isalnum():
+        return lambda value: value[path]
+
+    def slow(value):
+        found = get(value, path)
+        if not found:
+            raise KeyError(path)
+        return found[0][1]
+
+    return slow
+
+
+@overload
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+                      with_heading: Literal[False] = False) -> list[Point]: ...
+
+
+@overload
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+                      with_heading: Literal[True]) -> list[tuple[float, float, float, float]]: ...
+
+
+def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+                      with_heading: bool = False) -> list[Point] | list[tuple[float, float, float, float]]:
+    """(x, y, t absolute) of each planned point, per the spec's layout; (x, y, t, heading) with_heading."""
+    if not isinstance(message, Mapping):
+        return []
+    found = get(message, layout.points)
+    if not found or not isinstance(found[0][1], list):
+        return []
+    offset = 0.0
+    if layout.time == "relative":
+        stamp = get(message, layout.stamp)
+        try:
+            offset = seconds(stamp[0][1]) if stamp else 0.0
+        except (KeyError, TypeError, ValueError):
+            offset = 0.0
+    gx, gy, gt, gh = _getter(layout.x), _getter(layout.y), _getter(layout.t), _getter(layout.heading)
+    out: list = []
+    for point in found[0][1]:
+        try:
+            xyt = (float(gx(point)), float(gy(point)), seconds(gt(point)) + offset)
+        except (KeyError, IndexError, TypeError, ValueError):
+            continue
+        if with_heading:
+            try:
+                heading = float(gh(point))
+            except (KeyError, IndexError, TypeError, ValueError):
+                heading = 0.0
+            out.append((*xyt, heading))
+        else:
+            out.append(xyt)
+    return out
+
+
+def seconds(value: Any) -> float:
+    """A time as seconds: a number, or a ROS 2 ``builtin_interfaces/msg/Time`` decoded ({sec, nanosec})."""
+    if isinstance(value, Mapping):
+        return float(value["sec"]) + float(value["nanosec"]) * 1e-9
+    return float(value)
+
+
+def _env() -> dict[str, str]:
+    import os
+
+    return dict(os.environ)

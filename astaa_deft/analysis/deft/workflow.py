@@ -1,0 +1,148 @@
+"""DeFT extraction as one library call: a recorded run in, deterministic planner module tests out.
+
+``extract_module_tests(log_path, spec_path, out_dir, …)`` reads the run,
+replays the planner over the frames it reconstructs (:func:`.extract.extract`),
+writes the accepted frames as a pytest suite (:func:`.export.export_suite`)
+with oracle tests for a collision the run saw, and returns what it found.
+``astaa-deft extract`` prints the report; benchmarks and campaigns call this.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.output_place import Place, ready_dir, writing
+from astaa_deft.io.log import layout
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import LogContents, read_log
+from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.model.sut import Spec
+from astaa_deft.analysis.deft.checkpoint import Checkpoint, identity, read_state
+from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.extract import Extraction, extract, ground_truth_rate
+from astaa_deft.analysis.deft.oracle import oracle_entries
+from astaa_deft.analysis.deft.planner_section import replay_module_of
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.analysis.deft.snapshots import add_oracle_snapshots
+
+
+def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
+    """The params the run was recorded with (replay must build the same planner)."""
+    meta = log.metadata.get(layout.RUN_METADATA, {})
+    if meta.get("spec") and meta["spec"] != spec.name:
+        raise InputError(Problem(str(log.path), None, None,
+                                 f"this log was recorded with spec '{meta['spec']}', not '{spec.name}'",
+                                 "pass the spec the run used"))
+    try:
+        return json.loads(meta.get("params", "{}"))
+    except ValueError:
+        return {}
+
+
+def idle_cores() -> int:
+    """The cores not busy right now (CPUs minus the load average, at least one): candidates run in parallel
+    only where that costs the right candidate nothing."""
+    cpus = os.cpu_count() or 1
+    return max(1, cpus - math.ceil(os.getloadavg()[0] - 0.5)) if hasattr(os, "getloadavg") else cpus
+
+
+@dataclass
+class ExtractReport:
+    extraction: Extraction
+    spec: Spec  # with the threshold used (the planner's)
+    accepted: int  # module tests written
+    oracles: int  # oracle tests written (frames that planned into a predicted obstacle before a collision)
+    collision: bool  # the run recorded a collision
+    manifest: Any  # export_suite's manifest; empty when nothing was written
+    ground_truth: tuple[int, int] | None = None  # (frames that used exactly the planner's inputs, checked)
+    entry: Any = None  # the replayed module's ReplayModule, with the threshold used
+    interrupted: bool = False  # stopped early: ``extraction`` holds the outputs decided so far
+    resumed: int = 0  # outputs an interrupted extraction had decided, stepped once each
+
+
+def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, threshold: float | None = None,
+                         process: bool = False, ground_truth: str | None = None, jobs: int | None = None,
+                         progress: Callable[[int, int], None] = lambda done, total: None,
+                         notice: Callable[[str], None] = lambda line: None,
+                         module: str | None = None, resume: bool = False) -> ExtractReport:
+    """Extract and write the module tests of one run (InputError on bad input).
+
+    ``out_dir`` is checked before the log is read (OutputError: a file in the
+    way, not writable, no room, no usable temporary directory); a write that
+    fails later raises OutputError too.
+
+    ``module`` names a module of the spec's ``replay:`` section (default:
+    the planner). ``progress(done, total)`` follows the outputs; ``notice``
+    gets the log reader's warnings; ``jobs`` bounds the worker processes that
+    try an output's candidate frames in parallel (default: the idle cores).
+    The tests of the outputs decided so far are written as the extraction
+    goes (see checkpoint); a KeyboardInterrupt (the command turns SIGTERM
+    into one) ends it early with those written and a report marked
+    ``interrupted``; ``resume`` goes on from such an extraction into the
+    same ``out_dir`` (InputError if there is none, or it was another's).
+    """
+    place = Place(out_dir, "-o")
+    ready_dir(place, temp=True)
+    spec = load_spec(spec_path)
+    if module is None and spec.planner is None:
+        raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
+                                 "describe the planning module under 'planner:' (see docs/deft.md), or name a "
+                                 "module of its 'replay:' section with --module"))
+    if module is not None and spec.planner is not None and module == spec.planner.module:
+        module = None  # the planner, as its own section describes it
+    entry = replay_module_of(spec, module)
+    if threshold is not None:
+        entry = replace(entry, threshold=threshold)
+        if module is None and spec.planner is not None:
+            spec = replace(spec, planner=replace(spec.planner, threshold=threshold))
+    log = read_log(log_path)
+    for warning in log.warnings:
+        notice(f"warning: {warning}")
+    params = run_params(log, spec)
+    names = identity(log_path, spec, entry)
+    if resume and entry.per_trigger:
+        raise InputError(Problem(str(out_dir), None, None, f"--resume continues a planner-style extraction; "
+                                 f"{entry.module} is replayed per trigger", "drop --resume"))
+    before = read_state(out_dir, names) if resume else []
+    checkpoint = Checkpoint(out_dir, spec, params, entry, names)
+    planner = make_planner(spec, params, prefer_process=process, entry=entry)
+    try:
+        with writing(place):  # the decided outputs' tests are written as the extraction goes
+            ex = extract(log, spec, planner, progress=progress, jobs=jobs or idle_cores(), entry=entry,
+                         decided=checkpoint.add, resume=before)
+    except KeyboardInterrupt:
+        with writing(place):
+            checkpoint.write()
+        return _interrupted(checkpoint, spec, entry, len(before))
+    finally:
+        planner.close()
+    accepted = [f for f in ex.frames if f.accepted]
+    collisions = [v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant_kind == "collision"]
+    kept = {f.index for f in accepted}
+    oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
+    with writing(place):
+        manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles, entry=entry)
+        if oracles:
+            add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
+        checkpoint.finished()
+    exact = ground_truth_rate(ex, spec, ground_truth) if ground_truth else None
+    return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry,
+                         resumed=len(before))
+
+
+def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: Any, resumed: int) -> ExtractReport:
+    """The report of an extraction stopped early: the outputs decided before, as written."""
+    frames = [d.frame for d in checkpoint.decided if d.frame is not None]
+    ex = Extraction(frames=[replace(f, index=i) for i, f in enumerate(frames)],
+                    skipped=[(d.output_index, d.skipped or "") for d in checkpoint.decided if d.frame is None],
+                    outputs=checkpoint.total)
+    accepted = len(checkpoint.accepted())
+    manifest = checkpoint.out_dir / MANIFEST if accepted else None
+    return ExtractReport(ex, spec, accepted, 0, False, manifest, None, entry, interrupted=True, resumed=resumed)

@@ -1,0 +1,601 @@
+"""The planner replay of a recorded run, with any subset of its mutations applied.
+
+For a failing invariant that reads only the planner's output, a whole-system
+re-run is not needed: the planner is deterministic on its own (docs/deft.md).
+A test of a subset of mutations (:meth:`ReplayModel.run`)
+
+1. rebuilds the planner's input streams with those mutations applied and
+   every other one reverted (:class:`~.mutations.ReceivedStreams`);
+2. takes, for every recorded planner output, its most likely frame — the
+   first candidate of :func:`astaa_deft.analysis.deft.frames.candidates`, with the
+   same never-older-than-the-previous-frame rule as extraction (the output
+   times are the recorded ones: the replay is open-loop);
+3. replays the planner (``planner.replay.factory``, in-process) over the
+   frames in order and feeds its outputs, at the recorded outputs' times, to
+   a :class:`~astaa_deft.engine.monitor.MonitorSet` holding only that invariant;
+4. answers FAIL at the first violation, PASS if none.
+
+Cost. The replay of the run with every mutation reverted (the baseline) is
+done once per process, keeping a planner snapshot every few frames. A test
+replays only where its subset makes a difference: from the first frame it
+changes until the planner is back in the baseline's state (the effect of a
+mutation usually dies out within a few frames), and stops at the first
+violation. Decoded messages are cached by origin. Frames whose inputs do not
+decode are not used: an undecodable input is dropped, as a module's
+deserialiser would.
+
+This module runs in whichever process builds the model; the worker processes
+that run tests in isolation are :mod:`.replay_pool`, the tester ddmin calls
+is :mod:`.replay_tester`. Its records (:class:`Job`, :class:`ReplaySetup`,
+:class:`ReplayAnswer`) cross the pipes to the workers pickled.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import json
+import pickle
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.codecs.base import DecodeError
+from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
+from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
+from astaa_deft.analysis.deft.replay import StepHang, make_planner, within_limit
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.log import layout
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import LoggedMessage, read_log
+from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
+from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.engine.session.check import spec_from_log
+from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.spec.replay_section import ReplayModule
+from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
+from astaa_deft.analysis.minimise.mutations import (
+    Delivered,
+    FieldSelection,
+    ReceivedStreams,
+    read_mutations,
+    sent_stream,
+)
+
+SNAPSHOTS = 400  # planner snapshots kept along the baseline replay (at most)
+
+
+@dataclass(frozen=True)
+class Job:
+    """One test: the kept mutations (number → field selection) and, for stage 2, the frames replayed.
+
+    ``frames`` None: every output's frame, continuing from the baseline's
+    snapshots. A tuple of output indices: only those frames, in order, from a
+    fresh planner (the scaffolding search).
+    """
+
+    kept: tuple[tuple[int, FieldSelection], ...]
+    frames: tuple[int, ...] | None = None
+
+    @classmethod
+    def of(cls, kept: Mapping[int, FieldSelection], frames: Sequence[int] | None = None) -> Job:
+        return cls(tuple(sorted(kept.items())), None if frames is None else tuple(sorted(frames)))
+
+
+@dataclass(frozen=True)
+class ReplayAnswer:
+    result: TestResult
+    failing_output: int | None = None  # index of the output whose replay broke the invariant
+
+
+@dataclass(frozen=True)
+class ReplaySetup:
+    """What a worker needs to build its own :class:`ReplayModel` (plain, picklable data)."""
+
+    log_path: str
+    spec_path: str | None  # None: the spec stored in the log, used only with trust_log_spec
+    invariant: str
+    module: str | None = None  # the replayed module (None: whichever entry can judge the failure)
+    output: str | None = None  # its output (a module may have one entry per output)
+    failure_module: str | None = None  # the module the failure names (a crash is judged for it only)
+    trust_log_spec: bool = False  # the user let the log's own spec run (--trust-log-spec)
+
+
+@dataclass(frozen=True)
+class Frame:
+    output: int  # index into the recorded outputs (per-trigger modules: into the trigger messages)
+    inputs: tuple[tuple[str, Delivered], ...]
+    frame_time_ns: int
+    trigger_time_ns: int
+
+    @property
+    def key(self) -> tuple:
+        return tuple(d.key for _, d in self.inputs)
+
+
+def load_spec_for(log, spec_path: str | None, *, trust_log_spec: bool) -> Spec:
+    """The spec a minimisation runs: the user's file, or (``spec_path`` None) the one stored in the log.
+
+    The log's own spec names programs (module commands, replay factories)
+    that a minimisation runs; it is used only with ``trust_log_spec``, else
+    InputError lists what it would run and the two ways on (spec/executes.py).
+    InputError too when the log holds no readable spec.
+    """
+    if spec_path is not None:
+        from astaa_deft.engine.spec.loader import load_spec
+
+        return load_spec(spec_path)
+    spec = spec_from_log(log, f"{log.path}:{layout.SPEC_ATTACHMENT}")
+    if spec is None:
+        raise InputError(Problem(str(log.path), None, None, "the log holds no spec",
+                                 "give the SUT spec with --spec sut.yaml"))
+    if not trust_log_spec and what_spec_runs(spec):
+        raise untrusted_spec_refusal(spec, str(log.path), command="minimise",
+                                     why="module replays and whole-system re-runs")
+    return spec
+
+
+def run_params(log) -> dict[str, str]:
+    """The params the run was recorded with: the replayed planner must be built the same way."""
+    try:
+        return json.loads(log.metadata.get(layout.RUN_METADATA, {}).get("params", "{}"))
+    except ValueError:
+        return {}
+
+
+def replayable(spec: Spec, invariant_name: str, failure_module: str | None = None) -> str | None:
+    """None if a module replay can judge this failure, else why not (the live tester is used then)."""
+    entry, why = replay_entry_for(spec, invariant_name, failure_module)
+    return None if entry is not None else why
+
+
+def replay_entry_for(spec: Spec, invariant_name: str, failure_module: str | None = None
+                     ) -> tuple[ReplayModule | None, str]:
+    """The first replayable module (the planner first) that can judge the failure, or (None, why none can)."""
+    entries = replay_modules(spec)
+    if not entries:
+        return None, "the spec has no 'planner' section"
+    reasons = []
+    for entry in entries:
+        why = _why_not(spec, entry, invariant_name, failure_module)
+        if why is None:
+            return entry, ""
+        reasons.append(why)
+    return None, "; ".join(dict.fromkeys(reasons))
+
+
+def _why_not(spec: Spec, cfg: ReplayModule, invariant_name: str, failure_module: str | None) -> str | None:
+    """None if ``cfg``'s replay can judge the failure, else why not."""
+    is_planner = cfg.where == "planner"
+    if not cfg.factory:
+        return ("the planner has no in-process replay ('planner.replay.factory')" if is_planner
+                else f"module '{cfg.module}' has no in-process replay ('{cfg.where}.factory')")
+    crash_shown = cfg.per_trigger and cfg.exceptions == "crash"
+    if invariant_name == IMPLICIT:
+        if crash_shown and failure_module == cfg.module:
+            return None
+        return "a module crashed" if is_planner or failure_module != cfg.module else (
+            f"module '{cfg.module}' crashed, but its replay does not show crashes ('exceptions: crash')")
+    spec = with_typed_invariants(spec)
+    invariant = next((i for i in spec.invariants if i.name == invariant_name), None)
+    if invariant is None:
+        return f"'{invariant_name}' is not an invariant of the spec"
+    if invariant.kind == "process" and crash_shown and not is_planner:
+        # The module's exception is its process's abnormal exit: judged by this very invariant.
+        return None if failure_module == cfg.module else f"'{invariant_name}' broke for another module"
+    timing_replayed = cfg.per_trigger and invariant.kind == "deadline"
+    if invariant.kind in ("process", "deadline") and not timing_replayed:
+        return f"'{invariant_name}' is a {invariant.kind} invariant: timing and processes are not replayed"
+    channels = MonitorSet(replace(spec, invariants=(invariant,)), 0).channels()
+    if channels != {cfg.output}:
+        whose = "the planner's output" if is_planner else f"module '{cfg.module}''s output"
+        return (f"'{invariant_name}' reads {', '.join(sorted(channels)) or 'no channel'}, "
+                f"not only {whose} '{cfg.output}'")
+    return None
+
+
+class ReplayModel:
+    """A run's planner replay with any subset of its mutations, in this process.
+
+    ``baseline=False`` skips the baseline replay: enough for :meth:`frames`
+    and :meth:`replay` (what the orchestrating process needs), not for :meth:`run`.
+    """
+
+    def __init__(self, setup: ReplaySetup, baseline: bool = True):
+        log = read_log(setup.log_path)
+        spec = with_typed_invariants(load_spec_for(log, setup.spec_path, trust_log_spec=setup.trust_log_spec))
+        if setup.module is not None:
+            entry: ReplayModule | None = replay_module_of(spec, setup.module, setup.output)
+            why_not = _why_not(spec, entry, setup.invariant, setup.failure_module) if entry else None
+        else:
+            entry, why_not = replay_entry_for(spec, setup.invariant, setup.failure_module)
+        if why_not or entry is None:
+            raise InputError(Problem(setup.log_path, None, None, f"no planner replay: {why_not}", "use --live-only"))
+        self.spec = spec
+        self.cfg = entry
+        self.failure_module = setup.failure_module
+        self.params = {**spec.params, **run_params(log)}
+        invariant = next((i for i in spec.invariants if i.name == setup.invariant), None)
+        # A crash no invariant names (IMPLICIT) is judged by the module's exception alone.
+        self.crash_fails = invariant is None
+        self.judged = replace(spec, invariants=(invariant,) if invariant is not None else ())
+        self.mlog = read_mutations(log, spec)
+        self.streams = ReceivedStreams(self.mlog, self.cfg.module, self.cfg.inputs)
+        missing = [name for name in self.cfg.inputs if not self.streams.has(name)]
+        if missing:
+            whose = "the planner's" if self.cfg.where == "planner" else f"module '{self.cfg.module}''s"
+            raise InputError(Problem(str(log.path), None, None,
+                                     f"the log has no messages on {whose} input(s) {', '.join(missing)}",
+                                     "record the run with this spec"))
+        self.outputs: list[LoggedMessage] = sent_stream(self.mlog, log, self.cfg.output)
+        self.start_ns = self.mlog.start_ns
+        stopping = [e.time_ns for e in log.records(rec.RunStopping) if e.time_ns]
+        self.end_ns = int(stopping[0]) if stopping else max((m.log_time for m in self.outputs), default=self.start_ns)
+        # Replay only up to the output that failed in the run. The frames after it carry the
+        # failure's own consequences (in closed loop the ego is already speeding), which would
+        # make the failure look independent of every mutation.
+        failed_at = (_first_failure_ns(log, self.judged) if invariant is not None
+                     else _first_crash_ns(log, self.cfg.module))
+        # Per-trigger frames: every trigger message up to the failure (a crash or hang has no output).
+        self.until_ns: int | None = failed_at if self.cfg.per_trigger else None
+        if failed_at is not None and self.cfg.per_trigger:
+            self.end_ns = min(self.end_ns, failed_at + 1)
+        elif failed_at is not None:
+            # On the clock the monitor judged by: a message's publish time (the source timestamp the
+            # recorder kept, e.g. a ROS 2 message's, which precedes its log time), else its log time.
+            self.outputs = [m for m in self.outputs if m.publish_time <= failed_at]
+            self.end_ns = min(self.end_ns, self.outputs[-1].log_time if self.outputs else failed_at)
+        self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
+        self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
+        self._decoded: dict[Any, Any] = {}
+        self.baseline_seconds = 0.0
+        if baseline:
+            self._baseline()
+
+    # -- frames ------------------------------------------------------------
+    def decode(self, channel: str, delivered: Delivered) -> Any:
+        if delivered.key not in self._decoded:
+            try:
+                self._decoded[delivered.key] = self._codecs[channel].decode(delivered.data)
+            except DecodeError:
+                self._decoded[delivered.key] = None
+        return self._decoded[delivered.key]
+
+    def frames(self, kept: Mapping[int, FieldSelection]) -> list[Frame | None]:
+        """The most likely frame of every recorded output (None where an input had no message yet).
+
+        Per-trigger modules: one frame per trigger message the module received up to the failure.
+        """
+        built = self.streams.build(kept)
+        usable = {name: [d for d in stream if self.decode(name, d) is not None] for name, stream in built.items()}
+        streams = {name: Stream(name, [d.time_ns for d in msgs]) for name, msgs in usable.items()}
+        trigger = self.cfg.trigger
+        if self.cfg.per_trigger:
+            out_t: list[Frame | None] = []
+            previous_t: dict[str, int] = {}
+            for t_index, t_t in enumerate(streams[trigger].times):
+                if self.until_ns is not None and t_t > self.until_ns:
+                    break
+                picked = trigger_frame(streams, trigger, t_index, previous_t)
+                previous_t = picked
+                out_t.append(Frame(len(out_t), tuple((name, usable[name][i]) for name, i in sorted(picked.items())),
+                                   t_t, t_t))
+            return out_t
+        trigger_times = streams[trigger].times
+        previous: dict[str, int] = {}
+        out: list[Frame | None] = []
+        for index, output in enumerate(self.outputs):
+            t_index = newest_at_or_before(trigger_times, output.log_time)
+            if t_index < 0:
+                out.append(None)
+                continue
+            t_t = trigger_times[t_index]
+            choice = frame_at(streams, trigger, t_index, t_t, previous)
+            frame_time = t_t
+            if choice is None:  # the trigger time does not work: the candidate search decides
+                options = candidates(streams, trigger, output.log_time, previous, self.lookback_ns)
+                if not options:
+                    out.append(None)
+                    continue
+                choice, frame_time = dict(options[0].choice), options[0].frame_time
+            previous = choice
+            out.append(Frame(index, tuple((name, usable[name][i]) for name, i in sorted(choice.items())),
+                             frame_time, t_t))
+        return out
+
+    def frame_message(self, frame: Frame) -> dict[str, Any]:
+        return {name: self.decode(name, d) for name, d in frame.inputs}
+
+    # -- replay ------------------------------------------------------------
+    def fresh_planner(self):
+        return make_planner(self.spec, self.params, entry=self.cfg)
+
+    def step(self, planner, frame: Frame) -> Any:
+        """The module's answer to ``frame`` (StepHang past ``hang_after``; the module's own exceptions)."""
+        return within_limit(functools.partial(planner.step, self.frame_message(frame)), self.cfg.hang_after)
+
+    def output_time(self, frame: Frame) -> int:
+        """When ``frame``'s output is judged: the recorded output's time (per trigger: the trigger's)."""
+        return frame.trigger_time_ns if self.cfg.per_trigger else self.outputs[frame.output].log_time
+
+    def output_sequence(self, frame: Frame) -> int:
+        return frame.output + 1 if self.cfg.per_trigger else self.outputs[frame.output].sequence
+
+    def _baseline(self) -> None:
+        """Replay with every mutation reverted, once: the snapshots and outputs tests start from.
+
+        Snapshots are pickled: restoring one is a ``pickle.loads``, and two
+        planner states are the same when their pickles are (see :meth:`run`).
+        A planner that cannot be pickled is deep-copied instead, without that check.
+        """
+        started = time.perf_counter()
+        self.base_frames = self.frames({})
+        self.base_keys = [f.key if f else None for f in self.base_frames]
+        stride = max(1, len(self.base_frames) // SNAPSHOTS)
+        planner = self.fresh_planner()
+        self.snapshots: dict[int, Any] = {}
+        self._pickled = True
+        self.base_outputs: list[Any] = []
+        self.base_error: str | None = None
+        self.base_error_frame: int | None = None
+        for k, frame in enumerate(self.base_frames):
+            if k % stride == 0:
+                self.snapshots[k] = self._snapshot(planner)
+            if frame is None:
+                self.base_outputs.append(None)
+                continue
+            try:
+                self.base_outputs.append(self.step(planner, frame))
+            except Exception as exc:  # judged by the tests that reach it
+                self.base_error = f"output {k}'s frame: {type(exc).__name__}: {exc}"
+                self.base_error_frame = k
+                self.base_outputs.extend([None] * (len(self.base_frames) - k - 1))
+                break
+        planner.close()
+        self.baseline_seconds = time.perf_counter() - started
+
+    def _snapshot(self, planner) -> Any:
+        state = planner.snapshot()
+        if self._pickled:
+            try:
+                return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception:  # not picklable: deep copies, and no convergence check
+                self._pickled = False
+                self.snapshots = {k: pickle.loads(v) for k, v in self.snapshots.items()}
+        return state
+
+    def _restore(self, k: int):
+        """A planner in the baseline's state just before output ``k``'s frame."""
+        s = max(i for i in self.snapshots if i <= k)
+        planner = self.fresh_planner()
+        state = self.snapshots[s]
+        planner.restore(pickle.loads(state) if self._pickled else copy.deepcopy(state))
+        for i in range(s, k):  # only when snapshots are sparser than frames
+            frame = self.base_frames[i]
+            if frame is not None:
+                self.step(planner, frame)
+        return planner
+
+    def _converged(self, planner, k: int) -> bool:
+        """Is ``planner`` in the state the baseline was in before output ``k``'s frame?"""
+        if not self._pickled or k not in self.snapshots or not planner.can_snapshot:
+            return False
+        try:
+            return pickle.dumps(planner.snapshot(), protocol=pickle.HIGHEST_PROTOCOL) == self.snapshots[k]
+        except Exception:
+            return False
+
+    def run(self, job: Job) -> ReplayAnswer:
+        """The test of one job (module doc).
+
+        Stage-1 and stage-3 jobs follow the baseline: where a frame's inputs
+        are the baseline's and the planner is in the baseline's state, the
+        output is the baseline's and nothing is replayed. The planner runs
+        from the first frame the subset changes until its state is the
+        baseline's again (same pickle) on a frame with unchanged inputs — a
+        mutation's effect usually dies out within a few frames — and again
+        at the next change.
+        """
+        kept = dict(job.kept)
+        frames = self.frames(kept)
+        monitors = self._monitors()
+        if job.frames is not None:
+            chosen = [frame for i in job.frames if i < len(frames) and (frame := frames[i]) is not None]
+            if self.cfg.per_trigger:
+                return self._judge_last(self.fresh_planner(), chosen, monitors)
+            return self._judge(self.fresh_planner(), chosen, monitors)
+        planner = None  # None: in step with the baseline, whose outputs are known
+        try:
+            for k, frame in enumerate(frames):
+                if k >= len(self.base_keys):  # more trigger messages than the baseline's (a duplicate kept)
+                    unchanged = False
+                else:
+                    unchanged = (frame.key if frame is not None else None) == self.base_keys[k]
+                if (self.cfg.per_trigger and self.base_error_frame is not None and k >= self.base_error_frame):
+                    unchanged = False  # the baseline's module crashed or hung here: the step itself is judged
+                if planner is not None and unchanged and self._converged(planner, k):
+                    planner.close()
+                    planner = None
+                if planner is None and unchanged:
+                    if frame is None:
+                        continue
+                    if self.base_error_frame is not None and k >= self.base_error_frame:
+                        return ReplayAnswer(TestResult(Outcome.UNRESOLVED,
+                                                       f"the planner raised on {self.base_error}"))
+                    found = self._feed(monitors, frame, self.base_outputs[k])
+                    if found:
+                        return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output)
+                    continue
+                if planner is None:
+                    planner = self._restore(k)
+                if frame is None:
+                    continue
+                answer = self._step(planner, monitors, frame)
+                if answer is _STOPPED:
+                    return self._silence(monitors, frames[k + 1:], frame.output)
+                if answer is not None:
+                    return answer
+        finally:
+            if planner is not None:
+                planner.close()
+        return self._finish(monitors)
+
+    def _silence(self, monitors: MonitorSet, rest: Sequence[Frame | None], stopped_at: int) -> ReplayAnswer:
+        """The module crashed or hangs on frame ``stopped_at``: it answers nothing more; the clock goes on.
+
+        A failure that follows (a deadline) is the stopping frame's: that is the frame a history is kept for.
+        """
+        why = f"module '{self.cfg.module}' silent since trigger {stopped_at}"
+        for frame in rest:
+            if frame is not None:
+                found = monitors.on_tick(self.output_time(frame))
+                if found:
+                    return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.start_ns)} "
+                                                                 f"({why})"), stopped_at)
+        answer = self._finish(monitors)
+        if answer.result.outcome is Outcome.FAIL:
+            return ReplayAnswer(TestResult(Outcome.FAIL, f"{answer.result.detail} ({why})"), stopped_at)
+        return answer
+
+    def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, Any, str | None]]:
+        """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
+        planner = self.fresh_planner()
+        out: list[tuple[Frame, Any, str | None]] = []
+        try:
+            for frame in frames:
+                try:
+                    out.append((frame, self.step(planner, frame), None))
+                except Exception as exc:  # StepHang included
+                    out.append((frame, None, f"{type(exc).__name__}: {exc}"))
+                    break
+        finally:
+            planner.close()
+        return out
+
+    def _monitors(self) -> MonitorSet:
+        return MonitorSet(self.judged, self.start_ns)
+
+    def _feed(self, monitors: MonitorSet, frame: Frame, message: Any) -> str | None:
+        time_ns = self.output_time(frame)
+        found = monitors.on_tick(time_ns)
+        if self.cfg.per_trigger:
+            if not found and message is not None:  # None: the module answered this frame with nothing
+                found = monitors.on_message(self.cfg.output, time_ns, message, self.output_sequence(frame))
+        else:
+            found = monitors.on_message(self.cfg.output, time_ns, message, self.output_sequence(frame))
+        if found:
+            return f"{format_violation(found[0], self.start_ns)} (output {frame.output})"
+        return None
+
+    def _judge(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
+        """Replay ``frames`` in order on ``planner`` and judge every output."""
+        try:
+            for n, frame in enumerate(frames):
+                answer = self._step(planner, monitors, frame)
+                if answer is _STOPPED:
+                    return self._silence(monitors, frames[n + 1:], frame.output)
+                if answer is not None:
+                    return answer
+        finally:
+            planner.close()
+        return self._finish(monitors)
+
+    def _judge_last(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
+        """A per-trigger module's scaffolding test: the history steps unjudged, then the last frame is judged.
+
+        Judging the history's outputs would be wrong here: a few kept frames
+        are seconds apart, which a deadline reads as silence. What is asked is
+        whether the last frame fails as in the run: it hangs (a deadline
+        failure), crashes, or its output breaks the invariant.
+        """
+        try:
+            for frame in frames[:-1]:
+                try:
+                    self.step(planner, frame)
+                except Exception as exc:  # StepHang included: the module stopped before the failing frame
+                    return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"module '{self.cfg.module}' stopped on "
+                                                                       f"trigger {frame.output}: {exc}"))
+            if not frames:
+                return ReplayAnswer(TestResult(Outcome.PASS))
+            last = frames[-1]
+            try:
+                message = self.step(planner, last)
+            except StepHang as exc:
+                if any(i.kind == "deadline" for i in self.judged.invariants):
+                    return ReplayAnswer(TestResult(Outcome.FAIL, f"module '{self.cfg.module}' hangs on trigger "
+                                                                 f"{last.output}: {exc}"), last.output)
+                return ReplayAnswer(TestResult(Outcome.PASS))
+            except Exception as exc:
+                if self.cfg.exceptions != "crash":
+                    return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"module '{self.cfg.module}' raised "
+                                                                       f"{type(exc).__name__}: {exc}"))
+                answer = self._crashed(monitors, last, exc)
+                return answer if answer is not _STOPPED else ReplayAnswer(TestResult(Outcome.PASS))
+            found = self._feed(monitors, last, message)
+            return ReplayAnswer(TestResult(Outcome.FAIL, found), last.output) if found else ReplayAnswer(
+                TestResult(Outcome.PASS))
+        finally:
+            planner.close()
+
+    def _step(self, planner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
+        """One replayed output, judged: an answer if it decides the test, else None.
+
+        A per-trigger module that hangs, or raises where its process would
+        die (``exceptions: crash``), answers ``_STOPPED`` unless that decides
+        the test (a crash the failure is): it answers nothing more.
+        """
+        try:
+            message = self.step(planner, frame)
+        except StepHang as exc:
+            if self.cfg.per_trigger:
+                return _STOPPED
+            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"the planner hangs on output {frame.output}'s frame: "
+                                                               f"{exc}"))
+        except Exception as exc:
+            if self.cfg.per_trigger and self.cfg.exceptions == "crash":
+                return self._crashed(monitors, frame, exc)
+            who = "the planner" if self.cfg.where == "planner" else f"module '{self.cfg.module}'"
+            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"{who} raised {type(exc).__name__}: {exc} "
+                                                               f"on output {frame.output}'s frame"))
+        found = self._feed(monitors, frame, message)
+        return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output) if found else None
+
+    def _crashed(self, monitors: MonitorSet, frame: Frame, exc: Exception) -> ReplayAnswer:
+        """The module's process would die of ``exc``: its abnormal exit, judged like the run's."""
+        what = f"module '{self.cfg.module}' crashes on trigger {frame.output}: {type(exc).__name__}: {exc}"
+        time_ns = self.output_time(frame)
+        found = monitors.on_process_exit(self.cfg.module, 1, None, time_ns, False)
+        if found:
+            return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.start_ns)} ({what})"),
+                                frame.output)
+        if self.crash_fails and self.failure_module == self.cfg.module:
+            return ReplayAnswer(TestResult(Outcome.FAIL, what), frame.output)
+        return _STOPPED
+
+    def _finish(self, monitors: MonitorSet) -> ReplayAnswer:
+        found = monitors.finish(self.end_ns)
+        if found:
+            return ReplayAnswer(TestResult(Outcome.FAIL, format_violation(found[0], self.start_ns)))
+        return ReplayAnswer(TestResult(Outcome.PASS))
+
+
+# A per-trigger module that crashed or hangs: no answer decided the test, and it answers nothing more.
+_STOPPED = ReplayAnswer(TestResult(Outcome.UNRESOLVED, "the module stopped answering"))
+
+
+def _first_crash_ns(log, module: str) -> int | None:
+    """When ``module`` first exited abnormally in the run (None if it never did)."""
+    exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExitRecord)]
+    times = [e.time_ns for e in exits if e.module == module and not e.during_shutdown and (e.returncode or e.signal)]
+    return min(times) if times else None
+
+
+def _first_failure_ns(log, judged: Spec) -> int | None:
+    """When the run's recorded outputs first broke the judged invariant (None if they never did)."""
+    from astaa_deft.engine.monitor import check_log
+
+    found = check_log(log, judged).violations
+    return min(v.time_ns for v in found) if found else None

@@ -1,0 +1,279 @@
+"""The three minimisation stages over ddmin, for either tester.
+
+1. **Mutations** — ddmin over the run's mutations: which of them does the
+   failure need?
+2. **Scaffolding** (replay only) — ddmin over the frames before the first
+   failing output: the shortest history the planner needs to fail again
+   (planners carry state, so the failing frame alone may not be enough). The
+   failing frame itself is always kept; each test replays a fresh planner
+   over the kept frames.
+3. **Fields** — within each surviving mutation that set several fields,
+   which field changes matter (replay: the other fields reverted in the
+   message; live: a pinned policy setting fewer fields).
+
+This module only orchestrates: it turns subsets into tester calls and ddmin
+results into a :class:`Minimisation`. The algorithm is :mod:`.ddmin`'s, the
+verdicts are the testers'. Which failure to minimise and which tester can
+judge it are decided here too (:func:`find_failure`, :func:`choose_tester`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.log.reader import LogContents
+from astaa_deft.engine.monitor import check_log, with_typed_invariants
+from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.spec.replay_section import ReplayModule
+from astaa_deft.analysis.minimise.ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
+from astaa_deft.analysis.minimise.live_tester import LiveTester
+from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation, run_start_ns
+from astaa_deft.analysis.minimise.replay_model import Job, ReplayModel, replay_entry_for
+from astaa_deft.analysis.minimise.replay_tester import DeftTester
+
+
+@dataclass(frozen=True)
+class Failure:
+    """The failure being minimised, as the log reported it."""
+
+    invariant: str  # an invariant's name, or "(module exit)" for a crash no invariant named
+    kind: str
+    module: str | None
+    channel: str | None
+    at: float  # seconds since the run's start
+    detail: str
+    crash: str
+
+    def describe(self) -> str:
+        where = f" on '{self.channel}'" if self.channel else f" (module '{self.module}')" if self.module else ""
+        return f"{self.invariant} ({self.kind}){where} at +{self.at:.2f} s: {self.detail}"
+
+
+def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure:
+    """The first violation of ``invariant`` (or the first of all) in the log (InputError if none).
+
+    The log is judged again by the spec's monitors, as ``astaa-deft check``
+    does, rather than trusting the violation events the online monitors
+    logged: the testers judge their runs that way too, so the failure they
+    look for is the one found the same way.
+    """
+    start_ns = run_start_ns(log)
+    result = check_log(log, with_typed_invariants(spec))
+    found = list(result.violations)
+    first = result.verdict.first
+    if first is not None and first.invariant == IMPLICIT:  # a crash no invariant named: in the verdict only
+        found.append(first)
+    found.sort(key=lambda v: v.time_ns)
+    if invariant is not None:
+        chosen = [v for v in found if v.invariant == invariant]
+        if not chosen:
+            broken = sorted({v.invariant for v in found})
+            raise InputError(Problem(str(log.path), None, None, f"invariant '{invariant}' never broke in this run",
+                                     f"broken in it: {', '.join(broken)}" if broken else "nothing broke in it"))
+        found = chosen
+    if not found:
+        raise InputError(Problem(str(log.path), None, None, "the run did not fail: no invariant broke, "
+                                 "no module crashed", "minimise a log whose run failed (astaa-deft check LOG)"))
+    first = found[0]
+    at_s = ((first.time_ns or start_ns) - start_ns) / 1e9
+    return Failure(first.invariant, first.kind, first.module, first.channel, at_s, first.detail, first.crash)
+
+
+def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str]:
+    """("replay" | "live", why)."""
+    kind, why, _ = choose_replay(spec, failure, live_only)
+    return kind, why
+
+
+def choose_replay(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str, ReplayModule | None]:
+    """("replay" | "live", why, the replayed module's entry or None)."""
+    if live_only:
+        return "live", "--live-only", None
+    entry, why_not = replay_entry_for(spec, failure.invariant, failure.module)
+    if entry is None:
+        return "live", f"{why_not}: whole-system re-runs", None
+    if entry.where == "planner":
+        return "replay", f"'{failure.invariant}' reads only the planner's output: planner replay", entry
+    if failure.invariant == IMPLICIT or failure.kind == "process":
+        return "replay", (f"module '{entry.module}' crashed, and its replay shows crashes: module replay "
+                          f"({entry.where})"), entry
+    return "replay", (f"'{failure.invariant}' reads only module '{entry.module}''s output '{entry.output}': "
+                      f"module replay ({entry.where})"), entry
+
+
+@dataclass
+class StageReport:
+    name: str
+    unit: str  # what was minimised: "mutations", "frames", "fields"
+    before: int
+    after: int
+    tests_run: int = 0
+    cache_hits: int = 0
+    seconds: float = 0.0
+    complete: bool = True
+    note: str = ""
+
+    @classmethod
+    def of(cls, name: str, unit: str, before: int, result: DDResult, extra_tests: int = 0,
+           note: str = "") -> StageReport:
+        return cls(name, unit, before, len(result.minimal), result.tests_run + extra_tests, result.cache_hits,
+                   result.seconds, result.complete, note)
+
+
+@dataclass
+class Minimisation:
+    """What survived, and what it cost."""
+
+    tester: str  # "replay" | "live"
+    failure: Failure
+    mutations: list[Mutation]  # every effective mutation of the log
+    kept: dict[int, FieldSelection]  # the minimal mutations (number → fields kept; None: all)
+    stages: list[StageReport] = field(default_factory=list)
+    outputs_replayed: int = 0  # replay: frames before the failure in the run …
+    frames: list[int] = field(default_factory=list)  # … and those kept (output indices), failing one last
+    failing_output: int | None = None
+    detail: str = ""  # the failure as the final test saw it
+    failure_rate: float | None = None  # live: the rate the last stage saw for the minimal set
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def chosen(self) -> list[tuple[Mutation, FieldSelection]]:
+        by_number = {m.number: m for m in self.mutations}
+        return [(by_number[n], selection) for n, selection in sorted(self.kept.items())]
+
+    def fields_count(self) -> int:
+        """Field changes in the minimal mutations."""
+        return sum(len(m.fields) if s is None else len(s) for m, s in self.chosen)
+
+
+Say = Callable[[str], None]
+
+
+def _stage_progress(say: Say, name: str) -> Callable[[str], None]:
+    return lambda line: say(f"  [{name}] {line}")
+
+
+def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, parallel: int,
+                    say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
+    """The three stages with the planner replay (raises NotReproducible / FailsWithoutItems from stage 1)."""
+    relevant = model.streams.relevant
+    out = Minimisation("replay", failure, model.mlog.mutations, {})
+    ignored = len(model.mlog.mutations) - len(relevant)
+    who = "the planner" if model.cfg.where == "planner" else "the module"
+    if ignored:
+        out.notes.append(f"{ignored} mutation(s) did not reach {who} ({model.cfg.module}) and cannot "
+                         f"change its replay: not tested")
+
+    # Stage 1: mutations.
+    items = [m.number for m in relevant]
+    say(f"stage 1: {len(items)} mutations reaching {who}")
+    first = ddmin(items, lambda subset: tester(Job.of({n: None for n in subset})), parallel=parallel,
+                  max_tests=max_tests, progress=_stage_progress(say, "mutations"))
+    kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
+    out.stages.append(StageReport.of("mutations", "mutations", len(model.mlog.mutations), first,
+                                     note=f"{len(items)} reached {who}"))
+    answer = tester.answer(Job.of(kept))
+    failing = answer.failing_output
+    if answer.result.outcome is not Outcome.FAIL or failing is None:
+        # A violation only the end of the run decides (a temporal invariant's future): no failing
+        # frame to build a history for; every frame stays.
+        out.kept, out.detail = kept, answer.result.detail
+        out.frames = [i for i, frame in enumerate(model.frames(kept)) if frame is not None]
+        out.outputs_replayed = len(out.frames)
+        return out
+
+    # Stage 2: scaffolding frames.
+    frames = model.frames(kept)
+    preceding = [i for i in range(failing) if frames[i] is not None]
+    out.outputs_replayed = len(preceding) + 1
+    say(f"stage 2: {len(preceding)} frames before the failing output {failing}")
+    started = time.monotonic()
+    alone = tester(Job.of(kept, [failing]))
+    if alone.outcome is Outcome.FAIL:
+        scaffolding: list[int] = []
+        out.stages.append(StageReport("scaffolding", "frames", len(preceding) + 1, 1, 1, 0,
+                                      time.monotonic() - started, note="the failing frame alone fails"))
+    else:
+        second = ddmin(preceding, lambda subset: tester(Job.of(kept, [*subset, failing])), parallel=parallel,
+                       check_full=False, max_tests=max_tests, progress=_stage_progress(say, "frames"))
+        scaffolding = list(second.minimal)
+        report = StageReport.of("scaffolding", "frames", len(preceding) + 1, second, extra_tests=1)
+        report.after += 1  # the failing frame
+        out.stages.append(report)
+    out.frames = scaffolding + [failing]
+
+    # Stage 3: fields.
+    by_number = {m.number: m for m in model.mlog.mutations}
+    kept, _ = _minimise_fields(kept, by_number, lambda selection: tester(Job.of(selection, out.frames)),
+                               parallel, max_tests, say, out)
+    final = tester.answer(Job.of(kept, out.frames))
+    out.kept, out.failing_output, out.detail = kept, final.failing_output or failing, final.result.detail
+    return out
+
+
+def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Failure, full: TestResult,
+                  say: Say = lambda line: None, max_tests: int | None = None, jobs: int = 1) -> Minimisation:
+    """Stages 1 and 3 with whole-system re-runs; ``full`` is the result of the full set, tested already.
+
+    ``jobs`` > 1 tests that many subsets of a round at once, each run an isolated session of the SUT
+    (its own router port, run directory and log, as a campaign's cases).
+    """
+    out = Minimisation("live", failure, list(mutations), {})
+    by_number = {m.number: m for m in mutations}
+    items = [m.number for m in mutations]
+    cache = OutcomeCache()
+    cache.put(tuple(range(len(items))), full)  # the reproduction check's answer: not run again
+    say(f"stage 1: {len(items)} mutations, {tester.repeats} run(s) per test"
+        + (f", {jobs} tests at once" if jobs > 1 else ""))
+    first = ddmin(items, lambda subset: tester([(by_number[n], None) for n in subset]), cache=cache,
+                  max_tests=max_tests, progress=_stage_progress(say, "mutations"), parallel=jobs)
+    out.stages.append(StageReport.of("mutations", "mutations", len(items), first, extra_tests=1,
+                                     note="the full-set reproduction check included"))
+    kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
+    last = first.results.get(first.indices) or full
+    kept, fields_last = _minimise_fields(kept, by_number, lambda selection: tester(
+        [(by_number[n], s) for n, s in sorted(selection.items())]), jobs, max_tests, say, out)
+    last = fields_last or last
+    out.kept, out.detail, out.failure_rate = kept, last.detail, last.failure_rate
+    return out
+
+
+def _minimise_fields(kept: Mapping[int, FieldSelection], by_number: Mapping[int, Mutation],
+                     test: Callable[[dict[int, FieldSelection]], TestResult], parallel: int,
+                     max_tests: int | None, say: Say,
+                     out: Minimisation) -> tuple[dict[int, FieldSelection], TestResult | None]:
+    """Stage 3: the field changes that matter within the kept mutations that set several.
+
+    Returns the kept selection and the result of its last test (None if it was not tested here).
+    """
+    reducible = [n for n in sorted(kept) if by_number[n].fields_reducible]
+    items = [(n, i) for n in reducible for i in range(len(by_number[n].fields))]
+    if not items:
+        out.stages.append(StageReport("fields", "fields", out_fields(kept, by_number), out_fields(kept, by_number),
+                                      note="no surviving mutation sets several fields"))
+        return dict(kept), None
+
+    def selection(subset: Sequence[tuple[int, int]]) -> dict[int, FieldSelection]:
+        chosen: dict[int, FieldSelection] = {n: (None if n not in reducible else ()) for n in kept}
+        for n, i in subset:
+            chosen[n] = (*(chosen[n] or ()), i)  # a reducible mutation's selection starts as (), never None
+        return chosen
+
+    say(f"stage 3: {len(items)} field changes in {len(reducible)} mutation(s)")
+    before = out_fields(kept, by_number)
+    result = ddmin(items, lambda subset: test(selection(subset)), parallel=parallel, check_full=False,
+                   max_tests=max_tests, progress=_stage_progress(say, "fields"))
+    final = selection(result.minimal)
+    report = StageReport.of("fields", "fields", before, result)
+    report.after = out_fields(final, by_number)
+    out.stages.append(report)
+    return final, result.results.get(result.indices)
+
+
+def out_fields(kept: Mapping[int, FieldSelection], by_number: Mapping[int, Mutation]) -> int:
+    return sum(len(by_number[n].fields) if s is None else len(s) for n, s in kept.items())
+

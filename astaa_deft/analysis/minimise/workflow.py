@@ -1,0 +1,363 @@
+"""Minimisation as one library call: ``minimise_log(log, out_dir, options, progress=…) -> MinimiseReport``.
+
+Reads an intercepted run that failed, finds the failure (the named
+invariant's first violation, else the run's first), and minimises the run's
+mutations to those the failure needs — with the planner replay when the
+failure is in the planner's output, else with whole-system re-runs
+(docs/minimise.md). The minimal test case is then run live ``confirm``
+times to check it reproduces the failure through the proxy.
+
+This module owns the policy: which tester, the live fallback when the
+replay does not reproduce the failure, the reproduction check (flaky or
+not), the confirmation runs and the verdict. It prints nothing: progress
+lines go to the ``progress`` callback, and the report says what happened;
+``astaa-deft minimise`` prints them and picks the exit code, a campaign
+may do something else with them.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
+from astaa_deft.io.log import layout
+from astaa_deft.io.log.reader import LogContents, read_log
+from astaa_deft.engine.monitor import with_typed_invariants
+from astaa_deft.engine.spec.executes import TRUST_FLAG, what_spec_runs
+from astaa_deft.io.output_place import Place, ready_dir, writing
+from astaa_deft.analysis.minimise.anchoring import choose_anchor, pin_to_anchor
+from astaa_deft.analysis.minimise.ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
+from astaa_deft.analysis.minimise.live_tester import MARGIN_SECONDS, LiveRun, LiveTester
+from astaa_deft.analysis.minimise.mutations import Mutation, read_mutations
+from astaa_deft.analysis.minimise.output import (
+    MINIMAL_MCAP,
+    TESTS_DIR,
+    copy_log,
+    format_summary,
+    prepare_directory,
+    summary,
+    write_module_tests,
+    write_replay_log,
+    write_summary,
+    write_testcase_file,
+)
+from astaa_deft.analysis.minimise.replay_model import ReplayModel, load_spec_for, run_params
+from astaa_deft.analysis.minimise.replay_pool import ReplayPool, ReplayUnavailable
+from astaa_deft.analysis.minimise.replay_tester import DeftTester, default_setup
+from astaa_deft.analysis.minimise.restrict import restricted_testcase
+from astaa_deft.analysis.minimise.stages import (
+    Failure, Minimisation, choose_replay, find_failure, minimise_live, minimise_replay,
+)
+
+FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure not reproducible
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class MinimiseOptions:
+    spec_path: Path | None = None  # None: the spec stored in the log
+    invariant: str | None = None  # the failure to keep (None: the run's first violation)
+    repeats: int = 1  # whole-SUT re-runs per test when no replay applies
+    parallel: int = 2  # tests run at once where the replay allows
+    live_only: bool = False  # always re-run the whole SUT
+    confirm: int = 3  # live re-runs of the final result
+    max_tests: int | None = None  # stop after this many tests and keep the smallest failure
+    live_fallback: bool = True  # re-run the SUT when the planner replay does not reproduce the failure
+    jobs: int = 1  # whole-system runs at once (live tests, confirmations), each an isolated session
+    # Without spec_path: run what the log's own spec names (module commands, replay factories). Off, the
+    # workflow refuses and lists them: a log is data (docs/minimise.md, "Logs are data").
+    trust_log_spec: bool = False
+
+    def check(self) -> None:
+        """InputError naming the option when a value makes no sense."""
+        if self.repeats < 1:
+            raise InputError(Problem("--repeats", None, None, f"{self.repeats} runs per test", "give at least 1"))
+        if self.parallel < 1:
+            raise InputError(Problem("--parallel", None, None, f"{self.parallel} workers", "give at least 1"))
+        if self.jobs < 1:
+            raise InputError(Problem("--jobs", None, None, f"{self.jobs} runs at once", "give at least 1"))
+        if self.confirm < 0:
+            raise InputError(Problem("--confirm", None, None, f"{self.confirm} runs",
+                                     "give 0 (no live check) or more"))
+
+
+@dataclass
+class MinimiseReport:
+    """What a minimisation found: ``reproduced`` is True when the minimal test case stands (exit code 0)."""
+
+    reproduced: bool
+    verdict: str
+    summary: dict[str, Any]  # as written to DIR/summary.json
+    complete: bool = True  # False: stopped before minimising (no mutation needed, not reproducible)
+    files: dict[str, Path] = field(default_factory=dict)
+
+    def text(self) -> str:
+        """The closing lines a command prints."""
+        return format_summary(self.summary) if self.complete else f"minimise: {self.verdict}"
+
+
+def minimise_log(log_path: Path, out_dir: Path, options: MinimiseOptions = MinimiseOptions(), *,
+                 progress: Progress = lambda line: None) -> MinimiseReport:
+    """Minimise the failing intercepted run ``log_path`` into ``out_dir`` (InputError on bad input).
+
+    ``out_dir`` and the temporary directory are checked before the log is
+    read; either refusing a write, then or later, raises OutputError.
+    """
+    options.check()
+    place = Place(out_dir, "-o")
+    ready_dir(place, temp=True)
+    with writing(place), tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as scratch:
+        return _minimise(log_path, out_dir, options, progress, Path(scratch))
+
+
+def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
+              scratch: Path) -> MinimiseReport:
+    started = time.monotonic()
+    spec_path = options.spec_path
+    log = read_log(log_path)
+    for warning in log.warnings:
+        say(f"warning: {warning}")
+    spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None,
+                                               trust_log_spec=options.trust_log_spec))
+    if spec.path is None:  # the log's own spec (trusted): live runs (their recorder) and replays need it as a file
+        from astaa_deft.engine.spec.loader import load_spec
+
+        runs = what_spec_runs(spec)
+        if runs:
+            say(f"running what the spec stored in the log names ({TRUST_FLAG}):")
+        for item in runs:
+            say(f"  {item}")
+        spec_path = scratch / "spec.yaml"
+        spec_path.write_text(spec.source_text)
+        spec = with_typed_invariants(load_spec(spec_path))
+    recorded_with = log.metadata.get(layout.RUN_METADATA, {}).get("spec")
+    if recorded_with and recorded_with != spec.name:
+        raise InputError(Problem(str(log_path), None, None,
+                                 f"this log was recorded with spec '{recorded_with}', not '{spec.name}'",
+                                 "pass the spec the run used"))
+    mlog = read_mutations(log, spec)
+    if not mlog.mutations:
+        reason = ("it was not recorded with a policy (astaa-deft proxy --policy …)"
+                  if layout.MUTATIONS_TOPIC not in log.channels
+                  else f"its {mlog.noop} mutation event(s) changed nothing")
+        raise InputError(Problem(str(log_path), None, None, f"the log holds no mutations: {reason}",
+                                 "minimise a run that was intercepted"))
+    failure = find_failure(log, spec, options.invariant)
+    prepare_directory(out_dir)
+    tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
+    recorded_params = run_params(log)
+    if recorded_params:  # they fill the spec's placeholders in the commands that run
+        say("the run's params (from the log): " + ", ".join(f"{k}={v}" for k, v in sorted(recorded_params.items())))
+    params = {**spec.params, **recorded_params}
+    original = original_testcase(log)
+    # Live tests pin each mutation counted from the running stack, not from the run's start (anchoring.py).
+    anchor = choose_anchor(log, mlog, original)
+    mlog = pin_to_anchor(mlog, log, anchor)
+    say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
+    if anchor is not None:
+        say(f"pinned mutations count from the first '{anchor}' message on (the stack is live then)")
+    say(f"tester: {tester_kind} ({why})")
+
+    result: Minimisation | None = None
+    model: ReplayModel | None = None
+    replays = replay_hits = 0
+    notes: list[str] = []
+    if tester_kind == "replay":
+        assert entry is not None
+        setup = default_setup(log_path, spec_path, failure.invariant)
+        if entry.where != "planner":
+            setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
+        workers = max(1, min(options.parallel, os.cpu_count() or 1))
+        try:
+            pool = ReplayPool(setup, workers=workers)  # starts the workers: their baseline replay is done
+        except ReplayUnavailable as exc:
+            if not options.live_fallback:
+                return _stopped(out_dir, failure, started, log_path, (
+                    f"{exc} (whole-system re-runs were not tried: --no-live-fallback)"))
+            note = f"{exc}; whole-system re-runs instead"
+            say(f"note: {note}")
+            notes.append(note)
+            tester_kind, why = "live", "the module cannot be replayed here"
+    if tester_kind == "replay":
+        assert entry is not None
+        with pool:
+            what = "planner replay" if entry.where == "planner" else f"module replay ({entry.module})"
+            say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
+                f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
+            tester = DeftTester(pool)
+            model = ReplayModel(setup, baseline=False)
+            try:
+                result = minimise_replay(tester, model, failure, pool.workers, say, options.max_tests)
+            except NotReproducible as exc:
+                if not options.live_fallback:
+                    return _stopped(out_dir, failure, started, log_path, (
+                        f"the failure ({failure.invariant}) does not reproduce in the planner replay: {exc} "
+                        f"(whole-system re-runs were not tried: --no-live-fallback)"))
+                note = f"the planner replay does not reproduce the failure ({exc}); whole-system re-runs instead"
+                say(f"note: {note}")
+                notes.append(note)
+                tester_kind, why, model = "live", "the replay does not reproduce it", None
+            except FailsWithoutItems as exc:
+                return _no_mutation_needed(out_dir, failure, exc, started, log_path)
+            replays, replay_hits = tester.runs, tester.hits
+
+    live = LiveTester(spec, params, failure.invariant, failure.module, failure_at=failure.at,
+                      repeats=options.repeats, original=original, testcase_id=f"minimal-{_id(original)}",
+                      progress=(lambda line: say(f"  {line}")))
+    try:
+        if tester_kind == "live":
+            full, repeats_used = reproduce(live, mlog.mutations, failure, options.repeats, say)
+            if full is None:
+                return _stopped(out_dir, failure, started, log_path, (
+                    f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
+                    f"test case: nothing to minimise (a rare flaky failure? try --repeats N)"), notes=notes)
+            live.repeats = repeats_used
+            try:
+                result = minimise_live(live, mlog.mutations, failure, full, say, options.max_tests, jobs=options.jobs)
+            except FailsWithoutItems as exc:
+                return _no_mutation_needed(out_dir, failure, exc, started, log_path)
+        assert result is not None
+        result.notes[:0] = notes
+
+        testcase = restricted_testcase(
+            result.chosen, testcase_id=f"minimal-{_id(original)}", original=original,
+            description=(f"minimised from {log_path.name}: {len(result.kept)} of {len(result.mutations)} mutations; "
+                         f"fails {failure.invariant}"))
+        xml = write_testcase_file(out_dir, testcase, spec)
+        files = {"test case": xml}
+        confirmation, confirm_log = confirm_live(live, testcase, xml, result, options.confirm, say, scratch,
+                                                 jobs=options.jobs)
+        if result.tester == "replay" and model is not None:
+            files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
+            files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
+        elif confirm_log is not None:
+            files["log"] = copy_log(confirm_log, out_dir)
+        text, reproduced = verdict(result, confirmation)
+        files["summary"] = out_dir / "summary.json"
+        body = summary(result, log=log_path, why=why, seconds=time.monotonic() - started, confirm=confirmation,
+                       verdict=text, files=files, replay_tests=replays, replay_hits=replay_hits,
+                       live_runs=live.runs, live_seconds=live.run_seconds)
+        write_summary(out_dir, body)
+        return MinimiseReport(reproduced, text, body, files=files)
+    finally:
+        live.close()  # the recorders started ahead for tests that will not come
+
+
+def _id(original: TestCase | None) -> str:
+    return original.id if original is not None else "run"
+
+
+def original_testcase(log: LogContents) -> TestCase | None:
+    """The logged test case (rates and modes events do not record); None if absent or unreadable."""
+    data = log.attachments.get(layout.POLICY_ATTACHMENT)
+    if data is None:
+        return None
+    try:
+        return parse_testcase(data, layout.POLICY_ATTACHMENT)
+    except InputError:
+        return None
+
+
+def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure, repeats: int,
+              say: Progress) -> tuple[TestResult | None, int]:
+    """Re-run the full set of mutations: (its result, runs per test from now on); None if it never fails.
+
+    ``repeats`` runs first; if none fails, up to FLAKY_CHECK_RUNS in all
+    before giving up. A failure in some runs only is flaky: later tests then
+    run at least FLAKY_CHECK_RUNS times each.
+    """
+    chosen = [(m, None) for m in mutations]
+    testcase = live.testcase(chosen)
+    horizon = max([failure.at] + [m.at for m in mutations]) + MARGIN_SECONDS
+    say(f"reproducing the failure live with all {len(mutations)} mutations pinned")
+    runs: list[LiveRun] = []
+    while len(runs) < repeats or (len(runs) < FLAKY_CHECK_RUNS and not any(r.failed for r in runs)):
+        runs.append(live.run(testcase, horizon))
+        say(f"  run {len(runs)}: " + ("fail" if runs[-1].failed else "pass" if runs[-1].failed is False
+                                      else f"could not tell ({runs[-1].detail})") + f" ({runs[-1].seconds:.1f} s)")
+    told = [r for r in runs if r.failed is not None]
+    fails = [r for r in told if r.failed]
+    if not fails:
+        return None, repeats
+    rate = len(fails) / len(told)
+    per_test = repeats
+    if rate < 1.0:
+        per_test = max(repeats, FLAKY_CHECK_RUNS)
+        say(f"flaky: the full test case failed in {len(fails)} of {len(told)} runs; "
+            f"each test now runs {per_test} times and fails if any run fails")
+    return TestResult(Outcome.FAIL, fails[0].detail, rate), per_test
+
+
+def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, runs: int,
+                 say: Progress, scratch: Path, jobs: int = 1) -> tuple[dict, Path | None]:
+    """Run the minimal test case live ``runs`` times (``jobs`` at once): its failure rate, a failing run's log."""
+    if runs == 0:
+        return {"requested": 0, "runs": 0, "failures": 0, "rate": None}, None
+    horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
+    say(f"confirming {xml.name} live through the proxy ({runs} run(s)" + (f", {jobs} at once)" if jobs > 1 else ")"))
+    kept: Path | None = None
+    records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None for n in range(runs)]
+    with ThreadPoolExecutor(max(1, min(jobs, runs)), thread_name_prefix="confirm") as pool:
+        live.pin(testcase, result.chosen)
+        outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml),
+                                 records))
+    for n, (outcome, record) in enumerate(zip(outcomes, records, strict=True)):
+        say(f"  run {n + 1}: " + ("fail" if outcome.failed else "pass" if outcome.failed is False
+                                  else f"could not tell ({outcome.detail})") + f" ({outcome.seconds:.1f} s)")
+        if record is not None:
+            if kept is None and (outcome.failed or n == runs - 1):
+                kept = record
+            elif record != kept:
+                record.unlink(missing_ok=True)
+    told = [o for o in outcomes if o.failed is not None]
+    failures = sum(1 for o in told if o.failed)
+    body = {"requested": runs, "runs": len(told), "failures": failures,
+            "rate": failures / len(told) if told else None, "seconds": round(sum(o.seconds for o in outcomes), 3),
+            "details": sorted({o.detail for o in outcomes if o.failed is not False})[:3]}
+    return body, kept
+
+
+def verdict(result: Minimisation, confirmation: dict) -> tuple[str, bool]:
+    """(the verdict, whether the minimal test case stands: minimised and, where run live, reproduced)."""
+    rate = confirmation.get("rate")
+    if confirmation.get("requested") and not confirmation.get("runs"):
+        return f"minimised, but no confirmation run could tell: {'; '.join(confirmation['details'])}", False
+    if not confirmation.get("runs"):
+        if result.tester == "replay":
+            return "minimised; reproduced in the planner replay (not run live: --confirm 0)", True
+        return "minimised (not confirmed live: --confirm 0)", True
+    if rate == 1.0:
+        return "minimised and reproduced live in every run", True
+    if rate:
+        return (f"flaky: the minimal test case fails in {confirmation['failures']} of {confirmation['runs']} "
+                f"live runs ({rate:.0%})"), False
+    if result.tester == "replay":
+        return ("minimised in the planner replay, but the minimal test case did not reproduce the failure live "
+                "(the replay is open-loop: see docs/minimise.md)"), False
+    return "the minimal test case did not reproduce the failure in its confirmation runs", False
+
+
+def _no_mutation_needed(out_dir: Path, failure: Failure, exc: Exception, started: float,
+                        log_path: Path) -> MinimiseReport:
+    return _stopped(out_dir, failure, started, log_path,
+                    f"the failure happens without any of the mutations ({exc}): nothing to minimise")
+
+
+def _stopped(out_dir: Path, failure: Failure, started: float, log_path: Path, message: str, *,
+             notes: list[str] | None = None) -> MinimiseReport:
+    """A minimisation that ends before minimising: its summary holds the failure and why."""
+    body: dict[str, Any] = {"log": str(log_path), "failure": failure.__dict__, "verdict": message}
+    if notes is not None:
+        body["notes"] = notes
+    body["seconds"] = round(time.monotonic() - started, 3)
+    write_summary(out_dir, body)
+    return MinimiseReport(False, message, body, complete=False)

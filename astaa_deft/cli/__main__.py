@@ -1,0 +1,7 @@
+"""`python -m astaa_deft.cli ...`: the `astaa-deft` command, for a child process that must use this interpreter."""
+
+import sys
+
+from astaa_deft.cli import main
+
+sys.exit(main())

@@ -1,0 +1,131 @@
+"""`astaa-deft fuzz`: a campaign of generated test cases (astaa_deft.orchestration.campaign does the work)."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped
+from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_existing
+from astaa_deft.orchestration.campaign.progress import Progress, snapshot
+from astaa_deft.orchestration.campaign.standing import headline, most_severe, standings
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.output_place import Place, ready_dir, writing
+from astaa_deft.cli.commands.console import PlainLines, say
+
+DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
+
+
+def parse_budget(text: str) -> float:
+    match = DURATION.match(text.strip())
+    if not match:
+        raise InputError(Problem("--budget", None, None, f"'{text}' is not a duration", "write e.g. 90s, 30m or 2h"))
+    return float(match.group(1)) * {"": 1, "s": 1, "m": 60, "h": 3600}[match.group(2)]
+
+
+def parse_params(items: list[str]) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for item in items:
+        key, sep, values = item.partition("=")
+        if not sep or not key or not values:
+            raise InputError(Problem("--params", None, None, f"'{item}' is not KEY=VALUE[,VALUE…]",
+                                     "write e.g. --params scenario=cut_in,red_light"))
+        out[key.strip()] = [v.strip() for v in values.split(",") if v.strip()]
+    return out
+
+
+def status(out: Path) -> int:
+    journal = open_existing(out)
+    meta = journal.meta()
+    snap = snapshot(journal, meta.get("cases"), 0.0)
+    say(f"campaign {out}: spec {meta.get('spec')}, strategy {meta.get('strategy')}, seed {meta.get('seed')}")
+    say(snap.line().split(", 0.0 cases/min")[0])
+    minimised = journal.minimisations()
+    tests = journal.module_tests()
+    ranked = standings(journal)
+    say(headline(ranked))
+    merged = [b for b in journal.buckets() if b.merged_into]
+    for standing in ranked:
+        b = standing.bucket
+        rate = f"{standing.failures}/{standing.runs}" if standing.runs else "-"
+        m = minimised.get(b.bucket)
+        t = tests.get(b.bucket)
+        checked = ("" if t is None else " module tests fail on it" if t["fails_on_defect"] == 1
+                   else " module tests do NOT fail on it" if t["fails_on_defect"] == 0 else " module tests did not run")
+        twins = f" twins {b.control_failures}/{b.controls}" if b.controls else ""
+        say(f"  {b.bucket} {standing.status:12} {standing.severity:8} {b.verdict:9} {b.invariant:22} {b.family:40}"
+            f" cases {b.cases:3} rate {rate:5}{twins} {m['status'] if m else ''}"
+            f"{' ' + m['culprit'] if m and m['culprit'] else ''}{checked}")
+    for b in merged:
+        say(f"  {b.bucket} merged into {b.merged_into}: {b.invariant} {b.family}")
+    for note in journal.notes("concurrency"):
+        say(f"  {note['text']}")
+    journal.close()
+    return 0
+
+
+def run(config: CampaignConfig, resume: bool) -> int:
+    place = Place(config.out, "-o")
+    ready_dir(place, temp=True)  # before the journal and the baseline runs
+    with writing(place):
+        return _run(config, resume)
+
+
+def _run(config: CampaignConfig, resume: bool) -> int:
+    exists = (config.out / FILE_NAME).is_file()
+    if exists and not resume:
+        raise InputError(Problem(str(config.out), None, None, "a campaign is already here",
+                                 "add --resume to continue it, or give another -o directory"))
+    if resume and not exists:
+        raise InputError(Problem(str(config.out), None, None, "no campaign to resume here",
+                                 "drop --resume to start one"))
+    journal = Journal(config.out)
+    if resume:
+        meta = journal.meta()
+        config.spec_path = Path(meta.get("spec", config.spec_path))
+        config.seed = meta.get("seed", config.seed)
+        config.strategy = meta.get("strategy", config.strategy)
+        config.params = meta.get("params", config.params)
+        config.horizon = meta.get("horizon", config.horizon)
+        config.cases = config.cases if config.cases is not None else meta.get("cases")
+    progress = Progress(journal, config.cases)
+    lines = None if progress.live is not None else PlainLines("fuzz")  # not a terminal: the shared plain lines
+
+    def on_progress(campaign: Campaign) -> None:
+        if lines is None:
+            progress(campaign)
+        else:
+            lines.show(snapshot(journal, config.cases, time.monotonic() - progress.started).line())
+
+    try:
+        campaign = Campaign(config, journal, on_progress=on_progress, say=progress.say)
+        workers = ("runs at once calibrated from the baseline" if campaign.calibrated
+                   else f"{campaign.workers} worker(s){' on ' + config.cluster if config.cluster else ''}")
+        progress.say(f"astaa-deft fuzz: spec '{campaign.spec.name}', strategy {config.strategy}, seed {config.seed},"
+                     f" {workers}, journal {journal.path}")
+        result = campaign.run()
+    except CampaignStopped as exc:
+        progress.close()
+        raise InputError(Problem(str(config.spec_path), None, None, f"campaign stopped: {exc}",
+                                 "make the SUT start (try: astaa-deft proxy --spec … --duration 5)")) from None
+    finally:
+        progress.close()
+        if lines is not None:
+            lines.close()
+    if config.report:
+        from astaa_deft.orchestration.campaign.report import write_report
+
+        say(f"report: {write_report(config.out)}")
+    ranked = standings(journal)
+    say(f"campaign {result.stopped}: {result.cases_done} cases in {result.seconds:.0f} s, "
+        f"{result.failures} failing, {result.buckets} bucket(s): {headline(ranked)}")
+    top = most_severe(ranked)
+    if top is not None:
+        say(f"most severe: {top.describe()}")
+    if result.stopped == "interrupted":
+        say(f"continue with: astaa-deft fuzz --spec {config.spec_path} -o {config.out} --resume")
+        journal.close()
+        return 130
+    journal.close()
+    return 1 if result.buckets else 0

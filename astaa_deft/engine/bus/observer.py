@@ -1,0 +1,32 @@
+"""Passive observation: count each declared channel, off the SUT's message path."""
+
+from __future__ import annotations
+
+import zenoh
+
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.bus.topology import observed_keys
+
+
+class ChannelCounter:
+    def __init__(self, session: zenoh.Session, spec: Spec, mode: str):
+        self._counts = {ch.name: 0 for ch in spec.channels}
+        self._subs = []
+        for key_expr, channel in observed_keys(spec, mode):
+            self._subs.append(session.declare_subscriber(key_expr, self._counter(channel.name)))
+
+    def _counter(self, name: str):
+        counts = self._counts
+
+        def on_sample(_sample: zenoh.Sample) -> None:
+            counts[name] += 1
+
+        return on_sample
+
+    def counts(self) -> dict[str, int]:
+        return dict(self._counts)
+
+    def stop(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+        self._subs = []

@@ -1,0 +1,208 @@
+"""Derive rules: exceptional values computed from the field being mutated.
+
+A rule looks at a field's declaration (its bounds or width: ``static``,
+computed once per field) or at the message being mutated (its current value,
+the previous message on the channel, a sibling array: computed at mutation
+time, from a :class:`ValueContext`). A rule that has no value for a field
+raises :class:`NotApplicable` with the reason.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from astaa_deft.model.errors import AstaaDeftError
+from astaa_deft.model.fields import FieldPath, PathLike, as_path, type_at
+from astaa_deft.model.sut import FLOAT_KINDS, INT_KINDS, INT_RANGES, FieldType, MessageType
+
+
+class NotApplicable(AstaaDeftError):
+    """A derive rule has no value for this field or message; the message is the reason."""
+
+
+
+# ---------------------------------------------------------------- where a value goes
+
+@dataclass(frozen=True)
+class FieldSite:
+    """A declared field: its type, and the struct type holding it (for sibling rules)."""
+
+    field_type: FieldType
+    parent: MessageType | None = None
+
+
+def field_site(types: Mapping[str, MessageType], type_name: str, path: PathLike) -> FieldSite:
+    """The site of ``path`` in a ``type_name`` message (raises FieldPathError if it does not exist)."""
+    path = as_path(path)
+    field_type = type_at(types, type_name, path)
+    *parent_segments, last = path.segments
+    if type(last) is not str:  # an array element: its "parent" is an array, no struct siblings
+        return FieldSite(field_type)
+    if not parent_segments:
+        return FieldSite(field_type, types[type_name])
+    parent_type = type_at(types, type_name, FieldPath(tuple(parent_segments)))
+    if parent_type.kind != "struct" or parent_type.ref is None:
+        return FieldSite(field_type)
+    return FieldSite(field_type, types[parent_type.ref])
+
+
+@dataclass
+class ValueContext:
+    """What a derive rule may look at when mutating one concrete place of a message."""
+
+    site: FieldSite
+    current: Any  # the value at that place now
+    container: Any  # the dict (or list) holding it, for sibling arrays
+    key: str | int  # where it sits in the container
+    previous: Callable[[], Any]  # the same place in the previous real message; raises NotApplicable
+
+
+# ---------------------------------------------------------------- derive rules
+
+@dataclass(frozen=True)
+class Rule:
+    """A derive rule. ``kinds``: declared kinds it applies to (None: any leaf).
+
+    ``static`` rules depend on the declaration only and are computed once per
+    field; the others run per mutation on a ``ValueContext``.
+    """
+
+    name: str
+    kinds: frozenset[str] | None
+    compute: Callable[[FieldSite, ValueContext | None], Any]
+    static: bool = False
+
+    def problem(self, site: FieldSite) -> str | None:
+        kind = site.field_type.kind
+        if self.kinds is not None and kind not in self.kinds:
+            wanted = ", ".join(sorted(self.kinds))
+            return f"rule '{self.name}' applies to {wanted} fields, not {site.field_type.describe()}"
+        if self.static:
+            try:
+                self.compute(site, None)
+            except NotApplicable as exc:
+                return str(exc)
+        return None
+
+
+def _bound(site: FieldSite, which: str) -> float:
+    ftype = site.field_type
+    value = ftype.minimum if which == "min" else ftype.maximum
+    if value is None:
+        raise NotApplicable(f"the field declares no {which}")
+    return value
+
+
+def _below_min(site: FieldSite, _ctx: ValueContext | None) -> Any:
+    low = _bound(site, "min")
+    if site.field_type.kind in INT_KINDS:
+        return math.ceil(low) - 1
+    return math.nextafter(float(low), -math.inf)  # the closest value a range check must reject
+
+
+def _above_max(site: FieldSite, _ctx: ValueContext | None) -> Any:
+    high = _bound(site, "max")
+    if site.field_type.kind in INT_KINDS:
+        return math.floor(high) + 1
+    return math.nextafter(float(high), math.inf)
+
+
+def _width(offset: int, end: int) -> Callable[[FieldSite, ValueContext | None], int]:
+    return lambda site, _ctx: INT_RANGES[site.field_type.kind][end] + offset
+
+
+def _negated(_site: FieldSite, ctx: ValueContext | None) -> bool:
+    assert ctx is not None
+    if type(ctx.current) is not bool:
+        raise NotApplicable(f"the current value {ctx.current!r} is not a boolean")
+    return not ctx.current
+
+
+def _undefined_enum(site: FieldSite, _ctx: ValueContext | None) -> Any:
+    values = site.field_type.values
+    if values and all(type(v) is int for v in values):
+        return max(values) + 1
+    candidate = "UNDEFINED"
+    while candidate in values:
+        candidate += "_"
+    return candidate
+
+
+def _case_swapped(site: FieldSite, _ctx: ValueContext | None) -> str:
+    values = site.field_type.values
+    for value in values:
+        if isinstance(value, str) and value.swapcase() != value and value.swapcase() not in values:
+            return value.swapcase()
+    raise NotApplicable("no enum value has letters whose case can be swapped")
+
+
+def _previous(_site: FieldSite, ctx: ValueContext | None) -> Any:
+    assert ctx is not None
+    return copy.deepcopy(ctx.previous())
+
+
+def _previous_minus_1s(_site: FieldSite, ctx: ValueContext | None) -> float:
+    assert ctx is not None
+    previous = ctx.previous()
+    if type(previous) not in (int, float):
+        raise NotApplicable(f"the previous value {previous!r} is not a number of seconds")
+    return float(previous) - 1.0
+
+
+def _nonempty_list(ctx: ValueContext | None) -> list:
+    assert ctx is not None
+    if type(ctx.current) is not list:
+        raise NotApplicable("the current value is not an array")
+    if not ctx.current:
+        raise NotApplicable("the array is empty: no element to repeat")
+    return ctx.current
+
+
+def _first_only(_site: FieldSite, ctx: ValueContext | None) -> list:
+    return [copy.deepcopy(_nonempty_list(ctx)[0])]
+
+
+def _ten_times_longer(_site: FieldSite, ctx: ValueContext | None) -> list:
+    items = _nonempty_list(ctx)
+    # Separate copies: a later policy setting points[3].v must not change points[0].v too.
+    return [copy.deepcopy(item) for _ in range(10) for item in items]
+
+
+def _sibling_length_mismatch(site: FieldSite, ctx: ValueContext | None) -> list:
+    items = _nonempty_list(ctx)
+    assert ctx is not None
+    siblings = _sibling_arrays(site, ctx)
+    if not siblings:
+        raise NotApplicable("no sibling array in the same struct")
+    target = len(siblings[0]) + 1  # consumers that zip parallel arrays must notice
+    return [copy.deepcopy(items[i % len(items)]) for i in range(target)]
+
+
+def _sibling_arrays(site: FieldSite, ctx: ValueContext) -> list[list]:
+    if site.parent is None or type(ctx.container) is not dict:
+        return []
+    return [ctx.container[name] for name, ftype in site.parent.fields.items()
+            if ftype.kind == "array" and name != ctx.key and type(ctx.container.get(name)) is list]
+
+
+_NUMBERS = frozenset(FLOAT_KINDS + INT_KINDS + ("time",))
+RULES: dict[str, Rule] = {rule.name: rule for rule in (
+    Rule("below_min", _NUMBERS, _below_min, static=True),
+    Rule("above_max", _NUMBERS, _above_max, static=True),
+    Rule("width_min", frozenset(INT_KINDS), _width(0, 0), static=True),
+    Rule("width_max", frozenset(INT_KINDS), _width(0, 1), static=True),
+    Rule("width_underflow", frozenset(INT_KINDS), _width(-1, 0), static=True),
+    Rule("width_overflow", frozenset(INT_KINDS), _width(1, 1), static=True),
+    Rule("negated", frozenset({"bool"}), _negated),
+    Rule("undefined_value", frozenset({"enum"}), _undefined_enum, static=True),
+    Rule("case_swapped", frozenset({"enum"}), _case_swapped, static=True),
+    Rule("previous", None, _previous),
+    Rule("previous_minus_1s", frozenset(FLOAT_KINDS + ("time",)), _previous_minus_1s),
+    Rule("first_only", frozenset({"array"}), _first_only),
+    Rule("ten_times_longer", frozenset({"array"}), _ten_times_longer),
+    Rule("sibling_length_mismatch", frozenset({"array"}), _sibling_length_mismatch),
+)}

@@ -1,0 +1,145 @@
+"""The interface every invariant kind implements, and what they share.
+
+A kind (``kinds/<kind>.py``) brings three things: a frozen dataclass holding
+the validated invariant (built once, when the spec loads), a parser that
+builds it from YAML, and a ``Monitor`` that evaluates it over a run. The
+monitor gets messages, process exits and clock ticks, and answers with
+violations; it never raises on a bad message (that *is* a finding) and
+never looks at the wall clock (only at the times it is given), so the same
+monitor gives the same verdicts online, from the bus, and offline, from a
+log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+from collections.abc import Sequence
+
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.monitor.violation import Violation, message_copy
+
+NO_VIOLATIONS: list[Violation] = []  # returned (never mutated) on the hot path to avoid allocating
+
+
+@dataclass(frozen=True, kw_only=True)
+class Invariant:
+    """What every invariant declares; kinds add their own fields."""
+
+    kind: ClassVar[str] = "?"
+    default_crash: ClassVar[str] = "Silent"  # the CRASH class a violation of this kind points at
+
+    name: str
+    severity: str = "high"
+    crash: str | None = None  # overrides default_crash (e.g. "Hindering" for a status channel that lies)
+    description: str = ""
+    line: int | None = None  # where the spec declares it
+
+
+@dataclass(frozen=True)
+class ProcessExitInfo:
+    """A module's exit as the launcher reports it (and the log stores it)."""
+
+    module: str
+    returncode: int
+    signal: str | None
+    time_ns: int
+    during_shutdown: bool
+    stderr_tail: str = ""
+
+    @property
+    def abnormal(self) -> bool:
+        return not self.during_shutdown and (self.returncode != 0 or self.signal is not None)
+
+    def describe(self) -> str:
+        how = f"was killed by {self.signal}" if self.signal else f"exited with code {self.returncode}"
+        return f"module '{self.module}' {how}"
+
+
+@dataclass(frozen=True)
+class LogLineInfo:
+    """One line a module wrote on its output, and when the tool read it."""
+
+    module: str
+    text: str
+    time_ns: int
+
+
+@dataclass(frozen=True)
+class MonitorContext:
+    spec: Spec
+    start_ns: int  # the run's start: deadlines 'after: start' and the temporal sampling grid count from it
+
+    def producer(self, channel: str) -> str | None:
+        return next((c.producer for c in self.spec.channels if c.name == channel), None)
+
+
+class Monitor:
+    """Runtime state of one invariant. Subclasses override what they need."""
+
+    wants_ticks: ClassVar[bool] = False  # on_tick is only called on monitors that say so
+    wants_log_lines: ClassVar[bool] = False  # on_log_line likewise
+
+    def __init__(self, invariant: Invariant, context: MonitorContext):
+        self.invariant = invariant
+        self.context = context
+        self.evaluations = 0  # messages (or samples) judged
+        self.violating = 0  # of those, how many broke the invariant
+
+    def channels(self) -> set[str]:
+        """The channels whose messages this monitor reads."""
+        return set()
+
+    def on_message(self, channel: str, time_ns: int, value: dict | None, seq: int) -> list[Violation]:
+        return NO_VIOLATIONS
+
+    def on_process_exit(self, exit_: ProcessExitInfo) -> list[Violation]:
+        return NO_VIOLATIONS
+
+    def on_log_line(self, line: LogLineInfo) -> list[Violation]:
+        return NO_VIOLATIONS
+
+    def on_tick(self, time_ns: int) -> list[Violation]:
+        return NO_VIOLATIONS
+
+    def finish(self, time_ns: int) -> list[Violation]:
+        return NO_VIOLATIONS
+
+    # -- helpers for subclasses ----------------------------------------------
+    def violation(self, time_ns: int, detail: str, *, channel: str | None = None, seq: int | None = None,
+                  message: Any = None, module: str | None = None, crash: str | None = None,
+                  copy_message: bool = True, infer_module: bool = True) -> Violation:
+        """A violation of this invariant; the module defaults to the channel's producer."""
+        inv = self.invariant
+        if module is None and infer_module and channel is not None:
+            module = self.context.producer(channel)
+        return Violation(
+            invariant=inv.name, kind=inv.kind, severity=inv.severity, time_ns=time_ns, channel=channel, seq=seq,
+            message=message_copy(message) if copy_message else message, detail=detail,
+            crash=inv.crash or crash or inv.default_crash, module=module,
+        )
+
+
+class EpisodeGate:
+    """Report a broken invariant once per episode: when it breaks after holding.
+
+    ``key`` separates independent episodes inside one invariant (an obstacle
+    id for collisions); most monitors use the default key.
+    """
+
+    def __init__(self) -> None:
+        self._broken: set[Any] = set()
+
+    def broke(self, key: Any = None) -> bool:
+        """Record a failure; True if it starts a new episode (so it should be reported)."""
+        if key in self._broken:
+            return False
+        self._broken.add(key)
+        return True
+
+    def held(self, key: Any = None) -> None:
+        self._broken.discard(key)
+
+    def keep_only(self, keys: Sequence[Any]) -> None:
+        """End the episodes of every key not in ``keys`` (they held, or are gone)."""
+        self._broken.intersection_update(keys)

@@ -1,0 +1,53 @@
+"""What one run is asked to do (:class:`RunOptions`) and what it found (:class:`RunResult`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from astaa_deft.engine.bus.launcher import ProcessExit
+from astaa_deft.io.log.records import PolicyApplicationsRecord, ViolationRecord
+
+
+@dataclass
+class RunOptions:
+    mode: str = "star"  # "star" (man in the middle) or "passive" (observer only)
+    launch: bool = True  # False: attach to an already running SUT
+    record: Path | None = None  # the MCAP log; None: not recorded
+    params: dict[str, str] = field(default_factory=dict)
+    command_line: list[str] = field(default_factory=list)
+    run_dir: Path | None = None  # module logs and configs; a fresh temp dir if None (one per session)
+    interceptor: Any = None  # an ASTAA test case engine (star mode only)
+    stop_on_violation: bool = False
+    attachments: dict[str, Path] = field(default_factory=dict)  # name in the log → file (policy, dictionaries)
+    time_limit: float | None = None  # seconds; None: no limit from the caller
+    # A recorder started ahead of the run (bus_run.warm_recorder), taken by this run if still alive.
+    warm_recorder: Any = None
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One finished run, as a campaign or a command sees it."""
+
+    end_reason: str  # "time limit", "signal SIGINT", "all modules exited", "violation", or stop_when's reason
+    seconds: float  # wall time from the modules' launch to the end
+    verdict: Any  # astaa_deft.engine.monitor.verdict.Verdict (None if the run never started its monitors)
+    violations: tuple[ViolationRecord, ...]
+    exits: tuple[ProcessExit, ...]
+    sent: dict[str, int]  # messages per channel that went through the star (or were observed)
+    recorded: dict[str, int]  # messages per channel the recorder wrote
+    mutations: int  # messages the interception changed
+    log: Path | None  # the MCAP log, if recorded
+    complete: bool  # the log was finished cleanly by its recorder (or nothing was recorded)
+    observed: bool  # the monitors saw the run through to its end
+    policies: tuple[PolicyApplicationsRecord, ...] = ()  # what each policy of the test case did (with a reason
+    # for each that touched nothing)
+
+    @property
+    def crashes(self) -> tuple[ProcessExit, ...]:
+        return tuple(e for e in self.exits if e.abnormal)
+
+    @property
+    def passed(self) -> bool:
+        return (self.verdict is not None and self.verdict.klass == "Pass" and self.complete and self.observed)

@@ -1,0 +1,101 @@
+"""The spec's ``run:`` conditions during one run: when the run ends and what its end means.
+
+A :class:`RunEndWatch` listens to the channels the conditions read (as their
+producers published them) and to the modules' exits; the run loop asks it
+every poll whether the run is over. A module whose exit ends the run is not
+a crash: the session marks its exit as the run's own end, and its exit code
+becomes the outcome (a pass, or a finding with the CRASH class the spec
+gives it).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS
+from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation, message_copy
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.spec.run_section import ChannelEnd, Outcome, RunSection
+
+
+@dataclass(frozen=True)
+class RunEnd:
+    """The condition that ended a run."""
+
+    reason: str
+    outcome: Outcome
+    time_ns: int
+    channel: str | None = None
+    module: str | None = None
+    message: dict | None = None
+    detail: str = ""
+
+    def finding(self) -> Violation | None:
+        """The end as a finding (None when it is a pass)."""
+        if self.outcome.passed:
+            return None
+        return Violation(f"{RUN_END_KIND}:{self.outcome.name}", RUN_END_KIND, self.outcome.severity, self.time_ns,
+                         self.channel, None, self.message, self.detail, self.outcome.crash or "Silent", self.module)
+
+
+class RunEndWatch:
+    def __init__(self, spec: Spec):
+        self.spec = spec
+        self.section: RunSection = spec.run if spec.run is not None else RunSection()
+        self.ended: RunEnd | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def time_limit(self) -> float | None:
+        return self.section.time_limit
+
+    def attach(self, run) -> None:
+        """Subscribe to every channel a condition reads (``run``: a started BusRun)."""
+        by_channel: dict[str, list[ChannelEnd]] = {}
+        for end in self.section.channel_ends:
+            by_channel.setdefault(end.channel, []).append(end)
+        for name, ends in by_channel.items():
+            codec = get_codec(self.spec.channel(name).encoding)
+            try:
+                run.subscribe(name, lambda sample, ends=ends, codec=codec: self._seen(ends, codec, sample))
+            except KeyError:  # not observable in this mode: the condition cannot fire
+                continue
+
+    def _seen(self, ends: list[ChannelEnd], codec, sample) -> None:
+        if self.ended is not None:
+            return
+        now = time.time_ns()
+        try:
+            value = codec.decode(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001 - a malformed message ends nothing; the monitors report it
+            return
+        for end in ends:  # in the spec's order: the first condition that holds names the end
+            try:
+                holds = end.expr.evaluate(value) is True
+            except RUNTIME_ERRORS:
+                continue
+            if holds:
+                self._end(RunEnd(end.reason, end.outcome, now, channel=end.channel, message=message_copy(value),
+                                 detail=f"'{end.expr.text}' held on {end.channel}"))
+                return
+
+    def check(self, exits) -> RunEnd | None:
+        """The end, once a condition holds (``exits``: the run's ProcessExit records so far)."""
+        for exit_ in exits:
+            end = self.section.exit_end(exit_.module)
+            if end is not None:
+                outcome = end.outcome(exit_.returncode, exit_.signal)
+                how = f"killed by {exit_.signal}" if exit_.signal else f"exit code {exit_.returncode}"
+                self._end(RunEnd(end.describe(), outcome, exit_.time_ns, module=exit_.module,
+                                 message={"returncode": exit_.returncode, "signal": exit_.signal},
+                                 detail=f"module '{exit_.module}' ended the run with {how}: {outcome.name}"))
+                break
+        return self.ended
+
+    def _end(self, end: RunEnd) -> None:
+        with self._lock:
+            if self.ended is None:
+                self.ended = end

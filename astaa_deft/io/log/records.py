@@ -1,0 +1,294 @@
+"""Typed records of the run's event stream: one encoding to and from the log.
+
+Every event the tool writes to ``/astaa/events`` (and shows on the console)
+is one of the frozen dataclasses below; :func:`encode` turns a record into the
+JSON object written to the log and :func:`decode` turns a logged object back
+into a record. Readers work on records, never on the raw dicts, so a field's
+name lives in one place.
+
+The on-disk shape is the one earlier logs already have (a JSON object with a
+``kind`` and a ``time_ns``), so existing logs stay readable. A record may carry
+``"format": N``; a log written by a newer tool (``N`` > :data:`FORMAT`) is
+refused with a clear message instead of being half understood.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, fields
+from typing import Any
+from collections.abc import Mapping
+
+from astaa_deft.model.errors import InputError
+
+FORMAT = 1  # bump when a record's meaning changes; decode() refuses newer ones
+
+
+@dataclass(frozen=True)
+class RunStarted:
+    time_ns: int
+    mode: str
+    spec: str
+    command_line: tuple[str, ...] = ()
+    # The interceptor's clock origin on the log's clock (ns): a mutation event's ``time`` counts from it. A
+    # delayed message's arrival is known only on that clock (minimise reverts it to there). None: no
+    # interceptor, or a log from before this field (then the run's start is the best guess).
+    interceptor_epoch_ns: int | None = None
+    kind = "run_started"
+
+
+@dataclass(frozen=True)
+class RunStopping:
+    """The run's end: the monitors' horizon (nothing after it is judged)."""
+    time_ns: int
+    kind = "run_stopping"
+
+
+@dataclass(frozen=True)
+class RunStopped:
+    time_ns: int
+    kind = "run_stopped"
+
+
+@dataclass(frozen=True)
+class RunEnd:
+    """Why the run ended ('time limit', 'module planning exited', 'signal SIGINT', ...)."""
+    time_ns: int
+    reason: str
+    kind = "run_end"
+
+
+@dataclass(frozen=True)
+class ProcessExitRecord:
+    time_ns: int
+    module: str
+    pid: int
+    returncode: int
+    signal: str | None = None
+    during_shutdown: bool = False
+    abnormal: bool = False
+    stderr_tail: str = ""
+    kind = "process_exit"
+
+    def describe(self) -> str:
+        how = f"killed by {self.signal}" if self.signal else f"exit code {self.returncode}"
+        return f"module '{self.module}' {how}"
+
+
+@dataclass(frozen=True)
+class ViolationRecord:
+    time_ns: int
+    invariant: str
+    invariant_kind: str = "?"
+    severity: str = "high"
+    crash: str = "Silent"
+    detail: str = ""
+    module: str | None = None
+    channel: str | None = None
+    seq: int | None = None
+    message: Any = None
+    kind = "violation"
+
+
+@dataclass(frozen=True)
+class VerdictRecord:
+    time_ns: int
+    klass: str
+    summary: str = ""
+    first: ViolationRecord | None = None
+    reasons: tuple[str, ...] = ()
+    kind = "verdict"
+
+
+@dataclass(frozen=True)
+class UndeclaredKey:
+    time_ns: int
+    module: str
+    key: str
+    note: str = ""
+    kind = "undeclared_key"
+
+
+@dataclass(frozen=True)
+class FieldChange:
+    path: str
+    old: Any = None
+    new: Any = None
+
+
+@dataclass(frozen=True)
+class MutationRecord:
+    """What the interception did to one message (``policy``/``action`` joined by '+' when stacked).
+
+    Logged on the mutations topic (without kind/time_ns, with the sequence
+    numbers of the original and the delivered message in the log) and handed
+    to ``on_event`` live. Values in ``fields`` and ``detail`` are tagged JSON.
+    """
+    time_ns: int
+    policy: str
+    action: str
+    channel: str
+    message_index: int = 0  # 1-based index of the real message on its channel
+    fields: tuple[FieldChange, ...] = ()
+    testcase: str = ""
+    consumers: tuple[str, ...] = ()
+    time: float = 0.0  # seconds since the run's start, when the real message arrived
+    detail: Any = None
+    original_sequence: int | None = None
+    delivered_sequence: int | None = None
+    kind = "mutation"
+
+
+@dataclass(frozen=True)
+class PolicyApplicationsRecord:
+    """What one policy of the run's test case did, logged once at the run's end.
+
+    ``untouched_reason`` says why a policy touched no message (its window
+    never opened, its channel was silent or came late, the run ended first);
+    None when it touched one.
+    """
+    time_ns: int
+    testcase: str
+    policy: str
+    action: str = ""
+    window_start_s: float | None = None
+    window_end_s: float | None = None
+    anchor: str | None = None
+    in_window: int = 0
+    touched: int = 0
+    run_end_s: float = 0.0
+    traffic: tuple[Any, ...] = ()  # per target channel: {channel, count, first_s, last_s}
+    untouched_reason: str | None = None
+    kind = "policy_applications"
+
+
+@dataclass(frozen=True)
+class FlagRecord:
+    """A payload the recorder could not decode (forwarded untouched; logged raw on the flags topic)."""
+    time_ns: int
+    channel: str
+    sequence: int | None = None
+    reason: str = ""
+    size: int = 0
+    kind = "undecodable"
+
+
+@dataclass(frozen=True)
+class ModuleLogLine:
+    """A line a module wrote on stdout or stderr."""
+    time_ns: int
+    module: str
+    stream: str
+    line: str
+    kind = "module_log"
+
+
+@dataclass(frozen=True)
+class OtherEvent:
+    """An event of a kind this tool version does not model (kept, never interpreted)."""
+    kind: str
+    time_ns: int
+    body: tuple[tuple[str, Any], ...] = ()
+
+
+Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExitRecord | ViolationRecord | VerdictRecord
+          | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | PolicyApplicationsRecord | OtherEvent)
+
+_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, UndeclaredKey,
+                               ModuleLogLine, ViolationRecord, FlagRecord, PolicyApplicationsRecord)}
+
+
+def encode(record: Record) -> dict:
+    """The JSON object of ``record`` as written to the log."""
+    if isinstance(record, OtherEvent):
+        return {"kind": record.kind, "time_ns": record.time_ns, **dict(record.body)}
+    if isinstance(record, VerdictRecord):
+        return {"kind": record.kind, "time_ns": record.time_ns, "class": record.klass,
+                "first": _violation_body(record.first) if record.first else None,
+                "summary": record.summary, "reasons": list(record.reasons)}
+    if isinstance(record, MutationRecord):
+        return {"kind": record.kind, "time_ns": record.time_ns, "testcase": record.testcase,
+                "policy": record.policy, "action": record.action, "channel": record.channel,
+                "consumers": list(record.consumers), "message_index": record.message_index, "time": record.time,
+                "fields": [{"path": c.path, "old": c.old, "new": c.new} for c in record.fields],
+                "detail": record.detail, "original_sequence": record.original_sequence,
+                "delivered_sequence": record.delivered_sequence}
+    body: dict[str, Any] = {"kind": record.kind}
+    for f in fields(record):
+        value = getattr(record, f.name)
+        body[f.name] = list(value) if isinstance(value, tuple) else value
+    return body
+
+
+def to_json_text(record: Record) -> str:
+    return json.dumps(encode(record), default=str)
+
+
+def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
+    """The record of a logged JSON object; an unknown kind becomes an :class:`OtherEvent`."""
+    if not isinstance(body, Mapping):
+        raise InputError(f"{where}: an event is not a JSON object")
+    version = body.get("format", FORMAT)
+    if isinstance(version, int) and version > FORMAT:
+        raise InputError(f"{where}: events in record format {version}, this tool reads up to {FORMAT}; "
+                         "read this log with a newer astaa-deft")
+    kind = str(body.get("kind", ""))
+    time_ns = _int(body.get("time_ns"))
+    if kind == VerdictRecord.kind:
+        first = body.get("first")
+        return VerdictRecord(time_ns, str(body.get("class", "?")), str(body.get("summary", "")),
+                             _violation(first, time_ns) if isinstance(first, Mapping) else None,
+                             tuple(str(r) for r in body.get("reasons") or ()))
+    if kind == MutationRecord.kind:
+        return decode_mutation(body, time_ns)
+    if kind == ViolationRecord.kind:
+        return _violation(body, time_ns)
+    cls = _SIMPLE.get(kind)
+    if cls is None:
+        return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+    values: dict[str, Any] = {}  # checked by the dataclass itself: a missing field is a TypeError below
+    for f in fields(cls):
+        if f.name in body:
+            value = body[f.name]
+            values[f.name] = tuple(value) if isinstance(value, list) else value
+    values["time_ns"] = time_ns
+    try:
+        return cls(**values)
+    except TypeError:  # a required field missing: keep the event, do not guess it
+        return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+
+
+def decode_mutation(body: Mapping[str, Any], time_ns: int = 0) -> MutationRecord:
+    """A mutation as the interception and the recorder write it (the mutations topic has no 'kind')."""
+    changes = tuple(FieldChange(str(c.get("path")), c.get("old"), c.get("new"))
+                    for c in body.get("fields") or () if isinstance(c, Mapping))
+    time_s = body.get("time")
+    return MutationRecord(time_ns or _int(body.get("time_ns")), str(body.get("policy", "")),
+                          str(body.get("action", "")), str(body.get("channel", "")),
+                          _int(body.get("message_index")), changes, str(body.get("testcase", "")),
+                          tuple(str(c) for c in body.get("consumers") or ()),
+                          float(time_s) if isinstance(time_s, (int, float)) else 0.0, body.get("detail"),
+                          _opt_int(body.get("original_sequence")), _opt_int(body.get("delivered_sequence")))
+
+
+def _opt_int(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def _violation(body: Mapping[str, Any], time_ns: int) -> ViolationRecord:
+    seq = body.get("seq")
+    return ViolationRecord(_int(body.get("time_ns", time_ns)), str(body.get("invariant", "?")),
+                           str(body.get("invariant_kind", "?")), str(body.get("severity", "high")),
+                           str(body.get("crash", "Silent")), str(body.get("detail", "")),
+                           body.get("module"), body.get("channel"), seq if isinstance(seq, int) else None,
+                           body.get("message"))
+
+
+def _violation_body(v: ViolationRecord) -> dict:
+    body = encode(v)
+    body.pop("kind")
+    return body
+
+
+def _int(value: Any) -> int:
+    return value if isinstance(value, int) and not isinstance(value, bool) else 0

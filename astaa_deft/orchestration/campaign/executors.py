@@ -1,0 +1,244 @@
+"""Where cases run: a pool of local child processes, or a Dask distributed cluster.
+
+Both take payloads and hand back (case id, outcome) as cases finish, so the
+campaign's loop is the same either way. Local: each case is its own Python
+process (started in its own session and told to die with us), so a crash or
+a hang of one case never touches another or the campaign. Dask: each worker
+runs its cases on its own loopback and returns the log with the outcome; a
+task whose worker died is re-run by the scheduler elsewhere.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import socket
+import subprocess
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+from collections.abc import Iterator
+
+from astaa_deft.engine.bus.process_launch import start
+from astaa_deft.engine.bus.processes import python_module, stop_process, tail
+from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.campaign.zygote import Zygote, stop_group
+
+CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
+
+
+class LocalPool:
+    """``workers`` cases at once, each in a fresh process.
+
+    Each case process is forked from a template that imported everything and
+    loaded the spec once (:mod:`.zygote`; its recorder is forked from it in
+    turn, :mod:`.forked`): a case starts in milliseconds and spends no CPU on
+    Python's start-up, ~1.2 CPU s of a demo case before. Without a template
+    (it could not start), each slot keeps its next case's process warm
+    (started, imports done, spec loaded, its recorder started, waiting for
+    its payload) while the current case runs — on a loaded two-core machine
+    that start-up took ~3 s of a case's ~12 (measured;
+    benchmarks/bench_campaign.py).
+    """
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="case")
+        self._procs: set[subprocess.Popen] = set()
+        self._warm: list[tuple[tuple[str, ...], subprocess.Popen]] = []  # (what it preloaded, process)
+        self._zygotes: dict[tuple[str, ...], Zygote | None] = {}  # None: it could not start (processes instead)
+        self._forked: set[int] = set()  # case processes forked by a template, running
+        self._lock = threading.Lock()
+        self._closed = False
+        self.futures: dict[Future, str] = {}
+
+    def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+        # The template starts here, before its first case is run by the pool.
+        self._zygote(_key(payload))
+        self.futures[self._pool.submit(self._run, payload)] = case_id
+
+    def _spawn(self, key: tuple[str, ...]) -> subprocess.Popen:
+        return start([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", *key],
+                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def _take(self, payload: dict[str, Any]) -> subprocess.Popen:
+        """A warm process for this payload's spec (or a new one), and a warm one for the slot's next case."""
+        key = _key(payload)
+        with self._lock:
+            index = next((i for i, (k, p) in enumerate(self._warm) if k == key and p.poll() is None), None)
+            proc = self._warm.pop(index)[1] if index is not None else None
+            if self._closed:
+                raise RuntimeError("the pool is closed")
+            if proc is None:
+                proc = self._spawn(key)
+            self._procs.add(proc)
+            # Fill every slot's next process at once: the first wave after the baseline starts warm too.
+            while len(self._warm) < self.workers:
+                self._warm.append((key, self._spawn(key)))
+        return proc
+
+    def _zygote(self, key: tuple[str, ...]) -> Zygote | None:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the pool is closed")
+            zygote = self._zygotes.get(key)
+            if zygote is not None and not zygote.alive():
+                zygote.close()
+                zygote = self._zygotes[key] = None  # it died: processes of their own from now on
+            elif key not in self._zygotes:
+                try:
+                    zygote = self._zygotes[key] = Zygote(key[0], list(key[1:]))
+                except OSError:
+                    zygote = self._zygotes[key] = None
+            return zygote
+
+    def _run(self, payload: dict[str, Any]) -> CaseOutcome:
+        with self._lock:
+            zygote = self._zygotes.get(_key(payload))
+        if zygote is not None and zygote.alive():
+            try:
+                pid, conn = zygote.fork()
+            except OSError:
+                pass  # a process of its own instead
+            else:
+                return self._run_forked(pid, conn, payload)
+        proc = self._take(payload)
+        try:
+            out, err = proc.communicate(json.dumps(payload), timeout=float(payload["horizon"]) + CASE_TIMEOUT_MARGIN)
+        except subprocess.TimeoutExpired:
+            stop_process(proc, grace=5.0)
+            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+        finally:
+            with self._lock:
+                self._procs.discard(proc)
+        Path(payload["run_dir"]).mkdir(parents=True, exist_ok=True)
+        (Path(payload["run_dir"]) / "case.log").write_text(err)
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        if proc.returncode != 0 or not lines:
+            return CaseOutcome("error", "?", "the case process failed", error=err.strip()[-2000:])
+        return CaseOutcome.from_json(json.loads(lines[-1]))
+
+    def _run_forked(self, pid: int, conn: socket.socket, payload: dict[str, Any]) -> CaseOutcome:
+        """A case in a process forked by the template: payload out, outcome back on its socket."""
+        with self._lock:
+            self._forked.add(pid)
+        deadline = time.monotonic() + float(payload["horizon"]) + CASE_TIMEOUT_MARGIN
+        chunks = []
+        try:
+            conn.sendall(json.dumps(payload).encode())
+            conn.shutdown(socket.SHUT_WR)
+            while True:
+                conn.settimeout(max(0.001, deadline - time.monotonic()))
+                data = conn.recv(1 << 16)
+                if not data:
+                    break
+                chunks.append(data)
+        except TimeoutError:
+            stop_group(pid, grace=5.0)
+            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+        except OSError as exc:
+            stop_group(pid, grace=5.0)
+            return CaseOutcome("error", "?", "the case process failed", error=str(exc))
+        finally:
+            conn.close()
+            with self._lock:
+                self._forked.discard(pid)
+        lines = [line for line in b"".join(chunks).decode("utf-8", "replace").splitlines() if line.startswith("{")]
+        if not lines:
+            return CaseOutcome("error", "?", "the case process failed",
+                               error=tail(Path(payload["run_dir"]) / "case.log").strip()[-2000:])
+        return CaseOutcome.from_json(json.loads(lines[-1]))
+
+    def pending(self) -> int:
+        return len(self.futures)
+
+    def done(self, timeout: float | None = None) -> Iterator[tuple[str, CaseOutcome]]:
+        finished, _ = wait(list(self.futures), timeout=timeout, return_when=FIRST_COMPLETED)
+        for future in finished:
+            case_id = self.futures.pop(future)
+            yield case_id, future.result()
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            forked = list(self._forked)
+            zygotes = [z for z in self._zygotes.values() if z is not None]
+            procs = list(self._procs)
+            warm = [p for _, p in self._warm]
+            self._warm.clear()
+        for proc in warm:  # waiting for a payload: nothing of a case to lose
+            stop_process(proc, grace=1.0)
+        for proc in procs:
+            stop_process(proc, grace=10.0)
+        for pid in forked:
+            stop_group(pid, grace=10.0)
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        for zygote in zygotes:  # after the cases: it reaps them, so their CPU is accounted to it, then to us
+            zygote.close()
+
+
+def _key(payload: dict[str, Any]) -> tuple[str, ...]:
+    """What a case process preloads: the spec and the dictionaries."""
+    return (str(payload["spec"]), *map(str, payload.get("dictionaries", [])))
+
+
+class DaskPool:
+    """Cases on a Dask cluster: ``tcp://HOST:PORT`` (a running scheduler) or ``local:K`` (K worker processes)."""
+
+    def __init__(self, address: str, workers: int):
+        import dask
+        from dask.distributed import Client, LocalCluster
+
+        self.cluster = None
+        if address.startswith("local:"):
+            count = int(address.split(":", 1)[1] or workers)
+            # Workers without stack sampling (see worker.stop_worker_profiler: it can deadlock a case).
+            with dask.config.set({"distributed.worker.profile.enabled": False}):
+                self.cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                                            host="127.0.0.1", dashboard_address=None, protocol="tcp")
+            self.client = Client(self.cluster)
+        else:
+            self.client = Client(address)
+        self.workers = max(1, len(self.client.scheduler_info().get("workers", {})) or workers)
+        self.futures: dict[Any, tuple[str, dict]] = {}
+
+    def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+        from astaa_deft.orchestration.campaign.worker import execute_remote
+
+        # retries: a task lost with its worker (killed, machine gone) is re-queued on another.
+        future = self.client.submit(execute_remote, payload, key=f"case-{case_id}-{payload.get('attempt', 0)}",
+                                    pure=False, retries=3)
+        self.futures[future] = (case_id, payload)
+
+    def pending(self) -> int:
+        return len(self.futures)
+
+    def done(self, timeout: float | None = None) -> Iterator[tuple[str, CaseOutcome]]:
+        from dask.distributed import wait as dwait
+
+        try:
+            result = dwait(list(self.futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # nothing finished yet (dask raises instead of returning an empty set)
+            return
+        for future in result.done:
+            case_id, payload = self.futures.pop(future)
+            try:
+                body = future.result()
+            except Exception as exc:  # noqa: BLE001 - a task that failed on every retry
+                yield case_id, CaseOutcome("error", "?", "the case failed on the cluster", error=str(exc))
+                continue
+            log_b64 = body.pop("log_b64", None)
+            run_dir = Path(payload["run_dir"])
+            run_dir.mkdir(parents=True, exist_ok=True)
+            outcome = CaseOutcome.from_json(body)
+            if log_b64:
+                (run_dir / "run.mcap").write_bytes(base64.b64decode(log_b64))
+                outcome.log_path = str(run_dir / "run.mcap")
+            yield case_id, outcome
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()

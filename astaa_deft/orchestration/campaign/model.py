@@ -1,0 +1,105 @@
+"""Typed records of a campaign: a planned case, what a run of it gave, a bucket."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+from astaa_deft.engine.monitor.verdict import ORDER
+
+BASELINE = "baseline"  # a clean run, no mutation
+MUTATED = "mutated"  # a generated test case
+RERUN = "rerun"  # a bucket's first failure again, for its rate
+CONTROL = "control"  # a failing case's unmutated twin: same params, no test case, same concurrency
+CLEAN_KINDS = (BASELINE, CONTROL)  # runs without a test case: run to the scenario's end, timing measured
+
+# What a bucket is, once its control runs are in: the report tells them apart.
+BUG = "bug"  # reproduced by a re-run, and the unmutated twin did not fail that way
+FLAKY = "flaky"  # not reproduced, or the unmutated twin failed the same way: flaky SUT or environment
+BASELINE_FINDING = "baseline"  # fails without any mutation (a clean run, or a case that applied none)
+CONFIRMING = "confirming"  # its re-runs and twins are still running
+
+
+@dataclass(frozen=True)
+class PlannedCase:
+    """One run to make: everything a worker needs, nothing it must look up."""
+
+    case_id: str  # "b-0001", "c-000042", "r-<bucket>-1", "t-<bucket>-1"
+    kind: str  # BASELINE, MUTATED, RERUN or CONTROL
+    number: int  # order in the campaign
+    seed: int  # the strategy's seed for this case (the test case's own is inside the XML)
+    params: dict[str, str]
+    testcase_xml: str | None  # None: a clean run
+    strategy: str = "random"
+    parent: str | None = None  # guided: the corpus case this one mutates
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, body: dict[str, Any]) -> PlannedCase:
+        return cls(**body)
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One failure seen in a run: an invariant that broke or a module that died."""
+
+    invariant: str
+    crash: str  # CRASH class
+    module: str | None
+    channel: str | None
+    detail: str
+    severity: str = "high"  # the invariant's (low … critical); a crash no invariant named: high
+    at: float | None = None  # seconds from the run's start to the violation (None: not known)
+
+
+@dataclass
+class CaseOutcome:
+    """What one run of a case gave (JSON-able: it crosses process and machine boundaries)."""
+
+    status: str  # "done", or "error" (the run could not start / be judged)
+    verdict: str  # CRASH class of the run ("Pass", "Silent", …) or "?" on error
+    summary: str
+    findings: list[Finding] = field(default_factory=list)
+    seconds: float = 0.0
+    log_path: str | None = None
+    reason: str = ""  # why the run ended: "violation", "horizon", "all modules exited"
+    mutations: int = 0
+    margins: dict[str, float] = field(default_factory=dict)  # invariant → closest approach (smaller = closer)
+    error: str = ""
+    # Clean runs: seconds from the modules' launch to each channel's first message (the live stack's timing).
+    first_seen: dict[str, float] = field(default_factory=dict)
+    # What the run cost: CPU seconds of every process of the run (the case process, its recorder, the modules
+    # and what they reaped), the case's wall seconds, the peak summed resident memory (clean runs only).
+    cpu: float = 0.0
+    cpu_waited: float = 0.0  # CPU seconds its CPU-bound threads waited for a core (clean runs; cost.WantedCpu)
+    wall: float = 0.0
+    rss_mb: float = 0.0
+    # Clean runs: per channel, its message rate (1/s) and its longest gap between two messages (s).
+    timing: dict[str, dict[str, float]] = field(default_factory=dict)
+    # Per invariant: messages (or samples) that broke it — a known baseline finding is judged by these too.
+    violating: dict[str, int] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, body: dict[str, Any]) -> CaseOutcome:
+        body = dict(body)
+        body["findings"] = [Finding(**f) for f in body.get("findings", [])]
+        known = cls.__dataclass_fields__
+        return cls(**{k: v for k, v in body.items() if k in known})  # a journal of an older version
+
+    @property
+    def failed(self) -> bool:
+        return self.status == "done" and self.verdict != "Pass"
+
+    def keeping(self, kept: list[Finding], note: str) -> CaseOutcome:
+        """This outcome with only the ``kept`` findings (``note`` says why the rest do not count): its verdict
+        the most severe kept finding's class, Pass when none is left."""
+        if not kept:
+            return replace(self, verdict="Pass", findings=[], summary=f"Pass{note}")
+        klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c == "Pass")
+        return replace(self, verdict=klass if klass != "Pass" else self.verdict, findings=kept,
+                       summary=self.summary + note)

@@ -1,0 +1,119 @@
+"""A bucket's module tests: the frame its planner failed on, and whether the suite fails on the defect.
+
+DeFT extracts one frame per recorded planner output, so a cycle in which
+the planner raised (its node logged the exception and carried on, or died
+of it) answered nothing and is in no frame: the suite of such a run passes
+although the replayed planner would raise. For a crash bucket the frame of
+that cycle — the newest trigger the planner got before the failure, with
+the newest of each other input — is added in time order, with no output
+expected: its replay raising is the failing module test. The suite is then
+run once, and what fails decides whether it fails *on the defect*: an
+invariant oracle failing, or (crash bucket) a frame whose replay raises;
+frames that only differ from the recording do not count.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from astaa_deft.engine.bus import process_launch
+from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.extract import ExtractedFrame
+from astaa_deft.analysis.deft.validator import Comparison
+from astaa_deft.analysis.deft.workflow import ExtractReport, run_params
+from astaa_deft.io.log import records as rec
+from astaa_deft.io.log.reader import LoggedMessage, read_log
+from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.model.sut import Spec
+
+CRASH_KINDS = frozenset({"process", "log", "exceptions"})  # monitors of a module dying or raising
+_RAISED = re.compile(r"the (?:planner|module) raised (.+)")
+
+
+@dataclass(frozen=True)
+class TestsVerdict:
+    fails_on_defect: bool | None  # None: the suite could not run
+    detail: str
+
+
+def is_crash_bucket(verdict: str, invariant: str, spec: Spec) -> bool:
+    """Whether a bucket's finding is a module dying or raising (an abnormal exit, a log or exceptions monitor)."""
+    if verdict in ("Abort", "Catastrophic") or invariant == IMPLICIT:
+        return True
+    watched = next((i for i in spec.invariants if i.name == invariant), None)
+    return watched is not None and watched.kind in CRASH_KINDS
+
+
+def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: ExtractReport, invariant: str) -> bool:
+    """Add to an extracted planner suite the frame of the cycle its planner failed on (module doc); True if added.
+
+    The failure is the log's first violation of ``invariant``, else the
+    planner's first abnormal exit. Nothing is added when the log does not
+    say when, or no trigger reached the planner before it.
+    """
+    planner = spec.planner
+    if planner is None:
+        return False
+    log = read_log(log_path)
+    failed_at = next((v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant == invariant), None)
+    if failed_at is None:
+        failed_at = next((e.time_ns for e in log.records(rec.ProcessExitRecord)
+                          if e.module == planner.module and e.abnormal), None)
+    if failed_at is None:
+        return False
+    triggers = [m for m in log.on(spec.channel(planner.trigger).key) if m.log_time <= failed_at]
+    if not triggers:
+        return False
+    trigger = triggers[-1]
+    inputs: dict[str, LoggedMessage] = {planner.trigger: trigger}
+    for name in planner.inputs:
+        if name != planner.trigger:
+            before = [m for m in log.on(spec.channel(name).key) if m.log_time <= trigger.log_time]
+            if not before:
+                return False
+            inputs[name] = before[-1]
+    accepted = [f for f in report.extraction.frames if f.accepted]
+    failing = ExtractedFrame(index=max((f.index for f in accepted), default=-1) + 1, output=None,
+                             trigger_time=trigger.log_time, frame_time=trigger.log_time, inputs=inputs,
+                             comparison=Comparison(math.inf, math.inf, 0, "failed cycle"), accepted=True,
+                             candidates_tried=0, exact=False)
+    frames = sorted([*accepted, failing], key=lambda f: f.trigger_time)
+    oracles = json.loads((tests_dir / MANIFEST).read_text()).get("oracles", [])
+    export_suite(frames, spec, run_params(log, spec), tests_dir, oracles=oracles)
+    return True
+
+
+def run_module_tests(tests_dir: Path, *, crash: bool, timeout: float = 600.0) -> TestsVerdict:
+    """Run the suite once with pytest and judge it (:func:`judge_pytest`)."""
+    suite = tests_dir.resolve()  # pytest runs from inside the suite: its own pytest.ini
+    try:
+        done = process_launch.run([sys.executable, "-m", "pytest", "-q", "-rf", "-p", "no:cacheprovider", str(suite)],
+                                  timeout=timeout, cwd=str(suite))
+    except subprocess.TimeoutExpired:
+        return TestsVerdict(None, f"pytest did not finish in {timeout:.0f} s")
+    return judge_pytest(done.returncode, done.stdout + done.stderr, crash=crash)
+
+
+def judge_pytest(returncode: int, output: str, *, crash: bool) -> TestsVerdict:
+    """Whether a suite's pytest run failed on the bucket's defect, from its exit code and output."""
+    if returncode == 0:
+        return TestsVerdict(False, "they pass on the defect")
+    if returncode != 1:
+        tail = output.strip().splitlines()[-1:] or [""]
+        return TestsVerdict(None, f"pytest exit {returncode}: {tail[0][:200]}")
+    failed = [line for line in output.splitlines() if line.startswith("FAILED ")]
+    oracle = next((line for line in failed if "::oracle_" in line), None)
+    raised = _RAISED.search(output)
+    if oracle is not None:
+        return TestsVerdict(True, f"its oracle fails: {oracle.split(' - ', 1)[-1][:200]}")
+    if raised is not None and crash:
+        return TestsVerdict(True, f"the replay raises {raised.group(1).strip()[:200]}")
+    if raised is not None:
+        return TestsVerdict(False, f"the replay raises {raised.group(1).strip()[:200]}, but the bucket is no crash")
+    return TestsVerdict(False, f"{len(failed)} frame(s) differ from the recording; none fails on the defect")

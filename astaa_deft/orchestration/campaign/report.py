@@ -1,0 +1,274 @@
+"""The campaign's report: one static, self-contained HTML page built from the journal alone.
+
+A headline that counts confirmed bugs by severity apart from unconfirmed,
+flaky and clean-run failures and names the most severe finding
+(``standing.py``), a summary, a table of buckets ranked by status, severity
+and rate (status and its evidence, severity, verdict, invariant, culprit,
+rate, minimal XML, links to the log and the module tests, and whether those
+fail on the bucket's defect), and plots (new buckets over cases
+and over time, verdict classes, closest approach per invariant by strategy,
+time per case) as embedded base64 PNGs: the page opens from a file, offline.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import os
+import time
+from pathlib import Path
+
+from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
+from astaa_deft.orchestration.campaign.journal import Journal, open_existing
+from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX
+from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED
+from astaa_deft.orchestration.campaign.standing import CONFIRMED, headline, most_severe, standings
+
+REPORT_NAME = "report.html"
+
+CSS = """
+body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1150px;padding:0 1em;color:#222}
+table{border-collapse:collapse;width:100%;font-size:13px;table-layout:auto}td,th{border:1px solid #ccc;
+padding:4px 6px;vertical-align:top;text-align:left}th{background:#f0f0f0;white-space:nowrap}
+td.family,td.culprit{overflow-wrap:anywhere}
+table.summary{width:auto}table.summary th{width:14em}
+pre{white-space:pre-wrap;font-size:11px;margin:4px 0 0;max-height:18em;overflow:auto;background:#fafafa;
+padding:4px}.bad{color:#a00;font-weight:bold}.ok{color:#070;font-weight:bold}.muted{color:#777}
+tr.xml td{border-top:none;background:#fcfcfc}details summary{cursor:pointer;color:#345}
+.family div{white-space:nowrap}.headline{font-size:1.15em}
+.plots{display:grid;grid-template-columns:1fr 1fr;gap:12px}.plots img{width:100%;border:1px solid #eee}
+"""
+VERDICT_COLOURS = {"Pass": "#2a9d4b", "Hindering": "#e0a030", "Silent": "#d05a1e", "Abort": "#b3202a",
+                   "Restart": "#7a2ca0", "Catastrophic": "#222222", "?": "#999999"}
+
+
+def write_report(out: Path) -> Path:
+    """Render the campaign in ``out`` into ``out/report.html``; its path.
+
+    InputError when ``out`` holds no campaign; OutputError (before rendering)
+    when the folder cannot take the report, or when writing it fails.
+    """
+    journal = open_existing(out)
+    place = Place(out, "the campaign folder (copy it somewhere writable)")
+    try:
+        ready_dir(place)  # before rendering: OutputError if the report cannot be written there
+        page = render(journal, out)
+    finally:
+        journal.close()
+    path = out / REPORT_NAME
+    with writing(place):
+        write_atomic(path, page)  # never a half-written report
+    return path
+
+
+def _rel(path: str | None, out: Path) -> str | None:
+    if not path:
+        return None
+    try:
+        return os.path.relpath(path, out.resolve())
+    except ValueError:
+        return path
+
+
+def render(journal: Journal, out: Path) -> str:
+    meta = journal.meta()
+    rows = journal.cases()
+    done = [r for r in rows if r["status"] in ("done", "error")]
+    mutated = [r for r in done if r["kind"] == MUTATED]
+    failing = [r for r in mutated if r["verdict"] not in ("Pass", "?", None)]
+    errors = [r for r in done if r["status"] == "error"]
+    minimised = journal.minimisations()
+    checked = journal.module_tests()
+    ranked = standings(journal)
+    by_bucket = {s.bucket.bucket: s for s in ranked}
+    buckets = [s.bucket for s in ranked] + [b for b in journal.buckets() if b.bucket not in by_bucket]  # merged last
+    live = [b for b in buckets if b.merged_into is None]
+    e = html.escape
+    spec_name = Path(str(meta.get("spec") or "?")).stem
+    confirmed = any(s.status == CONFIRMED for s in ranked)
+    top = most_severe(ranked)
+    verdict_line = (f"<p>most severe: <b>{e(top.describe())}</b></p>" if top is not None
+                    else "<p class='ok'>no failure caused by a mutation</p>")
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>astaa-deft campaign: {e(spec_name)}</title>"
+             f"<style>{CSS}</style></head><body>",
+             f"<h1>astaa-deft campaign: {e(spec_name)}</h1>",
+             f"<p class='headline'><span class='{'bad' if confirmed else 'ok'}'>{e(headline(ranked))}</span> in"
+             f" {len(mutated)} generated case(s) and {len([r for r in done if r['kind'] == BASELINE])} clean"
+             f" run(s).</p>", verdict_line,
+             "<h2>Summary</h2><table class='summary'>"]
+    summary = [("spec", meta.get("spec")), ("strategy", meta.get("strategy")), ("seed", meta.get("seed")),
+               ("params", json.dumps(meta.get("params")) if meta.get("params") else "the spec's defaults"),
+               ("horizon", f"{meta.get('horizon')} s"),
+               ("baseline runs", len([r for r in done if r["kind"] == BASELINE])),
+               ("generated cases run", len(mutated)), ("failing cases", len(failing)),
+               ("cases that could not run", len(errors)),
+               ("how runs ended", _end_reasons(done)),
+               ("buckets", f"{len(live)} ({sum(1 for b in live if b.without_mutation)} without mutation,"
+                           f" {len(buckets) - len(live)} merged)"),
+               ("wall time of the cases", f"{_wall(done):.0f} s"), ("generated", time.strftime("%Y-%m-%d %H:%M:%S UTC",
+                                                                                  time.gmtime()))]
+    parts += [f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in summary]
+    parts.append("</table><h2>Buckets</h2>")
+    if not buckets:
+        parts.append("<p class='ok'>No failures found.</p>")
+    else:
+        parts.append("<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>"
+                     "<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
+                     "<th title='re-runs of the first failure that failed the same way'>rate</th>"
+                     "<th>files</th></tr>")
+        for b in buckets:
+            standing = by_bucket.get(b.bucket)
+            first = journal.case(b.first_case)
+            m = minimised.get(b.bucket)
+            fails, runs = journal.rate(b)
+            rate = f"{fails}/{runs}" if runs else "-"
+            links = []
+            log = _rel(first["log_path"] if first is not None else None, out)
+            if log:
+                links.append(f"<a href='{e(log)}'>failing log</a> <span class='muted'>(MCAP: Foxglove opens it)</span>")
+            tests = _rel(m["tests_dir"], out) if m is not None else None
+            if m is not None and tests:
+                kind = ("DeFT replay of the failing run" if str(m["tests_dir"]).endswith(REPLAY_TESTS_SUFFIX)
+                        else "fail on the culprit")
+                links.append(f"<a href='{e(tests)}'>module tests</a> "
+                             f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>"
+                             f"{_tests_verdict(checked.get(b.bucket))}")
+            minimisation = _rel(m["out_dir"], out) if m is not None else None
+            if minimisation:
+                links.append(f"<a href='{e(minimisation)}'>minimisation</a>")
+            minimal_xml = m["minimal_xml"] if m is not None else None
+            minimal = bool(minimal_xml)
+            xml = minimal_xml or ((first["testcase_xml"] or "") if first is not None else "")
+            family = ("<span class='muted'>without mutation</span>" if b.without_mutation
+                      else "".join(f"<div>{e(part)}</div>" for part in b.family.split("+")))
+            merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""
+            culprit = e(m["culprit"] or m["status"]) if m is not None else "<span class='muted'>not minimised</span>"
+            colour = VERDICT_COLOURS.get(b.verdict, "#a00")
+            status = (f"<span class='{'bad' if standing.status == CONFIRMED else 'muted'}'>{e(standing.status)}</span>"
+                      f"<br><span class='muted'>{e(standing.why)}</span>" if standing is not None else "")
+            parts.append(f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td><td>{status}</td>"
+                         f"<td>{e(standing.severity) if standing is not None else ''}</td>"
+                         f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
+                         f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
+                         f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
+                         f"<td>{'<br>'.join(links)}</td></tr>")
+            if xml:
+                what = "minimal test case" if minimal else "first failing test case (not minimised)"
+                parts.append(f"<tr class='xml'><td></td><td colspan='10'><details{' open' if minimal else ''}>"
+                             f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
+        parts.append("</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal"
+                     " test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky —"
+                     " the campaign's run without mutation failed too; without mutation — clean runs fail this way."
+                     " Ranked by status, severity, rate. rate: re-runs of a bucket's first failure that failed the"
+                     " same way (for a bucket without mutation: clean runs that failed this way). cases: generated"
+                     " cases filed in the bucket.</p>")
+    parts.append("<h2>Plots</h2><div class='plots'>")
+    for title, png in _plots(journal, done, buckets):
+        parts.append(f"<img alt='{e(title)}' title='{e(title)}' src='data:image/png;base64,{png}'>")
+    parts.append("</div></body></html>")
+    return "\n".join(parts)
+
+
+def _tests_verdict(row) -> str:
+    """Whether a bucket's module tests fail on its defect, as the campaign found when it ran them once."""
+    if row is None:
+        return ""
+    if row["fails_on_defect"] == 1:
+        return (f"<br><span class='ok'>fail on the defect</span> "
+                f"<span class='muted'>({html.escape(row['detail'])})</span>")
+    if row["fails_on_defect"] == 0:
+        return (f"<br><span class='bad'>do not fail on the defect</span> "
+                f"<span class='muted'>({html.escape(row['detail'])})</span>")
+    return f"<br><span class='muted'>could not run ({html.escape(row['detail'])})</span>"
+
+
+def _end_reasons(done) -> str:
+    """How the runs ended (the spec's run: reasons, violations, the horizon), most frequent first."""
+    counts: dict[str, int] = {}
+    for r in done:
+        reason = (json.loads(r["outcome"]).get("reason") if r["outcome"] else None) or r["status"]
+        counts[reason] = counts.get(reason, 0) + 1
+    return ", ".join(f"{reason} {n}" for reason, n in sorted(counts.items(), key=lambda kv: -kv[1])) or "-"
+
+
+def _wall(done) -> float:
+    starts = [r["started_at"] for r in done if r["started_at"]]
+    ends = [r["finished_at"] for r in done if r["finished_at"]]
+    return (max(ends) - min(starts)) if starts and ends else 0.0
+
+
+def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    out = []
+    ordered = sorted(done, key=lambda r: r["finished_at"] or 0)
+    t0 = min((r["started_at"] for r in ordered if r["started_at"]), default=0.0)
+    firsts = {b.first_case for b in buckets}
+    xs, ts, ys, count = [0], [0.0], [0], 0
+    for n, r in enumerate(ordered, start=1):
+        if r["case_id"] in firsts:
+            count += 1
+        xs.append(n)
+        ts.append((r["finished_at"] or t0) - t0)
+        ys.append(count)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(5, 3.2))
+    a.step(xs, ys, where="post")
+    a.set_xlabel("cases finished")
+    a.set_ylabel("buckets")
+    b.step(ts, ys, where="post", color="tab:orange")
+    b.set_xlabel("seconds")
+    for axis in (a, b):
+        axis.yaxis.set_major_locator(MaxNLocator(integer=True))
+    a.xaxis.set_major_locator(MaxNLocator(integer=True))
+    fig.suptitle("New buckets over cases and time")
+    out.append(("New buckets over cases and time", _png(fig, plt)))
+
+    classes: dict[str, int] = {}
+    for r in done:
+        classes[r["verdict"] or "?"] = classes.get(r["verdict"] or "?", 0) + 1
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.bar(list(classes), list(classes.values()), color=[VERDICT_COLOURS.get(c, "#a00") for c in classes])
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_title("Verdict classes (all runs)")
+    out.append(("Verdict classes", _png(fig, plt)))
+
+    closest: dict[tuple[str, str], list[tuple[int, float]]] = {}
+    for n, r in enumerate(ordered, start=1):
+        if r["kind"] != MUTATED or not r["outcome"]:
+            continue
+        for inv, margin in json.loads(r["outcome"]).get("margins", {}).items():
+            series = closest.setdefault((r["strategy"], inv), [])
+            best = min(margin, series[-1][1]) if series else margin
+            series.append((n, best))
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    for (strategy, inv), series in sorted(closest.items()):
+        ax.step([p[0] for p in series], [p[1] for p in series], where="post", label=f"{inv} ({strategy})")
+    if closest:
+        ax.legend(fontsize=6)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("cases finished")
+    ax.set_ylabel("closest approach (0 = broke)")
+    ax.set_title("Closest approach per invariant")
+    out.append(("Closest approach per invariant, by strategy", _png(fig, plt)))
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.hist([r["seconds"] for r in done if r["seconds"] is not None] or [0], bins=20, color="tab:green")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("seconds per case")
+    ax.set_title("Time per case")
+    out.append(("Time per case", _png(fig, plt)))
+    return out
+
+
+def _png(fig, plt) -> str:
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()

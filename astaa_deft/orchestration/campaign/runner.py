@@ -1,0 +1,300 @@
+"""The one adapter between a campaign and the rest of the tool: run one case, get a typed outcome.
+
+One call of :func:`astaa_deft.engine.session.run_session`: a fresh run with its
+own router port (the spec's endpoints with port 0 → a free port), its own
+run directory and its own log, ended by the spec's own ``run:`` section (a
+module's exit, a channel's "done", its time limit — applied by the session
+for every caller, no SUT-specific logic here), a mutated case's first broken
+invariant (known baseline findings apart), a crashed module (as its on_crash
+says), every module gone, or the campaign's time horizon.
+Nothing else in the campaign package touches the bus.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from astaa_deft.model import fields
+from astaa_deft.engine.bus.processes import ChildProcess
+from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.codecs.base import Codec
+from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
+from astaa_deft.engine.intercept.engine import Interceptor
+from astaa_deft.engine.intercept.testcase import TestCase
+from astaa_deft.io.log import layout
+from astaa_deft.io.log.records import ViolationRecord
+from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
+from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.engine.session import BusRun, RunOptions, run_session
+from astaa_deft.model.sut import Spec
+from astaa_deft.orchestration.campaign.cost import RunCost
+from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+
+POLL_SECONDS = 0.05
+LOG_NAME = "run.mcap"
+POLICY_NAME = "policy.xml"
+
+
+def isolated(spec: Spec) -> Spec:
+    """The spec with every listening endpoint on a free port: concurrent runs never share a router."""
+    endpoints = []
+    for endpoint in spec.zenoh.endpoints:
+        proto, _, addr = endpoint.partition("/")
+        host, _, _port = addr.rpartition(":")
+        endpoints.append(f"{proto}/{host}:0")
+    return replace(spec, zenoh=replace(spec.zenoh, endpoints=tuple(endpoints)))
+
+
+def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, horizon: float,
+             dictionary: Dictionary | None = None, settle: float | None = None, *,
+             warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset()) -> CaseOutcome:
+    """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
+
+    A mutated run ends at its first broken invariant, except those in
+    ``known`` (known baseline findings: the campaign judges them after the
+    run); a clean run (``testcase`` None) never ends at a violation: it runs
+    to the scenario's end, so it measures how long the SUT is live, and its
+    channels' timing (rates, longest gaps), and its memory.
+    ``settle``: a mutated run ends this many seconds after its test case can
+    mutate no more (its last window closed or its last one-message policy
+    acted) — what the SUT does with a bad message shows within seconds, and
+    a run's remaining minutes would be spent for nothing.
+    ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
+    Every outcome carries the run's CPU seconds and wall seconds (:mod:`.cost`).
+    """
+    cost = RunCost(sample_rss=testcase is None)
+    cost.start()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    log_path = run_dir / LOG_NAME
+    attachments = {}
+    interceptor = None
+    if testcase is not None and testcase.policies:
+        policy_file = run_dir / POLICY_NAME
+        policy_file.write_bytes(testcase.to_xml())
+        attachments[layout.POLICY_ATTACHMENT] = policy_file
+        interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
+    options = RunOptions(mode="star", launch=True, record=log_path, params=dict(params),
+                         command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
+                         interceptor=interceptor, stop_on_violation=False, attachments=attachments,
+                         warm_recorder=warm_recorder)
+    options.time_limit = horizon
+    watch = MarginWatch(spec)
+    settled = SettleWatch(testcase, settle) if testcase is not None and settle is not None else None
+    timing = ChannelTiming(spec) if testcase is None else None  # a clean run measures the stack's timing
+    stop_at_violation = testcase is not None
+    started: dict[str, Any] = {}
+
+    def on_start(bus: BusRun) -> None:
+        started["ns"] = time.time_ns()
+        started["monitors"] = bus.monitors.set if bus.monitors is not None else None
+        watch.attach(bus)
+        if settled is not None:
+            settled.attach(bus)
+        if timing is not None:
+            timing.attach(bus)
+
+    def stop_when(bus: BusRun) -> str | None:
+        if stop_at_violation and any(v.invariant not in known for v in list(bus.violations)):
+            return VIOLATION
+        return settled.check(bus) if settled is not None else None
+
+    try:
+        # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
+        result = run_session(isolated(spec), options, on_start=on_start, stop_when=stop_when)
+    except InputError as exc:
+        cost.stop()
+        return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems),
+                           cpu=cost.cpu, wall=cost.wall)
+    cost.stop()
+    reason = {"time limit": "horizon", SETTLED: "settled", VIOLATION: "violation"}.get(result.end_reason,
+                                                                                      result.end_reason)
+    if result.verdict is None or not result.observed or not result.complete:  # not fully observed: no Pass
+        return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
+                           log_path=str(log_path), reason=reason,
+                           error="no verdict" if result.verdict is None else "the log was not finished",
+                           cpu=cost.cpu, wall=cost.wall)
+    t0_ns = started.get("ns")
+    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail,
+                        at=round((v.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None, severity=v.severity)
+                for v in result.violations]
+    for exit_ in result.crashes:
+        if not any(f.module == exit_.module for f in findings):
+            findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
+                                    at=round((exit_.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None))
+    monitors = started.get("monitors")
+    violating = {name: s["violating"] for name, s in monitors.stats().items() if s["violating"]} \
+        if monitors is not None else {}
+    return CaseOutcome("done", result.verdict.klass, result.verdict.summary, findings, result.seconds,
+                       str(log_path), reason, result.mutations, margins=watch.margins(result.violations),
+                       first_seen=timing.seconds() if timing is not None else {},
+                       cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
+                       timing=timing.channels_timing() if timing is not None else {}, violating=violating)
+
+
+SETTLED = "settled after the last mutation"
+VIOLATION = "violation"
+
+
+class ChannelTiming:
+    """Per channel a module consumes: seconds from the run's start to its first message, its rate and its
+    longest gap between two messages (from its first message on: a slow start is not a gap)."""
+
+    def __init__(self, spec: Spec):
+        self.channels = [c.name for c in spec.channels if c.consumers]
+        self.t0 = 0.0
+        self.first: dict[str, float] = {}
+        self.last: dict[str, float] = {}
+        self.count: dict[str, int] = {}
+        self.max_gap: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def attach(self, bus: BusRun) -> None:
+        self.t0 = time.monotonic()
+        for channel in self.channels:
+            def seen(sample: zenoh.Sample, channel: str = channel) -> None:
+                now = time.monotonic()
+                with self._lock:
+                    if channel in self.last:
+                        self.max_gap[channel] = max(self.max_gap.get(channel, 0.0), now - self.last[channel])
+                    else:
+                        self.first[channel] = now - self.t0
+                    self.last[channel] = now
+                    self.count[channel] = self.count.get(channel, 0) + 1
+
+            try:
+                bus.subscribe(channel, seen)
+            except KeyError:
+                continue
+
+    def seconds(self) -> dict[str, float]:
+        with self._lock:
+            return {k: round(v, 3) for k, v in self.first.items()}
+
+    def channels_timing(self) -> dict[str, dict[str, float]]:
+        with self._lock:
+            out = {}
+            for channel, count in self.count.items():
+                span = self.last[channel] - self.t0 - self.first[channel]
+                out[channel] = {"count": count, "rate": round((count - 1) / span, 3) if span > 0 else 0.0,
+                                "max_gap": round(self.max_gap.get(channel, 0.0), 4)}
+            return out
+
+
+class SettleWatch:
+    """Ends a mutated run ``settle`` seconds after its test case can mutate no more.
+
+    A policy is done at its window's end, or — when it changes a bounded
+    number of messages — once its window opened and the interception's
+    mutation count has stood still for ``settle`` seconds. Windows counted
+    from a channel's first message start counting when the tool sees it.
+    A policy with an open-ended window keeps the run to its usual end.
+    """
+
+    def __init__(self, testcase: TestCase, settle: float):
+        self.settle = settle
+        self.anchors = {p.window.anchor_channel for p in testcase.policies if p.window.anchor_channel is not None}
+        self.policies = testcase.policies
+        self.t0 = 0.0
+        self.first: dict[str, float] = {}  # anchor channel → monotonic time of its first message
+        self.mutations = -1
+        self.changed = 0.0
+        self._lock = threading.Lock()
+
+    def attach(self, bus: BusRun) -> None:
+        self.t0 = time.monotonic()
+        self.changed = self.t0
+        for channel in self.anchors:
+            def seen(sample: zenoh.Sample, channel: str = channel) -> None:
+                with self._lock:
+                    self.first.setdefault(channel, time.monotonic())
+
+            try:
+                bus.subscribe(channel, seen)
+            except KeyError:  # not observable: the run keeps its usual end
+                continue
+
+    def _last_chance(self) -> float:
+        """Monotonic time after which no policy can act (inf: not known yet, or never)."""
+        last = self.t0
+        for policy in self.policies:
+            window = policy.window
+            base = self.t0
+            if window.anchor_channel is not None:
+                with self._lock:
+                    base = self.first.get(window.anchor_channel, math.inf)
+            bounded = policy.selection.limit is not None
+            end = window.start if bounded else window.end
+            if end is None:
+                return math.inf
+            last = max(last, base + end)
+        return last
+
+    def check(self, bus: BusRun) -> str | None:
+        now = time.monotonic()
+        mutations = bus.interception.mutations if bus.interception is not None else 0
+        if mutations != self.mutations:
+            self.mutations, self.changed = mutations, now
+        if now >= self._last_chance() + self.settle and now >= self.changed + self.settle:
+            return SETTLED
+        return None
+
+
+class MarginWatch:
+    """How close each bound invariant came to breaking: the smallest distance of its field to min/max.
+
+    Normalised by the bound's range when it has both ends (so invariants
+    compare), 0 when a value is non-finite or out of bounds; every invariant
+    that broke gets 0. The guided strategy steers by these numbers.
+    """
+
+    def __init__(self, spec: Spec):
+        self.bounds = [inv for inv in getattr(spec, "invariants", ()) if isinstance(inv, BoundInvariant)
+                       and (inv.minimum is not None or inv.maximum is not None)]
+        self.spec = spec
+        self.closest: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def attach(self, bus: BusRun) -> None:
+        for inv in self.bounds:
+            codec = get_codec(self.spec.channel(inv.channel).encoding)
+            def seen(sample: zenoh.Sample, inv: BoundInvariant = inv, codec: Codec = codec) -> None:
+                self._seen(inv, codec, sample)
+
+            try:
+                bus.subscribe(inv.channel, seen)
+            except KeyError:  # not observable in this mode
+                continue
+
+    def _seen(self, inv: BoundInvariant, codec, sample) -> None:
+        try:
+            values = [v for _, v in fields.get(codec.decode(sample.payload.to_bytes()), inv.field)]
+        except Exception:  # noqa: BLE001 - a payload the monitors will report; not ours to judge
+            return
+        span = (inv.maximum - inv.minimum) if inv.minimum is not None and inv.maximum is not None else 1.0
+        for value in values:
+            if not isinstance(value, (int, float)) or isinstance(value, bool):
+                continue
+            if not math.isfinite(value):
+                margin = 0.0
+            else:
+                ends = [value - inv.minimum if inv.minimum is not None else math.inf,
+                        inv.maximum - value if inv.maximum is not None else math.inf]
+                margin = max(0.0, min(ends)) / (span or 1.0)
+            with self._lock:
+                if margin < self.closest.get(inv.name, math.inf):
+                    self.closest[inv.name] = margin
+
+    def margins(self, violations: tuple[ViolationRecord, ...]) -> dict[str, float]:
+        with self._lock:
+            out = dict(self.closest)
+        for v in violations:
+            out[v.invariant] = 0.0
+        return out

@@ -1,0 +1,73 @@
+"""Random generation, coverage first: every channel and field early, then ASTAA's weighted draws.
+
+A campaign runs a few hundred cases, not ASTAA's thousands, so case ``n``
+comes from a schedule (:func:`astaa_deft.engine.intercept.generate.coverage_round`):
+the first ``COVERAGE_ROUNDS`` rounds each visit every (channel, field) once
+with a value of the round's class (non-finite or empty first, then extreme
+magnitudes, …), a third of them holding the value (sustained), apply one
+message fault (reorder, delay, duplicate, drop) to every channel and a stamp
+or sequence fault to a few (about 7 % of a round, NaN first); after them,
+cases alternate between further rounds and the weighted generation (one
+field, several fields, repeated, sustained, stamp; plus message faults).
+Windows fall inside the run's live part, counted from the first message of
+the channel that came last in the baseline runs (the
+campaign's :class:`Timing`), so a case mutates the running SUT, not its
+start-up. Deterministic: case ``n`` depends on the seed, ``n`` and the
+timing only — the same cases locally and on a cluster, in any order.
+"""
+
+from __future__ import annotations
+
+import random
+
+from astaa_deft.engine.intercept import generate as gen
+from astaa_deft.engine.intercept.dictionary import Dictionary
+from astaa_deft.model.sut import Spec
+from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Timing
+
+ID_WIDTH = 6
+COVERAGE_ROUNDS = 2  # pure coverage rounds before weighted draws are mixed in
+
+
+class RandomStrategy:
+    name = "random"
+
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float):
+        self.by_channel = gen.targets_to_mutate(spec, dictionary)  # InputError: nothing to mutate
+        self.stamps = gen.stamp_targets_by_channel(spec, dictionary)
+        self.seed = seed
+        self.timing = Timing(None, duration)
+        self._rounds: dict[int, list[gen.Probe]] = {}
+
+    def calibrate(self, timing: Timing) -> None:
+        """Windows from now on count from ``timing.anchor`` and fall inside ``timing.live`` seconds."""
+        self.timing = timing
+
+    @property
+    def round_length(self) -> int:
+        return len(self._round(0))
+
+    def _round(self, number: int) -> list[gen.Probe]:
+        if number not in self._rounds:
+            self._rounds[number] = gen.coverage_round(self.by_channel, self.seed, number, self.stamps)
+        return self._rounds[number]
+
+    def propose(self, number: int) -> Proposal:
+        testcase_id = f"tc-{number:0{ID_WIDTH}d}"
+        rng = random.Random(f"{self.seed}/{number}")
+        index = number - 1
+        covered = COVERAGE_ROUNDS * self.round_length
+        if index >= covered:  # after the pure rounds: every other case is a weighted draw
+            if (index - covered) % 2:
+                testcase = gen.weighted_testcase(testcase_id, rng, self.by_channel, self.timing.live,
+                                                 self.timing.anchor, message_faults=True, stamps=self.stamps)
+                return Proposal(testcase.to_xml().decode())
+            index = covered + (index - covered) // 2
+        round_number, position = divmod(index, self.round_length)
+        probe = self._round(round_number)[position]
+        testcase = gen.probe_testcase(testcase_id, rng, probe, round_number, self.timing.live, self.timing.anchor)
+        return Proposal(testcase.to_xml().decode())
+
+    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
+        pass  # random does not learn
