@@ -4,4 +4,5 @@ import sys
 
 from astaa_deft.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":  # a package walk imports this module too
+    sys.exit(main())

@@ -10,7 +10,7 @@ from astaa_deft.io.yamlsource import Source
 from astaa_deft.engine.intercept.dictionary.model import Dictionary, Entry
 from astaa_deft.engine.intercept.dictionary.yaml_format import DictionaryFile
 
-DEFAULT_DICTIONARY = Path(__file__).resolve().parents[4] / "data" / "dictionaries" / "default.yaml"
+DEFAULT_DICTIONARY = Path(__file__).resolve().parents[3] / "data" / "dictionaries" / "default.yaml"
 
 
 def load_dictionary(files: Sequence[Path | str] = (), *, include_default: bool = True) -> Dictionary:

@@ -26,7 +26,7 @@ from astaa_deft.engine.intercept.actions.base import decimal_text
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase.model import Selection, TestCase, Window
 
-SCHEMA_PATH = Path(__file__).resolve().parents[4] / "data" / "policies" / "testcase.xsd"
+SCHEMA_PATH = Path(__file__).resolve().parents[3] / "data" / "policies" / "testcase.xsd"
 MAX_FILE_BYTES = POLICY.max_bytes or 0  # the cap of a file read, applied to bytes given directly too
 DOCS = "docs/policies.md"
 
