@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import yaml
 
@@ -170,7 +170,7 @@ def parse_scenario(data: Any, source: str = "<scenario>") -> Scenario:
     )
 
 
-def _object(r: _Reader, data: Any, where: str, lane, moving: bool) -> ObjectSpec:
+def _object(r: _Reader, data: Any, where: str, lane: Callable[[Any, str], int], moving: bool) -> ObjectSpec:
     optional = ("offset", "heading", "length", "width") + (("speed", "maneuvers") if moving else ())
     m = r.mapping(data, where, required=("name", "kind", "lane", "x"), optional=optional)
     kind = r.string(m["kind"], f"{where}.kind")
@@ -193,7 +193,7 @@ def _object(r: _Reader, data: Any, where: str, lane, moving: bool) -> ObjectSpec
     )
 
 
-def _maneuver(r: _Reader, data: Any, where: str, lane) -> Maneuver:
+def _maneuver(r: _Reader, data: Any, where: str, lane: Callable[[Any, str], int]) -> Maneuver:
     m = r.mapping(data, where, required=(), optional=("when", "lane_change", "duration", "speed", "accel"))
     if ("lane_change" in m) == ("speed" in m):
         raise ScenarioError(f"{r.source}: {where}: give exactly one of lane_change or speed")
@@ -236,7 +236,8 @@ class _Reader:
     def fail(self, where: str, message: str) -> ScenarioError:
         return ScenarioError(f"{self.source}: {where}: {message}")
 
-    def mapping(self, value: Any, where: str, required=(), optional=()) -> Mapping[str, Any]:
+    def mapping(self, value: Any, where: str, required: tuple[str, ...] = (),
+                optional: tuple[str, ...] = ()) -> Mapping[str, Any]:
         if not isinstance(value, dict):
             raise self.fail(where, f"expected a mapping, got {type(value).__name__}")
         missing = [k for k in required if k not in value]

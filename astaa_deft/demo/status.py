@@ -6,6 +6,8 @@ import json
 import math
 import threading
 
+import zenoh
+
 
 class StatusWatch:
     """The simulator's latest status message, as the tool saw it (done: goal, collision or time limit)."""
@@ -18,7 +20,7 @@ class StatusWatch:
         self.min_clearance = math.inf
         self._lock = threading.Lock()
 
-    def on_sample(self, sample) -> None:
+    def on_sample(self, sample: zenoh.Sample) -> None:
         try:
             msg = json.loads(sample.payload.to_bytes())
         except ValueError:

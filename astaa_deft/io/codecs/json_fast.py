@@ -26,6 +26,7 @@ documents.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import orjson
@@ -74,7 +75,7 @@ def is_exact_scalar(value: Any) -> bool:
     return kind in _SCALARS
 
 
-def writes_alike(value: Any, encode) -> bool:
+def writes_alike(value: Any, encode: Callable[[Any], bytes]) -> bool:
     """True if orjson writes this value exactly as ``encode`` (the codec's encoder) does."""
     try:
         return _dumps(value) == encode(value)
