@@ -177,7 +177,8 @@ def copy_log(source: Path, target: Path, keep=lambda channel, message: True,
 
 def test_an_invariant_that_never_broke_is_an_input_error(runs, tmp_path):
     with pytest.raises(InputError, match="never broke in this run"):
-        command.minimise(runs["failing"], tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, invariant="no_collision", confirm=0))
+        command.minimise(runs["failing"], tmp_path / "out",
+                         MinimiseOptions(spec_path=SPEC_PATH, invariant="no_collision", confirm=0))
 
 
 def test_a_log_without_mutations_is_an_input_error(runs, tmp_path):
@@ -210,7 +211,8 @@ def test_a_failure_the_mutations_do_not_cause_is_reported_not_minimised(runs, tm
         return original if hit else message.data
 
     undone = copy_log(runs["failing"], tmp_path / "undone.mcap", keep, change)
-    code = command.minimise(undone, tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, confirm=0, live_fallback=False))
+    code = command.minimise(undone, tmp_path / "out",
+                            MinimiseOptions(spec_path=SPEC_PATH, confirm=0, live_fallback=False))
     assert code == 1
     out = capsys.readouterr().out
     assert "does not reproduce in the planner replay" in out and "Traceback" not in out
