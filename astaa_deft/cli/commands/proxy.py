@@ -147,7 +147,9 @@ def run_proxy(spec: Spec, options: RunOptions, *, duration: float | None) -> int
     say(f"stopped ({outcome.end_reason}) after {outcome.seconds:.1f} s")
     for name, n in outcome.sent.items():
         # A recorder that did not finish never reported its counts: say so rather than "recorded 0".
-        counted = (f", recorded {outcome.recorded.get(name, 0)}" if outcome.complete else ", recorded ?") if record else ""
+        counted = ""
+        if record:
+            counted = f", recorded {outcome.recorded.get(name, 0)}" if outcome.complete else ", recorded ?"
         say(f"  {name:20} {n:8d} messages{counted}")
     if interceptor is not None:
         say(f"mutations applied: {outcome.mutations}")
