@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 from test_minimise_demo import NOISE, SPEC_PATH, record
 
+from astaa_deft.analysis.minimise.workflow import MinimiseOptions
 from astaa_deft.cli.commands import minimise as command
 from astaa_deft.analysis.deft.extract import extract
 from astaa_deft.analysis.deft.export import export_suite
@@ -176,7 +177,7 @@ def test_control_frames_are_extracted_and_replay_exactly(clean_run, tmp_path):
 def test_a_control_crash_minimises_on_the_module_replay(crashed):
     directory, log_path = crashed
     out = directory / "minimal"
-    code = command.run(log_path, SPEC_PATH, None, out, confirm=0, verbose=False)
+    code = command.minimise(log_path, out, MinimiseOptions(spec_path=SPEC_PATH, confirm=0), verbose=False)
     body = json.loads((out / "summary.json").read_text())
     assert code == 0, body["verdict"]
     assert body["tester"] == "replay" and "module 'control' crashed" in body["why"]

@@ -14,7 +14,7 @@ import os
 
 import pytest
 
-from astaa_deft.cli.commands.demo import demo_policy_path, demo_spec_path, drive
+from astaa_deft.cli.commands.demo import DriveOptions, demo_policy_path, demo_spec_path, drive
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.spec.loader import load_spec
@@ -41,7 +41,7 @@ def agree_offline(log_path):
 @pytest.mark.parametrize("scenario", CLEAN)
 def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
     log = tmp_path / "run.mcap"
-    outcome, watch = drive(scenario, defects=False, passive=False, record=log, command_line=[])
+    outcome, watch = drive(DriveOptions(scenario, defects=False, passive=False, record=log, command_line=[]))
     assert watch.goal and watch.collision is None
     assert outcome.violations == (), [v.invariant for v in outcome.violations]
     assert outcome.verdict.klass == "Pass"
@@ -53,8 +53,8 @@ def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
 def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass, invariants):
     log = tmp_path / "run.mcap"
     # Ends at the first violation (the verdict is decided then), or after 30 s on a slow machine.
-    outcome, _ = drive("lane_follow", defects=True, passive=False, record=log, command_line=[],
-                       policy=demo_policy_path(policy), duration=30.0, stop_on_violation=True)
+    outcome, _ = drive(DriveOptions("lane_follow", defects=True, passive=False, record=log, command_line=[],
+                                    policy=demo_policy_path(policy), duration=30.0, stop_on_violation=True))
     assert outcome.mutations >= 1
     assert outcome.verdict.klass == klass, (outcome.verdict.summary, outcome.end_reason, outcome.seconds)
     assert outcome.verdict.first.invariant in invariants

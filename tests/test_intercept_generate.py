@@ -166,15 +166,15 @@ def test_a_spec_with_nothing_to_mutate_is_an_input_error():
 
 def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
     out = tmp_path / "cases"
-    assert generate_command.run(SPEC_PATH, 25, 9, out, duration=20.0) == 0
+    assert generate_command.generate(SPEC_PATH, 25, 9, out, duration=20.0) == 0
     files = sorted(out.glob("tc-*.xml"))
     assert len(files) == 25
     assert "wrote 25 test cases" in capsys.readouterr().out
     assert [f.read_bytes() for f in files] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 25, 9, 20.0)]
     with pytest.raises(InputError, match="already holds 25 test case"):
-        generate_command.run(SPEC_PATH, 5, 9, out)
+        generate_command.generate(SPEC_PATH, 5, 9, out)
     with pytest.raises(InputError, match="at least 1"):
-        generate_command.run(SPEC_PATH, 0, 9, tmp_path / "other")
+        generate_command.generate(SPEC_PATH, 0, 9, tmp_path / "other")
 
 
 def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):

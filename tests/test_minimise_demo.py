@@ -24,6 +24,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.analysis.minimise.workflow import MinimiseOptions
 from astaa_deft.cli.commands import minimise as command
 from astaa_deft.cli.commands.demo import demo_noise_policies, demo_spec_path
 from astaa_deft.analysis.deft.suite import Suite
@@ -69,7 +70,7 @@ def runs(tmp_path_factory):
 @pytest.fixture(scope="module")
 def minimised(runs):
     out = runs["directory"] / "minimal"
-    code = command.run(runs["failing"], SPEC_PATH, None, out, confirm=1)
+    code = command.minimise(runs["failing"], out, MinimiseOptions(spec_path=SPEC_PATH, confirm=1))
     return code, out, json.loads((out / "summary.json").read_text())
 
 
@@ -176,21 +177,22 @@ def copy_log(source: Path, target: Path, keep=lambda channel, message: True,
 
 def test_an_invariant_that_never_broke_is_an_input_error(runs, tmp_path):
     with pytest.raises(InputError, match="never broke in this run"):
-        command.run(runs["failing"], SPEC_PATH, "no_collision", tmp_path / "out", confirm=0)
+        command.minimise(runs["failing"], tmp_path / "out",
+                         MinimiseOptions(spec_path=SPEC_PATH, invariant="no_collision", confirm=0))
 
 
 def test_a_log_without_mutations_is_an_input_error(runs, tmp_path):
     plain = copy_log(runs["failing"], tmp_path / "plain.mcap",
                      keep=lambda channel, message: channel.topic != layout.MUTATIONS_TOPIC)
     with pytest.raises(InputError, match="holds no mutations"):
-        command.run(plain, SPEC_PATH, None, tmp_path / "out", confirm=0)
+        command.minimise(plain, tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, confirm=0))
 
 
 def test_a_run_that_did_not_fail_is_an_input_error(runs, tmp_path):
     benign = record(runs["directory"], "benign", NOISE, 4.0)
     assert read_mutations(read_log(benign), SPEC).mutations
     with pytest.raises(InputError, match="did not fail"):
-        command.run(benign, SPEC_PATH, None, tmp_path / "out", confirm=0)
+        command.minimise(benign, tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, confirm=0))
 
 
 def test_a_failure_the_mutations_do_not_cause_is_reported_not_minimised(runs, tmp_path, capsys):
@@ -209,7 +211,8 @@ def test_a_failure_the_mutations_do_not_cause_is_reported_not_minimised(runs, tm
         return original if hit else message.data
 
     undone = copy_log(runs["failing"], tmp_path / "undone.mcap", keep, change)
-    code = command.run(undone, SPEC_PATH, None, tmp_path / "out", confirm=0, live_fallback=False)
+    code = command.minimise(undone, tmp_path / "out",
+                            MinimiseOptions(spec_path=SPEC_PATH, confirm=0, live_fallback=False))
     assert code == 1
     out = capsys.readouterr().out
     assert "does not reproduce in the planner replay" in out and "Traceback" not in out

@@ -13,6 +13,7 @@ import json
 import pytest
 from test_minimise_demo import NOISE, SPEC_PATH, record
 
+from astaa_deft.analysis.minimise.workflow import MinimiseOptions
 from astaa_deft.cli.commands import minimise as command
 
 CULPRITS = {  # defect → (its policy, the field it sets, the invariant that breaks first)
@@ -32,7 +33,8 @@ CULPRITS = {  # defect → (its policy, the field it sets, the invariant that br
 def test_live_minimisation_finds_the_culprit_and_it_fails_again_live(defect, tmp_path):
     policy, field, invariant = CULPRITS[defect]
     log = record(tmp_path, f"defect{defect}", NOISE + policy, 7.0)
-    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=1, live_only=True)  # control has a replay
+    code = command.minimise(log, tmp_path / "out",
+                            MinimiseOptions(spec_path=SPEC_PATH, confirm=1, live_only=True))  # control has a replay
     body = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert code == 0, body["verdict"]
     assert body["tester"] == "live" and body["failure"]["invariant"] == invariant
@@ -55,7 +57,7 @@ ANCHORED = {  # the culprits anchored to control's first command: the stack is d
 def test_control_defects_minimise_on_the_module_replay(defect, tmp_path):
     policy, field, invariant = ANCHORED[defect]
     log = record(tmp_path, f"defect{defect}", NOISE + policy, 7.0)
-    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=1)
+    code = command.minimise(log, tmp_path / "out", MinimiseOptions(spec_path=SPEC_PATH, confirm=1))
     body = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert code == 0, body["verdict"]
     assert body["tester"] == "replay" and body["failure"]["invariant"] == invariant
@@ -70,7 +72,8 @@ def test_live_tests_run_in_parallel_isolated_sessions(tmp_path):
     """--jobs 2: two whole-system runs at a time, each its own session; the same culprit is found."""
     policy, field, invariant = ANCHORED[4]
     log = record(tmp_path, "defect4", NOISE + policy, 7.0)
-    code = command.run(log, SPEC_PATH, None, tmp_path / "out", confirm=2, live_only=True, jobs=2)
+    code = command.minimise(log, tmp_path / "out",
+                            MinimiseOptions(spec_path=SPEC_PATH, confirm=2, live_only=True, jobs=2))
     body = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert code == 0, body["verdict"]
     assert body["tester"] == "live" and body["failure"]["invariant"] == invariant

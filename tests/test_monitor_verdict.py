@@ -89,19 +89,19 @@ def write_run(path, nan_at: int | None = None, crash: bool = False):
 def test_check_exit_codes_and_output(tmp_path, capsys):
     spec_path = tmp_path / "sut.yaml"
     spec_path.write_text(spec_text(INVARIANTS))
-    assert check_command.run(write_run(tmp_path / "ok.mcap"), spec_path) == 0
+    assert check_command.check_log(write_run(tmp_path / "ok.mcap"), spec_path) == 0
     assert "verdict: Pass" in capsys.readouterr().out
 
-    assert check_command.run(write_run(tmp_path / "nan.mcap", nan_at=12), spec_path) == 1
+    assert check_command.check_log(write_run(tmp_path / "nan.mcap", nan_at=12), spec_path) == 1
     out = capsys.readouterr().out
     assert "finite_cmd (bound) on 'command' #13 at +1.200 s" in out and "verdict: Silent" in out
 
-    assert check_command.run(write_run(tmp_path / "crash.mcap", crash=True), None) == 1  # spec from the log
+    assert check_command.check_log(write_run(tmp_path / "crash.mcap", crash=True), None) == 1  # spec from the log
     assert "verdict: Abort" in capsys.readouterr().out
 
 
 def test_check_json_output(tmp_path, capsys):
-    assert check_command.run(write_run(tmp_path / "nan.mcap", nan_at=3), None, as_json=True) == 1
+    assert check_command.check_log(write_run(tmp_path / "nan.mcap", nan_at=3), None, as_json=True) == 1
     body = json.loads(capsys.readouterr().out)
     assert body["verdict"]["class"] == "Silent"
     assert [(v["invariant"], v["seq"]) for v in body["violations"]] == [("finite_cmd", 4)]
@@ -112,13 +112,13 @@ def test_check_input_errors(tmp_path):
     bare = HandMadeLog(tmp_path / "bare.mcap", spec)
     bare.close()
     with pytest.raises(InputError, match="holds no spec"):
-        check_command.run(tmp_path / "bare.mcap", None)
+        check_command.check_log(tmp_path / "bare.mcap", None)
     with pytest.raises(InputError, match="not found"):
-        check_command.run(tmp_path / "missing.mcap", None)
+        check_command.check_log(tmp_path / "missing.mcap", None)
     bad_spec = tmp_path / "bad.yaml"
     bad_spec.write_text(spec_text("- {name: a, kind: bound, channel: command, field: accel, min: 0}"))
     with pytest.raises(InputError) as caught:
-        check_command.run(write_run(tmp_path / "run.mcap"), bad_spec)
+        check_command.check_log(write_run(tmp_path / "run.mcap"), bad_spec)
     assert caught.value.problems[0].file == str(bad_spec) and caught.value.problems[0].line
 
 

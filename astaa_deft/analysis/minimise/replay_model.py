@@ -52,7 +52,7 @@ from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LoggedMessage, read_log
 from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
-from astaa_deft.engine.session.check import spec_from_log
+from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule

@@ -14,22 +14,44 @@ findings with exit 1 but withholds a Pass: exit 3, the run was not fully observe
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
-from astaa_deft.io.log.reader import LogContents
-from astaa_deft.engine.monitor import format_verdict, format_violation
-from astaa_deft.engine.session.check import check_recorded_run
-from astaa_deft.engine.monitor.offline import CheckResult
+
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
+    from astaa_deft.engine.monitor.offline import CheckResult
+    from astaa_deft.io.log.reader import LogContents
 
 EXIT_NOT_OBSERVED = 3  # as `proxy`: the run was not observed to its end, no Pass can be given
 
 
-def run(log_path: Path, spec_path: Path | None = None, as_json: bool = False) -> int:
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare the `check` command."""
+    chk = subparsers.add_parser("check", help="evaluate the spec's invariants over a recorded log (exit 1 on a "
+                                              "finding)")
+    chk.add_argument("log", type=Path, help="the MCAP test log")
+    chk.add_argument("--spec", type=Path, help="the SUT spec (default: the one stored in the log)")
+    chk.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    chk.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `check` arguments to :func:`check_log`."""
+    return check_log(args.log, args.spec, as_json=args.json)
+
+
+def check_log(log_path: Path, spec_path: Path | None = None, *, as_json: bool = False) -> int:
+    """Judge the recorded run at ``log_path`` against the spec (None: the one in the log), print the result
+    (as one JSON object with ``as_json``) and return the exit code the module docstring lists."""
+    from astaa_deft.engine.session.check import check_recorded_run
+
     checked = check_recorded_run(log_path, spec_path)
     result, log = checked.result, checked.log
     tool_lost = any(e.reason == layout.TOOL_LOST for e in log.records(rec.RunEnd))
@@ -65,6 +87,8 @@ def _withheld(log: LogContents, result: CheckResult) -> str:
 
 
 def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invariants: int, show_pass: bool) -> None:
+    from astaa_deft.engine.monitor import format_verdict, format_violation
+
     against = str(spec_path) if spec_path else "the spec stored in the log"
     rate = result.messages / result.seconds if result.seconds > 0 else 0.0
     print(f"check: {log_path} against {against}: {invariants} invariant{'s' if invariants != 1 else ''}, "
@@ -88,7 +112,7 @@ def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invarian
         print(f"online verdict recorded during the run: {online} ({agreement})")
 
 
-def _as_json(result: CheckResult, log: LogContents, tool_lost: bool = False) -> dict:
+def _as_json(result: CheckResult, log: LogContents, tool_lost: bool = False) -> dict[str, object]:
     return {
         "verdict": result.verdict.to_json() if (log.intact and not tool_lost) or not result.passed else None,
         "violations": [v.to_json() for v in result.violations],

@@ -16,26 +16,28 @@ from astaa_deft.io.log import records as rec
 
 
 class StopSignal:
-    """Turn SIGINT/SIGTERM into an Event so the main thread shuts down cleanly."""
+    """While entered, SIGINT/SIGTERM set ``received`` (the signal's name) instead of interrupting, so the
+    main thread polls ``requested()`` and shuts down cleanly. Enter and exit on the main thread only."""
 
     def __init__(self) -> None:
         self.received: str | None = None
-        self._old: dict = {}
+        self._old: dict[signal.Signals, signal._HANDLER] = {}
 
     def __enter__(self) -> StopSignal:
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._old[sig] = signal.signal(sig, self._handle)
         return self
 
-    def _handle(self, signum, _frame) -> None:
+    def _handle(self, signum: int, _frame: FrameType | None) -> None:
         # Only a plain assignment here: a handler that takes a lock (Event.set) can
         # deadlock against the main thread it interrupted.
         self.received = signal.Signals(signum).name
 
     def requested(self) -> bool:
+        """A stop signal arrived since entering."""
         return self.received is not None
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         for sig, old in self._old.items():
             signal.signal(sig, old)
 
@@ -55,6 +57,7 @@ def stop_as_interrupt() -> Iterator[None]:
 
 
 def parse_params(items: Iterable[str]) -> dict[str, str]:
+    """``KEY=VALUE`` texts as a dict (a later KEY wins); InputError for an item without ``=`` or a key."""
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
@@ -67,7 +70,7 @@ def parse_params(items: Iterable[str]) -> dict[str, str]:
 class StatusLine:
     """A one-line live status on a terminal; silent when output is not a terminal."""
 
-    def __init__(self, render: Callable[[], str], period: float = 1.0, stream=sys.stderr):
+    def __init__(self, render: Callable[[], str], period: float = 1.0, stream: TextIO = sys.stderr) -> None:
         self.render = render
         self.period = period
         self.stream = stream
@@ -90,7 +93,7 @@ class StatusLine:
             self.stream.write("\r\033[K")
             self.stream.flush()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join()
@@ -100,7 +103,7 @@ class StatusLine:
 class RateMeter:
     """Messages per second per channel between two calls."""
 
-    def __init__(self, counts: Callable[[], dict[str, int]]):
+    def __init__(self, counts: Callable[[], dict[str, int]]) -> None:
         self.counts = counts
         self._last = counts()
         self._last_t = time.monotonic()
@@ -253,6 +256,6 @@ def format_event(record: rec.Record) -> str | None:
     return None
 
 
-def _short(value, limit: int = 40) -> str:
+def _short(value: object, limit: int = 40) -> str:
     text = value if isinstance(value, str) else repr(value)
     return text if len(text) <= limit else text[: limit - 1] + "…"

@@ -12,45 +12,99 @@ Everything lands in ./astaa-deft-demo/ (or --out).
 
 from __future__ import annotations
 
+import argparse
 import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from astaa_deft.demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
-from astaa_deft.engine.bus import process_launch
 from astaa_deft.demo.status import StatusWatch
-from astaa_deft.engine.session.summary import untouched_policies
-from astaa_deft.engine.intercept import load_interceptor
 from astaa_deft.io.log import layout
-from astaa_deft.io.log.reader import read_log
-from astaa_deft.engine.session.summary import format_info
-from astaa_deft.engine.monitor.verdict import format_verdict
 from astaa_deft.io.output_place import Place, ready_dir, writing
-from astaa_deft.engine.session import RunOptions, RunResult
-from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.engine.session.options import RunOptions, RunResult
+from astaa_deft.cli.arguments import RUN_SECONDS, bounded
 from astaa_deft.cli.commands.console import say
 from astaa_deft.cli.commands.proxy import EXIT_NOT_OBSERVED, run_bus
+
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
 
 DEFAULT_TIME_LIMIT = 40.0
 
 
-def drive(scenario: str, defects: bool, passive: bool, record: Path, command_line: list[str],
-          duration: float | None = None, policy: Path | None = None, stop_on_violation: bool = False,
-          ) -> tuple[RunResult, StatusWatch]:
-    """One scenario through the proxy, recorded; stops at the goal, a collision or the time limit."""
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare the `demo` command and its `demo run` action."""
+    demo = subparsers.add_parser("demo", help="the bundled driving stack through the whole tool: record, DeFT "
+                                              "tests, live interception, minimisation")
+    demo.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
+    demo.add_argument("--out", type=Path, default=Path("astaa-deft-demo"), help="where everything is written")
+    demo.set_defaults(func=run)
+    demo_sub = demo.add_subparsers(dest="demo_command", metavar="ACTION")
+    demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy")
+    demo_run.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
+    bounded(demo_run, "--duration", RUN_SECONDS, help="stop after S seconds (default: the scenario's time limit)")
+    demo_run.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off")
+    demo_run.add_argument("--passive", action="store_true", help="observe only, no star")
+    demo_run.add_argument("--record", type=Path,
+                          help="where to write the log (default: astaa-deft-demo/SCENARIO.mcap)")
+    demo_run.set_defaults(func=run_one)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `demo` arguments to :func:`run_all`."""
+    return run_all(args.scenario, args.out, sys.argv)
+
+
+def run_one(args: argparse.Namespace) -> int:
+    """The parsed `demo run` arguments to :func:`run_scenario`."""
+    return run_scenario(args.scenario, duration=args.duration, defects=not args.no_defects, passive=args.passive,
+                        record=args.record, command_line=sys.argv)
+
+
+@dataclass(frozen=True)
+class DriveOptions:
+    """One demo drive: the scenario, where its log goes, and how it runs."""
+
+    scenario: str  # a bundled scenario name or a scenario YAML path
+    record: Path  # the MCAP log to write
+    defects: bool = True  # the demo's seeded defects on
+    passive: bool = False  # observe only (no star)
+    command_line: Sequence[str] = ()  # the command line stored in the log
+    duration: float | None = None  # seconds (None: DEFAULT_TIME_LIMIT)
+    policy: Path | None = None  # an ASTAA test case rewriting live messages
+    stop_on_violation: bool = False
+
+
+def drive(options: DriveOptions) -> tuple[RunResult, StatusWatch]:
+    """One scenario through the proxy, recorded; stops at the goal, a collision or the time limit.
+
+    Returns the run's result and what the demo's status channel showed; raises what :func:`run_bus` raises.
+    """
+    from astaa_deft.engine.intercept import load_interceptor
+    from astaa_deft.engine.spec.loader import load_spec
+
     spec = load_spec(demo_spec_path())
-    params = {"scenario": scenario, "defects": "on" if defects else "off"}
+    params = {"scenario": options.scenario, "defects": "on" if options.defects else "off"}
+    policy = options.policy
     interceptor = load_interceptor(policy, spec) if policy is not None else None
-    options = RunOptions(mode="passive" if passive else "star", record=record, params=params,
-                         command_line=command_line, interceptor=interceptor, stop_on_violation=stop_on_violation,
-                         attachments={layout.POLICY_ATTACHMENT: policy} if policy is not None else {})
+    run_options = RunOptions(mode="passive" if options.passive else "star", record=options.record, params=params,
+                             command_line=list(options.command_line), interceptor=interceptor,
+                             stop_on_violation=options.stop_on_violation,
+                             attachments={layout.POLICY_ATTACHMENT: policy} if policy is not None else {})
     watch = StatusWatch()
     # The spec's run: section ends the run (goal, collision, the scenario's end); the watch keeps what to show.
-    outcome = run_bus(spec, options, duration or DEFAULT_TIME_LIMIT,
+    outcome = run_bus(spec, run_options, options.duration or DEFAULT_TIME_LIMIT,
                       on_start=lambda r: r.subscribe("status", watch.on_sample))
     return outcome, watch
 
 
 def summarise(outcome: RunResult, watch: StatusWatch) -> None:
+    """Print how the drive ended: goal, collision, mutations, verdict (or why it is withheld)."""
+    from astaa_deft.engine.monitor.verdict import format_verdict
+    from astaa_deft.engine.session.summary import untouched_policies
+
     st = watch.latest
     say(f"stopped: {outcome.end_reason} after {outcome.seconds:.1f} s wall, sim time {st.get('sim_time', 0):.1f} s")
     say(f"goal reached: {'yes' if watch.goal else 'no'}")
@@ -69,16 +123,20 @@ def summarise(outcome: RunResult, watch: StatusWatch) -> None:
         say(format_verdict(outcome.verdict))
 
 
-def run(scenario: str, duration: float | None, defects: bool, passive: bool, record: Path | None,
-        command_line: list[str]) -> int:
-    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well."""
+def run_scenario(scenario: str, *, duration: float | None, defects: bool, passive: bool, record: Path | None,
+                 command_line: list[str]) -> int:
+    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well, 3 not fully observed."""
+    from astaa_deft.engine.session.summary import format_info
+    from astaa_deft.io.log.reader import read_log
+
     if record is None:
         record = Path("astaa-deft-demo") / f"{Path(scenario).stem}.mcap"
         ready_dir(Place(record.parent, "--record"))
     say(f"demo: scenario '{scenario}', defects {'on' if defects else 'off'}, "
         f"{'passive' if passive else 'star'} proxy, log {record}")
     with writing(Place(record, "--record")):
-        outcome, watch = drive(scenario, defects, passive, record, command_line, duration)
+        outcome, watch = drive(DriveOptions(scenario, record, defects=defects, passive=passive,
+                                            command_line=command_line, duration=duration))
     say("")
     say("== summary ==")
     summarise(outcome, watch)
@@ -99,12 +157,15 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
 
 def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
+    from astaa_deft.engine.bus import process_launch
+    from astaa_deft.cli.commands.extract import ExtractOptions, extract
+
     spec_path = demo_spec_path()
     problems: list[str] = []
 
     say(f"== 1/5 record: the demo stack drives '{scenario}' through the star proxy ==")
     clean_log = out_dir / "clean.mcap"
-    outcome, watch = drive(scenario, True, False, clean_log, command_line)
+    outcome, watch = drive(DriveOptions(scenario, clean_log, command_line=command_line))
     summarise(outcome, watch)
     if not watch.goal or not outcome.passed:
         problems.append("the clean run did not reach its goal with a Pass verdict")
@@ -112,9 +173,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say("")
     say("== 2/5 DeFT: deterministic planner tests from that record ==")
     tests_dir = out_dir / "planner-tests"
-    from astaa_deft.cli.commands.extract import run as extract
-
-    extract(clean_log, spec_path, tests_dir, threshold=None, process=False, ground_truth="debug.inputs")
+    extract(clean_log, spec_path, tests_dir, ExtractOptions(ground_truth="debug.inputs"))
     say(f"$ pytest {tests_dir.relative_to(Path.cwd()) if tests_dir.is_relative_to(Path.cwd()) else tests_dir}")
     result = process_launch.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
                                 timeout=None, cwd=str(out_dir))
@@ -127,7 +186,8 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say(f"== 3/5 ASTAA: the same scenario with live messages rewritten ({policy.name}) ==")
     say(policy.read_text().split("<description>")[1].split("</description>")[0].strip())
     attack_log = out_dir / "intercepted.mcap"
-    outcome, watch = drive(scenario, True, False, attack_log, command_line, policy=policy, duration=20.0)
+    outcome, watch = drive(DriveOptions(scenario, attack_log, command_line=command_line, policy=policy,
+                                        duration=20.0))
     summarise(outcome, watch)
     if outcome.verdict is None or outcome.verdict.klass == "Pass":
         problems.append("the interception did not make any invariant break")
@@ -155,7 +215,9 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
 
 def minimise_step(log: Path, spec: Path, out_dir: Path) -> int:
-    from astaa_deft.cli.commands import minimise
+    """Step 4 of the demo: minimise the intercepted run's failure into ``out_dir``; the command's exit code."""
+    from astaa_deft.analysis.minimise.workflow import MinimiseOptions
+    from astaa_deft.cli.commands.minimise import minimise
 
     # One live confirmation of the minimised test case keeps the demo short; the CLI defaults to 3.
-    return minimise.run(log, spec, None, out_dir, repeats=1, parallel=2, live_only=False, confirm=1)
+    return minimise(log, out_dir, MinimiseOptions(spec_path=spec, repeats=1, parallel=2, live_only=False, confirm=1))

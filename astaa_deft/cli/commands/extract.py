@@ -5,14 +5,63 @@ The work is :func:`astaa_deft.analysis.deft.workflow.extract_module_tests`; this
 
 from __future__ import annotations
 
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from astaa_deft.engine.spec.planner import PAPER_THRESHOLDS
-from astaa_deft.analysis.deft.extract import Extraction, near_miss_note, search_note
-from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.cli.arguments import PROCESSES, THRESHOLD_M, bounded
 from astaa_deft.cli.commands.console import CountProgress, say, stop_as_interrupt
 
-def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
+if TYPE_CHECKING:
+    from astaa_deft.analysis.deft.extract import Extraction
+    from astaa_deft.cli.arguments import SubParsers
+
+
+@dataclass(frozen=True)
+class ExtractOptions:
+    """How `extract` searches and replays (the `extract` command's options past the log, spec and output)."""
+
+    threshold: float | None = None  # accept a frame within this distance, m (None: the spec's)
+    process: bool = False  # replay with the planner's own process in lock-step
+    ground_truth: str | None = None  # evaluation only: the output field naming the inputs' header.seq
+    jobs: int | None = None  # candidate frames tried at once (None: the idle cores)
+    module: str | None = None  # a module of the spec's replay: section (None: the planner)
+    resume: bool = False  # continue an interrupted extraction into the same output directory
+
+
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare the `extract` command."""
+    ext = subparsers.add_parser("extract", help="DeFT: turn a recorded run into deterministic planner module tests")
+    ext.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy")
+    ext.add_argument("--spec", type=Path, required=True)
+    ext.add_argument("-o", "--out", type=Path, required=True, help="directory for the module tests")
+    bounded(ext, "--threshold", THRESHOLD_M, help="accept a frame within this distance, m (default: the spec's)")
+    ext.add_argument("--process", action="store_true",
+                     help="replay with the planner's own process in lock-step (needs planner.replay.command)")
+    ext.add_argument("--ground-truth", metavar="FIELD",
+                     help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
+    bounded(ext, "--jobs", PROCESSES, metavar="N",
+            help="candidate frames tried at once, in forked processes (default: the idle cores)")
+    ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
+    ext.add_argument("--resume", action="store_true",
+                     help="continue an interrupted extraction into the same -o directory")
+    ext.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `extract` arguments as ExtractOptions, to :func:`extract`."""
+    return extract(args.log, args.spec, args.out, ExtractOptions(
+        threshold=args.threshold, process=args.process, ground_truth=args.ground_truth, jobs=args.jobs,
+        module=args.module, resume=args.resume))
+
+
+def summary_table(ex: Extraction, thresholds: Sequence[float] | None = None) -> str:
+    """The extraction's counts and its reproduction rate at each threshold (default: the paper's) as text."""
+    from astaa_deft.engine.spec.planner import PAPER_THRESHOLDS
+
+    thresholds = PAPER_THRESHOLDS if thresholds is None else thresholds
     lines = [f"planning outputs found: {ex.outputs}; frames reconstructed: {len(ex.frames)}; "
              f"skipped: {len(ex.skipped)}"]
     if ex.recorded_outputs is not None:  # a per-trigger module: one frame per trigger message
@@ -29,14 +78,23 @@ def summary_table(ex: Extraction, thresholds=PAPER_THRESHOLDS) -> str:
     return "\n".join(lines)
 
 
-def run(log_path: Path, spec_path: Path, out_dir: Path, threshold: float | None, process: bool,
-        ground_truth: str | None, jobs: int | None = None, module: str | None = None, resume: bool = False) -> int:
+def extract(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOptions) -> int:
+    """DeFT module tests of the run at ``log_path`` written to ``out_dir``, with progress and a summary.
+
+    Returns 0 when tests were written, 1 when none could be, 130 when interrupted (Ctrl-C, SIGTERM; what was
+    decided is kept for ``resume``). Raises InputError on bad input, OutputError when ``out_dir`` cannot
+    be written.
+    """
+    from astaa_deft.analysis.deft.extract import near_miss_note, search_note
+    from astaa_deft.analysis.deft.workflow import extract_module_tests
+
+    threshold, module, ground_truth = options.threshold, options.module, options.ground_truth
     progress = CountProgress("extract", "outputs")
     try:
         with stop_as_interrupt():
-            report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=process,
-                                          ground_truth=ground_truth, jobs=jobs, progress=progress, notice=say,
-                                          module=module, resume=resume)
+            report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=options.process,
+                                          ground_truth=ground_truth, jobs=options.jobs, progress=progress,
+                                          notice=say, module=module, resume=options.resume)
     finally:
         progress.close()
     if report.resumed:

@@ -5,15 +5,46 @@ The work is :func:`astaa_deft.engine.intercept.generate.generate_to_directory`; 
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from astaa_deft.engine.intercept.generate import generate_to_directory
-from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.cli.arguments import CASES, SEED, WINDOW_SECONDS, bounded
+
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
 
 
-def run(spec_path: Path, count: int, seed: int, out_dir: Path, duration: float = 30.0,
-        include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> int:
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare the `generate` command."""
+    gen = subparsers.add_parser("generate", help="write ASTAA test cases drawn from a spec and the dictionary")
+    gen.add_argument("--spec", type=Path, required=True)
+    bounded(gen, "--count", CASES, required=True, help="test cases to write")
+    bounded(gen, "--seed", SEED, required=True, help="the seed of the draw (the same seed, the same cases)")
+    gen.add_argument("-o", "--out", type=Path, required=True)
+    bounded(gen, "--duration", WINDOW_SECONDS, default=30.0, help="windows fall inside this many seconds")
+    gen.add_argument("--include-brittle", action="store_true", help="also target timestamps, sequence numbers…")
+    gen.add_argument("--dictionary", type=Path, action="append", default=[])
+    gen.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `generate` arguments to :func:`generate`."""
+    return generate(args.spec, args.count, args.seed, args.out, duration=args.duration,
+                    include_brittle=args.include_brittle, dictionaries=args.dictionary)
+
+
+def generate(spec_path: Path, count: int, seed: int, out_dir: Path, *, duration: float = 30.0,
+             include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> int:
+    """Write ``count`` test cases drawn with ``seed`` into ``out_dir`` and print their shapes: 0.
+
+    Raises InputError for a spec or dictionary that does not load, a bad count or duration, or an
+    output directory that holds test cases already; OutputError when ``out_dir`` cannot be written.
+    """
+    from astaa_deft.engine.intercept.generate import generate_to_directory
+    from astaa_deft.engine.spec.loader import load_spec
+
     report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration, include_brittle, dictionaries)
     shapes = report.shapes
     print(f"wrote {report.count} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "

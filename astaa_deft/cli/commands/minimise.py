@@ -10,18 +10,65 @@ need the mutations), with the report; 2 bad input (InputError).
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from astaa_deft.analysis.minimise.workflow import MinimiseOptions, minimise_log
+from astaa_deft.cli.arguments import CASES, PROCESSES, REPEATS, RERUNS, bounded
 from astaa_deft.cli.commands.console import PlainLines, say as print_line
 
+if TYPE_CHECKING:
+    from astaa_deft.analysis.minimise.workflow import MinimiseOptions
+    from astaa_deft.cli.arguments import SubParsers
 
-def run(log_path: Path, spec_path: Path | None, invariant: str | None, out_dir: Path, repeats: int = 1,
-        parallel: int = 2, live_only: bool = False, *, confirm: int = 3, max_tests: int | None = None,
-        live_fallback: bool = True, verbose: bool = True, jobs: int = 1, trust_log_spec: bool = False) -> int:
-    options = MinimiseOptions(spec_path, invariant, repeats, parallel, live_only, confirm, max_tests, live_fallback,
-                              jobs, trust_log_spec)
+
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare the `minimise` command (alias `minimize`)."""
+    mini = subparsers.add_parser("minimise", aliases=["minimize"],
+                                 help="delta-debug a failing intercepted run down to the mutations, frames and "
+                                      "fields that cause it")
+    mini.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy --policy …")
+    trust = mini.add_mutually_exclusive_group()
+    trust.add_argument("--spec", type=Path, help="the SUT spec (the one stored in the log runs only with "
+                                                 "--trust-log-spec)")
+    trust.add_argument("--trust-log-spec", action="store_true",
+                       help="run the module commands and replay factories the spec stored in the log names "
+                            "(without it, minimise lists them and stops: a log is data)")
+    mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation)")
+    mini.add_argument("-o", "--out", type=Path, required=True, help="directory for the minimised test case and tests")
+    bounded(mini, "--repeats", REPEATS, default=1, help="whole-SUT re-runs per test when no replay applies")
+    bounded(mini, "--parallel", PROCESSES, default=2, help="tests run at once where the replay allows")
+    mini.add_argument("--live-only", action="store_true", help="always re-run the whole SUT (no module replay)")
+    bounded(mini, "--confirm", RERUNS, default=3, help="live re-runs of the final result, to report its rate")
+    bounded(mini, "--max-tests", CASES, help="stop after this many tests and keep the smallest failure")
+    mini.add_argument("--no-live-fallback", action="store_true",
+                      help="when the planner replay does not reproduce the failure, stop (exit 1) "
+                           "instead of re-running the SUT")
+    bounded(mini, "--jobs", PROCESSES, default=1,
+            help="whole-system runs at once (live tests, confirmations), each an isolated session")
+    mini.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `minimise` arguments as MinimiseOptions, to :func:`minimise`."""
+    from astaa_deft.analysis.minimise.workflow import MinimiseOptions
+
+    return minimise(args.log, args.out, MinimiseOptions(
+        spec_path=args.spec, invariant=args.invariant, repeats=args.repeats, parallel=args.parallel,
+        live_only=args.live_only, confirm=args.confirm, max_tests=args.max_tests,
+        live_fallback=not args.no_live_fallback, jobs=args.jobs, trust_log_spec=args.trust_log_spec))
+
+
+def minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, *, verbose: bool = True) -> int:
+    """Minimise the failure recorded at ``log_path`` into ``out_dir``, printing progress and the report.
+
+    ``verbose`` False prints only the report (and, off a terminal, the periodic progress lines). Returns
+    the exit code the module docstring lists; raises InputError on bad input, OutputError when ``out_dir``
+    cannot be written.
+    """
+    from astaa_deft.analysis.minimise.workflow import minimise_log
+
     # Not on a terminal (a CI log, a pipe): the latest step every few seconds on stderr too, a live test included.
     lines = None if sys.stderr.isatty() else PlainLines("minimise")
 

@@ -1,18 +1,43 @@
-"""`astaa-deft policy check FILE|DIR... [--spec SUT.yaml] [--dictionary FILE]`."""
+"""`astaa-deft policy check FILE|DIR... [--spec SUT.yaml] [--dictionary FILE]`: validate ASTAA test cases.
+
+Exit 0 when every file loads; the problems of all files raise one InputError (exit 2, printed by the CLI).
+"""
 
 from __future__ import annotations
 
+import argparse
 import sys
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.engine.intercept.dictionary import load_dictionary
-from astaa_deft.engine.intercept.testcase import load_testcase
-from astaa_deft.engine.spec.loader import load_spec
+
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
 
 
-def run(files: Sequence[Path], spec_path: Path | None = None, dictionaries: Sequence[Path] = ()) -> int:
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare `policy check` under the `policy` command's actions."""
+    pc = subparsers.add_parser("check", help="validate test case files (or directories of them)")
+    pc.add_argument("files", type=Path, nargs="+")
+    pc.add_argument("--spec", type=Path, help="also check channels, fields and values against this spec")
+    pc.add_argument("--dictionary", type=Path, action="append", default=[])
+    pc.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `policy check` arguments to :func:`check_policies`."""
+    return check_policies(args.files, args.spec, args.dictionary)
+
+
+def check_policies(files: Sequence[Path], spec_path: Path | None = None, dictionaries: Sequence[Path] = ()) -> int:
+    """Load each test case of ``files`` (a directory: its *.xml) against the spec and dictionaries, print a
+    line per file: 0. Raises InputError listing every problem found, after all files were tried."""
+    from astaa_deft.engine.intercept.dictionary import load_dictionary
+    from astaa_deft.engine.intercept.testcase import load_testcase
+    from astaa_deft.engine.spec.loader import load_spec
+
     spec = load_spec(spec_path) if spec_path is not None else None
     dictionary = load_dictionary(dictionaries)
     problems: list[Problem] = []

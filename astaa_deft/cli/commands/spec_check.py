@@ -1,20 +1,49 @@
-"""`astaa-deft spec check FILE`."""
+"""`astaa-deft spec check FILE [--param KEY=VALUE]`: validate a SUT spec, print what it declares.
+
+Exit 0 when the spec loads (and its planner replay factory imports); bad
+input raises InputError (exit 2, printed by the CLI).
+"""
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.analysis.deft.replay import importable_from
-from astaa_deft.engine.spec.params import check_param_values
-from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.cli.commands.console import parse_params
 
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
+    from astaa_deft.model.sut import Spec
 
-def run(path: Path, params: Sequence[str] = ()) -> int:
+
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare `spec check` under the `spec` command's actions."""
+    check = subparsers.add_parser("check", help="validate a SUT spec")
+    check.add_argument("file", type=Path)
+    check.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                       help="also check a param value (against the param's declared choices)")
+    check.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `spec check` arguments to :func:`check_spec`."""
+    return check_spec(args.file, args.param)
+
+
+def check_spec(path: Path, params: Sequence[str] = ()) -> int:
+    """Load the spec at ``path``, check ``params`` (KEY=VALUE texts) against it and print a summary: 0.
+
+    Raises InputError for a spec that does not load, a param that is not declared or not one of its
+    choices, or a planner replay factory that does not import.
+    """
+    from astaa_deft.engine.spec.loader import load_spec
+    from astaa_deft.engine.spec.params import check_param_values
+
     spec = load_spec(path)
     _check_factory(spec, path)
     given = parse_params(params)
@@ -25,7 +54,7 @@ def run(path: Path, params: Sequence[str] = ()) -> int:
     return 0
 
 
-def _check_factory(spec, path: Path) -> None:
+def _check_factory(spec: Spec, path: Path) -> None:
     """Import the planner replay factory the way replay loads it, so a wrong name fails here, not in extract.
 
     As replay does: from sys.path, or else from the spec's own directory (a planner beside its spec).
@@ -33,6 +62,8 @@ def _check_factory(spec, path: Path) -> None:
     factory = spec.planner.factory if spec.planner is not None else None
     if not factory:
         return
+    from astaa_deft.analysis.deft.replay import importable_from
+
     module_name, _, attr = factory.partition(":")
     line = _line_of(path, factory)
     try:

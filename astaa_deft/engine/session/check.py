@@ -15,13 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.io.log import layout
 from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.engine.monitor.invariants import with_typed_invariants
 from astaa_deft.engine.monitor.offline import CheckResult, check_log
 from astaa_deft.model.sut import Spec
-from astaa_deft.engine.spec.loader import load_spec, load_spec_text
-from astaa_deft.io.yamlsource import decode_utf8
+from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.engine.spec.stored import spec_from_log
 
 
 @dataclass(frozen=True)
@@ -57,15 +56,3 @@ def check_recorded_run(log_path: Path, spec_path: Path | None = None) -> Recorde
                                      "give the SUT spec with --spec sut.yaml"))
     spec = with_typed_invariants(spec)
     return RecordedCheck(check_log(log, spec), spec, spec_path is None, log)
-
-
-def spec_from_log(log: LogContents, name: str) -> Spec | None:
-    """The spec the run was recorded with (attached to the log), or None."""
-    data = log.attachments.get(layout.SPEC_ATTACHMENT)
-    if data is None:
-        return None
-    try:
-        return load_spec_text(decode_utf8(data, name), name=name)
-    except InputError as exc:
-        raise InputError(exc.problems + [Problem(str(log.path), None, None, "the spec stored in the log is unreadable",
-                                                 "give the SUT spec with --spec sut.yaml")]) from None

@@ -15,7 +15,13 @@ from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.fields import FieldPathError, type_at
 from astaa_deft.model.sut import Channel, MessageType, Module
 from astaa_deft.io.yamlsource import Node, Source, describe_value
-from astaa_deft.engine.spec.replay_module import PER_OUTPUT, CollisionOracle, ReplayModule, TrajectoryLayout
+from astaa_deft.engine.spec.replay_module import (
+    CollisionOracle,
+    FrameMode,
+    ReplayModule,
+    StepExceptions,
+    TrajectoryLayout,
+)
 
 FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*\Z")
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
@@ -97,8 +103,8 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     collision = _oracle(src, v.get("oracle"), inputs)
     # The planner is a module that runs alone like any other, with its extras: frames found per recorded
     # output, outputs compared as trajectories; an exception from step() is not judged (unresolved).
-    return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames=PER_OUTPUT,
-                        exceptions="unresolved", hang_after=0.0, threshold=threshold, lookback_ms=lookback,
+    return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames=FrameMode.PER_OUTPUT,
+                        exceptions=StepExceptions.UNRESOLVED, hang_after=0.0, threshold=threshold, lookback_ms=lookback,
                         skew_ms=skew, trajectory=layout, collision=collision, where="planner")
 
 

@@ -11,11 +11,35 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import Enum
 
-PER_OUTPUT = "per_output"  # one frame per recorded output, found by DeFT's candidate search (the planner's)
-PER_TRIGGER = "per_trigger"  # one frame per trigger message; the module answers with one output or none
-FRAME_MODES = (PER_TRIGGER, PER_OUTPUT)
-EXCEPTIONS = ("unresolved", "crash")
+
+class SpecWord(str, Enum):
+    """A word of the spec's vocabulary: compares, prints and serialises as the text the spec writes."""
+
+    def __str__(self) -> str:
+        return str(self.value)
+
+
+class FrameMode(SpecWord):
+    """How the frames a module replays are found (``frames:``)."""
+
+    PER_TRIGGER = "per_trigger"  # one frame per trigger message; the module answers with one output or none
+    PER_OUTPUT = "per_output"  # one frame per recorded output, found by DeFT's candidate search (the planner's)
+
+
+class StepExceptions(SpecWord):
+    """What an exception from a replayed ``step()`` means (``exceptions:``)."""
+
+    # The real module may never let such input reach the replayed code: the frame stays undecided.
+    UNRESOLVED = "unresolved"
+    CRASH = "crash"  # the module's own process would die of it: the replay shows a crash
+
+
+PER_OUTPUT = FrameMode.PER_OUTPUT
+PER_TRIGGER = FrameMode.PER_TRIGGER
+FRAME_MODES = tuple(mode.value for mode in FrameMode)  # the first is the default
+EXCEPTIONS = tuple(meaning.value for meaning in StepExceptions)  # the first is the default
 
 
 @dataclass(frozen=True)
@@ -55,10 +79,8 @@ class ReplayModule:
     factory: str | None = None  # "package.module:Name": in-process replay
     factory_args: Mapping[str, str] = field(default_factory=dict)
     command: tuple[str, ...] = ()  # or: the module's own process, fed in lock-step over Zenoh
-    frames: str = PER_TRIGGER
-    # What an exception from step() means: "crash" (the module's own process would die of it: the replay
-    # shows a crash) or "unresolved" (the real module may never let such input reach the replayed code).
-    exceptions: str = "unresolved"
+    frames: FrameMode = FrameMode.PER_TRIGGER
+    exceptions: StepExceptions = StepExceptions.UNRESOLVED
     hang_after: float = 1.0  # s: a step still running then is a hang (the module answers nothing more)
     threshold: float = 0.0
     lookback_ms: float = 100.0
@@ -70,4 +92,5 @@ class ReplayModule:
 
     @property
     def per_trigger(self) -> bool:
+        """One frame per trigger message (not per recorded output)."""
         return self.frames == PER_TRIGGER

@@ -29,7 +29,7 @@ from collections.abc import Mapping, Sequence
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.sut import Channel, Module
 from astaa_deft.engine.spec.planner import read_runner, read_setting
-from astaa_deft.engine.spec.replay_module import EXCEPTIONS, FRAME_MODES, ReplayModule
+from astaa_deft.engine.spec.replay_module import EXCEPTIONS, FRAME_MODES, FrameMode, ReplayModule, StepExceptions
 from astaa_deft.io.yamlsource import Node, Source, describe_value
 
 __all__ = ["ReplayModule", "build_replay_section"]
@@ -133,8 +133,8 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
                    "name a channel the module produces")
     factory, args, command = read_runner(src, v, where, "mystack.control:Replay",
                                          '["{python}", "-m", "mystack.control"]')
-    frames = _choice(src, v.get("frames"), f"{where}.frames", FRAME_MODES)
-    exceptions = _choice(src, v.get("exceptions"), f"{where}.exceptions", EXCEPTIONS)
+    frames = FrameMode(_choice(src, v.get("frames"), f"{where}.frames", FRAME_MODES))
+    exceptions = StepExceptions(_choice(src, v.get("exceptions"), f"{where}.exceptions", EXCEPTIONS))
     hang_after = read_setting(src, v.get("hang_after"), f"{where}.hang_after", 1.0, positive=True)
     threshold = read_setting(src, v.get("threshold"), f"{where}.threshold", 0.0)
     lookback = read_setting(src, v.get("lookback_ms"), f"{where}.lookback_ms", 100.0)

@@ -1,0 +1,100 @@
+"""The `fuzz` and `report` commands' arguments (campaigns).
+
+Declared here, beside the other commands' parsers, while the work and the
+printing stay in :mod:`astaa_deft.cli.commands.fuzz` and
+:mod:`astaa_deft.cli.commands.report`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from astaa_deft.cli.arguments import (
+    CAMPAIGN_SEED,
+    CASES,
+    DAY_S,
+    MAX_BUDGET_S,
+    PROCESSES,
+    RERUNS,
+    WINDOW_SECONDS,
+    bounded,
+    budget,
+    cluster,
+)
+from astaa_deft.model.errors import InputError, Problem
+
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
+
+
+def add_fuzz_parser(subparsers: SubParsers) -> None:
+    """Declare the `fuzz` command."""
+    fz = subparsers.add_parser("fuzz", help="a campaign: generated test cases, each a fresh run; failures bucketed, "
+                                            "re-run for their rate, minimised, reported")
+    fz.add_argument("--spec", type=Path, help="the SUT spec (YAML)")
+    fz.add_argument("-o", "--out", type=Path, required=True, help="the campaign directory (journal, logs, report)")
+    bounded(fz, "--cases", CASES, help="generated cases to run")
+    fz.add_argument("--budget", type=budget,
+                    help=f"or a time budget: 90s, 30m, 2h [at most {MAX_BUDGET_S / DAY_S:g} days]")
+    bounded(fz, "--workers", PROCESSES, help="cases at once (default: from the cores and the spec's modules)")
+    bounded(fz, "--seed", CAMPAIGN_SEED, default=0, help="the campaign's seed (default 0)")
+    fz.add_argument("--strategy", default="random",
+                    help="random (ASTAA's weighted generation), guided, or decictor (non-optimal decisions; "
+                         "baselines decictor-random, decictor-random-delta: docs/decictor.md)")
+    fz.add_argument("--dictionary", type=Path, action="append", default=[])
+    fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
+    bounded(fz, "--horizon", WINDOW_SECONDS, default=20.0, help="seconds a case runs at most")
+    bounded(fz, "--settle", WINDOW_SECONDS, default=3.0,
+            help="seconds a mutated case runs on after its last mutation could act")
+    bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first, per value of the --params grid")
+    bounded(fz, "--reruns", RERUNS, default=2,
+            help="re-runs of a new failure and as many unmutated twins, before it is filed as a bug")
+    fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets")
+    bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
+            help="seconds one bucket's minimisation may take (it holds a worker slot)")
+    fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")
+    fz.add_argument("--cluster", type=cluster,
+                    help=f"tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes) [K {PROCESSES}]")
+    fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit")
+    fz.set_defaults(func=run_fuzz)
+
+
+def run_fuzz(args: argparse.Namespace) -> int:
+    """The parsed `fuzz` arguments as a CampaignConfig, to :func:`astaa_deft.cli.commands.fuzz.run`.
+
+    Raises InputError when neither a spec nor ``--resume`` is given, or no campaign size.
+    """
+    from astaa_deft.cli.commands import fuzz
+    from astaa_deft.orchestration.campaign.campaign import CampaignConfig
+
+    if args.status:
+        return fuzz.status(args.out)
+    if args.spec is None and not args.resume:
+        raise InputError(Problem("astaa-deft fuzz", None, None, "no spec given",
+                                 "give --spec sut.yaml (or --resume to go on with the campaign in -o DIR)"))
+    if args.cases is None and args.budget is None and not args.resume:
+        raise InputError(Problem("astaa-deft fuzz", None, None, "no size given for the campaign",
+                                 "give --cases N or --budget DURATION (e.g. 10m)"))
+    config = CampaignConfig(args.spec or Path("."), args.out, cases=args.cases,
+                            budget=args.budget, workers=args.workers,
+                            seed=args.seed, strategy=args.strategy, dictionaries=args.dictionary,
+                            params=fuzz.parse_params(args.params), cluster=args.cluster, horizon=args.horizon,
+                            baseline_runs=args.baseline, reruns=args.reruns, minimise=not args.no_minimise,
+                            settle=args.settle, minimise_timeout=args.minimise_timeout)
+    return fuzz.run(config, args.resume)
+
+
+def add_report_parser(subparsers: SubParsers) -> None:
+    """Declare the `report` command."""
+    rep = subparsers.add_parser("report", help="regenerate a campaign's report.html")
+    rep.add_argument("campaign", type=Path)
+    rep.set_defaults(func=run_report)
+
+
+def run_report(args: argparse.Namespace) -> int:
+    """The parsed `report` arguments to :func:`astaa_deft.cli.commands.report.run`."""
+    from astaa_deft.cli.commands import report
+
+    return report.run(args.campaign)
