@@ -5,8 +5,10 @@ from __future__ import annotations
 import json
 import math
 import threading
+from typing import TYPE_CHECKING
 
-import zenoh
+if TYPE_CHECKING:  # the command line imports this module; zenoh loads only when a run starts
+    import zenoh
 
 
 class StatusWatch:
