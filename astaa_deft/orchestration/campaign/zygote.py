@@ -34,9 +34,9 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, NoReturn
 
-from astaa_deft.engine.bus.process_launch import die_with_parent, guarded_fork, start
+from astaa_deft.engine.bus.process_launch import fork_session_child, start
 from astaa_deft.engine.bus.processes import process_running, python_module
 from astaa_deft.io import pipe_messages
 from astaa_deft.io.inputfile import SPEC, read_input
@@ -197,7 +197,6 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.suppress(Exception):  # the recorder's own parse of the text (see forked.py)
         text = read_input(spec, SPEC).decode("utf-8")
         for_recorder = ParsedSpec(text, load_spec_text(text, name=Path(spec).name))
-    zygote = os.getpid()
     requests = _Requests(control)
     while True:
         ready, _, _ = select.select([control], [], [], REAP_SECONDS)
@@ -210,10 +209,10 @@ def main(argv: list[str] | None = None) -> int:
             break
         if fd is None:  # the campaign closed its end
             break
-        pid = guarded_fork("a case process")  # this process runs one thread and no Zenoh session
+        pid = fork_session_child("a case process")  # this process runs one thread and no Zenoh session
         if pid == 0:
             control.close()
-            _case(fd, Path(spec), _Preload(preloaded, for_recorder), parent=zygote)  # never returns
+            _case(fd, Path(spec), _Preload(preloaded, for_recorder))  # never returns
         os.close(fd)
         pipe_messages.send_socket(control, Forked(pid))
     while _reap(block=True):
@@ -242,14 +241,12 @@ class _Preload:
     recorder: ParsedSpec | None
 
 
-def _case(fd: int, spec: Path, preload: _Preload, *, parent: int) -> None:
+def _case(fd: int, spec: Path, preload: _Preload) -> NoReturn:
     """One case in a forked child: its recorder forked ahead, payload in, outcome out (module doc); exits."""
     from astaa_deft.orchestration.campaign import worker
 
     code = 1
     try:
-        os.setsid()
-        die_with_parent(parent)
         conn = socket.socket(fileno=fd)
         recorder = worker.recorder_ahead(spec, preload.recorder)
         payload = worker.receive_case(conn.recv, source="the case's payload socket")
