@@ -39,13 +39,12 @@ class LocalPool:
 
     Each case process is forked from a template that imported everything and
     loaded the spec once (:mod:`.zygote`; its recorder is forked from it in
-    turn, :mod:`.forked`): a case starts in milliseconds and spends no CPU on
-    Python's start-up, ~1.2 CPU s of a demo case before. Without a template
-    (it could not start), each slot keeps its next case's process warm
-    (started, imports done, spec loaded, its recorder started, waiting for
-    its payload) while the current case runs — on a loaded two-core machine
-    that start-up took ~3 s of a case's ~12 (measured;
-    benchmarks/bench_campaign.py).
+    turn, :mod:`.forked`). Without a template (it could not start), each
+    slot keeps its next case's process warm (started, imports done, spec
+    loaded, its recorder started, waiting for its payload) while the current
+    case runs. Why: docs/performance.md, "pipes". ``submit``, ``done``,
+    ``pending`` and ``close`` are called from one thread (the campaign's);
+    the cases run on the pool's threads.
     """
 
     def __init__(self, workers: int) -> None:

@@ -8,12 +8,11 @@ it reads the payload as a message on stdin and writes the outcome as a
 message on stdout (:mod:`astaa_deft.io.pipe_messages` frames).
 ``--warm``: import everything and load that spec and those dictionaries
 *before* waiting for the payload — the local pool starts each case's process
-while the previous case still runs, so a case does not wait seconds for
-Python's imports and the spec on a loaded machine (each case still gets a
-process of its own). It also starts the case's recorder ahead, forked from
-itself (:mod:`.forked`: no second interpreter start, imports or spec parse):
-the recorder's start-up was the largest fixed wait of a case (~1–2 s of a
-loaded machine's wall time before any module could start, ~0.55 CPU s).
+while the previous case still runs, so a case does not wait for Python's
+imports and the spec (each case still gets a process of its own). It also
+starts the case's recorder ahead, forked from itself (:mod:`.forked`: no
+second interpreter start, imports or spec parse). Figures:
+docs/performance.md, "pipes".
 """
 
 from __future__ import annotations

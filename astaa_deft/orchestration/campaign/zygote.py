@@ -1,15 +1,12 @@
 """Case processes forked from one warm template per campaign: no interpreter start, imports or spec load per case.
 
-Started as a process of its own, each case's worker spent ~0.7 CPU s on
-Python's start, the imports and loading the spec and dictionaries — the
-same work every case, a fifth of a demo case's CPU (measured:
-benchmarks/bench_campaign.py). The *zygote* does it once: a process that
-imports the worker, loads the spec and dictionaries, and then forks one
-child per case on request. A child is a case process as before — its own
-session and process group, dying with the zygote, which dies with the
-campaign — that forks its recorder in turn (:mod:`.forked`), reads its
-payload and writes its outcome on a socket of its own, and writes its
-stderr to the case's ``case.log``.
+The *zygote* imports the worker, loads the spec and dictionaries once, and
+then forks one child per case on request, so a case spends no CPU on
+Python's start-up (figures: docs/performance.md, "pipes"). A child is a case
+process as any other — its own session and process group, dying with the
+zygote, which dies with the campaign — that forks its recorder in turn
+(:mod:`.forked`), reads its payload and writes its outcome on a socket of
+its own, and writes its stderr to the case's ``case.log``.
 
 The zygote stays one thread with no Zenoh session (forking is safe), reaps
 its children, and exits once the campaign closes its control socket.
