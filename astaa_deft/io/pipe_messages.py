@@ -81,6 +81,20 @@ class PipeMessage(Protocol):
 
 
 M = TypeVar("M", bound=PipeMessage)
+F = TypeVar("F", bound="FieldlessMessage")
+
+
+class FieldlessMessage:
+    """Base of a message that has no fields (a request, a stop): subclasses set ``TAG``."""
+
+    TAG: ClassVar[str]
+
+    def to_json(self) -> JsonObject:
+        return {}
+
+    @classmethod
+    def from_json(cls: type[F], data: JsonObject) -> F:
+        return cls()
 
 
 # -- frames ------------------------------------------------------------------------------------------

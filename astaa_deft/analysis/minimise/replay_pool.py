@@ -36,7 +36,7 @@ from typing import ClassVar
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus.processes import python_module, stop_process
 from astaa_deft.io import pipe_messages
-from astaa_deft.io.pipe_messages import FrameError, fd_reader
+from astaa_deft.io.pipe_messages import FieldlessMessage, FrameError, fd_reader
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
@@ -118,17 +118,10 @@ class JobMessage:
 
 
 @dataclass(frozen=True)
-class StopMessage:
+class StopMessage(FieldlessMessage):
     """No more jobs: the worker exits."""
 
     TAG: ClassVar[str] = "stop"
-
-    def to_json(self) -> JsonObject:
-        return {}
-
-    @classmethod
-    def from_json(cls, data: JsonObject) -> StopMessage:
-        return cls()
 
 
 @dataclass(frozen=True)
@@ -423,8 +416,8 @@ class ReplayPool:
 
 
 if __name__ == "__main__":
-    # Run as a worker: the module's own copy under its real name (not ``__main__``), so
-    # nothing this worker pickles back to the parent names a module the parent does not know.
+    # Run as a worker: the module's own copy under its real name (not ``__main__``), so its message classes
+    # are the ones every other module of the worker imports.
     from astaa_deft.analysis.minimise import replay_pool as _real
 
     sys.exit(_real._worker_main(sys.argv[1:]))

@@ -37,7 +37,7 @@ from astaa_deft.engine.bus.process_launch import fork_session_child, start
 from astaa_deft.engine.bus.processes import process_running, python_module
 from astaa_deft.io import pipe_messages
 from astaa_deft.io.inputfile import SPEC, read_input
-from astaa_deft.io.pipe_messages import FrameError
+from astaa_deft.io.pipe_messages import FieldlessMessage, FrameError
 from astaa_deft.model.json import JsonObject, JsonValue
 
 if TYPE_CHECKING:  # the worker's imports are the template's to load, not the campaign's
@@ -48,17 +48,10 @@ FORK_TIMEOUT = 60.0
 
 
 @dataclass(frozen=True)
-class ForkRequest:
+class ForkRequest(FieldlessMessage):
     """To the template: fork a case process for the socket end sent with this message (SCM_RIGHTS)."""
 
     TAG: ClassVar[str] = "fork"
-
-    def to_json(self) -> JsonObject:
-        return {}
-
-    @classmethod
-    def from_json(cls, data: JsonObject) -> ForkRequest:
-        return cls()
 
 
 @dataclass(frozen=True)
