@@ -34,12 +34,15 @@ import pickle
 import socket
 import struct
 from collections.abc import Callable, Iterable, Mapping
-from typing import ClassVar, Protocol, TypeVar
+from typing import TYPE_CHECKING, ClassVar, Protocol, TypeVar
 
 import cbor2
 
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.json import JsonObject
+
+if TYPE_CHECKING:  # Python 3.10 has no typing.Self
+    from typing_extensions import Self
 
 MAGIC = b"\xadF"
 _HEADER = struct.Struct(">2sBxI")
@@ -77,7 +80,7 @@ class PipeMessage(Protocol):
     def to_json(self) -> JsonObject: ...
 
     @classmethod
-    def from_json(cls, data: JsonObject) -> PipeMessage: ...
+    def from_json(cls, data: JsonObject) -> Self: ...
 
 
 M = TypeVar("M", bound=PipeMessage)
@@ -189,15 +192,15 @@ def decode(encoding: BodyEncoding, body: bytes, kinds: Iterable[type[M]], *, sou
     except (cbor2.CBORDecodeError, ValueError, TypeError) as exc:
         raise FrameError(f"{source}: a garbled message ({exc})") from None
     by_tag: Mapping[str, type[M]] = {kind.TAG: kind for kind in kinds}
-    if not isinstance(data, dict) or data.get("type") not in by_tag:
-        found = data.get("type") if isinstance(data, dict) else type(data).__name__
+    tag = data["type"] if isinstance(data, dict) and "type" in data else None
+    if not isinstance(tag, str) or tag not in by_tag:
+        found = tag if isinstance(data, dict) else type(data).__name__
         raise FrameError(f"{source}: an unexpected message {found!r} (expected one of {', '.join(by_tag)})")
     fields = {key: value for key, value in data.items() if key != "type"}
     try:
-        message = by_tag[data["type"]].from_json(fields)
+        return by_tag[tag].from_json(fields)
     except (KeyError, TypeError, ValueError) as exc:
-        raise FrameError(f"{source}: a malformed {data['type']!r} message ({type(exc).__name__}: {exc})") from None
-    return message  # type: ignore[return-value]  # from_json of kind M returns an M
+        raise FrameError(f"{source}: a malformed {tag!r} message ({type(exc).__name__}: {exc})") from None
 
 
 def receive(read: Reader, kinds: Iterable[type[M]], *, source: str, max_bytes: int = MESSAGE_LIMIT) -> M | None:
