@@ -59,13 +59,19 @@ def test_an_unused_warm_recorder_exits_at_end_of_input():
 def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_full(tmp_path: Path):
     # The worker (--warm) forks the case's recorder before its payload comes (campaign/forked.py).
     from astaa_deft.engine.bus.processes import python_module
-    from astaa_deft.orchestration.campaign.model import BASELINE, CaseOutcome, PlannedCase
+    from astaa_deft.io import pipe_messages
+    from astaa_deft.io.pipe_messages import bytes_reader
+    from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
 
     case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
     payload = {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
     done = subprocess.run([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", str(ECHO)],
-                          input=json.dumps(payload), capture_output=True, text=True, timeout=60)
-    outcome = CaseOutcome.from_json(json.loads(done.stdout.splitlines()[-1]))
+                          input=pipe_messages.encode(CaseMessage(CasePayload.from_json(payload))),
+                          capture_output=True, timeout=60)
+    message = pipe_messages.receive(bytes_reader(done.stdout), (OutcomeMessage,), source="the worker's stdout")
+    assert message is not None, done.stderr[-2000:]
+    outcome = message.outcome
     assert outcome.status == "done", (outcome, done.stderr[-2000:])
     assert len(read_log(tmp_path / "a" / "run.mcap").on("test/data")) == 40
     assert (tmp_path / "a" / "modules" / "recorder.log").is_file()

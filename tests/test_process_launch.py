@@ -182,3 +182,35 @@ def test_a_single_threaded_process_forks_also_after_starting_a_child_and_one_wit
                           timeout=60, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
     expected = ["alone 7", "after a start 7", "with zenoh True", "native ok"]
     assert done.stdout.splitlines() == expected, done.stderr[-2000:]
+
+
+SESSION_CHILD = textwrap.dedent("""
+    import os, sys
+    from astaa_deft.engine.bus import process_launch
+
+    pid = process_launch.fork_session_child("a test child")
+    if pid == 0:
+        sys.stdin.read()  # until the stand-in tool dies (then the parent-death signal ends us)
+        os._exit(0)
+    print(pid, os.getpgid(pid) == pid, os.getsid(pid) == pid, flush=True)
+    sys.stdin.read()  # until the test kills us
+""")
+
+
+@needs_linux
+def test_a_session_child_leads_its_group_when_the_fork_returns_and_dies_with_the_tool():
+    tool = subprocess.Popen([*python_module("astaa_deft")[:-2], "-c", SESSION_CHILD], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert tool.stdout is not None
+    words = tool.stdout.readline().split()
+    assert len(words) == 3 and words[0].isdigit(), f"the stand-in tool did not fork (exit {tool.poll()})"
+    child = int(words[0])
+    try:
+        assert words[1:] == ["True", "True"]  # its own group and session before fork_session_child returned
+        assert _alive(child)
+        tool.kill()
+        tool.wait(timeout=10)
+        assert wait_for(lambda: not _alive(child), timeout=10.0), "the child outlived the tool that forked it"
+    finally:
+        _end(tool, child)

@@ -32,20 +32,19 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
-import pickle
 import select
 import signal
-import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NoReturn
 
 from astaa_deft.engine.bus.process_launch import guarded_fork
-from astaa_deft.model.errors import InputError
+from astaa_deft.io.pipe_messages import BULK_LIMIT, FrameError, decode_pickle, encode_pickle, fd_reader, read_frame, \
+    write_fd
+from astaa_deft.model.errors import InputError, Problem
 
 PR_SET_CHILD_SUBREAPER = 36
-_LEN = struct.Struct("<Q")
 MIN_LIMIT_S = 2.0
 LIMIT_FACTOR = 10.0  # a candidate may take this many recorded cycles before it is stopped
 
@@ -104,32 +103,26 @@ def candidate_limit(cycle_s: float) -> float:
     return max(MIN_LIMIT_S, LIMIT_FACTOR * cycle_s)
 
 
-def _send(fd: int, obj: Any) -> None:
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    view = memoryview(_LEN.pack(len(data)) + data)
-    while view:
-        view = view[os.write(fd, view):]
+def _send(fd: int, obj: object) -> None:
+    """``obj`` as one pickle frame (pipe_messages) on ``fd``: the planner's own objects, between forked copies of
+    this process only."""
+    write_fd(fd, encode_pickle(obj))
 
 
-def _read_exactly(fd: int, size: int) -> bytes | None:
-    chunks, left = [], size
-    while left:
-        chunk = os.read(fd, min(left, 1 << 20))
-        if not chunk:
-            return None
-        chunks.append(chunk)
-        left -= len(chunk)
-    return b"".join(chunks)
+def _receive(fd: int, *, what: str) -> object:
+    """The next object :func:`_send` wrote on ``fd``.
+
+    Raises ``EOFError`` at the channel's clean end and :class:`FrameError`
+    (naming ``what``) for a frame cut short (its writer died mid-frame) or garbled.
+    """
+    got = read_frame(fd_reader(fd), source=what, max_bytes=BULK_LIMIT)
+    if got is None:
+        raise EOFError(what)
+    return decode_pickle(*got, source=what)
 
 
-def _receive(fd: int) -> Any:
-    head = _read_exactly(fd, _LEN.size)
-    if head is None:
-        raise EOFError
-    body = _read_exactly(fd, _LEN.unpack(head)[0])
-    if body is None:
-        raise EOFError
-    return pickle.loads(body)
+_Running = tuple[int, int, int, float]
+"""A candidate's child while it runs: (pid, the fd its result comes on, the fd its verdict goes down, started)."""
 
 
 @dataclass
@@ -147,7 +140,7 @@ class Tried:
 class ForkedSearch:
     """Inside the runner: try candidates in forked children; the winner carries on as the runner."""
 
-    def __init__(self, jobs: int, send_to_caller: Callable[[Any], None]):
+    def __init__(self, jobs: int, send_to_caller: Callable[[Any], None]) -> None:
         self.jobs = max(1, jobs)
         self.send_to_caller = send_to_caller
         self.timeouts = 0  # candidates stopped by a time limit
@@ -159,7 +152,7 @@ class ForkedSearch:
         return {"timeouts": self.timeouts, "cut": self.cut, "retried": self.retried,
                 "retried_kept": self.retried_kept}
 
-    def search(self, count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool],
+    def search(self, count: int, run: Callable[[int], Any], *, accepted: Callable[[Any], bool],
                closeness: Callable[[Any], float], limit_s: float,
                settles: Callable[[Any], bool] = lambda result: False,
                retry_limit_s: float | None = None) -> Tried | None:
@@ -179,7 +172,7 @@ class ForkedSearch:
         the tight limit only saves time spent on wrong frames, it never costs
         an output.
         """
-        running: dict[int, tuple[int, int, int, float]] = {}  # index → (pid, result fd, go fd, started)
+        running: dict[int, _Running] = {}
         done: dict[int, Tried] = {}
         queue = list(range(count))
         limit, retrying = limit_s, False
@@ -226,8 +219,9 @@ class ForkedSearch:
         os._exit(0)  # the winner carries on from here; this runner's state is the old one
 
     # -- the pieces ------------------------------------------------------------
-    def _spawn(self, index: int, run: Callable[[int], Any], running: dict, done: dict
-               ) -> tuple[int, int, int, float] | None:
+    def _spawn(self, index: int, run: Callable[[int], Any], running: dict[int, _Running], done: dict[int, Tried]
+               ) -> _Running | None:
+        """Fork the child that tries candidate ``index``: its handle here; None in the child, once it won."""
         result_r, result_w = os.pipe()
         go_r, go_w = os.pipe()
         pid = _fork("a candidate's replay")
@@ -254,8 +248,10 @@ class ForkedSearch:
             verdict = os.read(go_r, 1)
             if verdict != b"1":
                 os._exit(0)
-            with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the runner's counters: ours predate it
-                self.__dict__.update(_receive(go_r))
+            with contextlib.suppress(EOFError, FrameError):  # the runner's counters: ours predate it
+                counters = _receive(go_r, what="the runner's verdict pipe")
+                if isinstance(counters, dict):
+                    self.__dict__.update(counters)
             os.close(go_r)
             self._won = Tried(index, result)
             return None
@@ -263,7 +259,7 @@ class ForkedSearch:
         os.close(go_r)
         return pid, result_r, go_w, time.monotonic()
 
-    def _collect(self, running: dict, done: dict, limit_s: float) -> None:
+    def _collect(self, running: dict[int, _Running], done: dict[int, Tried], limit_s: float) -> None:
         """Wait for at least one running child to report (or to run out of time).
 
         A candidate's time is the CPU time it used, not the wall time since
@@ -282,8 +278,8 @@ class ForkedSearch:
             index = fds[fd]
             pid, result_fd, go_fd, _ = running.pop(index)
             try:
-                result = _receive(result_fd)
-            except (EOFError, pickle.UnpicklingError):
+                result = _receive(result_fd, what="a candidate's result pipe")
+            except (EOFError, FrameError):
                 result = None
             os.close(result_fd)
             done[index] = Tried(index, result, pid=pid, go_fd=go_fd)
@@ -300,7 +296,8 @@ class ForkedSearch:
                 done[index] = Tried(index, None, timed_out=True)
 
     @staticmethod
-    def _decide(done: dict, count: int, accepted, closeness, final: bool = False) -> int | None:
+    def _decide(done: dict[int, Tried], count: int, accepted: Callable[[Any], bool],
+                closeness: Callable[[Any], float], final: bool = False) -> int | None:
         """The first candidate in order that is accepted, once all before it have reported."""
         for index in range(count):
             if index not in done:
@@ -319,6 +316,7 @@ class ForkedSearch:
 
     @staticmethod
     def _release(tried: Tried, go: bool, counters: dict[str, int] | None = None) -> None:
+        """Tell a reported child its verdict: carry on as the runner (with the runner's ``counters``) or exit."""
         pid, go_fd = tried.pid, tried.go_fd
         if pid is None or go_fd is None:
             return
@@ -377,8 +375,8 @@ def tell(copy: Shadow, word: Any) -> None:
 def next_word(following: Following) -> Any:
     """In the copy: the runner's next word; the copy exits when there is none (dropped, or the runner ended)."""
     try:
-        return _receive(following.word_fd)
-    except (EOFError, OSError, pickle.UnpicklingError):
+        return _receive(following.word_fd, what="the runner's word pipe")
+    except (EOFError, OSError, FrameError):
         os._exit(0)
 
 
@@ -395,6 +393,66 @@ def hand_over(copy: Shadow, word: Any) -> None:
     os._exit(0)
 
 
+@dataclass(frozen=True)
+class _Progress:
+    """Runner → caller: a progress message for ``on_message``."""
+
+    message: Any
+
+
+@dataclass(frozen=True)
+class _Finished:
+    """Runner → caller: what ``body`` returned (the last message)."""
+
+    result: Any
+
+
+@dataclass(frozen=True)
+class _BadInput:
+    """Runner → caller: ``body`` raised InputError with these problems (the last message)."""
+
+    problems: tuple[Problem, ...]
+
+
+@dataclass(frozen=True)
+class _Failed:
+    """Runner → caller: ``body`` raised anything else (the last message)."""
+
+    why: str
+
+
+def _supervise(body: Callable[[Callable[[Any], None]], Any], write_fd: int) -> NoReturn:
+    """The supervisor (forked): fork the runner, which runs ``body`` and reports on ``write_fd``; reap every
+    descendant until none is left; exit."""
+    # A group of its own, signals at their defaults: a stop (Ctrl-C, SIGTERM) reaches the caller, which
+    # ends the whole group (run_supervised); a forked copy must never run the caller's handlers.
+    os.setpgid(0, 0)
+    for stop in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(stop, signal.SIG_DFL)
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+    runner = _fork("the replay's runner")
+    if runner == 0:
+        code = 0
+        try:
+            result = body(lambda obj: _send(write_fd, _Progress(obj)))
+            _send(write_fd, _Finished(result))
+        except InputError as exc:  # bad input found by the runner: the caller raises it as it is
+            _send(write_fd, _BadInput(tuple(exc.problems)))
+        except BaseException as exc:  # noqa: BLE001 - reported to the caller, never raised here
+            try:
+                _send(write_fd, _Failed(f"{type(exc).__name__}: {exc}"))
+            except Exception:  # noqa: BLE001
+                code = 1
+        os._exit(code)
+    os.close(write_fd)
+    while True:
+        try:
+            os.waitpid(-1, 0)
+        except ChildProcessError:
+            os._exit(0)
+
+
 def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None]) -> Any:
     """Run ``body(send)`` in a forked runner under a reaping supervisor; return what it finally returned.
 
@@ -406,52 +464,28 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     """
     read_fd, write_fd = os.pipe()
     supervisor = _fork("the replay's supervisor")
-    if supervisor == 0:  # the supervisor: reap every descendant until none is left
+    if supervisor == 0:
         os.close(read_fd)
-        # A group of its own, signals at their defaults: a stop (Ctrl-C, SIGTERM) reaches the caller, which
-        # ends the whole group (below); a forked copy must never run the caller's handlers.
-        os.setpgid(0, 0)
-        for stop in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(stop, signal.SIG_DFL)
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
-        runner = _fork("the replay's runner")
-        if runner == 0:
-            code = 0
-            try:
-                result = body(lambda obj: _send(write_fd, ("message", obj)))
-                _send(write_fd, ("done", result))
-            except InputError as exc:  # bad input found by the runner: the caller raises it as it is
-                _send(write_fd, ("input_error", exc.problems))
-            except BaseException as exc:  # noqa: BLE001 - reported to the caller, never raised here
-                try:
-                    _send(write_fd, ("error", f"{type(exc).__name__}: {exc}"))
-                except Exception:  # noqa: BLE001
-                    code = 1
-            os._exit(code)
-        os.close(write_fd)
-        while True:
-            try:
-                os.waitpid(-1, 0)
-            except ChildProcessError:
-                os._exit(0)
+        _supervise(body, write_fd)
     with contextlib.suppress(OSError):  # (here too: a stop may come before the supervisor runs)
         os.setpgid(supervisor, supervisor)
     os.close(write_fd)
     try:
         while True:
             try:
-                kind, payload = _receive(read_fd)
-            except EOFError:
+                message = _receive(read_fd, what="the replay runner's pipe")
+            except (EOFError, FrameError):
                 raise RuntimeError("the replay process ended without a result (it crashed)") from None
-            if kind == "message":
-                on_message(payload)
-            elif kind == "input_error":
-                raise InputError(payload)
-            elif kind == "error":
-                raise RuntimeError(f"the replay process failed: {payload}")
+            if isinstance(message, _Progress):
+                on_message(message.message)
+            elif isinstance(message, _BadInput):
+                raise InputError(message.problems)
+            elif isinstance(message, _Failed):
+                raise RuntimeError(f"the replay process failed: {message.why}")
+            elif isinstance(message, _Finished):
+                return message.result
             else:
-                return payload
+                raise RuntimeError(f"the replay process sent {type(message).__name__}")
     except BaseException:  # stopped (KeyboardInterrupt) or failed: the runner and its candidates end now
         with contextlib.suppress(OSError):
             os.killpg(supervisor, signal.SIGKILL)

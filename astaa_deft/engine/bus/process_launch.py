@@ -17,9 +17,15 @@ Ways in, one set of rules:
 * :func:`fork_child` — a child forked without exec that runs a function of
   this process with its memory (a recorder forked from a warm worker), handed
   back as a :class:`ForkedChild`, driven like a ``Popen``.
+* :func:`fork_session_child` — a child forked without exec that leads a
+  session of its own and dies with this process, for a caller that sets up
+  its channels itself (the case template's case processes: a socket each).
 * :func:`guarded_fork` — a bare ``os.fork`` for code that manages its
-  children itself (the case template, forked replay), after
-  :func:`ensure_fork_safe`.
+  children itself (forked replay's copies, which must share this process's
+  group), after :func:`ensure_fork_safe`.
+
+The messages on the pipes and sockets to these children are framed by
+:mod:`astaa_deft.io.pipe_messages`.
 
 Nothing here signals or waits for a process it did not start.
 """
@@ -38,7 +44,7 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from queue import SimpleQueue
-from typing import IO, Any
+from typing import IO, Any, NoReturn
 
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.engine.bus.processes import stop_process
@@ -92,6 +98,7 @@ class _Starter:
 
     @property
     def thread(self) -> threading.Thread | None:
+        """The starter thread (None until the first start)."""
         return self._thread
 
     def call(self, job: Callable[[], Any]) -> Any:
@@ -259,10 +266,38 @@ def die_with_parent(parent: int, sig: signal.Signals = signal.SIGTERM) -> None:
         os._exit(128 + int(sig))
 
 
+def fork_session_child(what: str) -> int:
+    """:func:`guarded_fork` for a child that leads a session of its own and gets SIGTERM when this process ends.
+
+    0 in the child (which must end with ``os._exit``), its pid here once the
+    child leads its group (as ``Popen`` returns). Raises :class:`UnsafeFork`
+    naming ``what`` unless single-threaded.
+    """
+    parent = os.getpid()
+    started_read, started_write = os.pipe()  # the child says when it leads its own group
+    try:
+        pid = guarded_fork(what)
+    except UnsafeFork:
+        os.close(started_read)
+        os.close(started_write)
+        raise
+    if pid == 0:
+        os.close(started_read)
+        os.setsid()
+        die_with_parent(parent)
+        os.write(started_write, b"1")
+        os.close(started_write)
+        return 0
+    os.close(started_write)
+    os.read(started_read, 1)  # b"" if it died first: the caller finds out when it waits
+    os.close(started_read)
+    return pid
+
+
 class ForkedChild:
     """A child of :func:`fork_child`: the part of ``subprocess.Popen`` the tool uses (pid, pipes, poll, wait)."""
 
-    def __init__(self, pid: int, stdin: IO[str], stdout: IO[str]):
+    def __init__(self, pid: int, stdin: IO[str], stdout: IO[str]) -> None:
         self.pid = pid
         self.args = [f"<forked {pid}>"]
         self.stdin: IO[str] | None = stdin
@@ -271,6 +306,7 @@ class ForkedChild:
         self._lock = threading.Lock()
 
     def poll(self) -> int | None:
+        """Its exit code once it has exited (reaped here), else None; thread-safe."""
         with self._lock:
             if self.returncode is None:
                 try:
@@ -283,6 +319,7 @@ class ForkedChild:
             return self.returncode
 
     def wait(self, timeout: float | None = None) -> int:
+        """Its exit code, waiting up to ``timeout`` seconds (None: no limit); raises ``subprocess.TimeoutExpired``."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while (code := self.poll()) is None:
             if deadline is not None and time.monotonic() >= deadline:
@@ -296,42 +333,40 @@ def fork_child(body: Callable[[], int], *, what: str) -> ForkedChild:
 
     The child leads a session of its own, gets SIGTERM when this process
     ends, has stderr on ``/dev/null`` and no other file of ours open; it
-    leads its group before this returns. Call it while single-threaded
-    (raises :class:`UnsafeFork` otherwise, naming ``what``).
+    leads its group before this returns (:func:`fork_session_child`). Call
+    it while single-threaded (raises :class:`UnsafeFork` otherwise, naming ``what``).
     """
-    parent = os.getpid()
     stdin_read, stdin_write = os.pipe()
     stdout_read, stdout_write = os.pipe()
-    started_read, started_write = os.pipe()  # the child says when it leads its own group (as Popen's does)
     try:
-        pid = guarded_fork(what)
+        pid = fork_session_child(what)
     except UnsafeFork:
-        for fd in (stdin_read, stdin_write, stdout_read, stdout_write, started_read, started_write):
+        for fd in (stdin_read, stdin_write, stdout_read, stdout_write):
             os.close(fd)
         raise
     if pid == 0:
-        code = 1
-        try:
-            os.setsid()
-            die_with_parent(parent)
-            os.write(started_write, b"1")
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            for fd, target in ((stdin_read, 0), (stdout_write, 1), (devnull, 2)):
-                os.dup2(fd, target)
-            os.closerange(3, os.sysconf("SC_OPEN_MAX"))  # nothing of the parent's pipes stays open here
-            sys.stdin = open(0, encoding="utf-8", closefd=False)  # noqa: SIM115 - the process's own streams
-            sys.stdout = open(1, "w", encoding="utf-8", closefd=False)  # noqa: SIM115
-            sys.stderr = open(2, "w", encoding="utf-8", closefd=False)  # noqa: SIM115
-            code = body()
-        except BaseException:  # noqa: BLE001 - a child must never return into the parent's code
-            traceback.print_exc()
-        finally:
-            for stream in (sys.stdout, sys.stderr):
-                with contextlib.suppress(Exception):  # exiting anyway
-                    stream.flush()
-            os._exit(code)
-    for fd in (stdin_read, stdout_write, started_write):
+        _run_forked_body(body, stdin_read, stdout_write)
+    for fd in (stdin_read, stdout_write):
         os.close(fd)
-    os.read(started_read, 1)  # b"" if it died first: poll() tells the caller
-    os.close(started_read)
     return ForkedChild(pid, open(stdin_write, "w", encoding="utf-8"), open(stdout_read, encoding="utf-8"))
+
+
+def _run_forked_body(body: Callable[[], int], stdin_fd: int, stdout_fd: int) -> NoReturn:
+    """In a child of :func:`fork_child`: its streams on the pipes (stderr: /dev/null), ``body()``, exit."""
+    code = 1
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        for fd, target in ((stdin_fd, 0), (stdout_fd, 1), (devnull, 2)):
+            os.dup2(fd, target)
+        os.closerange(3, os.sysconf("SC_OPEN_MAX"))  # nothing of the parent's pipes stays open here
+        sys.stdin = open(0, encoding="utf-8", closefd=False)  # noqa: SIM115 - the process's own streams
+        sys.stdout = open(1, "w", encoding="utf-8", closefd=False)  # noqa: SIM115
+        sys.stderr = open(2, "w", encoding="utf-8", closefd=False)  # noqa: SIM115
+        code = body()
+    except BaseException:  # noqa: BLE001 - a child must never return into the parent's code
+        traceback.print_exc()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):  # exiting anyway
+                stream.flush()
+        os._exit(code)

@@ -86,6 +86,7 @@ def process_running(pid: int) -> bool:
 
 
 def tail(path: Path, lines: int = 20) -> str:
+    """The last ``lines`` lines of a text file (its last 16 KiB at most); "" when it cannot be read."""
     try:
         with open(path, "rb") as fh:
             fh.seek(0, os.SEEK_END)

@@ -10,21 +10,26 @@ task whose worker died is re-run by the scheduler elsewhere.
 
 from __future__ import annotations
 
-import base64
-import json
 import socket
 import subprocess
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 from collections.abc import Iterator
 
 from astaa_deft.engine.bus.process_launch import start
 from astaa_deft.engine.bus.processes import python_module, stop_process, tail
+from astaa_deft.io import pipe_messages
+from astaa_deft.io.pipe_messages import FrameError, bytes_reader
+from astaa_deft.model.json import JsonObject
 from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
 from astaa_deft.orchestration.campaign.zygote import Zygote, stop_group
+
+if TYPE_CHECKING:
+    from dask.distributed import Future as DaskFuture
 
 CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
 
@@ -34,36 +39,37 @@ class LocalPool:
 
     Each case process is forked from a template that imported everything and
     loaded the spec once (:mod:`.zygote`; its recorder is forked from it in
-    turn, :mod:`.forked`): a case starts in milliseconds and spends no CPU on
-    Python's start-up, ~1.2 CPU s of a demo case before. Without a template
-    (it could not start), each slot keeps its next case's process warm
-    (started, imports done, spec loaded, its recorder started, waiting for
-    its payload) while the current case runs — on a loaded two-core machine
-    that start-up took ~3 s of a case's ~12 (measured;
-    benchmarks/bench_campaign.py).
+    turn, :mod:`.forked`). Without a template (it could not start), each
+    slot keeps its next case's process warm (started, imports done, spec
+    loaded, its recorder started, waiting for its payload) while the current
+    case runs. Why: docs/performance.md, "pipes". ``submit``, ``done``,
+    ``pending`` and ``close`` are called from one thread (the campaign's);
+    the cases run on the pool's threads.
     """
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int) -> None:
         self.workers = workers
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="case")
-        self._procs: set[subprocess.Popen] = set()
-        self._warm: list[tuple[tuple[str, ...], subprocess.Popen]] = []  # (what it preloaded, process)
+        self._procs: set[subprocess.Popen[bytes]] = set()
+        self._warm: list[tuple[tuple[str, ...], subprocess.Popen[bytes]]] = []  # (what it preloaded, process)
         self._zygotes: dict[tuple[str, ...], Zygote | None] = {}  # None: it could not start (processes instead)
         self._forked: set[int] = set()  # case processes forked by a template, running
         self._lock = threading.Lock()
         self._closed = False
-        self.futures: dict[Future, str] = {}
+        self.futures: dict[Future[CaseOutcome], str] = {}
 
-    def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+    def submit(self, case_id: str, payload: JsonObject) -> None:
+        """Run the case (``payload``: :meth:`~.payload.CasePayload.to_json`); raises RuntimeError once closed."""
+        typed = CasePayload.from_json(payload)
         # The template starts here, before its first case is run by the pool.
-        self._zygote(_key(payload))
-        self.futures[self._pool.submit(self._run, payload)] = case_id
+        self._zygote(_key(typed))
+        self.futures[self._pool.submit(self._run, typed)] = case_id
 
-    def _spawn(self, key: tuple[str, ...]) -> subprocess.Popen:
+    def _spawn(self, key: tuple[str, ...]) -> subprocess.Popen[bytes]:
         return start([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", *key],
-                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
-    def _take(self, payload: dict[str, Any]) -> subprocess.Popen:
+    def _take(self, payload: CasePayload) -> subprocess.Popen[bytes]:
         """A warm process for this payload's spec (or a new one), and a warm one for the slot's next case."""
         key = _key(payload)
         with self._lock:
@@ -94,7 +100,7 @@ class LocalPool:
                     zygote = self._zygotes[key] = None
             return zygote
 
-    def _run(self, payload: dict[str, Any]) -> CaseOutcome:
+    def _run(self, payload: CasePayload) -> CaseOutcome:
         with self._lock:
             zygote = self._zygotes.get(_key(payload))
         if zygote is not None and zygote.alive():
@@ -104,52 +110,60 @@ class LocalPool:
                 pass  # a process of its own instead
             else:
                 return self._run_forked(pid, conn, payload)
+        return self._run_warm(payload)
+
+    def _run_warm(self, payload: CasePayload) -> CaseOutcome:
+        """A case in a warm process of its own: payload message on its stdin, outcome message on its stdout."""
         proc = self._take(payload)
         try:
-            out, err = proc.communicate(json.dumps(payload), timeout=float(payload["horizon"]) + CASE_TIMEOUT_MARGIN)
+            out, err = proc.communicate(pipe_messages.encode(CaseMessage(payload)),
+                                        timeout=payload.horizon + CASE_TIMEOUT_MARGIN)
         except subprocess.TimeoutExpired:
             stop_process(proc, grace=5.0)
             return CaseOutcome("error", "?", "the case did not finish", error="timeout")
         finally:
             with self._lock:
                 self._procs.discard(proc)
-        Path(payload["run_dir"]).mkdir(parents=True, exist_ok=True)
-        (Path(payload["run_dir"]) / "case.log").write_text(err)
-        lines = [line for line in out.splitlines() if line.startswith("{")]
-        if proc.returncode != 0 or not lines:
-            return CaseOutcome("error", "?", "the case process failed", error=err.strip()[-2000:])
-        return CaseOutcome.from_json(json.loads(lines[-1]))
+        log = err.decode("utf-8", "replace")
+        Path(payload.run_dir).mkdir(parents=True, exist_ok=True)
+        (Path(payload.run_dir) / "case.log").write_text(log)
+        try:
+            message = pipe_messages.receive(bytes_reader(out), (OutcomeMessage,), source="the case process's output")
+        except FrameError as exc:
+            log = f"{log}\n{exc}"
+            message = None
+        if proc.returncode != 0 or message is None:
+            return CaseOutcome("error", "?", "the case process failed", error=log.strip()[-2000:])
+        return message.outcome
 
-    def _run_forked(self, pid: int, conn: socket.socket, payload: dict[str, Any]) -> CaseOutcome:
+    def _run_forked(self, pid: int, conn: socket.socket, payload: CasePayload) -> CaseOutcome:
         """A case in a process forked by the template: payload out, outcome back on its socket."""
         with self._lock:
             self._forked.add(pid)
-        deadline = time.monotonic() + float(payload["horizon"]) + CASE_TIMEOUT_MARGIN
-        chunks = []
+        deadline = time.monotonic() + payload.horizon + CASE_TIMEOUT_MARGIN
+
+        def read(size: int) -> bytes:
+            conn.settimeout(max(0.001, deadline - time.monotonic()))
+            return conn.recv(size)
+
         try:
-            conn.sendall(json.dumps(payload).encode())
+            conn.sendall(pipe_messages.encode(CaseMessage(payload)))
             conn.shutdown(socket.SHUT_WR)
-            while True:
-                conn.settimeout(max(0.001, deadline - time.monotonic()))
-                data = conn.recv(1 << 16)
-                if not data:
-                    break
-                chunks.append(data)
+            message = pipe_messages.receive(read, (OutcomeMessage,), source="the forked case's socket")
         except TimeoutError:
             stop_group(pid, grace=5.0)
             return CaseOutcome("error", "?", "the case did not finish", error="timeout")
-        except OSError as exc:
+        except (OSError, FrameError) as exc:
             stop_group(pid, grace=5.0)
             return CaseOutcome("error", "?", "the case process failed", error=str(exc))
         finally:
             conn.close()
             with self._lock:
                 self._forked.discard(pid)
-        lines = [line for line in b"".join(chunks).decode("utf-8", "replace").splitlines() if line.startswith("{")]
-        if not lines:
+        if message is None:
             return CaseOutcome("error", "?", "the case process failed",
-                               error=tail(Path(payload["run_dir"]) / "case.log").strip()[-2000:])
-        return CaseOutcome.from_json(json.loads(lines[-1]))
+                               error=tail(Path(payload.run_dir) / "case.log").strip()[-2000:])
+        return message.outcome
 
     def pending(self) -> int:
         return len(self.futures)
@@ -179,15 +193,15 @@ class LocalPool:
             zygote.close()
 
 
-def _key(payload: dict[str, Any]) -> tuple[str, ...]:
+def _key(payload: CasePayload) -> tuple[str, ...]:
     """What a case process preloads: the spec and the dictionaries."""
-    return (str(payload["spec"]), *map(str, payload.get("dictionaries", [])))
+    return (payload.spec, *payload.dictionaries)
 
 
 class DaskPool:
     """Cases on a Dask cluster: ``tcp://HOST:PORT`` (a running scheduler) or ``local:K`` (K worker processes)."""
 
-    def __init__(self, address: str, workers: int):
+    def __init__(self, address: str, workers: int) -> None:
         import dask
         from dask.distributed import Client, LocalCluster
 
@@ -202,15 +216,16 @@ class DaskPool:
         else:
             self.client = Client(address)
         self.workers = max(1, len(self.client.scheduler_info().get("workers", {})) or workers)
-        self.futures: dict[Any, tuple[str, dict]] = {}
+        self.futures: dict[DaskFuture, tuple[str, CasePayload]] = {}
 
-    def submit(self, case_id: str, payload: dict[str, Any]) -> None:
+    def submit(self, case_id: str, payload: JsonObject) -> None:
+        """Run the case on the cluster (``payload``: :meth:`~.payload.CasePayload.to_json`)."""
         from astaa_deft.orchestration.campaign.worker import execute_remote
 
+        typed = CasePayload.from_json(payload)
         # retries: a task lost with its worker (killed, machine gone) is re-queued on another.
-        future = self.client.submit(execute_remote, payload, key=f"case-{case_id}-{payload.get('attempt', 0)}",
-                                    pure=False, retries=3)
-        self.futures[future] = (case_id, payload)
+        future = self.client.submit(execute_remote, typed, key=f"case-{case_id}-0", pure=False, retries=3)
+        self.futures[future] = (case_id, typed)
 
     def pending(self) -> int:
         return len(self.futures)
@@ -225,16 +240,15 @@ class DaskPool:
         for future in result.done:
             case_id, payload = self.futures.pop(future)
             try:
-                body = future.result()
+                result = future.result()
             except Exception as exc:  # noqa: BLE001 - a task that failed on every retry
                 yield case_id, CaseOutcome("error", "?", "the case failed on the cluster", error=str(exc))
                 continue
-            log_b64 = body.pop("log_b64", None)
-            run_dir = Path(payload["run_dir"])
+            run_dir = Path(payload.run_dir)
             run_dir.mkdir(parents=True, exist_ok=True)
-            outcome = CaseOutcome.from_json(body)
-            if log_b64:
-                (run_dir / "run.mcap").write_bytes(base64.b64decode(log_b64))
+            outcome = result.outcome
+            if result.log:
+                (run_dir / "run.mcap").write_bytes(result.log)
                 outcome.log_path = str(run_dir / "run.mcap")
             yield case_id, outcome
 

@@ -1,12 +1,11 @@
 """A case's recorder forked from its warm worker: no interpreter start, no imports, the spec parsed once.
 
-A warm worker (worker.py ``--warm``) has imported everything a recorder
-needs and parsed the spec before its payload comes. Started as its own
-Python process, the recorder would spend ~0.55 CPU s on the same start-up
-again (measured: interpreter, imports, the spec) — a sixth of a demo case's
-CPU. Forked from the worker while it is still one thread and has no Zenoh
-session, it starts with all of that done. It is a real child process all
-the same (its own session and process group, stopped with its parent,
+A warm worker (worker.py ``--warm``) or a case forked by the template has
+imported everything a recorder needs and parsed the spec before its payload
+comes. Forked from it while it is still one thread and has no Zenoh session,
+the recorder starts with all of that done (figures: docs/performance.md,
+"pipes"). It is a real child process all the same (its own session and
+process group, stopped with its parent,
 :func:`astaa_deft.engine.bus.process_launch.fork_child`), driven exactly as a
 recorder started with ``--warm`` (its ARGS line, then the spec's text on
 stdin), through the same calls as a ``subprocess.Popen`` (poll, wait, its
@@ -18,9 +17,10 @@ from __future__ import annotations
 from astaa_deft.engine.bus.process_launch import ForkedChild, fork_child
 from astaa_deft.engine.session import recorder
 from astaa_deft.engine.spec.loader import load_spec_text
+from astaa_deft.model.sut import Spec
 
 
-def fork_recorder(spec_text: str, spec_name: str, parsed: object = None) -> ForkedChild:
+def fork_recorder(spec_text: str, spec_name: str, parsed: Spec | None = None) -> ForkedChild:
     """A warm recorder (see ``session/recorder.py``) forked from this process.
 
     ``parsed``: ``spec_text`` parsed already, as ``load_spec_text(spec_text,

@@ -1,60 +1,90 @@
 """One case, executed where it runs: a child process of the local pool, or a Dask worker.
 
-The payload is plain JSON (spec path, planned case, run directory, horizon,
-extra dictionaries) and so is the result: the same function serves both.
+The payload is a :class:`~.payload.CasePayload` (spec path, planned case,
+run directory, horizon, extra dictionaries), the result a
+:class:`~.model.CaseOutcome`: the same function serves both.
 Run as ``python -m astaa_deft.orchestration.campaign.worker [--warm SPEC [DICTIONARY …]]``
-it reads the payload on stdin and prints the outcome as its last line.
+it reads the payload as a message on stdin and writes the outcome as a
+message on stdout (:mod:`astaa_deft.io.pipe_messages` frames).
 ``--warm``: import everything and load that spec and those dictionaries
 *before* waiting for the payload — the local pool starts each case's process
-while the previous case still runs, so a case does not wait seconds for
-Python's imports and the spec on a loaded machine (each case still gets a
-process of its own). It also starts the case's recorder ahead, forked from
-itself (:mod:`.forked`: no second interpreter start, imports or spec parse):
-the recorder's start-up was the largest fixed wait of a case (~1–2 s of a
-loaded machine's wall time before any module could start, ~0.55 CPU s).
+while the previous case still runs, so a case does not wait for Python's
+imports and the spec (each case still gets a process of its own). It also
+starts the case's recorder ahead, forked from itself (:mod:`.forked`: no
+second interpreter start, imports or spec parse). Figures:
+docs/performance.md, "pipes".
 """
 
 from __future__ import annotations
 
-import json
-import threading
+import os
 import sys
+import threading
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.engine.bus.processes import ChildProcess
+from astaa_deft.engine.intercept.dictionary.model import Dictionary
+from astaa_deft.io import pipe_messages
+from astaa_deft.io.pipe_messages import FrameError, fd_reader
 from astaa_deft.model.errors import InputError
+from astaa_deft.model.sut import Spec
 from astaa_deft.io.inputfile import SPEC, read_input
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.engine.session.bus_run import release_warm_recorder, warm_recorder
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.forked import fork_recorder
-from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
+from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
 from astaa_deft.orchestration.campaign.runner import run_case
 
 
-_Preloaded = tuple[str, list[str], Any, Any]  # spec path, dictionary paths, spec, dictionary
+@dataclass(frozen=True)
+class Preloaded:
+    """A spec and dictionaries loaded before the payload came (a warm worker, the case template)."""
+
+    spec_path: str
+    dictionary_paths: tuple[str, ...]
+    spec: Spec
+    dictionary: Dictionary
+
+    @classmethod
+    def load(cls, spec_path: str, dictionary_paths: tuple[str, ...]) -> Preloaded:
+        """Load them now; raises InputError for a bad spec or dictionary."""
+        return cls(spec_path, dictionary_paths, load_spec(Path(spec_path)),
+                   load_dictionary([Path(p) for p in dictionary_paths]))
 
 
-def execute(payload: dict[str, Any], preloaded: _Preloaded | None = None,
-            warm_recorder: ChildProcess | None = None) -> dict[str, Any]:
-    case = PlannedCase.from_json(payload["case"])
+@dataclass(frozen=True)
+class ParsedSpec:
+    """A spec file's text and that text parsed as the recorder parses it (a template's, for its cases' recorders)."""
+
+    text: str
+    spec: Spec
+
+
+def execute(payload: CasePayload, preloaded: Preloaded | None = None,
+            warm_recorder: ChildProcess | None = None) -> CaseOutcome:
+    """Run the payload's case; its outcome (status "error" for a bad spec, dictionary or test case).
+
+    ``preloaded``: used when it is the payload's spec and dictionaries (else
+    they are loaded here); ``warm_recorder``: the run's recorder, started ahead.
+    """
+    case = payload.case
     try:
-        if preloaded is not None and (preloaded[0], preloaded[1]) == (payload["spec"], payload.get("dictionaries", [])):
-            spec, dictionary = preloaded[2], preloaded[3]
+        if preloaded is not None and (preloaded.spec_path, preloaded.dictionary_paths) == (payload.spec,
+                                                                                         payload.dictionaries):
+            spec, dictionary = preloaded.spec, preloaded.dictionary
         else:
-            spec = load_spec(Path(payload["spec"]))
-            dictionary = load_dictionary([Path(p) for p in payload.get("dictionaries", [])])
+            spec = load_spec(Path(payload.spec))
+            dictionary = load_dictionary([Path(p) for p in payload.dictionaries])
         testcase = parse_testcase(case.testcase_xml.encode(), case.case_id, spec, dictionary) \
             if case.testcase_xml else None
     except InputError as exc:
-        return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems))).to_json()
-    settle = payload.get("settle")
-    outcome = run_case(spec, testcase, case.params, Path(payload["run_dir"]), float(payload["horizon"]), dictionary,
-                       float(settle) if settle is not None else None, warm_recorder=warm_recorder,
-                       known=frozenset(payload.get("known", ())))
-    return outcome.to_json()
+        return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems)))
+    return run_case(spec, testcase, case.params, Path(payload.run_dir), payload.horizon, dictionary,
+                    payload.settle, warm_recorder=warm_recorder, known=frozenset(payload.known))
 
 
 def stop_worker_profiler() -> bool:
@@ -90,26 +120,33 @@ def stop_worker_profiler() -> bool:
     return stopped.wait(10.0)
 
 
-def execute_remote(payload: dict[str, Any]) -> dict[str, Any]:
-    """On a Dask worker: run in a local temp dir, send the log back with the result."""
-    import base64
+@dataclass(frozen=True)
+class RemoteResult:
+    """A case run on a Dask worker: its outcome, and its log's bytes (None: the run wrote none)."""
+
+    outcome: CaseOutcome
+    log: bytes | None
+
+
+def execute_remote(payload: CasePayload) -> RemoteResult:
+    """On a Dask worker: run in a local temp dir, send the log back with the outcome."""
+    import dataclasses
     import tempfile
 
     stop_worker_profiler()
     with tempfile.TemporaryDirectory(prefix="astaa-deft-case-") as tmp:
-        body = execute({**payload, "run_dir": tmp})
+        outcome = execute(dataclasses.replace(payload, run_dir=tmp))
         log = Path(tmp) / "run.mcap"
-        body["log_b64"] = base64.b64encode(log.read_bytes()).decode() if log.is_file() else None
-        return body
+        return RemoteResult(outcome, log.read_bytes() if log.is_file() else None)
 
 
-def recorder_ahead(spec_path: Path, parsed: tuple[str, Any] | None = None) -> ChildProcess | None:
+def recorder_ahead(spec_path: Path, parsed: ParsedSpec | None = None) -> ChildProcess | None:
     """This case's recorder, started now: forked from this process (still one thread, no Zenoh session),
     else a warm recorder process of its own, else none (the run starts one itself).
-    ``parsed``: (the spec file's text, that text parsed as the recorder parses it), from a template process."""
+    ``parsed``: the spec file's text and its parse, from a template process."""
     try:
         if parsed is not None:
-            return fork_recorder(parsed[0], spec_path.name, parsed[1])
+            return fork_recorder(parsed.text, spec_path.name, parsed.spec)
         return fork_recorder(read_input(spec_path, SPEC).decode("utf-8"), spec_path.name)
     except Exception:  # noqa: BLE001 - an unreadable spec is the case's error to report; no fork: a process
         try:
@@ -118,22 +155,45 @@ def recorder_ahead(spec_path: Path, parsed: tuple[str, Any] | None = None) -> Ch
             return None
 
 
+def receive_case(read: pipe_messages.Reader, *, source: str) -> CasePayload:
+    """The case's payload, the one message on its channel ``read``.
+
+    Raises :class:`FrameError` naming ``source`` when the channel ended before
+    it, or held anything else.
+    """
+    message = pipe_messages.receive(read, (CaseMessage,), source=source)
+    if message is None:
+        raise FrameError(f"{source}: the channel ended before the case's payload came")
+    return message.payload
+
+
+def run_received(payload: CasePayload, preloaded: Preloaded | None, recorder: ChildProcess | None) -> OutcomeMessage:
+    """:func:`execute`, the warm ``recorder`` released whatever happens; the outcome message to send back."""
+    try:
+        return OutcomeMessage(execute(payload, preloaded, recorder))
+    finally:
+        release_warm_recorder(recorder)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """A warm case process: payload message on stdin, outcome message on stdout; its exit code.
+
+    Its own stdout is kept for the outcome; anything else printed to it goes
+    to stderr (the case's ``case.log``).
+    """
     argv = sys.argv[1:] if argv is None else argv
-    preloaded: _Preloaded | None = None
+    outcome_fd = os.dup(1)
+    os.dup2(2, 1)
+    preloaded: Preloaded | None = None
     recorder = None
     if argv[:1] == ["--warm"] and len(argv) >= 2:
         try:
-            preloaded = (argv[1], argv[2:], load_spec(Path(argv[1])), load_dictionary([Path(p) for p in argv[2:]]))
+            preloaded = Preloaded.load(argv[1], tuple(argv[2:]))
         except InputError:
             preloaded = None  # execute() loads it again and reports the problem as the case's outcome
         recorder = recorder_ahead(Path(argv[1]))
-    payload = json.loads(sys.stdin.read())
-    try:
-        body = execute(payload, preloaded, recorder)
-    finally:
-        release_warm_recorder(recorder)
-    print(json.dumps(body, default=str), flush=True)
+    payload = receive_case(fd_reader(0), source="the case's payload on stdin")
+    pipe_messages.send_fd(outcome_fd, run_received(payload, preloaded, recorder))
     return 0
 
 

@@ -1,0 +1,93 @@
+"""What the campaign hands a pool for one case, and the messages on the channel to the case's process.
+
+:class:`CasePayload` is the case's JSON form on the way to a worker (the
+keys ``worker.execute`` reads) and back from it (``from_json``, in the
+worker's process). :class:`CaseMessage` (the payload, to the case process)
+and :class:`OutcomeMessage` (its outcome, back) are the two messages on
+that channel, framed by :mod:`astaa_deft.io.pipe_messages`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import ClassVar
+
+from astaa_deft.model.json import JsonObject, JsonValue
+from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
+
+
+def _strings(value: JsonValue) -> tuple[str, ...]:
+    if not isinstance(value, list):
+        raise ValueError(f"a list of strings, not {value!r}")
+    return tuple(str(item) for item in value)
+
+
+def _number(value: JsonValue) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ValueError(f"a number, not {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class CasePayload:
+    """Everything a worker needs to run ``case``, nothing it must look up (paths absolute)."""
+
+    spec: str  # the spec file
+    case: PlannedCase
+    run_dir: str  # the case's own folder (its log, its modules' output)
+    horizon: float  # seconds the run may last at most
+    dictionaries: tuple[str, ...]  # dictionary files beside the bundled one
+    settle: float | None  # a mutated run ends this long after its last mutation could act (None: never)
+    known: tuple[str, ...]  # known baseline findings: a mutated run does not end at these
+
+    def to_json(self) -> JsonObject:
+        """The payload's JSON form (what the pools pass on to the workers)."""
+        return {"spec": self.spec, "case": self.case.to_json(), "run_dir": self.run_dir, "horizon": self.horizon,
+                "dictionaries": [path for path in self.dictionaries], "settle": self.settle,
+                "known": [name for name in self.known]}
+
+    @classmethod
+    def from_json(cls, data: JsonObject) -> CasePayload:
+        """The payload :meth:`to_json` wrote; ``dictionaries``, ``settle`` and ``known`` may be left out.
+
+        Raises ``KeyError``, ``ValueError`` or ``TypeError`` for a form it did not write.
+        """
+        case, settle = data["case"], data.get("settle")
+        if not isinstance(case, dict):
+            raise ValueError(f"a case is an object, not {case!r}")
+        return cls(spec=str(data["spec"]), case=PlannedCase.from_json(case), run_dir=str(data["run_dir"]),
+                   horizon=_number(data["horizon"]), dictionaries=_strings(data.get("dictionaries", [])),
+                   settle=None if settle is None else _number(settle), known=_strings(data.get("known", [])))
+
+
+@dataclass(frozen=True)
+class CaseMessage:
+    """To a case process: the case to run."""
+
+    TAG: ClassVar[str] = "case"
+    payload: CasePayload
+
+    def to_json(self) -> JsonObject:
+        return self.payload.to_json()
+
+    @classmethod
+    def from_json(cls, data: JsonObject) -> CaseMessage:
+        return cls(CasePayload.from_json(data))
+
+
+@dataclass(frozen=True)
+class OutcomeMessage:
+    """From a case process: what its run gave."""
+
+    TAG: ClassVar[str] = "outcome"
+    outcome: CaseOutcome
+
+    def to_json(self) -> JsonObject:
+        # A finding's detail may quote a module's own values: text for anything JSON has no form of.
+        plain: JsonObject = json.loads(json.dumps(self.outcome.to_json(), default=str))
+        return plain
+
+    @classmethod
+    def from_json(cls, data: JsonObject) -> OutcomeMessage:
+        return cls(CaseOutcome.from_json(data))
