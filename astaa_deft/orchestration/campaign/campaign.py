@@ -29,7 +29,7 @@ from astaa_deft.orchestration.campaign.calibration import (
     DRIFT_TOLERANCE, drift, fewer_after_drift, overloaded, run_share, workers_for,
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.campaign.journal import Bucket, Journal, _planned
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
 from astaa_deft.orchestration.campaign.minimiser import Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
@@ -178,10 +178,9 @@ class Campaign:
             stopped = "interrupted"
         finally:
             pool.close()
-        finish = getattr(self.strategy, "finish", None)  # a strategy with its own findings (decictor)
         try:
-            if stopped != "interrupted" and finish is not None:
-                finish(self.journal, self.config.out, self.config.spec_path, self.say)
+            if stopped != "interrupted" and self.strategy.exports_own_findings:
+                self.strategy.finish(self.journal, self.config.out, self.config.spec_path, self.say)
             elif stopped != "interrupted" and self.config.minimise:
                 self._minimise_left()
         except KeyboardInterrupt:
@@ -232,10 +231,9 @@ class Campaign:
         self._calibrate(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
-        seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes, strict=False):
-            if seed_hook is not None and outcome is not None:
-                seed_hook(row["case_id"], outcome)
+            if outcome is not None:
+                self.strategy.observe_baseline(row["case_id"], outcome)
         self._clean = clean + self._clean_failures_since_baseline()
         self.known = known_findings(self._clean)
         for name, finding in self.known.items():
@@ -351,9 +349,7 @@ class Campaign:
         timing = Timing(**stored) if stored else live_timing(clean, self.config.horizon)
         self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
         self.timing = timing
-        calibrate = getattr(self.strategy, "calibrate", None)
-        if calibrate is not None:
-            calibrate(timing)
+        self.strategy.calibrate(timing)
         if timing.anchor is not None:
             self.say(f"baseline: the stack is live from the first '{timing.anchor}' message and runs"
                      f" {timing.live:g} s on; generated windows fall inside that")
@@ -361,9 +357,8 @@ class Campaign:
     # -- generated cases -------------------------------------------------------
     def _main(self, pool) -> str:
         rows = self.journal.cases(MUTATED)
-        resume = getattr(self.strategy, "resume", None)  # guided: its schedule goes on where it was
-        if resume is not None and rows:
-            resume([(row["case_id"], row["testcase_xml"], row["parent"]) for row in rows])
+        if rows:  # guided: its schedule goes on where it was
+            self.strategy.resume([_planned(row) for row in rows])
         for row in rows:  # a resumed guided search learns its corpus again
             outcome = self.journal.outcome(row)
             if outcome is not None:
@@ -454,9 +449,8 @@ class Campaign:
         row = self.journal.planned(case_id)
         kind, xml = row["kind"], row["testcase_xml"]
         outcome = sig.without_self_inflicted(outcome, xml, self.spec)
-        judge = getattr(self.strategy, "judge", None)  # decictor: its oracle turns a run into a finding
-        if judge is not None and kind in (MUTATED, RERUN):
-            outcome = judge(case_id, xml, outcome, kind == MUTATED)
+        if kind in (MUTATED, RERUN):  # decictor: its oracle turns a run into a finding
+            outcome = self.strategy.judge(case_id, xml, outcome, kind == MUTATED)
         if kind != BASELINE:  # a known baseline finding counts only where this run makes it worse
             outcome = judged(outcome, self.known)
         new: list[PlannedCase] = []
@@ -574,7 +568,7 @@ class Campaign:
 
     # -- minimisation: confirmed buckets, alongside the hunt, each in a worker slot ---------------------------
     def _start_minimisations(self, hunting: bool) -> None:
-        if not self.config.minimise or getattr(self.strategy, "finish", None) is not None:
+        if not self.config.minimise or self.strategy.exports_own_findings:
             return
         done = self.journal.minimisations()
         in_flight = set(self._minimising.values())
