@@ -63,17 +63,17 @@ class Strategy(ABC):
     def propose(self, number: int) -> Proposal:
         """The ``number``-th test case; deterministic given the seed and what was observed before."""
 
-    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
+    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
         """A finished generated case (in the order results arrive). Default: nothing learnt."""
 
-    def observe_baseline(self, case_id: str, outcome: CaseOutcome) -> None:
+    def observe_baseline(self, case_id: str, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
         """A finished clean baseline run (every one, before the first :meth:`propose`). Default: ignored."""
 
-    def calibrate(self, timing: Timing) -> None:
+    def calibrate(self, timing: Timing) -> None:  # noqa: B027 (optional hook)
         """When the SUT is live, as the baseline measured it (once, before the first :meth:`propose`).
         Default: ignored."""
 
-    def resume(self, planned: Sequence[PlannedCase]) -> None:
+    def resume(self, planned: Sequence[PlannedCase]) -> None:  # noqa: B027 (optional hook)
         """On resume: the generated cases the campaign had planned already, in order (before their outcomes
         reach :meth:`observe`). Default: ignored."""
 
@@ -82,6 +82,6 @@ class Strategy(ABC):
         generated case, not a re-run). Default: the outcome as the monitors judged it."""
         return outcome
 
-    def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:
+    def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:  # noqa: B027 (optional hook)
         """After the hunt (not after an interruption): the strategy's own findings from ``journal`` into
         ``out`` (when :attr:`exports_own_findings`). Default: nothing."""
