@@ -11,8 +11,10 @@ import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.campaign import default_workers, param_grid
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.model import (
+    MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
+)
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.cli.commands.fuzz import parse_budget, parse_params
@@ -139,10 +141,10 @@ def test_signature_separates_mutation_families_and_folds_indices(demo):
     outcome = CaseOutcome("done", "Silent", "", [Finding("speed_limit", "Silent", None, "status", "")])
     one = parse_testcase(STRATEGIES["random"](spec, dictionary, 25, 8.0).propose(1).testcase_xml.encode())
     assert sig.mutation_family(one) == "trajectory:points:set"
-    assert sig.signature(outcome, None).endswith(sig.NO_MUTATION)
-    assert sig.failure_key(outcome) == "Silent|speed_limit|-"
+    assert sig.signature(outcome, None).text().endswith(sig.NO_MUTATION)
+    assert sig.failure_key(outcome).text() == "Silent|speed_limit|-"
     xml = one.to_xml().decode().replace('path="points"', 'path="points[3].v"')
-    assert sig.signature(outcome, xml).endswith("trajectory:points[].v:set")
+    assert sig.signature(outcome, xml).text().endswith("trajectory:points[].v:set")
 
 
 def test_params_spread_over_every_combination():
@@ -167,12 +169,12 @@ def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
     for n in range(1, 4):
         journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, "<x/>"))
         journal.started(f"c-{n}")
-    journal.finished("c-1", CaseOutcome("done", "Pass", "ok"), None, None, None)
+    journal.finished("c-1", CaseOutcome("done", "Pass", "ok"))
     journal.close()
     again = Journal(tmp_path)
     assert again.requeue_running() == 2
     assert [c.case_id for c in again.pending()] == ["c-2", "c-3"]
-    assert again.case("c-1")["status"] == "done"
+    assert again.case("c-1").status == "done"
     assert again.outcome(again.case("c-1")).summary == "ok"
 
 
@@ -224,6 +226,10 @@ def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
     assert rows == [("baseline", "error")]  # no generated case burnt
 
 
+def _signature(crash: str, invariant: str, module: str, family: str) -> BucketSignature:
+    return BucketSignature(FailureKey(crash, invariant, module), family)
+
+
 def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp_path: Path):
     from astaa_deft.orchestration.campaign.campaign import culprit_family, merge_same_culprits
 
@@ -234,25 +240,26 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
                                                            ("finite_plan", 1, culprit), ("control_alive", 0, "x")],
                                                           start=1):
             name = f"B00{n}"
-            journal.add_bucket(name, f"Silent|{invariant}|planning|fam", "Silent", invariant, "planning", "fam",
-                               f"c-{n}", False, n)
-            journal.minimised(name, "minimised" if exit_code == 0 else "not reproduced", exit_code, "<xml/>",
-                              found, None, None, 1.0, "")
+            journal.add_bucket(NewBucket(name, _signature("Silent", invariant, "planning", "fam"), "Silent", invariant,
+                                         "planning", f"c-{n}", False, n))
+            journal.minimised(Minimisation(name, "minimised" if exit_code == 0 else "not reproduced", exit_code,
+                                           "<xml/>", found, None, None, 1.0, ""))
         # the same field with another value (and another array index) is the same culprit
-        journal.add_bucket("B005", "Silent|planned_speed|planning|fam2", "Silent", "planned_speed", "planning", "fam2",
-                           "c-5", False, 5)
-        journal.minimised("B005", "minimised", 0, "<xml/>", "routing:speed_limit = dict:float.inf", None, None, 1.0,
-                          "")
-        journal.add_bucket("B006", "Abort|modules_alive|control|f", "Abort", "modules_alive", "control", "f", "c-6",
-                           False, 6)
-        journal.minimised("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan", None, None,
-                          1.0, "")
+        journal.add_bucket(NewBucket("B005", _signature("Silent", "planned_speed", "planning", "fam2"), "Silent",
+                                     "planned_speed", "planning", "c-5", False, 5))
+        journal.minimised(Minimisation("B005", "minimised", 0, "<xml/>", "routing:speed_limit = dict:float.inf", None,
+                                       None, 1.0, ""))
+        journal.add_bucket(NewBucket("B006", _signature("Abort", "modules_alive", "control", "f"), "Abort",
+                                     "modules_alive", "control", "c-6", False, 6))
+        journal.minimised(Minimisation("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan",
+                                       None, None, 1.0, ""))
         # message faults on one channel breaking the same invariant in the same module: one bug
         for name, fault, invariant in (("B007", "reorder", "finite_command"), ("B008", "delay", "finite_command"),
                                        ("B009", "drop", "control_alive")):
-            journal.add_bucket(name, f"Silent|{invariant}|control|{fault}", "Silent", invariant, "control", fault,
-                               f"c-{name}", False, 7)
-            journal.minimised(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0, "")
+            journal.add_bucket(NewBucket(name, _signature("Silent", invariant, "control", fault), "Silent", invariant,
+                                         "control", f"c-{name}", False, 7))
+            journal.minimised(Minimisation(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0,
+                                           ""))
         assert merge_same_culprits(journal) == [("B002", "B001"), ("B005", "B001"), ("B008", "B007")]
         assert {b.bucket: b.merged_into for b in journal.buckets()} == {
             "B001": None, "B002": "B001", "B003": None, "B004": None, "B005": "B001", "B006": None, "B007": None,

@@ -11,29 +11,18 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
-
-if TYPE_CHECKING:  # the journal imports nothing of the strategies; only the hook's annotation needs it
-    from astaa_deft.orchestration.campaign.journal import Journal
-
-
-@dataclass(frozen=True)
-class Timing:
-    """When a generated case's windows open: counted from the first message on ``anchor`` (None: from
-    the run's start), inside the first ``live`` seconds. The campaign measures both in its baseline runs:
-    the anchor is the channel whose first message came last (the whole stack is running then), ``live``
-    how long the baseline ran on from there."""
-
-    anchor: str | None
-    live: float
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase, Timing
 
 
 @dataclass(frozen=True)
 class Proposal:
+    """A strategy's next test case (its XML) and the case it was derived from, if any."""
+
     testcase_xml: str
     parent: str | None = None  # the case it was derived from, if any
 
@@ -85,3 +74,6 @@ class Strategy(ABC):
     def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:  # noqa: B027 (optional hook)
         """After the hunt (not after an interruption): the strategy's own findings from ``journal`` into
         ``out`` (when :attr:`exports_own_findings`). Default: nothing."""
+
+
+__all__ = ["Proposal", "Strategy", "Timing"]

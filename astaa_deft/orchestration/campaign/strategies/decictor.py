@@ -17,7 +17,6 @@ import json
 from dataclasses import replace
 from pathlib import Path
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from astaa_deft.analysis.decictor.config import DecictorConfig, read_config
 from astaa_deft.analysis.decictor.feasible import Area, ForbiddenRegion
@@ -30,10 +29,8 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Policy, TestCase, parse_testcase
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
-
-if TYPE_CHECKING:  # finish()'s annotation only
-    from astaa_deft.orchestration.campaign.journal import Journal
 
 INVARIANT = "path_consistency"
 CRASH = "Hindering"
