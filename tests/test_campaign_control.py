@@ -20,7 +20,7 @@ from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.runner import run_case
-from astaa_deft.orchestration.campaign.strategies.base import Proposal
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
@@ -42,7 +42,7 @@ DROP_AUX = ('<policy id="p1"><channel>aux</channel><window from="0.2" to="30"><a
             '</window><select limit="1"/><drop/></policy>')
 
 
-class Fixed:
+class Fixed(Strategy):
     """A strategy that proposes the given test cases in order (the campaign's interface, nothing mocked)."""
 
     name = "fixed"

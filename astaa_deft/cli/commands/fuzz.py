@@ -99,7 +99,7 @@ def _run(config: CampaignConfig, resume: bool) -> int:
 
     def on_progress(campaign: Campaign) -> None:
         if lines is None:
-            progress(campaign)
+            progress(campaign.workers)
         else:
             lines.show(snapshot(journal, config.cases, time.monotonic() - progress.started).line())
 

@@ -30,9 +30,10 @@ from astaa_deft.orchestration.campaign.calibration import (
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.rows import CampaignMeta, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
+from astaa_deft.orchestration.campaign.rows import CampaignMeta, CaseRow, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
-from astaa_deft.orchestration.campaign.minimiser import Minimised, minimise_run
+from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
     TestsVerdict, is_crash_bucket, run_module_tests,
 )
@@ -212,7 +213,7 @@ class Campaign:
         return CampaignResult(len(done), failures, len(live), time.monotonic() - self.started, stopped,
                               bugs=sum(1 for b in live if b.is_bug))
 
-    def _pool(self):
+    def _pool(self) -> CasePool:
         from astaa_deft.orchestration.campaign.executors import DaskPool, LocalPool
 
         if self.config.cluster:
@@ -224,7 +225,7 @@ class Campaign:
         return max(self.workers, MAX_WORKERS_PER_CORE * self.cores)
 
     # -- baseline: clean runs of every param value, the runs at once, the live time, known findings -------------
-    def _baseline(self, pool) -> None:
+    def _baseline(self, pool: CasePool) -> None:
         per_value = max(1, self.config.baseline_runs)
         self._plan_baseline(per_value * len(self.grid))
         stored = self.journal.meta().workers
@@ -256,7 +257,8 @@ class Campaign:
             self.say(f"baseline finding: '{name}' breaks without mutation ({finding.rate} clean runs): from now on"
                      f" it counts in a case only where the case makes it worse (earlier, more often)")
 
-    def _file_baseline(self, rows, outcomes: list[CaseOutcome | None], overloaded_runs: set[str]) -> None:
+    def _file_baseline(self, rows: list[CaseRow], outcomes: list[CaseOutcome | None],
+                       overloaded_runs: set[str]) -> None:
         """Failing baseline runs into baseline-finding buckets — except runs of a batch that overloaded the
         machine (their failures are the campaign's doing)."""
         for row, outcome in zip(rows, outcomes, strict=False):
@@ -272,7 +274,7 @@ class Campaign:
             params = {**self.grid[(n - 1) % len(self.grid)]}
             self.journal.plan(PlannedCase(f"b-{n:04d}", BASELINE, n, self.config.seed, params, None, "baseline"))
 
-    def _run_pending_baseline(self, pool, at_once: int | None = None, last: int | None = None) -> None:
+    def _run_pending_baseline(self, pool: CasePool, at_once: int | None = None, last: int | None = None) -> None:
         """Run the planned baseline runs (numbered up to ``last``), ``at_once`` (default: the campaign's) at a time."""
         queue = [c for c in self.journal.pending(BASELINE) if last is None or c.number <= last]
         limit = at_once or self.workers
@@ -294,7 +296,7 @@ class Campaign:
                 solo[row.params_key] = outcome
         return solo
 
-    def _calibrate_workers(self, pool, per_value: int) -> None:
+    def _calibrate_workers(self, pool: CasePool, per_value: int) -> None:
         """Runs at once from what a run costs alone, checked by clean runs at that concurrency (calibration.py):
         one run of each param value alone, then the rest of the baseline (at least as many runs as go at
         once) at that concurrency, fewer at once while their timing drifts from the solo runs'."""
@@ -370,7 +372,7 @@ class Campaign:
                      f" {timing.live:g} s on; generated windows fall inside that")
 
     # -- generated cases -------------------------------------------------------
-    def _main(self, pool) -> str:
+    def _main(self, pool: CasePool) -> str:
         rows = self.journal.cases(MUTATED)
         if rows:  # guided: its schedule goes on where it was
             self.strategy.resume([row.planned() for row in rows])
@@ -426,15 +428,14 @@ class Campaign:
     def _budget_over(self) -> bool:
         return self.config.budget is not None and time.monotonic() - self.started >= self.config.budget
 
-    def _submit(self, pool, case: PlannedCase) -> None:
-        payload = {"spec": str(self.config.spec_path.resolve()), "case": case.to_json(),
-                   "run_dir": str(self.case_dir(case.case_id)), "horizon": self.config.horizon,
-                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries],
-                   "settle": self.config.settle if case.kind in (MUTATED, RERUN) else None,
-                   "known": sorted(self.known)}
+    def _submit(self, pool: CasePool, case: PlannedCase) -> None:
+        payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
+                              self.config.horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
+                              settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
+                              known=tuple(sorted(self.known)))
         self.journal.started(case.case_id)
         self._running_cases.add(case.case_id)
-        pool.submit(case.case_id, payload)
+        pool.submit(case.case_id, payload.to_json())
 
     def case_dir(self, case_id: str) -> Path:
         return (self.config.out / "cases" / case_id).resolve()
@@ -447,7 +448,7 @@ class Campaign:
         if overloaded(load1, self.cores):
             self._concurrency(self.workers - 1, f"load {load1:.1f} above {self.cores} core(s)")
 
-    def _watch_timing(self, row, outcome: CaseOutcome) -> None:
+    def _watch_timing(self, row: CaseRow, outcome: CaseOutcome) -> None:
         """A control run is a clean run at the campaign's concurrency: its timing against the run alone."""
         solo = self._solo.get(row.params_key)
         if (not self.calibrated or solo is None or outcome.status != "done" or self.workers == 1
@@ -548,7 +549,7 @@ class Campaign:
         """Unmutated twins of a new failure: as many as its re-runs (so the two rates compare)."""
         return self.config.reruns
 
-    def _plan_confirmation(self, bucket: str, row) -> list[PlannedCase]:
+    def _plan_confirmation(self, bucket: str, row: CaseRow) -> list[PlannedCase]:
         """The failing case again (its rate) and its unmutated twins (same params, no test case): interleaved,
         so both see the same load."""
         cases = []
@@ -612,8 +613,8 @@ class Campaign:
         out_dir = self.config.out / "minimised" / bucket.bucket
         if out_dir.exists():
             shutil.rmtree(out_dir)
-        result = minimise_run(log, self.config.spec_path, out_dir, bucket.invariant,
-                              max_tests=self.config.minimise_max_tests, timeout=self.config.minimise_timeout,
+        limits = MinimiseLimits(max_tests=self.config.minimise_max_tests, timeout=self.config.minimise_timeout)
+        result = minimise_run(log, self.config.spec_path, out_dir, invariant=bucket.invariant, limits=limits,
                               cancel=self._cancel)
         tests_dir = None
         if result.tests_dir is not None:  # the minimiser's own: they fail on the culprit
@@ -664,11 +665,11 @@ class Campaign:
         for merged, into in merge_same_culprits(self.journal):
             self.say(f"  bucket {merged}: same minimised culprit as {into}: merged")
 
-    def _planner_caused(self, bucket) -> bool:
+    def _planner_caused(self, bucket: Bucket) -> bool:
         planner = self.spec.planner
         return planner is not None and bucket.module == planner.module
 
-    def _planner_tests(self, bucket, log: Path) -> Path | None:
+    def _planner_tests(self, bucket: Bucket, log: Path) -> Path | None:
         """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
 
         Built in a child process (``planner_tests``: this one runs threads, and
@@ -692,7 +693,7 @@ class Campaign:
                  f"{self._check_module_tests(bucket, tests_dir, crash)}")
         return tests_dir
 
-    def _check_module_tests(self, bucket, tests_dir: Path, crash: bool | None = None) -> str:
+    def _check_module_tests(self, bucket: Bucket, tests_dir: Path, crash: bool | None = None) -> str:
         """Run a bucket's module tests once and journal whether they fail on its defect; a phrase saying so."""
         if crash is None:
             crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
