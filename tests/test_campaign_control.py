@@ -18,7 +18,7 @@ from astaa_deft.orchestration.campaign import known as known_mod
 from astaa_deft.orchestration.campaign.calibration import run_share, workers_for
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
 from astaa_deft.orchestration.campaign.runner import run_case
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.engine.spec.loader import load_spec
@@ -227,7 +227,7 @@ def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
     from astaa_deft.orchestration.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
 
     def timed(gap: float, rate: float) -> CaseOutcome:
-        return CaseOutcome("done", "Pass", "", timing={"plan": {"count": 40, "rate": rate, "max_gap": gap}})
+        return CaseOutcome("done", "Pass", "", timing={"plan": ChannelRate(count=40, rate=rate, max_gap=gap)})
 
     solo = timed(0.6, 2.0)
     assert not drift(solo, timed(0.7, 1.9)).drifted  # jitter

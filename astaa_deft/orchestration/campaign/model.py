@@ -150,6 +150,15 @@ class Finding:
     at: float | None = None  # seconds from the run's start to the violation (None: not known)
 
 
+@dataclass(frozen=True)
+class ChannelRate:
+    """A channel's timing in a clean run: its messages, their rate (1/s) and the longest gap between two (s)."""
+
+    count: int
+    rate: float
+    max_gap: float
+
+
 @dataclass
 class CaseOutcome:
     """What one run of a case gave (JSON-able: it crosses process and machine boundaries)."""
@@ -173,7 +182,7 @@ class CaseOutcome:
     wall: float = 0.0
     rss_mb: float = 0.0
     # Clean runs: per channel, its message rate (1/s) and its longest gap between two messages (s).
-    timing: dict[str, dict[str, float]] = field(default_factory=dict)
+    timing: dict[str, ChannelRate] = field(default_factory=dict)
     # Per invariant: messages (or samples) that broke it — a known baseline finding is judged by these too.
     violating: dict[str, int] = field(default_factory=dict)
 
@@ -187,6 +196,7 @@ class CaseOutcome:
         defaults, fields this version does not know are left out)."""
         fields: dict[str, Any] = dict(body)
         fields["findings"] = [Finding(**f) for f in fields.get("findings", [])]
+        fields["timing"] = {channel: ChannelRate(**rate) for channel, rate in fields.get("timing", {}).items()}
         known = cls.__dataclass_fields__
         return cls(**{k: v for k, v in fields.items() if k in known})
 

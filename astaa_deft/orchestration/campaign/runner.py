@@ -36,7 +36,7 @@ from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.session import BusRun, RunOptions, RunResult, run_session
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
 
 POLL_SECONDS = 0.05
 LOG_NAME = "run.mcap"
@@ -208,13 +208,13 @@ class ChannelTiming:
         with self._lock:
             return {k: round(v, 3) for k, v in self.first.items()}
 
-    def channels_timing(self) -> dict[str, dict[str, float]]:
+    def channels_timing(self) -> dict[str, ChannelRate]:
         with self._lock:
             out = {}
             for channel, count in self.count.items():
                 span = self.last[channel] - self.t0 - self.first[channel]
-                out[channel] = {"count": count, "rate": round((count - 1) / span, 3) if span > 0 else 0.0,
-                                "max_gap": round(self.max_gap.get(channel, 0.0), 4)}
+                out[channel] = ChannelRate(count, round((count - 1) / span, 3) if span > 0 else 0.0,
+                                           round(self.max_gap.get(channel, 0.0), 4))
             return out
 
 
