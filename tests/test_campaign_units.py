@@ -291,3 +291,61 @@ def test_a_finding_on_the_channel_the_case_itself_mutates_is_not_a_failure(demo)
                                                                           "trajectory", "v nan")])
     assert sig.without_self_inflicted(other, xml, spec).failed
     assert sig.without_self_inflicted(only_own, None, spec) is only_own
+
+
+# The first journals: no cost columns, no bucket kinds or twins, no minimisation times.
+FIRST_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE cases (
+    case_id TEXT PRIMARY KEY, kind TEXT NOT NULL, number INTEGER NOT NULL, seed INTEGER NOT NULL,
+    params TEXT NOT NULL, testcase_xml TEXT, strategy TEXT NOT NULL, parent TEXT,
+    status TEXT NOT NULL DEFAULT 'planned',
+    verdict TEXT, summary TEXT, signature TEXT, failure_key TEXT, bucket TEXT, outcome TEXT,
+    planned_at REAL, started_at REAL, finished_at REAL, seconds REAL, log_path TEXT, worker TEXT
+);
+CREATE TABLE buckets (
+    bucket TEXT PRIMARY KEY, signature TEXT NOT NULL, verdict TEXT NOT NULL, invariant TEXT NOT NULL,
+    module TEXT, family TEXT NOT NULL, first_case TEXT NOT NULL, without_mutation INTEGER NOT NULL,
+    cases INTEGER NOT NULL DEFAULT 1, reruns INTEGER NOT NULL DEFAULT 0, rerun_failures INTEGER NOT NULL DEFAULT 0,
+    merged_into TEXT, created_at REAL NOT NULL, created_after_cases INTEGER NOT NULL
+);
+CREATE TABLE minimisations (
+    bucket TEXT PRIMARY KEY, status TEXT NOT NULL, exit_code INTEGER, minimal_xml TEXT, culprit TEXT,
+    out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT
+);
+"""
+
+
+def test_a_journal_of_the_first_version_reads_as_typed_rows(tmp_path: Path):
+    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseStatus
+    from astaa_deft.orchestration.campaign.report import write_report
+
+    db = sqlite3.connect(tmp_path / "journal.sqlite")
+    db.executescript(FIRST_SCHEMA)
+    db.execute("INSERT INTO meta VALUES ('spec', '\"/x/demo_av.yaml\"'), ('seed', '3'), ('timing',"
+               " '{\"anchor\": \"trajectory\", \"live\": 4.5}')")
+    outcome = '{"status": "done", "verdict": "Silent", "summary": "Silent: …", "findings": [], "reason": "violation"}'
+    db.execute("INSERT INTO cases VALUES ('b-0001', 'baseline', 1, 3, '{\"scenario\": \"lane_follow\"}', NULL,"
+               " 'baseline', NULL, 'done', 'Silent', 'Silent: …', 'Silent|?|?|(no mutation)', 'Silent|?|?', 'B001',"
+               " ?, 1.0, 2.0, 3.0, 1.0, NULL, NULL)", (outcome,))
+    db.execute("INSERT INTO buckets VALUES ('B001', 'Silent|?|?|(no mutation)', 'Silent', '?', NULL,"
+               " '(no mutation)', 'b-0001', 1, 1, 0, 0, NULL, 1.0, 1)")
+    db.execute("INSERT INTO minimisations VALUES ('B001', 'error', 2, NULL, NULL, NULL, NULL, 1.5, 'bad input')")
+    db.commit()
+    db.close()
+    journal = Journal(tmp_path)
+    try:
+        [case] = journal.cases()
+        assert (case.kind, case.status, case.params, case.cpu) == (CaseKind.BASELINE, CaseStatus.DONE,
+                                                                   {"scenario": "lane_follow"}, None)
+        assert case.outcome() is not None and case.outcome().reason == "violation"
+        [bucket] = journal.buckets()
+        assert bucket.kind == BucketKind.BASELINE and (bucket.controls, bucket.control_failures) == (0, 0)
+        assert journal.minimisations()["B001"].started_at is None
+        meta = journal.meta()
+        assert (meta.spec, meta.seed, meta.timing.anchor, meta.timing.live) == ("/x/demo_av.yaml", 3, "trajectory",
+                                                                                4.5)
+        assert journal.rate(bucket) == (1, 1)  # the clean run filed under it
+    finally:
+        journal.close()
+    assert "1 failing without mutation" in write_report(tmp_path).read_text()
