@@ -6,7 +6,7 @@ import re
 import time
 from pathlib import Path
 
-from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped
+from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped, StopReason
 from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_existing
 from astaa_deft.orchestration.campaign.progress import Progress, snapshot
 from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsRow
@@ -128,7 +128,7 @@ def _run(config: CampaignConfig, resume: bool) -> int:
     top = most_severe(ranked)
     if top is not None:
         say(f"most severe: {top.describe()}")
-    if result.stopped == "interrupted":
+    if result.stopped == StopReason.INTERRUPTED:
         say(f"continue with: astaa-deft fuzz --spec {config.spec_path} -o {config.out} --resume")
         journal.close()
         return 130

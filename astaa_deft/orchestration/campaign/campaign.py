@@ -40,7 +40,7 @@ from astaa_deft.orchestration.campaign.module_tests import (
 from astaa_deft.orchestration.campaign.planner_tests import build_in_child as build_planner_tests
 from astaa_deft.orchestration.campaign.model import (
     BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, BucketKind, BucketSignature,
-    CaseOutcome, CaseStatus, FailureKey, PlannedCase, Timing,
+    CaseOutcome, CaseStatus, FailureKey, PlannedCase, TextEnum, Timing,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES, Strategy
 
@@ -54,13 +54,9 @@ DEFAULT_MINIMISE_TIMEOUT = 300.0  # s one bucket's minimisation may take (it hol
 MAX_CALIBRATION_CHECKS = 3  # batches of clean runs at a concurrency before the campaign takes what it has
 MAX_WORKERS_PER_CORE = 4  # the local pool's threads: calibration picks at most this many runs a core
 SETTLE_LOAD_SECONDS = 60.0  # after a change of runs at once, the 1-min load average needs this long to show it
-# Before calibration (and for --cluster), the runs at once are estimated from the module count.
-# A run's modules mostly sleep: the demo's whole run (4 modules, proxy, recorder) used ~0.3 core on average
-# (user+sys over wall time); these leave headroom so deadline invariants do not starve on a loaded machine
-# (benchmarks/bench_campaign.py measures other counts).
-# Measured with cases forked from a template (zygote.py) and recorders forked from the case: a demo case used
-# 2.0-2.2 CPU s over its ~6.5 s — 0.33 core, 0.05 per module and 0.12 for the tool's process and recorder — and
-# 6 at once ran 1.35x the cases of 3 (benchmarks/bench_campaign.py); 4 at once keeps a third of two cores spare.
+# Before calibration (and for --cluster), the runs at once are estimated from the module count: a run's
+# modules mostly sleep, and these leave headroom so deadline invariants do not starve (the measurements behind
+# them: docs/performance.md, section "campaign").
 CORES_PER_MODULE = 0.08
 HELPER_CORES = 0.15  # the tool's own session, proxy and recorder per run
 
@@ -100,13 +96,21 @@ def _stored(stored: T | None, given: T) -> T:
     return stored if stored is not None else given
 
 
+class StopReason(TextEnum):
+    """Why a campaign ended (its text is what the command prints)."""
+
+    DONE = "done"  # every case ran
+    BUDGET = "budget"  # the time budget ran out
+    INTERRUPTED = "interrupted"  # Ctrl-C: resume goes on from the journal
+
+
 @dataclass
 class CampaignResult:
     cases_done: int
     failures: int
     buckets: int
     seconds: float
-    stopped: str  # "done", "budget", "interrupted"
+    stopped: StopReason
     bugs: int = 0  # buckets confirmed as bugs (the rest: flaky/environment, baseline findings)
 
 
@@ -187,24 +191,24 @@ class Campaign:
         if self.journal.requeue_minimisations():
             self.say("resume: the minimisations that were running start again")
         pool = self._pool()
-        stopped = "done"
+        stopped = StopReason.DONE
         try:
             self._baseline(pool)
             stopped = self._main(pool)
         except KeyboardInterrupt:
-            stopped = "interrupted"
+            stopped = StopReason.INTERRUPTED
         finally:
             pool.close()
         try:
-            if stopped != "interrupted" and self.strategy.exports_own_findings:
+            if stopped != StopReason.INTERRUPTED and self.strategy.exports_own_findings:
                 self.strategy.finish(self.journal, self.config.out, self.config.spec_path, self.say)
-            elif stopped != "interrupted" and self.config.minimise:
+            elif stopped != StopReason.INTERRUPTED and self.config.minimise:
                 self._minimise_left()
         except KeyboardInterrupt:
-            stopped = "interrupted"
+            stopped = StopReason.INTERRUPTED
         finally:
             if self._minimiser is not None:
-                if stopped == "interrupted":  # minimisations in flight stop now; a resume does them again
+                if stopped == StopReason.INTERRUPTED:  # minimisations in flight stop now; a resume does them again
                     self._cancel.set()
                 self._minimiser.shutdown(wait=True, cancel_futures=True)
         done = [r for r in self.journal.cases() if r.finished]
@@ -237,14 +241,14 @@ class Campaign:
             self._run_pending_baseline(pool)
         rows = self.journal.cases(BASELINE)
         outcomes = [self.journal.outcome(r) for r in rows]
-        failed = [o for o in outcomes if o is not None and o.status == "error"]
+        failed = [o for o in outcomes if o is not None and o.status == CaseStatus.ERROR]
         if rows and len(failed) == len(rows):
             raise CampaignStopped(f"the SUT does not start: {failed[0].error or failed[0].summary}")
         # Runs of a batch whose timing drifted (too many at once) measured the campaign's load, not the SUT:
         # neither its live time nor its baseline findings.
         overloaded_runs = set(self.journal.meta().overloaded_runs)
         clean = [o for r, o in zip(rows, outcomes, strict=False)
-                 if o is not None and o.status == "done" and r.case_id not in overloaded_runs]
+                 if o is not None and o.status == CaseStatus.DONE and r.case_id not in overloaded_runs]
         self._calibrate(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
@@ -292,7 +296,7 @@ class Campaign:
         solo: dict[str, CaseOutcome] = {}
         for row in self.journal.cases(BASELINE)[:len(self.grid)]:
             outcome = self.journal.outcome(row)
-            if outcome is not None and outcome.status == "done":
+            if outcome is not None and outcome.status == CaseStatus.DONE:
                 solo[row.params_key] = outcome
         return solo
 
@@ -320,7 +324,7 @@ class Campaign:
             self._plan_baseline(last)
             self._run_pending_baseline(pool)
             loaded = [(r, self.journal.outcome(r)) for r in self.journal.cases(BASELINE)
-                      if first <= r.number <= last and r.status == "done"]
+                      if first <= r.number <= last and r.status == CaseStatus.DONE]
             drifts = [drift(solo[r.params_key], o) for r, o in loaded if o is not None and r.params_key in solo]
             worst = max(drifts, key=lambda d: d.ratio, default=None)
             if worst is None:
@@ -372,7 +376,7 @@ class Campaign:
                      f" {timing.live:g} s on; generated windows fall inside that")
 
     # -- generated cases -------------------------------------------------------
-    def _main(self, pool: CasePool) -> str:
+    def _main(self, pool: CasePool) -> StopReason:
         rows = self.journal.cases(MUTATED)
         if rows:  # guided: its schedule goes on where it was
             self.strategy.resume([row.planned() for row in rows])
@@ -385,7 +389,7 @@ class Campaign:
                 self._decide(bucket.bucket)
         queue = self.journal.pending(MUTATED) + self.journal.pending(RERUN) + self.journal.pending(CONTROL)
         number = self.journal.max_number(MUTATED)
-        stopped = "done"
+        stopped = StopReason.DONE
         while True:
             self._watch_load()
             self._collect_minimisations()
@@ -396,7 +400,7 @@ class Campaign:
                     self._submit(pool, queue.pop(0))
                     continue
                 if self._budget_over():
-                    stopped, hunt_over = "budget", True
+                    stopped, hunt_over = StopReason.BUDGET, True
                     break
                 if self.config.cases is not None and number >= self.config.cases:
                     hunt_over = True
@@ -451,7 +455,7 @@ class Campaign:
     def _watch_timing(self, row: CaseRow, outcome: CaseOutcome) -> None:
         """A control run is a clean run at the campaign's concurrency: its timing against the run alone."""
         solo = self._solo.get(row.params_key)
-        if (not self.calibrated or solo is None or outcome.status != "done" or self.workers == 1
+        if (not self.calibrated or solo is None or outcome.status != CaseStatus.DONE or self.workers == 1
                 or time.monotonic() - self._last_change < SETTLE_LOAD_SECONDS):
             return
         found = drift(solo, outcome)
@@ -501,11 +505,11 @@ class Campaign:
         if confirms is not None:
             first = self.journal.outcome(self.journal.planned(self.journal.bucket(confirms).first_case))
             same = outcome.failed and first is not None and shows_failure(outcome, first)
-            if kind == RERUN and outcome.status == "done":
+            if kind == RERUN and outcome.status == CaseStatus.DONE:
                 self.journal.bucket_rerun(confirms, same and outcome.mutations > 0)
                 if bucket is None and outcome.mutations > 0:  # filed under the bucket it re-runs
                     bucket = confirms
-            elif kind == CONTROL and outcome.status == "done":
+            elif kind == CONTROL and outcome.status == CaseStatus.DONE:
                 self.journal.bucket_control(confirms, same)
                 self._watch_timing(row, outcome)
         self.journal.finished(case_id, outcome, signature=signature, failure=key, bucket=bucket)
