@@ -349,3 +349,41 @@ def test_a_journal_of_the_first_version_reads_as_typed_rows(tmp_path: Path):
     finally:
         journal.close()
     assert "1 failing without mutation" in write_report(tmp_path).read_text()
+
+
+def test_every_strategy_declares_the_campaigns_hooks_and_the_defaults_change_nothing():
+    from astaa_deft.orchestration.campaign.strategies import Proposal, Strategy
+
+    assert all(issubclass(cls, Strategy) for cls in STRATEGIES.values())
+
+    class Minimal(Strategy):
+        name = "minimal"
+
+        def __init__(self, spec, dictionary, seed: int, duration: float) -> None:
+            self.seed = seed
+
+        def propose(self, number: int) -> Proposal:
+            return Proposal(f"<testcase id='tc-{number}' seed='{self.seed}'/>")
+
+    strategy = Minimal(None, None, 3, 20.0)
+    outcome = CaseOutcome("done", "Silent", "Silent: …")
+    assert strategy.judge("c-1", "<x/>", outcome) is outcome  # the monitors' verdict stands
+    assert not strategy.exports_own_findings  # the campaign minimises its buckets
+    assert strategy.propose(1).testcase_xml == "<testcase id='tc-1' seed='3'/>"
+
+
+def test_vocabularies_and_signatures_keep_their_text_forms():
+    import json
+
+    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind
+    from astaa_deft.orchestration.campaign.standing import BucketStatus
+
+    assert (f"{CaseKind.RERUN}", str(BucketKind.BASELINE), f"{BucketStatus.WITHOUT_MUTATION:18}|") == (
+        "rerun", "baseline", "without mutation  |")
+    assert json.dumps(PlannedCase("c-1", MUTATED, 1, 2, {}, None).to_json()).startswith(
+        '{"case_id": "c-1", "kind": "mutated"')
+    assert PlannedCase.from_json(json.loads(json.dumps(PlannedCase("c-1", MUTATED, 1, 2, {}, None).to_json()))).kind \
+        is CaseKind.MUTATED
+    signature = BucketSignature(FailureKey("Silent", "speed_limit", "-"), "routing:speed_limit:set")
+    assert signature.text() == "Silent|speed_limit|-|routing:speed_limit:set"
+    assert BucketSignature.clean(signature.failure).text() == "Silent|speed_limit|-|(no mutation)"
