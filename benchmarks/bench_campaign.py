@@ -71,6 +71,12 @@ def defect_of(bucket: Bucket, first_xml: str) -> int | None:
     return None
 
 
+def _first_xml(journal: Journal, bucket: Bucket) -> str:
+    """The test case XML of a bucket's first failing case ("" for a clean run)."""
+    case = journal.case(bucket.first_case)
+    return (case.testcase_xml or "") if case is not None else ""
+
+
 @dataclass
 class Campaigned:
     seconds: float
@@ -94,7 +100,7 @@ class UntilAllFound(Campaign):
         found = set()
         for b in self.journal.buckets():
             if not b.without_mutation:
-                d = defect_of(b, self.journal.case(b.first_case)["testcase_xml"] or "")
+                d = defect_of(b, _first_xml(self.journal, b))
                 if d is not None:
                     found.add(d)
         return found >= set(DEFECTS)
@@ -113,9 +119,9 @@ def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, s
     try:
         result = kind(config, journal, say=lambda text: None).run()
         buckets = journal.buckets()
-        first_xml = {b.bucket: (journal.case(b.first_case)["testcase_xml"] or "") for b in buckets}
+        first_xml = {b.bucket: _first_xml(journal, b) for b in buckets}
         outcomes = [journal.outcome(r) for r in journal.cases()]
-        generated = [r["started_at"] for r in journal.cases() if r["kind"] != "baseline" and r["started_at"]]
+        generated = [r.started_at for r in journal.cases() if r.kind != "baseline" and r.started_at]
         generated_seconds = started + result.seconds - min(generated) if generated else 0.0
         case_seconds = [o.seconds for o in outcomes if o is not None and o.status == "done"]
     finally:

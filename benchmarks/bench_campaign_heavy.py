@@ -115,8 +115,8 @@ def run_fuzz(out: Path, budget: str, wall: float, workers: int | None) -> tuple[
 
 def report(out: Path, output: str, seconds: float, stopped: bool) -> None:
     journal = Journal(out)
-    notes = [n["text"] for n in journal.notes("concurrency")]
-    print(f"runs at once: {journal.meta().get('workers', '?')} (the campaign's own choice) on {os.cpu_count()} cores;"
+    notes = [n.text for n in journal.notes("concurrency")]
+    print(f"runs at once: {journal.meta().workers or '?'} (the campaign's own choice) on {os.cpu_count()} cores;"
           f" load average at the end {os.getloadavg()[0]:.1f}; wall {seconds:.0f} s"
           f"{' (stopped at the wall limit: minimisation unfinished)' if stopped else ''}")
     for text in notes:
@@ -142,10 +142,10 @@ def report(out: Path, output: str, seconds: float, stopped: bool) -> None:
             mine = [s for s in ranked if defect_of(s.bucket) == defect]
             found = ", ".join(f"{s.bucket.bucket} ({s.status})" for s in mine) or "not found"
             reached = [s.bucket.bucket for s in mine
-                       if (m := minimised.get(s.bucket.bucket)) is not None and m["exit_code"] == 0
-                       and culprit_reaches(defect, m["culprit"])]
+                       if (m := minimised.get(s.bucket.bucket)) is not None and m.exit_code == 0
+                       and culprit_reaches(defect, m.culprit)]
             failing = [s.bucket.bucket for s in mine if (t := tests.get(s.bucket.bucket)) is not None
-                       and t["fails_on_defect"] == 1]
+                       and t.fails_on_defect is True]
             print(f"known defect {defect} ({what}): {found}; minimised to it: {', '.join(reached) or 'no'};"
                   f" module tests fail on it: {', '.join(failing) or 'no'}")
         print(f"{'bucket':7} {'status':16} {'severity':8} {'verdict':9} {'invariant':22} {'defect':6} family"
@@ -154,9 +154,9 @@ def report(out: Path, output: str, seconds: float, stopped: bool) -> None:
             b = s.bucket
             m = minimised.get(b.bucket)
             t = tests.get(b.bucket)
-            culprit = (m["culprit"] or m["status"]) if m is not None else "not minimised"
-            verdict = ("-" if t is None else "fail on the defect" if t["fails_on_defect"] == 1
-                       else "do NOT fail on the defect" if t["fails_on_defect"] == 0 else "could not run")
+            culprit = (m.culprit or m.status) if m is not None else "not minimised"
+            verdict = ("-" if t is None else "fail on the defect" if t.fails_on_defect is True
+                       else "do NOT fail on the defect" if t.fails_on_defect is False else "could not run")
             defect = defect_of(b)
             print(f"{b.bucket:7} {s.status:16} {s.severity:8} {b.verdict:9} {b.invariant:22}"
                   f" {str(defect) if defect else '—':6} {b.family} | {culprit} | {verdict}"

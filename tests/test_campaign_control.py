@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
@@ -19,9 +18,9 @@ from astaa_deft.orchestration.campaign import known as known_mod
 from astaa_deft.orchestration.campaign.calibration import run_share, workers_for
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
 from astaa_deft.orchestration.campaign.runner import run_case
-from astaa_deft.orchestration.campaign.strategies.base import Proposal
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
@@ -43,7 +42,7 @@ DROP_AUX = ('<policy id="p1"><channel>aux</channel><window from="0.2" to="30"><a
             '</window><select limit="1"/><drop/></policy>')
 
 
-class Fixed:
+class Fixed(Strategy):
     """A strategy that proposes the given test cases in order (the campaign's interface, nothing mocked)."""
 
     name = "fixed"
@@ -83,8 +82,8 @@ def test_a_case_that_applied_no_mutation_is_never_filed_in_a_mutation_bucket(tmp
         assert outcome is not None and outcome.failed and outcome.mutations == 0, outcome
         [bucket] = journal.buckets()
         assert bucket.kind == "baseline" and bucket.without_mutation and bucket.family == "(no mutation)"
-        assert case["bucket"] == bucket.bucket
-        assert not [r for r in journal.cases() if r["kind"] in ("rerun", "control")]  # nothing to confirm
+        assert case.bucket == bucket.bucket
+        assert not [r for r in journal.cases() if r.kind in ("rerun", "control")]  # nothing to confirm
     finally:
         journal.close()
 
@@ -96,14 +95,14 @@ def test_a_failure_its_unmutated_twin_shows_too_is_flaky_not_a_bug(tmp_path: Pat
     journal = campaign(tmp_path / "c", STEADY, [SET_AUX, DROP_AUX], params=launches(tmp_path, "2,3,4,5"),
                        baseline_runs=1, reruns=1)
     try:
-        order = [r["case_id"] for r in sorted(journal.cases(), key=lambda r: r["started_at"])]
+        order = [r.case_id for r in sorted(journal.cases(), key=lambda r: r.started_at)]
         assert order == ["b-0001", "c-000001", "r-B001-1", "t-B001-1", "c-000002"]
         [bucket] = journal.buckets()
         assert bucket.family == "aux:value:set"
         assert (bucket.kind, bucket.rerun_failures, bucket.reruns, bucket.control_failures, bucket.controls) == \
             ("flaky", 1, 1, 1, 1)
         twin = journal.case("t-B001-1")
-        assert twin["testcase_xml"] is None and twin["params"] == journal.case("c-000001")["params"]
+        assert twin.testcase_xml is None and twin.params == journal.case("c-000001").params
         second = journal.outcome(journal.case("c-000002"))
         assert second is not None and second.mutations == 1 and second.verdict == "Pass", second
         assert "known baseline finding" in second.summary
@@ -131,8 +130,9 @@ def test_a_baseline_finding_neither_shrinks_the_live_time_nor_ends_cases(tmp_pat
         baseline = journal.outcome(journal.case("b-0001"))
         assert baseline is not None and baseline.reason == "horizon"  # not ended at its violation
         assert [f.invariant for f in baseline.findings] == ["data_small"]
-        timing = journal.meta()["timing"]
-        assert timing["live"] >= 2.0, timing  # to the scenario's end, not to the first violation (~0.5 s)
+        timing = journal.meta().timing
+        # to the scenario's end, not to the first violation (~0.5 s)
+        assert timing is not None and timing.live >= 2.0, timing
         case = journal.outcome(journal.case("c-000001"))
         assert case is not None and case.mutations == 1 and case.reason == "settled", case  # not "violation"
         assert case.verdict == "Pass" and "known baseline finding" in case.summary, case
@@ -175,12 +175,12 @@ def test_the_baseline_runs_every_param_value_and_calibrates_the_runs_at_once(tmp
                        baseline_runs=1)
     try:
         rows = journal.cases("baseline")
-        values = [json.loads(r["params"])["rate"] for r in rows]
+        values = [r.params["rate"] for r in rows]
         assert set(values) == {"20", "50", "100"} and values[:3] == ["20", "50", "100"]
-        assert all(r["at_once"] is not None for r in rows)
+        assert all(r.at_once is not None for r in rows)
         meta = journal.meta()
-        assert meta["calibrated"] and meta["workers"] >= 1
-        notes = [n["text"] for n in journal.notes("concurrency")]
+        assert meta.calibrated and meta.workers is not None and meta.workers >= 1
+        notes = [n.text for n in journal.notes("concurrency")]
         assert notes and "one run takes" in notes[0], notes
     finally:
         journal.close()
@@ -197,10 +197,10 @@ def test_a_confirmed_bucket_is_minimised_while_the_hunt_goes_on(tmp_path: Path):
         bug = next(b for b in journal.buckets() if b.family == "aux:value:set")
         assert bug.kind == "bug" and (bug.rerun_failures, bug.control_failures) == (1, 0)
         row = journal.minimisations()[bug.bucket]
-        assert row["status"] in ("minimised", "not reproduced"), dict(row)
-        later = [r for r in journal.cases("mutated") if r["started_at"] > row["started_at"]]
+        assert row.status in ("minimised", "not reproduced"), row
+        later = [r for r in journal.cases("mutated") if r.started_at > row.started_at]
         assert later, "no case started after the minimisation: it did not run alongside the hunt"
-        assert row["status"] == "minimised" and "aux:value" in (row["culprit"] or ""), dict(row)
+        assert row.status == "minimised" and "aux:value" in (row.culprit or ""), row
     finally:
         journal.close()
 
@@ -216,9 +216,9 @@ def test_a_minimisation_holding_the_only_slot_pauses_the_hunt_and_does_not_end_i
         bug = next(b for b in journal.buckets() if b.family == "aux:value:set")
         row = journal.minimisations()[bug.bucket]
         mutated = journal.cases("mutated")
-        assert len(mutated) == len(cases) and all(r["status"] in ("done", "error") for r in mutated), \
-            [(r["case_id"], r["status"]) for r in mutated]
-        assert [r for r in mutated if r["started_at"] > row["started_at"]], "the hunt did not go on after it"
+        assert len(mutated) == len(cases) and all(r.status in ("done", "error") for r in mutated), \
+            [(r.case_id, r.status) for r in mutated]
+        assert [r for r in mutated if r.started_at > row.started_at], "the hunt did not go on after it"
     finally:
         journal.close()
 
@@ -227,7 +227,7 @@ def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
     from astaa_deft.orchestration.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
 
     def timed(gap: float, rate: float) -> CaseOutcome:
-        return CaseOutcome("done", "Pass", "", timing={"plan": {"count": 40, "rate": rate, "max_gap": gap}})
+        return CaseOutcome("done", "Pass", "", timing={"plan": ChannelRate(count=40, rate=rate, max_gap=gap)})
 
     solo = timed(0.6, 2.0)
     assert not drift(solo, timed(0.7, 1.9)).drifted  # jitter

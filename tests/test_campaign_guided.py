@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, PlannedCase
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary
@@ -67,7 +67,8 @@ def test_a_resumed_guided_search_goes_on_with_its_schedule(demo):
                           CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.5}))
     resumed = STRATEGIES["guided"](spec, dictionary, 5, 20.0)
     resumed.observe_baseline("b-0001", BASELINE)
-    resumed.resume(planned)
+    resumed.resume([PlannedCase(case_id, MUTATED, n, 5, {}, xml, "guided", parent)
+                    for n, (case_id, xml, parent) in enumerate(planned, start=1)])
     resumed.observe("c-000003", planned[2][1], CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.5}))
     already = {_body(xml) for _, xml, parent in planned if parent is None}
     fresh = [p for p in (resumed.propose(n) for n in range(11, 31)) if p.parent is None]

@@ -10,8 +10,10 @@ import html
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign import signature as sig
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.model import (
+    MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
+)
 from astaa_deft.orchestration.campaign.report import write_report
 from astaa_deft.orchestration.campaign.standing import (CONFIRMED, UNCONFIRMED, WITHOUT_MUTATION, headline, most_severe,
                                           standings)
@@ -26,7 +28,7 @@ CRASH = Finding("(module exit)", "Abort", "planning", None, "killed by SIGABRT",
 def test_a_run_is_filed_under_its_most_severe_finding_not_its_first():
     outcome = CaseOutcome("done", "Silent", "…", [CLEARANCE, COLLISION])
     assert sig.primary(outcome) == COLLISION
-    assert sig.failure_key(outcome) == "Silent|no_collision|-"
+    assert sig.failure_key(outcome).text() == "Silent|no_collision|-"
     # same severity: the worse CRASH class, then the earlier
     assert sig.primary(CaseOutcome("done", "Abort", "…", [CLEARANCE, CRASH, replace_severity(CRASH)])) == CRASH
 
@@ -49,9 +51,10 @@ def _bucket(journal: Journal, name: str, finding: Finding, *, reruns: int = 0, f
             without_mutation: bool = False) -> None:
     case = f"c-{name}"
     journal.plan(PlannedCase(case, MUTATED, int(name[1:]), 1, {}, None, "random"))
-    journal.finished(case, CaseOutcome("done", finding.crash, "…", [finding]), f"s-{name}", None, name)
-    journal.add_bucket(name, f"s-{name}", finding.crash, finding.invariant, finding.module, "ego:x:set", case,
-                       without_mutation, 1)
+    signature = BucketSignature(FailureKey(finding.crash, finding.invariant, finding.module or "-"), "ego:x:set")
+    journal.finished(case, CaseOutcome("done", finding.crash, "…", [finding]), signature=signature, bucket=name)
+    journal.add_bucket(NewBucket(name, signature, finding.crash, finding.invariant, finding.module, case,
+                                 without_mutation, 1))
     for k in range(reruns):
         journal.bucket_rerun(name, k < failures)
 
@@ -73,10 +76,10 @@ def test_buckets_rank_confirmed_first_by_severity_then_rate_and_unconfirmed_ones
         journal.module_tests_checked("B003", str(out / "tests" / "B003-replay"), True,
                                      "the planner's replay raises CollisionCheckerFault")
         journal.module_tests_checked("B006", str(out / "tests" / "B006-replay"), False, "they pass on the defect")
-        journal.minimised("B003", "minimised", 0, None, "obstacles:obstacles[].length = -1", None,
-                          str(out / "tests" / "B003-replay"), 30.0, "")
-        journal.minimised("B006", "minimised", 0, None, "ego:heading = nan", None,
-                          str(out / "tests" / "B006-replay"), 30.0, "")
+        journal.minimised(Minimisation("B003", "minimised", 0, None, "obstacles:obstacles[].length = -1", None,
+                                       str(out / "tests" / "B003-replay"), 30.0, ""))
+        journal.minimised(Minimisation("B006", "minimised", 0, None, "ego:heading = nan", None,
+                                       str(out / "tests" / "B006-replay"), 30.0, ""))
         ranked = standings(journal)
         assert [(s.bucket.bucket, s.status, s.severity) for s in ranked] == [
             ("B004", CONFIRMED, "critical"), ("B006", CONFIRMED, "high"), ("B003", CONFIRMED, "high"),

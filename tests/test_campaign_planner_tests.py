@@ -50,7 +50,7 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
         assert not campaign._planner_caused(_bucket("B002", "control"))
         tests = campaign._planner_tests(_bucket("B001", "planning"), Path(outcome.log_path))
         checked = journal.module_tests()["B001"]  # the campaign ran them once: they fail on the defect
-        assert checked["fails_on_defect"] == 1 and "its oracle fails" in checked["detail"], dict(checked)
+        assert checked.fails_on_defect is True and "its oracle fails" in checked.detail, checked
     finally:
         journal.close()
     assert tests == out / "tests" / f"B001{REPLAY_TESTS_SUFFIX}" and (tests / "deft.json").is_file()

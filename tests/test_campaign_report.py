@@ -5,8 +5,10 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.model import (
+    BASELINE, MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
+)
 from astaa_deft.orchestration.campaign.report import write_report
 
 XML = '<testcase id="tc-{n}" seed="{n}"><policy id="p"><channel>routing</channel>' \
@@ -21,7 +23,11 @@ def _case(journal: Journal, out: Path, case_id: str, kind: str, n: int, verdict:
     log = out / "cases" / case_id / "run.mcap"
     outcome = CaseOutcome("done", verdict, f"{verdict}: …", [finding] if finding else [], 3.0, str(log), reason,
                           margins={"planned_speed": 0.2 / n})
-    journal.finished(case_id, outcome, "sig" if bucket else None, None, bucket)
+    journal.finished(case_id, outcome, signature=_signature("sig") if bucket else None, bucket=bucket)
+
+
+def _signature(family: str) -> BucketSignature:
+    return BucketSignature(FailureKey("Silent", "x", "-"), family)
 
 
 def test_report_shows_buckets_culprits_tests_merges_and_how_runs_ended(tmp_path: Path):
@@ -36,15 +42,18 @@ def test_report_shows_buckets_culprits_tests_merges_and_how_runs_ended(tmp_path:
         _case(journal, out, "c-000003", MUTATED, 3, "Pass", "goal reached")
         _case(journal, out, "b-0002", BASELINE, 2, "Restart", "violation", "B003",
               Finding("control_alive", "Restart", "control", "command", "silent"))
-        journal.add_bucket("B001", "s1", "Silent", "planned_speed", "planning", "routing:speed_limit:set+routing:x:set",
-                           "c-000001", False, 2)
-        journal.add_bucket("B002", "s2", "Silent", "speed_limit", "planning", "routing:speed_limit:set", "c-000002",
-                           False, 3)
-        journal.add_bucket("B003", "s3", "Restart", "control_alive", "control", "(no mutation)", "b-0002", True, 5)
-        journal.minimised("B001", "minimised", 0, "<testcase id='minimal-1'/>", "routing:speed_limit = dict:float.nan",
-                          str(out / "minimised" / "B001"), str(out / "tests" / "B001"), 12.0, "")
-        journal.minimised("B002", "minimised", 0, "<testcase id='minimal-2'/>", "routing:speed_limit = dict:float.nan",
-                          str(out / "minimised" / "B002"), str(out / "tests" / "B002-replay"), 12.0, "")
+        journal.add_bucket(NewBucket("B001", _signature("routing:speed_limit:set+routing:x:set"), "Silent",
+                                     "planned_speed", "planning", "c-000001", False, 2))
+        journal.add_bucket(NewBucket("B002", _signature("routing:speed_limit:set"), "Silent", "speed_limit",
+                                     "planning", "c-000002", False, 3))
+        journal.add_bucket(NewBucket("B003", _signature("(no mutation)"), "Restart", "control_alive", "control",
+                                     "b-0002", True, 5))
+        journal.minimised(Minimisation("B001", "minimised", 0, "<testcase id='minimal-1'/>",
+                                       "routing:speed_limit = dict:float.nan", str(out / "minimised" / "B001"),
+                                       str(out / "tests" / "B001"), 12.0, ""))
+        journal.minimised(Minimisation("B002", "minimised", 0, "<testcase id='minimal-2'/>",
+                                       "routing:speed_limit = dict:float.nan", str(out / "minimised" / "B002"),
+                                       str(out / "tests" / "B002-replay"), 12.0, ""))
         journal.merge_bucket("B002", "B001")
     finally:
         journal.close()

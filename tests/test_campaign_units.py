@@ -11,8 +11,10 @@ import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.campaign import default_workers, param_grid
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, Finding, PlannedCase
+from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.model import (
+    MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
+)
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.cli.commands.fuzz import parse_budget, parse_params
@@ -139,10 +141,10 @@ def test_signature_separates_mutation_families_and_folds_indices(demo):
     outcome = CaseOutcome("done", "Silent", "", [Finding("speed_limit", "Silent", None, "status", "")])
     one = parse_testcase(STRATEGIES["random"](spec, dictionary, 25, 8.0).propose(1).testcase_xml.encode())
     assert sig.mutation_family(one) == "trajectory:points:set"
-    assert sig.signature(outcome, None).endswith(sig.NO_MUTATION)
-    assert sig.failure_key(outcome) == "Silent|speed_limit|-"
+    assert sig.signature(outcome, None).text().endswith(sig.NO_MUTATION)
+    assert sig.failure_key(outcome).text() == "Silent|speed_limit|-"
     xml = one.to_xml().decode().replace('path="points"', 'path="points[3].v"')
-    assert sig.signature(outcome, xml).endswith("trajectory:points[].v:set")
+    assert sig.signature(outcome, xml).text().endswith("trajectory:points[].v:set")
 
 
 def test_params_spread_over_every_combination():
@@ -167,12 +169,12 @@ def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
     for n in range(1, 4):
         journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, "<x/>"))
         journal.started(f"c-{n}")
-    journal.finished("c-1", CaseOutcome("done", "Pass", "ok"), None, None, None)
+    journal.finished("c-1", CaseOutcome("done", "Pass", "ok"))
     journal.close()
     again = Journal(tmp_path)
     assert again.requeue_running() == 2
     assert [c.case_id for c in again.pending()] == ["c-2", "c-3"]
-    assert again.case("c-1")["status"] == "done"
+    assert again.case("c-1").status == "done"
     assert again.outcome(again.case("c-1")).summary == "ok"
 
 
@@ -224,6 +226,10 @@ def test_a_sut_that_never_starts_stops_the_campaign_at_once(tmp_path: Path):
     assert rows == [("baseline", "error")]  # no generated case burnt
 
 
+def _signature(crash: str, invariant: str, module: str, family: str) -> BucketSignature:
+    return BucketSignature(FailureKey(crash, invariant, module), family)
+
+
 def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp_path: Path):
     from astaa_deft.orchestration.campaign.campaign import culprit_family, merge_same_culprits
 
@@ -234,25 +240,26 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
                                                            ("finite_plan", 1, culprit), ("control_alive", 0, "x")],
                                                           start=1):
             name = f"B00{n}"
-            journal.add_bucket(name, f"Silent|{invariant}|planning|fam", "Silent", invariant, "planning", "fam",
-                               f"c-{n}", False, n)
-            journal.minimised(name, "minimised" if exit_code == 0 else "not reproduced", exit_code, "<xml/>",
-                              found, None, None, 1.0, "")
+            journal.add_bucket(NewBucket(name, _signature("Silent", invariant, "planning", "fam"), "Silent", invariant,
+                                         "planning", f"c-{n}", False, n))
+            journal.minimised(Minimisation(name, "minimised" if exit_code == 0 else "not reproduced", exit_code,
+                                           "<xml/>", found, None, None, 1.0, ""))
         # the same field with another value (and another array index) is the same culprit
-        journal.add_bucket("B005", "Silent|planned_speed|planning|fam2", "Silent", "planned_speed", "planning", "fam2",
-                           "c-5", False, 5)
-        journal.minimised("B005", "minimised", 0, "<xml/>", "routing:speed_limit = dict:float.inf", None, None, 1.0,
-                          "")
-        journal.add_bucket("B006", "Abort|modules_alive|control|f", "Abort", "modules_alive", "control", "f", "c-6",
-                           False, 6)
-        journal.minimised("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan", None, None,
-                          1.0, "")
+        journal.add_bucket(NewBucket("B005", _signature("Silent", "planned_speed", "planning", "fam2"), "Silent",
+                                     "planned_speed", "planning", "c-5", False, 5))
+        journal.minimised(Minimisation("B005", "minimised", 0, "<xml/>", "routing:speed_limit = dict:float.inf", None,
+                                       None, 1.0, ""))
+        journal.add_bucket(NewBucket("B006", _signature("Abort", "modules_alive", "control", "f"), "Abort",
+                                     "modules_alive", "control", "c-6", False, 6))
+        journal.minimised(Minimisation("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan",
+                                       None, None, 1.0, ""))
         # message faults on one channel breaking the same invariant in the same module: one bug
         for name, fault, invariant in (("B007", "reorder", "finite_command"), ("B008", "delay", "finite_command"),
                                        ("B009", "drop", "control_alive")):
-            journal.add_bucket(name, f"Silent|{invariant}|control|{fault}", "Silent", invariant, "control", fault,
-                               f"c-{name}", False, 7)
-            journal.minimised(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0, "")
+            journal.add_bucket(NewBucket(name, _signature("Silent", invariant, "control", fault), "Silent", invariant,
+                                         "control", f"c-{name}", False, 7))
+            journal.minimised(Minimisation(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0,
+                                           ""))
         assert merge_same_culprits(journal) == [("B002", "B001"), ("B005", "B001"), ("B008", "B007")]
         assert {b.bucket: b.merged_into for b in journal.buckets()} == {
             "B001": None, "B002": "B001", "B003": None, "B004": None, "B005": "B001", "B006": None, "B007": None,
@@ -284,3 +291,99 @@ def test_a_finding_on_the_channel_the_case_itself_mutates_is_not_a_failure(demo)
                                                                           "trajectory", "v nan")])
     assert sig.without_self_inflicted(other, xml, spec).failed
     assert sig.without_self_inflicted(only_own, None, spec) is only_own
+
+
+# The first journals: no cost columns, no bucket kinds or twins, no minimisation times.
+FIRST_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE cases (
+    case_id TEXT PRIMARY KEY, kind TEXT NOT NULL, number INTEGER NOT NULL, seed INTEGER NOT NULL,
+    params TEXT NOT NULL, testcase_xml TEXT, strategy TEXT NOT NULL, parent TEXT,
+    status TEXT NOT NULL DEFAULT 'planned',
+    verdict TEXT, summary TEXT, signature TEXT, failure_key TEXT, bucket TEXT, outcome TEXT,
+    planned_at REAL, started_at REAL, finished_at REAL, seconds REAL, log_path TEXT, worker TEXT
+);
+CREATE TABLE buckets (
+    bucket TEXT PRIMARY KEY, signature TEXT NOT NULL, verdict TEXT NOT NULL, invariant TEXT NOT NULL,
+    module TEXT, family TEXT NOT NULL, first_case TEXT NOT NULL, without_mutation INTEGER NOT NULL,
+    cases INTEGER NOT NULL DEFAULT 1, reruns INTEGER NOT NULL DEFAULT 0, rerun_failures INTEGER NOT NULL DEFAULT 0,
+    merged_into TEXT, created_at REAL NOT NULL, created_after_cases INTEGER NOT NULL
+);
+CREATE TABLE minimisations (
+    bucket TEXT PRIMARY KEY, status TEXT NOT NULL, exit_code INTEGER, minimal_xml TEXT, culprit TEXT,
+    out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT
+);
+"""
+
+
+def test_a_journal_of_the_first_version_reads_as_typed_rows(tmp_path: Path):
+    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseStatus
+    from astaa_deft.orchestration.campaign.report import write_report
+
+    db = sqlite3.connect(tmp_path / "journal.sqlite")
+    db.executescript(FIRST_SCHEMA)
+    db.execute("INSERT INTO meta VALUES ('spec', '\"/x/demo_av.yaml\"'), ('seed', '3'), ('timing',"
+               " '{\"anchor\": \"trajectory\", \"live\": 4.5}')")
+    outcome = '{"status": "done", "verdict": "Silent", "summary": "Silent: …", "findings": [], "reason": "violation"}'
+    db.execute("INSERT INTO cases VALUES ('b-0001', 'baseline', 1, 3, '{\"scenario\": \"lane_follow\"}', NULL,"
+               " 'baseline', NULL, 'done', 'Silent', 'Silent: …', 'Silent|?|?|(no mutation)', 'Silent|?|?', 'B001',"
+               " ?, 1.0, 2.0, 3.0, 1.0, NULL, NULL)", (outcome,))
+    db.execute("INSERT INTO buckets VALUES ('B001', 'Silent|?|?|(no mutation)', 'Silent', '?', NULL,"
+               " '(no mutation)', 'b-0001', 1, 1, 0, 0, NULL, 1.0, 1)")
+    db.execute("INSERT INTO minimisations VALUES ('B001', 'error', 2, NULL, NULL, NULL, NULL, 1.5, 'bad input')")
+    db.commit()
+    db.close()
+    journal = Journal(tmp_path)
+    try:
+        [case] = journal.cases()
+        assert (case.kind, case.status, case.params, case.cpu) == (CaseKind.BASELINE, CaseStatus.DONE,
+                                                                   {"scenario": "lane_follow"}, None)
+        assert case.outcome() is not None and case.outcome().reason == "violation"
+        [bucket] = journal.buckets()
+        assert bucket.kind == BucketKind.BASELINE and (bucket.controls, bucket.control_failures) == (0, 0)
+        assert journal.minimisations()["B001"].started_at is None
+        meta = journal.meta()
+        assert (meta.spec, meta.seed, meta.timing.anchor, meta.timing.live) == ("/x/demo_av.yaml", 3, "trajectory",
+                                                                                4.5)
+        assert journal.rate(bucket) == (1, 1)  # the clean run filed under it
+    finally:
+        journal.close()
+    assert "1 failing without mutation" in write_report(tmp_path).read_text()
+
+
+def test_every_strategy_declares_the_campaigns_hooks_and_the_defaults_change_nothing():
+    from astaa_deft.orchestration.campaign.strategies import Proposal, Strategy
+
+    assert all(issubclass(cls, Strategy) for cls in STRATEGIES.values())
+
+    class Minimal(Strategy):
+        name = "minimal"
+
+        def __init__(self, spec, dictionary, seed: int, duration: float) -> None:
+            self.seed = seed
+
+        def propose(self, number: int) -> Proposal:
+            return Proposal(f"<testcase id='tc-{number}' seed='{self.seed}'/>")
+
+    strategy = Minimal(None, None, 3, 20.0)
+    outcome = CaseOutcome("done", "Silent", "Silent: …")
+    assert strategy.judge("c-1", "<x/>", outcome) is outcome  # the monitors' verdict stands
+    assert not strategy.exports_own_findings  # the campaign minimises its buckets
+    assert strategy.propose(1).testcase_xml == "<testcase id='tc-1' seed='3'/>"
+
+
+def test_vocabularies_and_signatures_keep_their_text_forms():
+    import json
+
+    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind
+    from astaa_deft.orchestration.campaign.standing import BucketStatus
+
+    assert (f"{CaseKind.RERUN}", str(BucketKind.BASELINE), f"{BucketStatus.WITHOUT_MUTATION:18}|") == (
+        "rerun", "baseline", "without mutation  |")
+    assert json.dumps(PlannedCase("c-1", MUTATED, 1, 2, {}, None).to_json()).startswith(
+        '{"case_id": "c-1", "kind": "mutated"')
+    assert PlannedCase.from_json(json.loads(json.dumps(PlannedCase("c-1", MUTATED, 1, 2, {}, None).to_json()))).kind \
+        is CaseKind.MUTATED
+    signature = BucketSignature(FailureKey("Silent", "speed_limit", "-"), "routing:speed_limit:set")
+    assert signature.text() == "Silent|speed_limit|-|routing:speed_limit:set"
+    assert BucketSignature.clean(signature.failure).text() == "Silent|speed_limit|-|(no mutation)"

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import MUTATED, PlannedCase
+from astaa_deft.orchestration.campaign.journal import Journal, NewBucket
+from astaa_deft.orchestration.campaign.model import MUTATED, BucketSignature, FailureKey, PlannedCase
 from astaa_deft.orchestration.campaign.runner import run_case
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_xml
 from astaa_deft.cli.commands.demo import demo_spec_path
@@ -55,9 +55,9 @@ def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp
     journal = Journal(tmp_path)
     journal.plan(PlannedCase("c-000001", MUTATED, 1, 0, {}, xml, "decictor"))
     journal.started("c-000001")
-    journal.add_bucket("B001", "sig", judged.verdict, INVARIANT, "planning", "prediction:*:participant",
-                       "c-000001", False, 1)
-    journal.finished("c-000001", judged, "sig", "key", "B001")
+    signature = BucketSignature(FailureKey(judged.verdict, INVARIANT, "planning"), "prediction:*:participant")
+    journal.add_bucket(NewBucket("B001", signature, judged.verdict, INVARIANT, "planning", "c-000001", False, 1))
+    journal.finished("c-000001", judged, signature=signature, bucket="B001")
     said: list[str] = []
     strategy.finish(journal, tmp_path, Path(SPEC_PATH), said.append)
     tests = tmp_path / "tests" / "B001"

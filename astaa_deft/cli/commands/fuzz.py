@@ -6,10 +6,11 @@ import re
 import time
 from pathlib import Path
 
-from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped
+from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped, StopReason
 from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_existing
 from astaa_deft.orchestration.campaign.progress import Progress, snapshot
-from astaa_deft.orchestration.campaign.standing import headline, most_severe, standings
+from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsRow
+from astaa_deft.orchestration.campaign.standing import Standing, headline, most_severe, standings
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.cli.commands.console import PlainLines, say
@@ -18,6 +19,7 @@ DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
 
 def parse_budget(text: str) -> float:
+    """Seconds of a ``--budget`` (90s, 30m, 2h; plain seconds); InputError for anything else."""
     match = DURATION.match(text.strip())
     if not match:
         raise InputError(Problem("--budget", None, None, f"'{text}' is not a duration", "write e.g. 90s, 30m or 2h"))
@@ -25,6 +27,7 @@ def parse_budget(text: str) -> float:
 
 
 def parse_params(items: list[str]) -> dict[str, list[str]]:
+    """``--params KEY=VALUE[,VALUE…]`` items as key → values; InputError for an item of another shape."""
     out: dict[str, list[str]] = {}
     for item in items:
         key, sep, values = item.partition("=")
@@ -36,10 +39,12 @@ def parse_params(items: list[str]) -> dict[str, list[str]]:
 
 
 def status(out: Path) -> int:
+    """``fuzz --status``: the campaign in ``out`` as it stands (its buckets ranked, its notes); exit code 0.
+    InputError when ``out`` holds no campaign."""
     journal = open_existing(out)
     meta = journal.meta()
-    snap = snapshot(journal, meta.get("cases"), 0.0)
-    say(f"campaign {out}: spec {meta.get('spec')}, strategy {meta.get('strategy')}, seed {meta.get('seed')}")
+    snap = snapshot(journal, meta.cases, 0.0)
+    say(f"campaign {out}: spec {meta.spec}, strategy {meta.strategy}, seed {meta.seed}")
     say(snap.line().split(", 0.0 cases/min")[0])
     minimised = journal.minimisations()
     tests = journal.module_tests()
@@ -47,25 +52,31 @@ def status(out: Path) -> int:
     say(headline(ranked))
     merged = [b for b in journal.buckets() if b.merged_into]
     for standing in ranked:
-        b = standing.bucket
-        rate = f"{standing.failures}/{standing.runs}" if standing.runs else "-"
-        m = minimised.get(b.bucket)
-        t = tests.get(b.bucket)
-        checked = ("" if t is None else " module tests fail on it" if t["fails_on_defect"] == 1
-                   else " module tests do NOT fail on it" if t["fails_on_defect"] == 0 else " module tests did not run")
-        twins = f" twins {b.control_failures}/{b.controls}" if b.controls else ""
-        say(f"  {b.bucket} {standing.status:12} {standing.severity:8} {b.verdict:9} {b.invariant:22} {b.family:40}"
-            f" cases {b.cases:3} rate {rate:5}{twins} {m['status'] if m else ''}"
-            f"{' ' + m['culprit'] if m and m['culprit'] else ''}{checked}")
+        say(_bucket_line(standing, minimised.get(standing.bucket.bucket), tests.get(standing.bucket.bucket)))
     for b in merged:
         say(f"  {b.bucket} merged into {b.merged_into}: {b.invariant} {b.family}")
     for note in journal.notes("concurrency"):
-        say(f"  {note['text']}")
+        say(f"  {note.text}")
     journal.close()
     return 0
 
 
+def _bucket_line(standing: Standing, m: MinimisationRow | None, t: ModuleTestsRow | None) -> str:
+    """One bucket of ``--status``: status, severity, failure, family, counts, minimisation, module tests."""
+    b = standing.bucket
+    rate = f"{standing.failures}/{standing.runs}" if standing.runs else "-"
+    checked = ("" if t is None else " module tests fail on it" if t.fails_on_defect is True
+               else " module tests do NOT fail on it" if t.fails_on_defect is False else " module tests did not run")
+    twins = f" twins {b.control_failures}/{b.controls}" if b.controls else ""
+    return (f"  {b.bucket} {standing.status:12} {standing.severity:8} {b.verdict:9} {b.invariant:22} {b.family:40}"
+            f" cases {b.cases:3} rate {rate:5}{twins} {m.status if m else ''}"
+            f"{' ' + m.culprit if m and m.culprit else ''}{checked}")
+
+
 def run(config: CampaignConfig, resume: bool) -> int:
+    """``fuzz``: run (or with ``resume`` continue) the campaign ``config`` describes; the exit code (0 no
+    bucket, 1 buckets, 130 interrupted). InputError for bad input or a SUT that does not start; OutputError
+    when ``config.out`` cannot take the campaign."""
     place = Place(config.out, "-o")
     ready_dir(place, temp=True)  # before the journal and the baseline runs
     with writing(place):
@@ -82,19 +93,13 @@ def _run(config: CampaignConfig, resume: bool) -> int:
                                  "drop --resume to start one"))
     journal = Journal(config.out)
     if resume:
-        meta = journal.meta()
-        config.spec_path = Path(meta.get("spec", config.spec_path))
-        config.seed = meta.get("seed", config.seed)
-        config.strategy = meta.get("strategy", config.strategy)
-        config.params = meta.get("params", config.params)
-        config.horizon = meta.get("horizon", config.horizon)
-        config.cases = config.cases if config.cases is not None else meta.get("cases")
+        config = config.resuming(journal.meta())
     progress = Progress(journal, config.cases)
     lines = None if progress.live is not None else PlainLines("fuzz")  # not a terminal: the shared plain lines
 
     def on_progress(campaign: Campaign) -> None:
         if lines is None:
-            progress(campaign)
+            progress(campaign.workers)
         else:
             lines.show(snapshot(journal, config.cases, time.monotonic() - progress.started).line())
 
@@ -123,7 +128,7 @@ def _run(config: CampaignConfig, resume: bool) -> int:
     top = most_severe(ranked)
     if top is not None:
         say(f"most severe: {top.describe()}")
-    if result.stopped == "interrupted":
+    if result.stopped == StopReason.INTERRUPTED:
         say(f"continue with: astaa-deft fuzz --spec {config.spec_path} -o {config.out} --resume")
         journal.close()
         return 130

@@ -2,7 +2,9 @@
 
 One concern per module:
 
-* ``model``: the typed records (a planned case, its outcome, a bucket);
+* ``model``: the campaign's model (a planned case, its outcome, a bucket's signature, the vocabularies as enums);
+* ``rows``: the journal's typed rows (a case, a bucket, a minimisation, module tests, a note, the settings);
+* ``payload``: what a pool gets for one case, and the pool interface the campaign drives;
 * ``runner``: the one adapter to the rest of the tool that runs a case (a session);
 * ``minimiser``: the one adapter that minimises a bucket's first failure;
 * ``worker``: a case in its own process (local pool) or on a Dask worker;
@@ -12,7 +14,8 @@ One concern per module:
 * ``cost``: what a run costs the machine (CPU of all its processes, CPU waited for, memory);
 * ``calibration``: how many runs at once, from those costs and the clean runs' timing (pure);
 * ``known``: known baseline findings, and when a case makes one worse (pure);
-* ``strategies``: how the next test case is drawn (random, guided);
+* ``strategies``: how the next test case is drawn (the ``Strategy`` base class and its hooks; random, guided,
+  decictor);
 * ``campaign``: the workflow (baseline and calibration, cases, control runs, buckets, minimisation alongside);
 * ``progress``: a live bar on a terminal, plain lines otherwise;
 * ``report``: the static HTML report.

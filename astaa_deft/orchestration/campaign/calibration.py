@@ -78,17 +78,17 @@ def drift(solo: CaseOutcome, loaded: CaseOutcome) -> Drift:
     worst = Drift(1.0, None, "same timing")
     for channel, alone in solo.timing.items():
         there = loaded.timing.get(channel)
-        if there is None or alone.get("count", 0) < MIN_MESSAGES:
+        if there is None or alone.count < MIN_MESSAGES:
             continue
-        period = 1.0 / alone["rate"] if alone.get("rate") else 0.0
+        period = 1.0 / alone.rate if alone.rate else 0.0
         floor = max(GAP_FLOOR_PERIODS * period, GAP_FLOOR_SECONDS)
-        gap_ratio = max(there["max_gap"], floor) / max(alone["max_gap"], floor)
-        rate_ratio = alone["rate"] / there["rate"] if there.get("rate") else math.inf
+        gap_ratio = max(there.max_gap, floor) / max(alone.max_gap, floor)
+        rate_ratio = alone.rate / there.rate if there.rate else math.inf
         if gap_ratio > worst.ratio:
-            worst = Drift(gap_ratio, channel, f"'{channel}' longest gap {there['max_gap']:.2f} s"
-                                              f" (alone {alone['max_gap']:.2f} s)")
+            worst = Drift(gap_ratio, channel, f"'{channel}' longest gap {there.max_gap:.2f} s"
+                                              f" (alone {alone.max_gap:.2f} s)")
         if rate_ratio > worst.ratio:
-            worst = Drift(rate_ratio, channel, f"'{channel}' {there['rate']:.1f} msg/s (alone {alone['rate']:.1f})")
+            worst = Drift(rate_ratio, channel, f"'{channel}' {there.rate:.1f} msg/s (alone {alone.rate:.1f})")
     return worst
 
 

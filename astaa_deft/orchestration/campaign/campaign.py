@@ -8,7 +8,6 @@ ones in flight run again, buckets and their re-runs pick up where they were.
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import shutil
 import threading
@@ -16,8 +15,9 @@ import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor
 from concurrent.futures import wait as futures_wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TypeVar
 
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.engine.intercept.dictionary import load_dictionary
@@ -30,17 +30,21 @@ from astaa_deft.orchestration.campaign.calibration import (
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
+from astaa_deft.orchestration.campaign.rows import CampaignMeta, CaseRow, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
-from astaa_deft.orchestration.campaign.minimiser import Minimised, minimise_run
+from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
     TestsVerdict, is_crash_bucket, run_module_tests,
 )
 from astaa_deft.orchestration.campaign.planner_tests import build_in_child as build_planner_tests
 from astaa_deft.orchestration.campaign.model import (
-    BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, CaseOutcome, PlannedCase,
+    BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, BucketKind, BucketSignature,
+    CaseOutcome, CaseStatus, FailureKey, PlannedCase, TextEnum, Timing,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES, Strategy
-from astaa_deft.orchestration.campaign.strategies.base import Timing
+
+T = TypeVar("T")
 
 DEFAULT_HORIZON = 20.0
 DEFAULT_BASELINE_RUNS = 2
@@ -50,13 +54,9 @@ DEFAULT_MINIMISE_TIMEOUT = 300.0  # s one bucket's minimisation may take (it hol
 MAX_CALIBRATION_CHECKS = 3  # batches of clean runs at a concurrency before the campaign takes what it has
 MAX_WORKERS_PER_CORE = 4  # the local pool's threads: calibration picks at most this many runs a core
 SETTLE_LOAD_SECONDS = 60.0  # after a change of runs at once, the 1-min load average needs this long to show it
-# Before calibration (and for --cluster), the runs at once are estimated from the module count.
-# A run's modules mostly sleep: the demo's whole run (4 modules, proxy, recorder) used ~0.3 core on average
-# (user+sys over wall time); these leave headroom so deadline invariants do not starve on a loaded machine
-# (benchmarks/bench_campaign.py measures other counts).
-# Measured with cases forked from a template (zygote.py) and recorders forked from the case: a demo case used
-# 2.0-2.2 CPU s over its ~6.5 s — 0.33 core, 0.05 per module and 0.12 for the tool's process and recorder — and
-# 6 at once ran 1.35x the cases of 3 (benchmarks/bench_campaign.py); 4 at once keeps a third of two cores spare.
+# Before calibration (and for --cluster), the runs at once are estimated from the module count: a run's
+# modules mostly sleep, and these leave headroom so deadline invariants do not starve (the measurements behind
+# them: docs/performance.md, section "campaign").
 CORES_PER_MODULE = 0.08
 HELPER_CORES = 0.15  # the tool's own session, proxy and recorder per run
 
@@ -82,6 +82,27 @@ class CampaignConfig:
     minimise_timeout: float = DEFAULT_MINIMISE_TIMEOUT
     report: bool = True
 
+    def resuming(self, meta: CampaignMeta) -> CampaignConfig:
+        """This configuration continuing the campaign ``meta`` describes: its spec, seed, strategy, params and
+        horizon as stored, its case count unless this one gives one."""
+        return replace(self, spec_path=Path(meta.spec) if meta.spec is not None else self.spec_path,
+                       seed=_stored(meta.seed, self.seed), strategy=_stored(meta.strategy, self.strategy),
+                       params=_stored(meta.params, self.params), horizon=_stored(meta.horizon, self.horizon),
+                       cases=self.cases if self.cases is not None else meta.cases)
+
+
+def _stored(stored: T | None, given: T) -> T:
+    """The journal's value of a setting, the given one when the journal has none."""
+    return stored if stored is not None else given
+
+
+class StopReason(TextEnum):
+    """Why a campaign ended (its text is what the command prints)."""
+
+    DONE = "done"  # every case ran
+    BUDGET = "budget"  # the time budget ran out
+    INTERRUPTED = "interrupted"  # Ctrl-C: resume goes on from the journal
+
 
 @dataclass
 class CampaignResult:
@@ -89,7 +110,7 @@ class CampaignResult:
     failures: int
     buckets: int
     seconds: float
-    stopped: str  # "done", "budget", "interrupted"
+    stopped: StopReason
     bugs: int = 0  # buckets confirmed as bugs (the rest: flaky/environment, baseline findings)
 
 
@@ -170,34 +191,33 @@ class Campaign:
         if self.journal.requeue_minimisations():
             self.say("resume: the minimisations that were running start again")
         pool = self._pool()
-        stopped = "done"
+        stopped = StopReason.DONE
         try:
             self._baseline(pool)
             stopped = self._main(pool)
         except KeyboardInterrupt:
-            stopped = "interrupted"
+            stopped = StopReason.INTERRUPTED
         finally:
             pool.close()
-        finish = getattr(self.strategy, "finish", None)  # a strategy with its own findings (decictor)
         try:
-            if stopped != "interrupted" and finish is not None:
-                finish(self.journal, self.config.out, self.config.spec_path, self.say)
-            elif stopped != "interrupted" and self.config.minimise:
+            if stopped != StopReason.INTERRUPTED and self.strategy.exports_own_findings:
+                self.strategy.finish(self.journal, self.config.out, self.config.spec_path, self.say)
+            elif stopped != StopReason.INTERRUPTED and self.config.minimise:
                 self._minimise_left()
         except KeyboardInterrupt:
-            stopped = "interrupted"
+            stopped = StopReason.INTERRUPTED
         finally:
             if self._minimiser is not None:
-                if stopped == "interrupted":  # minimisations in flight stop now; a resume does them again
+                if stopped == StopReason.INTERRUPTED:  # minimisations in flight stop now; a resume does them again
                     self._cancel.set()
                 self._minimiser.shutdown(wait=True, cancel_futures=True)
-        done = [r for r in self.journal.cases() if r["status"] in ("done", "error")]
-        failures = sum(1 for r in done if r["kind"] == MUTATED and r["verdict"] not in ("Pass", None, "?"))
+        done = [r for r in self.journal.cases() if r.finished]
+        failures = sum(1 for r in done if r.kind == MUTATED and r.verdict not in ("Pass", None, "?"))
         live = self.journal.buckets(include_merged=False)
         return CampaignResult(len(done), failures, len(live), time.monotonic() - self.started, stopped,
                               bugs=sum(1 for b in live if b.is_bug))
 
-    def _pool(self):
+    def _pool(self) -> CasePool:
         from astaa_deft.orchestration.campaign.executors import DaskPool, LocalPool
 
         if self.config.cluster:
@@ -209,10 +229,10 @@ class Campaign:
         return max(self.workers, MAX_WORKERS_PER_CORE * self.cores)
 
     # -- baseline: clean runs of every param value, the runs at once, the live time, known findings -------------
-    def _baseline(self, pool) -> None:
+    def _baseline(self, pool: CasePool) -> None:
         per_value = max(1, self.config.baseline_runs)
         self._plan_baseline(per_value * len(self.grid))
-        stored = self.journal.meta().get("workers")
+        stored = self.journal.meta().workers
         if self.calibrated and stored is None:
             self._calibrate_workers(pool, per_value)
         else:
@@ -221,37 +241,36 @@ class Campaign:
             self._run_pending_baseline(pool)
         rows = self.journal.cases(BASELINE)
         outcomes = [self.journal.outcome(r) for r in rows]
-        failed = [o for o in outcomes if o is not None and o.status == "error"]
+        failed = [o for o in outcomes if o is not None and o.status == CaseStatus.ERROR]
         if rows and len(failed) == len(rows):
             raise CampaignStopped(f"the SUT does not start: {failed[0].error or failed[0].summary}")
         # Runs of a batch whose timing drifted (too many at once) measured the campaign's load, not the SUT:
         # neither its live time nor its baseline findings.
-        overloaded_runs = set(self.journal.meta().get("overloaded_runs", []))
+        overloaded_runs = set(self.journal.meta().overloaded_runs)
         clean = [o for r, o in zip(rows, outcomes, strict=False)
-                 if o is not None and o.status == "done" and r["case_id"] not in overloaded_runs]
+                 if o is not None and o.status == CaseStatus.DONE and r.case_id not in overloaded_runs]
         self._calibrate(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
-        seed_hook = getattr(self.strategy, "observe_baseline", None)  # decictor: the seed run
         for row, outcome in zip(rows, outcomes, strict=False):
-            if seed_hook is not None and outcome is not None:
-                seed_hook(row["case_id"], outcome)
+            if outcome is not None:
+                self.strategy.observe_baseline(row.case_id, outcome)
         self._clean = clean + self._clean_failures_since_baseline()
         self.known = known_findings(self._clean)
         for name, finding in self.known.items():
             self.say(f"baseline finding: '{name}' breaks without mutation ({finding.rate} clean runs): from now on"
                      f" it counts in a case only where the case makes it worse (earlier, more often)")
 
-    def _file_baseline(self, rows, outcomes: list[CaseOutcome | None], overloaded_runs: set[str]) -> None:
+    def _file_baseline(self, rows: list[CaseRow], outcomes: list[CaseOutcome | None],
+                       overloaded_runs: set[str]) -> None:
         """Failing baseline runs into baseline-finding buckets — except runs of a batch that overloaded the
         machine (their failures are the campaign's doing)."""
         for row, outcome in zip(rows, outcomes, strict=False):
-            if outcome is None or not outcome.failed or row["bucket"] or row["case_id"] in overloaded_runs:
+            if outcome is None or not outcome.failed or row.bucket or row.case_id in overloaded_runs:
                 continue
-            key = sig.failure_key(outcome)
-            signature = f"{key}|{sig.NO_MUTATION}"
-            self.journal.file_case(row["case_id"], signature, key,
-                                   self._bucket(signature, outcome, row["case_id"], BASELINE_FINDING))
+            signature = BucketSignature.clean(sig.failure_key(outcome))
+            self.journal.file_case(row.case_id, signature,
+                                   self._bucket(signature, outcome, row.case_id, BASELINE_FINDING))
 
     def _plan_baseline(self, count: int) -> None:
         """Baseline runs up to ``count``: run n has the grid's value (n-1) mod its size (every value in turn)."""
@@ -259,7 +278,7 @@ class Campaign:
             params = {**self.grid[(n - 1) % len(self.grid)]}
             self.journal.plan(PlannedCase(f"b-{n:04d}", BASELINE, n, self.config.seed, params, None, "baseline"))
 
-    def _run_pending_baseline(self, pool, at_once: int | None = None, last: int | None = None) -> None:
+    def _run_pending_baseline(self, pool: CasePool, at_once: int | None = None, last: int | None = None) -> None:
         """Run the planned baseline runs (numbered up to ``last``), ``at_once`` (default: the campaign's) at a time."""
         queue = [c for c in self.journal.pending(BASELINE) if last is None or c.number <= last]
         limit = at_once or self.workers
@@ -272,16 +291,16 @@ class Campaign:
 
     def _solo_runs(self) -> dict[str, CaseOutcome]:
         """The first clean run of each param value, run alone (calibrated campaigns): the timing reference."""
-        if not self.journal.meta().get("calibrated"):
+        if not self.journal.meta().calibrated:
             return {}
         solo: dict[str, CaseOutcome] = {}
         for row in self.journal.cases(BASELINE)[:len(self.grid)]:
             outcome = self.journal.outcome(row)
-            if outcome is not None and outcome.status == "done":
-                solo[row["params"]] = outcome
+            if outcome is not None and outcome.status == CaseStatus.DONE:
+                solo[row.params_key] = outcome
         return solo
 
-    def _calibrate_workers(self, pool, per_value: int) -> None:
+    def _calibrate_workers(self, pool: CasePool, per_value: int) -> None:
         """Runs at once from what a run costs alone, checked by clean runs at that concurrency (calibration.py):
         one run of each param value alone, then the rest of the baseline (at least as many runs as go at
         once) at that concurrency, fewer at once while their timing drifts from the solo runs'."""
@@ -305,8 +324,8 @@ class Campaign:
             self._plan_baseline(last)
             self._run_pending_baseline(pool)
             loaded = [(r, self.journal.outcome(r)) for r in self.journal.cases(BASELINE)
-                      if first <= r["number"] <= last and r["status"] == "done"]
-            drifts = [drift(solo[r["params"]], o) for r, o in loaded if o is not None and r["params"] in solo]
+                      if first <= r.number <= last and r.status == CaseStatus.DONE]
+            drifts = [drift(solo[r.params_key], o) for r, o in loaded if o is not None and r.params_key in solo]
             worst = max(drifts, key=lambda d: d.ratio, default=None)
             if worst is None:
                 break
@@ -317,8 +336,8 @@ class Campaign:
             if self.workers == 1:  # alone already: the drift is the machine's (other load), nothing to lower
                 self._concurrency(1, f"timing drifted even one at a time: {worst.detail}, ×{worst.ratio:.1f}")
                 break
-            overloaded_runs = self.journal.meta().get("overloaded_runs", [])
-            self.journal.set_meta(overloaded_runs=overloaded_runs + [r["case_id"] for r, _ in loaded])
+            overloaded_runs = [*self.journal.meta().overloaded_runs, *(r.case_id for r, _ in loaded)]
+            self.journal.set_meta(overloaded_runs=overloaded_runs)
             self._concurrency(fewer_after_drift(self.workers, worst),
                               f"timing drifted at {self.workers} at once: {worst.detail}, ×{worst.ratio:.1f}")
             if self.workers == 1:
@@ -338,42 +357,39 @@ class Campaign:
         """On resume: failing twins and cases that mutated nothing, as known baseline findings again."""
         out = []
         for row in self.journal.cases():
-            if row["kind"] not in (MUTATED, CONTROL) or row["status"] != "done":
+            if row.kind not in (MUTATED, CONTROL) or row.status != CaseStatus.DONE:
                 continue
             outcome = self.journal.outcome(row)
-            if outcome is not None and outcome.failed and (row["kind"] == CONTROL or outcome.mutations == 0):
+            if outcome is not None and outcome.failed and (row.kind == CONTROL or outcome.mutations == 0):
                 out.append(outcome)
         return out
 
     def _calibrate(self, clean: list[CaseOutcome]) -> None:
         """Tell the strategy when the SUT is live: measured once in the baseline, kept in the journal."""
-        stored = self.journal.meta().get("timing")
-        timing = Timing(**stored) if stored else live_timing(clean, self.config.horizon)
+        stored = self.journal.meta().timing
+        timing = stored if stored is not None else live_timing(clean, self.config.horizon)
         self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
         self.timing = timing
-        calibrate = getattr(self.strategy, "calibrate", None)
-        if calibrate is not None:
-            calibrate(timing)
+        self.strategy.calibrate(timing)
         if timing.anchor is not None:
             self.say(f"baseline: the stack is live from the first '{timing.anchor}' message and runs"
                      f" {timing.live:g} s on; generated windows fall inside that")
 
     # -- generated cases -------------------------------------------------------
-    def _main(self, pool) -> str:
+    def _main(self, pool: CasePool) -> StopReason:
         rows = self.journal.cases(MUTATED)
-        resume = getattr(self.strategy, "resume", None)  # guided: its schedule goes on where it was
-        if resume is not None and rows:
-            resume([(row["case_id"], row["testcase_xml"], row["parent"]) for row in rows])
+        if rows:  # guided: its schedule goes on where it was
+            self.strategy.resume([row.planned() for row in rows])
         for row in rows:  # a resumed guided search learns its corpus again
             outcome = self.journal.outcome(row)
             if outcome is not None:
-                self.strategy.observe(row["case_id"], row["testcase_xml"], outcome)
+                self.strategy.observe(row.case_id, row.testcase_xml, outcome)
         for bucket in self.journal.buckets():  # resumed between a bucket's last control run and its decision
             if bucket.kind == CONFIRMING and not self.journal.unfinished(bucket.bucket):
                 self._decide(bucket.bucket)
         queue = self.journal.pending(MUTATED) + self.journal.pending(RERUN) + self.journal.pending(CONTROL)
         number = self.journal.max_number(MUTATED)
-        stopped = "done"
+        stopped = StopReason.DONE
         while True:
             self._watch_load()
             self._collect_minimisations()
@@ -384,7 +400,7 @@ class Campaign:
                     self._submit(pool, queue.pop(0))
                     continue
                 if self._budget_over():
-                    stopped, hunt_over = "budget", True
+                    stopped, hunt_over = StopReason.BUDGET, True
                     break
                 if self.config.cases is not None and number >= self.config.cases:
                     hunt_over = True
@@ -416,15 +432,14 @@ class Campaign:
     def _budget_over(self) -> bool:
         return self.config.budget is not None and time.monotonic() - self.started >= self.config.budget
 
-    def _submit(self, pool, case: PlannedCase) -> None:
-        payload = {"spec": str(self.config.spec_path.resolve()), "case": case.to_json(),
-                   "run_dir": str(self.case_dir(case.case_id)), "horizon": self.config.horizon,
-                   "dictionaries": [str(p.resolve()) for p in self.config.dictionaries],
-                   "settle": self.config.settle if case.kind in (MUTATED, RERUN) else None,
-                   "known": sorted(self.known)}
+    def _submit(self, pool: CasePool, case: PlannedCase) -> None:
+        payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
+                              self.config.horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
+                              settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
+                              known=tuple(sorted(self.known)))
         self.journal.started(case.case_id)
         self._running_cases.add(case.case_id)
-        pool.submit(case.case_id, payload)
+        pool.submit(case.case_id, payload.to_json())
 
     def case_dir(self, case_id: str) -> Path:
         return (self.config.out / "cases" / case_id).resolve()
@@ -437,38 +452,37 @@ class Campaign:
         if overloaded(load1, self.cores):
             self._concurrency(self.workers - 1, f"load {load1:.1f} above {self.cores} core(s)")
 
-    def _watch_timing(self, row, outcome: CaseOutcome) -> None:
+    def _watch_timing(self, row: CaseRow, outcome: CaseOutcome) -> None:
         """A control run is a clean run at the campaign's concurrency: its timing against the run alone."""
-        solo = self._solo.get(row["params"])
-        if (not self.calibrated or solo is None or outcome.status != "done" or self.workers == 1
+        solo = self._solo.get(row.params_key)
+        if (not self.calibrated or solo is None or outcome.status != CaseStatus.DONE or self.workers == 1
                 or time.monotonic() - self._last_change < SETTLE_LOAD_SECONDS):
             return
         found = drift(solo, outcome)
         if found.drifted:
-            self._concurrency(self.workers - 1, f"timing drifted in clean run {row['case_id']}: {found.detail},"
+            self._concurrency(self.workers - 1, f"timing drifted in clean run {row.case_id}: {found.detail},"
                                                 f" ×{found.ratio:.1f}")
 
     # -- one finished case -----------------------------------------------------
     def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
         self._running_cases.discard(case_id)
         row = self.journal.planned(case_id)
-        kind, xml = row["kind"], row["testcase_xml"]
+        kind, xml = row.kind, row.testcase_xml
         outcome = sig.without_self_inflicted(outcome, xml, self.spec)
-        judge = getattr(self.strategy, "judge", None)  # decictor: its oracle turns a run into a finding
-        if judge is not None and kind in (MUTATED, RERUN):
-            outcome = judge(case_id, xml, outcome, kind == MUTATED)
+        if kind in (MUTATED, RERUN):  # decictor: its oracle turns a run into a finding
+            outcome = self.strategy.judge(case_id, xml, outcome, kind == MUTATED)
         if kind != BASELINE:  # a known baseline finding counts only where this run makes it worse
             outcome = judged(outcome, self.known)
         new: list[PlannedCase] = []
-        signature: str | None = None
-        key: str | None = None
+        signature: BucketSignature | None = None
+        key: FailureKey | None = None
         bucket: str | None = None
         if outcome.failed:
             key = sig.failure_key(outcome)
             clean = kind == BASELINE or (kind in (MUTATED, RERUN) and outcome.mutations == 0)
             if clean:  # no mutation acted: whatever failed, failed in a clean run — a baseline finding
                 if kind != BASELINE:  # baseline runs are filed once calibrated (_file_baseline)
-                    signature = f"{key}|{sig.NO_MUTATION}"
+                    signature = BucketSignature.clean(key)
                     bucket = self._bucket(signature, outcome, case_id, BASELINE_FINDING)
                     self._learn_clean_failure(outcome)
             elif kind == MUTATED:
@@ -485,20 +499,20 @@ class Campaign:
             elif kind == RERUN:
                 signature = sig.signature(outcome, xml)
             elif kind == CONTROL:
-                signature = f"{key}|{sig.NO_MUTATION}"
+                signature = BucketSignature.clean(key)
                 self._learn_clean_failure(outcome)
-        confirms = row["parent"] if kind in (RERUN, CONTROL) else None  # the bucket this run confirms
+        confirms = row.parent if kind in (RERUN, CONTROL) else None  # the bucket this run confirms
         if confirms is not None:
             first = self.journal.outcome(self.journal.planned(self.journal.bucket(confirms).first_case))
             same = outcome.failed and first is not None and shows_failure(outcome, first)
-            if kind == RERUN and outcome.status == "done":
+            if kind == RERUN and outcome.status == CaseStatus.DONE:
                 self.journal.bucket_rerun(confirms, same and outcome.mutations > 0)
                 if bucket is None and outcome.mutations > 0:  # filed under the bucket it re-runs
                     bucket = confirms
-            elif kind == CONTROL and outcome.status == "done":
+            elif kind == CONTROL and outcome.status == CaseStatus.DONE:
                 self.journal.bucket_control(confirms, same)
                 self._watch_timing(row, outcome)
-        self.journal.finished(case_id, outcome, signature, key, bucket)
+        self.journal.finished(case_id, outcome, signature=signature, failure=key, bucket=bucket)
         self.journal.cost(case_id, outcome.cpu, os.getloadavg()[0], self.workers)
         if confirms is not None and not self.journal.unfinished(confirms):
             self._decide(confirms)
@@ -515,18 +529,19 @@ class Campaign:
             self.say(f"baseline finding: '{name}' broke in a run without mutation: from now on it counts in a case"
                      f" only where the case makes it worse")
 
-    def _bucket(self, signature: str, outcome: CaseOutcome, case_id: str, kind: str) -> str:
+    def _bucket(self, signature: BucketSignature, outcome: CaseOutcome, case_id: str, kind: BucketKind) -> str:
         existing = self.journal.bucket_by_signature(signature)
         if existing is not None:
             self.journal.bucket_hit(existing.bucket)
             return existing.bucket
         name = f"B{len(self.journal.buckets()) + 1:03d}"
         finding = sig.primary(outcome)
-        done = sum(1 for r in self.journal.cases() if r["status"] in ("done", "error"))
-        family = signature.split("|")[-1]
+        family = signature.family
         invariant = finding.invariant if finding else "?"
-        self.journal.add_bucket(name, signature, outcome.verdict, invariant, finding.module if finding else None,
-                                family, case_id, kind == BASELINE_FINDING, done + 1, kind=kind)
+        self.journal.add_bucket(NewBucket(name, signature, outcome.verdict, invariant,
+                                          finding.module if finding else None, case_id,
+                                          without_mutation=kind == BASELINE_FINDING,
+                                          after_cases=self.journal.finished_count() + 1, kind=kind))
         if kind == BASELINE_FINDING:
             self.say(f"new bucket {name}: {outcome.verdict}: {invariant} (without mutation: a baseline finding)")
         else:
@@ -538,18 +553,18 @@ class Campaign:
         """Unmutated twins of a new failure: as many as its re-runs (so the two rates compare)."""
         return self.config.reruns
 
-    def _plan_confirmation(self, bucket: str, row) -> list[PlannedCase]:
+    def _plan_confirmation(self, bucket: str, row: CaseRow) -> list[PlannedCase]:
         """The failing case again (its rate) and its unmutated twins (same params, no test case): interleaved,
         so both see the same load."""
         cases = []
-        params = json.loads(row["params"])
+        params = row.params
         for k in range(1, max(self.config.reruns, self._controls()) + 1):
             if k <= self.config.reruns:
-                cases.append(PlannedCase(f"r-{bucket}-{k}", RERUN, row["number"], row["seed"], params,
-                                         row["testcase_xml"], row["strategy"], parent=bucket))
+                cases.append(PlannedCase(f"r-{bucket}-{k}", RERUN, row.number, row.seed, params,
+                                         row.testcase_xml, row.strategy, parent=bucket))
             if k <= self._controls():
-                cases.append(PlannedCase(f"t-{bucket}-{k}", CONTROL, row["number"], row["seed"], params, None,
-                                         row["strategy"], parent=bucket))
+                cases.append(PlannedCase(f"t-{bucket}-{k}", CONTROL, row.number, row.seed, params, None,
+                                         row.strategy, parent=bucket))
         for case in cases:
             self.journal.plan(case)
         return cases
@@ -574,7 +589,7 @@ class Campaign:
 
     # -- minimisation: confirmed buckets, alongside the hunt, each in a worker slot ---------------------------
     def _start_minimisations(self, hunting: bool) -> None:
-        if not self.config.minimise or getattr(self.strategy, "finish", None) is not None:
+        if not self.config.minimise or self.strategy.exports_own_findings:
             return
         done = self.journal.minimisations()
         in_flight = set(self._minimising.values())
@@ -586,14 +601,14 @@ class Campaign:
             if not bucket.is_bug or bucket.bucket in done or bucket.bucket in in_flight:
                 continue
             row = self.journal.planned(bucket.first_case)
-            if not row["log_path"] or not Path(row["log_path"]).is_file():
+            if not row.log_path or not Path(row.log_path).is_file():
                 continue
             if self._minimiser is None:
                 self._minimiser = ThreadPoolExecutor(max_workers=max(self.workers, 1) + 1,
                                                      thread_name_prefix="minimise")
             self.say(f"minimising bucket {bucket.bucket} ({bucket.invariant}) …")
             self.journal.minimisation_started(bucket.bucket)
-            future = self._minimiser.submit(self._minimise_one, bucket, Path(row["log_path"]))
+            future = self._minimiser.submit(self._minimise_one, bucket, Path(row.log_path))
             self._minimising[future] = bucket.bucket
 
     def _minimise_one(self, bucket: Bucket, log: Path) -> tuple[Minimised, Path | None, TestsVerdict | None]:
@@ -602,8 +617,8 @@ class Campaign:
         out_dir = self.config.out / "minimised" / bucket.bucket
         if out_dir.exists():
             shutil.rmtree(out_dir)
-        result = minimise_run(log, self.config.spec_path, out_dir, bucket.invariant,
-                              max_tests=self.config.minimise_max_tests, timeout=self.config.minimise_timeout,
+        limits = MinimiseLimits(max_tests=self.config.minimise_max_tests, timeout=self.config.minimise_timeout)
+        result = minimise_run(log, self.config.spec_path, out_dir, invariant=bucket.invariant, limits=limits,
                               cancel=self._cancel)
         tests_dir = None
         if result.tests_dir is not None:  # the minimiser's own: they fail on the culprit
@@ -624,9 +639,9 @@ class Campaign:
             name = self._minimising.pop(future)
             result, tests_dir, verdict = future.result()
             status = "minimised" if result.exit_code == 0 else "not reproduced" if result.exit_code == 1 else "error"
-            self.journal.minimised(name, status, result.exit_code, result.minimal_xml, result.culprit,
-                                   str(result.out_dir), str(tests_dir) if tests_dir else None, result.seconds,
-                                   result.detail)
+            self.journal.minimised(Minimisation(name, status, result.exit_code, result.minimal_xml, result.culprit,
+                                                str(result.out_dir), str(tests_dir) if tests_dir else None,
+                                                result.seconds, result.detail))
             self.say(f"  {name} {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
             if tests_dir is not None and verdict is not None:
                 self.say(f"  the minimiser's module tests{self._journal_module_tests(name, tests_dir, verdict)}")
@@ -643,21 +658,22 @@ class Campaign:
         minimised = self.journal.minimisations()
         for bucket in self.journal.buckets(include_merged=False):
             row = minimised.get(bucket.bucket)
-            if row is None or row["tests_dir"] or not self._planner_caused(bucket):
+            if row is None or row.tests_dir or not self._planner_caused(bucket):
                 continue
-            case = self.journal.planned(bucket.first_case)
-            tests_dir = self._planner_tests(bucket, Path(case["log_path"]))
+            log = self.journal.planned(bucket.first_case).log_path
+            if log is None:  # minimised from its log, so it has one
+                continue
+            tests_dir = self._planner_tests(bucket, Path(log))
             if tests_dir is not None:
-                self.journal.minimised(bucket.bucket, row["status"], row["exit_code"], row["minimal_xml"],
-                                       row["culprit"], row["out_dir"], str(tests_dir), row["seconds"], row["detail"])
+                self.journal.minimised(replace(row, tests_dir=str(tests_dir)))
         for merged, into in merge_same_culprits(self.journal):
             self.say(f"  bucket {merged}: same minimised culprit as {into}: merged")
 
-    def _planner_caused(self, bucket) -> bool:
+    def _planner_caused(self, bucket: Bucket) -> bool:
         planner = self.spec.planner
         return planner is not None and bucket.module == planner.module
 
-    def _planner_tests(self, bucket, log: Path) -> Path | None:
+    def _planner_tests(self, bucket: Bucket, log: Path) -> Path | None:
         """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
 
         Built in a child process (``planner_tests``: this one runs threads, and
@@ -681,7 +697,7 @@ class Campaign:
                  f"{self._check_module_tests(bucket, tests_dir, crash)}")
         return tests_dir
 
-    def _check_module_tests(self, bucket, tests_dir: Path, crash: bool | None = None) -> str:
+    def _check_module_tests(self, bucket: Bucket, tests_dir: Path, crash: bool | None = None) -> str:
         """Run a bucket's module tests once and journal whether they fail on its defect; a phrase saying so."""
         if crash is None:
             crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
@@ -726,9 +742,9 @@ def merge_same_culprits(journal: Journal) -> list[tuple[str, str]]:
     merged = []
     for bucket in journal.buckets():
         row = minimised.get(bucket.bucket)
-        if not bucket.is_bug or row is None or row["exit_code"] != 0 or not row["culprit"]:
+        if not bucket.is_bug or row is None or row.exit_code != 0 or not row.culprit:
             continue
-        family = culprit_family(row["culprit"])
+        family = culprit_family(row.culprit)
         if MESSAGE_FAULT in family:  # a reorder and a delay of one channel breaking the same thing: one bug
             family += f" → {bucket.invariant} in {bucket.module}"
         first = owner.setdefault(family, bucket.bucket)

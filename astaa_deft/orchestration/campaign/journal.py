@@ -3,7 +3,11 @@
 Every state change is its own committed transaction (WAL mode), so a
 Ctrl-C or a kill -9 loses at most the cases that were running: a case is
 ``planned`` → ``running`` → ``done``; on resume every ``running`` case goes
-back to ``planned`` and runs again.
+back to ``planned`` and runs again. Reading yields typed rows (``rows.py``);
+an older journal gains the columns added since when it is opened.
+
+Thread safety: one connection shared by the campaign's threads
+(``check_same_thread=False``); each statement is atomic, SQLite serialises them.
 """
 
 from __future__ import annotations
@@ -11,14 +15,18 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-from collections.abc import Iterator
 
-from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import OutputError
-from astaa_deft.orchestration.campaign.model import BASELINE_FINDING, BUG, CONTROL, RERUN, CaseOutcome, PlannedCase
+from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.json import JsonObject
+from astaa_deft.orchestration.campaign.model import (
+    BASELINE, BASELINE_FINDING, BUG, CONTROL, RERUN, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus,
+    FailureKey, PlannedCase,
+)
+from astaa_deft.orchestration.campaign.rows import (
+    Bucket, CampaignMeta, CaseRow, Minimisation, MinimisationRow, ModuleTestsRow, NewBucket, NoteRow,
+)
 
 FILE_NAME = "journal.sqlite"
 
@@ -63,38 +71,11 @@ CREATE TABLE IF NOT EXISTS module_tests (  -- a bucket's module tests, run once 
 """
 
 
-@dataclass(frozen=True)
-class Bucket:
-    bucket: str
-    signature: str
-    verdict: str
-    invariant: str
-    module: str | None
-    family: str
-    first_case: str
-    without_mutation: bool
-    cases: int
-    reruns: int
-    rerun_failures: int
-    merged_into: str | None
-    created_at: float
-    created_after_cases: int
-    kind: str = BUG  # BUG, FLAKY, BASELINE_FINDING or CONFIRMING (model.py)
-    controls: int = 0  # unmutated twins run
-    control_failures: int = 0  # of those, how many failed the same way
-
-    @property
-    def rate(self) -> float | None:
-        return self.rerun_failures / self.reruns if self.reruns else None
-
-    @property
-    def is_bug(self) -> bool:
-        """Confirmed: reproduced, and its unmutated twins did not fail that way."""
-        return self.kind == BUG
-
-
 class Journal:
-    def __init__(self, directory: Path):
+    """The journal in ``directory`` (created if missing). OutputError when it cannot be opened for writing,
+    InputError when the file is not a journal (damaged)."""
+
+    def __init__(self, directory: Path) -> None:
         self.path = directory / FILE_NAME
         try:
             directory.mkdir(parents=True, exist_ok=True)
@@ -124,7 +105,7 @@ class Journal:
         # a journal from before bucket kinds: its clean-run buckets are baseline findings
         self.db.execute("UPDATE buckets SET kind=? WHERE without_mutation=1 AND kind=?", (BASELINE_FINDING, BUG))
 
-    def _write(self, sql: str, args: tuple = ()) -> None:
+    def _write(self, sql: str, args: tuple[object, ...] = ()) -> None:
         try:
             self.db.execute(sql, args)
         except sqlite3.OperationalError as exc:  # full disk, read-only file: the journal stays as it was
@@ -132,12 +113,14 @@ class Journal:
                                      "free some space (or fix permissions) and run again with --resume")) from None
 
     # -- meta ---------------------------------------------------------------
-    def set_meta(self, **values: Any) -> None:
+    def set_meta(self, **values: object) -> None:
+        """Store campaign settings: key (a field of :class:`CampaignMeta`) → a value ``json.dumps`` takes."""
         for key, value in values.items():
             self._write("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, json.dumps(value)))
 
-    def meta(self) -> dict[str, Any]:
-        return {r["key"]: json.loads(r["value"]) for r in self.db.execute("SELECT key, value FROM meta")}
+    def meta(self) -> CampaignMeta:
+        stored: JsonObject = {r["key"]: json.loads(r["value"]) for r in self.db.execute("SELECT key, value FROM meta")}
+        return CampaignMeta.from_json(stored)
 
     # -- cases --------------------------------------------------------------
     def plan(self, case: PlannedCase) -> None:
@@ -150,18 +133,24 @@ class Journal:
         self._write("UPDATE cases SET status='running', started_at=?, worker=? WHERE case_id=?",
                     (time.time(), worker, case_id))
 
-    def finished(self, case_id: str, outcome: CaseOutcome, signature: str | None, failure_key: str | None,
-                 bucket: str | None) -> None:
+    def finished(self, case_id: str, outcome: CaseOutcome, *, signature: BucketSignature | None = None,
+                 failure: FailureKey | None = None, bucket: str | None = None) -> None:
+        """A case's run is over: its outcome, and for a failing case its signature, its failure key (default:
+        the signature's; a failing baseline run has a key and no signature until it is filed) and bucket."""
+        status = CaseStatus.DONE if outcome.status == CaseStatus.DONE else CaseStatus.ERROR
+        if failure is None and signature is not None:
+            failure = signature.failure
         self._write("UPDATE cases SET status=?, verdict=?, summary=?, signature=?, failure_key=?, bucket=?,"
                     " outcome=?, finished_at=?, seconds=?, log_path=? WHERE case_id=?",
-                    ("done" if outcome.status == "done" else "error", outcome.verdict, outcome.summary, signature,
-                     failure_key, bucket, json.dumps(outcome.to_json(), default=str), time.time(), outcome.seconds,
-                     outcome.log_path, case_id))
+                    (status, outcome.verdict, outcome.summary, signature.text() if signature is not None else None,
+                     failure.text() if failure is not None else None, bucket,
+                     json.dumps(outcome.to_json(), default=str), time.time(), outcome.seconds, outcome.log_path,
+                     case_id))
 
-    def file_case(self, case_id: str, signature: str, failure_key: str, bucket: str) -> None:
+    def file_case(self, case_id: str, signature: BucketSignature, bucket: str) -> None:
         """File a finished case into a bucket decided after it finished (baseline runs, once calibrated)."""
         self._write("UPDATE cases SET signature=?, failure_key=?, bucket=? WHERE case_id=?",
-                    (signature, failure_key, bucket, case_id))
+                    (signature.text(), signature.failure.text(), bucket, case_id))
 
     def cost(self, case_id: str, cpu: float, load: float, at_once: int) -> None:
         """What a finished case cost and how loaded the machine was when it ended."""
@@ -172,46 +161,53 @@ class Journal:
         cur = self.db.execute("UPDATE cases SET status='planned', started_at=NULL WHERE status='running'")
         return cur.rowcount
 
-    def pending(self, kind: str | None = None) -> list[PlannedCase]:
+    def pending(self, kind: CaseKind | None = None) -> list[PlannedCase]:
+        """The planned cases not started yet (of ``kind``), in order."""
         sql = "SELECT * FROM cases WHERE status='planned'" + (" AND kind=?" if kind else "") + " ORDER BY number"
-        return [_planned(r) for r in self.db.execute(sql, (kind,) if kind else ())]
+        return [_case(r).planned() for r in self.db.execute(sql, (kind,) if kind else ())]
 
-    def cases(self, kind: str | None = None) -> list[sqlite3.Row]:
+    def cases(self, kind: CaseKind | None = None) -> list[CaseRow]:
+        """Every case (of ``kind``), in order."""
         sql = "SELECT * FROM cases" + (" WHERE kind=?" if kind else "") + " ORDER BY number"
-        return list(self.db.execute(sql, (kind,) if kind else ()))
+        return [_case(r) for r in self.db.execute(sql, (kind,) if kind else ())]
 
-    def case(self, case_id: str) -> sqlite3.Row | None:
-        return self.db.execute("SELECT * FROM cases WHERE case_id=?", (case_id,)).fetchone()
+    def case(self, case_id: str) -> CaseRow | None:
+        row = self.db.execute("SELECT * FROM cases WHERE case_id=?", (case_id,)).fetchone()
+        return _case(row) if row is not None else None
 
-    def planned(self, case_id: str) -> sqlite3.Row:
+    def planned(self, case_id: str) -> CaseRow:
         """A case the campaign planned itself (a KeyError if the journal lost it: a bug, not bad input)."""
         row = self.case(case_id)
         if row is None:
             raise KeyError(f"case {case_id} is not in the journal")
         return row
 
-    def outcome(self, row: sqlite3.Row) -> CaseOutcome | None:
-        return CaseOutcome.from_json(json.loads(row["outcome"])) if row["outcome"] else None
+    def outcome(self, row: CaseRow) -> CaseOutcome | None:
+        """What the case's run gave (None: not finished)."""
+        return row.outcome()
+
+    def finished_count(self) -> int:
+        """Cases done or in error."""
+        return int(self.db.execute("SELECT COUNT(*) FROM cases WHERE status IN ('done', 'error')").fetchone()[0])
 
     def counts(self) -> dict[str, int]:
         return {f"{r['kind']}:{r['status']}": r["n"] for r in
                 self.db.execute("SELECT kind, status, COUNT(*) AS n FROM cases GROUP BY kind, status")}
 
-    def max_number(self, kind: str) -> int:
+    def max_number(self, kind: CaseKind) -> int:
         row = self.db.execute("SELECT MAX(number) FROM cases WHERE kind=?", (kind,)).fetchone()
         return int(row[0] or 0)
 
     # -- buckets ------------------------------------------------------------
-    def add_bucket(self, bucket: str, signature: str, verdict: str, invariant: str, module: str | None,
-                   family: str, first_case: str, without_mutation: bool, after_cases: int, *,
-                   kind: str = BUG) -> None:
+    def add_bucket(self, new: NewBucket) -> None:
+        """Open a bucket (a bucket of that name already there stays as it is)."""
         self._write("INSERT OR IGNORE INTO buckets(bucket, signature, verdict, invariant, module, family, first_case,"
                     " without_mutation, created_at, created_after_cases, kind)"
                     " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (bucket, signature, verdict, invariant, module, family, first_case, int(without_mutation),
-                     time.time(), after_cases, kind))
+                    (new.name, new.signature.text(), new.verdict, new.invariant, new.module, new.signature.family,
+                     new.first_case, int(new.without_mutation), time.time(), new.after_cases, new.kind))
 
-    def bucket_kind(self, bucket: str, kind: str) -> None:
+    def bucket_kind(self, bucket: str, kind: BucketKind) -> None:
         self._write("UPDATE buckets SET kind=? WHERE bucket=?", (kind, bucket))
 
     def bucket_control(self, bucket: str, failed: bool) -> None:
@@ -237,19 +233,31 @@ class Journal:
         return next(b for b in self.buckets() if b.bucket == name)
 
     def buckets(self, include_merged: bool = True) -> list[Bucket]:
-        rows = self.db.execute("SELECT * FROM buckets ORDER BY created_at")
-        out = [Bucket(**{**dict(r), "without_mutation": bool(r["without_mutation"])}) for r in rows]
+        """Every bucket in the order they were opened (``include_merged`` False: those not merged into another).
+        InputError for a bucket kind this version does not know (a journal of a newer version)."""
+        out = [self._bucket(r) for r in self.db.execute("SELECT * FROM buckets ORDER BY created_at")]
         return [b for b in out if include_merged or b.merged_into is None]
+
+    def _bucket(self, row: sqlite3.Row) -> Bucket:
+        fields = dict(row)
+        try:
+            kind = BucketKind(fields["kind"])
+        except ValueError:
+            raise InputError(Problem(str(self.path), None, None,
+                                     f"bucket {fields['bucket']} has an unknown kind '{fields['kind']}'",
+                                     "open this journal with the astaa-deft version that wrote it")) from None
+        return Bucket(**{**fields, "without_mutation": bool(fields["without_mutation"]), "kind": kind})
 
     def rate(self, bucket: Bucket) -> tuple[int, int]:
         """(failures, runs) behind a bucket's rate: its re-runs, or the baseline runs for a clean-run failure."""
         if bucket.without_mutation:
-            rows = [r for r in self.cases("baseline") if r["status"] == "done"]
-            return sum(1 for r in rows if r["signature"] == bucket.signature), len(rows)
+            rows = [r for r in self.cases(BASELINE) if r.status == CaseStatus.DONE]
+            return sum(1 for r in rows if r.signature == bucket.signature), len(rows)
         return bucket.rerun_failures, bucket.reruns
 
-    def bucket_by_signature(self, signature: str) -> Bucket | None:
-        return next((b for b in self.buckets() if b.signature == signature), None)
+    def bucket_by_signature(self, signature: BucketSignature) -> Bucket | None:
+        text = signature.text()
+        return next((b for b in self.buckets() if b.signature == text), None)
 
     # -- minimisations ------------------------------------------------------
     def minimisation_started(self, bucket: str) -> None:
@@ -260,25 +268,26 @@ class Journal:
         """On resume: minimisations that were running start again."""
         return self.db.execute("DELETE FROM minimisations WHERE status='running'").rowcount
 
-    def minimised(self, bucket: str, status: str, exit_code: int | None, minimal_xml: str | None,
-                  culprit: str | None, out_dir: str | None, tests_dir: str | None, seconds: float,
-                  detail: str) -> None:
-        started = self.db.execute("SELECT started_at FROM minimisations WHERE bucket=?", (bucket,)).fetchone()
+    def minimised(self, result: Minimisation) -> None:
+        """A bucket's minimisation is over (or replaced): what it gave; its start time stays."""
+        started = self.db.execute("SELECT started_at FROM minimisations WHERE bucket=?", (result.bucket,)).fetchone()
         self._write("INSERT OR REPLACE INTO minimisations(bucket, status, exit_code, minimal_xml, culprit, out_dir,"
                     " tests_dir, seconds, detail, started_at, finished_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (bucket, status, exit_code, minimal_xml, culprit, out_dir, tests_dir, seconds, detail,
+                    (result.bucket, result.status, result.exit_code, result.minimal_xml, result.culprit,
+                     result.out_dir, result.tests_dir, result.seconds, result.detail,
                      started[0] if started else None, time.time()))
 
-    def minimisations(self) -> dict[str, sqlite3.Row]:
-        return {r["bucket"]: r for r in self.db.execute("SELECT * FROM minimisations")}
+    def minimisations(self) -> dict[str, MinimisationRow]:
+        """Bucket name → its minimisation (running or over)."""
+        return {r["bucket"]: MinimisationRow(**dict(r)) for r in self.db.execute("SELECT * FROM minimisations")}
 
     # -- notes: what the campaign decided about itself (runs at once, back-offs), with why -------------
     def note(self, topic: str, text: str) -> None:
         self._write("INSERT INTO notes(time, topic, text) VALUES (?, ?, ?)", (time.time(), topic, text))
 
-    def notes(self, topic: str | None = None) -> list[sqlite3.Row]:
+    def notes(self, topic: str | None = None) -> list[NoteRow]:
         sql = "SELECT * FROM notes" + (" WHERE topic=?" if topic else "") + " ORDER BY time"
-        return list(self.db.execute(sql, (topic,) if topic else ()))
+        return [NoteRow(**dict(r)) for r in self.db.execute(sql, (topic,) if topic else ())]
 
     # -- module tests -------------------------------------------------------
     def module_tests_checked(self, bucket: str, tests_dir: str, fails_on_defect: bool | None, detail: str) -> None:
@@ -286,21 +295,28 @@ class Journal:
         self._write("INSERT OR REPLACE INTO module_tests VALUES (?, ?, ?, ?)",
                     (bucket, tests_dir, None if fails_on_defect is None else int(fails_on_defect), detail))
 
-    def module_tests(self) -> dict[str, sqlite3.Row]:
-        return {r["bucket"]: r for r in self.db.execute("SELECT * FROM module_tests")}
+    def module_tests(self) -> dict[str, ModuleTestsRow]:
+        """Bucket name → whether its module tests fail on its defect."""
+        return {r["bucket"]: ModuleTestsRow(r["bucket"], r["tests_dir"],
+                                            None if r["fails_on_defect"] is None else bool(r["fails_on_defect"]),
+                                            r["detail"])
+                for r in self.db.execute("SELECT * FROM module_tests")}
 
 
-def _planned(row: sqlite3.Row) -> PlannedCase:
-    return PlannedCase(row["case_id"], row["kind"], row["number"], row["seed"], json.loads(row["params"]),
-                       row["testcase_xml"], row["strategy"], row["parent"])
+def _case(row: sqlite3.Row) -> CaseRow:
+    fields = dict(row)
+    outcome = fields.pop("outcome")
+    return CaseRow(**{**fields, "kind": CaseKind(fields["kind"]), "status": CaseStatus(fields["status"]),
+                      "params": json.loads(fields["params"]), "outcome_json": outcome})
 
 
 def open_existing(directory: Path) -> Journal:
+    """The journal a campaign wrote in ``directory``; InputError when there is none."""
     if not (directory / FILE_NAME).is_file():
         raise InputError(Problem(str(directory), None, None, "no campaign journal here",
                                  f"give a directory written by 'astaa-deft fuzz -o {directory}'"))
     return Journal(directory)
 
 
-def iter_done(journal: Journal) -> Iterator[sqlite3.Row]:
-    yield from journal.db.execute("SELECT * FROM cases WHERE status IN ('done','error') ORDER BY finished_at")
+__all__ = ["Bucket", "CaseRow", "FILE_NAME", "Journal", "Minimisation", "MinimisationRow", "NewBucket",
+           "open_existing"]

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from astaa_deft.model.json import JsonObject
 from astaa_deft.orchestration.campaign.model import CaseOutcome
 
 EARLIER_SECONDS = 1.0  # a violation this much earlier than every clean run's (and …)
@@ -38,7 +39,8 @@ class KnownFinding:
     def rate(self) -> str:
         return f"{self.failing_runs}/{self.runs}"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
+        """Its JSON form."""
         return asdict(self)
 
 
@@ -55,8 +57,13 @@ def known_findings(clean: list[CaseOutcome]) -> dict[str, KnownFinding]:
     return out
 
 
-def from_json(body: dict[str, dict[str, Any]]) -> dict[str, KnownFinding]:
-    return {name: KnownFinding(**value) for name, value in body.items()}
+def from_json(body: JsonObject) -> dict[str, KnownFinding]:
+    """Invariant → known finding, from invariant → :meth:`KnownFinding.to_json` (TypeError for another shape)."""
+    out: dict[str, KnownFinding] = {}
+    for name, value in body.items():
+        fields: dict[str, Any] = value if isinstance(value, dict) else {}
+        out[name] = KnownFinding(**fields)
+    return out
 
 
 def worse(outcome: CaseOutcome, known: KnownFinding) -> str | None:

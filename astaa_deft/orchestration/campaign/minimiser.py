@@ -17,6 +17,7 @@ from pathlib import Path
 
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus.processes import python_module, stop_process
+from astaa_deft.model.json import JsonObject
 
 MINIMAL_XML = "minimal.xml"
 SUMMARY = "summary.json"
@@ -26,7 +27,18 @@ POLL_SECONDS = 0.5
 
 
 @dataclass(frozen=True)
+class MinimiseLimits:
+    """How much one minimisation may do: test runs at most, confirmations of the result, seconds in all."""
+
+    max_tests: int = 40
+    confirm: int = 1
+    timeout: float = 900.0
+
+
+@dataclass(frozen=True)
 class Minimised:
+    """What a minimisation gave: the minimiser's exit code, the minimal test case, its culprit, its outputs."""
+
     exit_code: int  # 0 minimised and confirmed, 1 a finding without a clean reproduction, 2 bad input
     minimal_xml: str | None
     culprit: str | None  # what the minimal test case does, e.g. "routing:speed_limit = dict:float.nan"
@@ -36,11 +48,13 @@ class Minimised:
     detail: str
 
 
-def minimise_run(log: Path, spec_path: Path, out_dir: Path, invariant: str | None = None,
-                 max_tests: int = 40, confirm: int = 1, timeout: float = 900.0, *,
-                 cancel: threading.Event | None = None) -> Minimised:
-    """Minimise ``log`` into ``out_dir`` in a child process stopped after ``timeout`` seconds, or as soon as
-    ``cancel`` is set (the campaign was interrupted: exit code 130)."""
+def minimise_run(log: Path, spec_path: Path, out_dir: Path, *, invariant: str | None = None,
+                 limits: MinimiseLimits = MinimiseLimits(), cancel: threading.Event | None = None) -> Minimised:
+    """Minimise ``log`` (towards ``invariant``, when it names a spec invariant) into ``out_dir`` in a child
+    process stopped after ``limits.timeout`` seconds (exit code 1), or as soon as ``cancel`` is set (the
+    campaign was interrupted: exit code 130). Blocks the calling thread until then; never raises for a
+    minimisation that fails (its exit code and output say why)."""
+    max_tests, confirm, timeout = limits.max_tests, limits.confirm, limits.timeout
     started = time.monotonic()
     args = [*python_module("astaa_deft.cli"), "minimise", str(log), "--spec", str(spec_path),
             "-o", str(out_dir), "--repeats", "1", "--confirm", str(confirm), "--max-tests", str(max_tests)]
@@ -90,7 +104,8 @@ def _culprit(minimal: Path) -> str | None:
     return "; ".join(sorted(parts)) or None
 
 
-def summary(out_dir: Path) -> dict:
+def summary(out_dir: Path) -> JsonObject:
+    """The minimiser's summary.json in ``out_dir`` ({} when it wrote none, or none that reads)."""
     path = out_dir / SUMMARY
     try:
         return json.loads(path.read_text())

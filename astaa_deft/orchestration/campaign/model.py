@@ -1,23 +1,115 @@
-"""Typed records of a campaign: a planned case, what a run of it gave, a bucket."""
+"""The campaign's model: a planned case, what a run of it gave, a bucket's signature, and the vocabularies.
+
+Pure types with their JSON and text forms; no I/O. They stay in the
+orchestration tier (not ``astaa_deft.model``): :meth:`CaseOutcome.keeping`
+ranks CRASH classes with the monitors' order (``engine.monitor.verdict``),
+which the bottom tier may not import.
+"""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
+from enum import Enum
 from typing import Any
 
 from astaa_deft.engine.monitor.verdict import ORDER
+from astaa_deft.model.json import JsonObject
 
-BASELINE = "baseline"  # a clean run, no mutation
-MUTATED = "mutated"  # a generated test case
-RERUN = "rerun"  # a bucket's first failure again, for its rate
-CONTROL = "control"  # a failing case's unmutated twin: same params, no test case, same concurrency
+
+class TextEnum(str, Enum):
+    """A vocabulary whose members are their text: the journal's SQLite text, JSON and f-strings stay the
+    plain values (``f"{CaseKind.RERUN}"`` is ``rerun``), and a member equals its text."""
+
+    def __str__(self) -> str:
+        return str(self.value)
+
+    def __format__(self, spec: str) -> str:
+        return format(str(self.value), spec)
+
+
+class CaseKind(TextEnum):
+    """What a planned case is for."""
+
+    BASELINE = "baseline"  # a clean run, no mutation
+    MUTATED = "mutated"  # a generated test case
+    RERUN = "rerun"  # a bucket's first failure again, for its rate
+    CONTROL = "control"  # a failing case's unmutated twin: same params, no test case, same concurrency
+
+
+class CaseStatus(TextEnum):
+    """Where a case is in the journal: planned → running → done (or error); resume puts running back."""
+
+    PLANNED = "planned"
+    RUNNING = "running"
+    DONE = "done"
+    ERROR = "error"  # the run could not start or be judged
+
+
+class BucketKind(TextEnum):
+    """What a bucket is, once its control runs are in: the report tells them apart."""
+
+    BUG = "bug"  # reproduced by a re-run, and the unmutated twin did not fail that way
+    FLAKY = "flaky"  # not reproduced, or the unmutated twin failed the same way: flaky SUT or environment
+    BASELINE = "baseline"  # fails without any mutation (a clean run, or a case that applied none)
+    CONFIRMING = "confirming"  # its re-runs and twins are still running
+
+
+BASELINE = CaseKind.BASELINE
+MUTATED = CaseKind.MUTATED
+RERUN = CaseKind.RERUN
+CONTROL = CaseKind.CONTROL
 CLEAN_KINDS = (BASELINE, CONTROL)  # runs without a test case: run to the scenario's end, timing measured
+FINISHED = (CaseStatus.DONE, CaseStatus.ERROR)
 
-# What a bucket is, once its control runs are in: the report tells them apart.
-BUG = "bug"  # reproduced by a re-run, and the unmutated twin did not fail that way
-FLAKY = "flaky"  # not reproduced, or the unmutated twin failed the same way: flaky SUT or environment
-BASELINE_FINDING = "baseline"  # fails without any mutation (a clean run, or a case that applied none)
-CONFIRMING = "confirming"  # its re-runs and twins are still running
+BUG = BucketKind.BUG
+FLAKY = BucketKind.FLAKY
+BASELINE_FINDING = BucketKind.BASELINE
+CONFIRMING = BucketKind.CONFIRMING
+
+NO_MUTATION = "(no mutation)"  # the mutation family of a failure in a run that mutated nothing
+NO_MODULE = "-"  # a failure key's module when the finding names none
+UNKNOWN = "?"  # a failure key's invariant and module when the run has no finding
+
+
+@dataclass(frozen=True)
+class FailureKey:
+    """The failure alone (no mutation): CRASH class, invariant, module; compared with the baseline's."""
+
+    crash: str
+    invariant: str
+    module: str  # NO_MODULE: the finding named none; UNKNOWN: no finding
+
+    def text(self) -> str:
+        """The journal's form, ``crash|invariant|module``."""
+        return f"{self.crash}|{self.invariant}|{self.module}"
+
+
+@dataclass(frozen=True)
+class BucketSignature:
+    """What groups failures into one bucket: the failure and the family of the mutation that caused it."""
+
+    failure: FailureKey
+    family: str  # channel:field:action parts joined by "+", or NO_MUTATION
+
+    def text(self) -> str:
+        """The journal's form, ``crash|invariant|module|family``."""
+        return f"{self.failure.text()}|{self.family}"
+
+    @classmethod
+    def clean(cls, failure: FailureKey) -> BucketSignature:
+        """The signature of a failure in a run that mutated nothing."""
+        return cls(failure, NO_MUTATION)
+
+
+@dataclass(frozen=True)
+class Timing:
+    """When a generated case's windows open: counted from the first message on ``anchor`` (None: from
+    the run's start), inside the first ``live`` seconds. The campaign measures both in its baseline runs:
+    the anchor is the channel whose first message came last (the whole stack is running then), ``live``
+    how long the baseline ran on from there."""
+
+    anchor: str | None
+    live: float
 
 
 @dataclass(frozen=True)
@@ -25,7 +117,7 @@ class PlannedCase:
     """One run to make: everything a worker needs, nothing it must look up."""
 
     case_id: str  # "b-0001", "c-000042", "r-<bucket>-1", "t-<bucket>-1"
-    kind: str  # BASELINE, MUTATED, RERUN or CONTROL
+    kind: CaseKind
     number: int  # order in the campaign
     seed: int  # the strategy's seed for this case (the test case's own is inside the XML)
     params: dict[str, str]
@@ -33,12 +125,16 @@ class PlannedCase:
     strategy: str = "random"
     parent: str | None = None  # guided: the corpus case this one mutates
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
+        """Its JSON form (it crosses process and machine boundaries)."""
         return asdict(self)
 
     @classmethod
-    def from_json(cls, body: dict[str, Any]) -> PlannedCase:
-        return cls(**body)
+    def from_json(cls, body: JsonObject) -> PlannedCase:
+        """The case :meth:`to_json` wrote (KeyError, ValueError or TypeError for another shape: a bug, not
+        input)."""
+        fields: dict[str, Any] = dict(body)
+        return cls(**{**fields, "kind": CaseKind(fields["kind"])})
 
 
 @dataclass(frozen=True)
@@ -52,6 +148,15 @@ class Finding:
     detail: str
     severity: str = "high"  # the invariant's (low … critical); a crash no invariant named: high
     at: float | None = None  # seconds from the run's start to the violation (None: not known)
+
+
+@dataclass(frozen=True)
+class ChannelRate:
+    """A channel's timing in a clean run: its messages, their rate (1/s) and the longest gap between two (s)."""
+
+    count: int
+    rate: float
+    max_gap: float
 
 
 @dataclass
@@ -77,19 +182,23 @@ class CaseOutcome:
     wall: float = 0.0
     rss_mb: float = 0.0
     # Clean runs: per channel, its message rate (1/s) and its longest gap between two messages (s).
-    timing: dict[str, dict[str, float]] = field(default_factory=dict)
+    timing: dict[str, ChannelRate] = field(default_factory=dict)
     # Per invariant: messages (or samples) that broke it — a known baseline finding is judged by these too.
     violating: dict[str, int] = field(default_factory=dict)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
+        """Its JSON form (the journal's ``outcome`` column, and the pipes from the case workers)."""
         return asdict(self)
 
     @classmethod
-    def from_json(cls, body: dict[str, Any]) -> CaseOutcome:
-        body = dict(body)
-        body["findings"] = [Finding(**f) for f in body.get("findings", [])]
+    def from_json(cls, body: JsonObject) -> CaseOutcome:
+        """The outcome :meth:`to_json` wrote, by this or an older version (fields it lacks take their
+        defaults, fields this version does not know are left out)."""
+        fields: dict[str, Any] = dict(body)
+        fields["findings"] = [Finding(**f) for f in fields.get("findings", [])]
+        fields["timing"] = {channel: ChannelRate(**rate) for channel, rate in fields.get("timing", {}).items()}
         known = cls.__dataclass_fields__
-        return cls(**{k: v for k, v in body.items() if k in known})  # a journal of an older version
+        return cls(**{k: v for k, v in fields.items() if k in known})
 
     @property
     def failed(self) -> bool:

@@ -4,14 +4,17 @@
 keys ``worker.execute`` reads) and back from it (``from_json``, in the
 worker's process). :class:`CaseMessage` (the payload, to the case process)
 and :class:`OutcomeMessage` (its outcome, back) are the two messages on
-that channel, framed by :mod:`astaa_deft.io.pipe_messages`.
+that channel, framed by :mod:`astaa_deft.io.pipe_messages`. :class:`CasePool`
+is the interface the campaign drives (``executors.LocalPool`` and
+``executors.DaskPool`` have it).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Protocol
 
 from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
@@ -91,3 +94,19 @@ class OutcomeMessage:
     @classmethod
     def from_json(cls, data: JsonObject) -> OutcomeMessage:
         return cls(CaseOutcome.from_json(data))
+
+
+class CasePool(Protocol):
+    """Where cases run: submitted cases run concurrently and their outcomes come back as they finish."""
+
+    def submit(self, case_id: str, payload: JsonObject) -> None:
+        """Start the case (``payload``: :meth:`CasePayload.to_json`)."""
+
+    def pending(self) -> int:
+        """Cases submitted whose outcome has not been taken yet."""
+
+    def done(self, timeout: float | None = None) -> Iterator[tuple[str, CaseOutcome]]:
+        """(case id, outcome) of the cases that finished, waiting up to ``timeout`` seconds for the first."""
+
+    def close(self) -> None:
+        """Stop the pool's workers (cases still running are abandoned)."""

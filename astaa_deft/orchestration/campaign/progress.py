@@ -85,9 +85,10 @@ class Progress:
         else:
             print(text, file=self.stream, flush=True)
 
-    def __call__(self, campaign=None) -> None:
-        snap = snapshot(self.journal, self.planned, time.monotonic() - self.started,
-                        getattr(campaign, "workers", None))
+    def __call__(self, at_once: int | None = None) -> None:
+        """Show the campaign's progress now (the bar) or every PLAIN_EVERY_SECONDS (plain lines); ``at_once``:
+        its runs at once."""
+        snap = snapshot(self.journal, self.planned, time.monotonic() - self.started, at_once)
         if self.live is not None:
             self.bar.update(self.task, completed=snap.done,
                             description=f"failures {snap.failures} · buckets {snap.buckets} ({snap.bugs} bug) · "

@@ -18,13 +18,20 @@ import io
 import json
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX
-from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED
-from astaa_deft.orchestration.campaign.standing import CONFIRMED, headline, most_severe, standings
+from astaa_deft.orchestration.campaign.journal import Journal, open_existing
+from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus
+from astaa_deft.orchestration.campaign.rows import Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow
+from astaa_deft.orchestration.campaign.standing import CONFIRMED, Standing, headline, most_severe, standings
+
+if TYPE_CHECKING:  # matplotlib is imported when the plots are drawn, not with the module
+    from matplotlib.figure import Figure
 
 REPORT_NAME = "report.html"
 
@@ -64,6 +71,7 @@ def write_report(out: Path) -> Path:
 
 
 def _rel(path: str | None, out: Path) -> str | None:
+    """``path`` relative to the campaign folder (as given when it is on another drive)."""
     if not path:
         return None
     try:
@@ -72,21 +80,34 @@ def _rel(path: str | None, out: Path) -> str | None:
         return path
 
 
+@dataclass(frozen=True)
+class _Cases:
+    """The journal's cases as the report counts them."""
+
+    done: list[CaseRow]  # finished (done or error)
+    mutated: list[CaseRow]  # finished generated cases
+    failing: list[CaseRow]  # of those, the ones that failed
+    errors: list[CaseRow]  # finished cases that could not run
+    clean: int  # finished baseline runs
+
+    @classmethod
+    def of(cls, rows: list[CaseRow]) -> _Cases:
+        done = [r for r in rows if r.finished]
+        mutated = [r for r in done if r.kind == MUTATED]
+        return cls(done, mutated, [r for r in mutated if r.verdict not in ("Pass", "?", None)],
+                   [r for r in done if r.status == CaseStatus.ERROR], len([r for r in done if r.kind == BASELINE]))
+
+
 def render(journal: Journal, out: Path) -> str:
+    """The report page of the campaign ``journal`` describes (links relative to ``out``): self-contained HTML.
+    Reads the journal only; matplotlib draws the plots (Agg, no display needed)."""
     meta = journal.meta()
-    rows = journal.cases()
-    done = [r for r in rows if r["status"] in ("done", "error")]
-    mutated = [r for r in done if r["kind"] == MUTATED]
-    failing = [r for r in mutated if r["verdict"] not in ("Pass", "?", None)]
-    errors = [r for r in done if r["status"] == "error"]
-    minimised = journal.minimisations()
-    checked = journal.module_tests()
+    cases = _Cases.of(journal.cases())
     ranked = standings(journal)
     by_bucket = {s.bucket.bucket: s for s in ranked}
     buckets = [s.bucket for s in ranked] + [b for b in journal.buckets() if b.bucket not in by_bucket]  # merged last
-    live = [b for b in buckets if b.merged_into is None]
     e = html.escape
-    spec_name = Path(str(meta.get("spec") or "?")).stem
+    spec_name = Path(str(meta.spec or "?")).stem
     confirmed = any(s.status == CONFIRMED for s in ranked)
     top = most_severe(ranked)
     verdict_line = (f"<p>most severe: <b>{e(top.describe())}</b></p>" if top is not None
@@ -95,111 +116,138 @@ def render(journal: Journal, out: Path) -> str:
              f"<style>{CSS}</style></head><body>",
              f"<h1>astaa-deft campaign: {e(spec_name)}</h1>",
              f"<p class='headline'><span class='{'bad' if confirmed else 'ok'}'>{e(headline(ranked))}</span> in"
-             f" {len(mutated)} generated case(s) and {len([r for r in done if r['kind'] == BASELINE])} clean"
+             f" {len(cases.mutated)} generated case(s) and {cases.clean} clean"
              f" run(s).</p>", verdict_line,
              "<h2>Summary</h2><table class='summary'>"]
-    summary = [("spec", meta.get("spec")), ("strategy", meta.get("strategy")), ("seed", meta.get("seed")),
-               ("params", json.dumps(meta.get("params")) if meta.get("params") else "the spec's defaults"),
-               ("horizon", f"{meta.get('horizon')} s"),
-               ("baseline runs", len([r for r in done if r["kind"] == BASELINE])),
-               ("generated cases run", len(mutated)), ("failing cases", len(failing)),
-               ("cases that could not run", len(errors)),
-               ("how runs ended", _end_reasons(done)),
-               ("buckets", f"{len(live)} ({sum(1 for b in live if b.without_mutation)} without mutation,"
-                           f" {len(buckets) - len(live)} merged)"),
-               ("wall time of the cases", f"{_wall(done):.0f} s"), ("generated", time.strftime("%Y-%m-%d %H:%M:%S UTC",
-                                                                                  time.gmtime()))]
-    parts += [f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in summary]
+    parts += [f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in _summary(meta, cases, buckets)]
     parts.append("</table><h2>Buckets</h2>")
-    if not buckets:
-        parts.append("<p class='ok'>No failures found.</p>")
-    else:
-        parts.append("<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>"
-                     "<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
-                     "<th title='re-runs of the first failure that failed the same way'>rate</th>"
-                     "<th>files</th></tr>")
-        for b in buckets:
-            standing = by_bucket.get(b.bucket)
-            first = journal.case(b.first_case)
-            m = minimised.get(b.bucket)
-            fails, runs = journal.rate(b)
-            rate = f"{fails}/{runs}" if runs else "-"
-            links = []
-            log = _rel(first["log_path"] if first is not None else None, out)
-            if log:
-                links.append(f"<a href='{e(log)}'>failing log</a> <span class='muted'>(MCAP: Foxglove opens it)</span>")
-            tests = _rel(m["tests_dir"], out) if m is not None else None
-            if m is not None and tests:
-                kind = ("DeFT replay of the failing run" if str(m["tests_dir"]).endswith(REPLAY_TESTS_SUFFIX)
-                        else "fail on the culprit")
-                links.append(f"<a href='{e(tests)}'>module tests</a> "
-                             f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>"
-                             f"{_tests_verdict(checked.get(b.bucket))}")
-            minimisation = _rel(m["out_dir"], out) if m is not None else None
-            if minimisation:
-                links.append(f"<a href='{e(minimisation)}'>minimisation</a>")
-            minimal_xml = m["minimal_xml"] if m is not None else None
-            minimal = bool(minimal_xml)
-            xml = minimal_xml or ((first["testcase_xml"] or "") if first is not None else "")
-            family = ("<span class='muted'>without mutation</span>" if b.without_mutation
-                      else "".join(f"<div>{e(part)}</div>" for part in b.family.split("+")))
-            merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""
-            culprit = e(m["culprit"] or m["status"]) if m is not None else "<span class='muted'>not minimised</span>"
-            colour = VERDICT_COLOURS.get(b.verdict, "#a00")
-            status = (f"<span class='{'bad' if standing.status == CONFIRMED else 'muted'}'>{e(standing.status)}</span>"
-                      f"<br><span class='muted'>{e(standing.why)}</span>" if standing is not None else "")
-            parts.append(f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td><td>{status}</td>"
-                         f"<td>{e(standing.severity) if standing is not None else ''}</td>"
-                         f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
-                         f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
-                         f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
-                         f"<td>{'<br>'.join(links)}</td></tr>")
-            if xml:
-                what = "minimal test case" if minimal else "first failing test case (not minimised)"
-                parts.append(f"<tr class='xml'><td></td><td colspan='10'><details{' open' if minimal else ''}>"
-                             f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
-        parts.append("</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal"
-                     " test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky —"
-                     " the campaign's run without mutation failed too; without mutation — clean runs fail this way."
-                     " Ranked by status, severity, rate. rate: re-runs of a bucket's first failure that failed the"
-                     " same way (for a bucket without mutation: clean runs that failed this way). cases: generated"
-                     " cases filed in the bucket.</p>")
+    parts += _bucket_table(journal, out, buckets, by_bucket)
     parts.append("<h2>Plots</h2><div class='plots'>")
-    for title, png in _plots(journal, done, buckets):
+    for title, png in _plots(journal, cases.done, buckets):
         parts.append(f"<img alt='{e(title)}' title='{e(title)}' src='data:image/png;base64,{png}'>")
     parts.append("</div></body></html>")
     return "\n".join(parts)
 
 
-def _tests_verdict(row) -> str:
+def _summary(meta: CampaignMeta, cases: _Cases, buckets: list[Bucket]) -> list[tuple[str, object]]:
+    """The summary table's rows: what the campaign was given and what it ran."""
+    live = [b for b in buckets if b.merged_into is None]
+    return [("spec", meta.spec), ("strategy", meta.strategy), ("seed", meta.seed),
+            ("params", json.dumps(meta.params) if meta.params else "the spec's defaults"),
+            ("horizon", f"{meta.horizon} s"),
+            ("baseline runs", cases.clean),
+            ("generated cases run", len(cases.mutated)), ("failing cases", len(cases.failing)),
+            ("cases that could not run", len(cases.errors)),
+            ("how runs ended", _end_reasons(cases.done)),
+            ("buckets", f"{len(live)} ({sum(1 for b in live if b.without_mutation)} without mutation,"
+                        f" {len(buckets) - len(live)} merged)"),
+            ("wall time of the cases", f"{_wall(cases.done):.0f} s"),
+            ("generated", time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()))]
+
+
+def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket], by_bucket: dict[str, Standing]) -> list[str]:
+    """The buckets table (ranked, merged ones last) with its legend, or the line saying there was no failure."""
+    if not buckets:
+        return ["<p class='ok'>No failures found.</p>"]
+    minimised = journal.minimisations()
+    checked = journal.module_tests()
+    parts = ["<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>"
+             "<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
+             "<th title='re-runs of the first failure that failed the same way'>rate</th>"
+             "<th>files</th></tr>"]
+    for b in buckets:
+        fails, runs = journal.rate(b)
+        parts += _bucket_rows(b, by_bucket.get(b.bucket), journal.case(b.first_case), minimised.get(b.bucket),
+                              checked.get(b.bucket), f"{fails}/{runs}" if runs else "-", out)
+    parts.append("</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal"
+                 " test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky —"
+                 " the campaign's run without mutation failed too; without mutation — clean runs fail this way."
+                 " Ranked by status, severity, rate. rate: re-runs of a bucket's first failure that failed the"
+                 " same way (for a bucket without mutation: clean runs that failed this way). cases: generated"
+                 " cases filed in the bucket.</p>")
+    return parts
+
+
+def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
+                 checked: ModuleTestsRow | None, rate: str, out: Path) -> list[str]:
+    """A bucket's row, and the row of its minimal (or first failing) test case's XML when there is one."""
+    e = html.escape
+    links = _links(first, m, checked, out)
+    minimal_xml = m.minimal_xml if m is not None else None
+    minimal = bool(minimal_xml)
+    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
+    family = ("<span class='muted'>without mutation</span>" if b.without_mutation
+              else "".join(f"<div>{e(part)}</div>" for part in b.family.split("+")))
+    merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""
+    culprit = e(m.culprit or m.status) if m is not None else "<span class='muted'>not minimised</span>"
+    colour = VERDICT_COLOURS.get(b.verdict, "#a00")
+    status = (f"<span class='{'bad' if standing.status == CONFIRMED else 'muted'}'>{e(standing.status)}</span>"
+              f"<br><span class='muted'>{e(standing.why)}</span>" if standing is not None else "")
+    rows = [f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td><td>{status}</td>"
+            f"<td>{e(standing.severity) if standing is not None else ''}</td>"
+            f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
+            f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
+            f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
+            f"<td>{'<br>'.join(links)}</td></tr>"]
+    if xml:
+        what = "minimal test case" if minimal else "first failing test case (not minimised)"
+        rows.append(f"<tr class='xml'><td></td><td colspan='10'><details{' open' if minimal else ''}>"
+                    f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
+    return rows
+
+
+def _links(first: CaseRow | None, m: MinimisationRow | None, checked: ModuleTestsRow | None, out: Path) -> list[str]:
+    """A bucket's files: its failing log, its module tests (and whether they fail on the defect), its
+    minimisation."""
+    e = html.escape
+    links = []
+    log = _rel(first.log_path if first is not None else None, out)
+    if log:
+        links.append(f"<a href='{e(log)}'>failing log</a> <span class='muted'>(MCAP: Foxglove opens it)</span>")
+    tests = _rel(m.tests_dir, out) if m is not None else None
+    if m is not None and tests:
+        kind = ("DeFT replay of the failing run" if str(m.tests_dir).endswith(REPLAY_TESTS_SUFFIX)
+                else "fail on the culprit")
+        links.append(f"<a href='{e(tests)}'>module tests</a> "
+                     f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>"
+                     f"{_tests_verdict(checked)}")
+    minimisation = _rel(m.out_dir, out) if m is not None else None
+    if minimisation:
+        links.append(f"<a href='{e(minimisation)}'>minimisation</a>")
+    return links
+
+
+def _tests_verdict(row: ModuleTestsRow | None) -> str:
     """Whether a bucket's module tests fail on its defect, as the campaign found when it ran them once."""
     if row is None:
         return ""
-    if row["fails_on_defect"] == 1:
+    if row.fails_on_defect is True:
         return (f"<br><span class='ok'>fail on the defect</span> "
-                f"<span class='muted'>({html.escape(row['detail'])})</span>")
-    if row["fails_on_defect"] == 0:
+                f"<span class='muted'>({html.escape(row.detail)})</span>")
+    if row.fails_on_defect is False:
         return (f"<br><span class='bad'>do not fail on the defect</span> "
-                f"<span class='muted'>({html.escape(row['detail'])})</span>")
-    return f"<br><span class='muted'>could not run ({html.escape(row['detail'])})</span>"
+                f"<span class='muted'>({html.escape(row.detail)})</span>")
+    return f"<br><span class='muted'>could not run ({html.escape(row.detail)})</span>"
 
 
-def _end_reasons(done) -> str:
+def _end_reasons(done: list[CaseRow]) -> str:
     """How the runs ended (the spec's run: reasons, violations, the horizon), most frequent first."""
     counts: dict[str, int] = {}
     for r in done:
-        reason = (json.loads(r["outcome"]).get("reason") if r["outcome"] else None) or r["status"]
+        outcome = r.outcome()
+        reason = (outcome.reason if outcome is not None else None) or r.status
         counts[reason] = counts.get(reason, 0) + 1
     return ", ".join(f"{reason} {n}" for reason, n in sorted(counts.items(), key=lambda kv: -kv[1])) or "-"
 
 
-def _wall(done) -> float:
-    starts = [r["started_at"] for r in done if r["started_at"]]
-    ends = [r["finished_at"] for r in done if r["finished_at"]]
+def _wall(done: list[CaseRow]) -> float:
+    starts = [r.started_at for r in done if r.started_at]
+    ends = [r.finished_at for r in done if r.finished_at]
     return (max(ends) - min(starts)) if starts and ends else 0.0
 
 
-def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
+def _plots(journal: Journal, done: list[CaseRow], buckets: list[Bucket]) -> list[tuple[str, str]]:
+    """The report's plots, (title, base64 PNG) each."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -207,15 +255,15 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
     from matplotlib.ticker import MaxNLocator
 
     out = []
-    ordered = sorted(done, key=lambda r: r["finished_at"] or 0)
-    t0 = min((r["started_at"] for r in ordered if r["started_at"]), default=0.0)
+    ordered = sorted(done, key=lambda r: r.finished_at or 0)
+    t0 = min((r.started_at for r in ordered if r.started_at), default=0.0)
     firsts = {b.first_case for b in buckets}
     xs, ts, ys, count = [0], [0.0], [0], 0
     for n, r in enumerate(ordered, start=1):
-        if r["case_id"] in firsts:
+        if r.case_id in firsts:
             count += 1
         xs.append(n)
-        ts.append((r["finished_at"] or t0) - t0)
+        ts.append((r.finished_at or t0) - t0)
         ys.append(count)
     fig, (a, b) = plt.subplots(1, 2, figsize=(5, 3.2))
     a.step(xs, ys, where="post")
@@ -231,7 +279,7 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
 
     classes: dict[str, int] = {}
     for r in done:
-        classes[r["verdict"] or "?"] = classes.get(r["verdict"] or "?", 0) + 1
+        classes[r.verdict or "?"] = classes.get(r.verdict or "?", 0) + 1
     fig, ax = plt.subplots(figsize=(5, 3.2))
     ax.bar(list(classes), list(classes.values()), color=[VERDICT_COLOURS.get(c, "#a00") for c in classes])
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
@@ -240,10 +288,11 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
 
     closest: dict[tuple[str, str], list[tuple[int, float]]] = {}
     for n, r in enumerate(ordered, start=1):
-        if r["kind"] != MUTATED or not r["outcome"]:
+        outcome = r.outcome() if r.kind == MUTATED else None
+        if outcome is None:
             continue
-        for inv, margin in json.loads(r["outcome"]).get("margins", {}).items():
-            series = closest.setdefault((r["strategy"], inv), [])
+        for inv, margin in outcome.margins.items():
+            series = closest.setdefault((r.strategy, inv), [])
             best = min(margin, series[-1][1]) if series else margin
             series.append((n, best))
     fig, ax = plt.subplots(figsize=(5, 3.2))
@@ -258,7 +307,7 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
     out.append(("Closest approach per invariant, by strategy", _png(fig, plt)))
 
     fig, ax = plt.subplots(figsize=(5, 3.2))
-    ax.hist([r["seconds"] for r in done if r["seconds"] is not None] or [0], bins=20, color="tab:green")
+    ax.hist([r.seconds for r in done if r.seconds is not None] or [0], bins=20, color="tab:green")
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("seconds per case")
     ax.set_title("Time per case")
@@ -266,7 +315,8 @@ def _plots(journal: Journal, done, buckets) -> list[tuple[str, str]]:
     return out
 
 
-def _png(fig, plt) -> str:
+def _png(fig: Figure, plt: ModuleType) -> str:
+    """The figure as a base64 PNG (the figure is closed)."""
     buf = io.BytesIO()
     fig.tight_layout()
     fig.savefig(buf, format="png", dpi=80)

@@ -17,7 +17,6 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import zenoh
 
@@ -32,11 +31,12 @@ from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.io.log import layout
 from astaa_deft.io.log.records import ViolationRecord
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
+from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.verdict import IMPLICIT
-from astaa_deft.engine.session import BusRun, RunOptions, run_session
+from astaa_deft.engine.session import BusRun, RunOptions, RunResult, run_session
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
 
 POLL_SECONDS = 0.05
 LOG_NAME = "run.mcap"
@@ -69,46 +69,18 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     a run's remaining minutes would be spent for nothing.
     ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
     Every outcome carries the run's CPU seconds and wall seconds (:mod:`.cost`).
+    Never raises for a run that does not start or is not observed to its end: the outcome says "error".
     """
     cost = RunCost(sample_rss=testcase is None)
     cost.start()
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
-    attachments = {}
-    interceptor = None
-    if testcase is not None and testcase.policies:
-        policy_file = run_dir / POLICY_NAME
-        policy_file.write_bytes(testcase.to_xml())
-        attachments[layout.POLICY_ATTACHMENT] = policy_file
-        interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
-    options = RunOptions(mode="star", launch=True, record=log_path, params=dict(params),
-                         command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
-                         interceptor=interceptor, stop_on_violation=False, attachments=attachments,
-                         warm_recorder=warm_recorder)
+    options = _run_options(spec, testcase, params, run_dir, dictionary=dictionary, warm_recorder=warm_recorder)
     options.time_limit = horizon
-    watch = MarginWatch(spec)
-    settled = SettleWatch(testcase, settle) if testcase is not None and settle is not None else None
-    timing = ChannelTiming(spec) if testcase is None else None  # a clean run measures the stack's timing
-    stop_at_violation = testcase is not None
-    started: dict[str, Any] = {}
-
-    def on_start(bus: BusRun) -> None:
-        started["ns"] = time.time_ns()
-        started["monitors"] = bus.monitors.set if bus.monitors is not None else None
-        watch.attach(bus)
-        if settled is not None:
-            settled.attach(bus)
-        if timing is not None:
-            timing.attach(bus)
-
-    def stop_when(bus: BusRun) -> str | None:
-        if stop_at_violation and any(v.invariant not in known for v in list(bus.violations)):
-            return VIOLATION
-        return settled.check(bus) if settled is not None else None
-
+    watches = _Watches(spec, testcase, settle, known)
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
-        result = run_session(isolated(spec), options, on_start=on_start, stop_when=stop_when)
+        result = run_session(isolated(spec), options, on_start=watches.on_start, stop_when=watches.stop_when)
     except InputError as exc:
         cost.stop()
         return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems),
@@ -121,22 +93,80 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                            log_path=str(log_path), reason=reason,
                            error="no verdict" if result.verdict is None else "the log was not finished",
                            cpu=cost.cpu, wall=cost.wall)
-    t0_ns = started.get("ns")
-    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail,
-                        at=round((v.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None, severity=v.severity)
-                for v in result.violations]
-    for exit_ in result.crashes:
-        if not any(f.module == exit_.module for f in findings):
-            findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
-                                    at=round((exit_.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None))
-    monitors = started.get("monitors")
-    violating = {name: s["violating"] for name, s in monitors.stats().items() if s["violating"]} \
-        if monitors is not None else {}
-    return CaseOutcome("done", result.verdict.klass, result.verdict.summary, findings, result.seconds,
-                       str(log_path), reason, result.mutations, margins=watch.margins(result.violations),
+    timing = watches.timing
+    return CaseOutcome("done", result.verdict.klass, result.verdict.summary, watches.findings(result),
+                       result.seconds, str(log_path), reason, result.mutations,
+                       margins=watches.margins.margins(result.violations),
                        first_seen=timing.seconds() if timing is not None else {},
                        cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
-                       timing=timing.channels_timing() if timing is not None else {}, violating=violating)
+                       timing=timing.channels_timing() if timing is not None else {},
+                       violating=watches.violating())
+
+
+def _run_options(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *,
+                 dictionary: Dictionary | None, warm_recorder: ChildProcess | None) -> RunOptions:
+    """The session's options for a case run in ``run_dir``: launched, recorded, the test case (its policy file
+    attached to the log) intercepting; the spec's own stop on violation off (the campaign decides)."""
+    attachments = {}
+    interceptor = None
+    if testcase is not None and testcase.policies:
+        policy_file = run_dir / POLICY_NAME
+        policy_file.write_bytes(testcase.to_xml())
+        attachments[layout.POLICY_ATTACHMENT] = policy_file
+        interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
+    return RunOptions(mode="star", launch=True, record=run_dir / LOG_NAME, params=dict(params),
+                      command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
+                      interceptor=interceptor, stop_on_violation=False, attachments=attachments,
+                      warm_recorder=warm_recorder)
+
+
+class _Watches:
+    """What a case run watches while it runs: margins, when a mutated run has settled or broke an invariant
+    (not a known one), a clean run's channel timing; and, after it, its findings and violation counts.
+    ``on_start``/``stop_when`` are the session's callbacks (its thread); the readers are called after it."""
+
+    def __init__(self, spec: Spec, testcase: TestCase | None, settle: float | None, known: frozenset[str]) -> None:
+        self.margins = MarginWatch(spec)
+        self.settled = SettleWatch(testcase, settle) if testcase is not None and settle is not None else None
+        self.timing = ChannelTiming(spec) if testcase is None else None  # a clean run measures the stack's timing
+        self.stop_at_violation = testcase is not None
+        self.known = known
+        self.t0_ns: int | None = None
+        self.monitors: MonitorSet | None = None
+
+    def on_start(self, bus: BusRun) -> None:
+        self.t0_ns = time.time_ns()
+        self.monitors = bus.monitors.set if bus.monitors is not None else None
+        self.margins.attach(bus)
+        if self.settled is not None:
+            self.settled.attach(bus)
+        if self.timing is not None:
+            self.timing.attach(bus)
+
+    def stop_when(self, bus: BusRun) -> str | None:
+        if self.stop_at_violation and any(v.invariant not in self.known for v in list(bus.violations)):
+            return VIOLATION
+        return self.settled.check(bus) if self.settled is not None else None
+
+    def _at(self, time_ns: int) -> float | None:
+        """Seconds from the run's start (None: the run did not start)."""
+        return round((time_ns - self.t0_ns) / 1e9, 3) if self.t0_ns is not None else None
+
+    def findings(self, result: RunResult) -> list[Finding]:
+        """The run's violations, and each crashed module no violation names (an implicit Abort)."""
+        found = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail, at=self._at(v.time_ns),
+                         severity=v.severity) for v in result.violations]
+        for exit_ in result.crashes:
+            if not any(f.module == exit_.module for f in found):
+                found.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
+                                     at=self._at(exit_.time_ns)))
+        return found
+
+    def violating(self) -> dict[str, int]:
+        """Per invariant that broke: the messages (or samples) that broke it."""
+        if self.monitors is None:
+            return {}
+        return {name: s["violating"] for name, s in self.monitors.stats().items() if s["violating"]}
 
 
 SETTLED = "settled after the last mutation"
@@ -178,13 +208,13 @@ class ChannelTiming:
         with self._lock:
             return {k: round(v, 3) for k, v in self.first.items()}
 
-    def channels_timing(self) -> dict[str, dict[str, float]]:
+    def channels_timing(self) -> dict[str, ChannelRate]:
         with self._lock:
             out = {}
             for channel, count in self.count.items():
                 span = self.last[channel] - self.t0 - self.first[channel]
-                out[channel] = {"count": count, "rate": round((count - 1) / span, 3) if span > 0 else 0.0,
-                                "max_gap": round(self.max_gap.get(channel, 0.0), 4)}
+                out[channel] = ChannelRate(count, round((count - 1) / span, 3) if span > 0 else 0.0,
+                                           round(self.max_gap.get(channel, 0.0), 4))
             return out
 
 
@@ -273,7 +303,7 @@ class MarginWatch:
             except KeyError:  # not observable in this mode
                 continue
 
-    def _seen(self, inv: BoundInvariant, codec, sample) -> None:
+    def _seen(self, inv: BoundInvariant, codec: Codec, sample: zenoh.Sample) -> None:
         try:
             values = [v for _, v in fields.get(codec.decode(sample.payload.to_bytes()), inv.field)]
         except Exception:  # noqa: BLE001 - a payload the monitors will report; not ours to judge

@@ -20,10 +20,11 @@ from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.verdict import ORDER
 from astaa_deft.engine.monitor.violation import SEVERITIES
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.model import (
+    NO_MODULE, NO_MUTATION, UNKNOWN, BucketSignature, CaseOutcome, FailureKey, Finding,
+)
 from astaa_deft.orchestration.campaign.originals import broken_on_originals
 
-NO_MUTATION = "(no mutation)"
 _INDEX = re.compile(r"\[\d+\]")
 
 
@@ -64,17 +65,18 @@ def fold_indices(path: str) -> str:
     return _INDEX.sub("[]", path)
 
 
-def failure_key(outcome: CaseOutcome) -> str:
-    """The failure alone (no mutation): compared with the baseline's failures."""
+def failure_key(outcome: CaseOutcome) -> FailureKey:
+    """The failure alone (no mutation), from the run's primary finding: compared with the baseline's failures."""
     finding = primary(outcome)
     if finding is None:
-        return f"{outcome.verdict}|?|?"
-    return f"{finding.crash}|{finding.invariant}|{finding.module or '-'}"
+        return FailureKey(outcome.verdict, UNKNOWN, UNKNOWN)
+    return FailureKey(finding.crash, finding.invariant, finding.module or NO_MODULE)
 
 
-def signature(outcome: CaseOutcome, testcase_xml: str | None) -> str:
+def signature(outcome: CaseOutcome, testcase_xml: str | None) -> BucketSignature:
+    """The bucket a failing run of ``testcase_xml`` (None: a clean run) belongs in."""
     testcase = parse_testcase(testcase_xml.encode()) if testcase_xml else None
-    return f"{failure_key(outcome)}|{mutation_family(testcase)}"
+    return BucketSignature(failure_key(outcome), mutation_family(testcase))
 
 
 def mutated_channels(testcase_xml: str | None, spec: Spec) -> set[str]:

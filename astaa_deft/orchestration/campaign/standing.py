@@ -14,29 +14,40 @@ by severity and names the most severe. Pure logic over journal rows.
 
 from __future__ import annotations
 
-import json
-import sqlite3
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 from astaa_deft.engine.monitor.violation import SEVERITIES
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.model import BASELINE_FINDING, BUG, CONFIRMING, CaseOutcome
-from astaa_deft.orchestration.campaign.model import FLAKY as FLAKY_KIND
+from astaa_deft.orchestration.campaign.model import BucketKind, TextEnum
+from astaa_deft.orchestration.campaign.rows import CaseRow
 from astaa_deft.orchestration.campaign.signature import primary
 
-CONFIRMED = "confirmed"
-UNCONFIRMED = "unconfirmed"
-FLAKY = "flaky"
-WITHOUT_MUTATION = "without mutation"
-PENDING = "confirming"
-STATUS_ORDER = (CONFIRMED, PENDING, UNCONFIRMED, FLAKY, WITHOUT_MUTATION)
+
+class BucketStatus(TextEnum):
+    """Where a bucket stands, in rank order (confirmed first)."""
+
+    CONFIRMED = "confirmed"
+    PENDING = "confirming"
+    UNCONFIRMED = "unconfirmed"
+    FLAKY = "flaky"
+    WITHOUT_MUTATION = "without mutation"
+
+
+CONFIRMED = BucketStatus.CONFIRMED
+UNCONFIRMED = BucketStatus.UNCONFIRMED
+FLAKY = BucketStatus.FLAKY
+WITHOUT_MUTATION = BucketStatus.WITHOUT_MUTATION
+PENDING = BucketStatus.PENDING
+STATUS_ORDER = tuple(BucketStatus)
 
 
 @dataclass(frozen=True)
 class Standing:
+    """A bucket with its status, the evidence behind it, its severity and its rate."""
+
     bucket: Bucket
-    status: str  # one of STATUS_ORDER, or a status the campaign recorded for the bucket
+    status: BucketStatus
     why: str  # the evidence behind the status, one phrase
     severity: str  # of the bucket's finding: low, medium, high, critical
     failures: int  # re-runs (or clean runs) that failed the same way …
@@ -53,18 +64,16 @@ class Standing:
                 f"{' in ' + b.module if b.module else ''} — {self.status} ({self.why})")
 
 
-def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool) -> tuple[str, str]:
+def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool) -> tuple[BucketStatus, str]:
     """(status, why) of a bucket from the campaign's kind for it, its rate and whether its minimal test case was
     confirmed live."""
     twins = f"; unmutated twins {bucket.control_failures}/{bucket.controls} failed" if bucket.controls else ""
-    if bucket.without_mutation or bucket.kind == BASELINE_FINDING:
+    if bucket.without_mutation or bucket.kind == BucketKind.BASELINE:
         return WITHOUT_MUTATION, f"{failures}/{runs} clean runs failed this way"
-    if bucket.kind == FLAKY_KIND:
+    if bucket.kind == BucketKind.FLAKY:
         return FLAKY, f"{failures}/{runs} re-runs failed the same way{twins}"
-    if bucket.kind == CONFIRMING:
+    if bucket.kind == BucketKind.CONFIRMING:
         return PENDING, "its re-runs and unmutated twins are still running"
-    if bucket.kind != BUG:  # a kind this module does not know: shown as it is
-        return str(bucket.kind), "as the campaign judged it"
     if failures:
         return CONFIRMED, f"{failures}/{runs} re-runs failed the same way{twins}"
     if minimised:
@@ -77,7 +86,7 @@ def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool) -> 
 def rank(standings: Sequence[Standing]) -> list[Standing]:
     """Confirmed first, then by severity (critical first), rate (highest first) and bucket name."""
     def key(s: Standing) -> tuple[int, int, float, str]:
-        status = STATUS_ORDER.index(s.status) if s.status in STATUS_ORDER else len(STATUS_ORDER)
+        status = STATUS_ORDER.index(s.status)
         severity = SEVERITIES.index(s.severity) if s.severity in SEVERITIES else -1
         return status, -severity, -s.rate, s.bucket.bucket
     return sorted(standings, key=key)
@@ -90,16 +99,17 @@ def standings(journal: Journal) -> list[Standing]:
     for bucket in journal.buckets(include_merged=False):
         failures, runs = journal.rate(bucket)
         row = minimised.get(bucket.bucket)
-        status, why = bucket_status(bucket, failures, runs, row is not None and row["exit_code"] == 0)
+        status, why = bucket_status(bucket, failures, runs, row is not None and row.exit_code == 0)
         out.append(Standing(bucket, status, why, _severity(journal.case(bucket.first_case)), failures, runs))
     return rank(out)
 
 
-def _severity(row: sqlite3.Row | None) -> str:
+def _severity(row: CaseRow | None) -> str:
     """The severity of the finding a case was filed under ("?" when the journal does not say)."""
-    if row is None or not row["outcome"]:
+    outcome = row.outcome() if row is not None else None
+    if outcome is None:
         return "?"
-    finding = primary(CaseOutcome.from_json(json.loads(row["outcome"])))
+    finding = primary(outcome)
     return finding.severity if finding is not None else "?"
 
 
@@ -112,7 +122,7 @@ def headline(ranked: Sequence[Standing]) -> str:
         parts = [f"{len(confirmed)} confirmed bug{'s' if len(confirmed) != 1 else ''} ({counts})"]
     else:
         parts = ["no confirmed bug"]
-    others: dict[str, int] = {}
+    others: dict[BucketStatus, int] = {}
     for s in ranked:
         if s.status != CONFIRMED:
             others[s.status] = others.get(s.status, 0) + 1

@@ -1,39 +1,79 @@
-"""The strategy interface: propose the n-th test case, learn from what runs gave."""
+"""The strategy interface: propose the n-th test case, learn from what runs gave.
+
+:class:`Strategy` declares every hook the campaign calls, each with a
+do-nothing default; a strategy overrides the ones it uses. The campaign
+calls every hook on every strategy (no probing for optional methods).
+"""
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from pathlib import Path
+from typing import ClassVar
 
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome
-
-
-@dataclass(frozen=True)
-class Timing:
-    """When a generated case's windows open: counted from the first message on ``anchor`` (None: from
-    the run's start), inside the first ``live`` seconds. The campaign measures both in its baseline runs:
-    the anchor is the channel whose first message came last (the whole stack is running then), ``live``
-    how long the baseline ran on from there."""
-
-    anchor: str | None
-    live: float
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase, Timing
 
 
 @dataclass(frozen=True)
 class Proposal:
+    """A strategy's next test case (its XML) and the case it was derived from, if any."""
+
     testcase_xml: str
     parent: str | None = None  # the case it was derived from, if any
 
 
-class Strategy(Protocol):
-    name: str
+class Strategy(ABC):
+    """How a campaign draws its test cases. Not thread-safe: the campaign calls the hooks from its own thread.
 
-    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None: ...
+    The campaign's order of calls: ``__init__``; ``observe_baseline`` per
+    finished clean baseline run; ``calibrate`` once the baseline measured
+    the live timing; on resume ``resume`` with the generated cases already
+    planned, then ``observe`` for each of them that finished; then
+    ``propose``/``judge``/``observe`` per case; at the end ``finish``.
+    """
 
+    name: ClassVar[str]
+    # True: the strategy turns its buckets into findings itself (``finish``); the campaign then does not
+    # minimise them.
+    exports_own_findings: ClassVar[bool] = False
+
+    @abstractmethod
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None:
+        """A strategy for ``spec``'s channels, drawing values from ``dictionary``, deterministic given ``seed``;
+        ``duration``: the seconds a case's windows may span until :meth:`calibrate` says better. InputError
+        when the spec gives the strategy nothing to work on."""
+
+    @abstractmethod
     def propose(self, number: int) -> Proposal:
         """The ``number``-th test case; deterministic given the seed and what was observed before."""
 
-    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
-        """A finished case (in the order results arrive)."""
+    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
+        """A finished generated case (in the order results arrive). Default: nothing learnt."""
+
+    def observe_baseline(self, case_id: str, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
+        """A finished clean baseline run (every one, before the first :meth:`propose`). Default: ignored."""
+
+    def calibrate(self, timing: Timing) -> None:  # noqa: B027 (optional hook)
+        """When the SUT is live, as the baseline measured it (once, before the first :meth:`propose`).
+        Default: ignored."""
+
+    def resume(self, planned: Sequence[PlannedCase]) -> None:  # noqa: B027 (optional hook)
+        """On resume: the generated cases the campaign had planned already, in order (before their outcomes
+        reach :meth:`observe`). Default: ignored."""
+
+    def judge(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome, learn: bool = True) -> CaseOutcome:
+        """The outcome of a generated case or its re-run as this strategy's oracle sees it (``learn``: a
+        generated case, not a re-run). Default: the outcome as the monitors judged it."""
+        return outcome
+
+    def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:  # noqa: B027 (optional hook)
+        """After the hunt (not after an interruption): the strategy's own findings from ``journal`` into
+        ``out`` (when :attr:`exports_own_findings`). Default: nothing."""
+
+
+__all__ = ["Proposal", "Strategy", "Timing"]

@@ -17,7 +17,6 @@ import json
 from dataclasses import replace
 from pathlib import Path
 from collections.abc import Callable
-from typing import Any
 
 from astaa_deft.analysis.decictor.config import DecictorConfig, read_config
 from astaa_deft.analysis.decictor.feasible import Area, ForbiddenRegion
@@ -30,7 +29,8 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Policy, TestCase, parse_testcase
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
-from astaa_deft.orchestration.campaign.strategies.base import Proposal
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 
 INVARIANT = "path_consistency"
 CRASH = "Hindering"
@@ -59,11 +59,12 @@ def scene_of(testcase_xml: str) -> Scene:
     return Scene(tuple(p.action for p in testcase.policies if isinstance(p.action, Participant)))
 
 
-class DecictorStrategy:
+class DecictorStrategy(Strategy):
     name = "decictor"
+    exports_own_findings = True  # finish(): module tests and decictor.html instead of minimisation
     mode = "decictor"
 
-    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float):
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None:
         self.spec = spec
         self.config: DecictorConfig = read_config(spec)  # a spec without lanes fails here: exit 2
         self.seed = seed
@@ -135,11 +136,8 @@ class DecictorStrategy:
         return replace(outcome, verdict=verdict_class, findings=[finding, *outcome.findings],
                        summary=f"{verdict.reason}; {outcome.summary}")
 
-    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
-        pass  # judge() already told the search
-
     # -- the end ---------------------------------------------------------------------
-    def finish(self, journal: Any, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:
+    def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:
         from astaa_deft.orchestration.campaign.strategies.decictor_export import export_findings
 
         export_findings(self, journal, out, spec_path, say)

@@ -18,8 +18,8 @@ import json
 import shutil
 import time
 from pathlib import Path
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.analysis.decictor.module_test import check_suite, end_points, write_consistency_test
@@ -28,6 +28,10 @@ from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.workflow import extract_module_tests
 from astaa_deft.model.errors import InputError
 from astaa_deft.io.log.reader import read_log
+from astaa_deft.analysis.decictor.search import Scene
+from astaa_deft.engine.intercept.actions.participant import Participant
+from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.rows import CaseRow, Minimisation
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, scene_of
 
 if TYPE_CHECKING:
@@ -46,8 +50,10 @@ def seed_plan_ends(strategy: DecictorStrategy, log_path: Path) -> list[tuple[flo
     return end_points(messages, cfg.trajectory)
 
 
-def export_findings(strategy: DecictorStrategy, journal: Any, out: Path, spec_path: Path,
+def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spec_path: Path,
                     say: Callable[[str], None]) -> None:
+    """Each path-consistency bucket of ``journal`` as DeFT module tests under ``out/tests`` (journalled as the
+    bucket's minimisation), and ``out/decictor.html``: seed vs mutated paths. Nothing without a seed run."""
     buckets = [b for b in journal.buckets(include_merged=False) if b.invariant == INVARIANT]
     if not buckets or strategy.seed_log is None:
         return
@@ -55,15 +61,16 @@ def export_findings(strategy: DecictorStrategy, journal: Any, out: Path, spec_pa
     sections = []
     for bucket in buckets:
         row = journal.case(bucket.first_case)
-        if not row["log_path"] or not Path(row["log_path"]).is_file():
+        if row is None or not row.log_path or not Path(row.log_path).is_file() or row.testcase_xml is None:
             continue
+        log = Path(row.log_path)
         started = time.monotonic()
         tests_dir = out / "tests" / bucket.bucket
         if tests_dir.exists():
             shutil.rmtree(tests_dir)
         say(f"decictor: module tests for {bucket.bucket} ({bucket.first_case}) …")
         try:
-            report = extract_module_tests(Path(row["log_path"]), spec_path, tests_dir)
+            report = extract_module_tests(log, spec_path, tests_dir)
             write_consistency_test(tests_dir, seed_ends, strategy.lanes, note=f"seed: {strategy.seed_log}")
             problem = check_suite(tests_dir, overrides="")
             status = "module tests (fail)" if problem else "module tests (pass: not reproduced)"
@@ -71,12 +78,13 @@ def export_findings(strategy: DecictorStrategy, journal: Any, out: Path, spec_pa
             detail = f"{report.accepted} frames; {detail}"
         except InputError as exc:
             status, detail = "error", "; ".join(map(str, exc.problems))
-        scene = scene_of(row["testcase_xml"])
+        scene = scene_of(row.testcase_xml)
         culprit = ", ".join(f"{p.kind} {p.id}" for p in scene.participants)
-        journal.minimised(bucket.bucket, status, 1 if status.endswith("(fail)") else 0, row["testcase_xml"],
-                          culprit, None, str(tests_dir), time.monotonic() - started, detail)
+        journal.minimised(Minimisation(bucket.bucket, status, 1 if status.endswith("(fail)") else 0,
+                                       row.testcase_xml, culprit, None, str(tests_dir), time.monotonic() - started,
+                                       detail))
         say(f"  {status}: {detail[:160]}")
-        sections.append(_section(strategy, bucket.bucket, row, scene))
+        sections.append(_section(strategy, bucket.bucket, row, log, scene=scene))
     page = out / PAGE
     page.write_text("<!doctype html><meta charset='utf-8'><title>Decictor findings</title>"
                     "<style>body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}"
@@ -85,18 +93,19 @@ def export_findings(strategy: DecictorStrategy, journal: Any, out: Path, spec_pa
     say(f"decictor: seed vs mutated paths in {page}")
 
 
-def _section(strategy: DecictorStrategy, bucket: str, row: Any, scene: Any) -> str:
-    record_path = Path(row["log_path"]).parent / "decictor.json"
+def _section(strategy: DecictorStrategy, bucket: str, row: CaseRow, log: Path, *, scene: Scene) -> str:
+    """A bucket's part of decictor.html: its oracle's reason and figures, the paths plotted, its test case."""
+    record_path = log.parent / "decictor.json"
     record = json.loads(record_path.read_text()) if record_path.is_file() else {}
-    png = plot_paths(strategy, Path(row["log_path"]), scene.participants,
-                     f"{bucket} ({row['case_id']}): {record.get('reason', '')}")
-    return (f"<h2>{html.escape(bucket)}: {html.escape(row['case_id'])}</h2>"
+    png = plot_paths(strategy, log, scene.participants,
+                     f"{bucket} ({row.case_id}): {record.get('reason', '')}")
+    return (f"<h2>{html.escape(bucket)}: {html.escape(row.case_id)}</h2>"
             f"<p>{html.escape(record.get('reason', ''))}; path distance {record.get('path_distance', 0):.2f} m, "
             f"behaviour MMD {record.get('behaviour_mmd', 0):.3f}</p>"
-            f"<img src='data:image/png;base64,{png}'><pre>{html.escape(row['testcase_xml'])}</pre>")
+            f"<img src='data:image/png;base64,{png}'><pre>{html.escape(row.testcase_xml or '')}</pre>")
 
 
-def plot_paths(strategy: DecictorStrategy, mutated_log: Path, participants: Any, title: str) -> str:
+def plot_paths(strategy: DecictorStrategy, mutated_log: Path, participants: Sequence[Participant], title: str) -> str:
     """Seed vs mutated ego path, lanes and participants, as a base64 PNG."""
     import matplotlib
 

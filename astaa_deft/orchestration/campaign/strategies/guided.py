@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Sequence
 from dataclasses import replace
 
 from astaa_deft.engine.intercept import generate as gen
@@ -29,8 +30,8 @@ from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Selection, TestCase, parse_testcase
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome
-from astaa_deft.orchestration.campaign.strategies.base import Proposal, Timing
+from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy, Timing
 from astaa_deft.orchestration.campaign.strategies.random import RandomStrategy
 
 EXPLOIT_SHARE = 0.5
@@ -41,10 +42,10 @@ CORPUS_LIMIT = 32
 OPERATORS = ("value", "field", "window", "action", "policy")
 
 
-class GuidedStrategy:
+class GuidedStrategy(Strategy):
     name = "guided"
 
-    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float):
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None:
         self.fresh = RandomStrategy(spec, dictionary, seed, duration)
         self.seed = seed
         self.duration = duration
@@ -62,10 +63,10 @@ class GuidedStrategy:
         """Whether case ``number`` may derive from the corpus (if the corpus holds anything by then)."""
         return random.Random(f"guided/{self.seed}/{number}").random() < EXPLOIT_SHARE
 
-    def resume(self, planned: list[tuple[str, str | None, str | None]]) -> None:
-        """The cases a resumed campaign had planned already, (case id, test case XML, parent): the schedule
-        goes on after the schedule cases among them (those without a parent), none proposed twice."""
-        self.fresh_planned = sum(1 for _case, _xml, parent in planned if parent is None)
+    def resume(self, planned: Sequence[PlannedCase]) -> None:
+        """The cases a resumed campaign had planned already: the schedule goes on after the schedule cases
+        among them (those without a parent), none proposed twice."""
+        self.fresh_planned = sum(1 for case in planned if case.parent is None)
 
     def propose(self, number: int) -> Proposal:
         rng = random.Random(f"guided/{self.seed}/{number}")

@@ -23,17 +23,16 @@ import random
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome
-from astaa_deft.orchestration.campaign.strategies.base import Proposal, Timing
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy, Timing
 
 ID_WIDTH = 6
 COVERAGE_ROUNDS = 2  # pure coverage rounds before weighted draws are mixed in
 
 
-class RandomStrategy:
+class RandomStrategy(Strategy):
     name = "random"
 
-    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float):
+    def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None:
         self.by_channel = gen.targets_to_mutate(spec, dictionary)  # InputError: nothing to mutate
         self.stamps = gen.stamp_targets_by_channel(spec, dictionary)
         self.seed = seed
@@ -68,6 +67,3 @@ class RandomStrategy:
         probe = self._round(round_number)[position]
         testcase = gen.probe_testcase(testcase_id, rng, probe, round_number, self.timing.live, self.timing.anchor)
         return Proposal(testcase.to_xml().decode())
-
-    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
-        pass  # random does not learn
