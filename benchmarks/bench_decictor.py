@@ -102,7 +102,7 @@ def live_cost(count: int) -> list[float]:
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(count):
             started = time.perf_counter()
-            outcome = run_case(spec, testcase, {}, Path(tmp) / f"c{k}", LIVE_HORIZON)
+            outcome = run_case(spec, testcase, {}, Path(tmp) / f"c{k}", horizon=LIVE_HORIZON)
             seconds.append(time.perf_counter() - started)
             print(f"  live scenario {k + 1}: {seconds[-1]:.1f} s ({outcome.status}, {outcome.verdict}, "
                   f"{outcome.summary[:80]})", flush=True)

@@ -159,7 +159,7 @@ def test_calibration_picks_fewer_runs_at_once_for_a_module_that_burns_a_core(tmp
     spec = load_spec(STEADY)
     shares = {}
     for burn in ("0", "1"):
-        outcome = run_case(spec, None, {"burn": burn}, tmp_path / f"burn{burn}", 3.0)
+        outcome = run_case(spec, None, {"burn": burn}, tmp_path / f"burn{burn}", horizon=3.0)
         assert outcome.status == "done" and outcome.cpu > 0 and outcome.rss_mb > 0, outcome
         shares[burn] = run_share([outcome])
     assert shares["1"] is not None and shares["0"] is not None

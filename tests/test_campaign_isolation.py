@@ -47,7 +47,8 @@ def test_an_anchored_case_mutates_once_then_ends_settle_seconds_later(tmp_path: 
            b'<window from="0.3" to="30"><after channel="data" message="1"/></window><select limit="1"/>'
            b'<set><field path="value" value="dict:float.nan"/></set></policy></testcase>')
     testcase = parse_testcase(xml, "t", spec, dictionary)
-    outcome = run_case(spec, testcase, {"count": "100000", "rate": "50"}, tmp_path / "case", 30.0, dictionary,
+    outcome = run_case(spec, testcase, {"count": "100000", "rate": "50"}, tmp_path / "case", horizon=30.0,
+                       dictionary=dictionary,
                        settle=1.0)
     assert outcome.status == "done", outcome
     assert outcome.reason == "settled"  # ended by the settle rule, not the 30 s horizon

@@ -36,8 +36,8 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
     spec = load_spec(demo_spec_path())
     dictionary = load_dictionary()
     testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
-    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case", 8.0,
-                       dictionary)
+    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case", horizon=8.0,
+                       dictionary=dictionary)
     assert outcome.status == "done" and outcome.mutations > 0, outcome
     assert any(f.invariant == "planned_speed" for f in outcome.findings), outcome  # the overspeed plan was seen
     monkeypatch.chdir(tmp_path)

@@ -40,14 +40,14 @@ def test_a_spec_without_lanes_stops_the_strategy_with_a_clear_error():
 def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp_path: Path):
     spec = load_spec(SPEC_PATH)
     strategy = DecictorStrategy(spec, load_dictionary(), 0, 15.0)
-    seed = run_case(spec, None, {}, tmp_path / "cases" / "b-0001", 15.0)
+    seed = run_case(spec, None, {}, tmp_path / "cases" / "b-0001", horizon=15.0)
     assert seed.status == "done", seed
     strategy.observe_baseline("b-0001", seed)
     assert strategy.search is not None, strategy.why_no_seed
 
     xml = scene_xml(Scene((CONE,), "add"), "tc-000001", 1, "prediction")
     testcase = parse_testcase(xml.encode(), "tc", spec, load_dictionary())
-    mutated = run_case(spec, testcase, {}, tmp_path / "cases" / "c-000001", 15.0)
+    mutated = run_case(spec, testcase, {}, tmp_path / "cases" / "c-000001", horizon=15.0)
     judged = strategy.judge("c-000001", xml, mutated)
     assert judged.findings and judged.findings[0].invariant == INVARIANT, judged.summary
     assert judged.findings[0].module == "planning" and judged.failed

@@ -53,8 +53,8 @@ def isolated(spec: Spec) -> Spec:
     return replace(spec, zenoh=replace(spec.zenoh, endpoints=tuple(endpoints)))
 
 
-def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, horizon: float,
-             dictionary: Dictionary | None = None, settle: float | None = None, *,
+def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *, horizon: float,
+             dictionary: Dictionary | None = None, settle: float | None = None,
              warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset()) -> CaseOutcome:
     """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
 

@@ -83,8 +83,9 @@ def execute(payload: CasePayload, preloaded: Preloaded | None = None,
             if case.testcase_xml else None
     except InputError as exc:
         return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems)))
-    return run_case(spec, testcase, case.params, Path(payload.run_dir), payload.horizon, dictionary,
-                    payload.settle, warm_recorder=warm_recorder, known=frozenset(payload.known))
+    return run_case(spec, testcase, case.params, Path(payload.run_dir), horizon=payload.horizon,
+                    dictionary=dictionary, settle=payload.settle, warm_recorder=warm_recorder,
+                    known=frozenset(payload.known))
 
 
 def stop_worker_profiler() -> bool:
