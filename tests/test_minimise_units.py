@@ -34,6 +34,7 @@ from astaa_deft.analysis.minimise.mutations import (
     read_mutations,
     sent_stream,
 )
+from astaa_deft.analysis.minimise.output import Confirmation
 from astaa_deft.analysis.minimise.restrict import restricted_testcase
 from astaa_deft.analysis.minimise import workflow
 from astaa_deft.analysis.minimise.stages import Failure, Minimisation
@@ -312,14 +313,14 @@ def test_verdicts_and_exit_codes():
     failure = Failure("x", "bound", None, "c", 1.0, "", "Silent")
     live = Minimisation("live", failure, [], {})
     replay = replace(live, tester="replay")
-    assert workflow.verdict(live, {"runs": 3, "failures": 3, "rate": 1.0})[1] is True
-    text, reproduced = workflow.verdict(live, {"runs": 3, "failures": 2, "rate": 2 / 3})
+    assert workflow.verdict(live, Confirmation(runs=3, failures=3, rate=1.0))[1] is True
+    text, reproduced = workflow.verdict(live, Confirmation(runs=3, failures=2, rate=2 / 3))
     assert reproduced is False and text.startswith("flaky") and "67%" in text
-    assert workflow.verdict(live, {"runs": 3, "failures": 0, "rate": 0.0})[1] is False
-    assert workflow.verdict(replay, {"runs": 0, "failures": 0, "rate": None})[1] is True
-    assert "open-loop" in workflow.verdict(replay, {"runs": 1, "failures": 0, "rate": 0.0})[0]
-    text, reproduced = workflow.verdict(replay, {"requested": 2, "runs": 0, "failures": 0, "rate": None,
-                                                 "details": ["the run did not start: port in use"]})
+    assert workflow.verdict(live, Confirmation(runs=3, failures=0, rate=0.0))[1] is False
+    assert workflow.verdict(replay, Confirmation(runs=0, failures=0, rate=None))[1] is True
+    assert "open-loop" in workflow.verdict(replay, Confirmation(runs=1, failures=0, rate=0.0))[0]
+    text, reproduced = workflow.verdict(replay, Confirmation(requested=2, runs=0, failures=0, rate=None,
+                                                             details=("the run did not start: port in use",)))
     assert reproduced is False and "port in use" in text
     # The command's exit code is the report's: 0 only when the minimal test case stands.
     report = workflow.MinimiseReport(False, text, {"verdict": text}, complete=False)
