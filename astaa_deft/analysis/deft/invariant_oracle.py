@@ -9,10 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.engine.spec.replay_section import ReplayModule
+
+if TYPE_CHECKING:
+    from astaa_deft.analysis.deft.suite import Suite
 
 ORACLE_KIND = "invariant"
 
@@ -22,7 +26,7 @@ def oracle_entry(invariant: str, frame: int, start_ns: int) -> dict:
     return {"kind": ORACLE_KIND, "invariant": invariant, "frame": frame, "start_ns": start_ns}
 
 
-def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
+def check_invariant_oracle(suite: Suite, entry: Mapping[str, Any]) -> str | None:
     """Run by the pytest plugin for an ``invariant`` oracle: why the test fails, or None.
 
     The invariant is judged, as the replay tester judges it, over the
@@ -66,5 +70,5 @@ def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
     return None
 
 
-def _who(cfg) -> str:
+def _who(cfg: ReplayModule) -> str:
     return "planner's" if cfg.where == "planner" else f"module '{cfg.module}''s"

@@ -10,7 +10,7 @@ passes once it does not.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
@@ -19,6 +19,9 @@ from astaa_deft.model.geometry import Box, interpolate_pose, overlap
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_module import CollisionOracle, TrajectoryLayout
 from astaa_deft.analysis.deft.extract import Extraction
+
+if TYPE_CHECKING:
+    from astaa_deft.analysis.deft.suite import Suite
 from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.replay import trajectory_points
 
@@ -83,7 +86,7 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
     return entries
 
 
-def check_oracle(suite, entry: Mapping[str, Any]) -> str | None:
+def check_oracle(suite: Suite, entry: Mapping[str, Any]) -> str | None:
     """Run by the pytest plugin: the reason the test fails, or None."""
     if entry.get("kind") == "invariant":  # written by `astaa-deft minimise`
         from astaa_deft.analysis.deft.invariant_oracle import check_invariant_oracle
@@ -92,6 +95,8 @@ def check_oracle(suite, entry: Mapping[str, Any]) -> str | None:
     from astaa_deft.analysis.deft.snapshots import usable_snapshot
 
     cfg = suite.spec.planner
+    # Collision oracles are exported only for a planner with a collision oracle and a trajectory layout.
+    assert cfg is not None and cfg.collision is not None and cfg.trajectory is not None, "not a collision suite"
     snapshot = usable_snapshot(suite, dict(entry)) if not suite.replayed else None
     if snapshot is not None:  # fail fast: one step from the state just before the frame
         result = suite.result_from_snapshot(entry["frame"], snapshot)

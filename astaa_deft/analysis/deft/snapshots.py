@@ -87,7 +87,7 @@ def add_oracle_snapshots(directory: Path) -> int:
     return kept
 
 
-def _same(a, b) -> bool:
+def _same(a: object, b: object) -> bool:
     return json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
 
 
