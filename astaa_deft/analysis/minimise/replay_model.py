@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import copy
 import functools
-import json
 import pickle
 import time
 from collections.abc import Hashable, Mapping, Sequence
@@ -45,6 +44,7 @@ from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
 from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
+from astaa_deft.analysis.deft.run_metadata import RunMetadata
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log import layout
@@ -141,10 +141,7 @@ def load_spec_for(log: LogContents, spec_path: str | None, *, trust_log_spec: bo
 
 def run_params(log: LogContents) -> dict[str, str]:
     """The params the run was recorded with: the replayed planner must be built the same way."""
-    try:
-        return json.loads(log.metadata.get(layout.RUN_METADATA, {}).get("params", "{}"))
-    except ValueError:
-        return {}
+    return RunMetadata.of(log).params
 
 
 def replayable(spec: Spec, invariant_name: str, failure_module: str | None = None) -> str | None:

@@ -32,6 +32,7 @@ from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.engine.monitor import with_typed_invariants
 from astaa_deft.engine.spec.executes import TRUST_FLAG, what_spec_runs
 from astaa_deft.io.output_place import Place, ready_dir, writing
+from astaa_deft.analysis.deft.run_metadata import RunMetadata
 from astaa_deft.analysis.minimise.anchoring import choose_anchor, pin_to_anchor
 from astaa_deft.analysis.minimise.ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from astaa_deft.analysis.minimise.live_tester import MARGIN_SECONDS, LiveRun, LiveTester
@@ -188,7 +189,7 @@ def _read_failing_run(log_path: Path, out_dir: Path, options: MinimiseOptions, s
     for warning in log.warnings:
         say(f"warning: {warning}")
     spec, spec_path = _spec_of(log, options, say, scratch)
-    recorded_with = log.metadata.get(layout.RUN_METADATA, {}).get("spec")
+    recorded_with = RunMetadata.of(log).spec
     if recorded_with and recorded_with != spec.name:
         raise InputError(Problem(str(log_path), None, None,
                                  f"this log was recorded with spec '{recorded_with}', not '{spec.name}'",
@@ -302,8 +303,8 @@ def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> Min
                      f"mutations; fails {failure.invariant}"))
     xml = write_testcase_file(out_dir, testcase, job.spec)
     files = {"test case": xml}
-    confirmation, confirm_log = confirm_live(live, testcase, xml, result, runs=job.options.confirm, say=job.say,
-                                             scratch=job.scratch, jobs=job.options.jobs)
+    confirmation, confirm_log = confirm_live(live, testcase, xml, result, options=job.options, say=job.say,
+                                             scratch=job.scratch)
     if result.tester == Tester.REPLAY and job.model is not None:
         files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, job.model, result, xml)
         files["module tests"] = write_module_tests(out_dir / TESTS_DIR, job.model, result).parent
@@ -365,13 +366,15 @@ def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure,
     return TestResult(Outcome.FAIL, fails[0].detail, rate), per_test
 
 
-def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, *, runs: int,
-                 say: Progress, scratch: Path, jobs: int = 1) -> tuple[Confirmation, Path | None]:
-    """Run the minimal test case live ``runs`` times (``jobs`` at once): its failure rate, a failing run's log.
+def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, *,
+                 options: MinimiseOptions, say: Progress, scratch: Path) -> tuple[Confirmation, Path | None]:
+    """Run the minimal test case live ``options.confirm`` times (``options.jobs`` at once): its failure rate,
+    a failing run's log.
 
     A whole-system minimisation keeps the log of the first failing run (or
     the last run) in ``scratch``; a replay one records none.
     """
+    runs, jobs = options.confirm, options.jobs
     if runs == 0:
         return Confirmation(runs=0, failures=0, rate=None), None
     horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
