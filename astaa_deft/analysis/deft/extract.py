@@ -582,7 +582,7 @@ _Outcome = tuple[Comparison, bool, float]
 # A cheap output's candidates are stepped in the runner itself, one after another, a shadow copy following
 # one output behind (see fork_replay.shadow), when the recorded planner answered within this window: a cheap
 # cycle, whose wrong frames are cheap too (a wrong frame stepped in the runner cannot be cut). Forking a worker
-# per candidate costs milliseconds per output, as much as such a step.
+# per candidate costs as much as such a step (docs/performance.md, "analysis").
 SPECULATE_MAX_WINDOW_S = 0.05
 # The runner's word to its shadow on an output: (KEEP, i): candidate i is kept, step it and follow on;
 # (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
@@ -751,8 +751,7 @@ def _judged(cfg: ReplayModule, replayed: Any, expected: _Expected) -> tuple[Comp
 
     Most replayed outputs equal the recording: then the trajectories are
     the same points, and their comparison is known without measuring
-    (``validator.identical``; measured on the OMPL stack, the measuring took
-    a third of a cheap cycle's replay).
+    (``validator.identical``; why: docs/performance.md, "analysis").
     """
     exact = _text(replayed) == expected.text
     if exact and cfg.trajectory is not None:
