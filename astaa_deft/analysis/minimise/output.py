@@ -39,7 +39,7 @@ from astaa_deft.io.output_place import write_atomic
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation
 from astaa_deft.analysis.minimise.replay_model import Frame, ReplayModel
 from astaa_deft.model.sut import Spec
-from astaa_deft.analysis.minimise.stages import Minimisation, Tester
+from astaa_deft.analysis.minimise.stages import Minimisation, TesterKind
 from astaa_deft.model.json import JsonObject
 
 MINIMAL_XML = "minimal.xml"
@@ -227,7 +227,7 @@ class MinimiseSummary:
         out: JsonObject = {
             "log": str(self.log),
             "failure": asdict(result.failure),
-            "tester": Tester(result.tester).value,
+            "tester": TesterKind(result.tester).value,
             "why": self.why,
             "verdict": self.verdict,
             "stages": [asdict(s) for s in result.stages],
@@ -248,7 +248,7 @@ class MinimiseSummary:
             "notes": list(result.notes),
             "files": {k: str(v) for k, v in self.files.items()},
         }
-        if result.tester == Tester.REPLAY:
+        if result.tester == TesterKind.REPLAY:
             out["frames"] = {"before": result.outputs_replayed, "after": len(result.frames)}
             out["replays"] = self.replay_tests
         else:
@@ -266,14 +266,14 @@ class MinimiseSummary:
     def text(self) -> str:
         """The console's summary: one line per stage, the culprit in words, the verdict."""
         result = self.result
-        lines = [f"failure: {result.failure.describe()}", f"tester: {Tester(result.tester).value} ({self.why})"]
+        lines = [f"failure: {result.failure.describe()}", f"tester: {TesterKind(result.tester).value} ({self.why})"]
         for s in result.stages:
             state = "" if s.complete else " (stopped by --max-tests)"
             note = f"; {s.note}" if s.note else ""
             lines.append(f"  {s.name:<12} {s.unit:<9} {s.before:>5} → {s.after:<4} "
                          f"{s.tests_run:>4} tests, {s.cache_hits:>3} cache hits, {s.seconds:6.1f} s{state}{note}")
         parts = [f"mutations {len(result.mutations)} → {len(result.chosen)}"]
-        if result.tester == Tester.REPLAY:
+        if result.tester == TesterKind.REPLAY:
             parts.append(f"frames {result.outputs_replayed} → {len(result.frames)}")
         parts.append(f"fields {self.fields_before} → {result.fields_count()}")
         lines.append(f"minimised: {', '.join(parts)}; {sum(s.tests_run for s in result.stages)} tests, "

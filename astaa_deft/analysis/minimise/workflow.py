@@ -54,7 +54,7 @@ from astaa_deft.analysis.minimise.replay_pool import ReplayPool, ReplayUnavailab
 from astaa_deft.analysis.minimise.replay_tester import DeftTester, default_setup
 from astaa_deft.analysis.minimise.restrict import restricted_testcase
 from astaa_deft.analysis.minimise.stages import (
-    Failure, Minimisation, Tester, TesterChoice, choose_tester, find_failure, minimise_live, minimise_replay,
+    Failure, Minimisation, TesterChoice, TesterKind, choose_tester, find_failure, minimise_live, minimise_replay,
 )
 from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.sut import Spec
@@ -152,14 +152,14 @@ class _Job:
         """Go on with whole-system re-runs (``note`` says why, to the user and in the summary)."""
         self.say(f"note: {note}")
         self.notes.append(note)
-        self.choice = TesterChoice(Tester.LIVE, why)
+        self.choice = TesterChoice(TesterKind.LIVE, why)
 
 
 def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
               scratch: Path) -> MinimiseReport:
     job = _read_failing_run(log_path, out_dir, options, say, scratch)
     minimised: Minimisation | None = None
-    if job.choice.tester == Tester.REPLAY:
+    if job.choice.tester == TesterKind.REPLAY:
         in_replay = _minimise_in_replay(job)
         if isinstance(in_replay, MinimiseReport):
             return in_replay
@@ -168,7 +168,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
                       repeats=options.repeats, original=job.original, testcase_id=f"minimal-{_id(job.original)}",
                       progress=(lambda line: say(f"  {line}")))
     try:
-        if job.choice.tester == Tester.LIVE:
+        if job.choice.tester == TesterKind.LIVE:
             in_live = _minimise_live(job, live)
             if isinstance(in_live, MinimiseReport):
                 return in_live
@@ -305,7 +305,7 @@ def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> Min
     files = {"test case": xml}
     confirmation, confirm_log = confirm_live(live, testcase, xml, result, options=job.options, say=job.say,
                                              scratch=job.scratch)
-    if result.tester == Tester.REPLAY and job.model is not None:
+    if result.tester == TesterKind.REPLAY and job.model is not None:
         files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, job.model, result, xml)
         files["module tests"] = write_module_tests(out_dir / TESTS_DIR, job.model, result).parent
     elif confirm_log is not None:
@@ -380,7 +380,7 @@ def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimi
     horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
     say(f"confirming {xml.name} live through the proxy ({runs} run(s)" + (f", {jobs} at once)" if jobs > 1 else ")"))
     kept: Path | None = None
-    records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == Tester.LIVE else None for n in range(runs)]
+    records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == TesterKind.LIVE else None for n in range(runs)]
     with ThreadPoolExecutor(max(1, min(jobs, runs)), thread_name_prefix="confirm") as pool:
         live.pin(testcase, result.chosen)
         outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml),
@@ -406,7 +406,7 @@ def verdict(result: Minimisation, confirmation: Confirmation) -> tuple[str, bool
     if confirmation.requested and not confirmation.runs:
         return f"minimised, but no confirmation run could tell: {'; '.join(confirmation.details)}", False
     if not confirmation.runs:
-        if result.tester == Tester.REPLAY:
+        if result.tester == TesterKind.REPLAY:
             return "minimised; reproduced in the planner replay (not run live: --confirm 0)", True
         return "minimised (not confirmed live: --confirm 0)", True
     if rate == 1.0:
@@ -414,7 +414,7 @@ def verdict(result: Minimisation, confirmation: Confirmation) -> tuple[str, bool
     if rate:
         return (f"flaky: the minimal test case fails in {confirmation.failures} of {confirmation.runs} "
                 f"live runs ({rate:.0%})"), False
-    if result.tester == Tester.REPLAY:
+    if result.tester == TesterKind.REPLAY:
         return ("minimised in the planner replay, but the minimal test case did not reproduce the failure live "
                 "(the replay is open-loop: see docs/minimise.md)"), False
     return "the minimal test case did not reproduce the failure in its confirmation runs", False
