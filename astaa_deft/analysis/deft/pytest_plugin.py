@@ -20,6 +20,7 @@ from astaa_deft.analysis.deft.export import MANIFEST
 if TYPE_CHECKING:
     from _pytest._code.code import TerminalRepr, TracebackStyle
 
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
     from astaa_deft.analysis.deft.suite import FrameResult, Suite
 
 
@@ -34,18 +35,18 @@ class DeftSuiteFile(pytest.File):
         from astaa_deft.analysis.deft.suite import Suite
 
         suite = Suite(self.path.parent)
-        oracles = list(enumerate(suite.manifest.get("oracles", [])))
+        oracles = list(enumerate(suite.oracles))
         # Oracle tests with a snapshot of the state before their frame run first: one step each, so a
         # suite that reproduces a failure fails at once (pytest -x) instead of after the whole replay.
         for n, oracle in oracles:
-            if oracle.get("snapshot"):
-                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+            if oracle.snapshot:
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle.kind}_{n:03d}", suite=suite,
                                              oracle=oracle)
         for position, entry in enumerate(suite.frames):
             yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", suite=suite, position=position)
         for n, oracle in oracles:
-            if not oracle.get("snapshot"):
-                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+            if not oracle.snapshot:
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle.kind}_{n:03d}", suite=suite,
                                              oracle=oracle)
 
 
@@ -121,7 +122,7 @@ class OracleFailure(AstaaDeftError):
 
 
 class OracleTest(pytest.Item):
-    def __init__(self, *, suite: Suite, oracle: dict[str, Any], **kwargs: Any) -> None:
+    def __init__(self, *, suite: Suite, oracle: OracleEntry, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.suite = suite
         self.oracle = oracle
@@ -136,7 +137,7 @@ class OracleTest(pytest.Item):
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
                      style: TracebackStyle | None = None) -> str | TerminalRepr:
         if isinstance(excinfo.value, OracleFailure):
-            return f"oracle {self.oracle.get('kind')}: {excinfo.value}"
+            return f"oracle {self.oracle.kind}: {excinfo.value}"
         return super().repr_failure(excinfo)
 
     def reportinfo(self) -> tuple[Path, int | None, str]:
