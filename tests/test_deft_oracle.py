@@ -161,3 +161,17 @@ def test_oracle_tests_run_first_from_a_snapshot_before_their_frame(tmp_path):
         assert all(usable_snapshot(Suite(suite_dir), OracleEntry.from_json(oracle)) is None for oracle in oracles)
     finally:
         sys.path.remove(str(SUT))
+
+
+def test_an_oracle_entry_reads_its_optional_fields_as_absent():
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
+
+    bare = OracleEntry.from_json({"kind": "collision", "frame": 4})
+    assert (bare.kind, bare.frame, bare.snapshot, bare.snapshot_params, bare.snapshot_code) == (
+        "collision", 4, None, None, None)
+    assert bare.start_ns == 0 and bare.invariant is None
+    full = OracleEntry.from_json({"kind": "invariant", "invariant": "planned_speed", "frame": 7, "start_ns": 12,
+                                  "snapshot": "snapshots/frame_00007.pickle",
+                                  "snapshot_of": {"params": {"a": "1"}, "code": "abc"}})
+    assert (full.invariant, full.start_ns, full.snapshot, full.snapshot_params, full.snapshot_code) == (
+        "planned_speed", 12, "snapshots/frame_00007.pickle", {"a": "1"}, "abc")

@@ -334,3 +334,22 @@ def test_jobs_below_one_is_an_input_error_naming_the_option():
 
     with pytest.raises(InputError, match="--jobs"):
         MinimiseOptions(jobs=0).check()
+
+
+def test_the_confirmation_in_summary_json_has_its_counts_only_when_no_run_was_asked_for():
+    assert Confirmation(runs=0, failures=0, rate=None).to_json() == {
+        "requested": 0, "runs": 0, "failures": 0, "rate": None}
+    ran = Confirmation(runs=2, failures=1, rate=0.5, requested=3, seconds=1.23456,
+                       details=("could not tell", "fail"))
+    assert ran.to_json() == {"requested": 3, "runs": 2, "failures": 1, "rate": 0.5, "seconds": 1.235,
+                             "details": ["could not tell", "fail"]}
+    assert list(ran.to_json()) == ["requested", "runs", "failures", "rate", "seconds", "details"]
+
+
+def test_live_only_chooses_the_live_tester_whatever_the_failure():
+    from astaa_deft.analysis.minimise.stages import TesterKind, choose_tester
+
+    failure = Failure("planned_speed", "bound", None, "trajectory", 1.0, "", "Silent")
+    choice = choose_tester(SPEC, failure, live_only=True)
+    assert choice.tester is TesterKind.LIVE and choice.why == "--live-only" and choice.entry is None
+    assert json.dumps({"tester": choice.tester.value}) == '{"tester": "live"}'
