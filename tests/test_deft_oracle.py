@@ -137,6 +137,7 @@ def test_frame_tests_fail_with_a_readable_diff_when_the_output_changes(tmp_path)
 
 def test_oracle_tests_run_first_from_a_snapshot_before_their_frame(tmp_path):
     """TTRF: a suite that reproduces a collision fails at its first test, one planner step from a snapshot."""
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
     from astaa_deft.analysis.deft.snapshots import usable_snapshot
     from astaa_deft.analysis.deft.suite import Suite
 
@@ -153,10 +154,24 @@ def test_oracle_tests_run_first_from_a_snapshot_before_their_frame(tmp_path):
     try:
         suite = Suite(suite_dir)
         for oracle in oracles:  # one step from the snapshot answers as the whole replay in order does
-            fast = suite.result_from_snapshot(oracle["frame"], usable_snapshot(suite, oracle))
+            fast = suite.result_from_snapshot(oracle["frame"], usable_snapshot(suite, OracleEntry.from_json(oracle)))
             slow = next(r for r in suite.results() if r.index == oracle["frame"])
             assert fast.message == slow.message and fast.error is None
         set_params(suite_dir, stop="on")  # another planner than the snapshot's: replayed from the start
-        assert all(usable_snapshot(Suite(suite_dir), oracle) is None for oracle in oracles)
+        assert all(usable_snapshot(Suite(suite_dir), OracleEntry.from_json(oracle)) is None for oracle in oracles)
     finally:
         sys.path.remove(str(SUT))
+
+
+def test_an_oracle_entry_reads_its_optional_fields_as_absent():
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
+
+    bare = OracleEntry.from_json({"kind": "collision", "frame": 4})
+    assert (bare.kind, bare.frame, bare.snapshot, bare.snapshot_params, bare.snapshot_code) == (
+        "collision", 4, None, None, None)
+    assert bare.start_ns == 0 and bare.invariant is None
+    full = OracleEntry.from_json({"kind": "invariant", "invariant": "planned_speed", "frame": 7, "start_ns": 12,
+                                  "snapshot": "snapshots/frame_00007.pickle",
+                                  "snapshot_of": {"params": {"a": "1"}, "code": "abc"}})
+    assert (full.invariant, full.start_ns, full.snapshot, full.snapshot_params, full.snapshot_code) == (
+        "planned_speed", 12, "snapshots/frame_00007.pickle", {"a": "1"}, "abc")

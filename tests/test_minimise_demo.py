@@ -33,6 +33,7 @@ from astaa_deft.engine.intercept import load_interceptor, load_testcase
 from astaa_deft.io.log import layout
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.analysis.deft.invariant_oracle import check_invariant_oracle
+from astaa_deft.analysis.deft.oracle_entry import OracleEntry
 from astaa_deft.analysis.minimise.replay_model import Job, ReplaySetup
 from astaa_deft.analysis.minimise.replay_pool import ReplayPool
 from astaa_deft.analysis.minimise.mutations import ReceivedStreams, read_mutations, sent_stream
@@ -123,7 +124,7 @@ def test_module_tests_fail_on_the_culprit_and_pass_once_the_planner_is_fixed(min
     [oracle] = suite.manifest["oracles"]
     assert oracle["kind"] == "invariant" and oracle["invariant"] == "planned_speed"
     assert all(r.error is None for r in suite.results())
-    assert "planned_speed" in (check_invariant_oracle(suite, oracle) or "")
+    assert "planned_speed" in (check_invariant_oracle(suite, OracleEntry.from_json(oracle)) or "")
     # The same suite against the planner with the defect guarded: the oracle holds.
     fixed = tmp_path / "fixed"
     fixed.mkdir()
@@ -131,7 +132,7 @@ def test_module_tests_fail_on_the_culprit_and_pass_once_the_planner_is_fixed(min
     manifest["params"]["defects"] = "off"
     (fixed / "deft.json").write_text(json.dumps(manifest))
     (fixed / "frames.mcap").write_bytes((out / "tests" / "frames.mcap").read_bytes())
-    assert check_invariant_oracle(Suite(fixed), oracle) is None
+    assert check_invariant_oracle(Suite(fixed), OracleEntry.from_json(oracle)) is None
 
 
 def test_pytest_runs_the_module_tests(minimised):

@@ -34,6 +34,7 @@ from astaa_deft.analysis.minimise.mutations import (
     read_mutations,
     sent_stream,
 )
+from astaa_deft.analysis.minimise.output import Confirmation
 from astaa_deft.analysis.minimise.restrict import restricted_testcase
 from astaa_deft.analysis.minimise import workflow
 from astaa_deft.analysis.minimise.stages import Failure, Minimisation
@@ -312,14 +313,14 @@ def test_verdicts_and_exit_codes():
     failure = Failure("x", "bound", None, "c", 1.0, "", "Silent")
     live = Minimisation("live", failure, [], {})
     replay = replace(live, tester="replay")
-    assert workflow.verdict(live, {"runs": 3, "failures": 3, "rate": 1.0})[1] is True
-    text, reproduced = workflow.verdict(live, {"runs": 3, "failures": 2, "rate": 2 / 3})
+    assert workflow.verdict(live, Confirmation(runs=3, failures=3, rate=1.0))[1] is True
+    text, reproduced = workflow.verdict(live, Confirmation(runs=3, failures=2, rate=2 / 3))
     assert reproduced is False and text.startswith("flaky") and "67%" in text
-    assert workflow.verdict(live, {"runs": 3, "failures": 0, "rate": 0.0})[1] is False
-    assert workflow.verdict(replay, {"runs": 0, "failures": 0, "rate": None})[1] is True
-    assert "open-loop" in workflow.verdict(replay, {"runs": 1, "failures": 0, "rate": 0.0})[0]
-    text, reproduced = workflow.verdict(replay, {"requested": 2, "runs": 0, "failures": 0, "rate": None,
-                                                 "details": ["the run did not start: port in use"]})
+    assert workflow.verdict(live, Confirmation(runs=3, failures=0, rate=0.0))[1] is False
+    assert workflow.verdict(replay, Confirmation(runs=0, failures=0, rate=None))[1] is True
+    assert "open-loop" in workflow.verdict(replay, Confirmation(runs=1, failures=0, rate=0.0))[0]
+    text, reproduced = workflow.verdict(replay, Confirmation(requested=2, runs=0, failures=0, rate=None,
+                                                             details=("the run did not start: port in use",)))
     assert reproduced is False and "port in use" in text
     # The command's exit code is the report's: 0 only when the minimal test case stands.
     report = workflow.MinimiseReport(False, text, {"verdict": text}, complete=False)
@@ -333,3 +334,22 @@ def test_jobs_below_one_is_an_input_error_naming_the_option():
 
     with pytest.raises(InputError, match="--jobs"):
         MinimiseOptions(jobs=0).check()
+
+
+def test_the_confirmation_in_summary_json_has_its_counts_only_when_no_run_was_asked_for():
+    assert Confirmation(runs=0, failures=0, rate=None).to_json() == {
+        "requested": 0, "runs": 0, "failures": 0, "rate": None}
+    ran = Confirmation(runs=2, failures=1, rate=0.5, requested=3, seconds=1.23456,
+                       details=("could not tell", "fail"))
+    assert ran.to_json() == {"requested": 3, "runs": 2, "failures": 1, "rate": 0.5, "seconds": 1.235,
+                             "details": ["could not tell", "fail"]}
+    assert list(ran.to_json()) == ["requested", "runs", "failures", "rate", "seconds", "details"]
+
+
+def test_live_only_chooses_the_live_tester_whatever_the_failure():
+    from astaa_deft.analysis.minimise.stages import TesterKind, choose_tester
+
+    failure = Failure("planned_speed", "bound", None, "trajectory", 1.0, "", "Silent")
+    choice = choose_tester(SPEC, failure, live_only=True)
+    assert choice.tester is TesterKind.LIVE and choice.why == "--live-only" and choice.entry is None
+    assert json.dumps({"tester": choice.tester.value}) == '{"tester": "live"}'

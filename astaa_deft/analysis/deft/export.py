@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from astaa_deft.io.log.reader import LoggedMessage
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.model.sut import Spec
@@ -51,7 +52,7 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
     written: dict[tuple[str, int, bytes], int] = {}
     counts: dict[str, int] = {name: 0 for name in channel_ids}
 
-    def put(name: str, msg) -> int:
+    def put(name: str, msg: LoggedMessage) -> int:
         key = (name, msg.log_time, msg.data)
         if key not in written:
             writer.message(channel_ids[name], msg.log_time, msg.data, msg.publish_time)

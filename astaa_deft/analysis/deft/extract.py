@@ -17,7 +17,7 @@ from typing import Any
 
 from astaa_deft.engine.bus.process_launch import fork_is_safe
 from astaa_deft.io.codecs import get_codec
-from astaa_deft.io.codecs.base import DecodeError
+from astaa_deft.io.codecs.base import Codec, DecodeError
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log.reader import LogContents, LoggedMessage
 from astaa_deft.model.sut import Spec
@@ -26,7 +26,7 @@ from astaa_deft.analysis.deft.fork_replay import (
     Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
     tell,
 )
-from astaa_deft.analysis.deft.frames import Stream, candidates, trigger_candidates
+from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
@@ -104,9 +104,9 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
     return out
 
 
-def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
+def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             progress: Callable[[int, int], None] = lambda done, total: None,
-            jobs: int | None = None, entry: ReplayModule | None = None, *,
+            jobs: int | None = None, entry: ReplayModule | None = None,
             decided: Callable[[Decided, int], None] = lambda outcome, total: None,
             resume: Sequence[Decided] = ()) -> Extraction:
     """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
@@ -138,6 +138,27 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner,
     return _extract(log, spec, planner, on_output, None, cfg, resume)
 
 
+@dataclass(frozen=True)
+class _TriggerModule:
+    """What every frame of a per-trigger replay reads: the module, its settings, the decodable inputs."""
+
+    planner: ReplayPlanner
+    cfg: ReplayModule
+    usable: Mapping[str, list[tuple[LoggedMessage, Any]]]  # channel → (message, decoded), log order
+
+
+@dataclass(frozen=True)
+class _TriggerAnswer:
+    """One candidate frame of a trigger as stepped (in the end: the one kept)."""
+
+    comparison: Comparison
+    choice: dict[str, int]
+    replayed: Any  # the module's answer; None: it answered nothing (or failed)
+    error: str | None  # the module crashed or hung on this frame
+    state: Any  # the planner state after this frame, or None: the planner's current state
+    tries: int
+
+
 def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
                          progress: OnOutput) -> Extraction:
     """One frame per trigger message, its replayed answer compared with the recorded one.
@@ -159,25 +180,17 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
     outputs = msgs.pop(cfg.output)
     codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
     t0 = time.perf_counter()
-    usable: dict[str, list[tuple[LoggedMessage, Any]]] = {}
-    for name, stream in msgs.items():
-        usable[name] = []
-        for m in stream:
-            with contextlib.suppress(DecodeError):  # dropped, as the module's deserialiser would
-                usable[name].append((m, codecs[name].decode(m.data)))
-    streams = {name: Stream(name, [m.log_time for m, _ in items]) for name, items in usable.items()}
+    module = _TriggerModule(planner, cfg, _decodable(msgs, codecs))
+    streams = {name: Stream(name, [m.log_time for m, _ in items]) for name, items in module.usable.items()}
     result = Extraction(outputs=len(outputs))
     result.reconstruction_seconds += time.perf_counter() - t0
     last = (outputs[-1].log_time if outputs else log_start(log)) + int(cfg.skew_ms * 1e6)
     triggers = [i for i, t in enumerate(streams[cfg.trigger].times) if t <= last]
     result.outputs, result.recorded_outputs = len(triggers), len(outputs)
     times = streams[cfg.trigger].times
-    lookback = int(cfg.lookback_ms * 1e6)
     previous: dict[str, int] = {}
     next_output = 0
     for done, t_index in enumerate(triggers, start=1):
-        t_t = times[t_index]
-        t_next = times[t_index + 1] if t_index + 1 < len(times) else None
         # Answers are paired with recorded outputs in order: a replayed answer is compared with the next
         # output; a frame answered with nothing leaves it to a later frame, which is plausible only when it
         # was logged after the next trigger (a module answers within its cycle, but may lag under load).
@@ -188,64 +201,90 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
                 expected = codecs[cfg.output].decode(output.data)
             except DecodeError as exc:
                 result.warnings.append(f"output {next_output}: recorded output does not decode ({exc})")
-        nothing_plausible = output is None or t_next is None or not _answered_in_turn(times, t_index, outputs,
-                                                                                      next_output)
+        nothing_plausible = output is None or t_index + 1 >= len(times) or not _answered_in_turn(
+            times, t_index, outputs, next_output)
         t1 = time.perf_counter()
-        options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback,
+        options = trigger_candidates(streams, cfg.trigger, t_index, previous, int(cfg.lookback_ms * 1e6),
                                      output.log_time if output is not None else None, int(cfg.skew_ms * 1e6))
         if not planner.can_snapshot:
             options = options[:1]
         start_state = planner.snapshot() if len(options) > 1 else None
         result.reconstruction_seconds += time.perf_counter() - t1
-        # (comparison, choice, replayed, error, the state after it or None if current, tries)
-        best: tuple[Comparison, dict[str, int], Any, str | None, Any, int] | None = None
-        for tries, choice in enumerate(options, start=1):
-            frame = {name: usable[name][i][1] for name, i in choice.items()}
-            if tries > 1 and start_state is not None:
-                planner.restore(copy.deepcopy(start_state))
-            t2 = time.perf_counter()
-            error = None
-            try:
-                replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
-            except StepHang as exc:
-                replayed, error = None, f"the module hangs: {exc}"
-            except Exception as exc:  # the module under test may crash on a frame: that is data
-                replayed, error = None, f"{type(exc).__name__}: {exc}"
-            t3 = time.perf_counter()
-            result.planner_seconds += t3 - t2
-            if error is not None:
-                cmp = Comparison(math.inf, math.inf, 0, "error")
-            elif replayed is None:
-                cmp = Comparison(0.0, 0.0, 0, "both empty") if nothing_plausible else Comparison(
-                    math.inf, math.inf, 0, "one empty")
-            else:
-                cmp = compare_outputs(cfg, replayed, expected)
-            result.validation_seconds += time.perf_counter() - t3
-            if error is None and cmp.within(cfg.threshold):
-                best = (cmp, choice, replayed, error, None, tries)
-                break
-            if best is None or cmp.distance < best[0].distance:
-                state = planner.snapshot() if start_state is not None else None
-                best = (cmp, choice, replayed, error, state, tries)
-        assert best is not None
-        cmp, choice, replayed, error, state, tries = best
-        if state is not None:
-            planner.restore(state)  # carry on from the state the kept frame produced
-        previous = choice
-        answered = replayed is not None and output is not None
+        kept = _answer_trigger(module, options, start_state=start_state, expected=expected,
+                               nothing_plausible=nothing_plausible, result=result)
+        if kept.state is not None:
+            planner.restore(kept.state)  # carry on from the state the kept frame produced
+        previous = kept.choice
+        answered = kept.replayed is not None and output is not None
         if answered:
             next_output += 1
+        within = kept.comparison.within(cfg.threshold)
         result.frames.append(ExtractedFrame(
-            index=len(result.frames), output=output if answered else None, trigger_time=t_t, frame_time=t_t,
-            inputs={name: usable[name][i][0] for name, i in choice.items()}, comparison=cmp,
-            accepted=error is None and cmp.within(cfg.threshold),
-            candidates_tried=tries if cmp.within(cfg.threshold) else len(options),
-            exact=error is None and _same(replayed, expected if answered else None)))
-        progress(done, len(triggers), Decided(done - 1, result.frames[-1], choice))
-        if error is not None:
-            result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {error}"))
+            index=len(result.frames), output=output if answered else None, trigger_time=times[t_index],
+            frame_time=times[t_index], inputs={name: module.usable[name][i][0] for name, i in kept.choice.items()},
+            comparison=kept.comparison, accepted=kept.error is None and within,
+            candidates_tried=kept.tries if within else len(options),
+            exact=kept.error is None and _same(kept.replayed, expected if answered else None)))
+        progress(done, len(triggers), Decided(done - 1, result.frames[-1], kept.choice))
+        if kept.error is not None:
+            result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {kept.error}"))
             break
     return result
+
+
+def _decodable(messages: Mapping[str, list[LoggedMessage]], codecs: Mapping[str, Codec]
+               ) -> dict[str, list[tuple[LoggedMessage, Any]]]:
+    """Each channel's messages that decode, with their decoded form (the others are dropped, as the module's
+    deserialiser would drop them)."""
+    usable: dict[str, list[tuple[LoggedMessage, Any]]] = {}
+    for name, stream in messages.items():
+        usable[name] = []
+        for m in stream:
+            with contextlib.suppress(DecodeError):
+                usable[name].append((m, codecs[name].decode(m.data)))
+    return usable
+
+
+def _answer_trigger(module: _TriggerModule, options: Sequence[dict[str, int]], *, start_state: Any,
+                    expected: Any, nothing_plausible: bool, result: Extraction) -> _TriggerAnswer:
+    """The candidate frame kept for one trigger: the first whose answer is within θ, else the closest.
+
+    Each candidate after the first starts from ``start_state`` (None: only
+    one candidate). The kept answer's ``state`` is None when the planner
+    already holds the state after it. Adds the step and comparison times
+    to ``result``.
+    """
+    planner, cfg = module.planner, module.cfg
+    best: _TriggerAnswer | None = None
+    for tries, choice in enumerate(options, start=1):
+        frame = {name: module.usable[name][i][1] for name, i in choice.items()}
+        if tries > 1 and start_state is not None:
+            planner.restore(copy.deepcopy(start_state))
+        t2 = time.perf_counter()
+        error = None
+        try:
+            replayed = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
+        except StepHang as exc:
+            replayed, error = None, f"the module hangs: {exc}"
+        except Exception as exc:  # the module under test may crash on a frame: that is data
+            replayed, error = None, f"{type(exc).__name__}: {exc}"
+        t3 = time.perf_counter()
+        result.planner_seconds += t3 - t2
+        if error is not None:
+            cmp = Comparison(math.inf, math.inf, 0, "error")
+        elif replayed is None:
+            cmp = Comparison(0.0, 0.0, 0, "both empty") if nothing_plausible else Comparison(
+                math.inf, math.inf, 0, "one empty")
+        else:
+            cmp = compare_outputs(cfg, replayed, expected)
+        result.validation_seconds += time.perf_counter() - t3
+        if error is None and cmp.within(cfg.threshold):
+            return _TriggerAnswer(cmp, choice, replayed, error, None, tries)
+        if best is None or cmp.distance < best.comparison.distance:
+            state = planner.snapshot() if start_state is not None else None
+            best = _TriggerAnswer(cmp, choice, replayed, error, state, tries)
+    assert best is not None
+    return best
 
 
 def _answered_in_turn(times: Sequence[int], t_index: int, outputs: list[LoggedMessage], next_output: int) -> bool:
@@ -279,149 +318,111 @@ def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
     return max(median, (outputs[index].log_time - outputs[index - 1].log_time) * 1e-9)
 
 
+@dataclass
+class _Recorded:
+    """The replayed module's recorded traffic: its inputs (decoded on demand, once) and outputs, in log order."""
+
+    messages: dict[str, list[LoggedMessage]]  # input channel → its messages
+    outputs: list[LoggedMessage]
+    streams: dict[str, Stream]
+    codecs: dict[str, Codec]
+    index_of: dict[str, dict[int, int]]  # input channel → id(message) → its index in ``messages``
+    decoded: dict[tuple[str, int], Any] = field(default_factory=dict)
+
+    @classmethod
+    def read(cls, log: LogContents, spec: Spec, cfg: ReplayModule) -> _Recorded:
+        """Raises InputError when the log lacks one of the module's channels."""
+        messages = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
+        outputs = messages.pop(cfg.output)
+        return cls(messages=messages, outputs=outputs,
+                   streams={name: Stream(name, [m.log_time for m in msgs]) for name, msgs in messages.items()},
+                   codecs={name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]},
+                   index_of={name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in messages.items()})
+
+    def decode(self, name: str, idx: int) -> Any:
+        """Message ``idx`` of input ``name`` decoded, or None if it does not decode."""
+        k = (name, idx)
+        if k not in self.decoded:
+            try:
+                self.decoded[k] = self.codecs[name].decode(self.messages[name][idx].data)
+            except DecodeError:
+                self.decoded[k] = None
+        return self.decoded[k]
+
+
+@dataclass(frozen=True)
+class _Expected:
+    """A recorded output as every candidate's replayed output is judged against it (computed once per output)."""
+
+    message: Any  # decoded; None if it does not decode
+    points: list[Any]  # its trajectory's points (a planner with a trajectory layout), else []
+    text: str  # its text form (see _text)
+
+
+@dataclass(frozen=True)
+class _Judged:
+    """The kept candidate's judgement: its comparison, whether it reproduced the output field for field,
+    the candidates tried for it (all of them when none was within θ)."""
+
+    comparison: Comparison
+    exact: bool
+    tries: int
+
+
+@dataclass
+class _Run:
+    """The state the steps of one extraction (:func:`_extract`) share, in the process that carries it on."""
+
+    planner: ReplayPlanner
+    cfg: ReplayModule
+    recorded: _Recorded
+    search: ForkedSearch | None  # None: candidates stepped here from deep copies of the state
+    progress: OnOutput
+    result: Extraction
+    previous: dict[str, int] = field(default_factory=dict)  # the choice kept for the output before
+    memory: SearchMemory = field(default_factory=SearchMemory)  # how earlier kept frames were derived, their time
+    speculation: Speculation = field(default_factory=lambda: Speculation())
+
+    def report(self, out_index: int, skipped: str | None = None) -> None:
+        """Pass on the output just decided (its frame is the last one; ``skipped``: none, and why).
+
+        A shadow following the runner reports nothing: the runner does.
+        """
+        if skipped is not None:
+            self.result.skipped.append((out_index, skipped))
+        frame = self.result.frames[-1] if skipped is None else None
+        if self.speculation.following is None:
+            index_of = self.recorded.index_of
+            self.progress(out_index + 1, len(self.recorded.outputs), Decided(
+                out_index, frame, None if frame is None else {
+                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped))
+
+    def keep(self, out_index: int, cand: Candidate, judged: _Judged) -> None:
+        """Record ``cand`` as the frame of output ``out_index`` and report it."""
+        self.previous = dict(cand.choice)
+        recorded, cfg = self.recorded, self.cfg
+        self.result.frames.append(ExtractedFrame(
+            index=len(self.result.frames), output=recorded.outputs[out_index],
+            trigger_time=recorded.streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
+            inputs={name: recorded.messages[name][idx] for name, idx in cand.choice.items()},
+            comparison=judged.comparison, accepted=judged.comparison.within(cfg.threshold),
+            candidates_tried=judged.tries, exact=judged.exact))
+        self.report(out_index)
+
+
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
              search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = ()) -> Extraction:
-    streams_msgs = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
-    outputs = streams_msgs.pop(cfg.output)
-    streams = {name: Stream(name, [m.log_time for m in msgs]) for name, msgs in streams_msgs.items()}
-    codecs = {name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]}
-    decoded: dict[tuple[str, int], Any] = {}
+    """A frame per recorded output, in order (see :func:`extract`); ``search`` None: no forking.
 
-    def decode(name: str, idx: int) -> Any:
-        k = (name, idx)
-        if k not in decoded:
-            try:
-                decoded[k] = codecs[name].decode(streams_msgs[name][idx].data)
-            except DecodeError:
-                decoded[k] = None
-        return decoded[k]
-
-    result = Extraction(outputs=len(outputs))
-    previous: dict[str, int] = {}
-    lookback = int(cfg.lookback_ms * 1e6)
-    skew = int(cfg.skew_ms * 1e6)
-    memory = SearchMemory()  # how the kept frames of earlier outputs were derived (tried first), how long they took
-    speculation = Speculation()
-
-    def report(out_index: int, skipped: str | None = None) -> None:  # a shadow follows the runner silently
-        if skipped is not None:
-            result.skipped.append((out_index, skipped))
-        frame = result.frames[-1] if skipped is None else None
-        if speculation.following is None:
-            progress(out_index + 1, len(outputs), Decided(out_index, frame, None if frame is None else {
-                name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped))
-
-    index_of = {name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in streams_msgs.items()}
-    for out_index, output in enumerate(outputs):
-        t0 = time.perf_counter()
-        generic = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
-                             outputs[out_index - 1].log_time + skew if out_index else None)
-        window = _recorded_window_s(streams[cfg.trigger], generic, output, outputs[out_index - 1]
-                                    if out_index else None, skew) if generic else 0.0
-        if out_index < len(resume):  # decided before: stepped once, as then; what it taught is learned again
-            before = resume[out_index]
-            if before.frame is None or before.choice is None:
-                report(out_index, before.skipped or "skipped")
-                continue
-            previous = dict(before.choice)
-            stepped, step_s = _step_decided(planner, before.frame, previous, decode, streams_msgs, output)
-            result.frames.append(replace(stepped, index=len(result.frames)))
-            for cand in generic if before.frame.accepted else ():
-                if dict(cand.choice) == previous:
-                    memory.learn(cand, step_s, window, expensive=search is not None and window > SPECULATE_MAX_WINDOW_S)
-            report(out_index)
-            continue
-        # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
-        # a planner step, so the frames nearest their trigger come first and only the first few are tried.
-        expensive = search is not None and window > SPECULATE_MAX_WINDOW_S
-        options, capped = memory.order(generic, expensive=expensive, first=not previous and planner.can_snapshot)
-        result.reordered += options[:1] != generic[:1]
-        t1 = time.perf_counter()
-        result.reconstruction_seconds += t1 - t0
-        try:
-            expected = codecs[cfg.output].decode(output.data)
-        except DecodeError as exc:
-            expected = None
-            result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
-        expected_points = trajectory_points(expected, cfg.trajectory) if cfg.trajectory is not None else []
-        expected_text = _text(expected)  # once per output: every candidate's output is checked against it
-        result.validation_seconds += time.perf_counter() - t1
-        if not options:
-            report(out_index, "an input had no message yet")
-            continue
-        if not planner.can_snapshot:
-            options = options[:1]
-        if search is not None:
-            full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
-            limit = memory.budget.neighbour_limit(full_limit) if expensive else memory.budget.limit(window, full_limit)
-            kept = _search_forked(search, options, decode, planner, cfg, expected, expected_points, expected_text,
-                                  limit, full_limit, result, out_index, speculation, cheap=not expensive)
-            if kept is None:
-                report(out_index, "no candidate frame decodes or finishes within its time limit")
-                continue
-            cand, cmp, exact, tries, step_s = kept
-            result.capped += capped and not cmp.within(cfg.threshold)
-            if cmp.within(cfg.threshold):
-                memory.learn(cand, step_s, window, expensive)
-            previous = dict(cand.choice)
-            result.frames.append(ExtractedFrame(
-                index=len(result.frames), output=output,
-                trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
-                inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
-                comparison=cmp, accepted=cmp.within(cfg.threshold), candidates_tried=tries, exact=exact))
-            report(out_index)
-            continue
-        # Several candidates: each must start from the same planner state.
-        t1 = time.perf_counter()
-        start_state = planner.snapshot() if len(options) > 1 else None
-        result.planner_seconds += time.perf_counter() - t1
-        best = None  # (comparison, candidate, equal to the recording, state after it or None if current, tries)
-        for tries, cand in enumerate(options, start=1):
-            t0 = time.perf_counter()
-            frame = {name: decode(name, idx) for name, idx in cand.choice.items()}
-            result.reconstruction_seconds += time.perf_counter() - t0
-            if any(v is None for v in frame.values()):
-                continue
-            t1 = time.perf_counter()
-            if tries > 1 and start_state is not None:
-                planner.restore(copy.deepcopy(start_state))
-            try:
-                replayed = planner.step(frame)
-            except Exception as exc:  # the planner under test may crash on a frame: that is data
-                replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
-            t2 = time.perf_counter()
-            result.planner_seconds += t2 - t1
-            cmp, exact = _judged(cfg, replayed, expected, expected_points, expected_text)
-            t1 = time.perf_counter()
-            result.validation_seconds += t1 - t2
-            if cmp.within(cfg.threshold):
-                best = (cmp, cand, exact, None, tries)
-                memory.learn(cand)
-                break
-            if best is None or cmp.distance < best[0].distance:
-                state = planner.snapshot() if start_state is not None else None
-                best = (cmp, cand, exact, state, tries)
-            result.planner_seconds += time.perf_counter() - t1
-        if best is None:
-            report(out_index, "no candidate frame decodes")
-            continue
-        cmp, cand, exact, state, _ = best
-        if state is not None:
-            planner.restore(state)  # carry on from the state the kept frame produced
-        tries = len(options) if not cmp.within(cfg.threshold) else best[4]
-        previous = dict(cand.choice)
-        result.frames.append(ExtractedFrame(
-            index=len(result.frames),
-            output=output,
-            trigger_time=streams[cfg.trigger].times[cand.choice[cfg.trigger]],
-            frame_time=cand.frame_time,
-            inputs={name: streams_msgs[name][idx] for name, idx in cand.choice.items()},
-            comparison=cmp,
-            accepted=cmp.within(cfg.threshold),
-            candidates_tried=tries,
-            exact=exact,
-        ))
-        report(out_index)
+    In a forked search, the process that returns is the one holding the
+    state after the last output kept; a shadow that was told to keep the
+    last output exits here instead (the runner reports).
+    """
+    recorded = _Recorded.read(log, spec, cfg)
+    run = _Run(planner, cfg, recorded, search, progress, Extraction(outputs=len(recorded.outputs)))
+    for out_index in range(len(recorded.outputs)):
+        _extract_output(run, out_index, resume[out_index] if out_index < len(resume) else None)
+    speculation, result = run.speculation, run.result
     if speculation.following is not None:  # a shadow told KEEP on the last output: the runner reports, not it
         os._exit(0)
     if search is not None:  # the counters as the last runner holds them (each winner takes them over)
@@ -429,6 +430,129 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
         result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
         result.first_stepped_in_runner, result.first_missed_in_runner = speculation.hits, speculation.misses
     return result
+
+
+def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
+    """Decide output ``out_index``: step it as ``before`` decided it (resumed), or search its candidates."""
+    t0 = time.perf_counter()
+    cfg, result, recorded, planner = run.cfg, run.result, run.recorded, run.planner
+    outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
+    output = outputs[out_index]
+    generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
+                         int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None)
+    window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
+                                if out_index else None, skew) if generic else 0.0
+    if before is not None:
+        _step_resumed(run, out_index, before, generic, window)
+        return
+    # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
+    # a planner step, so the frames nearest their trigger come first and only the first few are tried.
+    expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
+    options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot)
+    result.reordered += options[:1] != generic[:1]
+    t1 = time.perf_counter()
+    result.reconstruction_seconds += t1 - t0
+    expected = _expected(run, out_index)
+    result.validation_seconds += time.perf_counter() - t1
+    if not options:
+        run.report(out_index, "an input had no message yet")
+        return
+    if not planner.can_snapshot:
+        options = options[:1]
+    if run.search is None:
+        kept = _search_in_process(run, options, expected)
+        if kept is None:
+            run.report(out_index, "no candidate frame decodes")
+            return
+        run.keep(out_index, *kept)
+        return
+    full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
+    limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
+    searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive)
+    if searched is None:
+        run.report(out_index, "no candidate frame decodes or finishes within its time limit")
+        return
+    cand, judged, step_s = searched
+    within = judged.comparison.within(cfg.threshold)
+    result.capped += capped and not within
+    if within:
+        run.memory.learn(cand, step_s, window, expensive)
+    run.keep(out_index, cand, judged)
+
+
+def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[Candidate], window: float) -> None:
+    """An output decided before the extraction was resumed: stepped once, as then; what it taught is learned
+    again."""
+    if before.frame is None or before.choice is None:
+        run.report(out_index, before.skipped or "skipped")
+        return
+    run.previous = dict(before.choice)
+    recorded = run.recorded
+    stepped, step_s = _step_decided(run.planner, before.frame, run.previous, recorded.decode, recorded.messages,
+                                    recorded.outputs[out_index])
+    run.result.frames.append(replace(stepped, index=len(run.result.frames)))
+    for cand in generic if before.frame.accepted else ():
+        if dict(cand.choice) == run.previous:
+            run.memory.learn(cand, step_s, window,
+                             expensive=run.search is not None and window > SPECULATE_MAX_WINDOW_S)
+    run.report(out_index)
+
+
+def _expected(run: _Run, out_index: int) -> _Expected:
+    """Recorded output ``out_index`` decoded (a warning in the result when it does not decode)."""
+    cfg = run.cfg
+    try:
+        message = run.recorded.codecs[cfg.output].decode(run.recorded.outputs[out_index].data)
+    except DecodeError as exc:
+        message = None
+        run.result.warnings.append(f"output {out_index}: recorded output does not decode ({exc})")
+    points = trajectory_points(message, cfg.trajectory) if cfg.trajectory is not None else []
+    return _Expected(message, points, _text(message))
+
+
+def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expected
+                       ) -> tuple[Candidate, _Judged] | None:
+    """The candidate kept for one output, each stepped here from a deep copy of the state before it: the
+    first within θ, else the closest (the planner is left in the state after it); None if none decodes."""
+    planner, cfg, result = run.planner, run.cfg, run.result
+    # Several candidates: each must start from the same planner state.
+    t1 = time.perf_counter()
+    start_state = planner.snapshot() if len(options) > 1 else None
+    result.planner_seconds += time.perf_counter() - t1
+    best = None  # (comparison, candidate, equal to the recording, state after it or None if current, tries)
+    for tries, cand in enumerate(options, start=1):
+        t0 = time.perf_counter()
+        frame = {name: run.recorded.decode(name, idx) for name, idx in cand.choice.items()}
+        result.reconstruction_seconds += time.perf_counter() - t0
+        if any(v is None for v in frame.values()):
+            continue
+        t1 = time.perf_counter()
+        if tries > 1 and start_state is not None:
+            planner.restore(copy.deepcopy(start_state))
+        try:
+            replayed = planner.step(frame)
+        except Exception as exc:  # the planner under test may crash on a frame: that is data
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        t2 = time.perf_counter()
+        result.planner_seconds += t2 - t1
+        cmp, exact = _judged(cfg, replayed, expected)
+        t1 = time.perf_counter()
+        result.validation_seconds += t1 - t2
+        if cmp.within(cfg.threshold):
+            best = (cmp, cand, exact, None, tries)
+            run.memory.learn(cand)
+            break
+        if best is None or cmp.distance < best[0].distance:
+            state = planner.snapshot() if start_state is not None else None
+            best = (cmp, cand, exact, state, tries)
+        result.planner_seconds += time.perf_counter() - t1
+    if best is None:
+        return None
+    cmp, cand, exact, state, _ = best
+    if state is not None:
+        planner.restore(state)  # carry on from the state the kept frame produced
+    tries = len(options) if not cmp.within(cfg.threshold) else best[4]
+    return cand, _Judged(cmp, exact, tries)
 
 
 def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
@@ -452,10 +576,13 @@ def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, pr
     return max(output.log_time + skew_ns - start, skew_ns) * 1e-9
 
 
+# One candidate stepped: (its comparison, equal to the recorded output field for field, its step's CPU seconds).
+_Outcome = tuple[Comparison, bool, float]
+
 # A cheap output's candidates are stepped in the runner itself, one after another, a shadow copy following
 # one output behind (see fork_replay.shadow), when the recorded planner answered within this window: a cheap
 # cycle, whose wrong frames are cheap too (a wrong frame stepped in the runner cannot be cut). Forking a worker
-# per candidate costs milliseconds per output, as much as such a step.
+# per candidate costs as much as such a step (docs/performance.md, "analysis").
 SPECULATE_MAX_WINDOW_S = 0.05
 # The runner's word to its shadow on an output: (KEEP, i): candidate i is kept, step it and follow on;
 # (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
@@ -556,17 +683,19 @@ def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any
         speculation.tell(TRY_ON, tried)  # does not return: the shadow carries on from the state before
 
 
-def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayPlanner, cfg: ReplayModule,
-                   expected: Any, expected_points: list, expected_text: str, limit_s: float, full_limit_s: float,
-                   result: Extraction, out_index: int, speculation: Speculation, cheap: bool):
-    """(candidate, comparison, exact, tries, step seconds) kept for one output, in the process that carries
+def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected, *, limit_s: float,
+                   full_limit_s: float, cheap: bool) -> tuple[Candidate, _Judged, float] | None:
+    """(candidate, its judgement, its step's CPU seconds) kept for one output, in the process that carries
     on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted.
     A ``cheap`` output's candidates are stepped right here, one after another (see :func:`_step_in_turn`)."""
+    planner, cfg, result, speculation = run.planner, run.cfg, run.result, run.speculation
+    assert run.search is not None
+    search = run.search
     t0 = time.perf_counter()
-    frames = [{name: decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
+    frames = [{name: run.recorded.decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
     result.reconstruction_seconds += time.perf_counter() - t0
 
-    def run(index: int):
+    def run_candidate(index: int) -> _Outcome | None:
         frame = frames[index]
         if any(v is None for v in frame.values()):
             return None
@@ -576,14 +705,14 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
         step_s = time.process_time() - started
-        return (*_judged(cfg, replayed, expected, expected_points, expected_text), step_s)
+        return (*_judged(cfg, replayed, expected), step_s)
 
-    def accepted(outcome) -> bool:
+    def accepted(outcome: _Outcome | None) -> bool:
         """Within θ; and field for field while the outputs before were (else the closest is kept)."""
         return outcome is not None and outcome[0].within(cfg.threshold) and (
             outcome[1] or not speculation.expect_exact)
 
-    def settles(outcome) -> bool:
+    def settles(outcome: _Outcome) -> bool:
         """No other candidate can do better: the output reproduced field for field, or (outputs not expected
         field for field) within floating-point noise of it — the right frame on a planner not bit-stable."""
         cmp, exact = outcome[0], outcome[1]
@@ -591,12 +720,13 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
             not speculation.expect_exact and 0.0 < cmp.distance <= NEAR_MISS_M)
 
     t1 = time.perf_counter()
-    kept, in_vain = _step_in_turn(len(options), run, accepted, speculation, in_turn=cheap and len(options) > 1)
+    kept, in_vain = _step_in_turn(len(options), run_candidate, accepted, speculation,
+                                  in_turn=cheap and len(options) > 1)
     # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
     order = [i for i in range(len(options)) if i not in in_vain] + in_vain
     if kept is None:
         speculation.let_go()  # the search's winner carries on: it must not inherit the shadow's pipe
-        tried = search.search(len(order), lambda k: run(order[k]), accepted=accepted,
+        tried = search.search(len(order), lambda k: run_candidate(order[k]), accepted=accepted,
                               closeness=lambda r: r[0].distance, limit_s=limit_s,
                               settles=lambda r: settles(r), retry_limit_s=full_limit_s)
         kept = None if tried is None else (order[tried.index], tried.result)
@@ -606,29 +736,27 @@ def _search_forked(search: ForkedSearch, options: list, decode, planner: ReplayP
     index, (cmp, exact, step_s) = kept
     speculation.expect_exact = exact
     tries = index + 1 if cmp.within(cfg.threshold) else len(options)
-    return options[index], cmp, exact, tries, step_s
+    return options[index], _Judged(cmp, exact, tries), step_s
 
 
-def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list) -> Comparison:
+def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list[Any]) -> Comparison:
     """The planner's trajectories (points decoded once per output), or any module's output field by field."""
     if cfg.trajectory is not None:
         return compare(trajectory_points(replayed, cfg.trajectory), expected_points)
     return compare_outputs(cfg, replayed, expected)
 
 
-def _judged(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list, expected_text: str
-            ) -> tuple[Comparison, bool]:
+def _judged(cfg: ReplayModule, replayed: Any, expected: _Expected) -> tuple[Comparison, bool]:
     """(comparison, equal to the recorded output field for field) of one replayed output.
 
     Most replayed outputs equal the recording: then the trajectories are
     the same points, and their comparison is known without measuring
-    (``validator.identical``; measured on the OMPL stack, the measuring took
-    a third of a cheap cycle's replay).
+    (``validator.identical``; why: docs/performance.md, "analysis").
     """
-    exact = _text(replayed) == expected_text
+    exact = _text(replayed) == expected.text
     if exact and cfg.trajectory is not None:
-        return identical(expected_points), True
-    return _judge(cfg, replayed, expected, expected_points), exact
+        return identical(expected.points), True
+    return _judge(cfg, replayed, expected.message, expected.points), exact
 
 
 def search_note(extraction: Extraction) -> str | None:

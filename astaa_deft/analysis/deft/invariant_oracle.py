@@ -7,12 +7,16 @@ suite's manifest (:func:`oracle_entry`); the pytest plugin calls
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.engine.spec.replay_section import ReplayModule
+
+if TYPE_CHECKING:
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
+    from astaa_deft.analysis.deft.suite import Suite
 
 ORACLE_KIND = "invariant"
 
@@ -22,7 +26,7 @@ def oracle_entry(invariant: str, frame: int, start_ns: int) -> dict:
     return {"kind": ORACLE_KIND, "invariant": invariant, "frame": frame, "start_ns": start_ns}
 
 
-def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
+def check_invariant_oracle(suite: Suite, entry: OracleEntry) -> str | None:
     """Run by the pytest plugin for an ``invariant`` oracle: why the test fails, or None.
 
     The invariant is judged, as the replay tester judges it, over the
@@ -32,13 +36,13 @@ def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
     spec = with_typed_invariants(suite.spec)
     cfg = suite.entry
     crash_counts = cfg.per_trigger and cfg.exceptions == "crash"
-    invariant = next((i for i in spec.invariants if i.name == entry["invariant"]), None)
-    if invariant is None and not (crash_counts and entry["invariant"] == IMPLICIT):
-        return f"the suite's spec has no invariant '{entry['invariant']}'"
+    invariant = next((i for i in spec.invariants if i.name == entry.invariant), None)
+    if invariant is None and not (crash_counts and entry.invariant == IMPLICIT):
+        return f"the suite's spec has no invariant '{entry.invariant}'"
     monitors = MonitorSet(replace(spec, invariants=(invariant,) if invariant is not None else ()),
-                          int(entry.get("start_ns", 0)))
+                          entry.start_ns)
     output = cfg.output
-    last = int(entry.get("start_ns", 0))
+    last = entry.start_ns
     for number, (frame, result) in enumerate(zip(suite.frames, suite.results(), strict=False), start=1):
         if result.error is not None and not cfg.per_trigger:
             continue
@@ -58,13 +62,13 @@ def check_invariant_oracle(suite, entry: Mapping[str, Any]) -> str | None:
             continue  # a hung or crashed module, or a frame it answers with nothing: no output here
         found = monitors.on_message(output, last, result.message, number)
         if found:
-            return (f"frame {frame['index']}: the {_who(cfg)} output breaks invariant '{entry['invariant']}': "
+            return (f"frame {frame['index']}: the {_who(cfg)} output breaks invariant '{entry.invariant}': "
                     f"{found[0].detail}")
     found = monitors.finish(last)
     if found:
-        return f"the {_who(cfg)} outputs break invariant '{entry['invariant']}': {found[0].detail}"
+        return f"the {_who(cfg)} outputs break invariant '{entry.invariant}': {found[0].detail}"
     return None
 
 
-def _who(cfg) -> str:
+def _who(cfg: ReplayModule) -> str:
     return "planner's" if cfg.where == "planner" else f"module '{cfg.module}''s"

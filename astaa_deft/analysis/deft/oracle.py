@@ -10,7 +10,7 @@ passes once it does not.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
@@ -19,6 +19,10 @@ from astaa_deft.model.geometry import Box, interpolate_pose, overlap
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_module import CollisionOracle, TrajectoryLayout
 from astaa_deft.analysis.deft.extract import Extraction
+
+if TYPE_CHECKING:
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
+    from astaa_deft.analysis.deft.suite import Suite
 from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.replay import trajectory_points
 
@@ -83,24 +87,27 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
     return entries
 
 
-def check_oracle(suite, entry: Mapping[str, Any]) -> str | None:
+def check_oracle(suite: Suite, entry: OracleEntry) -> str | None:
     """Run by the pytest plugin: the reason the test fails, or None."""
-    if entry.get("kind") == "invariant":  # written by `astaa-deft minimise`
+    if entry.kind == "invariant":  # written by `astaa-deft minimise`
         from astaa_deft.analysis.deft.invariant_oracle import check_invariant_oracle
 
         return check_invariant_oracle(suite, entry)
     from astaa_deft.analysis.deft.snapshots import usable_snapshot
 
     cfg = suite.spec.planner
-    snapshot = usable_snapshot(suite, dict(entry)) if not suite.replayed else None
+    # Collision oracles are exported only for a planner with a collision oracle and a trajectory layout.
+    assert cfg is not None and cfg.collision is not None and cfg.trajectory is not None, "not a collision suite"
+    assert entry.frame is not None, "a collision oracle names its frame"
+    snapshot = usable_snapshot(suite, entry) if not suite.replayed else None
     if snapshot is not None:  # fail fast: one step from the state just before the frame
-        result = suite.result_from_snapshot(entry["frame"], snapshot)
+        result = suite.result_from_snapshot(entry.frame, snapshot)
     else:
-        result = next(r for r in suite.results() if r.index == entry["frame"])
-    frame_entry = next(e for e in suite.frames if e["index"] == entry["frame"])
+        result = next(r for r in suite.results() if r.index == entry.frame)
+    frame_entry = next(e for e in suite.frames if e["index"] == entry.frame)
     obstacles = suite.decoded(cfg.collision.channel, frame_entry["inputs"][cfg.collision.channel])
     hit = first_collision(planned_poses(result.message, cfg.trajectory), obstacles, cfg.collision)
     if hit is None:
         return None
-    return (f"frame {entry['frame']}: the planned trajectory reaches obstacle {hit['obstacle']} "
+    return (f"frame {entry.frame}: the planned trajectory reaches obstacle {hit['obstacle']} "
             f"at t = {hit['t']:.2f} s (x {hit['x']:.2f}, y {hit['y']:.2f}) as predicted in its own inputs")

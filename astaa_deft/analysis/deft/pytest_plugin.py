@@ -8,7 +8,9 @@ recorded one.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -16,32 +18,35 @@ from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.analysis.deft.export import MANIFEST
 
 if TYPE_CHECKING:
-    from astaa_deft.analysis.deft.suite import Suite
+    from _pytest._code.code import TerminalRepr, TracebackStyle
+
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
+    from astaa_deft.analysis.deft.suite import FrameResult, Suite
 
 
-def pytest_collect_file(file_path, parent):
+def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> DeftSuiteFile | None:
     if file_path.name == MANIFEST:
         return DeftSuiteFile.from_parent(parent, path=file_path)
     return None
 
 
 class DeftSuiteFile(pytest.File):
-    def collect(self):
+    def collect(self) -> Iterator[pytest.Item]:
         from astaa_deft.analysis.deft.suite import Suite
 
         suite = Suite(self.path.parent)
-        oracles = list(enumerate(suite.manifest.get("oracles", [])))
+        oracles = list(enumerate(suite.oracles))
         # Oracle tests with a snapshot of the state before their frame run first: one step each, so a
         # suite that reproduces a failure fails at once (pytest -x) instead of after the whole replay.
         for n, oracle in oracles:
-            if oracle.get("snapshot"):
-                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+            if oracle.snapshot:
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle.kind}_{n:03d}", suite=suite,
                                              oracle=oracle)
         for position, entry in enumerate(suite.frames):
             yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", suite=suite, position=position)
         for n, oracle in oracles:
-            if not oracle.get("snapshot"):
-                yield OracleTest.from_parent(self, name=f"oracle_{oracle['kind']}_{n:03d}", suite=suite,
+            if not oracle.snapshot:
+                yield OracleTest.from_parent(self, name=f"oracle_{oracle.kind}_{n:03d}", suite=suite,
                                              oracle=oracle)
 
 
@@ -50,7 +55,7 @@ class FrameMismatch(AstaaDeftError):
 
 
 class FrameTest(pytest.Item):
-    def __init__(self, *, suite: Suite, position: int, **kwargs):
+    def __init__(self, *, suite: Suite, position: int, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.suite = suite  # shared by the file's tests: the frames are replayed once, in order
         self.position = position
@@ -61,7 +66,8 @@ class FrameTest(pytest.Item):
         if result.error or not result.comparison.within(suite.threshold):
             raise FrameMismatch(result)
 
-    def repr_failure(self, excinfo, style=None):
+    def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
+                     style: TracebackStyle | None = None) -> str | TerminalRepr:
         if not isinstance(excinfo.value, FrameMismatch):
             return super().repr_failure(excinfo)
         r = excinfo.value.args[0]
@@ -83,7 +89,7 @@ class FrameTest(pytest.Item):
             lines.append(f"  {t:10.3f} {fmt(e):>24} {fmt(p):>24}")
         return "\n".join(lines)
 
-    def _fields_failure(self, r) -> str:
+    def _fields_failure(self, r: FrameResult) -> str:
         """Any other module's output: where the replayed message left the recorded one, field by field."""
         from astaa_deft.analysis.deft.validator import differing_fields
 
@@ -107,7 +113,7 @@ class FrameTest(pytest.Item):
                 lines.append(f"  {path:<28} {recorded!s:>22} {replayed!s:>22}")
         return "\n".join(lines)
 
-    def reportinfo(self):
+    def reportinfo(self) -> tuple[Path, int | None, str]:
         return self.path, None, f"DeFT {self.name}"
 
 
@@ -116,7 +122,7 @@ class OracleFailure(AstaaDeftError):
 
 
 class OracleTest(pytest.Item):
-    def __init__(self, *, suite: Suite, oracle: dict, **kwargs):
+    def __init__(self, *, suite: Suite, oracle: OracleEntry, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.suite = suite
         self.oracle = oracle
@@ -128,10 +134,11 @@ class OracleTest(pytest.Item):
         if problem:
             raise OracleFailure(problem)
 
-    def repr_failure(self, excinfo, style=None):
+    def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
+                     style: TracebackStyle | None = None) -> str | TerminalRepr:
         if isinstance(excinfo.value, OracleFailure):
-            return f"oracle {self.oracle.get('kind')}: {excinfo.value}"
+            return f"oracle {self.oracle.kind}: {excinfo.value}"
         return super().repr_failure(excinfo)
 
-    def reportinfo(self):
+    def reportinfo(self) -> tuple[Path, int | None, str]:
         return self.path, None, f"DeFT oracle {self.name}"

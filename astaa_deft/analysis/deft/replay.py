@@ -21,7 +21,8 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Literal, Protocol, TypeVar, overload
+from types import FrameType
+from typing import Any, Literal, NoReturn, Protocol, TypeVar, overload
 
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus import zenoh_config as zc
@@ -268,7 +269,7 @@ def within_limit(call: Callable[[], T], seconds: float) -> T:
     if seconds <= 0 or not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
         return call()
 
-    def expired(signum, frame):
+    def expired(signum: int, frame: FrameType | None) -> NoReturn:
         raise StepHang(f"the step did not return within {seconds:g} s")
 
     previous = signal.signal(signal.SIGALRM, expired)
@@ -280,12 +281,12 @@ def within_limit(call: Callable[[], T], seconds: float) -> T:
         signal.signal(signal.SIGALRM, previous)
 
 
-def _getter(path: str):
+def _getter(path: str) -> Callable[[Any], Any]:
     """A fast reader for a field path: plain keys are indexed directly (the common case)."""
     if path.replace("_", "").isalnum():
         return lambda value: value[path]
 
-    def slow(value):
+    def slow(value: Any) -> Any:
         found = get(value, path)
         if not found:
             raise KeyError(path)

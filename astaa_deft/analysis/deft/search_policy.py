@@ -85,10 +85,8 @@ def first_cycle_first(candidates: Sequence[Candidate]) -> list[Candidate]:
     """For a first output (nothing learned yet): the frame at the first trigger the planner could plan from.
 
     A first cycle is often the slowest (a planner building its state) and
-    answers the first trigger it could plan from: on the OMPL stack the
-    first output did so in every run measured, three or more triggers
-    later, after as many wrong frames of ~0.3 s each. A planner that keeps
-    up answers the newest, one more step. Only where several candidates are
+    answers the first trigger it could plan from (docs/performance.md,
+    "analysis"). A planner that keeps up answers the newest, one more step. Only where several candidates are
     tried (a process replay tries one: the generic order keeps the newest).
     """
     at_own_time = [c for c in candidates

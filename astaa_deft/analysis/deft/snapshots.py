@@ -27,6 +27,7 @@ from pathlib import Path
 
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.analysis.deft.export import MANIFEST
+from astaa_deft.analysis.deft.oracle_entry import OracleEntry
 from astaa_deft.analysis.deft.suite import Suite
 
 SNAPSHOTS = "snapshots"
@@ -35,8 +36,8 @@ SNAPSHOTS = "snapshots"
 def add_oracle_snapshots(directory: Path) -> int:
     """Snapshot the state before each oracle frame of the suite in ``directory``; how many were kept."""
     suite = Suite(directory)
-    oracles = suite.manifest.get("oracles") or []
-    wanted = {o["frame"] for o in oracles if "frame" in o and o.get("kind") == "collision"}
+    oracles = suite.manifest.get("oracles") or []  # as written: the kept snapshots are added to these
+    wanted = {o.frame for o in suite.oracles if o.frame is not None and o.kind == "collision"}
     if not wanted:
         return 0
     from astaa_deft.analysis.deft.replay import code_fingerprint, make_planner
@@ -66,14 +67,14 @@ def add_oracle_snapshots(directory: Path) -> int:
     sequential = {r.index: r for r in suite.results()}
     (directory / SNAPSHOTS).mkdir(exist_ok=True)
     kept = 0
-    for oracle in oracles:
-        data = taken.get(oracle.get("frame", -1))
-        if data is None:
+    for oracle, typed in zip(oracles, suite.oracles, strict=True):
+        data = taken.get(typed.frame) if typed.frame is not None else None
+        if typed.frame is None or data is None:
             continue
-        name = f"{SNAPSHOTS}/frame_{oracle['frame']:05d}.pickle"
+        name = f"{SNAPSHOTS}/frame_{typed.frame:05d}.pickle"
         write_atomic(directory / name, data)
-        fast = suite.result_from_snapshot(oracle["frame"], name)
-        slow = sequential.get(oracle["frame"])
+        fast = suite.result_from_snapshot(typed.frame, name)
+        slow = sequential.get(typed.frame)
         if slow is not None and fast.error == slow.error and _same(fast.message, slow.message):
             oracle["snapshot"] = name
             oracle["snapshot_of"] = {"params": suite.manifest["params"], "code": fingerprint}
@@ -87,15 +88,15 @@ def add_oracle_snapshots(directory: Path) -> int:
     return kept
 
 
-def _same(a, b) -> bool:
+def _same(a: object, b: object) -> bool:
     return json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
 
 
-def usable_snapshot(suite: Suite, oracle: dict) -> str | None:
+def usable_snapshot(suite: Suite, oracle: OracleEntry) -> str | None:
     """The oracle's snapshot, if the module's code and the suite's params are still the ones it was taken with."""
     from astaa_deft.analysis.deft.replay import code_fingerprint
 
-    name, of = oracle.get("snapshot"), oracle.get("snapshot_of") or {}
-    if not name or of.get("params") != suite.manifest.get("params") or not (suite.directory / name).is_file():
+    name = oracle.snapshot
+    if not name or oracle.snapshot_params != suite.manifest.get("params") or not (suite.directory / name).is_file():
         return None
-    return name if of.get("code") == code_fingerprint(suite.entry, suite.spec) else None
+    return name if oracle.snapshot_code == code_fingerprint(suite.entry, suite.spec) else None

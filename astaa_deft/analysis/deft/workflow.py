@@ -9,7 +9,6 @@ with oracle tests for a collision the run saw, and returns what it found.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Callable
@@ -19,7 +18,6 @@ from typing import Any
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
-from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.engine.spec.loader import load_spec
@@ -30,20 +28,18 @@ from astaa_deft.analysis.deft.extract import Extraction, extract, ground_truth_r
 from astaa_deft.analysis.deft.oracle import oracle_entries
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.analysis.deft.run_metadata import RunMetadata
 from astaa_deft.analysis.deft.snapshots import add_oracle_snapshots
 
 
 def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
     """The params the run was recorded with (replay must build the same planner)."""
-    meta = log.metadata.get(layout.RUN_METADATA, {})
-    if meta.get("spec") and meta["spec"] != spec.name:
+    meta = RunMetadata.of(log)
+    if meta.spec and meta.spec != spec.name:
         raise InputError(Problem(str(log.path), None, None,
-                                 f"this log was recorded with spec '{meta['spec']}', not '{spec.name}'",
+                                 f"this log was recorded with spec '{meta.spec}', not '{spec.name}'",
                                  "pass the spec the run used"))
-    try:
-        return json.loads(meta.get("params", "{}"))
-    except ValueError:
-        return {}
+    return meta.params
 
 
 def idle_cores() -> int:

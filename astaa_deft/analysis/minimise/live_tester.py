@@ -97,9 +97,9 @@ class LiveTester:
     def _recorder(self) -> subprocess.Popen | None:
         """A recorder started ahead (imports done, spec parsed) for this run, and another for the next one.
 
-        A whole-system test waits for its recorder before any module starts;
-        started cold that took seconds of a loaded machine's wall time per
-        test (the same start a campaign's case saves, campaign/worker.py).
+        A whole-system test waits for its recorder before any module starts:
+        starting it ahead saves that wait per test (docs/performance.md,
+        "analysis"). None when the spec is not a file.
         """
         if self.spec.path is None:
             return None

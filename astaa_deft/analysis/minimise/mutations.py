@@ -43,6 +43,7 @@ from astaa_deft.engine.intercept.actions.base import ActionDetail, FieldChange, 
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
 
 FieldSelection = tuple[int, ...] | None
@@ -61,7 +62,7 @@ class Step:
 
     policy: str
     action: str
-    detail: Mapping[str, Any]
+    detail: JsonObject  # the action's detail as logged, values untagged
 
     @property
     def record(self) -> ActionDetail | None:
@@ -97,7 +98,7 @@ class Mutation:
     delivered: bytes | None  # what the consumers got; None when dropped
     delivered_time_ns: int | None
     testcase: str = ""
-    event: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)  # as logged
+    event: JsonObject = field(default_factory=dict, compare=False, repr=False)  # as logged
     pin: AnchorPin | None = field(default=None, compare=False)  # None: pinned by its count from the run's start
 
     @property

@@ -20,7 +20,7 @@ import json
 import math
 import shutil
 from collections.abc import Mapping
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,8 +36,11 @@ from astaa_deft.io.log import records as log_records
 from astaa_deft.io.log.reader import LoggedMessage
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.io.output_place import write_atomic
+from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation
 from astaa_deft.analysis.minimise.replay_model import Frame, ReplayModel
-from astaa_deft.analysis.minimise.stages import Minimisation
+from astaa_deft.model.sut import Spec
+from astaa_deft.analysis.minimise.stages import Minimisation, TesterKind
+from astaa_deft.model.json import JsonObject
 
 MINIMAL_XML = "minimal.xml"
 MINIMAL_MCAP = "minimal.mcap"
@@ -59,7 +62,7 @@ def prepare_directory(out_dir: Path) -> None:
     shutil.rmtree(out_dir / TESTS_DIR, ignore_errors=True)
 
 
-def write_testcase_file(out_dir: Path, testcase: TestCase, spec) -> Path:
+def write_testcase_file(out_dir: Path, testcase: TestCase, spec: Spec) -> Path:
     """DIR/minimal.xml, read back with the spec: what we write must pass ``policy check``."""
     path = out_dir / MINIMAL_XML
     write_atomic(path, testcase.to_xml())
@@ -167,7 +170,7 @@ def _kept_frames(model: ReplayModel, result: Minimisation) -> list[Frame]:
     return [frame for i in result.frames if i < len(frames) and (frame := frames[i]) is not None]
 
 
-def _normal(selection, mutation):
+def _normal(selection: FieldSelection, mutation: Mutation) -> FieldSelection:
     if selection is None or len(selection) == len(mutation.fields):
         return None
     return tuple(sorted(selection))
@@ -182,79 +185,116 @@ def copy_log(source: Path, out_dir: Path) -> Path:
 # ---------------------------------------------------------------- the summary
 
 
-def summary(result: Minimisation, *, log: Path, why: str, seconds: float, confirm: Mapping[str, Any],
-            verdict: str, files: Mapping[str, Path], replay_tests: int = 0, replay_hits: int = 0,
-            live_runs: int = 0, live_seconds: float = 0.0) -> dict:
-    """Everything summary.json holds (and the console shows)."""
-    stages = [asdict(s) for s in result.stages]
-    kept_mutations = result.chosen
-    out: dict[str, Any] = {
-        "log": str(log),
-        "failure": asdict(result.failure),
-        "tester": result.tester,
-        "why": why,
-        "verdict": verdict,
-        "stages": stages,
-        "tests_run": sum(s.tests_run for s in result.stages),
-        "cache_hits": sum(s.cache_hits for s in result.stages) + replay_hits,
-        "seconds": round(seconds, 3),
-        "mutations": {"before": len(result.mutations), "after": len(kept_mutations)},
-        "fields": {"before": sum(len(m.fields) for m in result.mutations), "after": result.fields_count()},
-        "culprit": [m.describe(s) for m, s in kept_mutations],
-        "culprit_events": [{"number": m.number, "channel": m.channel, "message_index": m.message_index,
-                            "action": m.action, "consumers": list(m.consumers),
-                            "fields": [m.fields[i].to_json() for i in (range(len(m.fields)) if s is None else s)]}
-                           for m, s in kept_mutations],
-        "detail": result.detail,
-        "confirmation": dict(confirm),
-        "live_runs": live_runs,  # whole-system runs, the confirmation's included
-        "live_run_seconds": round(live_seconds, 3),
-        "notes": list(result.notes),
-        "files": {k: str(v) for k, v in files.items()},
-    }
-    if result.tester == "replay":
-        out["frames"] = {"before": result.outputs_replayed, "after": len(result.frames)}
-        out["replays"] = replay_tests  # planner replays actually run (speculative parallel ones included)
-    else:
-        out["failure_rate_while_minimising"] = result.failure_rate
-    return out
+@dataclass(frozen=True)
+class Confirmation:
+    """The live confirmation runs of the minimal test case (``requested`` 0: none were asked for)."""
+
+    runs: int  # the runs that could tell pass from fail
+    failures: int
+    rate: float | None  # failures / runs; None when no run could tell
+    requested: int = 0
+    seconds: float = 0.0  # all the runs' wall time
+    details: tuple[str, ...] = ()  # up to three details of the runs that did not pass, sorted
+
+    def to_json(self) -> JsonObject:
+        """Its form in summary.json (without runs asked for: the counts only)."""
+        if not self.requested:
+            return {"requested": 0, "runs": self.runs, "failures": self.failures, "rate": self.rate}
+        return {"requested": self.requested, "runs": self.runs, "failures": self.failures, "rate": self.rate,
+                "seconds": round(self.seconds, 3), "details": list(self.details)}
 
 
-def write_summary(out_dir: Path, body: Mapping[str, Any]) -> Path:
+@dataclass(frozen=True)
+class MinimiseSummary:
+    """What a finished minimisation reports: DIR/summary.json (:meth:`to_json`) and the console (:meth:`text`)."""
+
+    result: Minimisation
+    log: Path
+    why: str  # why this tester (see stages.choose_tester)
+    seconds: float  # the whole minimisation's wall time
+    confirmation: Confirmation
+    verdict: str
+    files: Mapping[str, Path]  # what was written, by what it is
+    replay_tests: int = 0  # module replays actually run (speculative parallel ones included)
+    replay_hits: int = 0  # replay answers found in the replay tester's cache
+    live_runs: int = 0  # whole-system runs, the confirmation's included
+    live_seconds: float = 0.0
+
+    def to_json(self) -> JsonObject:
+        """Everything summary.json holds."""
+        result = self.result
+        kept_mutations = result.chosen
+        out: JsonObject = {
+            "log": str(self.log),
+            "failure": asdict(result.failure),
+            "tester": TesterKind(result.tester).value,
+            "why": self.why,
+            "verdict": self.verdict,
+            "stages": [asdict(s) for s in result.stages],
+            "tests_run": sum(s.tests_run for s in result.stages),
+            "cache_hits": self.cache_hits,
+            "seconds": round(self.seconds, 3),
+            "mutations": {"before": len(result.mutations), "after": len(kept_mutations)},
+            "fields": {"before": self.fields_before, "after": result.fields_count()},
+            "culprit": [m.describe(s) for m, s in kept_mutations],
+            "culprit_events": [{"number": m.number, "channel": m.channel, "message_index": m.message_index,
+                                "action": m.action, "consumers": list(m.consumers),
+                                "fields": [m.fields[i].to_json() for i in (range(len(m.fields)) if s is None else s)]}
+                               for m, s in kept_mutations],
+            "detail": result.detail,
+            "confirmation": self.confirmation.to_json(),
+            "live_runs": self.live_runs,
+            "live_run_seconds": round(self.live_seconds, 3),
+            "notes": list(result.notes),
+            "files": {k: str(v) for k, v in self.files.items()},
+        }
+        if result.tester == TesterKind.REPLAY:
+            out["frames"] = {"before": result.outputs_replayed, "after": len(result.frames)}
+            out["replays"] = self.replay_tests
+        else:
+            out["failure_rate_while_minimising"] = result.failure_rate
+        return out
+
+    @property
+    def cache_hits(self) -> int:
+        return sum(s.cache_hits for s in self.result.stages) + self.replay_hits
+
+    @property
+    def fields_before(self) -> int:
+        return sum(len(m.fields) for m in self.result.mutations)
+
+    def text(self) -> str:
+        """The console's summary: one line per stage, the culprit in words, the verdict."""
+        result = self.result
+        lines = [f"failure: {result.failure.describe()}", f"tester: {TesterKind(result.tester).value} ({self.why})"]
+        for s in result.stages:
+            state = "" if s.complete else " (stopped by --max-tests)"
+            note = f"; {s.note}" if s.note else ""
+            lines.append(f"  {s.name:<12} {s.unit:<9} {s.before:>5} → {s.after:<4} "
+                         f"{s.tests_run:>4} tests, {s.cache_hits:>3} cache hits, {s.seconds:6.1f} s{state}{note}")
+        parts = [f"mutations {len(result.mutations)} → {len(result.chosen)}"]
+        if result.tester == TesterKind.REPLAY:
+            parts.append(f"frames {result.outputs_replayed} → {len(result.frames)}")
+        parts.append(f"fields {self.fields_before} → {result.fields_count()}")
+        lines.append(f"minimised: {', '.join(parts)}; {sum(s.tests_run for s in result.stages)} tests, "
+                     f"{self.cache_hits} cache hits, {round(self.seconds, 3):.1f} s")
+        culprit = [m.describe(s) for m, s in result.chosen]
+        lines.append("culprit:" if len(culprit) == 1 else f"culprits ({len(culprit)}):")
+        lines.extend(f"  {text}" for text in culprit)
+        for note in result.notes:
+            lines.append(f"note: {note}")
+        confirm = self.confirmation
+        if confirm.runs and confirm.rate is not None:
+            lines.append(f"live confirmation of {MINIMAL_XML}: failed in {confirm.failures} of {confirm.runs} "
+                         f"run(s) (rate {confirm.rate:.0%})")
+        lines.append(f"verdict: {self.verdict}")
+        for name, path in self.files.items():
+            lines.append(f"  {name}: {path}")
+        return "\n".join(lines)
+
+
+def write_summary(out_dir: Path, body: JsonObject) -> Path:
+    """DIR/summary.json, written atomically (OutputError when it cannot be)."""
     path = out_dir / SUMMARY_JSON
     write_atomic(path, json.dumps(body, indent=1, default=str, allow_nan=False) + "\n")
     return path
-
-
-def format_summary(body: Mapping[str, Any]) -> str:
-    """The console's summary: one line per stage, the culprit in words, the verdict."""
-    lines = [f"failure: {_failure_text(body['failure'])}", f"tester: {body['tester']} ({body['why']})"]
-    for s in body["stages"]:
-        state = "" if s["complete"] else " (stopped by --max-tests)"
-        note = f"; {s['note']}" if s["note"] else ""
-        lines.append(f"  {s['name']:<12} {s['unit']:<9} {s['before']:>5} → {s['after']:<4} "
-                     f"{s['tests_run']:>4} tests, {s['cache_hits']:>3} cache hits, {s['seconds']:6.1f} s{state}{note}")
-    parts = [f"mutations {body['mutations']['before']} → {body['mutations']['after']}"]
-    if "frames" in body:
-        parts.append(f"frames {body['frames']['before']} → {body['frames']['after']}")
-    parts.append(f"fields {body['fields']['before']} → {body['fields']['after']}")
-    lines.append(f"minimised: {', '.join(parts)}; {body['tests_run']} tests, {body['cache_hits']} cache hits, "
-                 f"{body['seconds']:.1f} s")
-    lines.append("culprit:" if len(body["culprit"]) == 1 else f"culprits ({len(body['culprit'])}):")
-    lines.extend(f"  {text}" for text in body["culprit"])
-    for note in body["notes"]:
-        lines.append(f"note: {note}")
-    confirm = body["confirmation"]
-    if confirm.get("runs"):
-        lines.append(f"live confirmation of {MINIMAL_XML}: failed in {confirm['failures']} of {confirm['runs']} "
-                     f"run(s) (rate {confirm['rate']:.0%})")
-    lines.append(f"verdict: {body['verdict']}")
-    for name, path in body["files"].items():
-        lines.append(f"  {name}: {path}")
-    return "\n".join(lines)
-
-
-def _failure_text(failure: Mapping[str, Any]) -> str:
-    where = f" on '{failure['channel']}'" if failure.get("channel") else (
-        f" (module '{failure['module']}')" if failure.get("module") else "")
-    return f"{failure['invariant']} ({failure['kind']}){where} at +{failure['at']:.2f} s: {failure['detail']}"

@@ -34,10 +34,9 @@ from __future__ import annotations
 
 import copy
 import functools
-import json
 import pickle
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -45,15 +44,17 @@ from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
 from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
-from astaa_deft.analysis.deft.replay import StepHang, make_planner, within_limit
+from astaa_deft.analysis.deft.run_metadata import RunMetadata
+from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
-from astaa_deft.io.log.reader import LoggedMessage, read_log
+from astaa_deft.io.log.reader import LogContents, LoggedMessage, read_log
 from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
@@ -112,11 +113,11 @@ class Frame:
     trigger_time_ns: int
 
     @property
-    def key(self) -> tuple:
+    def key(self) -> tuple[Hashable, ...]:
         return tuple(d.key for _, d in self.inputs)
 
 
-def load_spec_for(log, spec_path: str | None, *, trust_log_spec: bool) -> Spec:
+def load_spec_for(log: LogContents, spec_path: str | None, *, trust_log_spec: bool) -> Spec:
     """The spec a minimisation runs: the user's file, or (``spec_path`` None) the one stored in the log.
 
     The log's own spec names programs (module commands, replay factories)
@@ -138,12 +139,9 @@ def load_spec_for(log, spec_path: str | None, *, trust_log_spec: bool) -> Spec:
     return spec
 
 
-def run_params(log) -> dict[str, str]:
+def run_params(log: LogContents) -> dict[str, str]:
     """The params the run was recorded with: the replayed planner must be built the same way."""
-    try:
-        return json.loads(log.metadata.get(layout.RUN_METADATA, {}).get("params", "{}"))
-    except ValueError:
-        return {}
+    return RunMetadata.of(log).params
 
 
 def replayable(spec: Spec, invariant_name: str, failure_module: str | None = None) -> str | None:
@@ -204,7 +202,7 @@ class ReplayModel:
     and :meth:`replay` (what the orchestrating process needs), not for :meth:`run`.
     """
 
-    def __init__(self, setup: ReplaySetup, baseline: bool = True):
+    def __init__(self, setup: ReplaySetup, baseline: bool = True) -> None:
         log = read_log(setup.log_path)
         spec = with_typed_invariants(load_spec_for(log, setup.spec_path, trust_log_spec=setup.trust_log_spec))
         if setup.module is not None:
@@ -250,13 +248,14 @@ class ReplayModel:
             self.end_ns = min(self.end_ns, self.outputs[-1].log_time if self.outputs else failed_at)
         self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
         self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
-        self._decoded: dict[Any, Any] = {}
+        self._decoded: dict[Hashable, JsonObject | None] = {}  # by Delivered.key
         self.baseline_seconds = 0.0
         if baseline:
             self._baseline()
 
     # -- frames ------------------------------------------------------------
-    def decode(self, channel: str, delivered: Delivered) -> Any:
+    def decode(self, channel: str, delivered: Delivered) -> JsonObject | None:
+        """``delivered`` as ``channel``'s codec decodes it (None: it does not decode), decoded once."""
         if delivered.key not in self._decoded:
             try:
                 self._decoded[delivered.key] = self._codecs[channel].decode(delivered.data)
@@ -306,14 +305,16 @@ class ReplayModel:
                              frame_time, t_t))
         return out
 
-    def frame_message(self, frame: Frame) -> dict[str, Any]:
-        return {name: self.decode(name, d) for name, d in frame.inputs}
+    def frame_message(self, frame: Frame) -> dict[str, JsonObject]:
+        """The module's input for ``frame``: channel → decoded message (a frame holds decodable inputs only)."""
+        return {name: message for name, d in frame.inputs if (message := self.decode(name, d)) is not None}
 
     # -- replay ------------------------------------------------------------
-    def fresh_planner(self):
+    def fresh_planner(self) -> ReplayPlanner:
+        """A new replay of the module, in its initial state (the caller closes it)."""
         return make_planner(self.spec, self.params, entry=self.cfg)
 
-    def step(self, planner, frame: Frame) -> Any:
+    def step(self, planner: ReplayPlanner, frame: Frame) -> JsonObject | None:
         """The module's answer to ``frame`` (StepHang past ``hang_after``; the module's own exceptions)."""
         return within_limit(functools.partial(planner.step, self.frame_message(frame)), self.cfg.hang_after)
 
@@ -336,9 +337,10 @@ class ReplayModel:
         self.base_keys = [f.key if f else None for f in self.base_frames]
         stride = max(1, len(self.base_frames) // SNAPSHOTS)
         planner = self.fresh_planner()
+        # frame index → planner state: its pickle while the states pickle (``_pickled``), else the state itself
         self.snapshots: dict[int, Any] = {}
         self._pickled = True
-        self.base_outputs: list[Any] = []
+        self.base_outputs: list[JsonObject | None] = []
         self.base_error: str | None = None
         self.base_error_frame: int | None = None
         for k, frame in enumerate(self.base_frames):
@@ -357,7 +359,7 @@ class ReplayModel:
         planner.close()
         self.baseline_seconds = time.perf_counter() - started
 
-    def _snapshot(self, planner) -> Any:
+    def _snapshot(self, planner: ReplayPlanner) -> Any:
         state = planner.snapshot()
         if self._pickled:
             try:
@@ -367,7 +369,7 @@ class ReplayModel:
                 self.snapshots = {k: pickle.loads(v) for k, v in self.snapshots.items()}
         return state
 
-    def _restore(self, k: int):
+    def _restore(self, k: int) -> ReplayPlanner:
         """A planner in the baseline's state just before output ``k``'s frame."""
         s = max(i for i in self.snapshots if i <= k)
         planner = self.fresh_planner()
@@ -379,7 +381,7 @@ class ReplayModel:
                 self.step(planner, frame)
         return planner
 
-    def _converged(self, planner, k: int) -> bool:
+    def _converged(self, planner: ReplayPlanner, k: int) -> bool:
         """Is ``planner`` in the state the baseline was in before output ``k``'s frame?"""
         if not self._pickled or k not in self.snapshots or not planner.can_snapshot:
             return False
@@ -460,10 +462,10 @@ class ReplayModel:
             return ReplayAnswer(TestResult(Outcome.FAIL, f"{answer.result.detail} ({why})"), stopped_at)
         return answer
 
-    def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, Any, str | None]]:
+    def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, JsonObject | None, str | None]]:
         """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
         planner = self.fresh_planner()
-        out: list[tuple[Frame, Any, str | None]] = []
+        out: list[tuple[Frame, JsonObject | None, str | None]] = []
         try:
             for frame in frames:
                 try:
@@ -478,7 +480,7 @@ class ReplayModel:
     def _monitors(self) -> MonitorSet:
         return MonitorSet(self.judged, self.start_ns)
 
-    def _feed(self, monitors: MonitorSet, frame: Frame, message: Any) -> str | None:
+    def _feed(self, monitors: MonitorSet, frame: Frame, message: JsonObject | None) -> str | None:
         time_ns = self.output_time(frame)
         found = monitors.on_tick(time_ns)
         if self.cfg.per_trigger:
@@ -490,7 +492,7 @@ class ReplayModel:
             return f"{format_violation(found[0], self.start_ns)} (output {frame.output})"
         return None
 
-    def _judge(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
+    def _judge(self, planner: ReplayPlanner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
         """Replay ``frames`` in order on ``planner`` and judge every output."""
         try:
             for n, frame in enumerate(frames):
@@ -503,7 +505,7 @@ class ReplayModel:
             planner.close()
         return self._finish(monitors)
 
-    def _judge_last(self, planner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
+    def _judge_last(self, planner: ReplayPlanner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
         """A per-trigger module's scaffolding test: the history steps unjudged, then the last frame is judged.
 
         Judging the history's outputs would be wrong here: a few kept frames
@@ -540,7 +542,7 @@ class ReplayModel:
         finally:
             planner.close()
 
-    def _step(self, planner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
+    def _step(self, planner: ReplayPlanner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
         """One replayed output, judged: an answer if it decides the test, else None.
 
         A per-trigger module that hangs, or raises where its process would
@@ -586,14 +588,14 @@ class ReplayModel:
 _STOPPED = ReplayAnswer(TestResult(Outcome.UNRESOLVED, "the module stopped answering"))
 
 
-def _first_crash_ns(log, module: str) -> int | None:
+def _first_crash_ns(log: LogContents, module: str) -> int | None:
     """When ``module`` first exited abnormally in the run (None if it never did)."""
     exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExitRecord)]
     times = [e.time_ns for e in exits if e.module == module and not e.during_shutdown and (e.returncode or e.signal)]
     return min(times) if times else None
 
 
-def _first_failure_ns(log, judged: Spec) -> int | None:
+def _first_failure_ns(log: LogContents, judged: Spec) -> int | None:
     """When the run's recorded outputs first broke the judged invariant (None if they never did)."""
     from astaa_deft.engine.monitor import check_log
 

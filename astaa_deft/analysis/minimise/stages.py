@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import Enum
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log.reader import LogContents
@@ -83,26 +84,37 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
     return Failure(first.invariant, first.kind, first.module, first.channel, at_s, first.detail, first.crash)
 
 
-def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str]:
-    """("replay" | "live", why)."""
-    kind, why, _ = choose_replay(spec, failure, live_only)
-    return kind, why
+class TesterKind(str, Enum):
+    """What judges a subset of mutations: a replay of one module, or whole-system re-runs."""
+
+    REPLAY = "replay"
+    LIVE = "live"
 
 
-def choose_replay(spec: Spec, failure: Failure, live_only: bool) -> tuple[str, str, ReplayModule | None]:
-    """("replay" | "live", why, the replayed module's entry or None)."""
+@dataclass(frozen=True)
+class TesterChoice:
+    """The tester chosen for a failure, why (shown to the user), and for REPLAY the module replayed."""
+
+    tester: TesterKind
+    why: str
+    entry: ReplayModule | None = None  # set exactly when ``tester`` is REPLAY
+
+
+def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> TesterChoice:
+    """Replay the module whose output alone decides ``failure`` when the spec can replay it, else live."""
     if live_only:
-        return "live", "--live-only", None
+        return TesterChoice(TesterKind.LIVE, "--live-only")
     entry, why_not = replay_entry_for(spec, failure.invariant, failure.module)
     if entry is None:
-        return "live", f"{why_not}: whole-system re-runs", None
+        return TesterChoice(TesterKind.LIVE, f"{why_not}: whole-system re-runs")
     if entry.where == "planner":
-        return "replay", f"'{failure.invariant}' reads only the planner's output: planner replay", entry
+        return TesterChoice(TesterKind.REPLAY, f"'{failure.invariant}' reads only the planner's output: planner replay",
+                            entry)
     if failure.invariant == IMPLICIT or failure.kind == "process":
-        return "replay", (f"module '{entry.module}' crashed, and its replay shows crashes: module replay "
-                          f"({entry.where})"), entry
-    return "replay", (f"'{failure.invariant}' reads only module '{entry.module}''s output '{entry.output}': "
-                      f"module replay ({entry.where})"), entry
+        return TesterChoice(TesterKind.REPLAY, (f"module '{entry.module}' crashed, and its replay shows crashes: "
+                                            f"module replay ({entry.where})"), entry)
+    return TesterChoice(TesterKind.REPLAY, (f"'{failure.invariant}' reads only module '{entry.module}''s output "
+                                        f"'{entry.output}': module replay ({entry.where})"), entry)
 
 
 @dataclass
@@ -128,7 +140,7 @@ class StageReport:
 class Minimisation:
     """What survived, and what it cost."""
 
-    tester: str  # "replay" | "live"
+    tester: TesterKind
     failure: Failure
     mutations: list[Mutation]  # every effective mutation of the log
     kept: dict[int, FieldSelection]  # the minimal mutations (number → fields kept; None: all)
@@ -161,7 +173,7 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
                     say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
     """The three stages with the planner replay (raises NotReproducible / FailsWithoutItems from stage 1)."""
     relevant = model.streams.relevant
-    out = Minimisation("replay", failure, model.mlog.mutations, {})
+    out = Minimisation(TesterKind.REPLAY, failure, model.mlog.mutations, {})
     ignored = len(model.mlog.mutations) - len(relevant)
     who = "the planner" if model.cfg.where == "planner" else "the module"
     if ignored:
@@ -222,7 +234,7 @@ def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Fa
     ``jobs`` > 1 tests that many subsets of a round at once, each run an isolated session of the SUT
     (its own router port, run directory and log, as a campaign's cases).
     """
-    out = Minimisation("live", failure, list(mutations), {})
+    out = Minimisation(TesterKind.LIVE, failure, list(mutations), {})
     by_number = {m.number: m for m in mutations}
     items = [m.number for m in mutations]
     cache = OutcomeCache()

@@ -22,9 +22,8 @@ import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
@@ -33,17 +32,18 @@ from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.engine.monitor import with_typed_invariants
 from astaa_deft.engine.spec.executes import TRUST_FLAG, what_spec_runs
 from astaa_deft.io.output_place import Place, ready_dir, writing
+from astaa_deft.analysis.deft.run_metadata import RunMetadata
 from astaa_deft.analysis.minimise.anchoring import choose_anchor, pin_to_anchor
 from astaa_deft.analysis.minimise.ddmin import FailsWithoutItems, NotReproducible, Outcome, TestResult
 from astaa_deft.analysis.minimise.live_tester import MARGIN_SECONDS, LiveRun, LiveTester
-from astaa_deft.analysis.minimise.mutations import Mutation, read_mutations
+from astaa_deft.analysis.minimise.mutations import Mutation, MutationLog, read_mutations
 from astaa_deft.analysis.minimise.output import (
     MINIMAL_MCAP,
     TESTS_DIR,
+    Confirmation,
+    MinimiseSummary,
     copy_log,
-    format_summary,
     prepare_directory,
-    summary,
     write_module_tests,
     write_replay_log,
     write_summary,
@@ -54,8 +54,10 @@ from astaa_deft.analysis.minimise.replay_pool import ReplayPool, ReplayUnavailab
 from astaa_deft.analysis.minimise.replay_tester import DeftTester, default_setup
 from astaa_deft.analysis.minimise.restrict import restricted_testcase
 from astaa_deft.analysis.minimise.stages import (
-    Failure, Minimisation, choose_replay, find_failure, minimise_live, minimise_replay,
+    Failure, Minimisation, TesterChoice, TesterKind, choose_tester, find_failure, minimise_live, minimise_replay,
 )
+from astaa_deft.model.json import JsonObject, JsonValue
+from astaa_deft.model.sut import Spec
 
 FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure not reproducible
 
@@ -96,13 +98,14 @@ class MinimiseReport:
 
     reproduced: bool
     verdict: str
-    summary: dict[str, Any]  # as written to DIR/summary.json
+    summary: JsonObject  # as written to DIR/summary.json
     complete: bool = True  # False: stopped before minimising (no mutation needed, not reproducible)
     files: dict[str, Path] = field(default_factory=dict)
+    details: MinimiseSummary | None = None  # a complete minimisation's summary, typed
 
     def text(self) -> str:
         """The closing lines a command prints."""
-        return format_summary(self.summary) if self.complete else f"minimise: {self.verdict}"
+        return self.details.text() if self.complete and self.details is not None else f"minimise: {self.verdict}"
 
 
 def minimise_log(log_path: Path, out_dir: Path, options: MinimiseOptions = MinimiseOptions(), *,
@@ -119,27 +122,74 @@ def minimise_log(log_path: Path, out_dir: Path, options: MinimiseOptions = Minim
         return _minimise(log_path, out_dir, options, progress, Path(scratch))
 
 
+@dataclass
+class _Job:
+    """One minimisation as its steps share it: the failing run read, the choices made, what was found."""
+
+    log_path: Path
+    out_dir: Path
+    options: MinimiseOptions
+    say: Progress
+    scratch: Path  # removed when the minimisation ends
+    started: float  # time.monotonic() at the start
+    log: LogContents
+    spec: Spec
+    spec_path: Path | None  # the spec as a file (the log's own, written to scratch, if it came from the log)
+    mlog: MutationLog
+    failure: Failure
+    choice: TesterChoice
+    params: dict[str, str]  # the spec's params, the run's own over them
+    original: TestCase | None  # the logged test case
+    notes: list[str] = field(default_factory=list)  # for the summary: why the tester changed
+    model: ReplayModel | None = None  # the replay's model, when the replay minimised
+    replays: int = 0
+    replay_hits: int = 0
+
+    def stopped(self, message: str, *, notes: list[str] | None = None) -> MinimiseReport:
+        return _stopped(self.out_dir, self.failure, self.started, self.log_path, message, notes=notes)
+
+    def fall_back_to_live(self, note: str, why: str) -> None:
+        """Go on with whole-system re-runs (``note`` says why, to the user and in the summary)."""
+        self.say(f"note: {note}")
+        self.notes.append(note)
+        self.choice = TesterChoice(TesterKind.LIVE, why)
+
+
 def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
               scratch: Path) -> MinimiseReport:
+    job = _read_failing_run(log_path, out_dir, options, say, scratch)
+    minimised: Minimisation | None = None
+    if job.choice.tester == TesterKind.REPLAY:
+        in_replay = _minimise_in_replay(job)
+        if isinstance(in_replay, MinimiseReport):
+            return in_replay
+        minimised = in_replay
+    live = LiveTester(job.spec, job.params, job.failure.invariant, job.failure.module, failure_at=job.failure.at,
+                      repeats=options.repeats, original=job.original, testcase_id=f"minimal-{_id(job.original)}",
+                      progress=(lambda line: say(f"  {line}")))
+    try:
+        if job.choice.tester == TesterKind.LIVE:
+            in_live = _minimise_live(job, live)
+            if isinstance(in_live, MinimiseReport):
+                return in_live
+            minimised = in_live
+        assert minimised is not None
+        minimised.notes[:0] = job.notes
+        return _confirm_and_write(job, live, minimised)
+    finally:
+        live.close()  # the recorders started ahead for tests that will not come
+
+
+def _read_failing_run(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
+                      scratch: Path) -> _Job:
+    """Read the run, its spec and mutations, find the failure, choose the tester, prepare ``out_dir``
+    (InputError when the log cannot be minimised)."""
     started = time.monotonic()
-    spec_path = options.spec_path
     log = read_log(log_path)
     for warning in log.warnings:
         say(f"warning: {warning}")
-    spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None,
-                                               trust_log_spec=options.trust_log_spec))
-    if spec.path is None:  # the log's own spec (trusted): live runs (their recorder) and replays need it as a file
-        from astaa_deft.engine.spec.loader import load_spec
-
-        runs = what_spec_runs(spec)
-        if runs:
-            say(f"running what the spec stored in the log names ({TRUST_FLAG}):")
-        for item in runs:
-            say(f"  {item}")
-        spec_path = scratch / "spec.yaml"
-        spec_path.write_text(spec.source_text)
-        spec = with_typed_invariants(load_spec(spec_path))
-    recorded_with = log.metadata.get(layout.RUN_METADATA, {}).get("spec")
+    spec, spec_path = _spec_of(log, options, say, scratch)
+    recorded_with = RunMetadata.of(log).spec
     if recorded_with and recorded_with != spec.name:
         raise InputError(Problem(str(log_path), None, None,
                                  f"this log was recorded with spec '{recorded_with}', not '{spec.name}'",
@@ -153,11 +203,10 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
                                  "minimise a run that was intercepted"))
     failure = find_failure(log, spec, options.invariant)
     prepare_directory(out_dir)
-    tester_kind, why, entry = choose_replay(spec, failure, options.live_only)
+    choice = choose_tester(spec, failure, options.live_only)
     recorded_params = run_params(log)
     if recorded_params:  # they fill the spec's placeholders in the commands that run
         say("the run's params (from the log): " + ", ".join(f"{k}={v}" for k, v in sorted(recorded_params.items())))
-    params = {**spec.params, **recorded_params}
     original = original_testcase(log)
     # Live tests pin each mutation counted from the running stack, not from the run's start (anchoring.py).
     anchor = choose_anchor(log, mlog, original)
@@ -165,91 +214,111 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
     say(f"minimise: {log_path}: {len(mlog.mutations)} mutations; failure: {failure.describe()}")
     if anchor is not None:
         say(f"pinned mutations count from the first '{anchor}' message on (the stack is live then)")
-    say(f"tester: {tester_kind} ({why})")
+    say(f"tester: {choice.tester.value} ({choice.why})")
+    return _Job(log_path, out_dir, options, say, scratch, started, log, spec, spec_path, mlog, failure, choice,
+                {**spec.params, **recorded_params}, original)
 
-    result: Minimisation | None = None
-    model: ReplayModel | None = None
-    replays = replay_hits = 0
-    notes: list[str] = []
-    if tester_kind == "replay":
-        assert entry is not None
-        setup = default_setup(log_path, spec_path, failure.invariant)
-        if entry.where != "planner":
-            setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
-        workers = max(1, min(options.parallel, os.cpu_count() or 1))
-        try:
-            pool = ReplayPool(setup, workers=workers)  # starts the workers: their baseline replay is done
-        except ReplayUnavailable as exc:
-            if not options.live_fallback:
-                return _stopped(out_dir, failure, started, log_path, (
-                    f"{exc} (whole-system re-runs were not tried: --no-live-fallback)"))
-            note = f"{exc}; whole-system re-runs instead"
-            say(f"note: {note}")
-            notes.append(note)
-            tester_kind, why = "live", "the module cannot be replayed here"
-    if tester_kind == "replay":
-        assert entry is not None
-        with pool:
-            what = "planner replay" if entry.where == "planner" else f"module replay ({entry.module})"
-            say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
-                f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
-            tester = DeftTester(pool)
-            model = ReplayModel(setup, baseline=False)
-            try:
-                result = minimise_replay(tester, model, failure, pool.workers, say, options.max_tests)
-            except NotReproducible as exc:
-                if not options.live_fallback:
-                    return _stopped(out_dir, failure, started, log_path, (
-                        f"the failure ({failure.invariant}) does not reproduce in the planner replay: {exc} "
-                        f"(whole-system re-runs were not tried: --no-live-fallback)"))
-                note = f"the planner replay does not reproduce the failure ({exc}); whole-system re-runs instead"
-                say(f"note: {note}")
-                notes.append(note)
-                tester_kind, why, model = "live", "the replay does not reproduce it", None
-            except FailsWithoutItems as exc:
-                return _no_mutation_needed(out_dir, failure, exc, started, log_path)
-            replays, replay_hits = tester.runs, tester.hits
 
-    live = LiveTester(spec, params, failure.invariant, failure.module, failure_at=failure.at,
-                      repeats=options.repeats, original=original, testcase_id=f"minimal-{_id(original)}",
-                      progress=(lambda line: say(f"  {line}")))
+def _spec_of(log: LogContents, options: MinimiseOptions, say: Progress, scratch: Path) -> tuple[Spec, Path | None]:
+    """(the spec, as a file): ``--spec``'s, or the one stored in the log (when trusted) written to ``scratch``:
+    live runs (their recorder) and replays need it as a file."""
+    spec_path = options.spec_path
+    spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None,
+                                               trust_log_spec=options.trust_log_spec))
+    if spec.path is None:
+        from astaa_deft.engine.spec.loader import load_spec
+
+        runs = what_spec_runs(spec)
+        if runs:
+            say(f"running what the spec stored in the log names ({TRUST_FLAG}):")
+        for item in runs:
+            say(f"  {item}")
+        spec_path = scratch / "spec.yaml"
+        spec_path.write_text(spec.source_text)
+        spec = with_typed_invariants(load_spec(spec_path))
+    return spec, spec_path
+
+
+def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
+    """The minimisation with the module replay; None: it cannot replay or reproduce the failure, and the job
+    falls back to live runs; a report when the minimisation stops here."""
+    entry, failure, options, say = job.choice.entry, job.failure, job.options, job.say
+    assert entry is not None
+    setup = default_setup(job.log_path, job.spec_path, failure.invariant)
+    if entry.where != "planner":
+        setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
+    workers = max(1, min(options.parallel, os.cpu_count() or 1))
     try:
-        if tester_kind == "live":
-            full, repeats_used = reproduce(live, mlog.mutations, failure, options.repeats, say)
-            if full is None:
-                return _stopped(out_dir, failure, started, log_path, (
-                    f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
-                    f"test case: nothing to minimise (a rare flaky failure? try --repeats N)"), notes=notes)
-            live.repeats = repeats_used
-            try:
-                result = minimise_live(live, mlog.mutations, failure, full, say, options.max_tests, jobs=options.jobs)
-            except FailsWithoutItems as exc:
-                return _no_mutation_needed(out_dir, failure, exc, started, log_path)
-        assert result is not None
-        result.notes[:0] = notes
+        pool = ReplayPool(setup, workers=workers)  # starts the workers: their baseline replay is done
+    except ReplayUnavailable as exc:
+        if not options.live_fallback:
+            return job.stopped(f"{exc} (whole-system re-runs were not tried: --no-live-fallback)")
+        job.fall_back_to_live(f"{exc}; whole-system re-runs instead", "the module cannot be replayed here")
+        return None
+    with pool:
+        what = "planner replay" if entry.where == "planner" else f"module replay ({entry.module})"
+        say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
+            f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
+        tester = DeftTester(pool)
+        model = ReplayModel(setup, baseline=False)
+        try:
+            result = minimise_replay(tester, model, failure, pool.workers, say, options.max_tests)
+        except NotReproducible as exc:
+            if not options.live_fallback:
+                return job.stopped(
+                    f"the failure ({failure.invariant}) does not reproduce in the planner replay: {exc} "
+                    f"(whole-system re-runs were not tried: --no-live-fallback)")
+            job.fall_back_to_live(f"the planner replay does not reproduce the failure ({exc}); whole-system "
+                                  f"re-runs instead", "the replay does not reproduce it")
+            job.replays, job.replay_hits = tester.runs, tester.hits
+            return None
+        except FailsWithoutItems as exc:
+            return _no_mutation_needed(job.out_dir, failure, exc, job.started, job.log_path)
+        job.model, job.replays, job.replay_hits = model, tester.runs, tester.hits
+        return result
 
-        testcase = restricted_testcase(
-            result.chosen, testcase_id=f"minimal-{_id(original)}", original=original,
-            description=(f"minimised from {log_path.name}: {len(result.kept)} of {len(result.mutations)} mutations; "
-                         f"fails {failure.invariant}"))
-        xml = write_testcase_file(out_dir, testcase, spec)
-        files = {"test case": xml}
-        confirmation, confirm_log = confirm_live(live, testcase, xml, result, options.confirm, say, scratch,
-                                                 jobs=options.jobs)
-        if result.tester == "replay" and model is not None:
-            files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, model, result, xml)
-            files["module tests"] = write_module_tests(out_dir / TESTS_DIR, model, result).parent
-        elif confirm_log is not None:
-            files["log"] = copy_log(confirm_log, out_dir)
-        text, reproduced = verdict(result, confirmation)
-        files["summary"] = out_dir / "summary.json"
-        body = summary(result, log=log_path, why=why, seconds=time.monotonic() - started, confirm=confirmation,
-                       verdict=text, files=files, replay_tests=replays, replay_hits=replay_hits,
-                       live_runs=live.runs, live_seconds=live.run_seconds)
-        write_summary(out_dir, body)
-        return MinimiseReport(reproduced, text, body, files=files)
-    finally:
-        live.close()  # the recorders started ahead for tests that will not come
+
+def _minimise_live(job: _Job, live: LiveTester) -> Minimisation | MinimiseReport:
+    """The minimisation with whole-system re-runs, after checking the full test case reproduces the failure;
+    a report when the minimisation stops here."""
+    failure, options = job.failure, job.options
+    full, repeats_used = reproduce(live, job.mlog.mutations, failure, options.repeats, job.say)
+    if full is None:
+        return job.stopped(
+            f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
+            f"test case: nothing to minimise (a rare flaky failure? try --repeats N)", notes=job.notes)
+    live.repeats = repeats_used
+    try:
+        return minimise_live(live, job.mlog.mutations, failure, full, job.say, options.max_tests, jobs=options.jobs)
+    except FailsWithoutItems as exc:
+        return _no_mutation_needed(job.out_dir, failure, exc, job.started, job.log_path)
+
+
+def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> MinimiseReport:
+    """Write the minimal test case, confirm it live, write the log, module tests and summary: the report."""
+    out_dir, failure = job.out_dir, job.failure
+    testcase = restricted_testcase(
+        result.chosen, testcase_id=f"minimal-{_id(job.original)}", original=job.original,
+        description=(f"minimised from {job.log_path.name}: {len(result.kept)} of {len(result.mutations)} "
+                     f"mutations; fails {failure.invariant}"))
+    xml = write_testcase_file(out_dir, testcase, job.spec)
+    files = {"test case": xml}
+    confirmation, confirm_log = confirm_live(live, testcase, xml, result, options=job.options, say=job.say,
+                                             scratch=job.scratch)
+    if result.tester == TesterKind.REPLAY and job.model is not None:
+        files["log"] = write_replay_log(out_dir / MINIMAL_MCAP, job.model, result, xml)
+        files["module tests"] = write_module_tests(out_dir / TESTS_DIR, job.model, result).parent
+    elif confirm_log is not None:
+        files["log"] = copy_log(confirm_log, out_dir)
+    text, reproduced = verdict(result, confirmation)
+    files["summary"] = out_dir / "summary.json"
+    details = MinimiseSummary(result, log=job.log_path, why=job.choice.why,
+                              seconds=time.monotonic() - job.started, confirmation=confirmation, verdict=text,
+                              files=files, replay_tests=job.replays, replay_hits=job.replay_hits,
+                              live_runs=live.runs, live_seconds=live.run_seconds)
+    body = details.to_json()
+    write_summary(out_dir, body)
+    return MinimiseReport(reproduced, text, body, files=files, details=details)
 
 
 def _id(original: TestCase | None) -> str:
@@ -297,15 +366,21 @@ def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure,
     return TestResult(Outcome.FAIL, fails[0].detail, rate), per_test
 
 
-def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, runs: int,
-                 say: Progress, scratch: Path, jobs: int = 1) -> tuple[dict, Path | None]:
-    """Run the minimal test case live ``runs`` times (``jobs`` at once): its failure rate, a failing run's log."""
+def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimisation, *,
+                 options: MinimiseOptions, say: Progress, scratch: Path) -> tuple[Confirmation, Path | None]:
+    """Run the minimal test case live ``options.confirm`` times (``options.jobs`` at once): its failure rate,
+    a failing run's log.
+
+    A whole-system minimisation keeps the log of the first failing run (or
+    the last run) in ``scratch``; a replay one records none.
+    """
+    runs, jobs = options.confirm, options.jobs
     if runs == 0:
-        return {"requested": 0, "runs": 0, "failures": 0, "rate": None}, None
+        return Confirmation(runs=0, failures=0, rate=None), None
     horizon = max([result.failure.at] + [m.at for m, _ in result.chosen]) + MARGIN_SECONDS
     say(f"confirming {xml.name} live through the proxy ({runs} run(s)" + (f", {jobs} at once)" if jobs > 1 else ")"))
     kept: Path | None = None
-    records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == "live" else None for n in range(runs)]
+    records = [scratch / f"confirm-{n + 1}.mcap" if result.tester == TesterKind.LIVE else None for n in range(runs)]
     with ThreadPoolExecutor(max(1, min(jobs, runs)), thread_name_prefix="confirm") as pool:
         live.pin(testcase, result.chosen)
         outcomes = list(pool.map(lambda record: live.run(testcase, horizon, record=record, policy_file=xml),
@@ -320,27 +395,26 @@ def confirm_live(live: LiveTester, testcase: TestCase, xml: Path, result: Minimi
                 record.unlink(missing_ok=True)
     told = [o for o in outcomes if o.failed is not None]
     failures = sum(1 for o in told if o.failed)
-    body = {"requested": runs, "runs": len(told), "failures": failures,
-            "rate": failures / len(told) if told else None, "seconds": round(sum(o.seconds for o in outcomes), 3),
-            "details": sorted({o.detail for o in outcomes if o.failed is not False})[:3]}
-    return body, kept
+    return Confirmation(runs=len(told), failures=failures, rate=failures / len(told) if told else None,
+                        requested=runs, seconds=sum(o.seconds for o in outcomes),
+                        details=tuple(sorted({o.detail for o in outcomes if o.failed is not False})[:3])), kept
 
 
-def verdict(result: Minimisation, confirmation: dict) -> tuple[str, bool]:
+def verdict(result: Minimisation, confirmation: Confirmation) -> tuple[str, bool]:
     """(the verdict, whether the minimal test case stands: minimised and, where run live, reproduced)."""
-    rate = confirmation.get("rate")
-    if confirmation.get("requested") and not confirmation.get("runs"):
-        return f"minimised, but no confirmation run could tell: {'; '.join(confirmation['details'])}", False
-    if not confirmation.get("runs"):
-        if result.tester == "replay":
+    rate = confirmation.rate
+    if confirmation.requested and not confirmation.runs:
+        return f"minimised, but no confirmation run could tell: {'; '.join(confirmation.details)}", False
+    if not confirmation.runs:
+        if result.tester == TesterKind.REPLAY:
             return "minimised; reproduced in the planner replay (not run live: --confirm 0)", True
         return "minimised (not confirmed live: --confirm 0)", True
     if rate == 1.0:
         return "minimised and reproduced live in every run", True
     if rate:
-        return (f"flaky: the minimal test case fails in {confirmation['failures']} of {confirmation['runs']} "
+        return (f"flaky: the minimal test case fails in {confirmation.failures} of {confirmation.runs} "
                 f"live runs ({rate:.0%})"), False
-    if result.tester == "replay":
+    if result.tester == TesterKind.REPLAY:
         return ("minimised in the planner replay, but the minimal test case did not reproduce the failure live "
                 "(the replay is open-loop: see docs/minimise.md)"), False
     return "the minimal test case did not reproduce the failure in its confirmation runs", False
@@ -355,9 +429,10 @@ def _no_mutation_needed(out_dir: Path, failure: Failure, exc: Exception, started
 def _stopped(out_dir: Path, failure: Failure, started: float, log_path: Path, message: str, *,
              notes: list[str] | None = None) -> MinimiseReport:
     """A minimisation that ends before minimising: its summary holds the failure and why."""
-    body: dict[str, Any] = {"log": str(log_path), "failure": failure.__dict__, "verdict": message}
+    body: JsonObject = {"log": str(log_path), "failure": asdict(failure), "verdict": message}
     if notes is not None:
-        body["notes"] = notes
+        noted: list[JsonValue] = list(notes)
+        body["notes"] = noted
     body["seconds"] = round(time.monotonic() - started, 3)
     write_summary(out_dir, body)
     return MinimiseReport(False, message, body, complete=False)
