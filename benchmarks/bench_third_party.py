@@ -41,7 +41,7 @@ from astaa_deft.io.codecs import get_codec
 from astaa_deft.analysis.deft.extract import search_note
 from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.replay import make_planner
-from astaa_deft.analysis.deft.workflow import extract_module_tests, run_params
+from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests, run_params
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.session import RunOptions, run_session
@@ -147,7 +147,8 @@ def main() -> int:
     timings, cpu = [], []
     for pair in range(PAIRS):
         t0, c0 = time.perf_counter(), cpu_seconds()
-        report = extract_module_tests(clean_log, SPEC, out / f"module_tests{pair or ''}", jobs=args.jobs)
+        report = extract_module_tests(clean_log, SPEC, out / f"module_tests{pair or ''}",
+                                      ExtractOptions(jobs=args.jobs))
         extraction_s, extraction_cpu = time.perf_counter() - t0, cpu_seconds() - c0
         # Every frame the extraction kept, accepted or not: the planner's state (its RNG) goes through each.
         c0 = cpu_seconds()

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign.module_tests import add_failure_frame, is_crash_bucket, judge_pytest, run_module_tests
-from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 from astaa_deft.engine.spec.loader import load_spec
 
 STACK = Path(__file__).resolve().parent.parent / "examples" / "ompl_stack"
@@ -57,7 +57,7 @@ def test_a_planner_that_raised_in_a_cycle_fails_its_module_tests_on_that_cycle(t
                          capture_output=True, text=True, timeout=180, env=env)
     assert res.returncode == 1 and "planner_errors" in res.stdout, res.stdout + res.stderr
     tests = tmp_path / "tests"
-    report = extract_module_tests(log, SPEC, tests, jobs=1)
+    report = extract_module_tests(log, SPEC, tests, ExtractOptions(jobs=1))
     assert report.accepted >= 1
     before = run_module_tests(tests, crash=True)
     assert before.fails_on_defect is False, before  # every recorded output replays: nothing fails

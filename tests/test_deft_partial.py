@@ -19,7 +19,7 @@ import pytest
 
 from astaa_deft.cli.commands.console import PLAIN_PERIOD_S, PlainLines
 from astaa_deft.analysis.deft.checkpoint import STATE
-from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 
 STACK = Path(__file__).resolve().parent.parent / "examples" / "ompl_stack"
 SPEC = STACK / "spec.yaml"
@@ -119,7 +119,7 @@ def test_resume_goes_on_after_the_outputs_decided_before(light_log, tmp_path):
     assert first.interrupted and len(first.extraction.frames) == stop_after - 1
     assert frames_written(out) == first.accepted and (out / STATE).is_file()
 
-    resumed = extract_module_tests(light_log, SPEC, out, resume=True)
+    resumed = extract_module_tests(light_log, SPEC, out, ExtractOptions(resume=True))
     assert not resumed.interrupted and resumed.resumed == stop_after - 1
     ex = resumed.extraction
     assert ex.accepted_at(0.0) == ex.outputs and not ex.skipped  # every output, as in one go

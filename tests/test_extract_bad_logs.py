@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.analysis.deft.fork_replay import can_fork
-from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 from astaa_deft.model.errors import InputError
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.engine.spec.loader import load_spec
@@ -65,6 +65,6 @@ def test_the_forked_runner_raises_the_input_error_itself(tmp_path):
     """The library call (forked candidates) raises InputError with the problem's file and fix intact."""
     log = other_spec_log(tmp_path / "run.mcap")
     with pytest.raises(InputError) as caught:
-        extract_module_tests(log, DEMO_SPEC, tmp_path / "tests", jobs=2)
+        extract_module_tests(log, DEMO_SPEC, tmp_path / "tests", ExtractOptions(jobs=2))
     (problem,) = caught.value.problems
     assert problem.file == str(log) and "the log has no channel" in problem.message and problem.fix

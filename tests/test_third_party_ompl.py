@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.analysis.deft.frames import Stream, candidates
-from astaa_deft.analysis.deft.workflow import extract_module_tests
+from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
 
@@ -115,7 +115,7 @@ def test_clean_run_through_the_star_passes_as_the_simulator_says(clean_run):
 def test_extraction_reproduces_every_output_exactly_and_writes_tests_that_pass(clean_run):
     tmp, _, log, _ = clean_run
     out = tmp / "module_tests"
-    report = extract_module_tests(log, SPEC, out, jobs=2)
+    report = extract_module_tests(log, SPEC, out, ExtractOptions(jobs=2))
     ex = report.extraction
     plans = len(read_log(log).on("ompl/plan"))
     assert ex.outputs == plans > 20 and not ex.skipped

@@ -63,27 +63,38 @@ class ExtractReport:
     resumed: int = 0  # outputs an interrupted extraction had decided, stepped once each
 
 
-def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, threshold: float | None = None,
-                         process: bool = False, ground_truth: str | None = None, jobs: int | None = None,
-                         progress: Callable[[int, int], None] = lambda done, total: None,
-                         notice: Callable[[str], None] = lambda line: None,
-                         module: str | None = None, resume: bool = False) -> ExtractReport:
+@dataclass(frozen=True)
+class ExtractOptions:
+    """How an extraction searches and replays (the `extract` command's options past the log, spec and output)."""
+
+    threshold: float | None = None  # accept a frame within this distance, m (None: the spec's)
+    process: bool = False  # replay with the planner's own process in lock-step
+    ground_truth: str | None = None  # evaluation only: the output field naming the inputs' header.seq
+    jobs: int | None = None  # candidate frames tried at once (None: the idle cores)
+    module: str | None = None  # a module of the spec's replay: section (None: the planner)
+    resume: bool = False  # continue an interrupted extraction into the same output directory
+
+
+def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOptions = ExtractOptions(),
+                         *, progress: Callable[[int, int], None] = lambda done, total: None,
+                         notice: Callable[[str], None] = lambda line: None) -> ExtractReport:
     """Extract and write the module tests of one run (InputError on bad input).
 
     ``out_dir`` is checked before the log is read (OutputError: a file in the
     way, not writable, no room, no usable temporary directory); a write that
     fails later raises OutputError too.
 
-    ``module`` names a module of the spec's ``replay:`` section (default:
+    ``options.module`` names a module of the spec's ``replay:`` section (default:
     the planner). ``progress(done, total)`` follows the outputs; ``notice``
-    gets the log reader's warnings; ``jobs`` bounds the worker processes that
+    gets the log reader's warnings; ``options.jobs`` bounds the worker processes that
     try an output's candidate frames in parallel (default: the idle cores).
     The tests of the outputs decided so far are written as the extraction
     goes (see checkpoint); a KeyboardInterrupt (the command turns SIGTERM
     into one) ends it early with those written and a report marked
-    ``interrupted``; ``resume`` goes on from such an extraction into the
+    ``interrupted``; ``options.resume`` goes on from such an extraction into the
     same ``out_dir`` (InputError if there is none, or it was another's).
     """
+    threshold, module, jobs, resume = options.threshold, options.module, options.jobs, options.resume
     place = Place(out_dir, "-o")
     ready_dir(place, temp=True)
     spec = load_spec(spec_path)
@@ -108,7 +119,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
                                  f"{entry.module} is replayed per trigger", "drop --resume"))
     before = read_state(out_dir, names) if resume else []
     checkpoint = Checkpoint(out_dir, spec, params, entry, names)
-    planner = make_planner(spec, params, prefer_process=process, entry=entry)
+    planner = make_planner(spec, params, prefer_process=options.process, entry=entry)
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
             ex = extract(log, spec, planner, progress=progress, jobs=jobs or idle_cores(), entry=entry,
@@ -128,7 +139,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, *, thre
         if oracles:
             add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
         checkpoint.finished()
-    exact = ground_truth_rate(ex, spec, ground_truth) if ground_truth else None
+    exact = ground_truth_rate(ex, spec, options.ground_truth) if options.ground_truth else None
     return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry,
                          resumed=len(before))
 

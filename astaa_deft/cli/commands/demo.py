@@ -158,7 +158,8 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
 def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     from astaa_deft.engine.bus import process_launch
-    from astaa_deft.cli.commands.extract import ExtractOptions, extract
+    from astaa_deft.analysis.deft.workflow import ExtractOptions
+    from astaa_deft.cli.commands.extract import extract
 
     spec_path = demo_spec_path()
     problems: list[str] = []

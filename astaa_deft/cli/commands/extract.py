@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -16,19 +15,8 @@ from astaa_deft.cli.commands.console import CountProgress, say, stop_as_interrup
 
 if TYPE_CHECKING:
     from astaa_deft.analysis.deft.extract import Extraction
+    from astaa_deft.analysis.deft.workflow import ExtractOptions
     from astaa_deft.cli.arguments import SubParsers
-
-
-@dataclass(frozen=True)
-class ExtractOptions:
-    """How `extract` searches and replays (the `extract` command's options past the log, spec and output)."""
-
-    threshold: float | None = None  # accept a frame within this distance, m (None: the spec's)
-    process: bool = False  # replay with the planner's own process in lock-step
-    ground_truth: str | None = None  # evaluation only: the output field naming the inputs' header.seq
-    jobs: int | None = None  # candidate frames tried at once (None: the idle cores)
-    module: str | None = None  # a module of the spec's replay: section (None: the planner)
-    resume: bool = False  # continue an interrupted extraction into the same output directory
 
 
 def add_parser(subparsers: SubParsers) -> None:
@@ -52,6 +40,8 @@ def add_parser(subparsers: SubParsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The parsed `extract` arguments as ExtractOptions, to :func:`extract`."""
+    from astaa_deft.analysis.deft.workflow import ExtractOptions
+
     return extract(args.log, args.spec, args.out, ExtractOptions(
         threshold=args.threshold, process=args.process, ground_truth=args.ground_truth, jobs=args.jobs,
         module=args.module, resume=args.resume))
@@ -92,9 +82,7 @@ def extract(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOpti
     progress = CountProgress("extract", "outputs")
     try:
         with stop_as_interrupt():
-            report = extract_module_tests(log_path, spec_path, out_dir, threshold=threshold, process=options.process,
-                                          ground_truth=ground_truth, jobs=options.jobs, progress=progress,
-                                          notice=say, module=module, resume=options.resume)
+            report = extract_module_tests(log_path, spec_path, out_dir, options, progress=progress, notice=say)
     finally:
         progress.close()
     if report.resumed:

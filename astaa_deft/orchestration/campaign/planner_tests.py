@@ -44,11 +44,11 @@ def build(log: Path, spec_path: Path, tests_dir: Path, *, verdict: str, invarian
     Runs the replay in this process: call it from a single-threaded one
     (:func:`build_in_child` does).
     """
-    from astaa_deft.analysis.deft.workflow import extract_module_tests
+    from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 
     spec = load_spec(spec_path)
     try:
-        report = extract_module_tests(log, spec_path, tests_dir, jobs=1)
+        report = extract_module_tests(log, spec_path, tests_dir, ExtractOptions(jobs=1))
     except AstaaDeftError as exc:
         return PlannerTests(0, False, str(exc))
     if not report.accepted:
