@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
+from astaa_deft.model.vocabulary import TextEnum
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log.reader import LogContents
@@ -84,7 +84,7 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
     return Failure(first.invariant, first.kind, first.module, first.channel, at_s, first.detail, first.crash)
 
 
-class TesterKind(str, Enum):
+class TesterKind(TextEnum):
     """What judges a subset of mutations: a replay of one module, or whole-system re-runs."""
 
     REPLAY = "replay"

@@ -11,14 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from enum import Enum
+
+from astaa_deft.model.vocabulary import TextEnum
 
 
-class SpecWord(str, Enum):
+class SpecWord(TextEnum):
     """A word of the spec's vocabulary: compares, prints and serialises as the text the spec writes."""
-
-    def __str__(self) -> str:
-        return str(self.value)
 
 
 class FrameMode(SpecWord):

@@ -9,22 +9,11 @@ which the bottom tier may not import.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
-from enum import Enum
 from typing import Any
 
 from astaa_deft.engine.monitor.verdict import ORDER
 from astaa_deft.model.json import JsonObject
-
-
-class TextEnum(str, Enum):
-    """A vocabulary whose members are their text: the journal's SQLite text, JSON and f-strings stay the
-    plain values (``f"{CaseKind.RERUN}"`` is ``rerun``), and a member equals its text."""
-
-    def __str__(self) -> str:
-        return str(self.value)
-
-    def __format__(self, spec: str) -> str:
-        return format(str(self.value), spec)
+from astaa_deft.model.vocabulary import TextEnum
 
 
 class CaseKind(TextEnum):

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 from astaa_deft.engine.monitor.violation import SEVERITIES
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.model import BucketKind, TextEnum
+from astaa_deft.model.vocabulary import TextEnum
+from astaa_deft.orchestration.campaign.model import BucketKind
 from astaa_deft.orchestration.campaign.rows import CaseRow
 from astaa_deft.orchestration.campaign.signature import primary
 
