@@ -5,8 +5,11 @@
 Prints: functions over 80 lines; functions with 8+ parameters and those of
 them not keyword-only past the fourth; lines with ``.get("`` outside the
 decoders of external formats (the YAML a user writes, JSON from users, the
-bundled demo SUT); ``Any`` in the public signatures of the session, the
-campaign and the minimiser. Asserts nothing: the figures go in the notes.
+bundled demo SUT), and of those how many sit inside a record type's own
+decoder (``from_json``, ``from_*``, ``decode``: the one place a form read
+from a file or a pipe becomes the type); ``Any`` in the public signatures of
+the session, the campaign and the minimiser. Asserts nothing: the figures go
+in the notes.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ def main() -> None:
     parser.add_argument("--list", action="store_true", help="name every place, not only the counts")
     args = parser.parse_args()
     long_functions, many_params, positional_past_four, gets, anys = [], [], [], [], []
+    in_decoders: list[str] = []
     for path in sorted(PACKAGE.rglob("*.py")):
         rel = path.relative_to(PACKAGE).as_posix()
         text = path.read_text()
@@ -72,7 +76,14 @@ def main() -> None:
                         if positional > 4:
                             positional_past_four.append(f"{where} ({positional} positional)")
         if not rel.startswith(EXTERNAL):
-            gets += [f"{rel}:{n}" for n, line in enumerate(text.splitlines(), 1) if re.search(r'\.get\("', line)]
+            decoders = [range(node.lineno, node.end_lineno + 1) for node in ast.walk(tree)
+                        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+                        and (node.name.startswith("from_") or node.name == "decode")]
+            for n, line in enumerate(text.splitlines(), 1):
+                if re.search(r'\.get\("', line):
+                    gets.append(f"{rel}:{n}")
+                    if any(n in lines for lines in decoders):
+                        in_decoders.append(f"{rel}:{n}")
         if rel.startswith(PUBLIC_SEAMS):
             for name, fn in _public_functions(tree):
                 if isinstance(fn, ast.AnnAssign):
@@ -86,6 +97,7 @@ def main() -> None:
                          ("functions with 8+ parameters", many_params),
                          ("  of them positional past the fourth", positional_past_four),
                          ('lines with .get(" outside external-format decoders', gets),
+                         ("  of them in a record type's own decoder (from_json, from_*, decode)", in_decoders),
                          ("Any in public signatures of session, campaign, minimiser", anys)):
         print(f"{title}: {len(items)}")
         if args.list:
