@@ -231,10 +231,10 @@ def say(message: str) -> None:
 
 def format_event(record: rec.Record) -> str | None:
     """One event as the console shows it (None: not shown)."""
-    if isinstance(record, rec.ProcessExitRecord):
+    if isinstance(record, rec.ProcessExit):
         if record.during_shutdown:
             return None
-        text = f"!! {record.describe()}"
+        text = f"!! {record.describe(with_pid=False)}"
         tail = record.stderr_tail.strip().splitlines()
         if tail:
             text += "\n   " + "\n   ".join(tail[-5:])

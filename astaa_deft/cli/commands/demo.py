@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.demo.status import StatusWatch
@@ -129,7 +130,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     attack_log = out_dir / "intercepted.mcap"
     outcome, watch = drive(scenario, True, False, attack_log, command_line, policy=policy, duration=20.0)
     summarise(outcome, watch)
-    if outcome.verdict is None or outcome.verdict.klass == "Pass":
+    if outcome.verdict is None or outcome.verdict.klass == Verdict.PASS:
         problems.append("the interception did not make any invariant break")
     elif not outcome.complete or not outcome.observed:
         problems.append(f"the intercepted run was not fully observed ({outcome.end_reason})")

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 from collections.abc import Callable
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.output_place import Place, writing
 from astaa_deft.engine.session import BusRun, RunOptions, RunResult, run_session
@@ -102,7 +103,7 @@ def exit_code(outcome: RunResult) -> int:
     """Print the verdict (or why there is none) and pick the exit code: 0 Pass, 1 a finding, 3 not observed."""
     if not outcome.complete or not outcome.observed:
         # Findings made before the loss are real, but a Pass would claim what nobody saw.
-        if outcome.verdict is not None and outcome.verdict.klass != "Pass":
+        if outcome.verdict is not None and outcome.verdict.klass != Verdict.PASS:
             say(format_verdict(outcome.verdict))
         why = outcome.end_reason if not outcome.observed or "recorder" in outcome.end_reason \
             else "the recorder did not finish the log"
@@ -110,5 +111,5 @@ def exit_code(outcome: RunResult) -> int:
         return EXIT_NOT_OBSERVED
     if outcome.verdict is not None:
         say(format_verdict(outcome.verdict))
-        return 0 if outcome.verdict.klass == "Pass" else 1
+        return 0 if outcome.verdict.klass == Verdict.PASS else 1
     return 1 if outcome.crashes else 0

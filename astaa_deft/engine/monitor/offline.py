@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.codecs import Codec, get_codec
 from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.io.log import records as rec
@@ -28,7 +29,7 @@ from astaa_deft.io.log.reader import LogContents
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.order import channel_ranks, order_key
 from astaa_deft.engine.monitor.monitorset import MonitorSet
-from astaa_deft.engine.monitor.verdict import Verdict
+from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation
 
 
@@ -36,7 +37,7 @@ from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation
 @dataclass
 class CheckResult:
     violations: list[Violation]
-    verdict: Verdict
+    verdict: RunVerdict
     start_ns: int
     end_ns: int
     messages: int  # bus messages given to the monitors
@@ -48,7 +49,7 @@ class CheckResult:
 
     @property
     def passed(self) -> bool:
-        return self.verdict.klass == "Pass"
+        return self.verdict.klass == Verdict.PASS
 
 
 def check_log(log: LogContents, spec: Spec) -> CheckResult:
@@ -59,8 +60,8 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
     wanted = monitors.channels()
     routes = _routes(log, spec, wanted)
     # Process exits and module output lines, fed at their times between the messages.
-    side: list[rec.ProcessExitRecord | rec.ModuleLogLine] = sorted(
-        (e for e in events if isinstance(e, rec.ProcessExitRecord)
+    side: list[rec.ProcessExit | rec.ModuleLogLine] = sorted(
+        (e for e in events if isinstance(e, rec.ProcessExit)
          or (isinstance(e, rec.ModuleLogLine) and monitors.wants_log_lines())), key=lambda e: e.time_ns)
 
     clock = time.perf_counter()
@@ -134,14 +135,14 @@ def _end(log: LogContents, events: list[rec.Record]) -> int:
     return max(bus) if bus else _start(log, events)
 
 
-def _feed_side(monitors: MonitorSet, event: rec.ProcessExitRecord | rec.ModuleLogLine) -> None:
+def _feed_side(monitors: MonitorSet, event: rec.ProcessExit | rec.ModuleLogLine) -> None:
     if isinstance(event, rec.ModuleLogLine):
         monitors.on_log_line(event.module, event.line, event.time_ns)
     else:
         _feed_exit(monitors, event)
 
 
-def _feed_exit(monitors: MonitorSet, event: rec.ProcessExitRecord) -> None:
+def _feed_exit(monitors: MonitorSet, event: rec.ProcessExit) -> None:
     monitors.on_process_exit(
         module=event.module, returncode=int(event.returncode or 0), signal=event.signal, time_ns=event.time_ns,
         during_shutdown=bool(event.during_shutdown), stderr_tail=str(event.stderr_tail or ""))

@@ -23,6 +23,7 @@ from collections.abc import Callable, Sequence
 
 import zenoh
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.inputfile import SPEC, read_input
 from astaa_deft.io.output_place import Place, check_temp_dir, ready_dir, ready_file
@@ -31,8 +32,9 @@ from astaa_deft.engine.bus import topology
 from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.io.log import records as rec
 from astaa_deft.engine.monitor.online import OnlineMonitors
-from astaa_deft.engine.bus.launcher import Launcher, ModuleNotReady, ProcessExit, output_file
-from astaa_deft.engine.monitor.verdict import Verdict
+from astaa_deft.engine.bus.launcher import Launcher, ModuleNotReady, output_file
+from astaa_deft.model.records import ProcessExit
+from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.engine.monitor.violation import Violation
 from astaa_deft.engine.bus.observer import ChannelCounter
 from astaa_deft.engine.bus import process_launch
@@ -80,7 +82,7 @@ class BusRun:
         self.interception: InterceptionBridge | None = None
         self.policies: list[rec.PolicyApplicationsRecord] = []  # per policy of the test case, at the end
         self.monitors: OnlineMonitors | None = None
-        self.verdict: Verdict | None = None  # the CRASH-scale verdict, once stopped
+        self.verdict: RunVerdict | None = None  # the CRASH-scale verdict, once stopped
         self.violations: list[rec.ViolationRecord] = []
         self.stop_requested = threading.Event()  # --stop-on-violation
         self.end_reason = ""
@@ -423,14 +425,13 @@ class BusRun:
         if self.monitors is not None:
             self.monitors.process_exit(exit_.module, exit_.returncode, exit_.signal, exit_.time_ns,
                                        exit_.during_shutdown, exit_.stderr_tail)
-        self.emit(rec.ProcessExitRecord(exit_.time_ns, exit_.module, exit_.pid, exit_.returncode, exit_.signal,
-                                        exit_.during_shutdown, exit_.abnormal, exit_.stderr_tail))
+        self.emit(exit_)
 
     def _not_ready(self, exc: ModuleNotReady) -> None:
         if self.monitors is None:
             return
         found = Violation("(module start)", "ready", "high", time.time_ns(), None, None, None,
-                          f"module '{exc.module}' not ready: {exc.detail}", "Restart", exc.module)
+                          f"module '{exc.module}' not ready: {exc.detail}", Verdict.RESTART, exc.module)
         self.monitors.set.violations.append(found)  # the verdict is the monitors' own: they must count it
         self._violated(found)
 

@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from astaa_deft.engine.bus.launcher import ProcessExit
+from astaa_deft.model.records import Verdict
+from astaa_deft.model.records import ProcessExit
 from astaa_deft.io.log.records import PolicyApplicationsRecord, ViolationRecord
 
 
@@ -50,4 +51,4 @@ class RunResult:
 
     @property
     def passed(self) -> bool:
-        return (self.verdict is not None and self.verdict.klass == "Pass" and self.complete and self.observed)
+        return (self.verdict is not None and self.verdict.klass == Verdict.PASS and self.complete and self.observed)

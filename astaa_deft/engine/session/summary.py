@@ -87,7 +87,7 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
     lines.append("")
     lines.append("events: " + (", ".join(f"{k} ×{n}" for k, n in sorted(kinds.items())) or "none"))
     for e in events:
-        if isinstance(e, rec.ProcessExitRecord) and e.abnormal:
+        if isinstance(e, rec.ProcessExit) and e.abnormal:
             how = f"signal {e.signal}" if e.signal else f"exit code {e.returncode}"
             lines.append(f"  crash: module '{e.module}' ({how})")
         elif isinstance(e, rec.UndeclaredKey):

@@ -11,7 +11,7 @@ import json
 import struct
 import zlib
 from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
+from typing import ClassVar, Protocol, TypeVar
 from pathlib import Path
 
 from mcap.exceptions import EndOfFile, InvalidMagic
@@ -27,7 +27,7 @@ from astaa_deft.io.log import records as rec
 
 
 class _Kinded(Protocol):
-    kind: str
+    kind: ClassVar[str]
 
 
 R = TypeVar("R", bound=_Kinded)  # a record type of log/records.py (each names its event kind)

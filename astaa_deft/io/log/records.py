@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError
+from astaa_deft.model.records import FieldChange, ProcessExit, RecordError, RunEnd
 
 FORMAT = 1  # bump when a record's meaning changes; decode() refuses newer ones
 
@@ -34,45 +35,20 @@ class RunStarted:
     # delayed message's arrival is known only on that clock (minimise reverts it to there). None: no
     # interceptor, or a log from before this field (then the run's start is the best guess).
     interceptor_epoch_ns: int | None = None
-    kind = "run_started"
+    kind: ClassVar[str] = "run_started"
 
 
 @dataclass(frozen=True)
 class RunStopping:
     """The run's end: the monitors' horizon (nothing after it is judged)."""
     time_ns: int
-    kind = "run_stopping"
+    kind: ClassVar[str] = "run_stopping"
 
 
 @dataclass(frozen=True)
 class RunStopped:
     time_ns: int
-    kind = "run_stopped"
-
-
-@dataclass(frozen=True)
-class RunEnd:
-    """Why the run ended ('time limit', 'module planning exited', 'signal SIGINT', ...)."""
-    time_ns: int
-    reason: str
-    kind = "run_end"
-
-
-@dataclass(frozen=True)
-class ProcessExitRecord:
-    time_ns: int
-    module: str
-    pid: int
-    returncode: int
-    signal: str | None = None
-    during_shutdown: bool = False
-    abnormal: bool = False
-    stderr_tail: str = ""
-    kind = "process_exit"
-
-    def describe(self) -> str:
-        how = f"killed by {self.signal}" if self.signal else f"exit code {self.returncode}"
-        return f"module '{self.module}' {how}"
+    kind: ClassVar[str] = "run_stopped"
 
 
 @dataclass(frozen=True)
@@ -87,7 +63,7 @@ class ViolationRecord:
     channel: str | None = None
     seq: int | None = None
     message: Any = None
-    kind = "violation"
+    kind: ClassVar[str] = "violation"
 
 
 @dataclass(frozen=True)
@@ -97,7 +73,7 @@ class VerdictRecord:
     summary: str = ""
     first: ViolationRecord | None = None
     reasons: tuple[str, ...] = ()
-    kind = "verdict"
+    kind: ClassVar[str] = "verdict"
 
 
 @dataclass(frozen=True)
@@ -106,14 +82,7 @@ class UndeclaredKey:
     module: str
     key: str
     note: str = ""
-    kind = "undeclared_key"
-
-
-@dataclass(frozen=True)
-class FieldChange:
-    path: str
-    old: Any = None
-    new: Any = None
+    kind: ClassVar[str] = "undeclared_key"
 
 
 @dataclass(frozen=True)
@@ -136,7 +105,7 @@ class MutationRecord:
     detail: Any = None
     original_sequence: int | None = None
     delivered_sequence: int | None = None
-    kind = "mutation"
+    kind: ClassVar[str] = "mutation"
 
 
 @dataclass(frozen=True)
@@ -159,7 +128,7 @@ class PolicyApplicationsRecord:
     run_end_s: float = 0.0
     traffic: tuple[Any, ...] = ()  # per target channel: {channel, count, first_s, last_s}
     untouched_reason: str | None = None
-    kind = "policy_applications"
+    kind: ClassVar[str] = "policy_applications"
 
 
 @dataclass(frozen=True)
@@ -170,7 +139,7 @@ class FlagRecord:
     sequence: int | None = None
     reason: str = ""
     size: int = 0
-    kind = "undecodable"
+    kind: ClassVar[str] = "undecodable"
 
 
 @dataclass(frozen=True)
@@ -180,7 +149,7 @@ class ModuleLogLine:
     module: str
     stream: str
     line: str
-    kind = "module_log"
+    kind: ClassVar[str] = "module_log"
 
 
 @dataclass(frozen=True)
@@ -191,11 +160,16 @@ class OtherEvent:
     body: tuple[tuple[str, Any], ...] = ()
 
 
-Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExitRecord | ViolationRecord | VerdictRecord
+Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExit | ViolationRecord | VerdictRecord
           | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | PolicyApplicationsRecord | OtherEvent)
 
-_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, UndeclaredKey,
-                               ModuleLogLine, ViolationRecord, FlagRecord, PolicyApplicationsRecord)}
+__all__ = ["FORMAT", "FieldChange", "FlagRecord", "ModuleLogLine", "MutationRecord", "OtherEvent",
+           "PolicyApplicationsRecord", "ProcessExit", "Record", "RunEnd", "RunStarted", "RunStopped", "RunStopping",
+           "UndeclaredKey", "VerdictRecord", "ViolationRecord", "decode", "decode_mutation", "encode", "to_json_text"]
+
+_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, UndeclaredKey, ModuleLogLine, ViolationRecord,
+                               FlagRecord, PolicyApplicationsRecord)}
+_MODEL: dict[str, type[ProcessExit] | type[RunEnd]] = {c.kind: c for c in (ProcessExit, RunEnd)}  # own their JSON
 
 
 def encode(record: Record) -> dict:
@@ -213,6 +187,8 @@ def encode(record: Record) -> dict:
                 "fields": [{"path": c.path, "old": c.old, "new": c.new} for c in record.fields],
                 "detail": record.detail, "original_sequence": record.original_sequence,
                 "delivered_sequence": record.delivered_sequence}
+    if isinstance(record, (ProcessExit, RunEnd)):
+        return {"kind": record.kind, **record.to_json()}
     body: dict[str, Any] = {"kind": record.kind}
     for f in fields(record):
         value = getattr(record, f.name)
@@ -243,9 +219,15 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
         return decode_mutation(body, time_ns)
     if kind == ViolationRecord.kind:
         return _violation(body, time_ns)
+    model = _MODEL.get(kind)
+    if model is not None:
+        try:
+            return model.from_json({**body, "time_ns": time_ns}, where=where)
+        except RecordError:  # a required field missing or malformed: keep the event, do not guess it
+            return _other(kind, time_ns, body)
     cls = _SIMPLE.get(kind)
     if cls is None:
-        return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+        return _other(kind, time_ns, body)
     values: dict[str, Any] = {}  # checked by the dataclass itself: a missing field is a TypeError below
     for f in fields(cls):
         if f.name in body:
@@ -255,13 +237,16 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     try:
         return cls(**values)
     except TypeError:  # a required field missing: keep the event, do not guess it
-        return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+        return _other(kind, time_ns, body)
+
+
+def _other(kind: str, time_ns: int, body: Mapping[str, Any]) -> OtherEvent:
+    return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
 
 
 def decode_mutation(body: Mapping[str, Any], time_ns: int = 0) -> MutationRecord:
     """A mutation as the interception and the recorder write it (the mutations topic has no 'kind')."""
-    changes = tuple(FieldChange(str(c.get("path")), c.get("old"), c.get("new"))
-                    for c in body.get("fields") or () if isinstance(c, Mapping))
+    changes = tuple(FieldChange.from_json(c) for c in body.get("fields") or () if isinstance(c, Mapping))
     time_s = body.get("time")
     return MutationRecord(time_ns or _int(body.get("time_ns")), str(body.get("policy", "")),
                           str(body.get("action", "")), str(body.get("channel", "")),

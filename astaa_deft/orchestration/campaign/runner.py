@@ -21,6 +21,7 @@ from typing import Any
 
 import zenoh
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.model import fields
 from astaa_deft.engine.bus.processes import ChildProcess
 from astaa_deft.io.codecs import get_codec
@@ -127,7 +128,7 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                 for v in result.violations]
     for exit_ in result.crashes:
         if not any(f.module == exit_.module for f in findings):
-            findings.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
+            findings.append(Finding(IMPLICIT, Verdict.ABORT, exit_.module, None, exit_.describe(),
                                     at=round((exit_.time_ns - t0_ns) / 1e9, 3) if t0_ns is not None else None))
     monitors = started.get("monitors")
     violating = {name: s["violating"] for name, s in monitors.stats().items() if s["violating"]} \
