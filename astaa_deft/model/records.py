@@ -241,8 +241,10 @@ class ProcessExit:
 class Violation:
     """A broken invariant: when, where (channel and message, or module), and what the CRASH class points at."""
 
+    kind: ClassVar[str] = "violation"  # the log event's kind
+
     invariant: str
-    kind: str  # the invariant's kind (bound, deadline, process, ...)
+    invariant_kind: str  # the invariant's kind (bound, deadline, process, ...)
     severity: str
     time_ns: int  # when the invariant broke (the message's time, or the deadline that expired)
     channel: str | None
@@ -253,28 +255,38 @@ class Violation:
     module: str | None = None  # the module held responsible, when one is
 
     def to_json(self) -> JsonObject:
-        """The log's and the verdict's form (``invariant_kind`` for ``kind``)."""
+        """Its JSON form (a verdict's ``first``, ``check --json``)."""
         return {
-            "invariant": self.invariant, "invariant_kind": self.kind, "severity": self.severity,
+            "invariant": self.invariant, "invariant_kind": self.invariant_kind, "severity": self.severity,
             "time_ns": self.time_ns, "channel": self.channel, "seq": self.seq, "message": self.message,
             "detail": self.detail, "crash": self.crash, "module": self.module,
         }
 
+    def to_log_json(self) -> JsonObject:
+        """Its form in the log (without ``kind``): the same keys, in the order logs have always had them."""
+        return {
+            "time_ns": self.time_ns, "invariant": self.invariant, "invariant_kind": self.invariant_kind,
+            "severity": self.severity, "crash": self.crash, "detail": self.detail, "module": self.module,
+            "channel": self.channel, "seq": self.seq, "message": self.message,
+        }
+
     @classmethod
     def from_json(cls, body: object, *, where: str = "the log") -> Violation:
-        """The violation of its JSON form (absent fields take their defaults); RecordError if malformed."""
+        """The violation of either form; RecordError if it is not an object.
+
+        Lenient as logs have always been read: an absent or malformed field
+        takes its default (a time of 0, an unknown class Silent) rather than
+        losing the finding.
+        """
         obj = _mapping(body, where, "violation")
-        time_ns = obj.get("time_ns", 0)
-        if not isinstance(time_ns, int) or isinstance(time_ns, bool):
-            raise _damaged(where, f"a violation's time_ns is {time_ns!r}, not an integer")
-        crash = str(obj.get("crash", Verdict.SILENT))
         message, channel, module = obj.get("message"), obj.get("channel"), obj.get("module")
         return cls(
-            invariant=str(obj.get("invariant", "?")), kind=str(obj.get("invariant_kind", "?")),
-            severity=str(obj.get("severity", "high")), time_ns=time_ns,
+            invariant=str(obj.get("invariant", "?")), invariant_kind=str(obj.get("invariant_kind", "?")),
+            severity=str(obj.get("severity", "high")), time_ns=_int_or_zero(obj.get("time_ns")),
             channel=channel if isinstance(channel, str) else None, seq=_opt_int(obj.get("seq")),
             message=message if isinstance(message, dict) else None, detail=str(obj.get("detail", "")),
-            crash=Verdict.named(crash) or Verdict.SILENT, module=module if isinstance(module, str) else None,
+            crash=Verdict.named(str(obj.get("crash", Verdict.SILENT))) or Verdict.SILENT,
+            module=module if isinstance(module, str) else None,
         )
 
     @property

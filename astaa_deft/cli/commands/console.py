@@ -239,10 +239,10 @@ def format_event(record: rec.Record) -> str | None:
         if tail:
             text += "\n   " + "\n   ".join(tail[-5:])
         return text
-    if isinstance(record, rec.ViolationRecord):
-        from astaa_deft.engine.monitor.violation import Violation, format_violation
+    if isinstance(record, rec.Violation):
+        from astaa_deft.engine.monitor.violation import format_violation
 
-        return format_violation(Violation.from_json(rec.encode(record)))
+        return format_violation(record)
     if isinstance(record, rec.MutationRecord):
         fields = ", ".join(f"{c.path}: {_short(c.old)} → {_short(c.new)}" for c in record.fields)
         index = f" #{record.message_index}" if record.message_index is not None else ""

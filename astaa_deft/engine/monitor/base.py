@@ -95,8 +95,8 @@ class Monitor:
         if module is None and infer_module and channel is not None:
             module = self.context.producer(channel)
         return Violation(
-            invariant=inv.name, kind=inv.kind, severity=inv.severity, time_ns=time_ns, channel=channel, seq=seq,
-            message=message_copy(message) if copy_message else message, detail=detail,
+            invariant=inv.name, invariant_kind=inv.kind, severity=inv.severity, time_ns=time_ns, channel=channel,
+            seq=seq, message=message_copy(message) if copy_message else message, detail=detail,
             crash=inv.crash or crash or inv.default_crash, module=module,
         )
 

@@ -44,7 +44,7 @@ class CheckResult:
     stats: dict[str, dict[str, int]]
     seconds: float  # time spent evaluating (decoding included, reading the file not)
     online_verdict: rec.VerdictRecord | None = None  # the verdict the proxy logged during the run, if any
-    online_violations: list[rec.ViolationRecord] = field(default_factory=list)
+    online_violations: list[rec.Violation] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -88,8 +88,8 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
             _feed_side(monitors, event)
     monitors.finish(end_ns)
     for record in events:  # the spec's run: outcome (an exit code, a channel's end): judged once, when it happened
-        if isinstance(record, rec.ViolationRecord) and record.invariant_kind == RUN_END_KIND:
-            monitors.add_finding(Violation.from_json(rec.encode(record)))
+        if isinstance(record, rec.Violation) and record.invariant_kind == RUN_END_KIND:
+            monitors.add_finding(record)
     seconds = time.perf_counter() - clock
 
     extra = [rec.encode(e) for e in events if isinstance(e, rec.OtherEvent) and e.kind == "bus_lost"]
@@ -98,7 +98,7 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
         violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(extra),
         start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,
         online_verdict=online[-1] if online else None,
-        online_violations=[e for e in events if isinstance(e, rec.ViolationRecord)],
+        online_violations=[e for e in events if isinstance(e, rec.Violation)],
         warnings=list(log.warnings) + monitors.warnings,
     )
 

@@ -101,7 +101,7 @@ def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit | M
         classes[Verdict.CATASTROPHIC].append("every module exited during the run")
     for v in sorted(findings, key=_most_severe_first):  # stable: in time order within a severity
         klass = Verdict.named(v.crash) or Verdict.SILENT  # an unknown class counts as Silent
-        if klass is Verdict.RESTART and v.kind == "deadline" and _exited_before(v, first_exit_ns):
+        if klass is Verdict.RESTART and v.invariant_kind == "deadline" and _exited_before(v, first_exit_ns):
             continue  # silence after a crash is the crash's consequence, not a hang
         classes[klass].append(f"{v.invariant}: {v.detail}")
     klass = next(c for c in CRASH_SCALE if classes[c] or c is Verdict.PASS)
@@ -115,7 +115,7 @@ def _most_severe_first(v: Violation) -> int:
 
 def _unreported_exits(mid_run: Sequence[ProcessExit], violations: Sequence[Violation]) -> list[Violation]:
     """Findings for mid-run exits that no process invariant reported."""
-    reported = {(v.module, v.time_ns) for v in violations if v.kind == "process"}
+    reported = {(v.module, v.time_ns) for v in violations if v.invariant_kind == "process"}
     out = []
     for e in mid_run:
         if (e.module, e.time_ns) in reported:
@@ -152,5 +152,5 @@ def format_verdict(verdict: RunVerdict | Mapping[str, Any], start_ns: int | None
         v = verdict.first
         when = f" at +{(v.time_ns - start_ns) / 1e9:.3f} s" if start_ns is not None else ""
         where = f" {v.where}" if v.where else ""
-        lines.append(f"first violation: {v.invariant} ({v.kind}){where}{when}: {v.detail}")
+        lines.append(f"first violation: {v.invariant} ({v.invariant_kind}){where}{when}: {v.detail}")
     return "\n".join(lines)

@@ -32,7 +32,7 @@ def format_violation(v: Violation, start_ns: int | None = None) -> str:
     """One console line: '!! [high] speed_limit (expression) on 'status' #37 at +12.300 s: ...'."""
     when = f" at +{(v.time_ns - start_ns) / 1e9:.3f} s" if start_ns is not None else ""
     where = f" {v.where}" if v.where else ""
-    return f"!! [{v.severity}] {v.invariant} ({v.kind}){where}{when}: {v.detail}"
+    return f"!! [{v.severity}] {v.invariant} ({v.invariant_kind}){where}{when}: {v.detail}"
 
 
 def json_safe(value: Any, depth: int = 0) -> Any:

@@ -83,7 +83,7 @@ class BusRun:
         self.policies: list[rec.PolicyApplicationsRecord] = []  # per policy of the test case, at the end
         self.monitors: OnlineMonitors | None = None
         self.verdict: RunVerdict | None = None  # the CRASH-scale verdict, once stopped
-        self.violations: list[rec.ViolationRecord] = []
+        self.violations: list[rec.Violation] = []
         self.stop_requested = threading.Event()  # --stop-on-violation
         self.end_reason = ""
         self.recorder_finished = False  # the recorder reported its counts and exited cleanly
@@ -286,7 +286,8 @@ class BusRun:
             # Judged up to the stop, as `check` judges the log: the silence of modules being stopped
             # (one slow to exit, a loaded machine) is the tool's doing, not a hang of the SUT.
             self.verdict = self.monitors.finish(stopping.time_ns)
-            self.emit(rec.decode({"kind": "verdict", "time_ns": time.time_ns(), **self.verdict.to_json()}))
+            verdict = self.verdict
+            self.emit(rec.VerdictRecord(time.time_ns(), verdict.klass, verdict.summary, verdict.first, verdict.reasons))
             self.monitors = None
         if self.launcher is not None:
             self.launcher.stop()
@@ -401,10 +402,8 @@ class BusRun:
         self._violated(violation)
 
     def _violated(self, violation) -> None:
-        record = rec.decode({"kind": "violation", **violation.to_json()})
-        assert isinstance(record, rec.ViolationRecord)  # a 'violation' body always decodes to one
-        self.violations.append(record)
-        self.emit(record)
+        self.violations.append(violation)
+        self.emit(violation)
         if self.options.stop_on_violation:
             self.stop_requested.set()
 
@@ -449,7 +448,7 @@ class BusRun:
 
     def _mutated(self, event) -> None:
         # Not re-published: the interception's own record (with the original) is in the log already.
-        self.on_event(rec.decode({"kind": "mutation", "time_ns": time.time_ns(), **event.to_json()}))
+        self.on_event(rec.MutationRecord.of(event, time.time_ns()))
 
     def _undeclared(self, module: str, key: str) -> None:
         note = "forwarded to every other module; declare it under 'channels' to route it precisely"

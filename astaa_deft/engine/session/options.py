@@ -8,7 +8,7 @@ from typing import Any
 
 from astaa_deft.model.records import Verdict
 from astaa_deft.model.records import ProcessExit
-from astaa_deft.io.log.records import PolicyApplicationsRecord, ViolationRecord
+from astaa_deft.io.log.records import PolicyApplicationsRecord, Violation
 
 
 @dataclass
@@ -34,7 +34,7 @@ class RunResult:
     end_reason: str  # "time limit", "signal SIGINT", "all modules exited", "violation", or stop_when's reason
     seconds: float  # wall time from the modules' launch to the end
     verdict: Any  # astaa_deft.engine.monitor.verdict.Verdict (None if the run never started its monitors)
-    violations: tuple[ViolationRecord, ...]
+    violations: tuple[Violation, ...]
     exits: tuple[ProcessExit, ...]
     sent: dict[str, int]  # messages per channel that went through the star (or were observed)
     recorded: dict[str, int]  # messages per channel the recorder wrote

@@ -94,7 +94,7 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
             lines.append(f"  undeclared key '{e.key}' from module '{e.module}'")
         elif isinstance(e, rec.RunEnd):
             lines.append(f"  run ended: {e.reason}")
-    violations = Counter(e.invariant for e in events if isinstance(e, rec.ViolationRecord))
+    violations = Counter(e.invariant for e in events if isinstance(e, rec.Violation))
     if violations:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
     lines.extend(policy_lines(events))

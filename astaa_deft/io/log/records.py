@@ -20,7 +20,8 @@ from typing import Any, ClassVar
 from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError
-from astaa_deft.model.records import FieldChange, ProcessExit, RecordError, RunEnd
+from astaa_deft.model.records import FieldChange, Mutation, ProcessExit, RecordError, RunEnd, Violation
+from astaa_deft.model.tagged import to_tagged
 
 FORMAT = 1  # bump when a record's meaning changes; decode() refuses newer ones
 
@@ -52,26 +53,11 @@ class RunStopped:
 
 
 @dataclass(frozen=True)
-class ViolationRecord:
-    time_ns: int
-    invariant: str
-    invariant_kind: str = "?"
-    severity: str = "high"
-    crash: str = "Silent"
-    detail: str = ""
-    module: str | None = None
-    channel: str | None = None
-    seq: int | None = None
-    message: Any = None
-    kind: ClassVar[str] = "violation"
-
-
-@dataclass(frozen=True)
 class VerdictRecord:
     time_ns: int
     klass: str
     summary: str = ""
-    first: ViolationRecord | None = None
+    first: Violation | None = None
     reasons: tuple[str, ...] = ()
     kind: ClassVar[str] = "verdict"
 
@@ -87,11 +73,12 @@ class UndeclaredKey:
 
 @dataclass(frozen=True)
 class MutationRecord:
-    """What the interception did to one message (``policy``/``action`` joined by '+' when stacked).
+    """A ``model.records.Mutation`` as the log holds it (``policy``/``action`` joined by '+' when stacked).
 
-    Logged on the mutations topic (without kind/time_ns, with the sequence
-    numbers of the original and the delivered message in the log) and handed
-    to ``on_event`` live. Values in ``fields`` and ``detail`` are tagged JSON.
+    The log adds the time and the sequence numbers of the original and the
+    delivered message, and keeps the values of ``fields`` and ``detail`` in
+    their tagged JSON form (``model.tagged``), as written. Logged on the
+    mutations topic (without kind/time_ns) and handed to ``on_event`` live.
     """
     time_ns: int
     policy: str
@@ -106,6 +93,13 @@ class MutationRecord:
     original_sequence: int | None = None
     delivered_sequence: int | None = None
     kind: ClassVar[str] = "mutation"
+
+    @classmethod
+    def of(cls, mutation: Mutation, time_ns: int) -> MutationRecord:
+        """The record of a live mutation: its values in their tagged JSON form, as the log holds them."""
+        return cls(time_ns, mutation.policy, mutation.action, mutation.channel, mutation.message_index,
+                   tuple(FieldChange(c.path, to_tagged(c.old), to_tagged(c.new)) for c in mutation.fields),
+                   mutation.testcase, mutation.consumers, mutation.time, to_tagged(mutation.detail))
 
 
 @dataclass(frozen=True)
@@ -160,15 +154,15 @@ class OtherEvent:
     body: tuple[tuple[str, Any], ...] = ()
 
 
-Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExit | ViolationRecord | VerdictRecord
+Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExit | Violation | VerdictRecord
           | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | PolicyApplicationsRecord | OtherEvent)
 
 __all__ = ["FORMAT", "FieldChange", "FlagRecord", "ModuleLogLine", "MutationRecord", "OtherEvent",
            "PolicyApplicationsRecord", "ProcessExit", "Record", "RunEnd", "RunStarted", "RunStopped", "RunStopping",
-           "UndeclaredKey", "VerdictRecord", "ViolationRecord", "decode", "decode_mutation", "encode", "to_json_text"]
+           "UndeclaredKey", "VerdictRecord", "Violation", "decode", "decode_mutation", "encode", "to_json_text"]
 
-_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, UndeclaredKey, ModuleLogLine, ViolationRecord,
-                               FlagRecord, PolicyApplicationsRecord)}
+_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, UndeclaredKey, ModuleLogLine, FlagRecord,
+                               PolicyApplicationsRecord)}
 _MODEL: dict[str, type[ProcessExit] | type[RunEnd]] = {c.kind: c for c in (ProcessExit, RunEnd)}  # own their JSON
 
 
@@ -178,7 +172,7 @@ def encode(record: Record) -> dict:
         return {"kind": record.kind, "time_ns": record.time_ns, **dict(record.body)}
     if isinstance(record, VerdictRecord):
         return {"kind": record.kind, "time_ns": record.time_ns, "class": record.klass,
-                "first": _violation_body(record.first) if record.first else None,
+                "first": record.first.to_log_json() if record.first else None,
                 "summary": record.summary, "reasons": list(record.reasons)}
     if isinstance(record, MutationRecord):
         return {"kind": record.kind, "time_ns": record.time_ns, "testcase": record.testcase,
@@ -187,6 +181,8 @@ def encode(record: Record) -> dict:
                 "fields": [{"path": c.path, "old": c.old, "new": c.new} for c in record.fields],
                 "detail": record.detail, "original_sequence": record.original_sequence,
                 "delivered_sequence": record.delivered_sequence}
+    if isinstance(record, Violation):
+        return {"kind": record.kind, **record.to_log_json()}
     if isinstance(record, (ProcessExit, RunEnd)):
         return {"kind": record.kind, **record.to_json()}
     body: dict[str, Any] = {"kind": record.kind}
@@ -213,12 +209,13 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     if kind == VerdictRecord.kind:
         first = body.get("first")
         return VerdictRecord(time_ns, str(body.get("class", "?")), str(body.get("summary", "")),
-                             _violation(first, time_ns) if isinstance(first, Mapping) else None,
+                             Violation.from_json({"time_ns": time_ns, **first}, where=where)
+                             if isinstance(first, Mapping) else None,
                              tuple(str(r) for r in body.get("reasons") or ()))
     if kind == MutationRecord.kind:
         return decode_mutation(body, time_ns)
-    if kind == ViolationRecord.kind:
-        return _violation(body, time_ns)
+    if kind == Violation.kind:
+        return Violation.from_json({**body, "time_ns": body.get("time_ns", time_ns)}, where=where)
     model = _MODEL.get(kind)
     if model is not None:
         try:
@@ -258,21 +255,6 @@ def decode_mutation(body: Mapping[str, Any], time_ns: int = 0) -> MutationRecord
 
 def _opt_int(value: Any) -> int | None:
     return value if isinstance(value, int) and not isinstance(value, bool) else None
-
-
-def _violation(body: Mapping[str, Any], time_ns: int) -> ViolationRecord:
-    seq = body.get("seq")
-    return ViolationRecord(_int(body.get("time_ns", time_ns)), str(body.get("invariant", "?")),
-                           str(body.get("invariant_kind", "?")), str(body.get("severity", "high")),
-                           str(body.get("crash", "Silent")), str(body.get("detail", "")),
-                           body.get("module"), body.get("channel"), seq if isinstance(seq, int) else None,
-                           body.get("message"))
-
-
-def _violation_body(v: ViolationRecord) -> dict:
-    body = encode(v)
-    body.pop("kind")
-    return body
 
 
 def _int(value: Any) -> int:

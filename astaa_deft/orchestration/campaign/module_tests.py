@@ -62,7 +62,7 @@ def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: Extra
     if planner is None:
         return False
     log = read_log(log_path)
-    failed_at = next((v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant == invariant), None)
+    failed_at = next((v.time_ns for v in log.records(rec.Violation) if v.invariant == invariant), None)
     if failed_at is None:
         failed_at = next((e.time_ns for e in log.records(rec.ProcessExit)
                           if e.module == planner.module and e.abnormal), None)

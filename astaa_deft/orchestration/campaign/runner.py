@@ -31,7 +31,7 @@ from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
 from astaa_deft.engine.intercept.engine import Interceptor
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.io.log import layout
-from astaa_deft.io.log.records import ViolationRecord
+from astaa_deft.io.log.records import Violation
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.session import BusRun, RunOptions, run_session
@@ -293,7 +293,7 @@ class MarginWatch:
                 if margin < self.closest.get(inv.name, math.inf):
                     self.closest[inv.name] = margin
 
-    def margins(self, violations: tuple[ViolationRecord, ...]) -> dict[str, float]:
+    def margins(self, violations: tuple[Violation, ...]) -> dict[str, float]:
         with self._lock:
             out = dict(self.closest)
         for v in violations:
