@@ -30,6 +30,7 @@ from typing import Any, ClassVar, TypeAlias
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.tagged import to_tagged
 
 
@@ -42,18 +43,10 @@ def _damaged(where: str, what: str) -> RecordError:
                                "the file was cut or altered; record the run again"))
 
 
-def _mapping(body: object, where: str, kind: str) -> Mapping[str, Any]:
+def _fields(body: object, where: str, kind: str) -> JsonFields:
     if not isinstance(body, Mapping):
         raise _damaged(where, f"a {kind} is not a JSON object")
-    return body
-
-
-def _opt_int(value: object) -> int | None:
-    return value if isinstance(value, int) and not isinstance(value, bool) else None
-
-
-def _int_or_zero(value: object) -> int:
-    return value if isinstance(value, int) and not isinstance(value, bool) else 0
+    return JsonFields(body)
 
 
 # ---------------------------------------------------------------- the verdict's class
@@ -118,8 +111,8 @@ class FieldChange:
     @classmethod
     def from_json(cls, body: object, *, where: str = "the log") -> FieldChange:
         """The change of its JSON form (values stay tagged); RecordError if it is not an object."""
-        obj = _mapping(body, where, "field change")
-        return cls(str(obj.get("path")), obj.get("old"), obj.get("new"))
+        obj = _fields(body, where, "field change")
+        return cls(obj.text("path", "None"), obj.raw("old"), obj.raw("new"))
 
 
 # The compact form of a mutation on the proxy's hot path and on the pipe to the recorder: the
@@ -130,14 +123,18 @@ class FieldChange:
 # and ``mutation_row_json``.
 MutationRow: TypeAlias = tuple[str, str, str, str, tuple[str, ...], int, float,
                                Sequence[tuple[str, Any, Any]], dict[str, Any]]
-MUTATION_ROW_LENGTH = 9
+# The first five attributes of a mutation (testcase, policy, action, channel, consumers): fixed for
+# a policy on a channel, so the hot path builds a row from them and the three values per message.
+MutationSource: TypeAlias = tuple[str, str, str, str, tuple[str, ...]]
 
 
-def mutation_row(testcase: str, policy: str, action: str, channel: str, consumers: tuple[str, ...],  # noqa: PLR0913
-                 message_index: int, time: float, changes: Sequence[tuple[str, Any, Any]],
-                 detail: dict[str, Any]) -> MutationRow:
-    """The compact form of a mutation (the arguments in :class:`Mutation`'s field order)."""
-    return (testcase, policy, action, channel, consumers, message_index, time, changes, detail)
+def mutation_row(source: MutationSource, message_index: int, time: float,
+                 changes: Sequence[tuple[str, Any, Any]], detail: dict[str, Any] | None = None) -> MutationRow:
+    """The compact form of a mutation: ``source``'s attributes, the message's index and time, its changes.
+
+    ``changes``: (path, old, new) triples; ``detail`` None: no detail (a new empty dict).
+    """
+    return source + (message_index, time, changes, {} if detail is None else detail)
 
 
 def mutation_row_json(row: MutationRow) -> JsonObject:
@@ -167,7 +164,7 @@ class Mutation:
 
     def to_row(self) -> MutationRow:
         """Its compact form (see :data:`MutationRow`)."""
-        return mutation_row(self.testcase, self.policy, self.action, self.channel, self.consumers,
+        return mutation_row((self.testcase, self.policy, self.action, self.channel, self.consumers),
                             self.message_index, self.time, tuple([(c.path, c.old, c.new) for c in self.fields]),
                             self.detail)
 
@@ -225,13 +222,12 @@ class ProcessExit:
     @classmethod
     def from_json(cls, body: object, *, where: str = "the log") -> ProcessExit:
         """The exit of its JSON form; RecordError if a required field (module, pid, returncode) is missing."""
-        obj = _mapping(body, where, "process exit")
-        module, pid, code = obj.get("module"), _opt_int(obj.get("pid")), _opt_int(obj.get("returncode"))
-        if not isinstance(module, str) or pid is None or code is None:
+        obj = _fields(body, where, "process exit")
+        module, pid, code = obj.optional_text("module"), obj.optional_integer("pid"), obj.optional_integer("returncode")
+        if module is None or pid is None or code is None:
             raise _damaged(where, "a process exit without its module, pid or return code")
-        signal = obj.get("signal")
-        return cls(module, pid, code, signal if isinstance(signal, str) else None, _int_or_zero(obj.get("time_ns")),
-                   bool(obj.get("during_shutdown", False)), str(obj.get("stderr_tail", "")))
+        return cls(module, pid, code, obj.optional_text("signal"), obj.integer("time_ns"), obj.flag("during_shutdown"),
+                   obj.text("stderr_tail"))
 
 
 # ---------------------------------------------------------------- violations
@@ -278,15 +274,15 @@ class Violation:
         takes its default (a time of 0, an unknown class Silent) rather than
         losing the finding.
         """
-        obj = _mapping(body, where, "violation")
-        message, channel, module = obj.get("message"), obj.get("channel"), obj.get("module")
+        obj = _fields(body, where, "violation")
+        message = obj.object("message")
         return cls(
-            invariant=str(obj.get("invariant", "?")), invariant_kind=str(obj.get("invariant_kind", "?")),
-            severity=str(obj.get("severity", "high")), time_ns=_int_or_zero(obj.get("time_ns")),
-            channel=channel if isinstance(channel, str) else None, seq=_opt_int(obj.get("seq")),
-            message=message if isinstance(message, dict) else None, detail=str(obj.get("detail", "")),
-            crash=Verdict.named(str(obj.get("crash", Verdict.SILENT))) or Verdict.SILENT,
-            module=module if isinstance(module, str) else None,
+            invariant=obj.text("invariant", "?"), invariant_kind=obj.text("invariant_kind", "?"),
+            severity=obj.text("severity", "high"), time_ns=obj.integer("time_ns"),
+            channel=obj.optional_text("channel"), seq=obj.optional_integer("seq"),
+            message=dict(message) if message is not None else None, detail=obj.text("detail"),
+            crash=Verdict.named(obj.text("crash", Verdict.SILENT)) or Verdict.SILENT,
+            module=obj.optional_text("module"),
         )
 
     @property
@@ -317,8 +313,8 @@ class RunEnd:
     @classmethod
     def from_json(cls, body: object, *, where: str = "the log") -> RunEnd:
         """The end of its JSON form; RecordError if it has no reason."""
-        obj = _mapping(body, where, "run end")
-        reason = obj.get("reason")
-        if not isinstance(reason, str):
+        obj = _fields(body, where, "run end")
+        reason = obj.optional_text("reason")
+        if reason is None:
             raise _damaged(where, "a run end without its reason")
-        return cls(_int_or_zero(obj.get("time_ns")), reason)
+        return cls(obj.integer("time_ns"), reason)

@@ -247,8 +247,8 @@ class Interceptor:
         state.previous_payload = payload
         policy = live.policy
         self._count_touch(policy.id)
-        return done[0], mutation_row(self.testcase.id, policy.id, policy.action.name, channel, consumers, index, now,
-                                     done[1], {})
+        return done[0], mutation_row((self.testcase.id, policy.id, policy.action.name, channel, consumers), index, now,
+                                     done[1])
 
     @staticmethod
     def event(row: MutationRow) -> Mutation:

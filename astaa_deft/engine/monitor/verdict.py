@@ -30,6 +30,7 @@ from typing import Any
 
 from astaa_deft.engine.monitor.violation import SEVERITIES, Violation
 from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.records import CRASH_SCALE, ProcessExit, Verdict
 
 ORDER = CRASH_SCALE  # worst first, Pass last (the name the campaign imports)
@@ -54,10 +55,11 @@ class RunVerdict:
     @classmethod
     def from_json(cls, body: Mapping[str, Any], *, where: str = "the log") -> RunVerdict:
         """The verdict of its JSON form (an unknown class reads as Silent); RecordError if ``first`` is damaged."""
-        first = body.get("first")
-        klass = Verdict.named(str(body.get("class", "?"))) or Verdict.SILENT
-        return cls(klass, Violation.from_json(first, where=where) if first else None,
-                   str(body.get("summary", "")), tuple(str(r) for r in body.get("reasons") or ()))
+        read = JsonFields(body)
+        first = read.raw("first")
+        return cls(Verdict.named(read.text("class", "?")) or Verdict.SILENT,
+                   Violation.from_json(first, where=where) if first else None, read.text("summary"),
+                   read.texts("reasons"))
 
 
 def exits_of(events: Sequence[ProcessExit | Mapping[str, Any]]) -> tuple[list[ProcessExit], bool]:
@@ -71,9 +73,11 @@ def exits_of(events: Sequence[ProcessExit | Mapping[str, Any]]) -> tuple[list[Pr
     for event in events:
         if isinstance(event, ProcessExit):
             exits.append(event)
-        elif event.get("kind", ProcessExit.kind) == ProcessExit.kind:
+            continue
+        kind = JsonFields(event).text("kind", ProcessExit.kind)
+        if kind == ProcessExit.kind:
             exits.append(ProcessExit.from_json({"pid": 0, **event}))
-        elif event.get("kind") == BUS_LOST:
+        elif kind == BUS_LOST:
             bus_lost = True
     return exits, bus_lost
 

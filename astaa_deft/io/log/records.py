@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError
+from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.records import FieldChange, Mutation, ProcessExit, RecordError, RunEnd, Violation
 from astaa_deft.model.tagged import to_tagged
 
@@ -200,22 +201,22 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     """The record of a logged JSON object; an unknown kind becomes an :class:`OtherEvent`."""
     if not isinstance(body, Mapping):
         raise InputError(f"{where}: an event is not a JSON object")
-    version = body.get("format", FORMAT)
-    if isinstance(version, int) and version > FORMAT:
+    read = JsonFields(body)
+    version = read.integer("format", FORMAT)
+    if version > FORMAT:
         raise InputError(f"{where}: events in record format {version}, this tool reads up to {FORMAT}; "
                          "read this log with a newer astaa-deft")
-    kind = str(body.get("kind", ""))
-    time_ns = _int(body.get("time_ns"))
+    kind = read.text("kind")
+    time_ns = read.integer("time_ns")
     if kind == VerdictRecord.kind:
-        first = body.get("first")
-        return VerdictRecord(time_ns, str(body.get("class", "?")), str(body.get("summary", "")),
+        first = read.object("first")
+        return VerdictRecord(time_ns, read.text("class", "?"), read.text("summary"),
                              Violation.from_json({"time_ns": time_ns, **first}, where=where)
-                             if isinstance(first, Mapping) else None,
-                             tuple(str(r) for r in body.get("reasons") or ()))
+                             if first is not None else None, read.texts("reasons"))
     if kind == MutationRecord.kind:
         return decode_mutation(body, time_ns)
     if kind == Violation.kind:
-        return Violation.from_json({**body, "time_ns": body.get("time_ns", time_ns)}, where=where)
+        return Violation.from_json(body, where=where)
     model = _MODEL.get(kind)
     if model is not None:
         try:
@@ -243,19 +244,9 @@ def _other(kind: str, time_ns: int, body: Mapping[str, Any]) -> OtherEvent:
 
 def decode_mutation(body: Mapping[str, Any], time_ns: int = 0) -> MutationRecord:
     """A mutation as the interception and the recorder write it (the mutations topic has no 'kind')."""
-    changes = tuple(FieldChange.from_json(c) for c in body.get("fields") or () if isinstance(c, Mapping))
-    time_s = body.get("time")
-    return MutationRecord(time_ns or _int(body.get("time_ns")), str(body.get("policy", "")),
-                          str(body.get("action", "")), str(body.get("channel", "")),
-                          _int(body.get("message_index")), changes, str(body.get("testcase", "")),
-                          tuple(str(c) for c in body.get("consumers") or ()),
-                          float(time_s) if isinstance(time_s, (int, float)) else 0.0, body.get("detail"),
-                          _opt_int(body.get("original_sequence")), _opt_int(body.get("delivered_sequence")))
-
-
-def _opt_int(value: Any) -> int | None:
-    return value if isinstance(value, int) and not isinstance(value, bool) else None
-
-
-def _int(value: Any) -> int:
-    return value if isinstance(value, int) and not isinstance(value, bool) else 0
+    read = JsonFields(body)
+    return MutationRecord(time_ns or read.integer("time_ns"), read.text("policy"), read.text("action"),
+                          read.text("channel"), read.integer("message_index"),
+                          tuple(FieldChange.from_json(c) for c in read.objects("fields")), read.text("testcase"),
+                          read.texts("consumers"), read.number("time"), read.raw("detail"),
+                          read.optional_integer("original_sequence"), read.optional_integer("delivered_sequence"))
