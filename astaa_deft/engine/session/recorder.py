@@ -19,8 +19,11 @@ its critical path (seconds on a loaded machine). EOF instead of the line:
 nobody needs it, it exits.
 
 It belongs to the session, not to ``log/``: it joins transport (the bus
-keys it subscribes to), interception (the events it records) and the file
-format, which ``log/`` alone owns.
+keys it subscribes to), the run's records (the mutations the proxy sends,
+``model.records``) and the file format, which ``log/`` alone owns.
+
+Threads: Zenoh's callbacks only queue typed items (``QueueItem``); one
+writing thread writes them in arrival order (``_drain``).
 """
 
 from __future__ import annotations
@@ -404,8 +407,7 @@ class _JsonObjectCheck:
     """Does simdjson read ``data`` as a JSON object? (One parser per thread: simdjson's parsers are not shared.)
 
     simdjson validates strict RFC 8259 JSON (UTF-8, escapes, numbers) without
-    building Python objects: half of orjson's time on a 200 B message, which
-    itself is a tenth of the stdlib's. What it accepts, the stdlib accepts
+    building Python objects (docs/performance.md, "records"). What it accepts, the stdlib accepts
     too (it refuses NaN tokens, lone surrogates, integers beyond 64 bits,
     numbers beyond a double), but for a byte order mark, which it skips and
     is refused here; tests/test_recorder.py holds it to the codec.
@@ -460,7 +462,7 @@ def undecodable(codec: Codec, data: bytes) -> str | None:
 def _may_hold_nan(data: bytes) -> bool:
     """The twins' own first check (NaN or Infinity in the bytes), each search only where its first letter occurs.
 
-    An int needle is one memchr: 0.06 µs against 0.6 for the two bytes searches on a 200 B message.
+    (Why: docs/performance.md, "records".)
     """
     return (78 in data and b"NaN" in data) or (73 in data and b"Infinity" in data)  # 78: "N", 73: "I"
 
@@ -537,7 +539,7 @@ def _write_mutation(writer: LogWriter, target: InterceptedChannel, delivery: _De
 
 
 def _event_text(body: JsonObject) -> bytes:
-    """An event's JSON text: orjson's compact UTF-8 (a fifth of the stdlib's cost, measured), else the stdlib's.
+    """A mutation's JSON text: orjson's compact UTF-8 where it can (docs/performance.md, "records"), else the stdlib's.
 
     Both read back to the same object (the event's values are strict JSON
     data, see ``to_tagged``; anything else is written as ``str`` by both);

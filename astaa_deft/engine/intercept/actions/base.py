@@ -52,11 +52,10 @@ _new_object = object.__new__
 def built(cls: type[BuiltT], **values: Any) -> BuiltT:
     """An instance of the frozen dataclass ``cls`` from ALL its field values, without its ``__init__``.
 
-    A frozen dataclass's ``__init__`` sets each field through ``object.__setattr__``;
-    building the event, the delivery and the field change of every mutated
-    message that way took a third of the engine's time (profiled). The
-    instance is the same (equality, hash, repr, frozenness), so this is only
-    for the per-message path; tests/test_interception_records.py checks it.
+    For the engine's per-message path (why: docs/performance.md, "records").
+    The instance is the same as ``cls(**values)`` gives (equality, hash, repr,
+    frozenness); tests/test_interception_records.py checks it. ``cls`` must
+    not use ``__slots__``; every field must be given.
     """
     instance = _new_object(cls)
     instance.__dict__.update(values)
