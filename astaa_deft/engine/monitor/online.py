@@ -52,7 +52,7 @@ class OnlineMonitors:
             if name in self.wanted:
                 self._subs.append(session.declare_subscriber(key_expr, self._callback(name)))
 
-    def _callback(self, name: str):
+    def _callback(self, name: str) -> Callable[[zenoh.Sample], None]:
         q = self._q
 
         def on_sample(sample: zenoh.Sample) -> None:
