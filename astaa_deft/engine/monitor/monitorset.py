@@ -20,8 +20,7 @@ warning instead of ending the run.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable
 
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.base import LogLineInfo, Monitor, MonitorContext
@@ -104,10 +103,10 @@ class MonitorSet:
             self.violations.append(violation)
 
     # -- results -------------------------------------------------------------
-    def verdict(self, extra_events: Sequence[Mapping[str, Any]] = ()) -> RunVerdict:
-        """The run's CRASH verdict from everything seen so far (``extra_events``: e.g. a bus_lost event)."""
+    def verdict(self, *, bus_lost: bool = False) -> RunVerdict:
+        """The run's CRASH verdict from everything seen so far (``bus_lost``: the log says the bus was lost)."""
         with self._lock:
-            return run_verdict(self.violations, [*self.exits, *extra_events], [m.name for m in self.spec.modules])
+            return run_verdict(self.violations, self.exits, [m.name for m in self.spec.modules], bus_lost=bus_lost)
 
     def stats(self) -> dict[str, dict[str, int]]:
         """Per invariant: how many messages/samples were judged and how many broke it."""

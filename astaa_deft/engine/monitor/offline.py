@@ -29,7 +29,7 @@ from astaa_deft.io.log.reader import LogContents
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.order import channel_ranks, order_key
 from astaa_deft.engine.monitor.monitorset import MonitorSet
-from astaa_deft.engine.monitor.verdict import RunVerdict
+from astaa_deft.engine.monitor.verdict import BUS_LOST, RunVerdict
 from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation
 
 
@@ -92,10 +92,10 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
             monitors.add_finding(record)
     seconds = time.perf_counter() - clock
 
-    extra = [rec.encode(e) for e in events if isinstance(e, rec.OtherEvent) and e.kind == "bus_lost"]
+    bus_lost = any(isinstance(e, rec.OtherEvent) and e.kind == BUS_LOST for e in events)
     online = [e for e in events if isinstance(e, rec.VerdictRecord)]
     return CheckResult(
-        violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(extra),
+        violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(bus_lost=bus_lost),
         start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,
         online_verdict=online[-1] if online else None,
         online_violations=[e for e in events if isinstance(e, rec.Violation)],

@@ -83,14 +83,16 @@ def exits_of(events: Sequence[ProcessExit | Mapping[str, Any]]) -> tuple[list[Pr
 
 
 def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit | Mapping[str, Any]],
-                modules: Sequence[str]) -> RunVerdict:
+                modules: Sequence[str], *, bus_lost: bool = False) -> RunVerdict:
     """The CRASH class of a run from its violations, its process exits and its module names.
 
     ``exits``: the run's process exits, typed or as ``process_exit`` event
-    bodies (see :func:`exits_of`); a ``bus_lost`` event among them makes the
-    run Catastrophic. Pure: the same inputs give the same verdict.
+    bodies (see :func:`exits_of`). The bus lost (``bus_lost``, or a
+    ``bus_lost`` event among ``exits``) makes the run Catastrophic. Pure:
+    the same inputs give the same verdict.
     """
-    typed_exits, bus_lost = exits_of(exits)
+    typed_exits, lost_in_events = exits_of(exits)
+    bus_lost = bus_lost or lost_in_events
     mid_run = [e for e in typed_exits if not e.during_shutdown]
     first_exit_ns: dict[str | None, int] = {}
     for e in sorted(mid_run, key=lambda e: e.time_ns):
