@@ -27,7 +27,7 @@ from typing import Any
 
 from astaa_deft.io.codecs import Codec, DecodeError, get_codec
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.records import FieldChange, Mutation, MutationRow, mutation_row
+from astaa_deft.model.records import FieldChange, Mutation, MutationRow, MutationSource, mutation_row
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.intercept.actions.base import (
     ActionRuntime, Delivery, FastPath, MessageInfo, Pending, PolicyContext, built,
@@ -103,7 +103,7 @@ class _LivePolicy:
 
 class _ChannelState:
     __slots__ = ("name", "codec", "count", "first_at", "last_at", "previous_payload", "_previous_cache", "acting",
-                 "observers", "anchors", "held", "fast")
+                 "observers", "anchors", "held", "fast", "fast_source")
 
     def __init__(self, name: str, codec: Codec):
         self.name = name
@@ -119,6 +119,7 @@ class _ChannelState:
         self.held: list[tuple[float, int, Delivery]] = []  # delayed deliveries, a heap by due time
         # The acting policy's shortcut when it alone acts here, for every consumer (see ActionRuntime.fast_path).
         self.fast: FastPath | None = None
+        self.fast_source: MutationSource | None = None  # the shortcut's mutations' fixed attributes (see _fast_message)
 
     def previous_message(self) -> dict:
         """The previous real message, decoded once (derive rules like time.jump_back read it)."""
@@ -247,8 +248,10 @@ class Interceptor:
         state.previous_payload = payload
         policy = live.policy
         self._count_touch(policy.id)
-        return done[0], mutation_row((self.testcase.id, policy.id, policy.action.name, channel, consumers), index, now,
-                                     done[1])
+        source = state.fast_source  # built once per consumers tuple: a lane passes the same one every time
+        if source is None or source[4] is not consumers:
+            source = state.fast_source = (self.testcase.id, policy.id, policy.action.name, channel, consumers)
+        return done[0], mutation_row(source, index, now, done[1])
 
     @staticmethod
     def event(row: MutationRow) -> Mutation:
