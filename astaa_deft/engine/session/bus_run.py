@@ -23,7 +23,6 @@ from collections.abc import Callable, Sequence
 
 import zenoh
 
-from astaa_deft.model.records import Verdict
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.inputfile import SPEC, read_input
 from astaa_deft.io.output_place import Place, check_temp_dir, ready_dir, ready_file
@@ -33,7 +32,7 @@ from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.io.log import records as rec
 from astaa_deft.engine.monitor.online import OnlineMonitors
 from astaa_deft.engine.bus.launcher import Launcher, ModuleNotReady, output_file
-from astaa_deft.model.records import ProcessExit
+from astaa_deft.model.records import ProcessExit, Verdict
 from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.engine.monitor.violation import Violation
 from astaa_deft.engine.bus.observer import ChannelCounter

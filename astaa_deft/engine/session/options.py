@@ -6,9 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from astaa_deft.model.records import Verdict
-from astaa_deft.model.records import ProcessExit
-from astaa_deft.io.log.records import PolicyApplicationsRecord, Violation
+from astaa_deft.io.log.records import PolicyApplicationsRecord
+from astaa_deft.model.records import ProcessExit, Verdict, Violation
 
 
 @dataclass
@@ -33,7 +32,7 @@ class RunResult:
 
     end_reason: str  # "time limit", "signal SIGINT", "all modules exited", "violation", or stop_when's reason
     seconds: float  # wall time from the modules' launch to the end
-    verdict: Any  # astaa_deft.engine.monitor.verdict.Verdict (None if the run never started its monitors)
+    verdict: Any  # astaa_deft.engine.monitor.verdict.RunVerdict (None if the run never started its monitors)
     violations: tuple[Violation, ...]
     exits: tuple[ProcessExit, ...]
     sent: dict[str, int]  # messages per channel that went through the star (or were observed)

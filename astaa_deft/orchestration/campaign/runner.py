@@ -21,7 +21,7 @@ from typing import Any
 
 import zenoh
 
-from astaa_deft.model.records import Verdict
+from astaa_deft.model.records import Verdict, Violation
 from astaa_deft.model import fields
 from astaa_deft.engine.bus.processes import ChildProcess
 from astaa_deft.io.codecs import get_codec
@@ -31,7 +31,6 @@ from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
 from astaa_deft.engine.intercept.engine import Interceptor
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.io.log import layout
-from astaa_deft.io.log.records import Violation
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.session import BusRun, RunOptions, run_session
