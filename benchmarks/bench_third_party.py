@@ -70,7 +70,7 @@ def reported_collisions(log: Path) -> set[str]:
     events = [rec.decode(e) for e in read_log(log).events()]
     found = set()
     for e in events:
-        if isinstance(e, rec.ViolationRecord) and e.invariant == "no_collision":
+        if isinstance(e, rec.Violation) and e.invariant == "no_collision":
             match = OBSTACLE.search(e.detail)
             found.add(match.group(1) if match else "?")
     return found

@@ -395,7 +395,7 @@ def _strict(data: bytes):
 
 
 def test_non_finite_mutations_stay_exact_on_the_bus_and_every_logged_message_is_strict_json(tmp_path):
-    from astaa_deft.engine.intercept.actions.base import from_tagged
+    from astaa_deft.model.tagged import from_tagged
     from astaa_deft.io.log.viewable import VIEWABLE_PREFIX
 
     policy = tmp_path / "tc.xml"

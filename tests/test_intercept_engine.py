@@ -13,7 +13,7 @@ import pytest
 from astaa_deft.io.codecs import get_codec, same_value
 from astaa_deft.model.errors import InputError
 from astaa_deft.engine.intercept import Delivery, Interceptor, TestCase, load_dictionary, parse_testcase
-from astaa_deft.engine.intercept.actions.base import from_tagged, to_tagged
+from astaa_deft.model.tagged import from_tagged, to_tagged
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.testcase import Policy
 from astaa_deft.engine.spec.loader import load_spec

@@ -2,7 +2,7 @@
 
 The event travels as ``marshal`` data (cheap on the proxy's thread) and the
 recorder writes its JSON form: that form must be exactly the one
-``MutationEvent.to_json`` gives, whatever the values (exceptional floats,
+``Mutation.to_json`` gives, whatever the values (exceptional floats,
 bytes, lone surrogates, objects that look like tags, types marshal refuses).
 """
 
@@ -16,12 +16,12 @@ import pytest
 from astaa_deft.engine.bus.topology import (
     EVENT_JSON, EVENT_MARSHAL, intercept_record, pack_deliveries, read_intercept_record, unpack_deliveries,
 )
-from astaa_deft.engine.intercept.actions.base import FieldChange, MutationEvent
+from astaa_deft.model.records import FieldChange, Mutation
 from astaa_deft.engine.session.recorder import event_json
 
 
-def _event(old, new, detail=None) -> MutationEvent:
-    return MutationEvent("tc", "p1", "set", "data", ("sink", "other"), 7, 1.25,
+def _event(old, new, detail=None) -> Mutation:
+    return Mutation("tc", "p1", "set", "data", ("sink", "other"), 7, 1.25,
                          (FieldChange("a.b[2]", old, new),), detail or {})
 
 
@@ -96,7 +96,7 @@ def test_built_instances_are_the_dataclasses_own() -> None:
 
     from astaa_deft.engine.intercept.actions.base import Delivery, built
 
-    for cls, values in ((MutationEvent, _event(1, 2).__dict__),
+    for cls, values in ((Mutation, _event(1, 2).__dict__),
                         (FieldChange, {"path": "a", "old": 1, "new": float("inf")}),
                         (Delivery, {"consumers": ("s",), "payload": b"p", "at": 1.0, "original": b"o", "event": None})):
         assert set(values) == {f.name for f in fields(cls)}, f"{cls.__name__} gained a field: pass it to built()"

@@ -20,10 +20,11 @@ from astaa_deft.engine.bus.topology import intercept_record
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.engine.intercept import Interceptor, load_dictionary, parse_testcase
 from astaa_deft.engine.intercept.actions.base import FieldChange
+from astaa_deft.io.codecs import get_codec
 from astaa_deft.engine.intercept.actions.set import value_text
 from astaa_deft.io.log import layout
 from astaa_deft.io.log.reader import read_log
-from astaa_deft.engine.session.recorder import _write_intercepted
+from astaa_deft.engine.session.recorder import InterceptedChannel, _write_intercepted
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.analysis.minimise.ddmin import Outcome
 from astaa_deft.analysis.minimise.live_tester import LiveRun, LiveTester
@@ -62,6 +63,8 @@ def intercepted_log(path: Path, policies: str, count: int = 60) -> dict[str, lis
     cid = writer.bus_channel(SPEC.channel("localization"))
     original_cid = writer.bus_channel(SPEC.channel("localization"), topic=layout.ORIGINAL_PREFIX + LOC_KEY)
     mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
+    target = InterceptedChannel("localization", get_codec(SPEC.channel("localization").encoding), cid, original_cid,
+                                mutations_cid)
     writer.event("run_started", time_ns=START_NS)
     received: dict[str, list[bytes]] = {"planning": [], "control": []}
     held: list = []
@@ -75,7 +78,7 @@ def intercepted_log(path: Path, policies: str, count: int = 60) -> dict[str, lis
             writer.message(cid, t, d.payload)
         else:
             record = intercept_record(d.event.to_json(), d.original, delivered=bool(d.consumers))
-            _write_intercepted(writer, cid, original_cid, mutations_cid, record, t, d.payload, t)
+            _write_intercepted(writer, target, record, d.payload, log_time=t, publish_time=t)
 
     def route(deliveries, now: float) -> None:
         for d in deliveries:

@@ -56,7 +56,7 @@ def test_each_built_in_error_breaks_it_and_clean_lines_do_not(tmp_path):
     lines = [("planning", line) for line in CLEAN + ERRORS] + [("control", ERRORS[0])]  # control: not watched
     result = check_log(lines_log(tmp_path, spec, lines), spec)
     assert [v.message["line"] for v in result.violations] == ERRORS
-    assert {(v.invariant, v.kind, v.module, v.crash, v.severity) for v in result.violations} == {
+    assert {(v.invariant, v.invariant_kind, v.module, v.crash, v.severity) for v in result.violations} == {
         ("planner_errors", "exceptions", "planning", "Silent", "high")}
     assert result.violations[1].detail == f"module 'planning' logged an exception or error: {ERRORS[1]}"
     assert result.stats["planner_errors"] == {"evaluations": len(CLEAN) + len(ERRORS), "violating": len(ERRORS)}

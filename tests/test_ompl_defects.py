@@ -101,7 +101,7 @@ def test_defect_2_a_nan_heading_is_a_logged_planner_exception_and_the_node_carri
     assert "ValueError" in (tmp_path / "d2" / "planning.log").read_text()
     assert "(module exit)" not in res.stdout  # logged, not fatal: the node planned on once headings were finite
     log = read_log(tmp_path / "d2.mcap")
-    raised = min(v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant == "planner_errors")
+    raised = min(v.time_ns for v in log.records(rec.Violation) if v.invariant == "planner_errors")
     assert any(m.log_time > raised for m in log.on("ompl/plan")), "no plan after the exception"
     assert truth["contact"] is None, truth
 

@@ -20,10 +20,10 @@ ALL_KINDS = [
     rec.RunStopping(2),
     rec.RunStopped(3),
     rec.RunEnd(4, "time limit"),
-    rec.ProcessExitRecord(5, "talker", 42, 3, None, False, True, "Traceback ..."),
-    rec.ViolationRecord(6, "speed", "bound", "high", "Hindering", "too fast", None, "status", 7, {"v": 1}),
+    rec.ProcessExit("talker", 42, 3, None, 5, False, "Traceback ..."),
+    rec.Violation("speed", "bound", "high", 6, "status", 7, {"v": 1}, "too fast", "Hindering", None),
     rec.VerdictRecord(7, "Hindering", "1 violation",
-                      rec.ViolationRecord(6, "speed", "bound", "high", "Hindering", "too fast"), ("a reason",)),
+                      rec.Violation("speed", "bound", "high", 6, None, None, None, "too fast", "Hindering"), ("a reason",)),
     rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
     rec.MutationRecord(9, "p1", "set", "data", 12, (rec.FieldChange("value", 1.0, {"float": "nan"}),), "tc",
                        ("listener",), 1.5, {"steps": []}, 4, 5),
@@ -43,7 +43,7 @@ def test_existing_log_events_decode_to_records():
     old = {"kind": "process_exit", "time_ns": 5, "module": "m", "pid": 1, "returncode": -9, "signal": "SIGKILL",
            "during_shutdown": False, "abnormal": True, "stderr_tail": ""}
     exit_ = rec.decode(old)
-    assert isinstance(exit_, rec.ProcessExitRecord) and exit_.signal == "SIGKILL" and exit_.abnormal
+    assert isinstance(exit_, rec.ProcessExit) and exit_.signal == "SIGKILL" and exit_.abnormal
     started = rec.decode({"kind": "run_started", "time_ns": 1, "mode": "star", "spec": "s", "command_line": ["a"]})
     assert started == rec.RunStarted(1, "star", "s", ("a",))
 
@@ -87,7 +87,7 @@ def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
         assert rec.RunStarted in kinds and rec.VerdictRecord in kinds
         logged = [rec.decode(e) for e in read_log(result.log).events()]
         assert any(isinstance(r, rec.RunEnd) and r.reason == "all delivered" for r in logged)
-        assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1, (name, [r for r in logged if not isinstance(r, rec.ProcessExitRecord)])  # the other session's events are not here
+        assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1, (name, [r for r in logged if not isinstance(r, rec.ProcessExit)])  # the other session's events are not here
 
 
 def test_a_relative_run_dir_still_hands_modules_a_config_they_can_open(tmp_path, monkeypatch):

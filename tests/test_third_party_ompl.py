@@ -131,9 +131,9 @@ def test_extraction_reproduces_every_output_exactly_and_writes_tests_that_pass(c
 
 
 # -- a seeded obstacle: the collision verdict matches the simulator's own outcome ----------------------
-def _collisions(log: Path) -> list[rec.ViolationRecord]:
+def _collisions(log: Path) -> list[rec.Violation]:
     events = [rec.decode(x) for x in read_log(log).events()]
-    return [e for e in events if isinstance(e, rec.ViolationRecord) and e.invariant == "no_collision"]
+    return [e for e in events if isinstance(e, rec.Violation) and e.invariant == "no_collision"]
 
 
 def test_a_stopped_car_too_close_to_avoid_is_a_critical_collision_as_in_the_simulator(tmp_path):

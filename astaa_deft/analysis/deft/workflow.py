@@ -131,7 +131,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]
-    collisions = [v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant_kind == "collision"]
+    collisions = [v.time_ns for v in log.records(rec.Violation) if v.invariant_kind == "collision"]
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
     with writing(place):

@@ -211,19 +211,19 @@ class LiveTester:
                 result = check_log(log, self.spec)
             except InputError as exc:
                 return LiveRun(None, f"the run's log cannot be judged: {exc}", seconds)
-            exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExitRecord)]
+            exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExit)]
             detail = self._matching(result, exits)
             if detail:
                 return LiveRun(True, detail, seconds, record)
             return LiveRun(False, result.verdict.summary, seconds, record)
 
-    def _matching(self, result: CheckResult, exits: list[rec.ProcessExitRecord]) -> str:
+    def _matching(self, result: CheckResult, exits: list[rec.ProcessExit]) -> str:
         """The failure being minimised among a run's findings ('' if it is not there)."""
         if self.invariant == IMPLICIT:  # a crash no invariant named: the module's abnormal exit
             for e in exits:
                 if (not e.during_shutdown and (e.returncode or e.signal)
                         and (self.module is None or e.module == self.module)):
-                    return e.describe()
+                    return e.describe(with_pid=False)
             return ""
         for v in result.violations:
             if v.invariant == self.invariant and (self.module is None or v.module == self.module):

@@ -39,7 +39,9 @@ from astaa_deft.io.codecs.base import DecodeError, EncodeError
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.fields import FieldPath, FieldPathError, set_field
 from astaa_deft.engine.intercept.actions import ACTIONS
-from astaa_deft.engine.intercept.actions.base import ActionDetail, FieldChange, from_tagged
+from astaa_deft.engine.intercept.actions.base import ActionDetail
+from astaa_deft.model.records import FieldChange
+from astaa_deft.model.tagged import from_tagged
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage

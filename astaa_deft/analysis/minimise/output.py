@@ -130,8 +130,8 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
             # The module's process would have died of this exception: logged as its exit, as a run logs one.
             frame, error = crashed[0]
             end = max(end, model.output_time(frame) + 1)
-            writer.record(log_records.ProcessExitRecord(model.output_time(frame) + 1, cfg.module, 0, 1, None,
-                                                        False, True, error))
+            writer.record(log_records.ProcessExit(cfg.module, 0, 1, None, model.output_time(frame) + 1,
+                                                  False, error))
         writer.record(log_records.RunStopping(end))
     finally:
         writer.finish()

@@ -590,7 +590,7 @@ _STOPPED = ReplayAnswer(TestResult(Outcome.UNRESOLVED, "the module stopped answe
 
 def _first_crash_ns(log: LogContents, module: str) -> int | None:
     """When ``module`` first exited abnormally in the run (None if it never did)."""
-    exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExitRecord)]
+    exits = [e for e in map(rec.decode, log.events("process_exit")) if isinstance(e, rec.ProcessExit)]
     times = [e.time_ns for e in exits if e.module == module and not e.during_shutdown and (e.returncode or e.signal)]
     return min(times) if times else None
 

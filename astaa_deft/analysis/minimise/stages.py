@@ -81,7 +81,7 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
                                  "no module crashed", "minimise a log whose run failed (astaa-deft check LOG)"))
     first = found[0]
     at_s = ((first.time_ns or start_ns) - start_ns) / 1e9
-    return Failure(first.invariant, first.kind, first.module, first.channel, at_s, first.detail, first.crash)
+    return Failure(first.invariant, first.invariant_kind, first.module, first.channel, at_s, first.detail, first.crash)
 
 
 class TesterKind(TextEnum):

@@ -234,18 +234,18 @@ def say(message: str) -> None:
 
 def format_event(record: rec.Record) -> str | None:
     """One event as the console shows it (None: not shown)."""
-    if isinstance(record, rec.ProcessExitRecord):
+    if isinstance(record, rec.ProcessExit):
         if record.during_shutdown:
             return None
-        text = f"!! {record.describe()}"
+        text = f"!! {record.describe(with_pid=False)}"
         tail = record.stderr_tail.strip().splitlines()
         if tail:
             text += "\n   " + "\n   ".join(tail[-5:])
         return text
-    if isinstance(record, rec.ViolationRecord):
-        from astaa_deft.engine.monitor.violation import Violation, format_violation
+    if isinstance(record, rec.Violation):
+        from astaa_deft.engine.monitor.violation import format_violation
 
-        return format_violation(Violation.from_json(rec.encode(record)))
+        return format_violation(record)
     if isinstance(record, rec.MutationRecord):
         fields = ", ".join(f"{c.path}: {_short(c.old)} → {_short(c.new)}" for c in record.fields)
         index = f" #{record.message_index}" if record.message_index is not None else ""

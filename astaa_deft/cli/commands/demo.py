@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
 from astaa_deft.demo.status import StatusWatch
 from astaa_deft.io.log import layout
@@ -190,7 +191,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     outcome, watch = drive(DriveOptions(scenario, attack_log, command_line=command_line, policy=policy,
                                         duration=20.0))
     summarise(outcome, watch)
-    if outcome.verdict is None or outcome.verdict.klass == "Pass":
+    if outcome.verdict is None or outcome.verdict.klass == Verdict.PASS:
         problems.append("the interception did not make any invariant break")
     elif not outcome.complete or not outcome.observed:
         problems.append(f"the intercepted run was not fully observed ({outcome.end_reason})")

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from astaa_deft.cli.arguments import RUN_SECONDS, bounded
 from astaa_deft.cli.commands.console import RateMeter, StatusLine, StopSignal, format_event, parse_params, say
 from astaa_deft.engine.session.options import RunOptions, RunResult
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.output_place import Place, writing
 
@@ -169,7 +170,7 @@ def exit_code(outcome: RunResult) -> int:
 
     if not outcome.complete or not outcome.observed:
         # Findings made before the loss are real, but a Pass would claim what nobody saw.
-        if outcome.verdict is not None and outcome.verdict.klass != "Pass":
+        if outcome.verdict is not None and outcome.verdict.klass != Verdict.PASS:
             say(format_verdict(outcome.verdict))
         why = outcome.end_reason if not outcome.observed or "recorder" in outcome.end_reason \
             else "the recorder did not finish the log"
@@ -177,5 +178,5 @@ def exit_code(outcome: RunResult) -> int:
         return EXIT_NOT_OBSERVED
     if outcome.verdict is not None:
         say(format_verdict(outcome.verdict))
-        return 0 if outcome.verdict.klass == "Pass" else 1
+        return 0 if outcome.verdict.klass == Verdict.PASS else 1
     return 1 if outcome.crashes else 0

@@ -21,6 +21,7 @@ from pathlib import Path
 from collections.abc import Callable, Mapping
 
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.records import ProcessExit
 from astaa_deft.model.sut import Module, Spec
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus.processes import python_module, signal_group, tail
@@ -45,25 +46,6 @@ class ModuleCrashedWhileStarting(InputError):
     """
 
     exit_code = 1
-
-
-@dataclass(frozen=True)
-class ProcessExit:
-    module: str
-    pid: int
-    returncode: int
-    signal: str | None  # e.g. "SIGKILL" when killed by a signal
-    time_ns: int  # wall clock, ns since the epoch
-    during_shutdown: bool
-    stderr_tail: str = ""
-
-    @property
-    def abnormal(self) -> bool:
-        return not self.during_shutdown and self.returncode != 0
-
-    def describe(self) -> str:
-        how = f"killed by {self.signal}" if self.signal else f"exit code {self.returncode}"
-        return f"module '{self.module}' (pid {self.pid}) {how}"
 
 
 @dataclass

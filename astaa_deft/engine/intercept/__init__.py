@@ -9,12 +9,13 @@
 
 from __future__ import annotations
 
-from astaa_deft.engine.intercept.actions.base import Delivery, FieldChange, MutationEvent
+from astaa_deft.engine.intercept.actions.base import Delivery
+from astaa_deft.model.records import FieldChange, Mutation
 from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
 from astaa_deft.engine.intercept.engine import Interceptor, load_interceptor
 from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Window, load_testcase, parse_testcase
 
 __all__ = [
-    "Delivery", "Dictionary", "FieldChange", "Interceptor", "MutationEvent", "Policy", "Selection",
+    "Delivery", "Dictionary", "FieldChange", "Interceptor", "Mutation", "Policy", "Selection",
     "TestCase", "Window", "load_dictionary", "load_interceptor", "load_testcase", "parse_testcase",
 ]

@@ -27,19 +27,21 @@ from typing import Any
 
 from astaa_deft.io.codecs import Codec, DecodeError, get_codec
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.records import FieldChange, Mutation, MutationRow, MutationSource, mutation_row
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.intercept.actions.base import (
-    ActionRuntime, Delivery, FastPath, FieldChange, MessageInfo, MutationEvent, Pending,
-    PolicyContext, built,
+    ActionRuntime, Delivery, FastPath, MessageInfo, Pending, PolicyContext, built,
 )
 from astaa_deft.engine.intercept.applications import ChannelTraffic, PolicyApplications
 from astaa_deft.engine.intercept.dictionary import Dictionary, NotApplicable, load_dictionary
 from astaa_deft.engine.intercept.testcase import Policy, TestCase, load_testcase
 
-__all__ = ["Delivery", "FieldChange", "Interceptor", "Lane", "MutationEvent", "PolicyGate", "load_interceptor"]
+__all__ = ["Delivery", "FieldChange", "Interceptor", "Lane", "Mutation", "PolicyGate", "load_interceptor"]
 
-# Interceptor.lane's shortcut for one channel: lane(payload, now) -> None | (payload, event values) | deliveries.
-Lane = Callable[[bytes, float], Any]
+# What a lane answers for one message (see Interceptor.lane).
+LaneResult = None | tuple[bytes, MutationRow] | list[Delivery]
+# Interceptor.lane's shortcut for one channel: lane(payload, now) -> LaneResult.
+Lane = Callable[[bytes, float], LaneResult]
 
 
 class PolicyGate:
@@ -101,7 +103,7 @@ class _LivePolicy:
 
 class _ChannelState:
     __slots__ = ("name", "codec", "count", "first_at", "last_at", "previous_payload", "_previous_cache", "acting",
-                 "observers", "anchors", "held", "fast")
+                 "observers", "anchors", "held", "fast", "fast_source")
 
     def __init__(self, name: str, codec: Codec):
         self.name = name
@@ -117,6 +119,7 @@ class _ChannelState:
         self.held: list[tuple[float, int, Delivery]] = []  # delayed deliveries, a heap by due time
         # The acting policy's shortcut when it alone acts here, for every consumer (see ActionRuntime.fast_path).
         self.fast: FastPath | None = None
+        self.fast_source: MutationSource | None = None  # the shortcut's mutations' fixed attributes (see _fast_message)
 
     def previous_message(self) -> dict:
         """The previous real message, decoded once (derive rules like time.jump_back read it)."""
@@ -165,9 +168,9 @@ class Interceptor:
             done = self._fast_message(state, consumers, payload, now)
             if done is None:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
-            elif type(done) is tuple:
+            elif isinstance(done, tuple):
                 out.append(built(Delivery, consumers=consumers, payload=done[0], at=now, original=payload,
-                                 event=MutationEvent.from_values(done[1])))
+                                 event=Mutation.from_row(done[1])))
             else:
                 out.extend(done)
             return out
@@ -194,9 +197,9 @@ class Interceptor:
         ``on_message`` does and returns
 
         * None: the message goes to every consumer untouched, now;
-        * (payload, event values): the rewritten message goes to every
-          consumer now; the event as ``MutationEvent.from_values`` takes it
-          (the proxy's record carries it as is);
+        * (payload, mutation row): the rewritten message goes to every
+          consumer now; the mutation in its compact form (``model.records.MutationRow``,
+          which the proxy's record carries as is);
         * anything else as ``on_message`` returns it, a list of deliveries.
 
         Offered where ``on_message`` takes its short way (one acting policy
@@ -208,7 +211,7 @@ class Interceptor:
             return None
         fast_message, on_message = self._fast_message, self.on_message
 
-        def run(payload: bytes, now: float) -> Any:
+        def run(payload: bytes, now: float) -> LaneResult:
             if state.held:  # something delayed on this channel may fall due first: the general way
                 return on_message(channel, consumers, payload, now)
             return fast_message(state, consumers, payload, now)
@@ -227,7 +230,8 @@ class Interceptor:
                 gate.anchored_at(now)
         return index
 
-    def _fast_message(self, state: _ChannelState, consumers: tuple[str, ...], payload: bytes, now: float) -> Any:
+    def _fast_message(self, state: _ChannelState, consumers: tuple[str, ...], payload: bytes,
+                      now: float) -> LaneResult:
         """A message on a channel with a shortcut (``state.fast``), as ``lane`` answers (delayed ones released)."""
         index = self._arrived(state, now)
         channel, live = state.name, state.acting[0]
@@ -244,12 +248,15 @@ class Interceptor:
         state.previous_payload = payload
         policy = live.policy
         self._count_touch(policy.id)
-        return done[0], (self.testcase.id, policy.id, policy.action.name, channel, consumers, index, now, done[1], {})
+        source = state.fast_source  # built once per consumers tuple: a lane passes the same one every time
+        if source is None or source[4] is not consumers:
+            source = state.fast_source = (self.testcase.id, policy.id, policy.action.name, channel, consumers)
+        return done[0], mutation_row(source, index, now, done[1])
 
     @staticmethod
-    def event(values: tuple) -> MutationEvent:
-        """The typed event of a lane's event values."""
-        return MutationEvent.from_values(values)
+    def event(row: MutationRow) -> Mutation:
+        """The mutation of a lane's compact form."""
+        return Mutation.from_row(row)
 
     def on_tick(self, now: float) -> list[Delivery]:
         out = [d for state in self._channels.values() if state.held for d in self._release_due(state, now)]

@@ -282,7 +282,8 @@ def _draw(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Targe
     shape = rng.choices([name for name, _ in shapes], weights=[weight for _, weight in shapes])[0]
     if shape == "message":
         channel = rng.choice(sorted(by_channel))
-        return shape, fault_testcase(testcase_id, rng, channel, rng.choice(MESSAGE_FAULTS), duration, anchor)
+        return shape, fault_testcase(testcase_id, rng, channel, rng.choice(MESSAGE_FAULTS), duration=duration,
+                                     anchor=anchor)
     if shape == "stamp":
         assert stamps
         channel = rng.choice(sorted(stamps))
@@ -297,8 +298,8 @@ def _draw(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Targe
     assignments = tuple(Assignment(str(t.path), rng.choice(t.values).ref) for t in chosen)
     start = round(rng.uniform(0.0, duration * 0.8), 1)
     if shape == "sustained":
-        return shape, _one_policy(testcase_id, rng, channel, assignments, start, _held(rng, start, duration),
-                                  duration, anchor, "sustained")
+        return shape, _one_policy(testcase_id, rng, channel, assignments,
+                                  span=_Span(start, *_held(rng, start, duration), anchor), shape="sustained")
     if shape == "repeated":
         end = min(round(start + rng.uniform(1.0, 5.0), 1), duration)
         selection = rng.choice([Selection(), Selection(every=rng.choice([2, 5, 10])),
@@ -306,8 +307,8 @@ def _draw(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Targe
     else:  # one message: the first one in the window
         end = duration
         selection = Selection(limit=1)
-    return shape, _one_policy(testcase_id, rng, channel, assignments, start, (end, selection), duration, anchor,
-                              shape)
+    return shape, _one_policy(testcase_id, rng, channel, assignments, span=_Span(start, end, selection, anchor),
+                              shape=shape)
 
 
 def _held(rng: random.Random, start: float, duration: float) -> tuple[float, Selection]:
@@ -318,15 +319,24 @@ def _held(rng: random.Random, start: float, duration: float) -> tuple[float, Sel
     return duration, Selection(limit=rng.randint(*SUSTAINED_MESSAGES))
 
 
-def _one_policy(testcase_id: str, rng: random.Random, channel: str, assignments: tuple[Assignment, ...],
-                start: float, until: tuple[float, Selection], duration: float, anchor: str | None,
-                shape: str) -> TestCase:
-    """A test case of one ``set`` policy on ``channel`` from ``start`` s, ``until`` = (window end, selection)."""
-    end, selection = until
-    window = Window(start, max(end, round(start + 0.1, 1)), *_anchored(anchor))
-    policy = Policy("p1", Set(assignments), channels=(channel,), window=window, selection=selection)
-    return TestCase(testcase_id, rng.getrandbits(32), _describe(shape, channel, assignments, window, selection),
-                    (policy,))
+@dataclass(frozen=True)
+class _Span:
+    """A policy's window from ``start`` s to ``end`` s (at least 0.1 s), selecting ``selection``; its times
+    count from ``anchor``'s first message (None: from the run's start)."""
+
+    start: float
+    end: float
+    selection: Selection
+    anchor: str | None
+
+
+def _one_policy(testcase_id: str, rng: random.Random, channel: str, assignments: tuple[Assignment, ...], *,
+                span: _Span, shape: str) -> TestCase:
+    """A test case of one ``set`` policy on ``channel`` over ``span`` (``shape`` names it in the description)."""
+    window = Window(span.start, max(span.end, round(span.start + 0.1, 1)), *_anchored(span.anchor))
+    policy = Policy("p1", Set(assignments), channels=(channel,), window=window, selection=span.selection)
+    return TestCase(testcase_id, rng.getrandbits(32),
+                    _describe(shape, channel, assignments, window, span.selection), (policy,))
 
 
 def stamp_testcase(testcase_id: str, rng: random.Random, target: Target, fault: Entry, duration: float,
@@ -335,8 +345,8 @@ def stamp_testcase(testcase_id: str, rng: random.Random, target: Target, fault: 
     starting by ``latest`` s (default: 80 % of ``duration``)."""
     start = round(rng.uniform(0.0, duration * 0.8 if latest is None else latest), 1)
     until = _held(rng, start, duration) if rng.random() < 0.5 else (duration, Selection(limit=1))
-    return _one_policy(testcase_id, rng, target.channel.name, (Assignment(str(target.path), fault.ref),), start,
-                       until, duration, anchor, "stamp")
+    return _one_policy(testcase_id, rng, target.channel.name, (Assignment(str(target.path), fault.ref),),
+                       span=_Span(start, *until, anchor), shape="stamp")
 
 
 def _disjoint_sample(rng: random.Random, targets: list[Target], wanted: int) -> list[Target]:
@@ -500,8 +510,8 @@ def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_num
     # in shorter runs; later rounds spread over the whole live run for state-dependent failures.
     latest = duration * 0.8 * min(1.0, (round_number + 1) / SPREAD_ROUNDS)
     if probe.target is None:
-        return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], duration, anchor,
-                              repeated=False, latest=latest)
+        return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], duration=duration,
+                              anchor=anchor, repeated=False, latest=latest)
     if probe.fault == STAMP_PROBE:  # the round's stamp fault, NaN first (the field's own when it cannot take it)
         wanted = STAMP_FAULTS[round_number % len(STAMP_FAULTS)]
         fault = next((e for e in probe.target.values if e.key == wanted),
@@ -511,13 +521,13 @@ def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_num
     assignments = (Assignment(str(probe.target.path), entry.ref),)
     start = round(rng.uniform(0.0, latest), 1)
     if rng.random() < SUSTAINED_PROBE_SHARE:
-        return _one_policy(testcase_id, rng, probe.channel, assignments, start, _held(rng, start, duration),
-                           duration, anchor, "sustained")
-    return _one_policy(testcase_id, rng, probe.channel, assignments, start, (duration, Selection(limit=1)),
-                       duration, anchor, "single")
+        return _one_policy(testcase_id, rng, probe.channel, assignments,
+                           span=_Span(start, *_held(rng, start, duration), anchor), shape="sustained")
+    return _one_policy(testcase_id, rng, probe.channel, assignments,
+                       span=_Span(start, duration, Selection(limit=1), anchor), shape="single")
 
 
-def fault_testcase(testcase_id: str, rng: random.Random, channel: str, fault: str, duration: float,
+def fault_testcase(testcase_id: str, rng: random.Random, channel: str, fault: str, *, duration: float,
                    anchor: str | None = None, repeated: bool | None = None, latest: float | None = None) -> TestCase:
     """One message fault on ``channel``: one message, or (``repeated``, else by chance) a burst;
     starting by ``latest`` s (default: 80 % of ``duration``)."""

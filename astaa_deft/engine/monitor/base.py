@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 from collections.abc import Sequence
 
+from astaa_deft.model.records import ProcessExit, Verdict
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.violation import Violation, message_copy
 
@@ -27,33 +28,13 @@ class Invariant:
     """What every invariant declares; kinds add their own fields."""
 
     kind: ClassVar[str] = "?"
-    default_crash: ClassVar[str] = "Silent"  # the CRASH class a violation of this kind points at
+    default_crash: ClassVar[Verdict] = Verdict.SILENT  # the CRASH class a violation of this kind points at
 
     name: str
     severity: str = "high"
-    crash: str | None = None  # overrides default_crash (e.g. "Hindering" for a status channel that lies)
+    crash: Verdict | None = None  # overrides default_crash (e.g. Hindering for a status channel that lies)
     description: str = ""
     line: int | None = None  # where the spec declares it
-
-
-@dataclass(frozen=True)
-class ProcessExitInfo:
-    """A module's exit as the launcher reports it (and the log stores it)."""
-
-    module: str
-    returncode: int
-    signal: str | None
-    time_ns: int
-    during_shutdown: bool
-    stderr_tail: str = ""
-
-    @property
-    def abnormal(self) -> bool:
-        return not self.during_shutdown and (self.returncode != 0 or self.signal is not None)
-
-    def describe(self) -> str:
-        how = f"was killed by {self.signal}" if self.signal else f"exited with code {self.returncode}"
-        return f"module '{self.module}' {how}"
 
 
 @dataclass(frozen=True)
@@ -93,7 +74,7 @@ class Monitor:
     def on_message(self, channel: str, time_ns: int, value: dict | None, seq: int) -> list[Violation]:
         return NO_VIOLATIONS
 
-    def on_process_exit(self, exit_: ProcessExitInfo) -> list[Violation]:
+    def on_process_exit(self, exit_: ProcessExit) -> list[Violation]:
         return NO_VIOLATIONS
 
     def on_log_line(self, line: LogLineInfo) -> list[Violation]:
@@ -107,15 +88,15 @@ class Monitor:
 
     # -- helpers for subclasses ----------------------------------------------
     def violation(self, time_ns: int, detail: str, *, channel: str | None = None, seq: int | None = None,
-                  message: Any = None, module: str | None = None, crash: str | None = None,
+                  message: Any = None, module: str | None = None, crash: Verdict | None = None,
                   copy_message: bool = True, infer_module: bool = True) -> Violation:
         """A violation of this invariant; the module defaults to the channel's producer."""
         inv = self.invariant
         if module is None and infer_module and channel is not None:
             module = self.context.producer(channel)
         return Violation(
-            invariant=inv.name, kind=inv.kind, severity=inv.severity, time_ns=time_ns, channel=channel, seq=seq,
-            message=message_copy(message) if copy_message else message, detail=detail,
+            invariant=inv.name, invariant_kind=inv.kind, severity=inv.severity, time_ns=time_ns, channel=channel,
+            seq=seq, message=message_copy(message) if copy_message else message, detail=detail,
             crash=inv.crash or crash or inv.default_crash, module=module,
         )
 

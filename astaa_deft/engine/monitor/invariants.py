@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.sut import Channel, MessageType, Spec
 from astaa_deft.io.yamlsource import Node, Source
@@ -77,7 +78,7 @@ def _one(reader: InvariantReader, item: Node) -> Invariant | None:
     return KINDS[kind].parse(reader, item, common)
 
 
-def _crash(reader: InvariantReader, node: Node | None) -> str | None | bool:
+def _crash(reader: InvariantReader, node: Node | None) -> Verdict | None | bool:
     """The CRASH class an invariant's violations point at (None: its kind's default; False: invalid)."""
     if node is None:
         return None

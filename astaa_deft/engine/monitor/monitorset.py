@@ -20,13 +20,14 @@ warning instead of ending the run.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable
 
 from astaa_deft.model.sut import Spec
-from astaa_deft.engine.monitor.base import LogLineInfo, Monitor, MonitorContext, ProcessExitInfo
+from astaa_deft.engine.monitor.base import LogLineInfo, Monitor, MonitorContext
 from astaa_deft.engine.monitor.invariants import with_typed_invariants
 from astaa_deft.engine.monitor.kinds import KINDS
-from astaa_deft.engine.monitor.verdict import Verdict, run_verdict
+from astaa_deft.engine.monitor.verdict import RunVerdict, run_verdict
+from astaa_deft.model.records import ProcessExit
 from astaa_deft.engine.monitor.violation import Violation
 
 
@@ -44,7 +45,7 @@ class MonitorSet:
         self._tickers = [m for m in self.monitors if m.wants_ticks]
         self._log_readers = [m for m in self.monitors if m.wants_log_lines]
         self.violations: list[Violation] = []
-        self.exits: list[dict] = []  # process_exit events, as the log stores them (for the run verdict)
+        self.exits: list[ProcessExit] = []  # for the run verdict
         self.warnings: list[str] = []
         self.messages = 0
         self._lock = threading.Lock()
@@ -66,11 +67,10 @@ class MonitorSet:
 
     def on_process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int,
                         during_shutdown: bool, stderr_tail: str = "") -> list[Violation]:
-        exit_ = ProcessExitInfo(module, returncode, signal, time_ns, during_shutdown, stderr_tail)
+        # pid 0: monitors judge a module's exit, never its process id (the log keeps the real one).
+        exit_ = ProcessExit(module, 0, returncode, signal, time_ns, during_shutdown, stderr_tail)
         with self._lock:
-            self.exits.append({"kind": "process_exit", "module": module, "returncode": returncode,
-                               "signal": signal, "time_ns": time_ns, "during_shutdown": during_shutdown,
-                               "abnormal": exit_.abnormal})
+            self.exits.append(exit_)
             return self._collect(self.monitors, lambda m: m.on_process_exit(exit_))
 
     def wants_log_lines(self) -> bool:
@@ -103,10 +103,10 @@ class MonitorSet:
             self.violations.append(violation)
 
     # -- results -------------------------------------------------------------
-    def verdict(self, extra_events: Sequence[Mapping] = ()) -> Verdict:
-        """The run's CRASH verdict from everything seen so far (``extra_events``: e.g. a bus_lost event)."""
+    def verdict(self, *, bus_lost: bool = False) -> RunVerdict:
+        """The run's CRASH verdict from everything seen so far (``bus_lost``: the log says the bus was lost)."""
         with self._lock:
-            return run_verdict(self.violations, [*self.exits, *extra_events], [m.name for m in self.spec.modules])
+            return run_verdict(self.violations, self.exits, [m.name for m in self.spec.modules], bus_lost=bus_lost)
 
     def stats(self) -> dict[str, dict[str, int]]:
         """Per invariant: how many messages/samples were judged and how many broke it."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.codecs import Codec, get_codec
 from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.io.log import records as rec
@@ -28,7 +29,7 @@ from astaa_deft.io.log.reader import LogContents
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.order import channel_ranks, order_key
 from astaa_deft.engine.monitor.monitorset import MonitorSet
-from astaa_deft.engine.monitor.verdict import Verdict
+from astaa_deft.engine.monitor.verdict import BUS_LOST, RunVerdict
 from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation
 
 
@@ -36,19 +37,19 @@ from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation
 @dataclass
 class CheckResult:
     violations: list[Violation]
-    verdict: Verdict
+    verdict: RunVerdict
     start_ns: int
     end_ns: int
     messages: int  # bus messages given to the monitors
     stats: dict[str, dict[str, int]]
     seconds: float  # time spent evaluating (decoding included, reading the file not)
     online_verdict: rec.VerdictRecord | None = None  # the verdict the proxy logged during the run, if any
-    online_violations: list[rec.ViolationRecord] = field(default_factory=list)
+    online_violations: list[rec.Violation] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
-        return self.verdict.klass == "Pass"
+        return self.verdict.klass == Verdict.PASS
 
 
 def check_log(log: LogContents, spec: Spec) -> CheckResult:
@@ -59,8 +60,8 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
     wanted = monitors.channels()
     routes = _routes(log, spec, wanted)
     # Process exits and module output lines, fed at their times between the messages.
-    side: list[rec.ProcessExitRecord | rec.ModuleLogLine] = sorted(
-        (e for e in events if isinstance(e, rec.ProcessExitRecord)
+    side: list[rec.ProcessExit | rec.ModuleLogLine] = sorted(
+        (e for e in events if isinstance(e, rec.ProcessExit)
          or (isinstance(e, rec.ModuleLogLine) and monitors.wants_log_lines())), key=lambda e: e.time_ns)
 
     clock = time.perf_counter()
@@ -87,17 +88,17 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
             _feed_side(monitors, event)
     monitors.finish(end_ns)
     for record in events:  # the spec's run: outcome (an exit code, a channel's end): judged once, when it happened
-        if isinstance(record, rec.ViolationRecord) and record.invariant_kind == RUN_END_KIND:
-            monitors.add_finding(Violation.from_json(rec.encode(record)))
+        if isinstance(record, rec.Violation) and record.invariant_kind == RUN_END_KIND:
+            monitors.add_finding(record)
     seconds = time.perf_counter() - clock
 
-    extra = [rec.encode(e) for e in events if isinstance(e, rec.OtherEvent) and e.kind == "bus_lost"]
+    bus_lost = any(isinstance(e, rec.OtherEvent) and e.kind == BUS_LOST for e in events)
     online = [e for e in events if isinstance(e, rec.VerdictRecord)]
     return CheckResult(
-        violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(extra),
+        violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(bus_lost=bus_lost),
         start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,
         online_verdict=online[-1] if online else None,
-        online_violations=[e for e in events if isinstance(e, rec.ViolationRecord)],
+        online_violations=[e for e in events if isinstance(e, rec.Violation)],
         warnings=list(log.warnings) + monitors.warnings,
     )
 
@@ -134,14 +135,14 @@ def _end(log: LogContents, events: list[rec.Record]) -> int:
     return max(bus) if bus else _start(log, events)
 
 
-def _feed_side(monitors: MonitorSet, event: rec.ProcessExitRecord | rec.ModuleLogLine) -> None:
+def _feed_side(monitors: MonitorSet, event: rec.ProcessExit | rec.ModuleLogLine) -> None:
     if isinstance(event, rec.ModuleLogLine):
         monitors.on_log_line(event.module, event.line, event.time_ns)
     else:
         _feed_exit(monitors, event)
 
 
-def _feed_exit(monitors: MonitorSet, event: rec.ProcessExitRecord) -> None:
+def _feed_exit(monitors: MonitorSet, event: rec.ProcessExit) -> None:
     monitors.on_process_exit(
         module=event.module, returncode=int(event.returncode or 0), signal=event.signal, time_ns=event.time_ns,
         during_shutdown=bool(event.during_shutdown), stderr_tail=str(event.stderr_tail or ""))

@@ -22,7 +22,7 @@ from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.monitorset import MonitorSet
 from astaa_deft.engine.monitor.order import REORDER_WINDOW_NS, channel_ranks, order_key, sample_time_ns
-from astaa_deft.engine.monitor.verdict import Verdict
+from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.engine.monitor.violation import Violation
 
 TICK_SECONDS = 0.05
@@ -52,7 +52,7 @@ class OnlineMonitors:
             if name in self.wanted:
                 self._subs.append(session.declare_subscriber(key_expr, self._callback(name)))
 
-    def _callback(self, name: str):
+    def _callback(self, name: str) -> Callable[[zenoh.Sample], None]:
         q = self._q
 
         def on_sample(sample: zenoh.Sample) -> None:
@@ -132,7 +132,7 @@ class OnlineMonitors:
         now = time.time_ns() - REORDER_WINDOW_NS
         return now if self.ended_ns is None else min(now, self.ended_ns)
 
-    def finish(self, time_ns: int) -> Verdict:
+    def finish(self, time_ns: int) -> RunVerdict:
         """Stop listening, judge what is queued and what only the end can decide; the run's verdict."""
         if self.ended_ns is not None:
             time_ns = min(time_ns, self.ended_ns)

@@ -224,7 +224,7 @@ class OnlineStl:
 
 
 @functools.lru_cache(maxsize=1)
-def _pastifier_class():
+def _pastifier_class() -> type[Any]:
     """rtamt's pastifier with two visits fixed (see the module docstring); built lazily."""
     from rtamt.pastifier.stl.pastifier import StlPastifier
     from rtamt.semantics.interval.interval import Interval
@@ -233,7 +233,7 @@ def _pastifier_class():
     from rtamt.syntax.node.stl.timed_once import TimedOnce
 
     class FixedPastifier(StlPastifier):
-        def visitPredicate(self, node, *args, **kwargs):
+        def visitPredicate(self, node: Any, *args: Any, **kwargs: Any) -> Any:
             # upstream visits the operands with the *remaining* horizon and then
             # delays the comparison again: a double delay
             own = self.subformula_horizons[node]
@@ -243,7 +243,7 @@ def _pastifier_class():
             out = Predicate(left, right, node.operator)
             return TimedOnce(out, Interval(delay, delay)) if delay > 0 else out
 
-        def visitTimedHistorically(self, node, *args, **kwargs):
+        def visitTimedHistorically(self, node: Any, *args: Any, **kwargs: Any) -> Any:
             # upstream delays the operand instead of the historically node (dropping it)
             own = self.subformula_horizons[node]
             delay = args[0] - own

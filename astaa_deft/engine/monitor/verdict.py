@@ -24,83 +24,113 @@ Crashes are always monitored: an abnormal exit counts even when no
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
-from collections.abc import Mapping, Sequence
 
 from astaa_deft.engine.monitor.violation import SEVERITIES, Violation
+from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json_fields import JsonFields
+from astaa_deft.model.records import CRASH_SCALE, ProcessExit, Verdict
 
-ORDER = ("Catastrophic", "Restart", "Abort", "Silent", "Hindering", "Pass")
+ORDER = CRASH_SCALE  # worst first, Pass last (the name the campaign imports)
 IMPLICIT = "(module exit)"  # the name of the finding made from an exit no invariant reported
+BUS_LOST = "bus_lost"  # the kind of the log event saying the bus was lost
 
 
 @dataclass(frozen=True)
-class Verdict:
-    klass: str
+class RunVerdict:
+    """A run's verdict: its class, its earliest finding, a one-line summary, the reasons for the class."""
+
+    klass: Verdict
     first: Violation | None
     summary: str
     reasons: tuple[str, ...] = ()  # one line per finding that shaped the class
 
-    def to_json(self) -> dict:
+    def to_json(self) -> JsonObject:
+        """The ``verdict`` log event's body (without ``kind`` and ``time_ns``)."""
         return {"class": self.klass, "first": self.first.to_json() if self.first else None,
                 "summary": self.summary, "reasons": list(self.reasons)}
 
     @classmethod
-    def from_json(cls, body: Mapping[str, Any]) -> Verdict:
-        first = body.get("first")
-        return cls(str(body.get("class", "?")), Violation.from_json(first) if first else None,
-                   str(body.get("summary", "")), tuple(body.get("reasons") or ()))
+    def from_json(cls, body: Mapping[str, Any], *, where: str = "the log") -> RunVerdict:
+        """The verdict of its JSON form (an unknown class reads as Silent); RecordError if ``first`` is damaged."""
+        read = JsonFields(body)
+        first = read.raw("first")
+        return cls(Verdict.named(read.text("class", "?")) or Verdict.SILENT,
+                   Violation.from_json(first, where=where) if first else None, read.text("summary"),
+                   read.texts("reasons"))
 
 
-def run_verdict(violations: Sequence[Violation], exits: Sequence[Mapping], modules: Sequence[str]) -> Verdict:
-    """The CRASH class of a run from its violations, its process-exit events and its module names.
+def exits_of(events: Sequence[ProcessExit | Mapping[str, Any]]) -> tuple[list[ProcessExit], bool]:
+    """(the process exits, whether the bus was lost) of ``events``: typed exits or their log event bodies.
 
-    ``exits`` are ``process_exit`` event bodies (module, returncode, signal,
-    time_ns, during_shutdown); a ``{"kind": "bus_lost", ...}`` event among
-    them makes the run Catastrophic.
+    A body needs only module, returncode and time_ns (the pid defaults to 0);
+    a ``{"kind": "bus_lost"}`` body says the bus was lost; other kinds are ignored.
     """
-    mid_run = [e for e in exits if e.get("kind", "process_exit") == "process_exit" and not e.get("during_shutdown")]
-    bus_lost = [e for e in exits if e.get("kind") == "bus_lost"]
+    exits: list[ProcessExit] = []
+    bus_lost = False
+    for event in events:
+        if isinstance(event, ProcessExit):
+            exits.append(event)
+            continue
+        kind = JsonFields(event).text("kind", ProcessExit.kind)
+        if kind == ProcessExit.kind:
+            exits.append(ProcessExit.from_json({"pid": 0, **event}))
+        elif kind == BUS_LOST:
+            bus_lost = True
+    return exits, bus_lost
+
+
+def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit | Mapping[str, Any]],
+                modules: Sequence[str], *, bus_lost: bool = False) -> RunVerdict:
+    """The CRASH class of a run from its violations, its process exits and its module names.
+
+    ``exits``: the run's process exits, typed or as ``process_exit`` event
+    bodies (see :func:`exits_of`). The bus lost (``bus_lost``, or a
+    ``bus_lost`` event among ``exits``) makes the run Catastrophic. Pure:
+    the same inputs give the same verdict.
+    """
+    typed_exits, lost_in_events = exits_of(exits)
+    bus_lost = bus_lost or lost_in_events
+    mid_run = [e for e in typed_exits if not e.during_shutdown]
     first_exit_ns: dict[str | None, int] = {}
-    for e in sorted(mid_run, key=lambda e: e.get("time_ns", 0)):
-        first_exit_ns.setdefault(e.get("module"), e.get("time_ns", 0))
+    for e in sorted(mid_run, key=lambda e: e.time_ns):
+        first_exit_ns.setdefault(e.module, e.time_ns)
     findings = list(violations) + _unreported_exits(mid_run, violations)
     findings.sort(key=lambda v: v.time_ns)
 
-    classes: dict[str, list[str]] = {c: [] for c in ORDER}
+    classes: dict[Verdict, list[str]] = {c: [] for c in CRASH_SCALE}
     if bus_lost:
-        classes["Catastrophic"].append("the bus was lost")
+        classes[Verdict.CATASTROPHIC].append("the bus was lost")
     if modules and set(modules) <= set(first_exit_ns):
-        classes["Catastrophic"].append("every module exited during the run")
+        classes[Verdict.CATASTROPHIC].append("every module exited during the run")
     for v in sorted(findings, key=_most_severe_first):  # stable: in time order within a severity
-        klass = v.crash
-        if klass == "Restart" and v.kind == "deadline" and _exited_before(v, first_exit_ns):
+        klass = Verdict.named(v.crash) or Verdict.SILENT  # an unknown class counts as Silent
+        if klass is Verdict.RESTART and v.invariant_kind == "deadline" and _exited_before(v, first_exit_ns):
             continue  # silence after a crash is the crash's consequence, not a hang
-        if klass not in classes:
-            klass = "Silent"
         classes[klass].append(f"{v.invariant}: {v.detail}")
-    klass = next(c for c in ORDER if classes[c] or c == "Pass")
+    klass = next(c for c in CRASH_SCALE if classes[c] or c is Verdict.PASS)
     first = findings[0] if findings else None
-    return Verdict(klass, first, _summary(klass, first, findings, classes[klass]), tuple(classes[klass]))
+    return RunVerdict(klass, first, _summary(klass, first, findings, classes[klass]), tuple(classes[klass]))
 
 
 def _most_severe_first(v: Violation) -> int:
     return -SEVERITIES.index(v.severity) if v.severity in SEVERITIES else 0
 
 
-def _unreported_exits(mid_run: Sequence[Mapping], violations: Sequence[Violation]) -> list[Violation]:
+def _unreported_exits(mid_run: Sequence[ProcessExit], violations: Sequence[Violation]) -> list[Violation]:
     """Findings for mid-run exits that no process invariant reported."""
-    reported = {(v.module, v.time_ns) for v in violations if v.kind == "process"}
+    reported = {(v.module, v.time_ns) for v in violations if v.invariant_kind == "process"}
     out = []
     for e in mid_run:
-        module, time_ns = e.get("module"), int(e.get("time_ns", 0))
-        if (module, time_ns) in reported:
+        if (e.module, e.time_ns) in reported:
             continue
-        clean = e.get("returncode") == 0 and not e.get("signal")
-        how = f"was killed by {e['signal']}" if e.get("signal") else f"exited with code {e.get('returncode')}"
-        out.append(Violation(IMPLICIT, "process", "high", time_ns, None, None,
-                             {"returncode": e.get("returncode"), "signal": e.get("signal")},
-                             f"module '{module}' {how} during the run", "Hindering" if clean else "Abort", module))
+        clean = e.returncode == 0 and not e.signal
+        out.append(Violation(IMPLICIT, "process", "high", e.time_ns, None, None,
+                             {"returncode": e.returncode, "signal": e.signal},
+                             f"{e.as_finding()} during the run", Verdict.HINDERING if clean else Verdict.ABORT,
+                             e.module))
     return out
 
 
@@ -108,8 +138,8 @@ def _exited_before(v: Violation, first_exit_ns: Mapping[str | None, int]) -> boo
     return v.module in first_exit_ns and first_exit_ns[v.module] <= v.time_ns
 
 
-def _summary(klass: str, first: Violation | None, findings: Sequence[Violation], reasons: Sequence[str]) -> str:
-    if klass == "Pass":
+def _summary(klass: Verdict, first: Violation | None, findings: Sequence[Violation], reasons: Sequence[str]) -> str:
+    if klass is Verdict.PASS:
         return "Pass: every invariant held and every module kept running"
     text = f"{klass}: {reasons[0]}" if reasons else klass
     if len(findings) > 1:
@@ -119,14 +149,14 @@ def _summary(klass: str, first: Violation | None, findings: Sequence[Violation],
     return text
 
 
-def format_verdict(verdict: Verdict | Mapping[str, Any], start_ns: int | None = None) -> str:
-    """Console lines for a verdict (a Verdict or its JSON, e.g. a 'verdict' log event)."""
-    if not isinstance(verdict, Verdict):
-        verdict = Verdict.from_json(verdict)
+def format_verdict(verdict: RunVerdict | Mapping[str, Any], start_ns: int | None = None) -> str:
+    """Console lines for a verdict (a RunVerdict or its JSON, e.g. a 'verdict' log event)."""
+    if not isinstance(verdict, RunVerdict):
+        verdict = RunVerdict.from_json(verdict)
     lines = [f"verdict: {verdict.summary}"]
     if verdict.first is not None:
         v = verdict.first
         when = f" at +{(v.time_ns - start_ns) / 1e9:.3f} s" if start_ns is not None else ""
         where = f" {v.where}" if v.where else ""
-        lines.append(f"first violation: {v.invariant} ({v.kind}){where}{when}: {v.detail}")
+        lines.append(f"first violation: {v.invariant} ({v.invariant_kind}){where}{when}: {v.detail}")
     return "\n".join(lines)

@@ -1,4 +1,4 @@
-"""A broken invariant, as printed on the console and stored in the log.
+"""A broken invariant (``model.records.Violation``) as printed on the console, and its bounded message copy.
 
 A violation names the moment the invariant broke and the message that broke
 it. Monitors report one violation per *episode*: the first message that
@@ -11,12 +11,10 @@ from __future__ import annotations
 
 import base64
 import math
-from dataclasses import dataclass
 from typing import Any
-from collections.abc import Mapping
 
-# The CRASH class a violation points at when nothing overrides it (see verdict.py).
-CRASH_CLASSES = ("Catastrophic", "Restart", "Abort", "Silent", "Hindering")
+from astaa_deft.model.records import CRASH_CLASSES, Violation
+
 SEVERITIES = ("low", "medium", "high", "critical")
 RUN_END_KIND = "run_end"  # a finding made by the spec's run: section (a failing exit code or end condition)
 
@@ -26,51 +24,15 @@ MAX_ITEMS = 20
 MAX_TEXT = 200
 MAX_DEPTH = 6
 
-
-@dataclass(frozen=True)
-class Violation:
-    invariant: str
-    kind: str
-    severity: str
-    time_ns: int  # when the invariant broke (the message's time, or the deadline that expired)
-    channel: str | None
-    seq: int | None  # 1-based index of the message on its channel, as the recorder numbers it
-    message: dict | None  # the offending message (truncated, JSON-safe), or context for kinds without one
-    detail: str
-    crash: str = "Silent"  # the CRASH class this violation points at
-    module: str | None = None  # the module held responsible, when one is
-
-    def to_json(self) -> dict:
-        return {
-            "invariant": self.invariant, "invariant_kind": self.kind, "severity": self.severity,
-            "time_ns": self.time_ns, "channel": self.channel, "seq": self.seq, "message": self.message,
-            "detail": self.detail, "crash": self.crash, "module": self.module,
-        }
-
-    @classmethod
-    def from_json(cls, body: Mapping[str, Any]) -> Violation:
-        return cls(
-            invariant=str(body.get("invariant", "?")), kind=str(body.get("invariant_kind", "?")),
-            severity=str(body.get("severity", "high")), time_ns=int(body.get("time_ns", 0)),
-            channel=body.get("channel"), seq=body.get("seq"), message=body.get("message"),
-            detail=str(body.get("detail", "")), crash=str(body.get("crash", "Silent")), module=body.get("module"),
-        )
-
-    @property
-    def where(self) -> str:
-        """'on trajectory #12', 'module control', or ''."""
-        if self.channel is not None:
-            return f"on '{self.channel}'" + (f" #{self.seq}" if self.seq is not None else "")
-        if self.module is not None:
-            return f"module '{self.module}'"
-        return ""
+__all__ = ["CRASH_CLASSES", "MAX_DEPTH", "MAX_ITEMS", "MAX_TEXT", "RUN_END_KIND", "SEVERITIES", "Violation",
+           "format_violation", "json_safe", "message_copy"]
 
 
 def format_violation(v: Violation, start_ns: int | None = None) -> str:
     """One console line: '!! [high] speed_limit (expression) on 'status' #37 at +12.300 s: ...'."""
     when = f" at +{(v.time_ns - start_ns) / 1e9:.3f} s" if start_ns is not None else ""
     where = f" {v.where}" if v.where else ""
-    return f"!! [{v.severity}] {v.invariant} ({v.kind}){where}{when}: {v.detail}"
+    return f"!! [{v.severity}] {v.invariant} ({v.invariant_kind}){where}{when}: {v.detail}"
 
 
 def json_safe(value: Any, depth: int = 0) -> Any:

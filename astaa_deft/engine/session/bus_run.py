@@ -31,8 +31,9 @@ from astaa_deft.engine.bus import topology
 from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.io.log import records as rec
 from astaa_deft.engine.monitor.online import OnlineMonitors
-from astaa_deft.engine.bus.launcher import Launcher, ModuleNotReady, ProcessExit, output_file
-from astaa_deft.engine.monitor.verdict import Verdict
+from astaa_deft.engine.bus.launcher import Launcher, ModuleNotReady, output_file
+from astaa_deft.model.records import ProcessExit, Verdict
+from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.engine.monitor.violation import Violation
 from astaa_deft.engine.bus.observer import ChannelCounter
 from astaa_deft.engine.bus import process_launch
@@ -80,8 +81,8 @@ class BusRun:
         self.interception: InterceptionBridge | None = None
         self.policies: list[rec.PolicyApplicationsRecord] = []  # per policy of the test case, at the end
         self.monitors: OnlineMonitors | None = None
-        self.verdict: Verdict | None = None  # the CRASH-scale verdict, once stopped
-        self.violations: list[rec.ViolationRecord] = []
+        self.verdict: RunVerdict | None = None  # the CRASH-scale verdict, once stopped
+        self.violations: list[rec.Violation] = []
         self.stop_requested = threading.Event()  # --stop-on-violation
         self.end_reason = ""
         self.recorder_finished = False  # the recorder reported its counts and exited cleanly
@@ -284,7 +285,8 @@ class BusRun:
             # Judged up to the stop, as `check` judges the log: the silence of modules being stopped
             # (one slow to exit, a loaded machine) is the tool's doing, not a hang of the SUT.
             self.verdict = self.monitors.finish(stopping.time_ns)
-            self.emit(rec.decode({"kind": "verdict", "time_ns": time.time_ns(), **self.verdict.to_json()}))
+            verdict = self.verdict
+            self.emit(rec.VerdictRecord(time.time_ns(), verdict.klass, verdict.summary, verdict.first, verdict.reasons))
             self.monitors = None
         if self.launcher is not None:
             self.launcher.stop()
@@ -399,10 +401,8 @@ class BusRun:
         self._violated(violation)
 
     def _violated(self, violation) -> None:
-        record = rec.decode({"kind": "violation", **violation.to_json()})
-        assert isinstance(record, rec.ViolationRecord)  # a 'violation' body always decodes to one
-        self.violations.append(record)
-        self.emit(record)
+        self.violations.append(violation)
+        self.emit(violation)
         if self.options.stop_on_violation:
             self.stop_requested.set()
 
@@ -423,14 +423,13 @@ class BusRun:
         if self.monitors is not None:
             self.monitors.process_exit(exit_.module, exit_.returncode, exit_.signal, exit_.time_ns,
                                        exit_.during_shutdown, exit_.stderr_tail)
-        self.emit(rec.ProcessExitRecord(exit_.time_ns, exit_.module, exit_.pid, exit_.returncode, exit_.signal,
-                                        exit_.during_shutdown, exit_.abnormal, exit_.stderr_tail))
+        self.emit(exit_)
 
     def _not_ready(self, exc: ModuleNotReady) -> None:
         if self.monitors is None:
             return
         found = Violation("(module start)", "ready", "high", time.time_ns(), None, None, None,
-                          f"module '{exc.module}' not ready: {exc.detail}", "Restart", exc.module)
+                          f"module '{exc.module}' not ready: {exc.detail}", Verdict.RESTART, exc.module)
         self.monitors.set.violations.append(found)  # the verdict is the monitors' own: they must count it
         self._violated(found)
 
@@ -448,7 +447,7 @@ class BusRun:
 
     def _mutated(self, event) -> None:
         # Not re-published: the interception's own record (with the original) is in the log already.
-        self.on_event(rec.decode({"kind": "mutation", "time_ns": time.time_ns(), **event.to_json()}))
+        self.on_event(rec.MutationRecord.of(event, time.time_ns()))
 
     def _undeclared(self, module: str, key: str) -> None:
         note = "forwarded to every other module; declare it under 'channels' to route it precisely"

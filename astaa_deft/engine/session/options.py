@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from astaa_deft.engine.bus.launcher import ProcessExit
-from astaa_deft.io.log.records import PolicyApplicationsRecord, ViolationRecord
+from astaa_deft.io.log.records import PolicyApplicationsRecord
+from astaa_deft.model.records import ProcessExit, Verdict, Violation
 
 
 @dataclass
@@ -32,8 +32,8 @@ class RunResult:
 
     end_reason: str  # "time limit", "signal SIGINT", "all modules exited", "violation", or stop_when's reason
     seconds: float  # wall time from the modules' launch to the end
-    verdict: Any  # astaa_deft.engine.monitor.verdict.Verdict (None if the run never started its monitors)
-    violations: tuple[ViolationRecord, ...]
+    verdict: Any  # astaa_deft.engine.monitor.verdict.RunVerdict (None if the run never started its monitors)
+    violations: tuple[Violation, ...]
     exits: tuple[ProcessExit, ...]
     sent: dict[str, int]  # messages per channel that went through the star (or were observed)
     recorded: dict[str, int]  # messages per channel the recorder wrote
@@ -50,4 +50,4 @@ class RunResult:
 
     @property
     def passed(self) -> bool:
-        return (self.verdict is not None and self.verdict.klass == "Pass" and self.complete and self.observed)
+        return (self.verdict is not None and self.verdict.klass == Verdict.PASS and self.complete and self.observed)

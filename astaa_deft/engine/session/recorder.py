@@ -19,8 +19,11 @@ its critical path (seconds on a loaded machine). EOF instead of the line:
 nobody needs it, it exits.
 
 It belongs to the session, not to ``log/``: it joins transport (the bus
-keys it subscribes to), interception (the events it records) and the file
-format, which ``log/`` alone owns.
+keys it subscribes to), the run's records (the mutations the proxy sends,
+``model.records``) and the file format, which ``log/`` alone owns.
+
+Threads: Zenoh's callbacks only queue typed items (``QueueItem``); one
+writing thread writes them in arrival order (``_drain``).
 """
 
 from __future__ import annotations
@@ -34,7 +37,9 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import zenoh
 
@@ -47,6 +52,8 @@ from astaa_deft.io.codecs.rmw_attachment import parse_attachment
 from astaa_deft.io.log import layout, records
 from astaa_deft.io.log.viewable import ViewableTwins
 from astaa_deft.io.log.writer import LogWriter
+from astaa_deft.model.json import JsonObject
+from astaa_deft.model.records import mutation_row_json
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.loader import load_spec_text
 import contextlib
@@ -61,7 +68,6 @@ except ImportError:  # pragma: no cover - a declared dependency; orjson and the 
     _simdjson = None  # type: ignore[assignment]
 
 _ORJSON_AS_STDLIB = (_orjson.OPT_PASSTHROUGH_DATETIME | _orjson.OPT_PASSTHROUGH_DATACLASS) if _orjson is not None else 0
-_STOP = object()
 # json.dumps(body, default=str) exactly, without building an encoder per call (half its cost on an event).
 _EVENT_ENCODER = json.JSONEncoder(default=str)
 TOOL_GONE_WAIT_SECONDS = 2.0  # an unannounced stop: how long to wait for the dying tool to show
@@ -69,11 +75,105 @@ CAUGHT_UP = "caught up"  # stdout line: the run_stopped event arrived, so did ev
 SHUTDOWN_LIMIT_SECONDS = 20.0
 
 
+# -- what the subscriber callbacks queue for the writing thread -----------------------------------
+
+
+@dataclass(frozen=True)
+class InterceptedChannel:
+    """Where one intercepted channel's deliveries go in the log."""
+
+    name: str
+    codec: Codec
+    delivered: int  # the channel's log id: what its consumers got
+    original: int  # the log id of its originals (what the producer sent, where the proxy changed it)
+    mutations: int  # the log id of the mutations topic
+
+
+class BusMessage(NamedTuple):
+    """A message on a declared channel, or (codec None) one of the tool's own events."""
+
+    log_time: int
+    channel_id: int
+    codec: Codec | None
+    name: str
+    data: bytes
+    source_time: int | zenoh.Timestamp | None  # rmw_zenoh's source time (ns), or the Zenoh timestamp
+
+
+class InterceptedBatch(NamedTuple):
+    """The deliveries of one intercepted channel the proxy sent together (``topology.pack_deliveries``)."""
+
+    log_time: int
+    channel: InterceptedChannel
+    data: bytes
+
+
+class UndeclaredMessage(NamedTuple):
+    """A message on a key the spec does not declare, which the proxy forwarded."""
+
+    log_time: int
+    key: str
+    encoding: str
+    data: bytes
+    source_time: zenoh.Timestamp | None
+
+
+QueueItem = BusMessage | InterceptedBatch | UndeclaredMessage
+
+
+class _Stop:
+    """The writing thread's last item: everything before it is written."""
+
+
+_STOP = _Stop()
+
+
 def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | None = None) -> int:
-    """``parsed``: specs parsed ahead (warm start), by (text, name); used only when the text is the same."""
+    """Record one run (module doc); ``parsed``: specs parsed ahead (warm start), by (text, name).
+
+    Returns only on a bad argument (argparse exits 2) or a warm recorder told
+    to exit; a run ends this process itself, exit code 0 (4: the log could not
+    be written, 3: the shutdown took longer than ``SHUTDOWN_LIMIT_SECONDS``).
+    """
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--warm"]:
         return _warm(argv[1:])
+    args = _arguments(argv)
+    if args.log_file is not None:
+        fd = os.open(args.log_file, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        os.dup2(fd, 2)
+        os.close(fd)
+
+    tool_pid = os.getppid()  # if this changes, the tool died (and its death signal is what stops us)
+    stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda signum, _frame: stopping.append(signum))
+
+    text = sys.stdin.read()
+    spec = (parsed or {}).get((text, args.spec_name)) or load_spec_text(text, name=args.spec_name)
+    assert isinstance(spec, Spec)
+    writer = _open_log(args, spec)
+    # Callbacks (one Python thread each, Zenoh's default) queue what they receive for one writing
+    # thread (the alternatives measured worse: docs/performance.md, "records").
+    q: queue.SimpleQueue[QueueItem | _Stop] = queue.SimpleQueue()
+    counts = {channel.name: 0 for _, channel in topology.recorded_keys(spec, args.mode)}
+    run_stopped: list[bool] = []  # the tool's orderly stop announced itself
+    session = zc.open_session(zc.config_dict(mode="client", connect=args.connect))
+    subscribers = _subscribe(session, spec, args, writer, q, run_stopped)
+    twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
+    write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, _Sink(writer, counts, twins)),
+                                    daemon=True)
+    write_thread.start()
+    print("ready", flush=True)
+
+    while not stopping:
+        time.sleep(0.05)
+    _finish(subscribers, q, write_thread, writer, lost=lambda: _tool_lost(tool_pid, announced=bool(run_stopped)),
+            counts=counts)
+    return 0  # not reached: _finish exits the process
+
+
+def _arguments(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="astaa-deft-recorder")
     ap.add_argument("--spec-name", default="spec.yaml",
                     help="the spec's file name, for messages (its text is on stdin)")
@@ -88,20 +188,11 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
                     help="a channel the proxy may alter: record what it delivered, and the originals")
     ap.add_argument("--log-file", type=Path,
                     help="write stderr here (a warm recorder was started before its run directory was known)")
-    args = ap.parse_args(argv)
-    if args.log_file is not None:
-        fd = os.open(args.log_file, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
-        os.dup2(fd, 2)
-        os.close(fd)
+    return ap.parse_args(argv)
 
-    tool_pid = os.getppid()  # if this changes, the tool died (and its death signal is what stops us)
-    stopping: list[int] = []  # a signal handler must not take locks (Event.set could deadlock)
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda signum, _frame: stopping.append(signum))
 
-    text = sys.stdin.read()
-    spec = (parsed or {}).get((text, args.spec_name)) or load_spec_text(text, name=args.spec_name)
-    assert isinstance(spec, Spec)
+def _open_log(args: argparse.Namespace, spec: Spec) -> LogWriter:
+    """The log, with the spec, the attached files and the run's metadata written."""
     writer = LogWriter(args.out, spec, chunk_size=args.chunk_size)
     writer.attachment(layout.SPEC_ATTACHMENT, spec.source_text.encode(), "application/yaml")
     for item in args.attach:
@@ -110,47 +201,46 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
         writer.attachment(name, read_input(path, POLICY if policy else DICTIONARY),
                           "application/xml" if policy else "application/yaml")
     writer.metadata(layout.RUN_METADATA, {**json.loads(args.meta), "mode": args.mode})
+    return writer
 
-    # Callbacks (one Python thread each, Zenoh's default) queue what they receive for one writing
-    # thread. Both alternatives measured worse at 200 B: writing inside the callbacks (no queue)
-    # 21-22 µs/msg of recorder + modules CPU against 17-18, and callbacks on Zenoh's own receiving
-    # thread (indirect=False) 35.
-    q: queue.SimpleQueue = queue.SimpleQueue()
-    counts: dict[str, int] = {}
 
-    session = zc.open_session(zc.config_dict(mode="client", connect=args.connect))
-    subscribers = []
+def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, writer: LogWriter,  # noqa: PLR0913
+               q: queue.SimpleQueue[QueueItem | _Stop], run_stopped: list[bool]) -> list[zenoh.Subscriber]:
+    """Subscribers for the recorded channels, the tool's events and undeclared keys, each queueing for ``q``.
+
+    Creates the log's channels in the order logs have always had them: each
+    recorded channel (its originals' channel after it), then the mutations topic.
+    """
+    recorded = []
     for key_expr, channel in topology.recorded_keys(spec, args.mode):
         cid = writer.bus_channel(channel)
+        original_cid = (writer.bus_channel(channel, topic=layout.ORIGINAL_PREFIX + channel.key)
+                        if channel.name in args.intercepted else None)
+        recorded.append((key_expr, channel, cid, original_cid))
+    mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
+    subscribers = []
+    for key_expr, channel, cid, original_cid in recorded:
         codec = get_codec(channel.encoding)
-        counts[channel.name] = 0
+        if original_cid is not None:
+            target = InterceptedChannel(channel.name, codec, cid, original_cid, mutations_cid)
 
-        ros2 = channel.encoding.startswith("cdr:")
-
-        def on_sample(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name, ros2=ros2) -> None:
-            q.put((time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
-                   _source_time(sample) if ros2 else sample.timestamp))
-
-        if channel.name in args.intercepted:
-            original_cid = writer.bus_channel(channel, topic=layout.ORIGINAL_PREFIX + channel.key)
-
-            def on_intercepted(sample: zenoh.Sample, cid=cid, codec=codec, name=channel.name,
-                               original_cid=original_cid) -> None:
-                q.put((time.time_ns(), ("intercepted", cid, original_cid), codec, name, sample.payload.to_bytes(),
-                       None))
+            def on_intercepted(sample: zenoh.Sample, target: InterceptedChannel = target) -> None:
+                q.put(InterceptedBatch(time.time_ns(), target, sample.payload.to_bytes()))
 
             subscribers.append(session.declare_subscriber(topology.intercepted_key(channel.key), on_intercepted))
-        else:
-            subscribers.append(session.declare_subscriber(key_expr, on_sample))
+            continue
+        ros2 = channel.encoding.startswith("cdr:")
 
-    mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
-    twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
+        def on_sample(sample: zenoh.Sample, cid: int = cid, codec: Codec = codec, name: str = channel.name,
+                      ros2: bool = ros2) -> None:
+            q.put(BusMessage(time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
+                             _source_time(sample) if ros2 else sample.timestamp))
 
-    run_stopped: list[bool] = []  # the tool's orderly stop announced itself
+        subscribers.append(session.declare_subscriber(key_expr, on_sample))
 
     def on_tool_event(sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
-        q.put((time.time_ns(), writer.events_channel, None, None, data, None))
+        q.put(BusMessage(time.time_ns(), writer.events_channel, None, "", data, None))
         if b'"run_stopped"' in data:
             run_stopped.append(True)
             # Everything the tool forwarded before this event has reached us (one link, in order):
@@ -159,19 +249,21 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
 
     def on_undeclared(sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)[len(topology.UNDECLARED_PREFIX) + 1:]
-        q.put((time.time_ns(), ("undeclared", key, str(sample.encoding)), None, None,
-               sample.payload.to_bytes(), sample.timestamp))
+        q.put(UndeclaredMessage(time.time_ns(), key, str(sample.encoding), sample.payload.to_bytes(),
+                                sample.timestamp))
 
     subscribers.append(session.declare_subscriber(topology.EVENTS_KEY, on_tool_event))
     subscribers.append(session.declare_subscriber(f"{topology.UNDECLARED_PREFIX}/**", on_undeclared))
+    return subscribers
 
-    write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, writer, counts, mutations_cid, twins),
-                                    daemon=True)
-    write_thread.start()
-    print("ready", flush=True)
 
-    while not stopping:
-        time.sleep(0.05)
+def _finish(subscribers: list[zenoh.Subscriber], q: queue.SimpleQueue[QueueItem | _Stop],  # noqa: PLR0913
+            write_thread: threading.Thread, writer: LogWriter, *, lost: Callable[[], bool],
+            counts: dict[str, int]) -> None:
+    """Stop receiving, write what is queued, finish the file, report the counts and exit (never returns).
+
+    ``lost``: whether the tool died (asked once the queue is written: a dying tool shows late).
+    """
     # A recorder must never outlive its run, whatever Zenoh does at shutdown.
     threading.Timer(SHUTDOWN_LIMIT_SECONDS, os._exit, args=(3,)).start()
     # Order matters: no more callbacks, write what is queued, finish the file;
@@ -180,7 +272,7 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
         sub.undeclare()
     q.put(_STOP)
     write_thread.join()
-    if _tool_lost(tool_pid, announced=bool(run_stopped)):
+    if lost():
         writer.record(records.RunEnd(time.time_ns(), layout.TOOL_LOST))
     writer.finish()
     _report(json.dumps({"recorded": counts}))
@@ -243,54 +335,67 @@ def _report(line: str) -> None:
         print(line, flush=True)
 
 
-def _drain_or_exit(out: Path, *args) -> None:
+@dataclass
+class _Sink:
+    """What the writing thread writes to, and counts (touched by that thread only)."""
+
+    writer: LogWriter
+    counts: dict[str, int]  # messages recorded per declared channel
+    twins: ViewableTwins
+
+
+def _drain_or_exit(out: Path, q: queue.SimpleQueue[QueueItem | _Stop], sink: _Sink) -> None:
     """Write until told to stop; if the log cannot be written (disk full, file size limit), say so and exit 4.
 
     The tool sees its recorder gone and withholds the verdict; every chunk
     written before the failure stays readable.
     """
     try:
-        _drain(*args)
+        _drain(q, sink)
     except OSError as exc:
         print(f"recorder: cannot write the log {out}: {exc.strerror or exc}", file=sys.stderr, flush=True)
         os._exit(4)
 
 
-def _drain(q: queue.SimpleQueue, writer: LogWriter, counts: dict[str, int], mutations_cid: int,
-           twins: ViewableTwins) -> None:
+def _drain(q: queue.SimpleQueue[QueueItem | _Stop], sink: _Sink) -> None:
     """Write what the callbacks queued, in arrival order; the common case (a declared channel) first and short."""
+    writer, counts, twins = sink.writer, sink.counts, sink.twins
     undeclared_ids: dict[str, int] = {}
     message, get = writer.message, q.get
     json_object = _JsonObjectCheck() if _simdjson is not None else None  # this thread's own parser
     while True:
         item = get()
-        if item is _STOP:
-            return
-        log_time, cid, codec, name, data, ts = item
-        # ts: the rmw_zenoh source time (ns) of a ROS 2 message, else the Zenoh timestamp
-        publish_time = (ts if type(ts) is int else ts.get_time_as_ntp64().as_nanos()) if ts is not None else log_time
-        if type(cid) is int:
-            seq = message(cid, log_time, data, publish_time)
+        if type(item) is BusMessage:
+            log_time, cid, codec, name, data, ts = item
+            seq = message(cid, log_time, data, _publish_time(ts, log_time))
             if codec is None:  # the tool's own event
                 continue
             counts[name] += 1
             if codec.name == "json":
                 # The twins' own first check, without their call (_may_hold_nan inline: it runs per message).
                 if (78 in data and b"NaN" in data) or (73 in data and b"Infinity" in data):
-                    twins.add(name, log_time, data, publish_time)  # a NaN on the wire: viewable too
+                    twins.add(name, log_time, data, _publish_time(ts, log_time))  # a NaN on the wire: viewable too
                 if json_object is not None and len(data) < FAST_JSON_LIMIT and json_object(data):
                     continue  # undecodable's first answer, without its call
             reason = undecodable(codec, data)
             if reason is not None:
                 writer.record(records.FlagRecord(log_time, name, seq, reason, len(data)),
                               channel_id=writer.flags_channel)
-        elif cid[0] == "intercepted":
-            _write_batch(writer, cid[1], cid[2], mutations_cid, codec, name, data, counts, log_time, twins)
-        else:  # an undeclared key the proxy forwarded
-            _, key, encoding = cid
-            if key not in undeclared_ids:
-                undeclared_ids[key] = writer.undeclared_channel(key, encoding)
-            message(undeclared_ids[key], log_time, data, publish_time)
+        elif type(item) is InterceptedBatch:
+            _write_batch(sink, item.channel, item.data, item.log_time)
+        elif type(item) is UndeclaredMessage:  # an undeclared key the proxy forwarded
+            if item.key not in undeclared_ids:
+                undeclared_ids[item.key] = writer.undeclared_channel(item.key, item.encoding)
+            message(undeclared_ids[item.key], item.log_time, item.data, _publish_time(item.source_time, item.log_time))
+        else:
+            return  # _STOP
+
+
+def _publish_time(source: int | zenoh.Timestamp | None, log_time: int) -> int:
+    """A message's publish time: the rmw_zenoh source time (ns) of a ROS 2 message, else the Zenoh timestamp."""
+    if source is None:
+        return log_time
+    return source if type(source) is int else source.get_time_as_ntp64().as_nanos()  # type: ignore[union-attr]
 
 
 # A JSON document this short cannot nest deeply enough to exhaust the stdlib parser's recursion
@@ -302,8 +407,7 @@ class _JsonObjectCheck:
     """Does simdjson read ``data`` as a JSON object? (One parser per thread: simdjson's parsers are not shared.)
 
     simdjson validates strict RFC 8259 JSON (UTF-8, escapes, numbers) without
-    building Python objects: half of orjson's time on a 200 B message, which
-    itself is a tenth of the stdlib's. What it accepts, the stdlib accepts
+    building Python objects (docs/performance.md, "records"). What it accepts, the stdlib accepts
     too (it refuses NaN tokens, lone surrogates, integers beyond 64 bits,
     numbers beyond a double), but for a byte order mark, which it skips and
     is refused here; tests/test_recorder.py holds it to the codec.
@@ -358,39 +462,47 @@ def undecodable(codec: Codec, data: bytes) -> str | None:
 def _may_hold_nan(data: bytes) -> bool:
     """The twins' own first check (NaN or Infinity in the bytes), each search only where its first letter occurs.
 
-    An int needle is one memchr: 0.06 µs against 0.6 for the two bytes searches on a 200 B message.
+    (Why: docs/performance.md, "records".)
     """
     return (78 in data and b"NaN" in data) or (73 in data and b"Infinity" in data)  # 78: "N", 73: "I"
 
 
-def _write_batch(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, codec, name: str,
-                 data: bytes, counts: dict[str, int], received_ns: int, twins: ViewableTwins) -> None:
-    """The deliveries of one intercepted channel the proxy sent together (see ``topology.pack_deliveries``).
+class _Delivery(NamedTuple):
+    """One intercepted delivery as the proxy framed it (``topology.pack_deliveries``)."""
 
-    Each is logged at the time the proxy delivered it, which is when the
-    consumer got it.
-    """
+    time_ns: int  # when the proxy delivered it (when the consumers got it)
+    payload: bytes
+    original: bytes | None  # the real message it was made from, where it differs
+    delivered: bool  # False: dropped (only the mutation is logged)
+    event: topology.WireEvent | None  # what the proxy changed; None: delivered untouched
+
+
+def _write_batch(sink: _Sink, target: InterceptedChannel, data: bytes, received_ns: int) -> None:
+    """The deliveries of one intercepted channel the proxy sent together, each logged when it was delivered."""
+    writer = sink.writer
     try:
         rows = topology.unpack_deliveries(data)
     except ValueError as exc:
-        writer.record(records.FlagRecord(received_ns, name, None, str(exc), len(data)), channel_id=writer.flags_channel)
+        writer.record(records.FlagRecord(received_ns, target.name, None, str(exc), len(data)),
+                      channel_id=writer.flags_channel)
         return
-    json_twins = codec.name == "json"
-    for time_ns, payload, original, delivered, wire in rows:
-        if wire is not None:  # the proxy changed something: log it three ways
-            if _write_mutation(writer, cid, original_cid, mutations_cid, wire, original, delivered, time_ns, payload,
-                               time_ns):
-                counts[name] += 1
+    json_twins = target.codec.name == "json"
+    for row in rows:
+        delivery = _Delivery._make(row)
+        time_ns, payload = delivery.time_ns, delivery.payload
+        if delivery.event is not None:  # the proxy changed something: log it three ways
+            if _write_mutation(writer, target, delivery, publish_time=time_ns):
+                sink.counts[target.name] += 1
                 if json_twins and _may_hold_nan(payload):
-                    twins.add(name, time_ns, payload, time_ns)  # a NaN mutation: viewable too
+                    sink.twins.add(target.name, time_ns, payload, time_ns)  # a NaN mutation: viewable too
             continue
-        seq = writer.message(cid, time_ns, payload, time_ns)
-        counts[name] += 1
+        seq = writer.message(target.delivered, time_ns, payload, time_ns)
+        sink.counts[target.name] += 1
         if json_twins and _may_hold_nan(payload):
-            twins.add(name, time_ns, payload, time_ns)
-        reason = undecodable(codec, payload)
+            sink.twins.add(target.name, time_ns, payload, time_ns)
+        reason = undecodable(target.codec, payload)
         if reason is not None:
-            writer.record(records.FlagRecord(time_ns, name, seq, reason, len(payload)),
+            writer.record(records.FlagRecord(time_ns, target.name, seq, reason, len(payload)),
                           channel_id=writer.flags_channel)
 
 
@@ -400,32 +512,34 @@ def _source_time(sample: zenoh.Sample) -> int | zenoh.Timestamp | None:
     return attachment.source_time_ns if attachment is not None else sample.timestamp
 
 
-def _write_intercepted(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, attachment: bytes,
-                       log_time: int, data: bytes, publish_time: int, name: str = "") -> bool:
+def _write_intercepted(writer: LogWriter, target: InterceptedChannel, attachment: bytes, data: bytes, *,
+                       log_time: int, publish_time: int) -> bool:
     """One delivery as ``topology.intercept_record`` frames it (see ``_write_mutation``); flagged if malformed."""
     try:
         wire, original, delivered = topology.read_intercept_record(attachment)
     except ValueError as exc:
-        writer.record(records.FlagRecord(log_time, name, None, str(exc), len(attachment)),
+        writer.record(records.FlagRecord(log_time, target.name, None, str(exc), len(attachment)),
                       channel_id=writer.flags_channel)
         return False
-    return _write_mutation(writer, cid, original_cid, mutations_cid, wire, original, delivered, log_time, data,
-                           publish_time)
+    return _write_mutation(writer, target, _Delivery(log_time, data, original, delivered, wire),
+                           publish_time=publish_time)
 
 
-def _write_mutation(writer: LogWriter, cid: int, original_cid: int, mutations_cid: int, wire: topology.WireEvent,
-                    original: bytes | None, delivered: bool, log_time: int, data: bytes, publish_time: int) -> bool:
-    """Original, delivered message and mutation event, cross-referenced; True if something was delivered."""
-    original_seq = writer.message(original_cid, log_time, original, publish_time) if original is not None else None
-    delivered_seq = writer.message(cid, log_time, data, publish_time) if delivered else None
-    body = event_json(wire)  # a dict of its own: the two sequences go last, as they always did
+def _write_mutation(writer: LogWriter, target: InterceptedChannel, delivery: _Delivery, *, publish_time: int) -> bool:
+    """Original, delivered message and mutation, cross-referenced; True if something was delivered."""
+    log_time, original = delivery.time_ns, delivery.original
+    assert delivery.event is not None  # (called for changed deliveries only)
+    original_seq = writer.message(target.original, log_time, original, publish_time) if original is not None else None
+    delivered_seq = (writer.message(target.delivered, log_time, delivery.payload, publish_time)
+                     if delivery.delivered else None)
+    body = event_json(delivery.event)  # a dict of its own: the two sequences go last, as they always did
     body["original_sequence"], body["delivered_sequence"] = original_seq, delivered_seq
-    writer.message(mutations_cid, log_time, _event_text(body))
-    return delivered
+    writer.message(target.mutations, log_time, _event_text(body))
+    return delivery.delivered
 
 
-def _event_text(body: dict) -> bytes:
-    """An event's JSON text: orjson's compact UTF-8 (a fifth of the stdlib's cost, measured), else the stdlib's.
+def _event_text(body: JsonObject) -> bytes:
+    """A mutation's JSON text: orjson's compact UTF-8 where it can (docs/performance.md, "records"), else the stdlib's.
 
     Both read back to the same object (the event's values are strict JSON
     data, see ``to_tagged``; anything else is written as ``str`` by both);
@@ -441,22 +555,11 @@ def _event_text(body: dict) -> bytes:
     return _EVENT_ENCODER.encode(body).encode()
 
 
-_event_json_form: Any = None  # intercept.actions.base.event_json_form, once the first event needs it
-
-
-def event_json(wire: topology.WireEvent) -> dict:
-    """A mutation event's JSON form (``MutationEvent.to_json``), from what the proxy sent."""
+def event_json(wire: topology.WireEvent) -> JsonObject:
+    """A mutation's JSON form (``Mutation.to_json``), from what the proxy sent."""
     if wire.form == topology.EVENT_JSON:
         return dict(wire.value)
-    global _event_json_form
-    if _event_json_form is None:
-        # Here, not at the top: the interception's modules take a third of a second to load, and
-        # a recorder must be ready quickly (every live minimisation test starts one). Kept once
-        # loaded: an import statement per event cost most of this function (measured).
-        from astaa_deft.engine.intercept.actions.base import event_json_form
-
-        _event_json_form = event_json_form
-    return _event_json_form(*wire.value)  # the attributes in MutationEvent's order (topology.intercept_record)
+    return mutation_row_json(wire.value)  # the compact form (topology.intercept_record)
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS
 from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation, message_copy
@@ -38,7 +39,8 @@ class RunEnd:
         if self.outcome.passed:
             return None
         return Violation(f"{RUN_END_KIND}:{self.outcome.name}", RUN_END_KIND, self.outcome.severity, self.time_ns,
-                         self.channel, None, self.message, self.detail, self.outcome.crash or "Silent", self.module)
+                         self.channel, None, self.message, self.detail, self.outcome.crash or Verdict.SILENT,
+                         self.module)
 
 
 class RunEndWatch:

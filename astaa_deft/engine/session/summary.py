@@ -87,14 +87,14 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
     lines.append("")
     lines.append("events: " + (", ".join(f"{k} ×{n}" for k, n in sorted(kinds.items())) or "none"))
     for e in events:
-        if isinstance(e, rec.ProcessExitRecord) and e.abnormal:
+        if isinstance(e, rec.ProcessExit) and e.abnormal:
             how = f"signal {e.signal}" if e.signal else f"exit code {e.returncode}"
             lines.append(f"  crash: module '{e.module}' ({how})")
         elif isinstance(e, rec.UndeclaredKey):
             lines.append(f"  undeclared key '{e.key}' from module '{e.module}'")
         elif isinstance(e, rec.RunEnd):
             lines.append(f"  run ended: {e.reason}")
-    violations = Counter(e.invariant for e in events if isinstance(e, rec.ViolationRecord))
+    violations = Counter(e.invariant for e in events if isinstance(e, rec.Violation))
     if violations:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
     lines.extend(policy_lines(events))

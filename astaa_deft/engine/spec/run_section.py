@@ -27,6 +27,7 @@ from astaa_deft.engine.monitor.expression import CompiledExpression
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import CRASH_CLASSES, SEVERITIES
 from astaa_deft.io.yamlsource import Node, Source, describe_value
+from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Channel, MessageType
 
 KEYS = ("time_limit", "end_when")
@@ -34,7 +35,7 @@ MODULE_KEYS = ("module", "exit_codes", "reason")
 CHANNEL_KEYS = ("channel", "expr", "reason", "crash", "severity")
 CODE_KEYS = ("code", "outcome", "crash", "severity")
 PASS = "pass"
-DEFAULT_FAILURE_CRASH = "Silent"  # a named outcome the module reports: the SUT noticed nothing else
+DEFAULT_FAILURE_CRASH = Verdict.SILENT  # a named outcome the module reports: the SUT noticed nothing else
 DEFAULT_SEVERITY = "high"
 MAX_TIME_LIMIT = 7 * 24 * 3600.0
 
@@ -44,7 +45,7 @@ class Outcome:
     """What a run's end means: a pass, or a finding with a CRASH class and a severity."""
 
     name: str
-    crash: str | None = None  # None: the end is a pass
+    crash: Verdict | None = None  # None: the end is a pass
     severity: str = DEFAULT_SEVERITY
 
     @property
@@ -53,7 +54,7 @@ class Outcome:
 
 
 PASS_OUTCOME = Outcome(PASS)
-CRASHED = Outcome("crashed", "Abort")  # an exit code the spec does not list, or a kill by a signal
+CRASHED = Outcome("crashed", Verdict.ABORT)  # an exit code the spec does not list, or a kill by a signal
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ class ModuleExitEnd:
 
     def outcome(self, returncode: int, signal: str | None) -> Outcome:
         if signal:
-            return Outcome(f"killed by {signal}", "Abort")
+            return Outcome(f"killed by {signal}", Verdict.ABORT)
         return self.exit_codes.get(returncode, self.other)
 
     def describe(self) -> str:
@@ -213,7 +214,7 @@ def _outcome(reader: InvariantReader, node: Node, name: str) -> Outcome | None:
 
 def _failure(reader: InvariantReader, node: Node, name: str) -> Outcome | None:
     v = node.value
-    crash: str | None = DEFAULT_FAILURE_CRASH
+    crash: Verdict | None = DEFAULT_FAILURE_CRASH
     if "crash" in v:
         text = v["crash"].value if isinstance(v["crash"].value, str) else ""
         crash = next((c for c in CRASH_CLASSES if c.lower() == text.lower()), None)

@@ -16,14 +16,15 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Iterable
 from typing import BinaryIO
 
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
-    Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex,
-    Schema, Statistics, SummaryOffset,
+    Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, McapRecord, Metadata,
+    MetadataIndex, Schema, Statistics, SummaryOffset,
 )
 
 MAGIC = struct.pack("<8B", 137, 77, 67, 65, 80, 48, 13, 10)
@@ -206,7 +207,7 @@ class McapWriter:
         summary = RecordBuilder()
         offsets: list[SummaryOffset] = []
 
-        def group(opcode: Opcode, records) -> None:
+        def group(opcode: Opcode, records: Iterable[McapRecord]) -> None:
             start = summary.count
             for record in records:
                 record.write(summary)

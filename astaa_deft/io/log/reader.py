@@ -11,13 +11,13 @@ import json
 import struct
 import zlib
 from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
+from typing import BinaryIO, ClassVar, Protocol, TypeVar
 from pathlib import Path
 
 from mcap.exceptions import EndOfFile, InvalidMagic
 from mcap.opcode import Opcode
-from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Message, MessageIndex, Metadata, Schema,
-                          Statistics)
+from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, McapRecord, Message, MessageIndex, Metadata,
+                          Schema, Statistics)
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from astaa_deft.model.errors import InputError, Problem
@@ -27,7 +27,7 @@ from astaa_deft.io.log import records as rec
 
 
 class _Kinded(Protocol):
-    kind: str
+    kind: ClassVar[str]
 
 
 R = TypeVar("R", bound=_Kinded)  # a record type of log/records.py (each names its event kind)
@@ -145,7 +145,7 @@ def read_log(path: Path | str) -> LogContents:
     return out
 
 
-def _read_all(out: LogContents, stream, size: int) -> None:
+def _read_all(out: LogContents, stream: BinaryIO, size: int) -> None:
     """Every record of the file; a damaged chunk is skipped and reported, a damaged record stops the read."""
     path = out.path
     if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
@@ -274,7 +274,7 @@ _MESSAGE_HEAD = struct.Struct("<BQHIQ")
 MAX_CHUNK_BYTES = 1 << 28
 
 
-def _check_nothing_follows(out: LogContents, stream, size: int) -> None:
+def _check_nothing_follows(out: LogContents, stream: BinaryIO, size: int) -> None:
     """The log ends at its closing magic; bytes after it (a second log written into the file, junk, text
     appended) are part of the evidence that was not read, so the log is damaged, never clean."""
     end = stream.tell()
@@ -288,7 +288,7 @@ def _check_nothing_follows(out: LogContents, stream, size: int) -> None:
                     f"{end - len(MCAP_MAGIC):,}): {what}; they were not read")
 
 
-def _check_summary(out: LogContents, footer: Footer, stream, footer_offset: int) -> None:
+def _check_summary(out: LogContents, footer: Footer, stream: BinaryIO, footer_offset: int) -> None:
     """The footer's CRC covers the summary section (its channel list, statistics and indexes)."""
     if footer.summary_crc == 0 or footer.summary_start == 0 or footer.summary_start > footer_offset:
         return
@@ -329,14 +329,14 @@ def _compare_with_summary(out: LogContents) -> None:
                         f"{stats.message_count}")
 
 
-def _ends_with_magic(stream, size: int) -> bool:
+def _ends_with_magic(stream: BinaryIO, size: int) -> bool:
     if size < 8:
         return False
     stream.seek(size - 8)
     return stream.read(8) == MCAP_MAGIC
 
 
-def _crc_of_prefix(stream, length: int) -> int:
+def _crc_of_prefix(stream: BinaryIO, length: int) -> int:
     stream.seek(0)
     crc, left = 0, length
     while left > 0:
@@ -368,7 +368,7 @@ def _plain(exc: BaseException) -> str:
     return text[:200] if text else "unreadable record"
 
 
-def _take(out: LogContents, record, offset: int = 0) -> None:
+def _take(out: LogContents, record: McapRecord, offset: int = 0) -> None:
     if isinstance(record, Schema):
         out._schema_names[record.id] = record.name
     elif isinstance(record, Channel):

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError
+from astaa_deft.model.json_fields import JsonFields
+from astaa_deft.model.records import FieldChange, Mutation, ProcessExit, RecordError, RunEnd, Violation
+from astaa_deft.model.tagged import to_tagged
 
 FORMAT = 1  # bump when a record's meaning changes; decode() refuses newer ones
 
@@ -34,60 +37,20 @@ class RunStarted:
     # delayed message's arrival is known only on that clock (minimise reverts it to there). None: no
     # interceptor, or a log from before this field (then the run's start is the best guess).
     interceptor_epoch_ns: int | None = None
-    kind = "run_started"
+    kind: ClassVar[str] = "run_started"
 
 
 @dataclass(frozen=True)
 class RunStopping:
     """The run's end: the monitors' horizon (nothing after it is judged)."""
     time_ns: int
-    kind = "run_stopping"
+    kind: ClassVar[str] = "run_stopping"
 
 
 @dataclass(frozen=True)
 class RunStopped:
     time_ns: int
-    kind = "run_stopped"
-
-
-@dataclass(frozen=True)
-class RunEnd:
-    """Why the run ended ('time limit', 'module planning exited', 'signal SIGINT', ...)."""
-    time_ns: int
-    reason: str
-    kind = "run_end"
-
-
-@dataclass(frozen=True)
-class ProcessExitRecord:
-    time_ns: int
-    module: str
-    pid: int
-    returncode: int
-    signal: str | None = None
-    during_shutdown: bool = False
-    abnormal: bool = False
-    stderr_tail: str = ""
-    kind = "process_exit"
-
-    def describe(self) -> str:
-        how = f"killed by {self.signal}" if self.signal else f"exit code {self.returncode}"
-        return f"module '{self.module}' {how}"
-
-
-@dataclass(frozen=True)
-class ViolationRecord:
-    time_ns: int
-    invariant: str
-    invariant_kind: str = "?"
-    severity: str = "high"
-    crash: str = "Silent"
-    detail: str = ""
-    module: str | None = None
-    channel: str | None = None
-    seq: int | None = None
-    message: Any = None
-    kind = "violation"
+    kind: ClassVar[str] = "run_stopped"
 
 
 @dataclass(frozen=True)
@@ -95,9 +58,9 @@ class VerdictRecord:
     time_ns: int
     klass: str
     summary: str = ""
-    first: ViolationRecord | None = None
+    first: Violation | None = None
     reasons: tuple[str, ...] = ()
-    kind = "verdict"
+    kind: ClassVar[str] = "verdict"
 
 
 @dataclass(frozen=True)
@@ -106,23 +69,17 @@ class UndeclaredKey:
     module: str
     key: str
     note: str = ""
-    kind = "undeclared_key"
-
-
-@dataclass(frozen=True)
-class FieldChange:
-    path: str
-    old: Any = None
-    new: Any = None
+    kind: ClassVar[str] = "undeclared_key"
 
 
 @dataclass(frozen=True)
 class MutationRecord:
-    """What the interception did to one message (``policy``/``action`` joined by '+' when stacked).
+    """A ``model.records.Mutation`` as the log holds it (``policy``/``action`` joined by '+' when stacked).
 
-    Logged on the mutations topic (without kind/time_ns, with the sequence
-    numbers of the original and the delivered message in the log) and handed
-    to ``on_event`` live. Values in ``fields`` and ``detail`` are tagged JSON.
+    The log adds the time and the sequence numbers of the original and the
+    delivered message, and keeps the values of ``fields`` and ``detail`` in
+    their tagged JSON form (``model.tagged``), as written. Logged on the
+    mutations topic (without kind/time_ns) and handed to ``on_event`` live.
     """
     time_ns: int
     policy: str
@@ -136,7 +93,14 @@ class MutationRecord:
     detail: Any = None
     original_sequence: int | None = None
     delivered_sequence: int | None = None
-    kind = "mutation"
+    kind: ClassVar[str] = "mutation"
+
+    @classmethod
+    def of(cls, mutation: Mutation, time_ns: int) -> MutationRecord:
+        """The record of a live mutation: its values in their tagged JSON form, as the log holds them."""
+        return cls(time_ns, mutation.policy, mutation.action, mutation.channel, mutation.message_index,
+                   tuple(FieldChange(c.path, to_tagged(c.old), to_tagged(c.new)) for c in mutation.fields),
+                   mutation.testcase, mutation.consumers, mutation.time, to_tagged(mutation.detail))
 
 
 @dataclass(frozen=True)
@@ -159,7 +123,7 @@ class PolicyApplicationsRecord:
     run_end_s: float = 0.0
     traffic: tuple[Any, ...] = ()  # per target channel: {channel, count, first_s, last_s}
     untouched_reason: str | None = None
-    kind = "policy_applications"
+    kind: ClassVar[str] = "policy_applications"
 
 
 @dataclass(frozen=True)
@@ -170,7 +134,7 @@ class FlagRecord:
     sequence: int | None = None
     reason: str = ""
     size: int = 0
-    kind = "undecodable"
+    kind: ClassVar[str] = "undecodable"
 
 
 @dataclass(frozen=True)
@@ -180,7 +144,7 @@ class ModuleLogLine:
     module: str
     stream: str
     line: str
-    kind = "module_log"
+    kind: ClassVar[str] = "module_log"
 
 
 @dataclass(frozen=True)
@@ -191,11 +155,16 @@ class OtherEvent:
     body: tuple[tuple[str, Any], ...] = ()
 
 
-Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExitRecord | ViolationRecord | VerdictRecord
+Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExit | Violation | VerdictRecord
           | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | PolicyApplicationsRecord | OtherEvent)
 
-_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, RunEnd, ProcessExitRecord, UndeclaredKey,
-                               ModuleLogLine, ViolationRecord, FlagRecord, PolicyApplicationsRecord)}
+__all__ = ["FORMAT", "FieldChange", "FlagRecord", "ModuleLogLine", "MutationRecord", "OtherEvent",
+           "PolicyApplicationsRecord", "ProcessExit", "Record", "RunEnd", "RunStarted", "RunStopped", "RunStopping",
+           "UndeclaredKey", "VerdictRecord", "Violation", "decode", "decode_mutation", "encode", "to_json_text"]
+
+_SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, UndeclaredKey, ModuleLogLine, FlagRecord,
+                               PolicyApplicationsRecord)}
+_MODEL: dict[str, type[ProcessExit] | type[RunEnd]] = {c.kind: c for c in (ProcessExit, RunEnd)}  # own their JSON
 
 
 def encode(record: Record) -> dict:
@@ -204,7 +173,7 @@ def encode(record: Record) -> dict:
         return {"kind": record.kind, "time_ns": record.time_ns, **dict(record.body)}
     if isinstance(record, VerdictRecord):
         return {"kind": record.kind, "time_ns": record.time_ns, "class": record.klass,
-                "first": _violation_body(record.first) if record.first else None,
+                "first": record.first.to_log_json() if record.first else None,
                 "summary": record.summary, "reasons": list(record.reasons)}
     if isinstance(record, MutationRecord):
         return {"kind": record.kind, "time_ns": record.time_ns, "testcase": record.testcase,
@@ -213,6 +182,10 @@ def encode(record: Record) -> dict:
                 "fields": [{"path": c.path, "old": c.old, "new": c.new} for c in record.fields],
                 "detail": record.detail, "original_sequence": record.original_sequence,
                 "delivered_sequence": record.delivered_sequence}
+    if isinstance(record, Violation):
+        return {"kind": record.kind, **record.to_log_json()}
+    if isinstance(record, (ProcessExit, RunEnd)):
+        return {"kind": record.kind, **record.to_json()}
     body: dict[str, Any] = {"kind": record.kind}
     for f in fields(record):
         value = getattr(record, f.name)
@@ -228,24 +201,31 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     """The record of a logged JSON object; an unknown kind becomes an :class:`OtherEvent`."""
     if not isinstance(body, Mapping):
         raise InputError(f"{where}: an event is not a JSON object")
-    version = body.get("format", FORMAT)
-    if isinstance(version, int) and version > FORMAT:
+    read = JsonFields(body)
+    version = read.integer("format", FORMAT)
+    if version > FORMAT:
         raise InputError(f"{where}: events in record format {version}, this tool reads up to {FORMAT}; "
                          "read this log with a newer astaa-deft")
-    kind = str(body.get("kind", ""))
-    time_ns = _int(body.get("time_ns"))
+    kind = read.text("kind")
+    time_ns = read.integer("time_ns")
     if kind == VerdictRecord.kind:
-        first = body.get("first")
-        return VerdictRecord(time_ns, str(body.get("class", "?")), str(body.get("summary", "")),
-                             _violation(first, time_ns) if isinstance(first, Mapping) else None,
-                             tuple(str(r) for r in body.get("reasons") or ()))
+        first = read.object("first")
+        return VerdictRecord(time_ns, read.text("class", "?"), read.text("summary"),
+                             Violation.from_json({"time_ns": time_ns, **first}, where=where)
+                             if first is not None else None, read.texts("reasons"))
     if kind == MutationRecord.kind:
         return decode_mutation(body, time_ns)
-    if kind == ViolationRecord.kind:
-        return _violation(body, time_ns)
+    if kind == Violation.kind:
+        return Violation.from_json(body, where=where)
+    model = _MODEL.get(kind)
+    if model is not None:
+        try:
+            return model.from_json({**body, "time_ns": time_ns}, where=where)
+        except RecordError:  # a required field missing or malformed: keep the event, do not guess it
+            return _other(kind, time_ns, body)
     cls = _SIMPLE.get(kind)
     if cls is None:
-        return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+        return _other(kind, time_ns, body)
     values: dict[str, Any] = {}  # checked by the dataclass itself: a missing field is a TypeError below
     for f in fields(cls):
         if f.name in body:
@@ -255,40 +235,18 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     try:
         return cls(**values)
     except TypeError:  # a required field missing: keep the event, do not guess it
-        return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
+        return _other(kind, time_ns, body)
+
+
+def _other(kind: str, time_ns: int, body: Mapping[str, Any]) -> OtherEvent:
+    return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))
 
 
 def decode_mutation(body: Mapping[str, Any], time_ns: int = 0) -> MutationRecord:
     """A mutation as the interception and the recorder write it (the mutations topic has no 'kind')."""
-    changes = tuple(FieldChange(str(c.get("path")), c.get("old"), c.get("new"))
-                    for c in body.get("fields") or () if isinstance(c, Mapping))
-    time_s = body.get("time")
-    return MutationRecord(time_ns or _int(body.get("time_ns")), str(body.get("policy", "")),
-                          str(body.get("action", "")), str(body.get("channel", "")),
-                          _int(body.get("message_index")), changes, str(body.get("testcase", "")),
-                          tuple(str(c) for c in body.get("consumers") or ()),
-                          float(time_s) if isinstance(time_s, (int, float)) else 0.0, body.get("detail"),
-                          _opt_int(body.get("original_sequence")), _opt_int(body.get("delivered_sequence")))
-
-
-def _opt_int(value: Any) -> int | None:
-    return value if isinstance(value, int) and not isinstance(value, bool) else None
-
-
-def _violation(body: Mapping[str, Any], time_ns: int) -> ViolationRecord:
-    seq = body.get("seq")
-    return ViolationRecord(_int(body.get("time_ns", time_ns)), str(body.get("invariant", "?")),
-                           str(body.get("invariant_kind", "?")), str(body.get("severity", "high")),
-                           str(body.get("crash", "Silent")), str(body.get("detail", "")),
-                           body.get("module"), body.get("channel"), seq if isinstance(seq, int) else None,
-                           body.get("message"))
-
-
-def _violation_body(v: ViolationRecord) -> dict:
-    body = encode(v)
-    body.pop("kind")
-    return body
-
-
-def _int(value: Any) -> int:
-    return value if isinstance(value, int) and not isinstance(value, bool) else 0
+    read = JsonFields(body)
+    return MutationRecord(time_ns or read.integer("time_ns"), read.text("policy"), read.text("action"),
+                          read.text("channel"), read.integer("message_index"),
+                          tuple(FieldChange.from_json(c) for c in read.objects("fields")), read.text("testcase"),
+                          read.texts("consumers"), read.number("time"), read.raw("detail"),
+                          read.optional_integer("original_sequence"), read.optional_integer("delivered_sequence"))

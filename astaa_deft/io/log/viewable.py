@@ -15,9 +15,12 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from astaa_deft.model.sut import Channel
+
+if TYPE_CHECKING:
+    from astaa_deft.io.log.writer import LogWriter
 
 VIEWABLE_PREFIX = "/astaa/viewable/"
 _TAGS = {"NaN": "nan", "Infinity": "inf", "-Infinity": "-inf"}
@@ -52,7 +55,7 @@ def strict_twin(data: bytes) -> bytes | None:
 class ViewableTwins:
     """Writes the twins through a LogWriter, one MCAP channel per bus channel, registered on first use."""
 
-    def __init__(self, writer, channels: dict[str, Channel]):
+    def __init__(self, writer: LogWriter, channels: dict[str, Channel]) -> None:
         self._writer = writer
         self._channels = channels  # by channel name
         self._ids: dict[str, int] = {}

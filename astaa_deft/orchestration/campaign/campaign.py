@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TypeVar
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.model.sut import Spec
@@ -212,7 +213,7 @@ class Campaign:
                     self._cancel.set()
                 self._minimiser.shutdown(wait=True, cancel_futures=True)
         done = [r for r in self.journal.cases() if r.finished]
-        failures = sum(1 for r in done if r.kind == MUTATED and r.verdict not in ("Pass", None, "?"))
+        failures = sum(1 for r in done if r.kind == MUTATED and r.verdict not in (Verdict.PASS, None, "?"))
         live = self.journal.buckets(include_merged=False)
         return CampaignResult(len(done), failures, len(live), time.monotonic() - self.started, stopped,
                               bugs=sum(1 for b in live if b.is_bug))

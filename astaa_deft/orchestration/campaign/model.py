@@ -14,6 +14,7 @@ from typing import Any
 from astaa_deft.engine.monitor.verdict import ORDER
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.vocabulary import TextEnum
+from astaa_deft.model.records import Verdict
 
 
 class CaseKind(TextEnum):
@@ -153,7 +154,7 @@ class CaseOutcome:
     """What one run of a case gave (JSON-able: it crosses process and machine boundaries)."""
 
     status: str  # "done", or "error" (the run could not start / be judged)
-    verdict: str  # CRASH class of the run ("Pass", "Silent", …) or "?" on error
+    verdict: str  # CRASH class of the run (a Verdict's value: "Pass", "Silent", …) or "?" on error
     summary: str
     findings: list[Finding] = field(default_factory=list)
     seconds: float = 0.0
@@ -191,13 +192,13 @@ class CaseOutcome:
 
     @property
     def failed(self) -> bool:
-        return self.status == "done" and self.verdict != "Pass"
+        return self.status == "done" and self.verdict != Verdict.PASS
 
     def keeping(self, kept: list[Finding], note: str) -> CaseOutcome:
         """This outcome with only the ``kept`` findings (``note`` says why the rest do not count): its verdict
         the most severe kept finding's class, Pass when none is left."""
         if not kept:
-            return replace(self, verdict="Pass", findings=[], summary=f"Pass{note}")
-        klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c == "Pass")
-        return replace(self, verdict=klass if klass != "Pass" else self.verdict, findings=kept,
+            return replace(self, verdict=Verdict.PASS, findings=[], summary=f"{Verdict.PASS}{note}")
+        klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c is Verdict.PASS)
+        return replace(self, verdict=klass if klass is not Verdict.PASS else self.verdict, findings=kept,
                        summary=self.summary + note)

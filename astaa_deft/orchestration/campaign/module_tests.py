@@ -22,6 +22,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
 from astaa_deft.analysis.deft.extract import ExtractedFrame
@@ -44,7 +45,7 @@ class TestsVerdict:
 
 def is_crash_bucket(verdict: str, invariant: str, spec: Spec) -> bool:
     """Whether a bucket's finding is a module dying or raising (an abnormal exit, a log or exceptions monitor)."""
-    if verdict in ("Abort", "Catastrophic") or invariant == IMPLICIT:
+    if verdict in (Verdict.ABORT, Verdict.CATASTROPHIC) or invariant == IMPLICIT:
         return True
     watched = next((i for i in spec.invariants if i.name == invariant), None)
     return watched is not None and watched.kind in CRASH_KINDS
@@ -61,9 +62,9 @@ def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: Extra
     if planner is None:
         return False
     log = read_log(log_path)
-    failed_at = next((v.time_ns for v in log.records(rec.ViolationRecord) if v.invariant == invariant), None)
+    failed_at = next((v.time_ns for v in log.records(rec.Violation) if v.invariant == invariant), None)
     if failed_at is None:
-        failed_at = next((e.time_ns for e in log.records(rec.ProcessExitRecord)
+        failed_at = next((e.time_ns for e in log.records(rec.ProcessExit)
                           if e.module == planner.module and e.abnormal), None)
     if failed_at is None:
         return False

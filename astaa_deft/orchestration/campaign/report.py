@@ -23,6 +23,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX
 from astaa_deft.orchestration.campaign.journal import Journal, open_existing
@@ -47,8 +48,9 @@ tr.xml td{border-top:none;background:#fcfcfc}details summary{cursor:pointer;colo
 .family div{white-space:nowrap}.headline{font-size:1.15em}
 .plots{display:grid;grid-template-columns:1fr 1fr;gap:12px}.plots img{width:100%;border:1px solid #eee}
 """
-VERDICT_COLOURS = {"Pass": "#2a9d4b", "Hindering": "#e0a030", "Silent": "#d05a1e", "Abort": "#b3202a",
-                   "Restart": "#7a2ca0", "Catastrophic": "#222222", "?": "#999999"}
+VERDICT_COLOURS = {Verdict.PASS: "#2a9d4b", Verdict.HINDERING: "#e0a030", Verdict.SILENT: "#d05a1e",
+                   Verdict.ABORT: "#b3202a", Verdict.RESTART: "#7a2ca0", Verdict.CATASTROPHIC: "#222222",
+                   "?": "#999999"}
 
 
 def write_report(out: Path) -> Path:
@@ -94,7 +96,7 @@ class _Cases:
     def of(cls, rows: list[CaseRow]) -> _Cases:
         done = [r for r in rows if r.finished]
         mutated = [r for r in done if r.kind == MUTATED]
-        return cls(done, mutated, [r for r in mutated if r.verdict not in ("Pass", "?", None)],
+        return cls(done, mutated, [r for r in mutated if r.verdict not in (Verdict.PASS, "?", None)],
                    [r for r in done if r.status == CaseStatus.ERROR], len([r for r in done if r.kind == BASELINE]))
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import zenoh
 
+from astaa_deft.model.records import Verdict, Violation
 from astaa_deft.model import fields
 from astaa_deft.engine.bus.processes import ChildProcess
 from astaa_deft.io.codecs import get_codec
@@ -29,7 +30,6 @@ from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
 from astaa_deft.engine.intercept.engine import Interceptor
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.io.log import layout
-from astaa_deft.io.log.records import ViolationRecord
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
 from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.verdict import IMPLICIT
@@ -158,7 +158,7 @@ class _Watches:
                          severity=v.severity) for v in result.violations]
         for exit_ in result.crashes:
             if not any(f.module == exit_.module for f in found):
-                found.append(Finding(IMPLICIT, "Abort", exit_.module, None, exit_.describe(),
+                found.append(Finding(IMPLICIT, Verdict.ABORT, exit_.module, None, exit_.describe(),
                                      at=self._at(exit_.time_ns)))
         return found
 
@@ -322,7 +322,7 @@ class MarginWatch:
                 if margin < self.closest.get(inv.name, math.inf):
                     self.closest[inv.name] = margin
 
-    def margins(self, violations: tuple[ViolationRecord, ...]) -> dict[str, float]:
+    def margins(self, violations: tuple[Violation, ...]) -> dict[str, float]:
         with self._lock:
             out = dict(self.closest)
         for v in violations:

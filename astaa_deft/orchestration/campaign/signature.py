@@ -18,6 +18,7 @@ from pathlib import Path
 from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.verdict import ORDER
+from astaa_deft.model.records import Verdict
 from astaa_deft.engine.monitor.violation import SEVERITIES
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import (
@@ -141,8 +142,9 @@ def without_self_inflicted(outcome: CaseOutcome, testcase_xml: str | None, spec:
     if len(kept) == len(outcome.findings):
         return replace(outcome, margins=margins, summary=outcome.summary + note)
     if not kept:
-        return replace(outcome, verdict="Pass", summary=f"Pass: only the mutated values themselves broke"
-                                                        f" invariants{note}", findings=[], margins=margins)
-    klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c == "Pass")
-    return replace(outcome, verdict=klass if klass != "Pass" else outcome.verdict, findings=kept,
+        return replace(outcome, verdict=Verdict.PASS,
+                       summary=f"{Verdict.PASS}: only the mutated values themselves broke invariants{note}",
+                       findings=[], margins=margins)
+    klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c is Verdict.PASS)
+    return replace(outcome, verdict=klass if klass is not Verdict.PASS else outcome.verdict, findings=kept,
                    summary=outcome.summary + note, margins=margins)

@@ -15,9 +15,10 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from astaa_deft.engine.intercept.actions.base import ActionConfig, ActionRuntime, Delivery, FieldChange, MutationEvent
+from astaa_deft.engine.intercept.actions.base import ActionConfig, ActionRuntime, Delivery
+from astaa_deft.model.records import FieldChange, Mutation
 
-__all__ = ["ACTIONS", "ActionConfig", "ActionRuntime", "Delivery", "FieldChange", "MutationEvent"]
+__all__ = ["ACTIONS", "ActionConfig", "ActionRuntime", "Delivery", "FieldChange", "Mutation"]
 
 
 def _discover() -> dict[str, type[ActionConfig]]:

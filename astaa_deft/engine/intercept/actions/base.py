@@ -24,18 +24,16 @@ its element in ``policies/testcase.xsd``).
 
 from __future__ import annotations
 
-import base64
 import copy
-import json
-import math
 import random
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from decimal import Decimal
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from astaa_deft.io.codecs import Codec, EncodeError
+from astaa_deft.model.records import FieldChange, Mutation
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -54,74 +52,14 @@ _new_object = object.__new__
 def built(cls: type[BuiltT], **values: Any) -> BuiltT:
     """An instance of the frozen dataclass ``cls`` from ALL its field values, without its ``__init__``.
 
-    A frozen dataclass's ``__init__`` sets each field through ``object.__setattr__``;
-    building the event, the delivery and the field change of every mutated
-    message that way took a third of the engine's time (profiled). The
-    instance is the same (equality, hash, repr, frozenness), so this is only
-    for the per-message path; tests/test_interception_records.py checks it.
+    For the engine's per-message path (why: docs/performance.md, "records").
+    The instance is the same as ``cls(**values)`` gives (equality, hash, repr,
+    frozenness); tests/test_interception_records.py checks it. ``cls`` must
+    not use ``__slots__``; every field must be given.
     """
     instance = _new_object(cls)
     instance.__dict__.update(values)
     return instance
-
-
-@dataclass(frozen=True)
-class FieldChange:
-    path: str  # concrete: points[2].v, never a wildcard
-    old: Any
-    new: Any
-
-    def to_json(self) -> dict:
-        return _change_json(self.path, self.old, self.new)
-
-
-@dataclass(frozen=True)
-class MutationEvent:
-    """What one policy (or a stack of policies, see ``combine_events``) did to one message."""
-
-    testcase: str
-    policy: str
-    action: str
-    channel: str
-    consumers: tuple[str, ...]
-    message_index: int  # 1-based index of the real message on its channel
-    time: float  # seconds since run start, when the real message arrived
-    fields: tuple[FieldChange, ...] = ()
-    detail: dict = field(default_factory=dict)
-
-    @classmethod
-    def from_values(cls, values: tuple) -> MutationEvent:
-        """The event from its values in field order, changes as (path, old, new) triples (``Interceptor.lane``)."""
-        testcase, policy, action, channel, consumers, index, time, changes, detail = values
-        return cls(testcase, policy, action, channel, consumers, index, time,
-                   tuple(FieldChange(path, old, new) for path, old, new in changes), detail)
-
-    def to_json(self) -> dict:
-        """Plain JSON types only; exceptional values are tagged (see ``to_tagged``)."""
-        return event_json_form(self.testcase, self.policy, self.action, self.channel, self.consumers,
-                               self.message_index, self.time, [(c.path, c.old, c.new) for c in self.fields],
-                               self.detail)
-
-
-def event_json_form(testcase: str, policy: str, action: str, channel: str, consumers: tuple[str, ...],
-                    message_index: int, time: float, changes: list[tuple[str, Any, Any]], detail: dict) -> dict:
-    """``MutationEvent.to_json`` from the event's values (``changes``: (path, old, new) triples).
-
-    The recorder writes an event's JSON form from the values the proxy sent,
-    without building the event and its field changes first (docs/performance.md,
-    "Mutation events").
-    """
-    return {
-        "testcase": testcase, "policy": policy, "action": action, "channel": channel, "consumers": list(consumers),
-        "message_index": message_index, "time": time,
-        "fields": [_change_json(path, old, new) for path, old, new in changes],
-        "detail": to_tagged(detail),
-    }
-
-
-def _change_json(path: str, old: Any, new: Any) -> dict:
-    """``FieldChange.to_json``'s form."""
-    return {"path": path, "old": to_tagged(old), "new": to_tagged(new)}
 
 
 @dataclass(frozen=True)
@@ -138,10 +76,10 @@ class Delivery:
     payload: bytes
     at: float
     original: bytes | None = None
-    event: MutationEvent | None = None
+    event: Mutation | None = None
 
 
-def combine_events(events: list[MutationEvent]) -> MutationEvent | None:
+def combine_events(events: list[Mutation]) -> Mutation | None:
     """One event for a delivery that several policies acted on (they stack in document order).
 
     ``policy`` and ``action`` join the parts with '+', ``fields`` are
@@ -153,63 +91,11 @@ def combine_events(events: list[MutationEvent]) -> MutationEvent | None:
         return events[0]
     first, last = events[0], events[-1]
     steps = [{"policy": e.policy, "action": e.action, "detail": e.detail} for e in events]
-    return MutationEvent(
+    return Mutation(
         testcase=first.testcase, policy="+".join(e.policy for e in events),
         action="+".join(e.action for e in events), channel=first.channel, consumers=last.consumers,
         message_index=first.message_index, time=first.time,
         fields=tuple(change for e in events for change in e.fields), detail={"steps": steps})
-
-
-# ---------------------------------------------------------------- JSON for exceptional values
-
-# A value JSON cannot hold exactly becomes a one-key object naming its kind.
-# A real object with exactly one of these keys is wrapped in {"object": ...},
-# so a reader never mistakes message data for a tag.
-TAGS = ("float", "base64", "str_escaped", "object")
-
-
-def to_tagged(value: Any) -> Any:
-    """``value`` as strict JSON data (RFC 8259, valid UTF-8), losslessly.
-
-    NaN/inf -> {"float": "nan" | "inf" | "-inf"}; bytes -> {"base64": ...};
-    a string with lone surrogates -> {"str_escaped": its JSON escape text}.
-    """
-    kind = type(value)
-    if kind is float and not math.isfinite(value):
-        return {"float": "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")}
-    if kind is bytes:
-        return {"base64": base64.b64encode(value).decode("ascii")}
-    if kind is str:
-        try:
-            value.encode("utf-8")
-            return value
-        except UnicodeEncodeError:
-            return {"str_escaped": json.dumps(value)[1:-1]}
-    if kind is list or kind is tuple:
-        return [to_tagged(item) for item in value]
-    if kind is dict:
-        tagged = {str(k): to_tagged(v) for k, v in value.items()}
-        return {"object": tagged} if len(tagged) == 1 and next(iter(tagged)) in TAGS else tagged
-    return value
-
-
-def from_tagged(value: Any) -> Any:
-    """The inverse of ``to_tagged``."""
-    if type(value) is list:
-        return [from_tagged(item) for item in value]
-    if type(value) is not dict:
-        return value
-    if len(value) == 1:
-        (tag, inner), = value.items()
-        if tag == "float":
-            return float(inner)
-        if tag == "base64":
-            return base64.b64decode(inner)
-        if tag == "str_escaped":
-            return json.loads(f'"{inner}"')
-        if tag == "object":
-            return {k: from_tagged(v) for k, v in inner.items()}
-    return {k: from_tagged(v) for k, v in value.items()}
 
 
 # ---------------------------------------------------------------- in flight inside the engine
@@ -235,7 +121,7 @@ class Pending:
         # Held back (delay, reorder): it goes out with a later call, not as "the message
         # just received", so its delivery names its payload even when unchanged.
         self.deferred = False
-        self.events: list[MutationEvent] = []
+        self.events: list[Mutation] = []
         self.message: dict | None = None
 
     def copy_for(self, consumers: tuple[str, ...], *, extra: bool | None = None) -> Pending:
@@ -304,8 +190,8 @@ class PolicyContext:
     select_slot: Callable[[str, float], bool]
 
     def event(self, action: str, info: MessageInfo, consumers: tuple[str, ...],
-              fields: tuple[FieldChange, ...] = (), **detail: Any) -> MutationEvent:
-        return built(MutationEvent, testcase=self.testcase, policy=self.policy.id, action=action,
+              fields: tuple[FieldChange, ...] = (), **detail: Any) -> Mutation:
+        return built(Mutation, testcase=self.testcase, policy=self.policy.id, action=action,
                      channel=info.channel, consumers=consumers, message_index=info.index, time=info.now,
                      fields=fields, detail=detail)
 

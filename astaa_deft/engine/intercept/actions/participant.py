@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
-from astaa_deft.model.fields import FieldPath, FieldPathError, get, type_at
+from astaa_deft.model.fields import FieldPath, FieldPathError, FieldType, get, type_at
 from astaa_deft.engine.intercept.actions.base import (
     ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text, required,
@@ -265,7 +265,7 @@ def _path(text: Any, where: str) -> FieldPath:
         raise MappingError(f"{where}: invalid field path {text!r}: {exc.reason}") from None
 
 
-def _field_type(spec: Spec, type_name: str, path: FieldPath, where: str):
+def _field_type(spec: Spec, type_name: str, path: FieldPath, where: str) -> FieldType:
     try:
         return type_at(spec.types, type_name, path)
     except FieldPathError as exc:

@@ -399,22 +399,34 @@ class CollisionMonitor(Monitor):
                 continue
             colliding.append(obstacle_id)
             if self._gate.broke(obstacle_id):
-                out.append(self._violation(channel, time_ns, seq, obstacle_id, depth, ego_box, element, skew))
+                out.append(self._violation(channel, time_ns, seq, _Overlap(obstacle_id, element, depth, ego_box, skew)))
         if colliding:
             self.violating += 1
         self._gate.keep_only(colliding)
         return out
 
-    def _violation(self, channel: str, time_ns: int, seq: int, obstacle_id: Any, depth: float, ego: Box,
-                   element: Any, skew: float) -> Violation:
+    def _violation(self, channel: str, time_ns: int, seq: int, found: _Overlap) -> Violation:
         margin = f" (with a {self.inv.margin:g} m margin)" if self.inv.margin else ""
-        held = f"; a side held or carried over {skew:.3f} s" if skew else ""
-        detail = f"ego footprint overlaps obstacle {obstacle_id!r} by {depth:.2f} m{margin}{held}"
-        context = {"obstacle_id": json_safe(obstacle_id), "overlap_m": round(depth, 4), "skew_s": round(skew, 6),
+        held = f"; a side held or carried over {found.skew:.3f} s" if found.skew else ""
+        detail = f"ego footprint overlaps obstacle {found.obstacle_id!r} by {found.depth:.2f} m{margin}{held}"
+        ego = found.ego
+        context = {"obstacle_id": json_safe(found.obstacle_id), "overlap_m": round(found.depth, 4),
+                   "skew_s": round(found.skew, 6),
                    "ego": {"x": ego.x, "y": ego.y, "heading": ego.heading, "length": ego.length,
                            "width": ego.width},
-                   "obstacle": json_safe(element)}
+                   "obstacle": json_safe(found.element)}
         return self.violation(time_ns, detail, channel=channel, seq=seq, message=context, infer_module=False)
+
+
+@dataclass(frozen=True)
+class _Overlap:
+    """The ego footprint overlapping one obstacle at one time."""
+
+    obstacle_id: Any
+    element: Any  # the obstacle as its message gave it
+    depth: float  # m
+    ego: Box  # the ego footprint (without the margin)
+    skew: float  # s: how far a side was held or carried over to this time
 
 
 def monitor(invariant: CollisionInvariant, context: MonitorContext) -> CollisionMonitor:

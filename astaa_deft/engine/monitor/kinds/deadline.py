@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
@@ -33,7 +34,7 @@ AFTER = ("first", "start")
 @dataclass(frozen=True, kw_only=True)
 class DeadlineInvariant(Invariant):
     kind: ClassVar[str] = "deadline"
-    default_crash: ClassVar[str] = "Restart"  # a module that stops talking hangs (CRASH: needs a restart)
+    default_crash: ClassVar[Verdict] = Verdict.RESTART  # a module that stops talking hangs (CRASH: needs a restart)
 
     channels: tuple[str, ...]  # the watched channels: one, or every channel a module produces
     max_gap_ns: int

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
@@ -45,7 +46,7 @@ BUILT_IN = "|".join((
 @dataclass(frozen=True, kw_only=True)
 class ExceptionsInvariant(LogInvariant):
     kind: ClassVar[str] = "exceptions"
-    default_crash: ClassVar[str] = "Silent"
+    default_crash: ClassVar[Verdict] = Verdict.SILENT
 
     def what_matched(self) -> str:
         return "logged an exception or error"

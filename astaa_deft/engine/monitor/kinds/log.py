@@ -21,6 +21,7 @@ import re
 from dataclasses import dataclass
 from typing import ClassVar
 
+from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, LogLineInfo, Monitor, MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
@@ -34,7 +35,7 @@ MAX_PATTERN = 1000  # characters: a pattern is a short regex, not a document
 @dataclass(frozen=True, kw_only=True)
 class LogInvariant(Invariant):
     kind: ClassVar[str] = "log"
-    default_crash: ClassVar[str] = "Silent"
+    default_crash: ClassVar[Verdict] = Verdict.SILENT
 
     modules: tuple[str, ...]
     pattern: re.Pattern

@@ -21,9 +21,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from astaa_deft.model.records import ProcessExit, Verdict
 from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 from astaa_deft.io.yamlsource import Node
-from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext, ProcessExitInfo
+from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
@@ -35,7 +36,7 @@ REQUIRED = ()
 @dataclass(frozen=True, kw_only=True)
 class ProcessInvariant(Invariant):
     kind: ClassVar[str] = "process"
-    default_crash: ClassVar[str] = "Abort"
+    default_crash: ClassVar[Verdict] = Verdict.ABORT
 
     modules: tuple[str, ...]
     allow_clean_exit: bool = False
@@ -91,7 +92,7 @@ class ProcessMonitor(Monitor):
     def channels(self) -> set[str]:
         return set(self.inv.counter_channels)
 
-    def on_process_exit(self, exit_: ProcessExitInfo) -> list[Violation]:
+    def on_process_exit(self, exit_: ProcessExit) -> list[Violation]:
         if exit_.module not in self.inv.modules or exit_.during_shutdown:
             return NO_VIOLATIONS
         self.evaluations += 1
@@ -99,13 +100,13 @@ class ProcessMonitor(Monitor):
         if clean and self.inv.allow_clean_exit:
             return NO_VIOLATIONS
         self.violating += 1
-        detail = f"{exit_.describe()} during the run"
+        detail = f"{exit_.as_finding()} during the run"
         if clean:
             detail += " (a clean exit code for a module that stopped serving)"
         tail = exit_.stderr_tail.strip().splitlines()[-5:]
         context = {"returncode": exit_.returncode, "signal": exit_.signal, "stderr_tail": "\n".join(tail)}
         return [self.violation(exit_.time_ns, detail, module=exit_.module, message=context,
-                               crash="Hindering" if clean else "Abort")]
+                               crash=Verdict.HINDERING if clean else Verdict.ABORT)]
 
     def on_message(self, channel: str, time_ns: int, value: dict | None, seq: int) -> list[Violation]:
         if value is None:
@@ -125,7 +126,7 @@ class ProcessMonitor(Monitor):
         producer = self.context.producer(channel)
         detail = (f"module '{producer}' restarted: {self.inv.restart_counter} on '{channel}' went back "
                   f"from {previous:g} to {counter:g}")
-        return [self.violation(time_ns, detail, channel=channel, seq=seq, message=value, crash="Restart")]
+        return [self.violation(time_ns, detail, channel=channel, seq=seq, message=value, crash=Verdict.RESTART)]
 
 
 def monitor(invariant: ProcessInvariant, context: MonitorContext) -> ProcessMonitor:

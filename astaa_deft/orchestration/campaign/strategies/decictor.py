@@ -27,13 +27,14 @@ from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.engine.intercept.actions.participant import Participant
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Policy, TestCase, parse_testcase
+from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 
 INVARIANT = "path_consistency"
-CRASH = "Hindering"
+CRASH = Verdict.HINDERING
 AREA_MARGIN = 4.0  # m beyond the outer lane edges where participants may stand
 AREA_BEHIND, AREA_AHEAD = 10.0, 30.0  # m before the seed path's start and past its end
 RESULT_FILE = "decictor.json"
@@ -132,7 +133,7 @@ class DecictorStrategy(Strategy):
             return outcome
         module = self.spec.planner.module if self.spec.planner is not None else None
         finding = Finding(INVARIANT, CRASH, module, self.config.participants.channel, verdict.reason)
-        verdict_class = CRASH if outcome.verdict == "Pass" else outcome.verdict
+        verdict_class = CRASH if outcome.verdict == Verdict.PASS else outcome.verdict
         return replace(outcome, verdict=verdict_class, findings=[finding, *outcome.findings],
                        summary=f"{verdict.reason}; {outcome.summary}")
 
