@@ -4,8 +4,10 @@
 
 Prints: functions over 80 lines; functions with 8+ parameters and those of
 them not keyword-only past the fourth; lines with ``.get("`` outside the
-decoders of external formats (the YAML a user writes, JSON from users, the
-bundled demo SUT), and of those how many sit inside a record type's own
+decoders of external formats — whole files (the spec reader, the YAML and
+codec helpers, the bundled demo SUT) and the functions that read a user's
+YAML node or XML element (a monitor kind's ``parse``, a fault action's
+``from_xml``) — and of those how many sit inside a record type's own
 decoder (``from_json``, ``from_*``, ``decode``: the one place a form read
 from a file or a pipe becomes the type); ``Any`` in the public signatures of
 the session, the campaign and the minimiser. Asserts nothing: the figures go
@@ -33,6 +35,13 @@ def _params(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> tuple[int, int]:
     if positional and positional[0].arg in ("self", "cls"):
         positional = positional[1:]
     return len(positional) + len(a.kwonlyargs), len(positional)
+
+
+def _reads_user_format(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    """A function given a user's YAML node (and the invariant reader) or an XML element of a policy."""
+    args = [*fn.args.posonlyargs, *fn.args.args, *fn.args.kwonlyargs]
+    return any(a.annotation is not None and re.search(r"\b(Node|InvariantReader|_Element)\b", ast.unparse(a.annotation))
+               for a in args)
 
 
 def _mentions_any(node: ast.AST | None) -> bool:
@@ -76,11 +85,12 @@ def main() -> None:
                         if positional > 4:
                             positional_past_four.append(f"{where} ({positional} positional)")
         if not rel.startswith(EXTERNAL):
-            decoders = [range(node.lineno, node.end_lineno + 1) for node in ast.walk(tree)
-                        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
-                        and (node.name.startswith("from_") or node.name == "decode")]
+            functions = [node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+            decoders = [range(fn.lineno, fn.end_lineno + 1) for fn in functions
+                        if fn.name.startswith("from_") or fn.name == "decode"]
+            user_formats = [range(fn.lineno, fn.end_lineno + 1) for fn in functions if _reads_user_format(fn)]
             for n, line in enumerate(text.splitlines(), 1):
-                if re.search(r'\.get\("', line):
+                if re.search(r'\.get\("', line) and not any(n in lines for lines in user_formats):
                     gets.append(f"{rel}:{n}")
                     if any(n in lines for lines in decoders):
                         in_decoders.append(f"{rel}:{n}")
