@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.output_place import Place, writing
-from astaa_deft.engine.session import BusRun, RunOptions, RunResult, run_session
+from astaa_deft.engine.session import RunOptions, RunResult, RunView, run_session
 from astaa_deft.engine.session.summary import untouched_policies
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.params import check_param_values
@@ -21,8 +21,8 @@ EXIT_NOT_OBSERVED = 3  # the tool lost its recorder or bus router: no verdict ca
 
 
 def run_bus(spec: Spec, options: RunOptions, duration: float | None,
-            until: Callable[[BusRun], str | None] = lambda run: None,
-            on_start: Callable[[BusRun], None] = lambda run: None, verbose: bool = True) -> RunResult:
+            until: Callable[[RunView], str | None] = lambda run: None,
+            on_start: Callable[[RunView], None] = lambda run: None, verbose: bool = True) -> RunResult:
     """:func:`run_session` with the console: events as they come, a status line, Ctrl-C/SIGTERM to stop."""
 
     shown: dict[str, int] = {}
@@ -44,14 +44,14 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
     status = StatusLine(lambda: "")
     with StopSignal() as stop:
 
-        def started(run: BusRun) -> None:
+        def started(run: RunView) -> None:
             meter = RateMeter(run.counts)
             t0 = time.monotonic()
             status.render = lambda: _status(run, meter, t0)
             status.__enter__()
             on_start(run)
 
-        def stop_when(run: BusRun) -> str | None:
+        def stop_when(run: RunView) -> str | None:
             if stop.requested():
                 return f"signal {stop.received}"
             return until(run)
@@ -62,7 +62,7 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             status.__exit__()
 
 
-def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
+def _status(run: RunView, meter: RateMeter, t0: float) -> str:
     rates = meter.rates()
     parts = [f"{name} {rate:.0f}/s" for name, rate in rates.items()]
     crashes = len(run.crashed())

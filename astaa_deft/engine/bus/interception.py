@@ -47,7 +47,7 @@ from astaa_deft.engine.bus.proxy import BLOCK, REMOTE, Forwarder, LiveRoute, pla
 from astaa_deft.engine.bus.topology import intercepted_key, pack_deliveries
 
 TICK_SECONDS = 0.01
-BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of 200 B messages stays under 64 KiB)
+BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of small messages stays one Zenoh message)
 
 # (encoding, attachment, timestamp) of the real message a delivery comes from: what its put carries.
 SampleMeta = tuple[zenoh.Encoding | None, zenoh.ZBytes | None, zenoh.Timestamp | None]
@@ -55,10 +55,11 @@ NO_META: SampleMeta = (None, None, None)
 
 
 class MutationLike(Protocol):
-    """What the bridge reads of a mutation event (the rest travels to the recorder as it is)."""
+    """What the bridge and its listeners read of a mutation event (the rest travels to the recorder as it is)."""
 
     @property
     def channel(self) -> str: ...
+    def to_json(self) -> Mapping[str, object]: ...
 
 
 class DeliveryLike(Protocol):

@@ -26,9 +26,7 @@ from astaa_deft.engine.bus.topology import (
 BLOCK = zenoh.CongestionControl.BLOCK
 REMOTE = zenoh.Locality.REMOTE
 FIFO_CAPACITY = 16384  # samples waiting per route; when full, Zenoh holds back the sender (no loss)
-# The bound is in samples, not bytes: a waiting 200 B sample holds ≈ 8 KiB of native memory, so one backlog that
-# fills a FIFO (its forwarder stalled on a loaded machine) lifts the tool's RSS by ≈ 130 MiB, kept by malloc
-# for the next backlog once drained: RSS levels off there (bench_soak.py --rate 25000; ≈ 47 MiB at 1,024).
+# The bound is in samples, not bytes: what a full FIFO costs in memory is in docs/performance.md ("session").
 BURST_LIMIT = 128  # samples a forwarder with a burst handler takes out of its FIFO at a time (see run_bursts)
 CATCH_ALL_POLL_SECONDS = 0.002  # how often the catch-all looks into its FIFO (see StarProxy._catch_all_forwarder)
 
@@ -132,11 +130,9 @@ class StarProxy:
 
     Each declared channel has its own subscriber, whose samples queue in a
     Zenoh FIFO channel (native side) and are forwarded by a thread of its
-    own, and so does the catch-all. Measured against Python callbacks run on
-    Zenoh's threads (one wildcard subscriber dispatching on the key, or one
-    callback subscriber per channel plus a wildcard catch-all): about 30 %
-    less CPU per message and 1.3–1.6× the throughput, the catch-all included.
-    Order is kept per channel. ``make_forwarder`` is where a later stage
+    own, and so does the catch-all (why FIFOs rather than callbacks on
+    Zenoh's threads: docs/performance.md, "session"). Order is kept per
+    channel. ``make_forwarder`` is where a later stage
     (interception) substitutes its own :class:`Forwarder` for a route.
     ``start`` and ``stop`` are called from one thread; ``counts`` from any.
     """

@@ -33,7 +33,7 @@ from astaa_deft.io.log import layout
 from astaa_deft.io.log.records import ViolationRecord
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
 from astaa_deft.engine.monitor.verdict import IMPLICIT
-from astaa_deft.engine.session import BusRun, RunOptions, run_session
+from astaa_deft.engine.session import RunOptions, RunView, run_session
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
@@ -92,16 +92,16 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     stop_at_violation = testcase is not None
     started: dict[str, Any] = {}
 
-    def on_start(bus: BusRun) -> None:
+    def on_start(bus: RunView) -> None:
         started["ns"] = time.time_ns()
-        started["monitors"] = bus.monitors.set if bus.monitors is not None else None
+        started["monitors"] = bus.monitor_set
         watch.attach(bus)
         if settled is not None:
             settled.attach(bus)
         if timing is not None:
             timing.attach(bus)
 
-    def stop_when(bus: BusRun) -> str | None:
+    def stop_when(bus: RunView) -> str | None:
         if stop_at_violation and any(v.invariant not in known for v in list(bus.violations)):
             return VIOLATION
         return settled.check(bus) if settled is not None else None
@@ -156,7 +156,7 @@ class ChannelTiming:
         self.max_gap: dict[str, float] = {}
         self._lock = threading.Lock()
 
-    def attach(self, bus: BusRun) -> None:
+    def attach(self, bus: RunView) -> None:
         self.t0 = time.monotonic()
         for channel in self.channels:
             def seen(sample: zenoh.Sample, channel: str = channel) -> None:
@@ -208,7 +208,7 @@ class SettleWatch:
         self.changed = 0.0
         self._lock = threading.Lock()
 
-    def attach(self, bus: BusRun) -> None:
+    def attach(self, bus: RunView) -> None:
         self.t0 = time.monotonic()
         self.changed = self.t0
         for channel in self.anchors:
@@ -237,9 +237,9 @@ class SettleWatch:
             last = max(last, base + end)
         return last
 
-    def check(self, bus: BusRun) -> str | None:
+    def check(self, bus: RunView) -> str | None:
         now = time.monotonic()
-        mutations = bus.interception.mutations if bus.interception is not None else 0
+        mutations = bus.mutations
         if mutations != self.mutations:
             self.mutations, self.changed = mutations, now
         if now >= self._last_chance() + self.settle and now >= self.changed + self.settle:
@@ -262,7 +262,7 @@ class MarginWatch:
         self.closest: dict[str, float] = {}
         self._lock = threading.Lock()
 
-    def attach(self, bus: BusRun) -> None:
+    def attach(self, bus: RunView) -> None:
         for inv in self.bounds:
             codec = get_codec(self.spec.channel(inv.channel).encoding)
             def seen(sample: zenoh.Sample, inv: BoundInvariant = inv, codec: Codec = codec) -> None:
