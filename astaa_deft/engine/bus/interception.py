@@ -39,7 +39,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, cast
 
 import zenoh
 
@@ -98,17 +98,22 @@ class Interceptor(Protocol):
     def applications(self, now: float) -> Sequence[JsonForm]: ...  # per policy: what it touched, and why not
 
 
-@dataclass(frozen=True)
 class Rewritten:
     """A lane's answer "this payload, to every consumer, now", with its event.
 
     ``event`` is what the recorder's row carries: the lane's event values, or
     a typed event; ``typed`` turns it into the typed event for a listener.
+    A slotted class rather than a frozen dataclass: one is made per
+    rewritten message, and a frozen dataclass's ``__init__`` costs several
+    times more. Treat it as immutable.
     """
 
-    payload: bytes
-    event: object
-    typed: Callable[[object], MutationLike]
+    __slots__ = ("payload", "event", "typed")
+
+    def __init__(self, payload: bytes, event: object, typed: Callable[[object], MutationLike]):
+        self.payload = payload
+        self.event = event
+        self.typed = typed
 
 
 @dataclass
@@ -136,8 +141,8 @@ class _Channel:
 
 
 def _same(event: object) -> MutationLike:
-    """The typed event of a row that already holds one."""
-    return event  # type: ignore[return-value]  # rows from deliveries hold MutationLike events
+    """The typed event of a row that already holds one (rows made from deliveries)."""
+    return cast(MutationLike, event)
 
 
 class InterceptionBridge:
@@ -182,13 +187,13 @@ class InterceptionBridge:
         typed = self.interceptor.event
 
         def to_event(values: object) -> MutationLike:
-            return typed(values)  # type: ignore[arg-type]  # a lane's event values are a tuple
+            return typed(cast("tuple[object, ...]", values))  # a lane's event values are a tuple
 
         def lane(payload: bytes, now: float) -> Rewritten | Sequence[DeliveryLike] | None:
             done = offered(payload, now)
             if isinstance(done, tuple):
                 return Rewritten(done[0], done[1], to_event)
-            return done  # type: ignore[return-value]  # None or the deliveries, as Interceptor.lane says
+            return cast("Sequence[DeliveryLike] | None", done)  # None or the deliveries, as Interceptor.lane says
 
         return lane
 
@@ -242,7 +247,7 @@ class InterceptionBridge:
                             append_out((pub, done.payload, meta))
                         record(channel, (time_ns(), done.payload, payload, True, done.event), done.typed)
                     else:
-                        dispatch(live, done, meta, now, sample)
+                        dispatch(live, done, meta, now=now, sample=sample)
                 last_meta[name] = meta  # what a tick's injected message on this channel goes out with
                 self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
 
@@ -293,8 +298,9 @@ class InterceptionBridge:
             self._send()
 
     # -- delivery ------------------------------------------------------------
-    def _dispatch(self, live: LiveRoute, deliveries: Sequence[DeliveryLike], meta: SampleMeta, now: float,
+    def _dispatch(self, live: LiveRoute, deliveries: Sequence[DeliveryLike], meta: SampleMeta, *, now: float,
                   sample: zenoh.Sample | None) -> None:
+        """Deliveries for one message: due ones now (``sample``: the message, for its very payload), others later."""
         for d in deliveries:
             if d.at > now:
                 heapq.heappush(self._heap, (d.at, next(self._order), _Pending(live, d, meta)))

@@ -144,8 +144,9 @@ class BusRun:
         meta = {"spec": self.spec.name, "command_line": " ".join(self.options.command_line),
                 "started_ns": str(self.started_ns),
                 "params": json.dumps({**self.spec.params, **self.options.params}, sort_keys=True)}
-        return RecorderRequest(path, self.options.mode, meta, self.bus_endpoints, sorted(transport.intercepted),
-                               self.options.attachments, self.options.warm_recorder)
+        return RecorderRequest(path=path, mode=self.options.mode, meta=meta, endpoints=self.bus_endpoints,
+                               intercepted=sorted(transport.intercepted), attachments=self.options.attachments,
+                               warm=self.options.warm_recorder)
 
     # -- observation -------------------------------------------------------
     @property

@@ -158,7 +158,7 @@ class BusRouter(RunPart):
             self.helper.stop(grace=5.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RecorderRequest:
     """What the recorder is told: where to write, what to connect to, what to attach and expect."""
 
