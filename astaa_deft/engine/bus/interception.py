@@ -101,19 +101,22 @@ class Interceptor(Protocol):
 class Rewritten:
     """A lane's answer "this payload, to every consumer, now", with its event.
 
-    ``event`` is what the recorder's row carries: the lane's event values, or
-    a typed event; ``typed`` turns it into the typed event for a listener.
-    A slotted class rather than a frozen dataclass: one is made per
-    rewritten message, and a frozen dataclass's ``__init__`` costs several
-    times more. Treat it as immutable.
+    ``event`` is what the recorder's row carries: the lane's event values
+    (the interceptor's lane) or a typed event (``on_message``'s); the
+    forwarder knows which, by its lane. A slotted class rather than a frozen
+    dataclass: one is made per rewritten message, and a frozen dataclass's
+    ``__init__`` costs several times more. Treat it as immutable.
     """
 
-    __slots__ = ("payload", "event", "typed")
+    __slots__ = ("payload", "event")
 
-    def __init__(self, payload: bytes, event: object, typed: Callable[[object], MutationLike]):
+    def __init__(self, payload: bytes, event: object):
         self.payload = payload
         self.event = event
-        self.typed = typed
+
+
+# A lane: the channel's messages in, the common answers (None: untouched; Rewritten) or the deliveries out.
+Lane = Callable[[bytes, float], "Rewritten | Sequence[DeliveryLike] | None"]
 
 
 @dataclass
@@ -138,6 +141,21 @@ class _Channel:
         self.pubs = [pub for _consumer, pub in live.publishers]
         self.rows: list[Row] = []
         self.record_pub = record_pub
+
+
+def _engine_lane(offered: Callable[[bytes, float], object]) -> Lane:
+    """The interceptor's own lane (``Interceptor.lane``), its rewrites as :class:`Rewritten` (event values kept)."""
+    rewritten = Rewritten  # (a local: this runs per message)
+
+    def lane(payload: bytes, now: float) -> Rewritten | Sequence[DeliveryLike] | None:
+        done = offered(payload, now)
+        if isinstance(done, tuple):
+            return rewritten(done[0], done[1])
+        if isinstance(done, list):  # the deliveries, as on_message returns them
+            return done
+        return None  # untouched
+
+    return lane
 
 
 def _same(event: object) -> MutationLike:
@@ -178,27 +196,16 @@ class InterceptionBridge:
         channel = self._channels[name] = _Channel(live, record_pub)
         consumers = tuple(c for c, _ in live.publishers)
         offered = self.interceptor.lane(name, consumers) if consumers else None
-        lane = self._engine_lane(offered) if offered is not None else self._general_lane(name, consumers)
-        return self._lane_forwarder(channel, lane)
-
-    def _engine_lane(self, offered: Callable[[bytes, float], object]
-                     ) -> Callable[[bytes, float], Rewritten | Sequence[DeliveryLike] | None]:
-        """The interceptor's own lane, its rewrites as :class:`Rewritten` (their event values kept as they are)."""
+        if offered is None:
+            return self._lane_forwarder(channel, self._general_lane(name, consumers), _same)
         typed = self.interceptor.event
 
-        def to_event(values: object) -> MutationLike:
+        def event_values(values: object) -> MutationLike:
             return typed(cast("tuple[object, ...]", values))  # a lane's event values are a tuple
 
-        def lane(payload: bytes, now: float) -> Rewritten | Sequence[DeliveryLike] | None:
-            done = offered(payload, now)
-            if isinstance(done, tuple):
-                return Rewritten(done[0], done[1], to_event)
-            return cast("Sequence[DeliveryLike] | None", done)  # None or the deliveries, as Interceptor.lane says
+        return self._lane_forwarder(channel, _engine_lane(offered), event_values)
 
-        return lane
-
-    def _general_lane(self, name: str, consumers: tuple[str, ...]
-                      ) -> Callable[[bytes, float], Rewritten | Sequence[DeliveryLike] | None]:
+    def _general_lane(self, name: str, consumers: tuple[str, ...]) -> Lane:
         """``on_message`` in the lane's terms, where the interceptor offers no lane.
 
         Its common case, one delivery now to every consumer, takes the
@@ -215,18 +222,20 @@ class InterceptionBridge:
                     if d.original is None and d.event is None:
                         return None
                     if d.original is not None and d.event is not None:
-                        return Rewritten(d.payload, d.event, _same)
+                        return Rewritten(d.payload, d.event)
             return deliveries
 
         return lane
 
-    def _lane_forwarder(self, channel: _Channel,
-                        lane: Callable[[bytes, float], Rewritten | Sequence[DeliveryLike] | None]) -> Forwarder:
-        """An intercepting forwarder: the lane's common answers handled here, anything else by ``_dispatch``."""
+    def _lane_forwarder(self, channel: _Channel, lane: Lane, typed: Callable[[object], MutationLike]) -> Forwarder:
+        """An intercepting forwarder: the lane's common answers handled here, anything else by ``_dispatch``.
+
+        ``typed`` makes the typed event of a :class:`Rewritten` answer's event.
+        """
         live, pubs, name = channel.live, channel.pubs, channel.name
         lock, dispatch, record, outbox = self._lock, self._dispatch, self._record, self._outbox
         t0, monotonic, time_ns, last_meta = self.t0, time.monotonic, time.time_ns, self._last_meta
-        append_out = outbox.append
+        append_out, rewritten = outbox.append, Rewritten
 
         def forward_burst(samples: list[zenoh.Sample]) -> None:
             live.count += len(samples)
@@ -242,10 +251,10 @@ class InterceptionBridge:
                         for pub in pubs:
                             append_out((pub, zpayload, meta))
                         record(channel, (time_ns(), payload, None, True, None), _same)
-                    elif isinstance(done, Rewritten):  # rewritten, for every consumer, now
+                    elif isinstance(done, rewritten):  # rewritten, for every consumer, now
                         for pub in pubs:
                             append_out((pub, done.payload, meta))
-                        record(channel, (time_ns(), done.payload, payload, True, done.event), done.typed)
+                        record(channel, (time_ns(), done.payload, payload, True, done.event), typed)
                     else:
                         dispatch(live, done, meta, now=now, sample=sample)
                 last_meta[name] = meta  # what a tick's injected message on this channel goes out with
