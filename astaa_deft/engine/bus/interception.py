@@ -119,7 +119,7 @@ class Rewritten:
 Lane = Callable[[bytes, float], "Rewritten | Sequence[DeliveryLike] | None"]
 
 
-@dataclass
+@dataclass(slots=True)
 class _Pending:
     live: LiveRoute
     delivery: DeliveryLike
