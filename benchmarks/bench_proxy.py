@@ -4,7 +4,7 @@
 
 Every figure comes from real processes on loopback: a source and a sink that
 import nothing from astaa-deft, wired either directly (peer to peer) or by
-the tool (`BusRun`, as `astaa-deft proxy` does). Prints absolute figures and
+the tool (`run_session`, as `astaa-deft proxy` does). Prints absolute figures and
 the ratios the targets are stated in; asserts nothing.
 """
 
@@ -22,7 +22,7 @@ from pathlib import Path
 
 from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.engine.bus.processes import stop_process
-from astaa_deft.engine.session import RunOptions, run_session
+from astaa_deft.engine.session import RunOptions, RunView, run_session
 from astaa_deft.engine.intercept import load_interceptor
 from astaa_deft.engine.spec.loader import load_spec
 
@@ -133,15 +133,17 @@ def run_tool(params: dict[str, str], mode: str, record: bool, spec=SPEC, policy:
         threads0, at_end = thread_cpu(), {}
         recorder_cpu: list[float | None] = []  # at the modules' start, once the recorder has caught up
 
-        def started(run) -> None:
-            recorder_cpu.append(process_cpu(run.recorder.pid) if run.recorder is not None else None)
+        def started(run: RunView) -> None:
+            pid = run.recorder_pid
+            recorder_cpu.append(process_cpu(pid) if pid is not None else None)
 
-        def sink_done(run) -> str | None:
+        def sink_done(run: RunView) -> str | None:
             if not sink.exists():
                 return None
             at_end.update(thread_cpu())
-            if run.recorder is not None:
-                recorder_cpu.append(settled_cpu(run.recorder.pid))
+            pid = run.recorder_pid
+            if pid is not None:
+                recorder_cpu.append(settled_cpu(pid))
             return "sink done"
 
         tool0, children0 = cpu_seconds(resource.RUSAGE_SELF), cpu_seconds(resource.RUSAGE_CHILDREN)

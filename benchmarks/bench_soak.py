@@ -43,7 +43,7 @@ import tracemalloc
 from pathlib import Path
 
 from astaa_deft.io.log.reader import read_log
-from astaa_deft.engine.session import BusRun, RunOptions, run_session
+from astaa_deft.engine.session import RunOptions, RunView, run_session
 from astaa_deft.engine.spec.loader import load_spec
 
 SUT = Path(__file__).parent / "sut"
@@ -113,14 +113,14 @@ def soak(count: int, rate: float, label: str, size: int = 200) -> dict:
 
         snapshots: list[tracemalloc.Snapshot] = []
 
-        def started(run: BusRun) -> None:
+        def started(run: RunView) -> None:
             t0[0] = time.monotonic()
             if TRACE_PYTHON[0]:
                 tracemalloc.start()
 
-        def stop_when(run: BusRun) -> str | None:
+        def stop_when(run: RunView) -> str | None:
             now = time.monotonic() - t0[0]
-            recorder = run.recorder.pid if run.recorder is not None else None
+            recorder = run.recorder_pid
             sample = {"t": now, "tool": rss_kib(os.getpid()), "recorder": rss_kib(recorder) if recorder else None,
                       "forwarded": run.counts().get("data", 0), "malloc": malloc_kib(),
                       "threads": threads(os.getpid())}

@@ -51,7 +51,7 @@ from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.monitor.offline import CheckResult, check_log
 from astaa_deft.engine.monitor.verdict import IMPLICIT
-from astaa_deft.engine.session import BusRun, RunOptions, run_session
+from astaa_deft.engine.session import RunOptions, RunView, run_session
 from astaa_deft.engine.session.bus_run import release_warm_recorder, warm_recorder
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
@@ -182,7 +182,7 @@ class LiveTester:
                     for policy in record.policy.split("+"):
                         fired.setdefault(policy, record.time_ns)
 
-            def stop_when(bus: BusRun) -> str | None:
+            def stop_when(bus: RunView) -> str | None:
                 if self._seen_online(bus):
                     return "the failure was seen"
                 now = time.time_ns()
@@ -230,7 +230,7 @@ class LiveTester:
                 return f"{v.invariant}: {v.detail}"
         return ""
 
-    def _seen_online(self, bus: BusRun) -> bool:
+    def _seen_online(self, bus: RunView) -> bool:
         """Has the run visibly failed already (worth stopping it)?"""
         if any(self.module is None or e.module == self.module for e in bus.crashed()):
             return True

@@ -22,7 +22,7 @@ from astaa_deft.io.output_place import Place, writing
 
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
-    from astaa_deft.engine.session import BusRun
+    from astaa_deft.engine.session import RunView
     from astaa_deft.model.sut import Spec
 
 
@@ -73,8 +73,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_bus(spec: Spec, options: RunOptions, duration: float | None,
-            until: Callable[[BusRun], str | None] = lambda run: None,
-            on_start: Callable[[BusRun], None] = lambda run: None, verbose: bool = True) -> RunResult:
+            until: Callable[[RunView], str | None] = lambda run: None,
+            on_start: Callable[[RunView], None] = lambda run: None, verbose: bool = True) -> RunResult:
     """:func:`run_session` with the console: events as they come, a status line, Ctrl-C/SIGTERM to stop.
 
     ``duration`` (seconds, None: no limit) caps ``options.time_limit`` (the options are updated);
@@ -103,14 +103,14 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
     status = StatusLine(lambda: "")
     with StopSignal() as stop:
 
-        def started(run: BusRun) -> None:
+        def started(run: RunView) -> None:
             meter = RateMeter(run.counts)
             t0 = time.monotonic()
             status.render = lambda: _status(run, meter, t0)
             status.__enter__()
             on_start(run)
 
-        def stop_when(run: BusRun) -> str | None:
+        def stop_when(run: RunView) -> str | None:
             if stop.requested():
                 return f"signal {stop.received}"
             return until(run)
@@ -121,7 +121,7 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             status.__exit__()
 
 
-def _status(run: BusRun, meter: RateMeter, t0: float) -> str:
+def _status(run: RunView, meter: RateMeter, t0: float) -> str:
     rates = meter.rates()
     parts = [f"{name} {rate:.0f}/s" for name, rate in rates.items()]
     crashes = len(run.crashed())

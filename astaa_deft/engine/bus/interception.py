@@ -1,21 +1,34 @@
 """Bridge between the star proxy and an interceptor (the ASTAA test case engine).
 
-Channels the test case can touch get an intercepting forwarder; every other
-channel keeps the proxy's zero-copy path. For intercepted channels the proxy
-tells the recorder, on the tool's own key, what it delivered, what the
-original was and what it did — one entry per delivery, so the three records
-can never be mismatched. Entries that pile up while the forwarder is busy go
-out together in one message (see ``topology.pack_deliveries``); the batch is sent
-as soon as the forwarder has nothing more waiting, so at ordinary rates each
-delivery is recorded at once. Samples are handled in bursts (``proxy.run_bursts``),
-in arrival order: a burst is one sample whenever the forwarder keeps up.
-The forwarder goes through a lane: the interceptor's own for the channel
-(``Interceptor.lane``: no objects built per message) where it offers one,
-else ``on_message`` put in the lane's terms (``_general_lane``).
+Contract:
 
-Why the forwarder is shaped this way (bursts, one put per burst, the
-lane, FIFOs rather than callbacks on Zenoh's thread) and what each choice
-bought is measured in docs/performance.md ("Interception").
+* Channels the interceptor names (``Interceptor.channels``) get an
+  intercepting :class:`~astaa_deft.engine.bus.proxy.Forwarder`; every other
+  channel keeps the proxy's zero-copy path (``plain_forwarder``).
+* Each message of an intercepted channel goes through the interceptor once,
+  in arrival order: through the channel's *lane* (``Interceptor.lane``: no
+  objects built per message) where the interceptor offers one, else through
+  ``on_message`` put in the lane's terms. Deliveries due later wait in a heap
+  that a tick thread releases every ``TICK_SECONDS``; ``stop`` flushes the
+  interceptor and releases everything still held.
+* For every delivery the recorder gets one row on the channel's
+  ``intercepted_key`` — (time ns, delivered payload, original or None,
+  delivered to anyone, event or None) — so delivery, original and event can
+  never be mismatched. Rows go out in batches (``topology.pack_deliveries``)
+  when the forwarder has nothing more waiting, or at ``BATCH_LIMIT``.
+* Deliveries to consumers wait in an outbox until the end of the forwarder's
+  burst and are put together.
+* ``on_mutation`` (if given) gets each typed mutation event, ``on_delivered``
+  (if set) each channel and payload delivered to someone; both are called
+  with the bridge's lock held, from a forwarder or the tick thread: keep them
+  quick, and do not call back into the bridge.
+
+Thread safety: the interceptor sees one call at a time (one lock, taken
+once per burst). ``start``/``stop`` are called from one thread.
+
+Why the forwarder is shaped this way (bursts, one put per burst, the lane,
+FIFOs rather than callbacks on Zenoh's thread) is measured in
+docs/performance.md ("Interception", and "session" for this module's form).
 """
 
 from __future__ import annotations
@@ -24,45 +37,130 @@ import heapq
 import itertools
 import threading
 import time
-from typing import Any, Protocol
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol, cast
 
 import zenoh
 
-from astaa_deft.engine.bus.proxy import BLOCK, REMOTE, LiveRoute, plain_forwarder
+from astaa_deft.engine.bus.proxy import BLOCK, REMOTE, Forwarder, LiveRoute, plain_forwarder
 from astaa_deft.engine.bus.topology import intercepted_key, pack_deliveries
+from astaa_deft.model.records import Mutation, MutationRow
 
 TICK_SECONDS = 0.01
-BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of 200 B messages stays under 64 KiB)
-# Deliveries to consumers wait in an outbox until the end of the forwarder's burst (see
-# proxy.run_bursts): Zenoh's sending thread then wakes once per burst and sends it in one write
-# (woken per message, it cost as much CPU as the mutation itself). When the forwarder keeps up,
-# a burst is one message: no added delay.
+BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of small messages stays one Zenoh message)
+
+# (encoding, attachment, timestamp) of the real message a delivery comes from: what its put carries.
+SampleMeta = tuple[zenoh.Encoding | None, zenoh.ZBytes | None, zenoh.Timestamp | None]
+NO_META: SampleMeta = (None, None, None)
+
+
+class DeliveryLike(Protocol):
+    """One delivery the interceptor asks for (``intercept.engine.Delivery``)."""
+
+    @property
+    def consumers(self) -> tuple[str, ...]: ...
+    @property
+    def payload(self) -> bytes: ...
+    @property
+    def at(self) -> float: ...  # seconds since the bridge's start
+    @property
+    def original(self) -> bytes | None: ...
+    @property
+    def event(self) -> Mutation | None: ...
+
+
+class JsonForm(Protocol):
+    """A record that writes its own JSON form."""
+
+    def to_json(self) -> Mapping[str, object]: ...
 
 
 class Interceptor(Protocol):
+    """The interceptor the bridge and the session drive (``intercept.engine.Interceptor``)."""
+
     def channels(self) -> set[str]: ...
-    def on_message(self, channel: str, consumers: tuple[str, ...], payload: bytes, now: float) -> list: ...
-    def on_tick(self, now: float) -> list: ...
-    def flush(self, now: float) -> list: ...
-    # on_message for one channel without objects, where it can (see intercept.engine.Interceptor.lane)
-    def lane(self, channel: str, consumers: tuple[str, ...]) -> Callable[[bytes, float], Any] | None: ...
-    # the typed event from a lane's event values
-    def event(self, values: tuple) -> Any: ...
+    def on_message(self, channel: str, consumers: tuple[str, ...], payload: bytes,
+                   now: float) -> Sequence[DeliveryLike]: ...
+    def on_tick(self, now: float) -> Sequence[DeliveryLike]: ...
+    def flush(self, now: float) -> Sequence[DeliveryLike]: ...
+    # on_message for one channel without objects, where it can: returns None (untouched, every consumer, now),
+    # a 2-tuple (payload, event values: rewritten, every consumer, now) or a list of deliveries.
+    def lane(self, channel: str, consumers: tuple[str, ...]) -> Callable[[bytes, float], object] | None: ...
+    def event(self, row: MutationRow) -> Mutation: ...  # the typed event of a lane's event values
+    def applications(self, now: float) -> Sequence[JsonForm]: ...  # per policy: what it touched, and why not
 
 
+class Rewritten:
+    """A lane's answer "this payload, to every consumer, now", with its event.
+
+    ``event`` is what the recorder's row carries: the lane's event values
+    (the interceptor's lane) or a typed event (``on_message``'s); the
+    forwarder knows which, by its lane. A slotted class rather than a frozen
+    dataclass: one is made per rewritten message, and a frozen dataclass's
+    ``__init__`` costs several times more. Treat it as immutable.
+    """
+
+    __slots__ = ("payload", "event")
+
+    def __init__(self, payload: bytes, event: object):
+        self.payload = payload
+        self.event = event
+
+
+# A lane: the channel's messages in, the common answers (None: untouched; Rewritten) or the deliveries out.
+Lane = Callable[[bytes, float], "Rewritten | Sequence[DeliveryLike] | None"]
+
+
+@dataclass(slots=True)
 class _Pending:
-    __slots__ = ("live", "delivery", "sample_meta")
+    live: LiveRoute
+    delivery: DeliveryLike
+    sample_meta: SampleMeta  # of the real message it came from
 
-    def __init__(self, live: LiveRoute, delivery: Any, sample_meta: tuple):
+
+# One recorder row: (time ns, delivered payload, original, delivered to anyone, event or its values).
+Row = tuple[int, bytes, bytes | None, bool, object]
+
+
+class _Channel:
+    """An intercepted channel: its route, its consumers' publishers and the rows not yet sent to the recorder."""
+
+    __slots__ = ("live", "name", "pubs", "rows", "record_pub")
+
+    def __init__(self, live: LiveRoute, record_pub: zenoh.Publisher):
         self.live = live
-        self.delivery = delivery
-        self.sample_meta = sample_meta  # (encoding, attachment, timestamp) of the real message it came from
+        self.name = live.route.channel.name
+        self.pubs = [pub for _consumer, pub in live.publishers]
+        self.rows: list[Row] = []
+        self.record_pub = record_pub
+
+
+def _engine_lane(offered: Callable[[bytes, float], object]) -> Lane:
+    """The interceptor's own lane (``Interceptor.lane``), its rewrites as :class:`Rewritten` (event values kept)."""
+    rewritten = Rewritten  # (a local: this runs per message)
+
+    def lane(payload: bytes, now: float) -> Rewritten | Sequence[DeliveryLike] | None:
+        done = offered(payload, now)
+        if isinstance(done, tuple):
+            return rewritten(done[0], done[1])
+        if isinstance(done, list):  # the deliveries, as on_message returns them
+            return done
+        return None  # untouched
+
+    return lane
+
+
+def _same(event: object) -> Mutation:
+    """The typed event of a row that already holds one (rows made from deliveries)."""
+    return cast(Mutation, event)
 
 
 class InterceptionBridge:
+    """Intercepting forwarders for the star proxy (see the module's contract)."""
+
     def __init__(self, session: zenoh.Session, interceptor: Interceptor, start_monotonic: float,
-                 on_mutation: Callable[[Any], None] | None = None):
+                 on_mutation: Callable[[Mutation], None] | None = None):
         self.session = session
         self.interceptor = interceptor
         self.t0 = start_monotonic
@@ -71,12 +169,9 @@ class InterceptionBridge:
         self._lock = threading.Lock()  # the interceptor sees one call at a time
         self._heap: list[tuple[float, int, _Pending]] = []
         self._order = itertools.count()
-        self._routes: dict[str, LiveRoute] = {}
-        self._last_meta: dict[str, tuple] = {}
-        self._record_pubs: dict[str, zenoh.Publisher] = {}
-        # per channel: deliveries not yet sent to the recorder, (time ns, payload, original, delivered, event)
-        self._batches: dict[str, list[tuple[int, bytes, bytes | None, bool, Any]]] = {}
-        self._outbox: list[tuple[zenoh.Publisher, Any, tuple]] = []  # (publisher, payload, meta) to put
+        self._channels: dict[str, _Channel] = {}
+        self._last_meta: dict[str, SampleMeta] = {}
+        self._outbox: list[tuple[zenoh.Publisher, zenoh.ZBytes | bytes, SampleMeta]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick_loop, name="interception-ticks", daemon=True)
         self.mutations = 0
@@ -84,32 +179,35 @@ class InterceptionBridge:
         self.on_delivered: Callable[[str, bytes], None] | None = None
 
     # -- wiring ------------------------------------------------------------
-    def make_forwarder(self, live: LiveRoute) -> Callable[[zenoh.Sample], None]:
+    def make_forwarder(self, live: LiveRoute) -> Forwarder:
+        """The proxy's forwarder for ``live``: intercepting if the interceptor names its channel."""
         name = live.route.channel.name
         if name not in self.targets:
             return plain_forwarder(live)
-        self._routes[name] = live
-        key = live.route.channel.key
-        self._record_pubs[name] = self.session.declare_publisher(
-            intercepted_key(key), congestion_control=BLOCK, allowed_destination=REMOTE)
+        record_pub = self.session.declare_publisher(
+            intercepted_key(live.route.channel.key), congestion_control=BLOCK, allowed_destination=REMOTE)
+        channel = self._channels[name] = _Channel(live, record_pub)
         consumers = tuple(c for c, _ in live.publishers)
-        rows: list[tuple[int, bytes, bytes | None, bool, Any]] = []
-        self._batches[name] = rows
-        lane = self.interceptor.lane(name, consumers) if consumers else None
-        if lane is None:
-            lane = self._general_lane(name, consumers)
-        return self._lane_forwarder(live, lane, rows, self._record_pubs[name])
+        offered = self.interceptor.lane(name, consumers) if consumers else None
+        if offered is None:
+            return self._lane_forwarder(channel, self._general_lane(name, consumers), _same)
+        typed = self.interceptor.event
 
-    def _general_lane(self, name: str, consumers: tuple[str, ...]) -> Callable[[bytes, float], Any]:
-        """``on_message`` in the lane's terms (see ``Interceptor.lane``), where the interceptor offers no lane.
+        def event_values(values: object) -> Mutation:
+            return typed(cast(MutationRow, values))  # a lane's event values are a mutation's row
+
+        return self._lane_forwarder(channel, _engine_lane(offered), event_values)
+
+    def _general_lane(self, name: str, consumers: tuple[str, ...]) -> Lane:
+        """``on_message`` in the lane's terms, where the interceptor offers no lane.
 
         Its common case, one delivery now to every consumer, takes the
-        forwarder's short way (an event object in place of the lane's values);
-        anything else goes back as the deliveries, for ``_dispatch``.
+        forwarder's short way (None, or :class:`Rewritten` with the typed
+        event); anything else goes back as the deliveries, for ``_dispatch``.
         """
         on_message, count = self.interceptor.on_message, len(consumers)
 
-        def lane(payload: bytes, now: float) -> Any:
+        def lane(payload: bytes, now: float) -> Rewritten | Sequence[DeliveryLike] | None:
             deliveries = on_message(name, consumers, payload, now)
             if count and len(deliveries) == 1:
                 d = deliveries[0]
@@ -117,25 +215,25 @@ class InterceptionBridge:
                     if d.original is None and d.event is None:
                         return None
                     if d.original is not None and d.event is not None:
-                        return d.payload, d.event
+                        return Rewritten(d.payload, d.event)
             return deliveries
 
         return lane
 
-    def _lane_forwarder(self, live: LiveRoute, lane: Callable[[bytes, float], Any],
-                        rows: list[tuple[int, bytes, bytes | None, bool, Any]],
-                        record_pub: zenoh.Publisher) -> Callable[[zenoh.Sample], None]:
-        """An intercepting forwarder: through the lane, the common delivery handled here (what _put does)."""
-        name = live.route.channel.name
-        pubs = [pub for _consumer, pub in live.publishers]
-        lock, dispatch, outbox, on_mutation, typed = (self._lock, self._dispatch, self._outbox, self.on_mutation,
-                                                      self.interceptor.event)
+    def _lane_forwarder(self, channel: _Channel, lane: Lane, typed: Callable[[object], Mutation]) -> Forwarder:
+        """An intercepting forwarder: the lane's common answers handled here, anything else by ``_dispatch``.
+
+        ``typed`` makes the typed event of a :class:`Rewritten` answer's event.
+        """
+        live, pubs, name = channel.live, channel.pubs, channel.name
+        lock, dispatch, record, outbox = self._lock, self._dispatch, self._record, self._outbox
         t0, monotonic, time_ns, last_meta = self.t0, time.monotonic, time.time_ns, self._last_meta
-        append_row, append_out = rows.append, outbox.append
+        append_out, rewritten = outbox.append, Rewritten
 
         def forward_burst(samples: list[zenoh.Sample]) -> None:
             live.count += len(samples)
             with lock:  # once per burst: the tick thread waits at most one burst (BURST_LIMIT samples)
+                meta: SampleMeta = NO_META
                 for sample in samples:
                     zpayload = sample.payload
                     meta = (sample.encoding, sample.attachment, sample.timestamp)
@@ -145,33 +243,20 @@ class InterceptionBridge:
                     if done is None:  # untouched: the very same Zenoh payload, no copy
                         for pub in pubs:
                             append_out((pub, zpayload, meta))
-                        append_row((time_ns(), payload, None, True, None))
-                        data = payload
-                    elif type(done) is tuple:  # rewritten, for every consumer, now
-                        data, event = done  # the lane's event values, or an event (the general lane)
+                        record(channel, (time_ns(), payload, None, True, None), _same)
+                    elif isinstance(done, rewritten):  # rewritten, for every consumer, now
                         for pub in pubs:
-                            append_out((pub, data, meta))
-                        self.mutations += 1
-                        append_row((time_ns(), data, payload, True, event))
-                        if on_mutation is not None:
-                            on_mutation(typed(event) if type(event) is tuple else event)
+                            append_out((pub, done.payload, meta))
+                        record(channel, (time_ns(), done.payload, payload, True, done.event), typed)
                     else:
-                        dispatch(live, done, meta, now, sample)
-                        continue
-                    if len(rows) >= BATCH_LIMIT:
-                        record_pub.put(pack_deliveries(rows, typed))
-                        rows.clear()
-                    if self.on_delivered is not None:
-                        self.on_delivered(name, data)
+                        dispatch(live, done, meta, now=now, sample=sample)
                 last_meta[name] = meta  # what a tick's injected message on this channel goes out with
                 self._deliver_outbox()  # one burst of puts: Zenoh's sending thread wakes once for it
 
         def forward(sample: zenoh.Sample) -> None:
             forward_burst([sample])
 
-        forward.on_idle = self.idle  # type: ignore[attr-defined]  # see StarProxy
-        forward.burst = forward_burst  # type: ignore[attr-defined]
-        return forward
+        return Forwarder(forward, burst=forward_burst, on_idle=self.idle)
 
     def idle(self) -> None:
         """The forwarders have nothing waiting: deliver what is in the outbox, send the recorder its batches."""
@@ -188,15 +273,20 @@ class InterceptionBridge:
 
     def _send(self) -> None:
         self._deliver_outbox()
-        for name, rows in self._batches.items():
-            if rows:
-                self._record_pubs[name].put(pack_deliveries(rows, self.interceptor.event))
-                rows.clear()
+        for channel in self._channels.values():
+            if channel.rows:
+                self._send_rows(channel)
+
+    def _send_rows(self, channel: _Channel) -> None:
+        channel.record_pub.put(pack_deliveries(channel.rows, self.interceptor.event))
+        channel.rows.clear()
 
     def start(self) -> None:
+        """Start the tick thread (delayed deliveries, injections, windows closing)."""
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop the ticks, flush the interceptor and release everything it still held; send every row."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
@@ -210,31 +300,33 @@ class InterceptionBridge:
             self._send()
 
     # -- delivery ------------------------------------------------------------
-    def _dispatch(self, live: LiveRoute, deliveries: list, meta: tuple, now: float,
+    def _dispatch(self, live: LiveRoute, deliveries: Sequence[DeliveryLike], meta: SampleMeta, *, now: float,
                   sample: zenoh.Sample | None) -> None:
+        """Deliveries for one message: due ones now (``sample``: the message, for its very payload), others later."""
         for d in deliveries:
             if d.at > now:
                 heapq.heappush(self._heap, (d.at, next(self._order), _Pending(live, d, meta)))
             else:
                 self._put(live, d, meta, sample)
 
-    def _dispatch_unbound(self, d: Any, now: float, force: bool = False) -> None:
+    def _dispatch_unbound(self, d: DeliveryLike, now: float, force: bool = False) -> None:
         """A delivery produced by a tick (injected, released): route it by its channel."""
         if d.event is None:
             return
-        name: str = d.event.channel
-        live = self._routes.get(name)
-        if live is None:
+        name = d.event.channel
+        channel = self._channels.get(name)
+        if channel is None:
             return
-        meta = self._last_meta.get(name, (None, None, None))
+        meta = self._last_meta.get(name, NO_META)
         if d.at > now and not force:
-            heapq.heappush(self._heap, (d.at, next(self._order), _Pending(live, d, meta)))
+            heapq.heappush(self._heap, (d.at, next(self._order), _Pending(channel.live, d, meta)))
         else:
-            self._put(live, d, meta, None)
+            self._put(channel.live, d, meta, None)
 
-    def _put(self, live: LiveRoute, d: Any, meta: tuple, sample: zenoh.Sample | None) -> None:
+    def _put(self, live: LiveRoute, d: DeliveryLike, meta: SampleMeta, sample: zenoh.Sample | None) -> None:
+        """One delivery: into the outbox for its consumers, and its row for the recorder."""
         # The very same Zenoh payload when nothing changed: no copy on the common path.
-        payload = sample.payload if d.original is None and sample is not None else d.payload
+        payload: zenoh.ZBytes | bytes = sample.payload if d.original is None and sample is not None else d.payload
         if len(d.consumers) == len(live.publishers):  # all of them: no filtering
             for _consumer, pub in live.publishers:
                 self._outbox.append((pub, payload, meta))
@@ -243,22 +335,31 @@ class InterceptionBridge:
             for consumer, pub in live.publishers:
                 if consumer in wanted:
                     self._outbox.append((pub, payload, meta))
-        name = live.route.channel.name
-        data = payload if type(payload) is bytes else payload.to_bytes()
-        event = d.event
-        rows = self._batches[name]
+        channel = self._channels[live.route.channel.name]
+        data = payload if isinstance(payload, bytes) else payload.to_bytes()
+        if d.event is None:  # untouched (always to someone: a delivery to no one carries an event)
+            self._record(channel, (time.time_ns(), data, None, True, None), _same)
+        else:
+            self._record(channel, (time.time_ns(), data, d.original, bool(d.consumers), d.event), _same)
+
+    def _record(self, channel: _Channel, row: Row, typed: Callable[[object], Mutation]) -> None:
+        """One delivery's recorder row (the rows sent at ``BATCH_LIMIT``), and the listeners told.
+
+        ``row``: (time ns, delivered payload, original, delivered to anyone,
+        event); event None: delivered untouched. ``typed`` makes the typed
+        event of the row's event for ``on_mutation`` (called only when there is one).
+        """
+        rows = channel.rows
+        rows.append(row)
+        _, data, _, delivered, event = row
         if event is not None:
             self.mutations += 1
-            rows.append((time.time_ns(), data, d.original, bool(d.consumers), event))
             if self.on_mutation is not None:
-                self.on_mutation(event)
-        else:
-            rows.append((time.time_ns(), data, None, True, None))
+                self.on_mutation(typed(event))
         if len(rows) >= BATCH_LIMIT:
-            self._record_pubs[name].put(pack_deliveries(rows, self.interceptor.event))
-            rows.clear()
-        if d.consumers and self.on_delivered is not None:
-            self.on_delivered(name, data)
+            self._send_rows(channel)
+        if delivered and self.on_delivered is not None:
+            self.on_delivered(channel.name, data)
 
     def _tick_loop(self) -> None:
         while not self._stop.wait(TICK_SECONDS):

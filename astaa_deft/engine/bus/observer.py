@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import zenoh
 
 from astaa_deft.model.sut import Spec
@@ -9,13 +11,18 @@ from astaa_deft.engine.bus.topology import observed_keys
 
 
 class ChannelCounter:
+    """Messages per declared channel as seen on the bus (``mode`` picks the keys, see ``observed_keys``).
+
+    Counted on Zenoh's threads; ``counts`` may be called from any thread, ``stop`` once.
+    """
+
     def __init__(self, session: zenoh.Session, spec: Spec, mode: str):
         self._counts = {ch.name: 0 for ch in spec.channels}
-        self._subs = []
+        self._subs: list[zenoh.Subscriber[None]] = []
         for key_expr, channel in observed_keys(spec, mode):
             self._subs.append(session.declare_subscriber(key_expr, self._counter(channel.name)))
 
-    def _counter(self, name: str):
+    def _counter(self, name: str) -> Callable[[zenoh.Sample], None]:
         counts = self._counts
 
         def on_sample(_sample: zenoh.Sample) -> None:

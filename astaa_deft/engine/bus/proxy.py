@@ -12,6 +12,8 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
 
 import zenoh
 
@@ -24,9 +26,7 @@ from astaa_deft.engine.bus.topology import (
 BLOCK = zenoh.CongestionControl.BLOCK
 REMOTE = zenoh.Locality.REMOTE
 FIFO_CAPACITY = 16384  # samples waiting per route; when full, Zenoh holds back the sender (no loss)
-# The bound is in samples, not bytes: a waiting 200 B sample holds ≈ 8 KiB of native memory, so one backlog that
-# fills a FIFO (its forwarder stalled on a loaded machine) lifts the tool's RSS by ≈ 130 MiB, kept by malloc
-# for the next backlog once drained: RSS levels off there (bench_soak.py --rate 25000; ≈ 47 MiB at 1,024).
+# The bound is in samples, not bytes: what a full FIFO costs in memory is in docs/performance.md ("session").
 BURST_LIMIT = 128  # samples a forwarder with a burst handler takes out of its FIFO at a time (see run_bursts)
 CATCH_ALL_POLL_SECONDS = 0.002  # how often the catch-all looks into its FIFO (see StarProxy._catch_all_forwarder)
 
@@ -42,7 +42,34 @@ class LiveRoute:
         self.count = 0
 
 
-def plain_forwarder(live: LiveRoute) -> Callable[[zenoh.Sample], None]:
+def _nothing() -> None:
+    """The idle hook of a forwarder that keeps nothing back."""
+
+
+@dataclass(frozen=True)
+class Forwarder:
+    """How the proxy hands one subscriber's samples on.
+
+    * ``handle``: one sample at a time, on the route's own thread.
+    * ``burst``: if set, the samples go here instead, in bursts of up to
+      ``BURST_LIMIT`` (:func:`run_bursts`), in arrival order.
+    * ``on_idle``: called (bursts only) whenever the subscriber's FIFO runs
+      empty, and once more after the subscriber is undeclared: a forwarder
+      that keeps deliveries back sends them then.
+    * ``poll_seconds``: (bursts only) look into the FIFO this often rather
+      than wait on it (see ``StarProxy._catch_all_forwarder``).
+
+    The callables run on the route's thread only; a forwarder shared by
+    several routes guards its own state.
+    """
+
+    handle: Callable[[zenoh.Sample], None]
+    burst: Callable[[list[zenoh.Sample]], None] | None = None
+    on_idle: Callable[[], None] = _nothing
+    poll_seconds: float | None = None
+
+
+def plain_forwarder(live: LiveRoute) -> Forwarder:
     """The untouched path: same payload, encoding, attachment and timestamp objects."""
     pubs = [pub for _consumer, pub in live.publishers]
 
@@ -53,11 +80,18 @@ def plain_forwarder(live: LiveRoute) -> Callable[[zenoh.Sample], None]:
         for pub in pubs:
             pub.put(payload, encoding=encoding, attachment=attachment, timestamp=timestamp)
 
-    return forward
+    return Forwarder(forward)
 
 
-def run_bursts(fifo, handle_burst: Callable[[list[zenoh.Sample]], None], on_idle: Callable[[], None],
-               poll: float | None = None) -> None:
+class SampleQueue(Protocol):
+    """A subscriber's FIFO as ``run_bursts`` takes from it (a Zenoh ``FifoChannel`` handler)."""
+
+    def try_recv(self) -> zenoh.Sample | None: ...
+    def recv(self) -> zenoh.Sample: ...
+
+
+def run_bursts(fifo: SampleQueue, handle_burst: Callable[[list[zenoh.Sample]], None],
+               on_idle: Callable[[], None], poll: float | None = None) -> None:
     """Hand ``handle_burst`` what waits in ``fifo``, up to BURST_LIMIT samples at a time, in arrival order.
 
     Taking them out together, before handling any, frees FIFO slots in a
@@ -96,20 +130,16 @@ class StarProxy:
 
     Each declared channel has its own subscriber, whose samples queue in a
     Zenoh FIFO channel (native side) and are forwarded by a thread of its
-    own, and so does the catch-all. Measured against Python callbacks run on
-    Zenoh's threads (one wildcard subscriber dispatching on the key, or one
-    callback subscriber per channel plus a wildcard catch-all): about 30 %
-    less CPU per message and 1.3–1.6× the throughput, the catch-all included.
-    Order is kept per channel. `make_forwarder` is where a later stage
-    (interception) substitutes its own function for a route; a forwarder
-    with a ``burst`` attribute is handed its samples in bursts
-    (:func:`run_bursts`) and has its ``on_idle`` called whenever its queue
-    runs empty (interception sends its outbox and batched records then).
+    own, and so does the catch-all (why FIFOs rather than callbacks on
+    Zenoh's threads: docs/performance.md, "session"). Order is kept per
+    channel. ``make_forwarder`` is where a later stage
+    (interception) substitutes its own :class:`Forwarder` for a route.
+    ``start`` and ``stop`` are called from one thread; ``counts`` from any.
     """
 
     def __init__(self, session: zenoh.Session, spec: Spec,
                  on_undeclared: Callable[[str, str], None] = lambda module, key: None,
-                 make_forwarder: Callable[[LiveRoute], Callable[[zenoh.Sample], None]] = plain_forwarder):
+                 make_forwarder: Callable[[LiveRoute], Forwarder] = plain_forwarder):
         self.session = session
         self.spec = spec
         self.on_undeclared = on_undeclared
@@ -134,15 +164,13 @@ class StarProxy:
         self.liveliness.start()
         self.queries.start()
 
-    def _pump(self, key_expr: str, handle: Callable[[zenoh.Sample], None], name: str, **options) -> None:
-        sub = self.session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(FIFO_CAPACITY), **options)
+    def _pump(self, key_expr: str, forwarder: Forwarder, name: str,
+              allowed_origin: zenoh.Locality | None = None) -> None:
+        queue = zenoh.handlers.FifoChannel(FIFO_CAPACITY)
+        sub = (self.session.declare_subscriber(key_expr, queue) if allowed_origin is None
+               else self.session.declare_subscriber(key_expr, queue, allowed_origin=allowed_origin))
         self._subscribers.append(sub)
-
-        # A forwarder with a ``burst`` handler takes its samples in bursts and has ``on_idle`` called
-        # whenever its queue runs empty (interception); any other is handed one sample at a time.
-        burst: Callable[[list[zenoh.Sample]], None] | None = getattr(handle, "burst", None)
-        on_idle: Callable[[], None] = getattr(handle, "on_idle", lambda: None)
-        poll: float | None = getattr(handle, "poll_interval", None)
+        handle, burst, on_idle, poll = forwarder.handle, forwarder.burst, forwarder.on_idle, forwarder.poll_seconds
         fifo = sub.handler
 
         def run() -> None:
@@ -175,7 +203,7 @@ class StarProxy:
     def _publisher(self, key: str) -> zenoh.Publisher:
         return self.session.declare_publisher(key, congestion_control=BLOCK, allowed_destination=REMOTE)
 
-    def _catch_all_forwarder(self) -> Callable[[zenoh.Sample], None]:
+    def _catch_all_forwarder(self) -> Forwarder:
         """The catch-all sees every producer's message and forwards only undeclared keys.
 
         It looks into its FIFO every CATCH_ALL_POLL_SECONDS rather than
@@ -197,9 +225,7 @@ class StarProxy:
         def forward(sample: zenoh.Sample) -> None:
             burst([sample])
 
-        forward.burst = burst  # type: ignore[attr-defined]
-        forward.poll_interval = CATCH_ALL_POLL_SECONDS  # type: ignore[attr-defined]
-        return forward
+        return Forwarder(forward, burst=burst, poll_seconds=CATCH_ALL_POLL_SECONDS)
 
     # -- catch-all ---------------------------------------------------------
     def _forward_undeclared(self, sample: zenoh.Sample, full_key: str) -> None:

@@ -17,10 +17,12 @@ if TYPE_CHECKING:
     from astaa_deft.engine.session.bus_run import BusRun
     from astaa_deft.engine.session.loop import run_session
     from astaa_deft.engine.session.options import RunOptions, RunResult
+    from astaa_deft.engine.session.view import RunView
 
-__all__ = ["BusRun", "RunOptions", "RunResult", "run_session"]
+__all__ = ["BusRun", "RunOptions", "RunResult", "RunView", "run_session"]
 
-_HOMES = {"BusRun": ".bus_run", "run_session": ".loop", "RunOptions": ".options", "RunResult": ".options"}
+_HOMES = {"BusRun": ".bus_run", "run_session": ".loop", "RunOptions": ".options", "RunResult": ".options",
+          "RunView": ".view"}
 
 
 def __getattr__(name: str) -> Any:

@@ -10,14 +10,15 @@ from astaa_deft.model.sut import Spec
 from astaa_deft.engine.session.bus_run import BusRun
 from astaa_deft.engine.session.options import RunOptions, RunResult
 from astaa_deft.engine.session.run_end import RunEndWatch
+from astaa_deft.engine.session.view import RunView
 
 POLL_SECONDS = 0.05
 
 
 def run_session(spec: Spec, options: RunOptions, *,
-                stop_when: Callable[[BusRun], str | None] | None = None,
+                stop_when: Callable[[RunView], str | None] | None = None,
                 on_event: Callable[[rec.Record], None] | None = None,
-                on_start: Callable[[BusRun], None] | None = None) -> RunResult:
+                on_start: Callable[[RunView], None] | None = None) -> RunResult:
     """Run the SUT of ``spec`` once through the bus and return what happened.
 
     Stable entry point for commands, minimisation, campaigns and benchmarks.
@@ -29,13 +30,14 @@ def run_session(spec: Spec, options: RunOptions, *,
       ``options.run_dir`` is given), so concurrent calls in one process do
       not share state; give each its own ``run_dir`` and log path, and port 0
       (the default) in ``zenoh.endpoints``.
-    * ``stop_when(run)``: polled every 50 ms while the run goes on; a
-      non-empty string ends the run and becomes its ``end_reason``.
+    * ``stop_when(view)``: polled every 50 ms while the run goes on (``view``:
+      a :class:`~astaa_deft.engine.session.view.RunView`); a non-empty
+      string ends the run and becomes its ``end_reason``.
     * ``on_event(record)``: every event as a typed record
       (:mod:`astaa_deft.io.log.records`), from the thread that produced it —
       keep it quick and thread-safe.
-    * ``on_start(run)``: called once the modules are launched (e.g. to
-      subscribe to a channel with ``run.subscribe``).
+    * ``on_start(view)``: called once the modules are launched (e.g. to
+      subscribe to a channel with ``view.subscribe``).
 
     The run ends at the first of: the recorder or the bus router lost (then
     ``complete``/``observed`` is False); ``options.time_limit`` or the spec's
@@ -49,16 +51,17 @@ def run_session(spec: Spec, options: RunOptions, *,
     Raises :class:`~astaa_deft.model.errors.InputError` when the run cannot start.
     """
     run = BusRun(spec, options, on_event=on_event)
+    view = RunView(run)
     ends = RunEndWatch(spec)
     time_limit = min((t for t in (options.time_limit, ends.time_limit) if t is not None), default=None)
     t0 = time.monotonic()
     with run:
         t0 = time.monotonic()
-        ends.attach(run)
+        ends.attach(view)
         if on_start is not None:
-            on_start(run)
+            on_start(view)
         while True:
-            reason = _why_end(run, options, t0, time_limit, ends, stop_when)
+            reason = _why_end(run, view, ends, t0=t0, time_limit=time_limit, stop_when=stop_when)
             if reason:
                 break
             time.sleep(POLL_SECONDS)
@@ -68,22 +71,26 @@ def run_session(spec: Spec, options: RunOptions, *,
         if finding is not None:
             run.add_finding(finding)
         run.end(reason)
+    verdict = run.judge.verdict if run.judge is not None else None
+    recorder = run.recorder
     return RunResult(
-        end_reason=reason, seconds=seconds, verdict=run.verdict, violations=tuple(run.violations),
-        exits=tuple(run.exits), sent=sent, recorded=dict(run.recorded),
-        mutations=run.interception.mutations if run.interception is not None else 0,
-        log=options.record, complete=options.record is None or run.recorder_finished,
-        observed=run.verdict is not None and not run.lost, policies=tuple(run.policies))
+        end_reason=reason, seconds=seconds, verdict=verdict, violations=tuple(run.violations),
+        exits=tuple(run.exits), sent=sent, recorded=dict(recorder.recorded) if recorder is not None else {},
+        mutations=run.mutations, log=options.record,
+        complete=options.record is None or (recorder is not None and recorder.finished),
+        observed=verdict is not None and not run.lost,
+        policies=tuple(run.transport.policies) if run.transport is not None else ())
 
 
-def _why_end(run: BusRun, options: RunOptions, t0: float, time_limit: float | None, ends: RunEndWatch,
-             stop_when: Callable[[BusRun], str | None] | None) -> str:
+def _why_end(run: BusRun, view: RunView, ends: RunEndWatch, *, t0: float, time_limit: float | None,
+             stop_when: Callable[[RunView], str | None] | None) -> str:
+    """Why the run ends now ("" while it goes on): the first that holds of the conditions ``run_session`` lists."""
     lost = run.helper_lost()
     if lost:
         return lost
     if time_limit is not None and time.monotonic() - t0 >= time_limit:
         return "time limit"
-    if run.stop_requested.is_set():
+    if run.judge is not None and run.judge.stop_requested.is_set():
         return "violation (--stop-on-violation)"
     ended = ends.check(list(run.exits))
     if ended is not None:
@@ -93,8 +100,8 @@ def _why_end(run: BusRun, options: RunOptions, t0: float, time_limit: float | No
     if crash is not None:
         # The verdict is decided (Abort at least); going on would only wait for a time limit or a Ctrl-C.
         return f"{crash.describe()} (on_crash: end_run)"
-    if options.launch and run.launcher is not None and not run.alive():
+    if run.modules is not None and not run.alive():
         return "all modules exited"
     if stop_when is not None:
-        return stop_when(run) or ""
+        return stop_when(view) or ""
     return ""

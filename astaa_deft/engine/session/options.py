@@ -4,26 +4,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
+from astaa_deft.engine.bus.interception import Interceptor
+from astaa_deft.engine.bus.processes import ChildProcess
+from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.io.log.records import PolicyApplicationsRecord
 from astaa_deft.model.records import ProcessExit, Verdict, Violation
 
 
 @dataclass
 class RunOptions:
+    """What one run is asked to do; read by the run from the thread that runs it."""
+
     mode: str = "star"  # "star" (man in the middle) or "passive" (observer only)
     launch: bool = True  # False: attach to an already running SUT
     record: Path | None = None  # the MCAP log; None: not recorded
     params: dict[str, str] = field(default_factory=dict)
     command_line: list[str] = field(default_factory=list)
     run_dir: Path | None = None  # module logs and configs; a fresh temp dir if None (one per session)
-    interceptor: Any = None  # an ASTAA test case engine (star mode only)
+    interceptor: Interceptor | None = None  # an ASTAA test case engine (star mode only)
     stop_on_violation: bool = False
     attachments: dict[str, Path] = field(default_factory=dict)  # name in the log → file (policy, dictionaries)
     time_limit: float | None = None  # seconds; None: no limit from the caller
     # A recorder started ahead of the run (bus_run.warm_recorder), taken by this run if still alive.
-    warm_recorder: Any = None
+    warm_recorder: ChildProcess | None = None
 
 
 @dataclass(frozen=True)
@@ -32,7 +36,7 @@ class RunResult:
 
     end_reason: str  # "time limit", "signal SIGINT", "all modules exited", "violation", or stop_when's reason
     seconds: float  # wall time from the modules' launch to the end
-    verdict: Any  # astaa_deft.engine.monitor.verdict.RunVerdict (None if the run never started its monitors)
+    verdict: RunVerdict | None  # the CRASH-scale verdict (None if the run never started its monitors)
     violations: tuple[Violation, ...]
     exits: tuple[ProcessExit, ...]
     sent: dict[str, int]  # messages per channel that went through the star (or were observed)

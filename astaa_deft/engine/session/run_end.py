@@ -10,16 +10,25 @@ gives it).
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from dataclasses import dataclass
 
+from typing import TYPE_CHECKING
+
+import zenoh
+
 from astaa_deft.model.records import Verdict
-from astaa_deft.io.codecs import get_codec
+from astaa_deft.io.codecs import Codec, get_codec
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS
 from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation, message_copy
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.run_section import ChannelEnd, Outcome, RunSection
+
+if TYPE_CHECKING:
+    from astaa_deft.model.records import ProcessExit
+    from astaa_deft.engine.session.view import RunView
 
 
 @dataclass(frozen=True)
@@ -44,6 +53,8 @@ class RunEnd:
 
 
 class RunEndWatch:
+    """The spec's ``run:`` end conditions over one run; the first that holds is ``ended`` (set once, any thread)."""
+
     def __init__(self, spec: Spec):
         self.spec = spec
         self.section: RunSection = spec.run if spec.run is not None else RunSection()
@@ -54,19 +65,19 @@ class RunEndWatch:
     def time_limit(self) -> float | None:
         return self.section.time_limit
 
-    def attach(self, run) -> None:
-        """Subscribe to every channel a condition reads (``run``: a started BusRun)."""
+    def attach(self, run: RunView) -> None:
+        """Subscribe to every channel a condition reads (``run``: a started run)."""
         by_channel: dict[str, list[ChannelEnd]] = {}
         for end in self.section.channel_ends:
             by_channel.setdefault(end.channel, []).append(end)
         for name, ends in by_channel.items():
             codec = get_codec(self.spec.channel(name).encoding)
             try:
-                run.subscribe(name, lambda sample, ends=ends, codec=codec: self._seen(ends, codec, sample))
+                run.subscribe(name, functools.partial(self._seen, ends, codec))
             except KeyError:  # not observable in this mode: the condition cannot fire
                 continue
 
-    def _seen(self, ends: list[ChannelEnd], codec, sample) -> None:
+    def _seen(self, ends: list[ChannelEnd], codec: Codec, sample: zenoh.Sample) -> None:
         if self.ended is not None:
             return
         now = time.time_ns()
@@ -84,7 +95,7 @@ class RunEndWatch:
                                  detail=f"'{end.expr.text}' held on {end.channel}"))
                 return
 
-    def check(self, exits) -> RunEnd | None:
+    def check(self, exits: list[ProcessExit]) -> RunEnd | None:
         """The end, once a condition holds (``exits``: the run's ProcessExit records so far)."""
         for exit_ in exits:
             end = self.section.exit_end(exit_.module)

@@ -33,7 +33,7 @@ from astaa_deft.io.log import layout
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
 from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.verdict import IMPLICIT
-from astaa_deft.engine.session import BusRun, RunOptions, RunResult, run_session
+from astaa_deft.engine.session import RunOptions, RunResult, RunView, run_session
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
 from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
@@ -134,16 +134,16 @@ class _Watches:
         self.t0_ns: int | None = None
         self.monitors: MonitorSet | None = None
 
-    def on_start(self, bus: BusRun) -> None:
+    def on_start(self, bus: RunView) -> None:
         self.t0_ns = time.time_ns()
-        self.monitors = bus.monitors.set if bus.monitors is not None else None
+        self.monitors = bus.monitor_set
         self.margins.attach(bus)
         if self.settled is not None:
             self.settled.attach(bus)
         if self.timing is not None:
             self.timing.attach(bus)
 
-    def stop_when(self, bus: BusRun) -> str | None:
+    def stop_when(self, bus: RunView) -> str | None:
         if self.stop_at_violation and any(v.invariant not in self.known for v in list(bus.violations)):
             return VIOLATION
         return self.settled.check(bus) if self.settled is not None else None
@@ -186,7 +186,7 @@ class ChannelTiming:
         self.max_gap: dict[str, float] = {}
         self._lock = threading.Lock()
 
-    def attach(self, bus: BusRun) -> None:
+    def attach(self, bus: RunView) -> None:
         self.t0 = time.monotonic()
         for channel in self.channels:
             def seen(sample: zenoh.Sample, channel: str = channel) -> None:
@@ -238,7 +238,7 @@ class SettleWatch:
         self.changed = 0.0
         self._lock = threading.Lock()
 
-    def attach(self, bus: BusRun) -> None:
+    def attach(self, bus: RunView) -> None:
         self.t0 = time.monotonic()
         self.changed = self.t0
         for channel in self.anchors:
@@ -267,9 +267,9 @@ class SettleWatch:
             last = max(last, base + end)
         return last
 
-    def check(self, bus: BusRun) -> str | None:
+    def check(self, bus: RunView) -> str | None:
         now = time.monotonic()
-        mutations = bus.interception.mutations if bus.interception is not None else 0
+        mutations = bus.mutations
         if mutations != self.mutations:
             self.mutations, self.changed = mutations, now
         if now >= self._last_chance() + self.settle and now >= self.changed + self.settle:
@@ -292,7 +292,7 @@ class MarginWatch:
         self.closest: dict[str, float] = {}
         self._lock = threading.Lock()
 
-    def attach(self, bus: BusRun) -> None:
+    def attach(self, bus: RunView) -> None:
         for inv in self.bounds:
             codec = get_codec(self.spec.channel(inv.channel).encoding)
             def seen(sample: zenoh.Sample, inv: BoundInvariant = inv, codec: Codec = codec) -> None:
