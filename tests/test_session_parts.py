@@ -9,6 +9,7 @@ from astaa_deft.engine.session import BusRun, RunOptions, RunView, run_session
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
+from astaa_deft.model.records import ProcessExit
 
 from proxy_helpers import ECHO_SPEC
 
@@ -33,8 +34,8 @@ def test_the_run_ends_then_is_judged_then_stops_its_modules_then_its_recorder(tm
     # recorder stops: the reverse of the start order (recorder, judge, modules).
     order = [kinds.index(k) for k in (rec.RunEnd, rec.RunStopping, rec.VerdictRecord, rec.RunStopped)]
     assert order == sorted(order)
-    assert all(isinstance(e, rec.ProcessExitRecord) and e.during_shutdown
-               for e in events[order[2] + 1:order[3]] if isinstance(e, rec.ProcessExitRecord))
+    stopped = [e for e in events[order[2] + 1:order[3]] if isinstance(e, ProcessExit)]
+    assert stopped and all(e.during_shutdown for e in stopped)
     # The recorder was still up for the last event: the log holds it.
     logged = [rec.decode(e) for e in read_log(log).events()]
     assert isinstance(logged[-1], rec.RunStopped)

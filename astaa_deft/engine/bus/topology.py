@@ -50,9 +50,8 @@ _EVENT_ATTRS = ("testcase", "policy", "action", "channel", "consumers", "message
 def intercept_record(event: Any, original: bytes | None, delivered: bool) -> bytes:
     """What was done, whether anything was delivered, the original: one intercepted delivery for the recorder.
 
-    ``event`` is a mutation event (``intercept.actions.base.MutationEvent``,
-    duck-typed: transport imports no interception) or, already in its JSON
-    form, a dict. Binary framing rather than JSON: the original payload rides
+    ``event`` is a mutation (``model.records.Mutation``, read by its
+    attributes) or, already in its JSON form, a dict. Binary framing rather than JSON: the original payload rides
     as raw bytes, and the event as ``marshal`` data, whose encoding costs a
     tenth of the event's JSON form (which the recorder builds, in its own process).
     """
