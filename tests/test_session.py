@@ -12,6 +12,7 @@ from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.session import RunOptions, RunResult, run_session
 from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.model.records import Verdict
 
 from proxy_helpers import ECHO_SPEC
 
@@ -22,8 +23,8 @@ ALL_KINDS = [
     rec.RunEnd(4, "time limit"),
     rec.ProcessExit("talker", 42, 3, None, 5, False, "Traceback ..."),
     rec.Violation("speed", "bound", "high", 6, "status", 7, {"v": 1}, "too fast", "Hindering", None),
-    rec.VerdictRecord(7, "Hindering", "1 violation",
-                      rec.Violation("speed", "bound", "high", 6, None, None, None, "too fast", "Hindering"), ("a reason",)),
+    rec.RunVerdict(Verdict.HINDERING, rec.Violation("speed", "bound", "high", 6, None, None, None, "too fast",
+                                                    "Hindering"), "1 violation", ("a reason",), time_ns=7),
     rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
     rec.MutationRecord(9, "p1", "set", "data", 12, (rec.FieldChange("value", 1.0, {"float": "nan"}),), "tc",
                        ("listener",), 1.5, {"steps": []}, 4, 5),
@@ -84,7 +85,7 @@ def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
         assert result.complete and result.observed and result.log == tmp_path / f"{name}.mcap"
         assert (tmp_path / f"run-{name}" / "listener.out").read_text().count("\n") == 100
         kinds = [type(r) for r in events[name]]
-        assert rec.RunStarted in kinds and rec.VerdictRecord in kinds
+        assert rec.RunStarted in kinds and rec.RunVerdict in kinds
         logged = [rec.decode(e) for e in read_log(result.log).events()]
         assert any(isinstance(r, rec.RunEnd) and r.reason == "all delivered" for r in logged)
         assert sum(isinstance(r, rec.RunStarted) for r in logged) == 1, (name, [r for r in logged if not isinstance(r, rec.ProcessExit)])  # the other session's events are not here

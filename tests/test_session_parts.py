@@ -32,7 +32,7 @@ def test_the_run_ends_then_is_judged_then_stops_its_modules_then_its_recorder(tm
     assert kinds[0] is rec.RunStarted
     # The end, then the verdict (judged up to the stop), then the modules stopped and the drain before the
     # recorder stops: the reverse of the start order (recorder, judge, modules).
-    order = [kinds.index(k) for k in (rec.RunEnd, rec.RunStopping, rec.VerdictRecord, rec.RunStopped)]
+    order = [kinds.index(k) for k in (rec.RunEnd, rec.RunStopping, rec.RunVerdict, rec.RunStopped)]
     assert order == sorted(order)
     stopped = [e for e in events[order[2] + 1:order[3]] if isinstance(e, ProcessExit)]
     assert stopped and all(e.during_shutdown for e in stopped)

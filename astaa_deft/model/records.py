@@ -25,13 +25,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import Any, ClassVar, TypeAlias
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.tagged import to_tagged
+from astaa_deft.model.vocabulary import TextEnum
 
 
 class RecordError(InputError):
@@ -52,7 +52,7 @@ def _fields(body: object, where: str, kind: str) -> JsonFields:
 # ---------------------------------------------------------------- the verdict's class
 
 
-class Verdict(str, Enum):
+class Verdict(TextEnum):
     """A run's class on the CRASH scale, worst first (see ``engine.monitor.verdict`` for how each is found).
 
     A ``str`` so that its text and JSON forms are its value ("Pass",
@@ -65,13 +65,6 @@ class Verdict(str, Enum):
     SILENT = "Silent"  # an invariant broke and nothing in the system noticed
     HINDERING = "Hindering"  # a module reported an error that misstates what happened
     PASS = "Pass"  # none of the above
-
-    # The value, not "Verdict.PASS", in str() and f-strings (Python 3.11 changed a mixin's format).
-    def __str__(self) -> str:
-        return self.value
-
-    def __format__(self, format_spec: str) -> str:
-        return self.value.__format__(format_spec)
 
     @classmethod
     def named(cls, text: str) -> Verdict | None:
@@ -318,3 +311,47 @@ class RunEnd:
         if reason is None:
             raise _damaged(where, "a run end without its reason")
         return cls(obj.integer("time_ns"), reason)
+
+
+# ---------------------------------------------------------------- the run's verdict
+
+
+@dataclass(frozen=True)
+class RunVerdict:
+    """A run's verdict: its class, its earliest finding, a one-line summary, the reasons for the class.
+
+    The monitors give it (``time_ns`` 0); the session logs it with the time
+    it was given (the log's ``verdict`` event) — one type for both.
+    """
+
+    kind: ClassVar[str] = "verdict"
+
+    klass: Verdict
+    first: Violation | None
+    summary: str
+    reasons: tuple[str, ...] = ()  # one line per finding that shaped the class
+    time_ns: int = 0  # when the verdict was logged (0: not logged)
+
+    def to_json(self) -> JsonObject:
+        """The verdict's JSON form (the ``verdict`` log event's body without ``kind`` and ``time_ns``)."""
+        return {"class": self.klass, "first": self.first.to_json() if self.first else None,
+                "summary": self.summary, "reasons": list(self.reasons)}
+
+    def to_log_json(self) -> JsonObject:
+        """The ``verdict`` log event's body, without ``kind``: the first finding in the log's key order."""
+        return {"time_ns": self.time_ns, "class": self.klass,
+                "first": self.first.to_log_json() if self.first else None,
+                "summary": self.summary, "reasons": list(self.reasons)}
+
+    @classmethod
+    def from_json(cls, body: Mapping[str, Any], *, where: str = "the log") -> RunVerdict:
+        """The verdict of its JSON form (an unknown class reads as Silent, as a damaged finding's does);
+        RecordError if ``first`` is damaged. A first finding without a time has the verdict's."""
+        read = JsonFields(body)
+        time_ns = read.integer("time_ns")
+        first = read.raw("first")
+        if first is not None and not isinstance(first, Mapping):
+            raise _damaged(where, "a verdict whose first finding is not an object")
+        return cls(Verdict.named(read.text("class", "?")) or Verdict.SILENT,
+                   Violation.from_json({"time_ns": time_ns, **first}, where=where) if first else None,
+                   read.text("summary"), read.texts("reasons"), time_ns)

@@ -43,7 +43,7 @@ class CheckResult:
     messages: int  # bus messages given to the monitors
     stats: dict[str, dict[str, int]]
     seconds: float  # time spent evaluating (decoding included, reading the file not)
-    online_verdict: rec.VerdictRecord | None = None  # the verdict the proxy logged during the run, if any
+    online_verdict: RunVerdict | None = None  # the verdict the proxy logged during the run, if any
     online_violations: list[rec.Violation] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -93,7 +93,7 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
     seconds = time.perf_counter() - clock
 
     bus_lost = any(isinstance(e, rec.OtherEvent) and e.kind == BUS_LOST for e in events)
-    online = [e for e in events if isinstance(e, rec.VerdictRecord)]
+    online = [e for e in events if isinstance(e, RunVerdict)]
     return CheckResult(
         violations=sorted(monitors.violations, key=lambda v: v.time_ns), verdict=monitors.verdict(bus_lost=bus_lost),
         start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,

@@ -25,41 +25,15 @@ Crashes are always monitored: an abnormal exit counts even when no
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 from astaa_deft.engine.monitor.violation import SEVERITIES, Violation
-from astaa_deft.model.json import JsonObject
 from astaa_deft.model.json_fields import JsonFields
-from astaa_deft.model.records import CRASH_SCALE, ProcessExit, Verdict
+from astaa_deft.model.records import CRASH_SCALE, ProcessExit, RunVerdict, Verdict
 
 ORDER = CRASH_SCALE  # worst first, Pass last (the name the campaign imports)
 IMPLICIT = "(module exit)"  # the name of the finding made from an exit no invariant reported
 BUS_LOST = "bus_lost"  # the kind of the log event saying the bus was lost
-
-
-@dataclass(frozen=True)
-class RunVerdict:
-    """A run's verdict: its class, its earliest finding, a one-line summary, the reasons for the class."""
-
-    klass: Verdict
-    first: Violation | None
-    summary: str
-    reasons: tuple[str, ...] = ()  # one line per finding that shaped the class
-
-    def to_json(self) -> JsonObject:
-        """The ``verdict`` log event's body (without ``kind`` and ``time_ns``)."""
-        return {"class": self.klass, "first": self.first.to_json() if self.first else None,
-                "summary": self.summary, "reasons": list(self.reasons)}
-
-    @classmethod
-    def from_json(cls, body: Mapping[str, Any], *, where: str = "the log") -> RunVerdict:
-        """The verdict of its JSON form (an unknown class reads as Silent); RecordError if ``first`` is damaged."""
-        read = JsonFields(body)
-        first = read.raw("first")
-        return cls(Verdict.named(read.text("class", "?")) or Verdict.SILENT,
-                   Violation.from_json(first, where=where) if first else None, read.text("summary"),
-                   read.texts("reasons"))
 
 
 def exits_of(events: Sequence[ProcessExit | Mapping[str, Any]]) -> tuple[list[ProcessExit], bool]:

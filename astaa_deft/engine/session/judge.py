@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -60,9 +61,7 @@ class Judge(RunPart):
         # Judged up to the stop, as `check` judges the log: the silence of modules being stopped
         # (one slow to exit, a loaded machine) is the tool's doing, not a hang of the SUT.
         self.verdict = self.monitors.finish(stopping.time_ns)
-        verdict = self.verdict
-        self._events.emit(rec.VerdictRecord(time.time_ns(), verdict.klass, verdict.summary, verdict.first,
-                                            verdict.reasons))
+        self._events.emit(dataclasses.replace(self.verdict, time_ns=time.time_ns()))
         self.monitors = None
 
     def end(self, reason: str) -> None:

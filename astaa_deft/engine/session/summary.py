@@ -98,7 +98,7 @@ def format_info(log: LogContents, with_warnings: bool = True) -> str:
     if violations:
         lines.append("violations: " + ", ".join(f"{name} ×{n}" for name, n in sorted(violations.items())))
     lines.extend(policy_lines(events))
-    verdicts = [e for e in events if isinstance(e, rec.VerdictRecord)]
+    verdicts = [e for e in events if isinstance(e, rec.RunVerdict)]
     if verdicts:
         started = next((e.time_ns for e in events if isinstance(e, rec.RunStarted)), None)
         lines.append(format_verdict(rec.encode(verdicts[-1]), started))

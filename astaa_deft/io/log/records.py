@@ -21,7 +21,9 @@ from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError
 from astaa_deft.model.json_fields import JsonFields
-from astaa_deft.model.records import FieldChange, Mutation, ProcessExit, RecordError, RunEnd, Violation
+from astaa_deft.model.records import (
+    FieldChange, Mutation, ProcessExit, RecordError, RunEnd, RunVerdict, Violation,
+)
 from astaa_deft.model.tagged import to_tagged
 
 FORMAT = 1  # bump when a record's meaning changes; decode() refuses newer ones
@@ -51,16 +53,6 @@ class RunStopping:
 class RunStopped:
     time_ns: int
     kind: ClassVar[str] = "run_stopped"
-
-
-@dataclass(frozen=True)
-class VerdictRecord:
-    time_ns: int
-    klass: str
-    summary: str = ""
-    first: Violation | None = None
-    reasons: tuple[str, ...] = ()
-    kind: ClassVar[str] = "verdict"
 
 
 @dataclass(frozen=True)
@@ -155,12 +147,12 @@ class OtherEvent:
     body: tuple[tuple[str, Any], ...] = ()
 
 
-Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExit | Violation | VerdictRecord
+Record = (RunStarted | RunStopping | RunStopped | RunEnd | ProcessExit | Violation | RunVerdict
           | UndeclaredKey | MutationRecord | FlagRecord | ModuleLogLine | PolicyApplicationsRecord | OtherEvent)
 
 __all__ = ["FORMAT", "FieldChange", "FlagRecord", "ModuleLogLine", "MutationRecord", "OtherEvent",
            "PolicyApplicationsRecord", "ProcessExit", "Record", "RunEnd", "RunStarted", "RunStopped", "RunStopping",
-           "UndeclaredKey", "VerdictRecord", "Violation", "decode", "decode_mutation", "encode", "to_json_text"]
+           "UndeclaredKey", "RunVerdict", "Violation", "decode", "decode_mutation", "encode", "to_json_text"]
 
 _SIMPLE = {c.kind: c for c in (RunStarted, RunStopping, RunStopped, UndeclaredKey, ModuleLogLine, FlagRecord,
                                PolicyApplicationsRecord)}
@@ -171,10 +163,8 @@ def encode(record: Record) -> dict:
     """The JSON object of ``record`` as written to the log."""
     if isinstance(record, OtherEvent):
         return {"kind": record.kind, "time_ns": record.time_ns, **dict(record.body)}
-    if isinstance(record, VerdictRecord):
-        return {"kind": record.kind, "time_ns": record.time_ns, "class": record.klass,
-                "first": record.first.to_log_json() if record.first else None,
-                "summary": record.summary, "reasons": list(record.reasons)}
+    if isinstance(record, RunVerdict):
+        return {"kind": record.kind, **record.to_log_json()}
     if isinstance(record, MutationRecord):
         return {"kind": record.kind, "time_ns": record.time_ns, "testcase": record.testcase,
                 "policy": record.policy, "action": record.action, "channel": record.channel,
@@ -208,11 +198,8 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
                          "read this log with a newer astaa-deft")
     kind = read.text("kind")
     time_ns = read.integer("time_ns")
-    if kind == VerdictRecord.kind:
-        first = read.object("first")
-        return VerdictRecord(time_ns, read.text("class", "?"), read.text("summary"),
-                             Violation.from_json({"time_ns": time_ns, **first}, where=where)
-                             if first is not None else None, read.texts("reasons"))
+    if kind == RunVerdict.kind:
+        return RunVerdict.from_json(body, where=where)
     if kind == MutationRecord.kind:
         return decode_mutation(body, time_ns)
     if kind == Violation.kind:
