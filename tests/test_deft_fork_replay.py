@@ -52,7 +52,7 @@ def test_forked_candidates_reproduce_every_output_exactly(crafted, jobs):
     spec, log_path = crafted
     seen = []
     ex = extract(read_log(log_path), spec, make_planner(spec, {}), jobs=jobs,
-                 progress=lambda done, total: seen.append((done, total)))
+                 on_output=lambda done, total, outcome: seen.append((done, total)))
     assert ex.outputs == CYCLES and len(ex.frames) == CYCLES and not ex.skipped
     assert ex.accepted_at(0.0) == CYCLES
     assert all(f.exact for f in ex.frames)

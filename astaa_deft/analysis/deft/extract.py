@@ -105,9 +105,8 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 
 
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
-            progress: Callable[[int, int], None] = lambda done, total: None,
+            on_output: OnOutput = lambda done, total, outcome: None,
             jobs: int | None = None, entry: ReplayModule | None = None,
-            decided: Callable[[Decided, int], None] = lambda outcome, total: None,
             resume: Sequence[Decided] = ()) -> Extraction:
     """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
 
@@ -117,17 +116,13 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     very same planner state (see fork_replay); otherwise — or while this
     process runs other Python threads, which a fork must not copy in the
     middle of their work — from deep copies of the planner, one after another.
-    ``decided(outcome, outputs in all)`` gets each output as soon as it is
-    decided, in order. ``resume``: the outputs an earlier extraction of this
-    log decided (in order, from the first): their frames are stepped once
-    each, as decided, and the search goes on after them.
+    ``on_output(outputs done, outputs in all, outcome)`` gets each output
+    as soon as it is decided, in order (progress and checkpoints follow it).
+    ``resume``: the outputs an earlier extraction of this log decided (in
+    order, from the first): their frames are stepped once each, as decided,
+    and the search goes on after them.
     """
     cfg = entry if entry is not None else replay_module_of(spec)
-
-    def on_output(done: int, total: int, outcome: Decided) -> None:
-        progress(done, total)
-        decided(outcome, total)
-
     if cfg.per_trigger:
         return _extract_per_trigger(log, spec, planner, cfg, on_output)
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):

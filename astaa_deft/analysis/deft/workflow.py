@@ -24,7 +24,7 @@ from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.deft.checkpoint import Checkpoint, identity, read_state
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
-from astaa_deft.analysis.deft.extract import Extraction, extract, ground_truth_rate
+from astaa_deft.analysis.deft.extract import Decided, Extraction, OnOutput, extract, ground_truth_rate
 from astaa_deft.analysis.deft.oracle import oracle_entries
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import make_planner
@@ -122,8 +122,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     planner = make_planner(spec, params, prefer_process=options.process, entry=entry)
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
-            ex = extract(log, spec, planner, progress=progress, jobs=jobs or idle_cores(), entry=entry,
-                         decided=checkpoint.add, resume=before)
+            ex = extract(log, spec, planner, on_output=_following(progress, checkpoint), jobs=jobs or idle_cores(),
+                         entry=entry, resume=before)
     except KeyboardInterrupt:
         with writing(place):
             checkpoint.write()
@@ -142,6 +142,15 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     exact = ground_truth_rate(ex, spec, options.ground_truth) if options.ground_truth else None
     return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry,
                          resumed=len(before))
+
+
+def _following(progress: Callable[[int, int], None], checkpoint: Checkpoint) -> OnOutput:
+    """The extraction's per-output callback: the caller's progress, then the decided output checkpointed."""
+    def on_output(done: int, total: int, outcome: Decided) -> None:
+        progress(done, total)
+        checkpoint.add(outcome, total)
+
+    return on_output
 
 
 def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: Any, resumed: int) -> ExtractReport:
