@@ -279,7 +279,8 @@ class ScriptedTester(LiveTester):
     """A live tester whose runs are scripted (no SUT): fail/pass per call, in order."""
 
     def __init__(self, script: list[bool | None], repeats: int = 1):
-        super().__init__(SPEC, {}, "control_alive", "control", failure_at=3.0, repeats=repeats)
+        failure = Failure("control_alive", "expression", "control", None, 3.0, "silent", "Silent")
+        super().__init__(SPEC, {}, failure, repeats=repeats)
         self.script = list(script)
 
     def run(self, testcase, horizon, record=None, policy_file=None) -> LiveRun:

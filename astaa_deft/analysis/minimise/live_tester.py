@@ -55,6 +55,7 @@ from astaa_deft.engine.session import RunOptions, RunView, run_session
 from astaa_deft.engine.session.bus_run import release_warm_recorder, warm_recorder
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
+from astaa_deft.analysis.minimise.failure import Failure
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation
 from astaa_deft.analysis.minimise.restrict import restricted_testcase, write_testcase
 
@@ -75,14 +76,14 @@ class LiveRun:
 class LiveTester:
     """Subsets of mutations to whole-system verdicts (module doc)."""
 
-    def __init__(self, spec: Spec, params: Mapping[str, str], invariant: str, module: str | None, *,
-                 failure_at: float, repeats: int = 1, original: TestCase | None = None,
-                 testcase_id: str = "minimise", progress: Callable[[str], None] = lambda line: None):
+    def __init__(self, spec: Spec, params: Mapping[str, str], failure: Failure, *, repeats: int = 1,
+                 original: TestCase | None = None, testcase_id: str = "minimise",
+                 progress: Callable[[str], None] = lambda line: None):
         self.spec = spec
         self.params = dict(params)
-        self.invariant = invariant
-        self.module = module
-        self.failure_at = failure_at  # seconds since the run's start in the original log
+        self.invariant = failure.invariant
+        self.module = failure.module
+        self.failure_at = failure.at  # seconds since the run's start in the original log
         self.repeats = max(1, repeats)
         self.original = original
         self.testcase_id = testcase_id

@@ -30,28 +30,12 @@ from astaa_deft.engine.monitor import check_log, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
+from astaa_deft.analysis.minimise.failure import Failure
 from astaa_deft.analysis.minimise.ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
 from astaa_deft.analysis.minimise.live_tester import LiveTester
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation, run_start_ns
 from astaa_deft.analysis.minimise.replay_model import Job, ReplayModel, replay_entry_for
 from astaa_deft.analysis.minimise.replay_tester import DeftTester
-
-
-@dataclass(frozen=True)
-class Failure:
-    """The failure being minimised, as the log reported it."""
-
-    invariant: str  # an invariant's name, or "(module exit)" for a crash no invariant named
-    kind: str
-    module: str | None
-    channel: str | None
-    at: float  # seconds since the run's start
-    detail: str
-    crash: str
-
-    def describe(self) -> str:
-        where = f" on '{self.channel}'" if self.channel else f" (module '{self.module}')" if self.module else ""
-        return f"{self.invariant} ({self.kind}){where} at +{self.at:.2f} s: {self.detail}"
 
 
 def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure:

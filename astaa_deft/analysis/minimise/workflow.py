@@ -164,7 +164,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
         if isinstance(in_replay, MinimiseReport):
             return in_replay
         minimised = in_replay
-    live = LiveTester(job.spec, job.params, job.failure.invariant, job.failure.module, failure_at=job.failure.at,
+    live = LiveTester(job.spec, job.params, job.failure,
                       repeats=options.repeats, original=job.original, testcase_id=f"minimal-{_id(job.original)}",
                       progress=(lambda line: say(f"  {line}")))
     try:
