@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from astaa_deft.engine.bus.interception import Interceptor
-from astaa_deft.engine.bus.processes import ChildProcess
-from astaa_deft.engine.monitor.verdict import RunVerdict
-from astaa_deft.io.log.records import PolicyApplicationsRecord
-from astaa_deft.model.records import ProcessExit, Verdict, Violation
+from astaa_deft.model.records import ProcessExit, RunVerdict, Verdict, Violation
+
+if TYPE_CHECKING:  # types only: the command line builds options without loading Zenoh
+    from astaa_deft.engine.bus.interception import Interceptor
+    from astaa_deft.engine.bus.processes import ChildProcess
+    from astaa_deft.io.log.records import PolicyApplicationsRecord
 
 
 @dataclass
