@@ -286,7 +286,7 @@ class MarginWatch:
     """
 
     def __init__(self, spec: Spec):
-        self.bounds = [inv for inv in getattr(spec, "invariants", ()) if isinstance(inv, BoundInvariant)
+        self.bounds = [inv for inv in spec.invariants if isinstance(inv, BoundInvariant)
                        and (inv.minimum is not None or inv.maximum is not None)]
         self.spec = spec
         self.closest: dict[str, float] = {}

@@ -53,8 +53,8 @@ def mutation_family(testcase: TestCase | None) -> str:
         return NO_MUTATION
     parts = set()
     for policy in testcase.policies:
-        action = getattr(policy.action, "name", type(policy.action).__name__.lower())
-        fields = [a.path for a in getattr(policy.action, "fields", ())] or ["*"]
+        action = policy.action.name
+        fields = list(policy.action.field_paths()) or ["*"]
         for channel in policy.channels or (policy.message_type or "*",):
             for path in fields:
                 parts.add(f"{channel}:{_INDEX.sub('[]', str(path))}:{action}")

@@ -270,6 +270,10 @@ class ActionConfig(ABC):
     def write_xml(self, element: etree._Element) -> None:
         """Fill in the attributes and children of this action's (empty) element."""
 
+    def field_paths(self) -> tuple[str, ...]:
+        """The field paths this action sets (as written, wildcards kept); none for an action that sets none."""
+        return ()
+
     def check(self, policy: Policy, channels: tuple[Channel, ...],  # noqa: B027 (a hook with a default)
               checker: ActionChecker) -> None:
         """Check against the spec and dictionary (``checker`` has both); default: nothing to check."""

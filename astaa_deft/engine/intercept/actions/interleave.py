@@ -52,6 +52,9 @@ class Interleave(ActionConfig):
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Interleave:
         return cls(float(required(element, "rate")), read_assignments(element))
 
+    def field_paths(self) -> tuple[str, ...]:
+        return tuple(a.path for a in self.fields)
+
     def write_xml(self, element: etree._Element) -> None:
         element.set("rate", decimal_text(self.rate))
         write_assignments(element, self.fields)

@@ -378,6 +378,9 @@ class Set(ActionConfig):
     def write_xml(self, element: etree._Element) -> None:
         write_assignments(element, self.fields)
 
+    def field_paths(self) -> tuple[str, ...]:
+        return tuple(a.path for a in self.fields)
+
     def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
         check_assignments(self.fields, channels, checker)
 
