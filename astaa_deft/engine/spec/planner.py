@@ -15,6 +15,7 @@ from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.fields import FieldPathError, type_at
 from astaa_deft.model.sut import Channel, MessageType, Module
 from astaa_deft.io.yamlsource import Node, Source, describe_value
+from astaa_deft.engine.spec.reader import declared_channel
 from astaa_deft.engine.spec.replay_module import (
     CollisionOracle,
     FrameMode,
@@ -63,12 +64,7 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
         return n.value
 
     def channel_ref(n: Node, what: str) -> str:
-        name = n.value if isinstance(n.value, str) else ""
-        if name not in by_name:
-            shown = f"'{n.value}'" if isinstance(n.value, str) else f"({describe_value(n.value)})"
-            src.at(n, f"{what} {shown} is not a declared channel",
-                   did_you_mean(name, by_name) or "declare it under 'channels'")
-        return name
+        return declared_channel(src, n, what, by_name)
 
     module = text("module")
     if module and module not in module_names:

@@ -9,6 +9,7 @@ Not thread-safe (a load's problems accumulate on its source).
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -95,6 +96,16 @@ class SpecReader:
         if name not in module_names:
             hint = did_you_mean(name, module_names) or f"modules: {', '.join(module_names)}"
             self.src.at(node, f"unknown module '{name}'", hint)
+
+
+def declared_channel(src: Source, node: Node, what: str, declared: Mapping[str, object]) -> str:
+    """The channel ``node`` names (reported on ``src`` with a suggestion if it is not ``declared``; "" then)."""
+    name = node.value if isinstance(node.value, str) else ""
+    if name not in declared:
+        shown = f"'{node.value}'" if isinstance(node.value, str) else f"({describe_value(node.value)})"
+        src.at(node, f"{what} {shown} is not a declared channel",
+               did_you_mean(name, declared) or "declare it under 'channels'")
+    return name
 
 
 def scalar_text(value: object) -> str:

@@ -31,6 +31,7 @@ from astaa_deft.model.sut import Channel, Module
 from astaa_deft.engine.spec.planner import read_runner, read_setting
 from astaa_deft.engine.spec.replay_module import EXCEPTIONS, FRAME_MODES, FrameMode, ReplayModule, StepExceptions
 from astaa_deft.io.yamlsource import Node, Source, describe_value
+from astaa_deft.engine.spec.reader import declared_channel
 
 __all__ = ["ReplayModule", "build_replay_section"]
 
@@ -100,12 +101,7 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
                did_you_mean(module, module_names) or "declare it under 'modules'")
 
     def channel_ref(n: Node, what: str) -> str:
-        name = n.value if isinstance(n.value, str) else ""
-        if name not in by_name:
-            shown = f"'{n.value}'" if isinstance(n.value, str) else f"({describe_value(n.value)})"
-            src.at(n, f"{what} {shown} is not a declared channel",
-                   did_you_mean(name, by_name) or "declare it under 'channels'")
-        return name
+        return declared_channel(src, n, what, by_name)
 
     inputs: list[str] = []
     if not v["inputs"].is_list or not v["inputs"].value:
