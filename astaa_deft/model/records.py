@@ -77,6 +77,13 @@ class Verdict(TextEnum):
         return CRASH_SCALE.index(self)
 
 
+class RunMode(TextEnum):
+    """Where the tool sits on the bus during a run."""
+
+    STAR = "star"  # in the middle: every module in its own namespace, every message republished by the proxy
+    PASSIVE = "passive"  # an observer among the modules: adds nothing to their message path
+
+
 CRASH_SCALE: tuple[Verdict, ...] = tuple(Verdict)  # worst first, Pass last
 CRASH_CLASSES: tuple[Verdict, ...] = CRASH_SCALE[:-1]  # what a finding can point at (never Pass)
 

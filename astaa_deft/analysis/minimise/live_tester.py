@@ -58,6 +58,7 @@ from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
 from astaa_deft.analysis.minimise.failure import Failure
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation
 from astaa_deft.analysis.minimise.restrict import restricted_testcase, write_testcase
+from astaa_deft.model.records import RunMode
 
 MARGIN_SECONDS = 3.0  # a run goes on this long past the original failure (or the last mutation) before it passes
 # A run whose pinned mutations have not all happened by the horizon (the stack started late: the pinned
@@ -169,7 +170,7 @@ class LiveTester:
             log_path = record or Path(tmp) / "run.mcap"
             policy_file = policy_file or write_testcase(testcase, Path(tmp) / "policy.xml")
             interceptor = Interceptor(testcase, self.spec, self.dictionary) if testcase.policies else None
-            options = RunOptions(mode="star", interceptor=interceptor, record=log_path, params=self.params,
+            options = RunOptions(mode=RunMode.STAR, interceptor=interceptor, record=log_path, params=self.params,
                                  run_dir=Path(tmp) / "run", attachments={layout.POLICY_ATTACHMENT: policy_file},
                                  command_line=["astaa-deft", "minimise"], warm_recorder=self._recorder())
             with self._count:

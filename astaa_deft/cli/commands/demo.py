@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from astaa_deft.model.records import Verdict
+from astaa_deft.model.records import RunMode, Verdict
 from astaa_deft.demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
 from astaa_deft.demo.status import StatusWatch
 from astaa_deft.io.log import layout
@@ -90,7 +90,8 @@ def drive(options: DriveOptions) -> tuple[RunResult, StatusWatch]:
     params = {"scenario": options.scenario, "defects": "on" if options.defects else "off"}
     policy = options.policy
     interceptor = load_interceptor(policy, spec) if policy is not None else None
-    run_options = RunOptions(mode="passive" if options.passive else "star", record=options.record, params=params,
+    mode = RunMode.PASSIVE if options.passive else RunMode.STAR
+    run_options = RunOptions(mode=mode, record=options.record, params=params,
                              command_line=list(options.command_line), interceptor=interceptor,
                              stop_on_violation=options.stop_on_violation,
                              attachments={layout.POLICY_ATTACHMENT: policy} if policy is not None else {})

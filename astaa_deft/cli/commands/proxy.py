@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from astaa_deft.cli.arguments import RUN_SECONDS, bounded
 from astaa_deft.cli.commands.console import RateMeter, StatusLine, StopSignal, format_event, parse_params, say
 from astaa_deft.engine.session.options import RunOptions, RunResult
-from astaa_deft.model.records import Verdict
+from astaa_deft.model.records import RunMode, Verdict
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.output_place import Place, writing
 
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         attachments[layout.POLICY_ATTACHMENT] = args.policy
         for n, path in enumerate(args.dictionary, start=1):
             attachments[layout.DICTIONARY_ATTACHMENT.format(n=n)] = path
-    options = RunOptions(mode="passive" if args.passive else "star", launch=args.launch, record=args.record,
+    options = RunOptions(mode=RunMode.PASSIVE if args.passive else RunMode.STAR, launch=args.launch, record=args.record,
                          params=parse_params(args.param), command_line=sys.argv, run_dir=args.run_dir,
                          stop_on_violation=args.stop_on_violation, interceptor=interceptor,
                          attachments=attachments)
@@ -139,7 +139,7 @@ def run_proxy(spec: Spec, options: RunOptions, *, duration: float | None) -> int
     from astaa_deft.engine.spec.params import check_param_values
 
     check_param_values(spec, {name: [value] for name, value in options.params.items()}, "--param")
-    record, passive, interceptor = options.record, options.mode == "passive", options.interceptor
+    record, passive, interceptor = options.record, options.mode == RunMode.PASSIVE, options.interceptor
     say(f"astaa-deft proxy: spec '{spec.name}', {'passive' if passive else 'star'} mode"
         + (f", recording to {record}" if record else "") + " — Ctrl-C to stop")
     places = [Place(path, option) for path, option in ((options.run_dir, "--run-dir"), (record, "--record")) if path]

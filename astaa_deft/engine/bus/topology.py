@@ -26,6 +26,7 @@ from typing import Any
 
 from astaa_deft.model.sut import Channel, Spec
 from astaa_deft.engine.bus import zenoh_config as zc
+from astaa_deft.model.records import RunMode
 
 STAR_PREFIX = "sut"
 TOOL_PREFIX = "astaa-deft"
@@ -211,13 +212,12 @@ def star_routes(spec: Spec) -> list[Route]:
     ]
 
 
-def module_configs(spec: Spec, mode: str, bus_endpoint: str) -> dict[str, dict[str, Any]]:
-    """The Zenoh config each module gets, by module name: a client of the bus."""
-    if mode not in ("star", "passive"):
-        raise ValueError(f"unknown mode {mode!r}")
+def module_configs(spec: Spec, mode: RunMode, bus_endpoint: str) -> dict[str, dict[str, Any]]:
+    """The Zenoh config each module gets, by module name: a client of the bus (ValueError: not a mode)."""
+    mode = RunMode(mode)
     return {
         m.name: zc.config_dict(mode="client", connect=[bus_endpoint],
-                               namespace=module_namespace(m.name) if mode == "star" else None)
+                               namespace=module_namespace(m.name) if mode == RunMode.STAR else None)
         for m in spec.modules
     }
 
@@ -230,7 +230,7 @@ def recorded_keys(spec: Spec, mode: str) -> list[tuple[str, Channel]]:
     reconstructs a consumer's frames from them); a channel nobody consumes is
     taken where its producer publishes it.
     """
-    if mode == "star":
+    if mode == RunMode.STAR:
         return [(r.destinations[0][1] if r.destinations else r.source, r.channel) for r in star_routes(spec)]
     return [(ch.key, ch) for ch in spec.channels]
 
@@ -241,7 +241,7 @@ def observed_keys(spec: Spec, mode: str) -> list[tuple[str, Channel]]:
     Not the proxy's copies: its publishers deliver to remote sessions only
     (so the catch-all never sees them), which keeps them from the tool too.
     """
-    if mode == "star":
+    if mode == RunMode.STAR:
         return [(r.source, r.channel) for r in star_routes(spec)]
     return [(ch.key, ch) for ch in spec.channels]
 

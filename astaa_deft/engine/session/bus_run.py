@@ -26,7 +26,7 @@ import zenoh
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus import topology
 from astaa_deft.engine.bus import zenoh_config as zc
-from astaa_deft.model.records import ProcessExit, Violation
+from astaa_deft.model.records import ProcessExit, RunMode, Violation
 from astaa_deft.engine.bus.processes import ChildProcess, python_module
 from astaa_deft.engine.session.helpers import BusRouter, Drain, Helpers, Recorder, RecorderRequest
 from astaa_deft.engine.session.judge import Judge
@@ -97,7 +97,7 @@ class BusRun:
     def start(self) -> None:
         """Start every part in order (see the module's docstring)."""
         opts, spec = self.options, self.spec
-        if opts.interceptor is not None and opts.mode != "star":
+        if opts.interceptor is not None and opts.mode != RunMode.STAR:
             raise InputError("a policy needs the star: interception cannot run with --passive")
         # Both output places are checked before anything starts (OutputError: the place cannot take files).
         if opts.record is not None:
@@ -253,7 +253,7 @@ def _bus_plan(spec: Spec, options: RunOptions) -> BusPlan:
                                      "--no-launch needs to know where the running SUT is",
                                      "list its router under 'zenoh: connect: [...]' in the spec"))
         return BusPlan(zc.config_dict(mode="client", connect=endpoints), listen, endpoints, router=False)
-    if options.mode == "star":
+    if options.mode == RunMode.STAR:
         return BusPlan(zc.config_dict(mode="router", listen=listen), listen, listen[:1], router=False)
     return BusPlan(zc.config_dict(mode="client", connect=listen[:1]), listen, listen[:1], router=True)
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from astaa_deft.model.records import ProcessExit, RunVerdict, Verdict, Violation
+from astaa_deft.model.records import ProcessExit, RunMode, RunVerdict, Verdict, Violation
 
 if TYPE_CHECKING:  # types only: the command line builds options without loading Zenoh
     from astaa_deft.engine.bus.interception import Interceptor
@@ -18,7 +18,7 @@ if TYPE_CHECKING:  # types only: the command line builds options without loading
 class RunOptions:
     """What one run is asked to do; read by the run from the thread that runs it."""
 
-    mode: str = "star"  # "star" (man in the middle) or "passive" (observer only)
+    mode: RunMode = RunMode.STAR  # in the middle, or an observer only (a string is read as its mode)
     launch: bool = True  # False: attach to an already running SUT
     record: Path | None = None  # the MCAP log; None: not recorded
     params: dict[str, str] = field(default_factory=dict)
@@ -30,6 +30,9 @@ class RunOptions:
     time_limit: float | None = None  # seconds; None: no limit from the caller
     # A recorder started ahead of the run (bus_run.warm_recorder), taken by this run if still alive.
     warm_recorder: ChildProcess | None = None
+
+    def __post_init__(self) -> None:
+        self.mode = RunMode(self.mode)  # "star" or "passive" as text too; ValueError for anything else
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,7 @@ from astaa_deft.io.log import layout, records
 from astaa_deft.io.log.viewable import ViewableTwins
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.model.json import JsonObject
-from astaa_deft.model.records import mutation_row_json
+from astaa_deft.model.records import RunMode, mutation_row_json
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.loader import load_spec_text
 import contextlib
@@ -177,7 +177,7 @@ def _arguments(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="astaa-deft-recorder")
     ap.add_argument("--spec-name", default="spec.yaml",
                     help="the spec's file name, for messages (its text is on stdin)")
-    ap.add_argument("--mode", choices=("star", "passive"), required=True)
+    ap.add_argument("--mode", choices=[m.value for m in RunMode], required=True)
     ap.add_argument("--connect", action="append", required=True, help="the bus to record (a router or peer)")
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--meta", default="{}", help="JSON object stored as run metadata")

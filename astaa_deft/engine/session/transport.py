@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 
 from astaa_deft.engine.bus.interception import InterceptionBridge
-from astaa_deft.model.records import Mutation
+from astaa_deft.model.records import Mutation, RunMode
 from astaa_deft.engine.bus.observer import ChannelCounter
 from astaa_deft.engine.bus.proxy import StarProxy, plain_forwarder
 from astaa_deft.engine.session.options import RunOptions
@@ -32,7 +32,7 @@ class Transport(RunPart):
 
     def start(self) -> None:
         session, interceptor = self._session.session, self._options.interceptor
-        if self._options.mode != "star":
+        if self._options.mode != RunMode.STAR:
             self.counter = ChannelCounter(session, self._spec, self._options.mode)
             return
         make_forwarder = plain_forwarder

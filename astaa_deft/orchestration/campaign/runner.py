@@ -20,7 +20,7 @@ from pathlib import Path
 
 import zenoh
 
-from astaa_deft.model.records import Verdict, Violation
+from astaa_deft.model.records import RunMode, Verdict, Violation
 from astaa_deft.model import fields
 from astaa_deft.engine.bus.processes import ChildProcess
 from astaa_deft.io.codecs import get_codec
@@ -114,7 +114,7 @@ def _run_options(spec: Spec, testcase: TestCase | None, params: dict[str, str], 
         policy_file.write_bytes(testcase.to_xml())
         attachments[layout.POLICY_ATTACHMENT] = policy_file
         interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
-    return RunOptions(mode="star", launch=True, record=run_dir / LOG_NAME, params=dict(params),
+    return RunOptions(mode=RunMode.STAR, launch=True, record=run_dir / LOG_NAME, params=dict(params),
                       command_line=["astaa-deft", "fuzz"], run_dir=run_dir / "modules",
                       interceptor=interceptor, stop_on_violation=False, attachments=attachments,
                       warm_recorder=warm_recorder)
