@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from astaa_deft.io.codecs import DecodeError, get_codec, json_fast, same_value
 from astaa_deft.engine.intercept import Delivery, Interceptor, load_dictionary, parse_testcase
 from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.model.records import Rewritten
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC = load_spec(ROOT / "tests" / "data" / "intercept_sut.yaml")
@@ -105,8 +106,8 @@ def through_lane(engine: Interceptor, payload: bytes, now: float) -> list:
     done = lane(payload, now)
     if done is None:
         return [Delivery(CONSUMERS, payload, now)]
-    if type(done) is tuple:
-        return [Delivery(CONSUMERS, done[0], now, original=payload, event=engine.event(done[1]))]
+    if isinstance(done, Rewritten):
+        return [Delivery(CONSUMERS, done.payload, now, original=payload, event=engine.event(done.event))]
     return done
 
 

@@ -128,6 +128,25 @@ MutationRow: TypeAlias = tuple[str, str, str, str, tuple[str, ...], int, float,
 MutationSource: TypeAlias = tuple[str, str, str, str, tuple[str, ...]]
 
 
+class Rewritten:
+    """A lane's answer "this payload, to every consumer, now", with its event.
+
+    The interceptor's lane (``intercept.engine.Interceptor.lane``) answers a
+    rewritten message with one, ``event`` its mutation's row; the proxy's
+    general lane with the typed ``Mutation``; the forwarder knows which, by
+    its lane, and puts ``event`` in the recorder's row as it is. A slotted
+    class rather than a frozen dataclass: one is made per rewritten message,
+    and a frozen dataclass's ``__init__`` costs several times more. Treat it
+    as immutable.
+    """
+
+    __slots__ = ("payload", "event")
+
+    def __init__(self, payload: bytes, event: MutationRow | Mutation):
+        self.payload = payload
+        self.event = event
+
+
 def mutation_row(source: MutationSource, message_index: int, time: float,
                  changes: Sequence[tuple[str, Any, Any]], detail: dict[str, Any] | None = None) -> MutationRow:
     """The compact form of a mutation: ``source``'s attributes, the message's index and time, its changes.

@@ -45,7 +45,7 @@ import zenoh
 
 from astaa_deft.engine.bus.proxy import BLOCK, REMOTE, Forwarder, LiveRoute, plain_forwarder
 from astaa_deft.engine.bus.topology import intercepted_key, pack_deliveries
-from astaa_deft.model.records import Mutation, MutationRow
+from astaa_deft.model.records import Mutation, MutationRow, Rewritten
 
 TICK_SECONDS = 0.01
 BATCH_LIMIT = 256  # deliveries per recorder message at most (a batch of small messages stays one Zenoh message)
@@ -85,27 +85,10 @@ class Interceptor(Protocol):
     def on_tick(self, now: float) -> Sequence[DeliveryLike]: ...
     def flush(self, now: float) -> Sequence[DeliveryLike]: ...
     # on_message for one channel without objects, where it can: returns None (untouched, every consumer, now),
-    # a 2-tuple (payload, event values: rewritten, every consumer, now) or a list of deliveries.
-    def lane(self, channel: str, consumers: tuple[str, ...]) -> Callable[[bytes, float], object] | None: ...
+    # a Rewritten (payload and mutation row: rewritten, every consumer, now) or a list of deliveries.
+    def lane(self, channel: str, consumers: tuple[str, ...]) -> Lane | None: ...
     def event(self, row: MutationRow) -> Mutation: ...  # the typed event of a lane's event values
     def applications(self, now: float) -> Sequence[JsonForm]: ...  # per policy: what it touched, and why not
-
-
-class Rewritten:
-    """A lane's answer "this payload, to every consumer, now", with its event.
-
-    ``event`` is what the recorder's row carries: the lane's event values
-    (the interceptor's lane) or a typed event (``on_message``'s); the
-    forwarder knows which, by its lane. A slotted class rather than a frozen
-    dataclass: one is made per rewritten message, and a frozen dataclass's
-    ``__init__`` costs several times more. Treat it as immutable.
-    """
-
-    __slots__ = ("payload", "event")
-
-    def __init__(self, payload: bytes, event: object):
-        self.payload = payload
-        self.event = event
 
 
 # A lane: the channel's messages in, the common answers (None: untouched; Rewritten) or the deliveries out.
@@ -134,21 +117,6 @@ class _Channel:
         self.pubs = [pub for _consumer, pub in live.publishers]
         self.rows: list[Row] = []
         self.record_pub = record_pub
-
-
-def _engine_lane(offered: Callable[[bytes, float], object]) -> Lane:
-    """The interceptor's own lane (``Interceptor.lane``), its rewrites as :class:`Rewritten` (event values kept)."""
-    rewritten = Rewritten  # (a local: this runs per message)
-
-    def lane(payload: bytes, now: float) -> Rewritten | Sequence[DeliveryLike] | None:
-        done = offered(payload, now)
-        if isinstance(done, tuple):
-            return rewritten(done[0], done[1])
-        if isinstance(done, list):  # the deliveries, as on_message returns them
-            return done
-        return None  # untouched
-
-    return lane
 
 
 def _same(event: object) -> Mutation:
@@ -194,9 +162,9 @@ class InterceptionBridge:
         typed = self.interceptor.event
 
         def event_values(values: object) -> Mutation:
-            return typed(cast(MutationRow, values))  # a lane's event values are a mutation's row
+            return typed(cast(MutationRow, values))  # the interceptor's lane answers with a mutation's row
 
-        return self._lane_forwarder(channel, _engine_lane(offered), event_values)
+        return self._lane_forwarder(channel, offered, event_values)
 
     def _general_lane(self, name: str, consumers: tuple[str, ...]) -> Lane:
         """``on_message`` in the lane's terms, where the interceptor offers no lane.

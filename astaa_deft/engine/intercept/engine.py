@@ -23,11 +23,11 @@ import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from astaa_deft.io.codecs import Codec, DecodeError, get_codec
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.records import FieldChange, Mutation, MutationRow, MutationSource, mutation_row
+from astaa_deft.model.records import FieldChange, Mutation, MutationRow, MutationSource, Rewritten, mutation_row
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.intercept.actions.base import (
     ActionRuntime, Delivery, FastPath, MessageInfo, Pending, PolicyContext, built,
@@ -39,7 +39,7 @@ from astaa_deft.engine.intercept.testcase import Policy, TestCase, load_testcase
 __all__ = ["Delivery", "FieldChange", "Interceptor", "Lane", "Mutation", "PolicyGate", "load_interceptor"]
 
 # What a lane answers for one message (see Interceptor.lane).
-LaneResult = None | tuple[bytes, MutationRow] | list[Delivery]
+LaneResult = None | Rewritten | list[Delivery]
 # Interceptor.lane's shortcut for one channel: lane(payload, now) -> LaneResult.
 Lane = Callable[[bytes, float], LaneResult]
 
@@ -168,9 +168,9 @@ class Interceptor:
             done = self._fast_message(state, consumers, payload, now)
             if done is None:
                 out.append(built(Delivery, consumers=consumers, payload=payload, at=now, original=None, event=None))
-            elif isinstance(done, tuple):
-                out.append(built(Delivery, consumers=consumers, payload=done[0], at=now, original=payload,
-                                 event=Mutation.from_row(done[1])))
+            elif isinstance(done, Rewritten):  # its event is the row _fast_message built
+                out.append(built(Delivery, consumers=consumers, payload=done.payload, at=now, original=payload,
+                                 event=Mutation.from_row(cast(MutationRow, done.event))))
             else:
                 out.extend(done)
             return out
@@ -197,9 +197,9 @@ class Interceptor:
         ``on_message`` does and returns
 
         * None: the message goes to every consumer untouched, now;
-        * (payload, mutation row): the rewritten message goes to every
-          consumer now; the mutation in its compact form (``model.records.MutationRow``,
-          which the proxy's record carries as is);
+        * ``Rewritten(payload, mutation row)``: the rewritten message goes to
+          every consumer now; the mutation in its compact form
+          (``model.records.MutationRow``, which the proxy's record carries as is);
         * anything else as ``on_message`` returns it, a list of deliveries.
 
         Offered where ``on_message`` takes its short way (one acting policy
@@ -251,7 +251,7 @@ class Interceptor:
         source = state.fast_source  # built once per consumers tuple: a lane passes the same one every time
         if source is None or source[4] is not consumers:
             source = state.fast_source = (self.testcase.id, policy.id, policy.action.name, channel, consumers)
-        return done[0], mutation_row(source, index, now, done[1])
+        return Rewritten(done[0], mutation_row(source, index, now, done[1]))
 
     @staticmethod
     def event(row: MutationRow) -> Mutation:
