@@ -26,6 +26,7 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.io.log import layout
 from astaa_deft.engine.monitor import MonitorSet, Violation, check_log, run_verdict
 from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.model.records import ProcessExit
 
 MODULES = ("sim", "planning", "control")
 
@@ -34,9 +35,8 @@ def violation(invariant="inv", kind="bound", crash="Silent", at=1.0, module="con
     return Violation(invariant, kind, "high", ns(at), "command", 3, None, "broke", crash, module)
 
 
-def exit_event(module, at, returncode=1, signal=None, during_shutdown=False) -> dict:
-    return {"kind": "process_exit", "module": module, "time_ns": ns(at), "returncode": returncode,
-            "signal": signal, "during_shutdown": during_shutdown}
+def exit_event(module, at, returncode=1, signal=None, during_shutdown=False) -> ProcessExit:
+    return ProcessExit(module, 0, returncode, signal, ns(at), during_shutdown)
 
 
 @pytest.mark.parametrize("violations, exits, expected", [
@@ -50,10 +50,13 @@ def exit_event(module, at, returncode=1, signal=None, during_shutdown=False) -> 
     # silent *after* its module crashed: the crash's consequence, not a hang
     ([violation(kind="deadline", crash="Restart", at=3.0)], [exit_event("control", 2.0)], "Abort"),
     ([violation()], [exit_event(m, 2.0 + i) for i, m in enumerate(MODULES)], "Catastrophic"),
-    ([], [{"kind": "bus_lost", "time_ns": ns(1.0)}], "Catastrophic"),
 ])
 def test_crash_scale_mapping(violations, exits, expected):
     assert run_verdict(violations, exits, MODULES).klass == expected
+
+
+def test_a_lost_bus_makes_the_run_catastrophic():
+    assert run_verdict([], [], MODULES, bus_lost=True).klass == "Catastrophic"
 
 
 def test_the_first_finding_is_the_earliest_and_exits_count_without_a_process_invariant():

@@ -28,7 +28,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from astaa_deft.engine.monitor.violation import SEVERITIES, Violation
-from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.records import CRASH_SCALE, ProcessExit, RunVerdict, Verdict
 
 ORDER = CRASH_SCALE  # worst first, Pass last (the name the campaign imports)
@@ -36,38 +35,14 @@ IMPLICIT = "(module exit)"  # the name of the finding made from an exit no invar
 BUS_LOST = "bus_lost"  # the kind of the log event saying the bus was lost
 
 
-def exits_of(events: Sequence[ProcessExit | Mapping[str, Any]]) -> tuple[list[ProcessExit], bool]:
-    """(the process exits, whether the bus was lost) of ``events``: typed exits or their log event bodies.
-
-    A body needs only module, returncode and time_ns (the pid defaults to 0);
-    a ``{"kind": "bus_lost"}`` body says the bus was lost; other kinds are ignored.
-    """
-    exits: list[ProcessExit] = []
-    bus_lost = False
-    for event in events:
-        if isinstance(event, ProcessExit):
-            exits.append(event)
-            continue
-        kind = JsonFields(event).text("kind", ProcessExit.kind)
-        if kind == ProcessExit.kind:
-            exits.append(ProcessExit.from_json({"pid": 0, **event}))
-        elif kind == BUS_LOST:
-            bus_lost = True
-    return exits, bus_lost
-
-
-def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit | Mapping[str, Any]],
+def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit],
                 modules: Sequence[str], *, bus_lost: bool = False) -> RunVerdict:
     """The CRASH class of a run from its violations, its process exits and its module names.
 
-    ``exits``: the run's process exits, typed or as ``process_exit`` event
-    bodies (see :func:`exits_of`). The bus lost (``bus_lost``, or a
-    ``bus_lost`` event among ``exits``) makes the run Catastrophic. Pure:
-    the same inputs give the same verdict.
+    ``exits``: the run's process exits. The bus lost (``bus_lost``) makes
+    the run Catastrophic. Pure: the same inputs give the same verdict.
     """
-    typed_exits, lost_in_events = exits_of(exits)
-    bus_lost = bus_lost or lost_in_events
-    mid_run = [e for e in typed_exits if not e.during_shutdown]
+    mid_run = [e for e in exits if not e.during_shutdown]
     first_exit_ns: dict[str | None, int] = {}
     for e in sorted(mid_run, key=lambda e: e.time_ns):
         first_exit_ns.setdefault(e.module, e.time_ns)
