@@ -56,7 +56,7 @@ class Registry(Generic[T]):
 
     def register_class(self, cls: C) -> C:
         """Class decorator: register ``cls`` under its ``name`` attribute."""
-        self.register(cls.name, cls)  # type: ignore[arg-type]  # a class registry's T is that class type
+        self.register(cls.name, cls)  # type: ignore[arg-type,attr-defined]  # a class registry's T is that class type
         return cls
 
     def unregister(self, name: str) -> None:
