@@ -10,15 +10,31 @@ YAML node or XML element (a monitor kind's ``parse``, a fault action's
 ``from_xml``) — and of those how many sit inside a record type's own
 decoder (``from_json``, ``from_*``, ``decode``: the one place a form read
 from a file or a pipe becomes the type); ``Any`` in the public signatures of
-the session, the campaign and the minimiser. Asserts nothing: the figures go
-in the notes.
+the session, the campaign and the minimiser.
+
+Package-wide (issue 35; everything outside the bundled demo): ``Any`` in
+public signatures (module-level functions and classes whose name does not
+start with ``_``, their public methods and ``__init__``, and class
+attributes annotated with ``Any``); functions taking more than four
+positional parameters (``self``/``cls`` not counted); dataclasses whose
+constructor takes more than four fields positionally (not ``kw_only``);
+classes over 300 lines; calls of ``parse_testcase`` and ``to_xml`` in the
+orchestration tier outside the journal and the case payload (where a test
+case is stored or handed to a worker); and the import-linter contracts of
+``pyproject.toml`` checked again with type-only imports (``if
+TYPE_CHECKING:``) counted, as broken contracts and the imports that break
+them. Asserts nothing: the figures go in the notes.
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import os
 import re
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "astaa_deft"
@@ -62,10 +78,93 @@ def _public_functions(tree: ast.Module):
                     yield f"{node.name}.{ast.unparse(item.target)}", item
 
 
+def _signature_mentions_any(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    annotations = [a.annotation for a in [*fn.args.posonlyargs, *fn.args.args, *fn.args.kwonlyargs,
+                                          fn.args.vararg, fn.args.kwarg] if a is not None]
+    return any(_mentions_any(a) for a in [*annotations, fn.returns])
+
+
+def _public_anys(rel: str, tree: ast.Module) -> list[str]:
+    found = []
+    for name, fn in _public_functions(tree):
+        if isinstance(fn, ast.AnnAssign):
+            found.append(f"{rel} {name}")
+        elif _signature_mentions_any(fn):
+            found.append(f"{rel}:{fn.lineno} {name}")
+    return found
+
+
+def _is_dataclass(cls: ast.ClassDef) -> tuple[bool, bool]:
+    """(a dataclass, declared ``kw_only=True``)."""
+    for deco in cls.decorator_list:
+        target = deco.func if isinstance(deco, ast.Call) else deco
+        name = target.id if isinstance(target, ast.Name) else target.attr if isinstance(target, ast.Attribute) else ""
+        if name == "dataclass":
+            kw_only = isinstance(deco, ast.Call) and any(
+                k.arg == "kw_only" and isinstance(k.value, ast.Constant) and k.value.value is True
+                for k in deco.keywords)
+            return True, kw_only
+    return False, False
+
+
+def _positional_fields(cls: ast.ClassDef) -> int:
+    """Fields a dataclass's constructor takes positionally (up to a ``_: KW_ONLY`` marker; ClassVars not fields)."""
+    count = 0
+    for item in cls.body:
+        if isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name):
+            annotation = ast.unparse(item.annotation)
+            if "KW_ONLY" in annotation:
+                break
+            if "ClassVar" in annotation:
+                continue
+            if isinstance(item.value, ast.Call) and ast.unparse(item.value.func).endswith("field") and any(
+                    k.arg in ("init", "kw_only") for k in item.value.keywords):
+                continue
+            count += 1
+    return count
+
+
+def _calls(tree: ast.Module, names: tuple[str, ...]) -> list[tuple[int, str]]:
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            func = node.func
+            name = func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else ""
+            if name in names:
+                out.append((node.lineno, name))
+    return out
+
+
+def _contracts_with_type_checking(package: Path) -> list[str]:
+    """The import-linter contracts of pyproject.toml, run with type-only imports counted: what breaks."""
+    pyproject = package.parent / "pyproject.toml"
+    text = pyproject.read_text()
+    section = text[text.index("[tool.importlinter]"):]
+    section = re.sub(r"exclude_type_checking_imports\s*=\s*true", "exclude_type_checking_imports = false", section)
+    if "exclude_type_checking_imports" not in section:
+        section = section.replace("[tool.importlinter]\n", "[tool.importlinter]\nexclude_type_checking_imports = false\n", 1)
+    with tempfile.TemporaryDirectory() as tmp:
+        config = Path(tmp) / "importlinter.toml"
+        config.write_text(section)
+        env = {**os.environ, "PYTHONPATH": str(package.parent), "COLUMNS": "1000"}  # one chain a line
+        lint = Path(sys.executable).parent / "lint-imports"
+        done = subprocess.run([str(lint), "--config", str(config), "--no-cache"], cwd=package.parent, env=env,
+                              capture_output=True, text=True, check=False)
+    broken = [line.strip() for line in done.stdout.splitlines() if line.rstrip().endswith("BROKEN")]
+    imports = [line.strip() for line in done.stdout.splitlines()  # direct imports: "- a -> b (l.N)"
+               if re.match(r"^- astaa_deft\.\S+ -> astaa_deft\.\S+ \(l\.\d+\)$", line.strip())]
+    return [f"contract {b}" for b in broken] + [f"  import {i.lstrip('- ')}" for i in imports]
+
+
 def main() -> None:
+    global PACKAGE
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--list", action="store_true", help="name every place, not only the counts")
+    parser.add_argument("--package", type=Path, default=PACKAGE,
+                        help="the astaa_deft folder to measure (default: this checkout's), e.g. another worktree's")
     args = parser.parse_args()
+    PACKAGE = args.package.resolve()
+    package_anys, positional_over_four, positional_records, long_classes, xml_calls = [], [], [], [], []
     long_functions, many_params, positional_past_four, gets, anys = [], [], [], [], []
     in_decoders: list[str] = []
     for path in sorted(PACKAGE.rglob("*.py")):
@@ -80,10 +179,25 @@ def main() -> None:
                     if length > 80:
                         long_functions.append(f"{where} ({length} lines)")
                     count, positional = _params(node)
+                    if positional > 4:
+                        positional_over_four.append(f"{where} ({positional} positional)")
                     if count >= 8:
                         many_params.append(f"{where} ({count} parameters)")
                         if positional > 4:
                             positional_past_four.append(f"{where} ({positional} positional)")
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ClassDef):
+                    length = node.end_lineno - node.lineno + 1
+                    if length > 300:
+                        long_classes.append(f"{rel}:{node.lineno} {node.name} ({length} lines)")
+                    dataclass, kw_only = _is_dataclass(node)
+                    if dataclass and not kw_only and _positional_fields(node) > 4:
+                        positional_records.append(f"{rel}:{node.lineno} {node.name} "
+                                                  f"({_positional_fields(node)} positional fields)")
+            package_anys.extend(_public_anys(rel, tree))
+        if rel.startswith("orchestration/") and rel not in ("orchestration/campaign/journal.py",
+                                                             "orchestration/campaign/payload.py"):
+            xml_calls.extend(f"{rel}:{line} {name}" for line, name in _calls(tree, ("parse_testcase", "to_xml")))
         if not rel.startswith(EXTERNAL):
             functions = [node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
             decoders = [range(fn.lineno, fn.end_lineno + 1) for fn in functions
@@ -95,20 +209,22 @@ def main() -> None:
                     if any(n in lines for lines in decoders):
                         in_decoders.append(f"{rel}:{n}")
         if rel.startswith(PUBLIC_SEAMS):
-            for name, fn in _public_functions(tree):
-                if isinstance(fn, ast.AnnAssign):
-                    anys.append(f"{rel} {name}")
-                    continue
-                annotations = [a.annotation for a in [*fn.args.posonlyargs, *fn.args.args, *fn.args.kwonlyargs,
-                                                      fn.args.vararg, fn.args.kwarg] if a is not None]
-                if any(_mentions_any(a) for a in [*annotations, fn.returns]):
-                    anys.append(f"{rel}:{fn.lineno} {name}")
+            anys.extend(_public_anys(rel, tree))
+    layer_breaks = _contracts_with_type_checking(PACKAGE)
     for title, items in (("functions over 80 lines", long_functions),
                          ("functions with 8+ parameters", many_params),
                          ("  of them positional past the fourth", positional_past_four),
                          ('lines with .get(" outside external-format decoders', gets),
                          ("  of them in a record type's own decoder (from_json, from_*, decode)", in_decoders),
-                         ("Any in public signatures of session, campaign, minimiser", anys)):
+                         ("Any in public signatures of session, campaign, minimiser", anys),
+                         ("Any in public signatures, package-wide (demo excepted)", package_anys),
+                         ("functions with more than 4 positional parameters", positional_over_four),
+                         ("dataclasses with more than 4 positional fields", positional_records),
+                         ("classes over 300 lines", long_classes),
+                         ("parse_testcase/to_xml calls in orchestration outside journal and payload", xml_calls),
+                         ("layer contracts broken with TYPE_CHECKING imports counted",
+                          [b for b in layer_breaks if b.startswith("contract")]),
+                         ("  the imports that break them", [b for b in layer_breaks if not b.startswith("contract")])):
         print(f"{title}: {len(items)}")
         if args.list:
             for item in items:
