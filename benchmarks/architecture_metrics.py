@@ -142,7 +142,8 @@ def _contracts_with_type_checking(package: Path) -> list[str]:
     section = text[text.index("[tool.importlinter]"):]
     section = re.sub(r"exclude_type_checking_imports\s*=\s*true", "exclude_type_checking_imports = false", section)
     if "exclude_type_checking_imports" not in section:
-        section = section.replace("[tool.importlinter]\n", "[tool.importlinter]\nexclude_type_checking_imports = false\n", 1)
+        section = section.replace("[tool.importlinter]\n",
+                                  "[tool.importlinter]\nexclude_type_checking_imports = false\n", 1)
     with tempfile.TemporaryDirectory() as tmp:
         config = Path(tmp) / "importlinter.toml"
         config.write_text(section)
