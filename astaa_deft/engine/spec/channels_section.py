@@ -14,12 +14,12 @@ from dataclasses import dataclass, field
 
 from astaa_deft.engine.spec.reader import SpecReader
 from astaa_deft.engine.spec.ros2_section import resolve_cdr_channel
+from astaa_deft.io.codecs import encoding_names
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.sut import Channel, MessageType, Module, Ros2Section
 
 KEY_RE = re.compile(r"^[^*$?#\s]+\Z")  # a concrete Zenoh key: no wildcards, no DSL
-ENCODINGS = ("json", "cbor", "cdr")
 CHANNEL_KEYS = ("name", "key", "topic", "producer", "consumers", "type", "encoding")
 
 
@@ -132,7 +132,8 @@ class _ChannelsReader:
         if "encoding" not in v or not self.reader.expect(v["encoding"], (str,), "'encoding'", "an encoding name"):
             return "json"
         encoding: str = v["encoding"].value
-        if encoding not in ENCODINGS:
-            hint = did_you_mean(encoding, ENCODINGS) or f"supported: {', '.join(ENCODINGS)}"
+        encodings = encoding_names()  # the registered codecs and codec families (io/codecs)
+        if encoding not in encodings:
+            hint = did_you_mean(encoding, encodings) or f"supported: {', '.join(encodings)}"
             self.reader.src.at(v["encoding"], f"unknown encoding '{encoding}'", hint)
         return encoding

@@ -22,6 +22,7 @@ from typing import Any
 from collections.abc import Callable
 
 from astaa_deft.model.errors import AstaaDeftError
+from astaa_deft.model.registry import Registry
 
 
 class CodecError(AstaaDeftError):
@@ -59,6 +60,17 @@ class Codec(ABC):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"
+
+
+# Modules of this package that are not codecs (helpers, and ``cdr``, which loads rosbags and is
+# reached through its family's module, ``cdr_family``).
+_NOT_CODECS = ("base", "cdr", "json_fast", "jsonschema", "rmw_attachment")
+
+# Codecs by name: each codec's module registers one instance (codecs are stateless and shared).
+CODECS: Registry[Codec] = Registry("codec", "astaa_deft.io.codecs", skip=_NOT_CODECS)
+# Families of codecs named ``family:argument`` (``cdr:geometry_msgs/msg/Twist``): each family's
+# module registers how to build the codec of one argument (first use, then kept).
+CODEC_FAMILIES: Registry[Callable[[str], Codec]] = Registry("codec family", "astaa_deft.io.codecs", skip=_NOT_CODECS)
 
 
 def same_value(a: Any, b: Any) -> bool:

@@ -17,7 +17,7 @@ from typing import Any
 
 import cbor2
 
-from astaa_deft.io.codecs.base import Codec, DecodeError, EncodeError, first_uncarried, kind_of
+from astaa_deft.io.codecs.base import CODECS, Codec, DecodeError, EncodeError, first_uncarried, kind_of
 
 # RFC 8949 §3.4.6: an optional "this is CBOR" tag 55799 in front of the item.
 _SELF_DESCRIBE_PREFIX = b"\xd9\xd9\xf7"
@@ -104,3 +104,6 @@ def _cbor_scalar_problem(value: Any) -> str | None:
     if kind in _PLAIN_SCALARS:
         return None
     return f"CBOR (as plain data) cannot carry {kind_of(value)}"
+
+
+CODECS.register(CborCodec.name, CborCodec())

@@ -18,7 +18,7 @@ import re
 import sys
 from typing import Any
 
-from astaa_deft.io.codecs.base import Codec, DecodeError, EncodeError, first_uncarried, kind_of
+from astaa_deft.io.codecs.base import CODECS, Codec, DecodeError, EncodeError, first_uncarried, kind_of
 
 # Built once: json.loads/dumps with options construct a new object per call.
 _DECODER = json.JSONDecoder()  # parse_constant accepts NaN/Infinity/-Infinity
@@ -97,3 +97,6 @@ def _int_problem(number: int) -> str | None:
     except ValueError:
         limit = getattr(sys, "get_int_max_str_digits", lambda: 0)()
         return f"integer longer than Python's {limit}-digit limit for JSON text"
+
+
+CODECS.register(JsonCodec.name, JsonCodec())

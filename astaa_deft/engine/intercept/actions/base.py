@@ -17,9 +17,12 @@ An action module defines everything about its action:
   (``after_message``), clock ticks (``on_tick``) and the end of the run
   (``flush``); each returns the ``Pending`` deliveries it releases.
 
-The package ``astaa_deft.engine.intercept.actions`` finds every ``ActionConfig``
-subclass in its modules, so adding an action is adding a module here (and
-its element in ``policies/testcase.xsd``).
+An action module registers its ``ActionConfig`` on :data:`ACTIONS`
+(``@ACTIONS.register_class``) and declares its element's XSD type
+(``schema``), which the test case reader splices into
+``policies/testcase.xsd``'s Action group: adding an action is adding one
+module to ``astaa_deft.engine.intercept.actions`` (the registry imports every
+module of the package on first use).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from astaa_deft.io.codecs import Codec, EncodeError
 from astaa_deft.model.records import FieldChange, Mutation
+from astaa_deft.model.registry import Registry
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -247,6 +251,9 @@ class ActionConfig(ABC):
     """An action as written in a test case. Subclasses are frozen dataclasses."""
 
     name: ClassVar[str]  # its XML element name
+    # Its element's type in the test case schema: an anonymous ``<xs:complexType>`` (in the XSD
+    # namespace, prefix ``xs``) that may use testcase.xsd's named types (Field, Milliseconds, Count…).
+    schema: ClassVar[str]
     detail_type: ClassVar[type[ActionDetail]] = NoDetail
 
     # What a delivery this action took part in looks like in the log; the minimiser
@@ -296,6 +303,12 @@ class ActionConfig(ABC):
     def pin_copies(cls, count: int) -> ActionConfig:
         """One action making ``count`` plain copies of a message (for ``pins_copies`` actions)."""
         raise NotImplementedError(f"'{cls.name}' does not make copies")
+
+
+# Every action by its XML element name: each action module registers its config class
+# (``@ACTIONS.register_class``); the engine, the test case reader and its schema, and the minimiser
+# look actions up here.
+ACTIONS: Registry[type[ActionConfig]] = Registry("action", "astaa_deft.engine.intercept.actions")
 
 
 # A runtime's shortcut for one channel (``ActionRuntime.fast_path``), called as fast(payload):

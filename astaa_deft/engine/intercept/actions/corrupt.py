@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text, required,
 )
 
@@ -37,9 +37,25 @@ class CorruptDetail(ActionDetail):
 MAX_KEEP = 0.999999
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Corrupt(ActionConfig):
     name: ClassVar[str] = "corrupt"
+    # flip: XOR `bytes` random bytes with random non-zero masks; truncate: keep the first `keep`
+    # fraction of the payload (random if omitted).
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:attribute name="mode" use="required">
+          <xs:simpleType>
+            <xs:restriction base="xs:token">
+              <xs:enumeration value="flip"/>
+              <xs:enumeration value="truncate"/>
+            </xs:restriction>
+          </xs:simpleType>
+        </xs:attribute>
+        <xs:attribute name="bytes" type="Count"/>
+        <xs:attribute name="keep" type="Fraction"/>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = CorruptDetail
     fields_separable: ClassVar[bool] = False  # the delivery is damaged bytes, not a message
     mode: str  # "flip" | "truncate"

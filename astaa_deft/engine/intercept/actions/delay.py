@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text, required,
 )
 
@@ -29,9 +29,14 @@ class DelayDetail(ActionDetail):
     delay_ms: float | None = None
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Delay(ActionConfig):
     name: ClassVar[str] = "delay"
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:attribute name="ms" type="Milliseconds" use="required"/>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = DelayDetail
     defers: ClassVar[bool] = True
     ms: float

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
 )
 
 if TYPE_CHECKING:
@@ -21,9 +21,11 @@ if TYPE_CHECKING:
     from astaa_deft.engine.intercept.testcase import ActionChecker
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Drop(ActionConfig):
     name: ClassVar[str] = "drop"
+    schema: ClassVar[str] = "<xs:complexType/>"  # its element's type in the test case schema: empty
     fields_separable: ClassVar[bool] = False  # nothing is delivered
 
     @classmethod

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
 )
 
 if TYPE_CHECKING:
@@ -27,9 +27,14 @@ class DuplicateDetail(ActionDetail):
     copies: int | None = None
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Duplicate(ActionConfig):
     name: ClassVar[str] = "duplicate"
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:attribute name="copies" type="Copies" default="1"/>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = DuplicateDetail
     adds_delivery: ClassVar[bool] = True
     pins_copies: ClassVar[bool] = True

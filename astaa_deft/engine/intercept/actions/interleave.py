@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from astaa_deft.io.codecs import DecodeError, get_codec
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text, required,
 )
 from astaa_deft.engine.intercept.actions.set import (
@@ -39,9 +39,19 @@ DEFAULT_PINNED_RATE = 10.0  # Hz, for a pinned injection whose policy is unknown
 MAX_RATE = 1000.0  # the schema's bound
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Interleave(ActionConfig):
     name: ClassVar[str] = "interleave"
+    # Inject copies of the channel's last real message, with these fields set, `rate` times per
+    # second while the window is open.
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:sequence>
+          <xs:element name="field" type="Field" minOccurs="0" maxOccurs="unbounded"/>
+        </xs:sequence>
+        <xs:attribute name="rate" type="Rate" use="required"/>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = FieldsDetail
     adds_delivery: ClassVar[bool] = True
     carries_fields: ClassVar[bool] = True

@@ -39,7 +39,7 @@ from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.model.fields import FieldPath, FieldPathError, FieldType, get, type_at
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text, required,
 )
 
@@ -85,6 +85,7 @@ class ParticipantDetail(ActionDetail):
     skipped: str | None = None
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Participant(ActionConfig):
     """A participant: id, kind, pose (x, y, heading), size, and a motion (static, or a timed path).
@@ -95,6 +96,29 @@ class Participant(ActionConfig):
     """
 
     name: ClassVar[str] = "participant"
+    # Append a traffic participant to an array field of every selected message (docs/decictor.md):
+    # pose x, y, heading at time t (on the channel's clock), size, and a motion: static, or straight
+    # lines through the <at> waypoints.
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:sequence>
+          <xs:element name="at" minOccurs="0" maxOccurs="1000">
+            <xs:complexType>
+              <xs:attribute name="t" type="Time" use="required"/>
+              <xs:attribute name="x" type="Coordinate" use="required"/>
+              <xs:attribute name="y" type="Coordinate" use="required"/>
+            </xs:complexType>
+          </xs:element>
+        </xs:sequence>
+        <xs:attribute name="id" type="ParticipantId" use="required"/>
+        <xs:attribute name="kind" type="Name" default="vehicle"/>
+        <xs:attribute name="x" type="Coordinate" use="required"/>
+        <xs:attribute name="y" type="Coordinate" use="required"/>
+        <xs:attribute name="heading" type="Coordinate" default="0"/>
+        <xs:attribute name="length" type="Size" default="4.6"/>
+        <xs:attribute name="width" type="Size" default="1.9"/>
+        <xs:attribute name="t" type="Time" default="0"/>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = ParticipantDetail
     id: int
     kind: str

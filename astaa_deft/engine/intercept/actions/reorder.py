@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, ClassVar
 
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text,
 )
 
@@ -31,9 +31,16 @@ class ReorderDetail(ActionDetail):
     released: str | None = None  # why it went out without a successor
 
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Reorder(ActionConfig):
     name: ClassVar[str] = "reorder"
+    # Hold a message and deliver it right after the next one on its channel; released anyway after
+    # max-hold-ms if no next message comes.
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:attribute name="max-hold-ms" type="Milliseconds" default="1000"/>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = ReorderDetail
     defers: ClassVar[bool] = True
     max_hold_ms: float = 1000.0

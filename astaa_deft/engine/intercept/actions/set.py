@@ -44,7 +44,7 @@ from astaa_deft.engine.intercept.dictionary import (
     field_site, wire_value,
 )
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, FastPath, FieldChange, MessageInfo,
+    ACTIONS, ActionConfig, ActionDetail, ActionRuntime, FastPath, FieldChange, MessageInfo,
     Pending, PinnedStep, PolicyContext, built, required,
 )
 
@@ -364,9 +364,17 @@ def _previous_at(info: MessageInfo, where: FieldPath) -> Any:
 
 # ---------------------------------------------------------------- the action
 
+@ACTIONS.register_class
 @dataclass(frozen=True)
 class Set(ActionConfig):
     name: ClassVar[str] = "set"
+    # Its element's type in the test case schema (spliced into testcase.xsd's Action group).
+    schema: ClassVar[str] = """
+      <xs:complexType>
+        <xs:sequence>
+          <xs:element name="field" type="Field" maxOccurs="unbounded"/>
+        </xs:sequence>
+      </xs:complexType>"""
     detail_type: ClassVar[type[ActionDetail]] = FieldsDetail
     carries_fields: ClassVar[bool] = True
     fields: tuple[Assignment, ...]

@@ -22,7 +22,7 @@ from lxml import etree
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.io.inputfile import POLICY
 from astaa_deft.model.sut import Spec
-from astaa_deft.engine.intercept.actions.base import decimal_text
+from astaa_deft.engine.intercept.actions.base import ACTIONS, decimal_text
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase.model import Selection, TestCase, Window
 
@@ -84,9 +84,29 @@ def parse_xml(data: bytes, name: str) -> etree._Element:
     return root
 
 
-@lru_cache(maxsize=1)
+XS = "http://www.w3.org/2001/XMLSchema"
+
+
+def schema_document() -> etree._ElementTree:
+    """testcase.xsd with its Action group filled: one element per registered action, of the type it declares."""
+    document = etree.parse(str(SCHEMA_PATH), hardened_parser())
+    choice = document.find(f"{{{XS}}}group[@name='Action']/{{{XS}}}choice")
+    assert choice is not None, "testcase.xsd lost its Action group"
+    for name, action in ACTIONS.items():
+        element = etree.SubElement(choice, f"{{{XS}}}element", name=name)
+        element.append(etree.fromstring(f'<xs:schema xmlns:xs="{XS}">{action.schema}</xs:schema>',
+                                        hardened_parser())[0])
+    return document
+
+
 def _schema() -> etree.XMLSchema:
-    return etree.XMLSchema(etree.parse(str(SCHEMA_PATH), hardened_parser()))
+    return _schema_of(ACTIONS.names())
+
+
+@lru_cache(maxsize=2)
+def _schema_of(actions: tuple[str, ...]) -> etree.XMLSchema:
+    """The schema for this set of registered actions (built again when one is added, e.g. by a test)."""
+    return etree.XMLSchema(schema_document())
 
 
 # Hints for the schema's own types, keyed by the type name libxml2 quotes.

@@ -1,23 +1,26 @@
-"""The invariant kinds, one module each, behind one interface.
+"""The invariant kinds, one module each, each registering itself on ``KINDS``.
 
-Each kind module provides ``KEYS`` (its own YAML keys), ``REQUIRED`` (those
+A kind module provides ``KEYS`` (its own YAML keys), ``REQUIRED`` (those
 that must be given), ``parse(reader, node, common)`` (YAML -> its frozen
 Invariant dataclass, or None after reporting why) and ``monitor(invariant,
-context)`` (a ``base.Monitor``). Adding a kind is adding a module and a
-line below.
+context)`` (a ``base.Monitor``), and registers them as a :class:`Kind` on
+:data:`KINDS` (a ``model.registry.Registry``). Adding a kind is adding a
+module here: the spec reader's list of kinds (``kind: …``, its "did you
+mean", the keys it allows) and the monitor set are read from the registry.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from types import ModuleType
 from collections.abc import Callable
+from dataclasses import dataclass
 
-from astaa_deft.engine.monitor.kinds import bound, collision, deadline, exceptions, expression, log, process, temporal
+from astaa_deft.model.registry import Registry
 
 
 @dataclass(frozen=True)
 class Kind:
+    """One invariant kind: its YAML keys, the reader of its entry and the maker of its monitor."""
+
     name: str
     keys: tuple[str, ...]
     required: tuple[str, ...]
@@ -25,22 +28,12 @@ class Kind:
     monitor: Callable
     invariant_type: type
 
+    @classmethod
+    def register(cls, invariant_type: type, keys: tuple[str, ...], required: tuple[str, ...], *,
+                 parse: Callable, monitor: Callable) -> Kind:
+        """Register the kind whose invariants are ``invariant_type`` (its ``kind`` is the name)."""
+        name: str = invariant_type.kind  # type: ignore[attr-defined]  # every Invariant declares its kind
+        return KINDS.register(name, cls(name, keys, required, parse, monitor, invariant_type))
 
-def _kind(module: ModuleType, invariant_type: type) -> Kind:
-    name = invariant_type.kind  # type: ignore[attr-defined]
-    return Kind(name, module.KEYS, module.REQUIRED, module.parse, module.monitor, invariant_type)
 
-
-KINDS: dict[str, Kind] = {
-    kind.name: kind
-    for kind in (
-        _kind(process, process.ProcessInvariant),
-        _kind(deadline, deadline.DeadlineInvariant),
-        _kind(bound, bound.BoundInvariant),
-        _kind(expression, expression.ExpressionInvariant),
-        _kind(temporal, temporal.TemporalInvariant),
-        _kind(collision, collision.CollisionInvariant),
-        _kind(log, log.LogInvariant),
-        _kind(exceptions, exceptions.ExceptionsInvariant),
-    )
-}
+KINDS: Registry[Kind] = Registry("monitor kind", __name__)

@@ -24,6 +24,7 @@ from astaa_deft.engine.monitor.base import NO_VIOLATIONS, EpisodeGate, Invariant
 from astaa_deft.engine.monitor.paths import Missing, compile_values
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("channel", "field", "min", "max", "finite", "non_empty", "in_enum")
 REQUIRED = ("channel", "field")
@@ -157,3 +158,6 @@ class BoundMonitor(Monitor):
 
 def monitor(invariant: BoundInvariant, context: MonitorContext) -> BoundMonitor:
     return BoundMonitor(invariant, context)
+
+
+Kind.register(BoundInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

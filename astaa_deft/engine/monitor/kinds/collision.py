@@ -54,6 +54,7 @@ from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.model.geometry import Box, box_between, box_moved, overlap
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation, json_safe
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("ego", "obstacles", "margin")
 REQUIRED = ("ego", "obstacles")
@@ -431,3 +432,6 @@ class _Overlap:
 
 def monitor(invariant: CollisionInvariant, context: MonitorContext) -> CollisionMonitor:
     return CollisionMonitor(invariant, context)
+
+
+Kind.register(CollisionInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

@@ -24,6 +24,7 @@ from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("channel", "module", "max_gap", "after", "responds_to")
 REQUIRED = ("max_gap",)
@@ -148,3 +149,6 @@ class DeadlineMonitor(Monitor):
 
 def monitor(invariant: DeadlineInvariant, context: MonitorContext) -> DeadlineMonitor:
     return DeadlineMonitor(invariant, context)
+
+
+Kind.register(DeadlineInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

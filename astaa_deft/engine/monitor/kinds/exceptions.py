@@ -27,6 +27,7 @@ from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.kinds.log import LogInvariant, LogMonitor, read_watched_output
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("modules", "pattern", "max_count")
 REQUIRED = ()
@@ -62,3 +63,6 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> ExceptionsInvari
 
 def monitor(invariant: ExceptionsInvariant, context: MonitorContext) -> LogMonitor:
     return LogMonitor(invariant, context)
+
+
+Kind.register(ExceptionsInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

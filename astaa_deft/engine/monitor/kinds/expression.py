@@ -19,6 +19,7 @@ from astaa_deft.engine.monitor.base import NO_VIOLATIONS, EpisodeGate, Invariant
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, CompiledExpression, describe_runtime_error
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("channel", "expr")
 REQUIRED = ("channel", "expr")
@@ -72,3 +73,6 @@ class ExpressionMonitor(Monitor):
 
 def monitor(invariant: ExpressionInvariant, context: MonitorContext) -> ExpressionMonitor:
     return ExpressionMonitor(invariant, context)
+
+
+Kind.register(ExpressionInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

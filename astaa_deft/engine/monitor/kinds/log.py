@@ -26,6 +26,7 @@ from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, LogLineInfo, Monitor, MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("modules", "pattern", "max_count")
 REQUIRED = ("pattern",)
@@ -123,3 +124,6 @@ class LogMonitor(Monitor):
 
 def monitor(invariant: LogInvariant, context: MonitorContext) -> LogMonitor:
     return LogMonitor(invariant, context)
+
+
+Kind.register(LogInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

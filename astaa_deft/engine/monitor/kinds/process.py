@@ -28,6 +28,7 @@ from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, Mo
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("modules", "allow_clean_exit", "restart_counter")
 REQUIRED = ()
@@ -131,3 +132,6 @@ class ProcessMonitor(Monitor):
 
 def monitor(invariant: ProcessInvariant, context: MonitorContext) -> ProcessMonitor:
     return ProcessMonitor(invariant, context)
+
+
+Kind.register(ProcessInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

@@ -35,6 +35,7 @@ from astaa_deft.engine.monitor.sampling import GridSampler
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.stl import SIGNAL_NAME, StlError, StlFormula, check_formula
 from astaa_deft.engine.monitor.violation import Violation
+from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("signals", "formula", "period")
 REQUIRED = ("signals", "formula")
@@ -234,3 +235,6 @@ class TemporalMonitor(Monitor):
 
 def monitor(invariant: TemporalInvariant, context: MonitorContext) -> TemporalMonitor:
     return TemporalMonitor(invariant, context)
+
+
+Kind.register(TemporalInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

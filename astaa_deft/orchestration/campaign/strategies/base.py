@@ -17,6 +17,7 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase, Timing
+from astaa_deft.model.registry import Registry
 
 
 @dataclass(frozen=True)
@@ -77,3 +78,9 @@ class Strategy(ABC):
 
 
 __all__ = ["Proposal", "Strategy", "Timing"]
+
+
+# Every strategy by its name (``fuzz --strategy``): each strategy's module registers its class
+# (``@STRATEGIES.register_class``); the campaign and the command line's choices read it.
+STRATEGIES: Registry[type[Strategy]] = Registry("strategy", "astaa_deft.orchestration.campaign.strategies",
+                                                skip=("base", "decictor_export"))

@@ -31,7 +31,7 @@ from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
+from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy
 
 INVARIANT = "path_consistency"
 CRASH = Verdict.HINDERING
@@ -60,6 +60,7 @@ def scene_of(testcase_xml: str) -> Scene:
     return Scene(tuple(p.action for p in testcase.policies if isinstance(p.action, Participant)))
 
 
+@STRATEGIES.register_class
 class DecictorStrategy(Strategy):
     name = "decictor"
     exports_own_findings = True  # finish(): module tests and decictor.html instead of minimisation
@@ -144,11 +145,13 @@ class DecictorStrategy(Strategy):
         export_findings(self, journal, out, spec_path, say)
 
 
+@STRATEGIES.register_class
 class DecictorRandomDeltaStrategy(DecictorStrategy):
     name = "decictor-random-delta"
     mode = "random-delta"
 
 
+@STRATEGIES.register_class
 class DecictorRandomStrategy(DecictorStrategy):
     name = "decictor-random"
     mode = "random"

@@ -31,7 +31,7 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Selection, TestCase, parse_testcase
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
-from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy, Timing
+from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy, Timing
 from astaa_deft.orchestration.campaign.strategies.random import RandomStrategy
 
 EXPLOIT_SHARE = 0.5
@@ -42,6 +42,7 @@ CORPUS_LIMIT = 32
 OPERATORS = ("value", "field", "window", "action", "policy")
 
 
+@STRATEGIES.register_class
 class GuidedStrategy(Strategy):
     name = "guided"
 

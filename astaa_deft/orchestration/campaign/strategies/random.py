@@ -23,12 +23,13 @@ import random
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy, Timing
+from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy, Timing
 
 ID_WIDTH = 6
 COVERAGE_ROUNDS = 2  # pure coverage rounds before weighted draws are mixed in
 
 
+@STRATEGIES.register_class
 class RandomStrategy(Strategy):
     name = "random"
 
