@@ -26,7 +26,7 @@ ALL_KINDS = [
     rec.RunVerdict(Verdict.HINDERING, rec.Violation("speed", "bound", "high", 6, None, None, None, "too fast",
                                                     "Hindering"), "1 violation", ("a reason",), time_ns=7),
     rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
-    rec.MutationRecord(9, "p1", "set", "data", 12, (rec.FieldChange("value", 1.0, {"float": "nan"}),), "tc",
+    rec.MutationRecord(9, "p1", "set", "data", 12, (rec.TaggedFieldChange("value", 1.0, {"float": "nan"}),), "tc",
                        ("listener",), 1.5, {"steps": []}, 4, 5),
     rec.ModuleLogLine(10, "talker", "stderr", "ERROR: boom"),
     rec.FlagRecord(12, "data", 4, "not JSON", 11),

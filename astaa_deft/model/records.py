@@ -6,14 +6,16 @@ launcher, the recorder and the log:
 * :class:`Verdict` — the CRASH scale (Kropp, Koopman & Siewiorek, FTCS 1998),
   worst first, with ``Pass`` last; its values are the text the log, the
   console and the campaign journal have always held;
-* :class:`FieldChange` and :class:`Mutation` — what one policy (or a stack of
-  policies) did to one message; :data:`MutationRow` its compact tuple form;
+* :class:`FieldChange` (the message's values) and :class:`TaggedFieldChange`
+  (the same in their tagged JSON form, as a log holds it), and
+  :class:`Mutation` — what one policy (or a stack of policies) did to one
+  message; :data:`MutationRow` its compact tuple form;
 * :class:`ProcessExit` — a module's exit, as the launcher sees it and the log
   stores it;
 * :class:`Violation` — a broken invariant;
 * :class:`RunEnd` — why the run ended.
 
-Each type owns its JSON form: ``to_json()`` writes it and ``from_json(obj,
+Each type owns its one JSON form: ``to_json()`` writes it and ``from_json(obj,
 where=...)`` reads it back, checking what it reads and raising
 :class:`RecordError` (an ``InputError`` naming the place) for a damaged
 record. The log adds a ``kind`` (and for some a ``time_ns``) around these
@@ -23,14 +25,14 @@ between threads.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeAlias
 
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.json_fields import JsonFields
-from astaa_deft.model.tagged import to_tagged
+from astaa_deft.model.tagged import from_tagged, to_tagged
 from astaa_deft.model.vocabulary import TextEnum
 
 
@@ -93,11 +95,12 @@ CRASH_CLASSES: tuple[Verdict, ...] = CRASH_SCALE[:-1]  # what a finding can poin
 
 @dataclass(frozen=True)
 class FieldChange:
-    """One field a policy changed: ``path`` is concrete (``points[2].v``, never a wildcard).
+    """One field a policy changed, with the message's own values: ``path`` is concrete (``points[2].v``).
 
-    In a mutation the interception builds, ``old`` and ``new`` are the
-    message's values; in one read from the log they are in their tagged JSON
-    form (``model.tagged``), as written.
+    What the interception builds and the minimiser works with; a value may be
+    NaN, bytes or a string JSON cannot hold, so its JSON form tags them
+    (``model.tagged``). As a log holds it, the change is a
+    :class:`TaggedFieldChange`.
     """
 
     path: str
@@ -108,11 +111,32 @@ class FieldChange:
         """``{"path", "old", "new"}`` with the values tagged (strict JSON)."""
         return {"path": self.path, "old": to_tagged(self.old), "new": to_tagged(self.new)}
 
+    def tagged(self) -> TaggedFieldChange:
+        """The same change with its values in their tagged JSON form."""
+        return TaggedFieldChange(self.path, to_tagged(self.old), to_tagged(self.new))
+
+
+@dataclass(frozen=True)
+class TaggedFieldChange:
+    """One field change as a log holds it: its values in their tagged JSON form (``model.tagged``), as written."""
+
+    path: str
+    old: JsonValue = None
+    new: JsonValue = None
+
+    def to_json(self) -> JsonObject:
+        """``{"path", "old", "new"}``, the values as held (already strict JSON)."""
+        return {"path": self.path, "old": self.old, "new": self.new}
+
     @classmethod
-    def from_json(cls, body: object, *, where: str = "the log") -> FieldChange:
+    def from_json(cls, body: object, *, where: str = "the log") -> TaggedFieldChange:
         """The change of its JSON form (values stay tagged); RecordError if it is not an object."""
         obj = _fields(body, where, "field change")
         return cls(obj.text("path", "None"), obj.raw("old"), obj.raw("new"))
+
+    def untagged(self) -> FieldChange:
+        """The change with the message's own values (NaN, bytes… back from their tags)."""
+        return FieldChange(self.path, from_tagged(self.old), from_tagged(self.new))
 
 
 # The compact form of a mutation on the proxy's hot path and on the pipe to the recorder: the
@@ -120,7 +144,7 @@ class FieldChange:
 # tuple because ``marshal`` (the proxy → recorder framing) carries exact built-in types only and
 # building the dataclass and its changes per mutated message costs the proxy (docs/performance.md,
 # "records"). Built only by ``mutation_row`` or ``Mutation.to_row``; read by ``Mutation.from_row``
-# and ``mutation_row_json``.
+# and ``Mutation.row_json``.
 MutationRow: TypeAlias = tuple[str, str, str, str, tuple[str, ...], int, float,
                                Sequence[tuple[str, Any, Any]], dict[str, Any]]
 # The first five attributes of a mutation (testcase, policy, action, channel, consumers): fixed for
@@ -156,17 +180,6 @@ def mutation_row(source: MutationSource, message_index: int, time: float,
     return source + (message_index, time, changes, {} if detail is None else detail)
 
 
-def mutation_row_json(row: MutationRow) -> JsonObject:
-    """``Mutation.from_row(row).to_json()``, without building the mutation (the recorder's per-event path)."""
-    testcase, policy, action, channel, consumers, message_index, time, changes, detail = row
-    return {
-        "testcase": testcase, "policy": policy, "action": action, "channel": channel, "consumers": list(consumers),
-        "message_index": message_index, "time": time,
-        "fields": [{"path": path, "old": to_tagged(old), "new": to_tagged(new)} for path, old, new in changes],
-        "detail": to_tagged(detail),
-    }
-
-
 @dataclass(frozen=True)
 class Mutation:
     """What one policy (or a stack of policies, names joined by '+') did to one message."""
@@ -196,7 +209,20 @@ class Mutation:
 
     def to_json(self) -> JsonObject:
         """Plain JSON types only; exceptional values are tagged (``model.tagged``)."""
-        return mutation_row_json(self.to_row())
+        return Mutation.row_json(self.to_row())
+
+    @staticmethod
+    def row_json(row: MutationRow, tag: Callable[[Any], JsonValue] = to_tagged) -> JsonObject:
+        """The JSON form of a mutation from its compact form (the recorder's per-event path), without
+        building the mutation: the one place that lays out a mutation's keys. ``tag`` writes a value
+        (the log's record passes values already tagged through as they are)."""
+        testcase, policy, action, channel, consumers, message_index, time, changes, detail = row
+        return {
+            "testcase": testcase, "policy": policy, "action": action, "channel": channel, "consumers": list(consumers),
+            "message_index": message_index, "time": time,
+            "fields": [{"path": path, "old": tag(old), "new": tag(new)} for path, old, new in changes],
+            "detail": tag(detail),
+        }
 
 
 # ---------------------------------------------------------------- process exits
@@ -270,15 +296,8 @@ class Violation:
     module: str | None = None  # the module held responsible, when one is
 
     def to_json(self) -> JsonObject:
-        """Its JSON form (a verdict's ``first``, ``check --json``)."""
-        return {
-            "invariant": self.invariant, "invariant_kind": self.invariant_kind, "severity": self.severity,
-            "time_ns": self.time_ns, "channel": self.channel, "seq": self.seq, "message": self.message,
-            "detail": self.detail, "crash": self.crash, "module": self.module,
-        }
-
-    def to_log_json(self) -> JsonObject:
-        """Its form in the log (without ``kind``): the same keys, in the order logs have always had them."""
+        """Its one JSON form: the log's ``violation`` event's body (without ``kind``), a verdict's ``first``,
+        ``check --json`` — in the key order logs have always had."""
         return {
             "time_ns": self.time_ns, "invariant": self.invariant, "invariant_kind": self.invariant_kind,
             "severity": self.severity, "crash": self.crash, "detail": self.detail, "module": self.module,
@@ -287,7 +306,7 @@ class Violation:
 
     @classmethod
     def from_json(cls, body: object, *, where: str = "the log") -> Violation:
-        """The violation of either form; RecordError if it is not an object.
+        """The violation of its JSON form; RecordError if it is not an object.
 
         Lenient as logs have always been read: an absent or malformed field
         takes its default (a time of 0, an unknown class Silent) rather than
@@ -359,14 +378,8 @@ class RunVerdict:
     time_ns: int = 0  # when the verdict was logged (0: not logged)
 
     def to_json(self) -> JsonObject:
-        """The verdict's JSON form (the ``verdict`` log event's body without ``kind`` and ``time_ns``)."""
-        return {"class": self.klass, "first": self.first.to_json() if self.first else None,
-                "summary": self.summary, "reasons": list(self.reasons)}
-
-    def to_log_json(self) -> JsonObject:
-        """The ``verdict`` log event's body, without ``kind``: the first finding in the log's key order."""
-        return {"time_ns": self.time_ns, "class": self.klass,
-                "first": self.first.to_log_json() if self.first else None,
+        """Its one JSON form: the ``verdict`` log event's body (without ``kind``), ``check --json``'s verdict."""
+        return {"time_ns": self.time_ns, "class": self.klass, "first": self.first.to_json() if self.first else None,
                 "summary": self.summary, "reasons": list(self.reasons)}
 
     @classmethod

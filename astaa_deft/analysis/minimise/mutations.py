@@ -250,7 +250,7 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
         if not isinstance(body, Mapping):
             raise InputError(Problem(str(log.path), None, None, "a mutation event is not a JSON object",
                                      "the log is damaged or was not written by astaa-deft"))
-        event = rec.decode_mutation(body, record.log_time)
+        event = rec.MutationRecord.from_json(body, time_ns=record.log_time, where=str(log.path))
         channel = known.get(event.channel)
         if channel is None:
             raise InputError(Problem(str(log.path), None, None,
@@ -278,7 +278,7 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
             number=number, channel=event.channel, steps=steps,
             consumers=event.consumers, message_index=event.message_index,
             time=time_s, at=(arrived_ns - start_ns) / 1e9,
-            fields=tuple(FieldChange(f.path, from_tagged(f.old), from_tagged(f.new)) for f in event.fields),
+            fields=tuple(change.untagged() for change in event.fields),
             original=original.data,
             original_time_ns=arrived_ns,
             delivered=delivered.data if delivered is not None else None,

@@ -53,7 +53,7 @@ from astaa_deft.io.log import layout, records
 from astaa_deft.io.log.viewable import ViewableTwins
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.model.json import JsonObject
-from astaa_deft.model.records import RunMode, mutation_row_json
+from astaa_deft.model.records import Mutation, RunMode
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.loader import load_spec_text
 import contextlib
@@ -532,8 +532,7 @@ def _write_mutation(writer: LogWriter, target: InterceptedChannel, delivery: _De
     original_seq = writer.message(target.original, log_time, original, publish_time) if original is not None else None
     delivered_seq = (writer.message(target.delivered, log_time, delivery.payload, publish_time)
                      if delivery.delivered else None)
-    body = event_json(delivery.event)  # a dict of its own: the two sequences go last, as they always did
-    body["original_sequence"], body["delivered_sequence"] = original_seq, delivered_seq
+    body = records.MutationRecord.logged(event_json(delivery.event), original_seq, delivered_seq)
     writer.message(target.mutations, log_time, _event_text(body))
     return delivery.delivered
 
@@ -559,7 +558,7 @@ def event_json(wire: topology.WireEvent) -> JsonObject:
     """A mutation's JSON form (``Mutation.to_json``), from what the proxy sent."""
     if wire.form == topology.EVENT_JSON:
         return dict(wire.value)
-    return mutation_row_json(wire.value)  # the compact form (topology.intercept_record)
+    return Mutation.row_json(wire.value)  # the compact form (topology.intercept_record)
 
 
 if __name__ == "__main__":
