@@ -8,13 +8,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 from collections.abc import Mapping
 
-if TYPE_CHECKING:
-    from astaa_deft.engine.spec.decictor_section import DecictorSection  # it imports fields, which imports this module
-    from astaa_deft.engine.spec.replay_module import ReplayModule
-    from astaa_deft.engine.spec.run_section import RunSection
+from astaa_deft.model.decictor import DecictorSection
+from astaa_deft.model.replay_module import ReplayModule
+from astaa_deft.model.run_section import RunSection
 
 FLOAT_KINDS = ("float32", "float64")
 INT_KINDS = ("int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64")

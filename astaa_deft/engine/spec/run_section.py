@@ -20,84 +20,23 @@ against the channel's declared message type when the spec is loaded.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Mapping, Sequence
 
-from astaa_deft.engine.monitor.expression import CompiledExpression
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import CRASH_CLASSES, SEVERITIES
 from astaa_deft.io.yamlsource import Node, Source, describe_value
 from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Channel, MessageType
+from astaa_deft.model.run_section import (
+    CRASHED, DEFAULT_SEVERITY, PASS, PASS_OUTCOME, ChannelEnd, ModuleExitEnd, Outcome, RunSection,
+)
 
 KEYS = ("time_limit", "end_when")
 MODULE_KEYS = ("module", "exit_codes", "reason")
 CHANNEL_KEYS = ("channel", "expr", "reason", "crash", "severity")
 CODE_KEYS = ("code", "outcome", "crash", "severity")
-PASS = "pass"
 DEFAULT_FAILURE_CRASH = Verdict.SILENT  # a named outcome the module reports: the SUT noticed nothing else
-DEFAULT_SEVERITY = "high"
 MAX_TIME_LIMIT = 7 * 24 * 3600.0
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """What a run's end means: a pass, or a finding with a CRASH class and a severity."""
-
-    name: str
-    crash: Verdict | None = None  # None: the end is a pass
-    severity: str = DEFAULT_SEVERITY
-
-    @property
-    def passed(self) -> bool:
-        return self.crash is None
-
-
-PASS_OUTCOME = Outcome(PASS)
-CRASHED = Outcome("crashed", Verdict.ABORT)  # an exit code the spec does not list, or a kill by a signal
-
-
-@dataclass(frozen=True)
-class ModuleExitEnd:
-    """The run ends when ``module`` exits; its exit code says how it went."""
-
-    module: str
-    exit_codes: Mapping[int, Outcome] = field(default_factory=lambda: {0: PASS_OUTCOME})
-    other: Outcome = CRASHED
-    reason: str = ""
-
-    def outcome(self, returncode: int, signal: str | None) -> Outcome:
-        if signal:
-            return Outcome(f"killed by {signal}", Verdict.ABORT)
-        return self.exit_codes.get(returncode, self.other)
-
-    def describe(self) -> str:
-        return self.reason or f"module '{self.module}' exited"
-
-
-@dataclass(frozen=True)
-class ChannelEnd:
-    """The run ends at the first message on ``channel`` for which ``expr`` holds."""
-
-    channel: str
-    expr: CompiledExpression
-    reason: str
-    outcome: Outcome = PASS_OUTCOME
-
-
-@dataclass(frozen=True)
-class RunSection:
-    time_limit: float | None = None
-    module_exits: tuple[ModuleExitEnd, ...] = ()
-    channel_ends: tuple[ChannelEnd, ...] = ()
-
-    def exit_end(self, module: str) -> ModuleExitEnd | None:
-        """The condition that makes ``module``'s exit the end of the run (None: its exit is a crash)."""
-        return next((m for m in self.module_exits if m.module == module), None)
-
-    @property
-    def empty(self) -> bool:
-        return self.time_limit is None and not self.module_exits and not self.channel_ends
 
 
 def build_run_section(src: Source, node: Node | None, types: Mapping[str, MessageType],

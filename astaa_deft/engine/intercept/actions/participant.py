@@ -46,7 +46,7 @@ from astaa_deft.engine.intercept.actions.base import (
 if TYPE_CHECKING:
     from lxml import etree
 
-    from astaa_deft.engine.spec.decictor_section import ParticipantMappingSection
+    from astaa_deft.model.decictor import ParticipantMappingSection
     from astaa_deft.model.sut import Channel, Spec
     from astaa_deft.engine.intercept.testcase import ActionChecker, Policy
 
