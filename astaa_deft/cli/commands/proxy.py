@@ -10,6 +10,7 @@ import argparse
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -77,7 +78,7 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             on_start: Callable[[RunView], None] = lambda run: None, verbose: bool = True) -> RunResult:
     """:func:`run_session` with the console: events as they come, a status line, Ctrl-C/SIGTERM to stop.
 
-    ``duration`` (seconds, None: no limit) caps ``options.time_limit`` (the options are updated);
+    ``duration`` (seconds, None: no limit) caps ``options.time_limit`` (for this run: the options are not changed);
     ``until(run)`` returns a reason to stop or None; ``on_start(run)`` is called once the run is up;
     ``verbose`` False prints no events. Returns the run's result; raises what :func:`run_session` raises.
     Main thread only (it installs the SIGINT/SIGTERM handlers).
@@ -99,7 +100,8 @@ def run_bus(spec: Spec, options: RunOptions, duration: float | None,
             say(text)
 
     if duration is not None:
-        options.time_limit = duration if options.time_limit is None else min(duration, options.time_limit)
+        options = replace(options, time_limit=duration if options.time_limit is None
+                          else min(duration, options.time_limit))
     status = StatusLine(lambda: "")
     with StopSignal() as stop:
 

@@ -14,9 +14,13 @@ if TYPE_CHECKING:  # types only: the command line builds options without loading
     from astaa_deft.io.log.records import PolicyApplicationsRecord
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class RunOptions:
-    """What one run is asked to do; read by the run from the thread that runs it."""
+    """What one run is asked to do; read by the run from the thread that runs it.
+
+    Keyword-only and frozen: a caller that needs another value makes a copy
+    (``dataclasses.replace(options, time_limit=…)``).
+    """
 
     mode: RunMode = RunMode.STAR  # in the middle, or an observer only (a string is read as its mode)
     launch: bool = True  # False: attach to an already running SUT
@@ -32,7 +36,8 @@ class RunOptions:
     warm_recorder: ChildProcess | None = None
 
     def __post_init__(self) -> None:
-        self.mode = RunMode(self.mode)  # "star" or "passive" as text too; ValueError for anything else
+        # "star" or "passive" as text too; ValueError for anything else
+        object.__setattr__(self, "mode", RunMode(self.mode))
 
 
 @dataclass(frozen=True)

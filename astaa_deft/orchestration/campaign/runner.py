@@ -75,8 +75,8 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     cost.start()
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
-    options = _run_options(spec, testcase, params, run_dir, dictionary=dictionary, warm_recorder=warm_recorder)
-    options.time_limit = horizon
+    options = replace(_run_options(spec, testcase, params, run_dir, dictionary=dictionary,
+                                   warm_recorder=warm_recorder), time_limit=horizon)
     watches = _Watches(spec, testcase, settle, known)
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
