@@ -24,33 +24,33 @@ violation. Decoded messages are cached by origin. Frames whose inputs do not
 decode are not used: an undecodable input is dropped, as a module's
 deserialiser would.
 
-This module runs in whichever process builds the model; the worker processes
+This module builds the model (the log read, the frames of any subset) and
+runs a test; the baseline replay and its snapshots are :mod:`.replay_baseline`,
+the judging of one test's outputs :mod:`.replay_judge`, and the records
+(:class:`Job`, :class:`ReplaySetup`, :class:`ReplayAnswer`, :class:`Frame`,
+in :mod:`.replay_records`, re-exported here) cross the pipes to the workers
+pickled. It runs in whichever process builds the model; the worker processes
 that run tests in isolation are :mod:`.replay_pool`, the tester ddmin calls
-is :mod:`.replay_tester`. Its records (:class:`Job`, :class:`ReplaySetup`,
-:class:`ReplayAnswer`) cross the pipes to the workers pickled.
+is :mod:`.replay_tester`.
 """
 
 from __future__ import annotations
 
-import copy
 import functools
-import pickle
-import time
 from collections.abc import Hashable, Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import replace
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
 from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
 from astaa_deft.analysis.deft.run_metadata import RunMetadata
-from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
+from astaa_deft.analysis.deft.replay import ReplayPlanner, make_planner, within_limit
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage, read_log
-from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
+from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
@@ -65,56 +65,12 @@ from astaa_deft.analysis.minimise.mutations import (
     read_mutations,
     sent_stream,
 )
+from astaa_deft.analysis.minimise.replay_baseline import Baseline
+from astaa_deft.analysis.minimise.replay_judge import STOPPED, ReplayJudge
+from astaa_deft.analysis.minimise.replay_records import Frame, Job, ReplayAnswer, ReplaySetup
 
-SNAPSHOTS = 400  # planner snapshots kept along the baseline replay (at most)
-
-
-@dataclass(frozen=True)
-class Job:
-    """One test: the kept mutations (number → field selection) and, for stage 2, the frames replayed.
-
-    ``frames`` None: every output's frame, continuing from the baseline's
-    snapshots. A tuple of output indices: only those frames, in order, from a
-    fresh planner (the scaffolding search).
-    """
-
-    kept: tuple[tuple[int, FieldSelection], ...]
-    frames: tuple[int, ...] | None = None
-
-    @classmethod
-    def of(cls, kept: Mapping[int, FieldSelection], frames: Sequence[int] | None = None) -> Job:
-        return cls(tuple(sorted(kept.items())), None if frames is None else tuple(sorted(frames)))
-
-
-@dataclass(frozen=True)
-class ReplayAnswer:
-    result: TestResult
-    failing_output: int | None = None  # index of the output whose replay broke the invariant
-
-
-@dataclass(frozen=True)
-class ReplaySetup:
-    """What a worker needs to build its own :class:`ReplayModel` (plain, picklable data)."""
-
-    log_path: str
-    spec_path: str | None  # None: the spec stored in the log, used only with trust_log_spec
-    invariant: str
-    module: str | None = None  # the replayed module (None: whichever entry can judge the failure)
-    output: str | None = None  # its output (a module may have one entry per output)
-    failure_module: str | None = None  # the module the failure names (a crash is judged for it only)
-    trust_log_spec: bool = False  # the user let the log's own spec run (--trust-log-spec)
-
-
-@dataclass(frozen=True)
-class Frame:
-    output: int  # index into the recorded outputs (per-trigger modules: into the trigger messages)
-    inputs: tuple[tuple[str, Delivered], ...]
-    frame_time_ns: int
-    trigger_time_ns: int
-
-    @property
-    def key(self) -> tuple[Hashable, ...]:
-        return tuple(d.key for _, d in self.inputs)
+__all__ = ["Frame", "Job", "ReplayAnswer", "ReplayModel", "ReplaySetup", "load_spec_for", "replay_entry_for",
+           "replayable", "run_params"]
 
 
 def load_spec_for(log: LogContents, spec_path: str | None, *, trust_log_spec: bool) -> Spec:
@@ -249,9 +205,12 @@ class ReplayModel:
         self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
         self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
         self._decoded: dict[Hashable, JsonObject | None] = {}  # by Delivered.key
-        self.baseline_seconds = 0.0
-        if baseline:
-            self._baseline()
+        self.baseline: Baseline | None = Baseline(self) if baseline else None
+
+    @property
+    def baseline_seconds(self) -> float:
+        """What the baseline replay took (0: none made)."""
+        return self.baseline.seconds if self.baseline is not None else 0.0
 
     # -- frames ------------------------------------------------------------
     def decode(self, channel: str, delivered: Delivered) -> JsonObject | None:
@@ -325,71 +284,6 @@ class ReplayModel:
     def output_sequence(self, frame: Frame) -> int:
         return frame.output + 1 if self.cfg.per_trigger else self.outputs[frame.output].sequence
 
-    def _baseline(self) -> None:
-        """Replay with every mutation reverted, once: the snapshots and outputs tests start from.
-
-        Snapshots are pickled: restoring one is a ``pickle.loads``, and two
-        planner states are the same when their pickles are (see :meth:`run`).
-        A planner that cannot be pickled is deep-copied instead, without that check.
-        """
-        started = time.perf_counter()
-        self.base_frames = self.frames({})
-        self.base_keys = [f.key if f else None for f in self.base_frames]
-        stride = max(1, len(self.base_frames) // SNAPSHOTS)
-        planner = self.fresh_planner()
-        # frame index → planner state: its pickle while the states pickle (``_pickled``), else the state itself
-        self.snapshots: dict[int, Any] = {}
-        self._pickled = True
-        self.base_outputs: list[JsonObject | None] = []
-        self.base_error: str | None = None
-        self.base_error_frame: int | None = None
-        for k, frame in enumerate(self.base_frames):
-            if k % stride == 0:
-                self.snapshots[k] = self._snapshot(planner)
-            if frame is None:
-                self.base_outputs.append(None)
-                continue
-            try:
-                self.base_outputs.append(self.step(planner, frame))
-            except Exception as exc:  # judged by the tests that reach it
-                self.base_error = f"output {k}'s frame: {type(exc).__name__}: {exc}"
-                self.base_error_frame = k
-                self.base_outputs.extend([None] * (len(self.base_frames) - k - 1))
-                break
-        planner.close()
-        self.baseline_seconds = time.perf_counter() - started
-
-    def _snapshot(self, planner: ReplayPlanner) -> Any:
-        state = planner.snapshot()
-        if self._pickled:
-            try:
-                return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
-            except Exception:  # not picklable: deep copies, and no convergence check
-                self._pickled = False
-                self.snapshots = {k: pickle.loads(v) for k, v in self.snapshots.items()}
-        return state
-
-    def _restore(self, k: int) -> ReplayPlanner:
-        """A planner in the baseline's state just before output ``k``'s frame."""
-        s = max(i for i in self.snapshots if i <= k)
-        planner = self.fresh_planner()
-        state = self.snapshots[s]
-        planner.restore(pickle.loads(state) if self._pickled else copy.deepcopy(state))
-        for i in range(s, k):  # only when snapshots are sparser than frames
-            frame = self.base_frames[i]
-            if frame is not None:
-                self.step(planner, frame)
-        return planner
-
-    def _converged(self, planner: ReplayPlanner, k: int) -> bool:
-        """Is ``planner`` in the state the baseline was in before output ``k``'s frame?"""
-        if not self._pickled or k not in self.snapshots or not planner.can_snapshot:
-            return False
-        try:
-            return pickle.dumps(planner.snapshot(), protocol=pickle.HIGHEST_PROTOCOL) == self.snapshots[k]
-        except Exception:
-            return False
-
     def run(self, job: Job) -> ReplayAnswer:
         """The test of one job (module doc).
 
@@ -403,64 +297,47 @@ class ReplayModel:
         """
         kept = dict(job.kept)
         frames = self.frames(kept)
-        monitors = self._monitors()
+        judge = ReplayJudge(self)
         if job.frames is not None:
             chosen = [frame for i in job.frames if i < len(frames) and (frame := frames[i]) is not None]
             if self.cfg.per_trigger:
-                return self._judge_last(self.fresh_planner(), chosen, monitors)
-            return self._judge(self.fresh_planner(), chosen, monitors)
+                return judge.judge_last(self.fresh_planner(), chosen)
+            return judge.judge(self.fresh_planner(), chosen)
+        base = self.baseline
+        assert base is not None, "a model built with baseline=False runs scaffolding tests only"
         planner = None  # None: in step with the baseline, whose outputs are known
         try:
             for k, frame in enumerate(frames):
-                if k >= len(self.base_keys):  # more trigger messages than the baseline's (a duplicate kept)
-                    unchanged = False
-                else:
-                    unchanged = (frame.key if frame is not None else None) == self.base_keys[k]
-                if (self.cfg.per_trigger and self.base_error_frame is not None and k >= self.base_error_frame):
+                # (more trigger messages than the baseline's: a duplicate kept)
+                unchanged = k < len(base.keys) and (frame.key if frame is not None else None) == base.keys[k]
+                if (self.cfg.per_trigger and base.error_frame is not None and k >= base.error_frame):
                     unchanged = False  # the baseline's module crashed or hung here: the step itself is judged
-                if planner is not None and unchanged and self._converged(planner, k):
+                if planner is not None and unchanged and base.converged(planner, k):
                     planner.close()
                     planner = None
                 if planner is None and unchanged:
                     if frame is None:
                         continue
-                    if self.base_error_frame is not None and k >= self.base_error_frame:
+                    if base.error_frame is not None and k >= base.error_frame:
                         return ReplayAnswer(TestResult(Outcome.UNRESOLVED,
-                                                       f"the planner raised on {self.base_error}"))
-                    found = self._feed(monitors, frame, self.base_outputs[k])
+                                                       f"the planner raised on {base.error}"))
+                    found = judge.feed(frame, base.outputs[k])
                     if found:
                         return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output)
                     continue
                 if planner is None:
-                    planner = self._restore(k)
+                    planner = base.restore(k)
                 if frame is None:
                     continue
-                answer = self._step(planner, monitors, frame)
-                if answer is _STOPPED:
-                    return self._silence(monitors, frames[k + 1:], frame.output)
+                answer = judge.judged_step(planner, frame)
+                if answer is STOPPED:
+                    return judge.silence(frames[k + 1:], frame.output)
                 if answer is not None:
                     return answer
         finally:
             if planner is not None:
                 planner.close()
-        return self._finish(monitors)
-
-    def _silence(self, monitors: MonitorSet, rest: Sequence[Frame | None], stopped_at: int) -> ReplayAnswer:
-        """The module crashed or hangs on frame ``stopped_at``: it answers nothing more; the clock goes on.
-
-        A failure that follows (a deadline) is the stopping frame's: that is the frame a history is kept for.
-        """
-        why = f"module '{self.cfg.module}' silent since trigger {stopped_at}"
-        for frame in rest:
-            if frame is not None:
-                found = monitors.on_tick(self.output_time(frame))
-                if found:
-                    return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.start_ns)} "
-                                                                 f"({why})"), stopped_at)
-        answer = self._finish(monitors)
-        if answer.result.outcome is Outcome.FAIL:
-            return ReplayAnswer(TestResult(Outcome.FAIL, f"{answer.result.detail} ({why})"), stopped_at)
-        return answer
+        return judge.finish()
 
     def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, JsonObject | None, str | None]]:
         """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
@@ -476,117 +353,6 @@ class ReplayModel:
         finally:
             planner.close()
         return out
-
-    def _monitors(self) -> MonitorSet:
-        return MonitorSet(self.judged, self.start_ns)
-
-    def _feed(self, monitors: MonitorSet, frame: Frame, message: JsonObject | None) -> str | None:
-        time_ns = self.output_time(frame)
-        found = monitors.on_tick(time_ns)
-        if self.cfg.per_trigger:
-            if not found and message is not None:  # None: the module answered this frame with nothing
-                found = monitors.on_message(self.cfg.output, time_ns, message, self.output_sequence(frame))
-        else:
-            found = monitors.on_message(self.cfg.output, time_ns, message, self.output_sequence(frame))
-        if found:
-            return f"{format_violation(found[0], self.start_ns)} (output {frame.output})"
-        return None
-
-    def _judge(self, planner: ReplayPlanner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
-        """Replay ``frames`` in order on ``planner`` and judge every output."""
-        try:
-            for n, frame in enumerate(frames):
-                answer = self._step(planner, monitors, frame)
-                if answer is _STOPPED:
-                    return self._silence(monitors, frames[n + 1:], frame.output)
-                if answer is not None:
-                    return answer
-        finally:
-            planner.close()
-        return self._finish(monitors)
-
-    def _judge_last(self, planner: ReplayPlanner, frames: Sequence[Frame], monitors: MonitorSet) -> ReplayAnswer:
-        """A per-trigger module's scaffolding test: the history steps unjudged, then the last frame is judged.
-
-        Judging the history's outputs would be wrong here: a few kept frames
-        are seconds apart, which a deadline reads as silence. What is asked is
-        whether the last frame fails as in the run: it hangs (a deadline
-        failure), crashes, or its output breaks the invariant.
-        """
-        try:
-            for frame in frames[:-1]:
-                try:
-                    self.step(planner, frame)
-                except Exception as exc:  # StepHang included: the module stopped before the failing frame
-                    return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"module '{self.cfg.module}' stopped on "
-                                                                       f"trigger {frame.output}: {exc}"))
-            if not frames:
-                return ReplayAnswer(TestResult(Outcome.PASS))
-            last = frames[-1]
-            try:
-                message = self.step(planner, last)
-            except StepHang as exc:
-                if any(i.kind == "deadline" for i in self.judged.invariants):
-                    return ReplayAnswer(TestResult(Outcome.FAIL, f"module '{self.cfg.module}' hangs on trigger "
-                                                                 f"{last.output}: {exc}"), last.output)
-                return ReplayAnswer(TestResult(Outcome.PASS))
-            except Exception as exc:
-                if self.cfg.exceptions != "crash":
-                    return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"module '{self.cfg.module}' raised "
-                                                                       f"{type(exc).__name__}: {exc}"))
-                answer = self._crashed(monitors, last, exc)
-                return answer if answer is not _STOPPED else ReplayAnswer(TestResult(Outcome.PASS))
-            found = self._feed(monitors, last, message)
-            return ReplayAnswer(TestResult(Outcome.FAIL, found), last.output) if found else ReplayAnswer(
-                TestResult(Outcome.PASS))
-        finally:
-            planner.close()
-
-    def _step(self, planner: ReplayPlanner, monitors: MonitorSet, frame: Frame) -> ReplayAnswer | None:
-        """One replayed output, judged: an answer if it decides the test, else None.
-
-        A per-trigger module that hangs, or raises where its process would
-        die (``exceptions: crash``), answers ``_STOPPED`` unless that decides
-        the test (a crash the failure is): it answers nothing more.
-        """
-        try:
-            message = self.step(planner, frame)
-        except StepHang as exc:
-            if self.cfg.per_trigger:
-                return _STOPPED
-            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"the planner hangs on output {frame.output}'s frame: "
-                                                               f"{exc}"))
-        except Exception as exc:
-            if self.cfg.per_trigger and self.cfg.exceptions == "crash":
-                return self._crashed(monitors, frame, exc)
-            who = "the planner" if self.cfg.where == "planner" else f"module '{self.cfg.module}'"
-            return ReplayAnswer(TestResult(Outcome.UNRESOLVED, f"{who} raised {type(exc).__name__}: {exc} "
-                                                               f"on output {frame.output}'s frame"))
-        found = self._feed(monitors, frame, message)
-        return ReplayAnswer(TestResult(Outcome.FAIL, found), frame.output) if found else None
-
-    def _crashed(self, monitors: MonitorSet, frame: Frame, exc: Exception) -> ReplayAnswer:
-        """The module's process would die of ``exc``: its abnormal exit, judged like the run's."""
-        what = f"module '{self.cfg.module}' crashes on trigger {frame.output}: {type(exc).__name__}: {exc}"
-        time_ns = self.output_time(frame)
-        found = monitors.on_process_exit(self.cfg.module, 1, None, time_ns, False)
-        if found:
-            return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.start_ns)} ({what})"),
-                                frame.output)
-        if self.crash_fails and self.failure_module == self.cfg.module:
-            return ReplayAnswer(TestResult(Outcome.FAIL, what), frame.output)
-        return _STOPPED
-
-    def _finish(self, monitors: MonitorSet) -> ReplayAnswer:
-        found = monitors.finish(self.end_ns)
-        if found:
-            return ReplayAnswer(TestResult(Outcome.FAIL, format_violation(found[0], self.start_ns)))
-        return ReplayAnswer(TestResult(Outcome.PASS))
-
-
-# A per-trigger module that crashed or hangs: no answer decided the test, and it answers nothing more.
-_STOPPED = ReplayAnswer(TestResult(Outcome.UNRESOLVED, "the module stopped answering"))
-
 
 def _first_crash_ns(log: LogContents, module: str) -> int | None:
     """When ``module`` first exited abnormally in the run (None if it never did)."""
