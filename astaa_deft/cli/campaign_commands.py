@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from astaa_deft.cli.arguments import (
     CAMPAIGN_SEED,
@@ -24,16 +24,16 @@ from astaa_deft.cli.arguments import (
     cluster,
 )
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.registry import NamesOf, Registry
+from astaa_deft.model.registry import NamesOf
 
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
 
 
-def _strategies() -> Registry[Any]:
+def _strategy_names() -> tuple[str, ...]:
     from astaa_deft.orchestration.campaign.strategies import STRATEGIES  # imported when --strategy is read
 
-    return STRATEGIES
+    return STRATEGIES.names()
 
 
 def add_fuzz_parser(subparsers: SubParsers) -> None:
@@ -47,7 +47,7 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
                     help=f"or a time budget: 90s, 30m, 2h [at most {MAX_BUDGET_S / DAY_S:g} days]")
     bounded(fz, "--workers", PROCESSES, help="cases at once (default: from the cores and the spec's modules)")
     bounded(fz, "--seed", CAMPAIGN_SEED, default=0, help="the campaign's seed (default 0)")
-    fz.add_argument("--strategy", default="random", choices=NamesOf(_strategies), metavar="STRATEGY",
+    fz.add_argument("--strategy", default="random", choices=NamesOf(_strategy_names), metavar="STRATEGY",
                     help="how cases are drawn, one of: %(choices)s (default random: ASTAA's weighted generation; "
                          "decictor looks for non-optimal decisions: docs/decictor.md)")
     fz.add_argument("--dictionary", type=Path, action="append", default=[])

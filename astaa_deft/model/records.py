@@ -212,7 +212,7 @@ class Mutation:
         return Mutation.row_json(self.to_row())
 
     @staticmethod
-    def row_json(row: MutationRow, tag: Callable[[Any], JsonValue] = to_tagged) -> JsonObject:
+    def row_json(row: MutationRow, tag: Callable[[object], JsonValue] = to_tagged) -> JsonObject:
         """The JSON form of a mutation from its compact form (the recorder's per-event path), without
         building the mutation: the one place that lays out a mutation's keys. ``tag`` writes a value
         (the log's record passes values already tagged through as they are)."""

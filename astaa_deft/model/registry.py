@@ -18,7 +18,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 from collections.abc import Callable, Iterator
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 T = TypeVar("T")
 C = TypeVar("C", bound=type)
@@ -119,20 +119,20 @@ class Registry(Generic[T]):
 class NamesOf:
     """A registry's names, read when first asked: ``choices`` for argparse that import no extension until needed.
 
-    ``registry`` returns the registry (importing it may be costly: a command
-    line builds every command's parser, and only ``fuzz`` needs the
-    strategies). argparse only iterates the choices for help and error
-    messages and tests membership of a value given.
+    ``names`` returns the registry's ``names()`` (importing the registry may
+    be costly: a command line builds every command's parser, and only
+    ``fuzz`` needs the strategies). argparse only iterates the choices for
+    help and error messages and tests membership of a value given.
     """
 
-    def __init__(self, registry: Callable[[], Registry[Any]]) -> None:
-        self._registry = registry
+    def __init__(self, names: Callable[[], tuple[str, ...]]) -> None:
+        self._names = names
 
     def __contains__(self, name: object) -> bool:
-        return name in self._registry()
+        return name in self._names()
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._registry().names())
+        return iter(self._names())
 
     def __len__(self) -> int:
-        return len(self._registry())
+        return len(self._names())

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 from astaa_deft.model.records import Verdict
 
@@ -20,7 +20,7 @@ class Condition(Protocol):
     def text(self) -> str: ...
 
     @property
-    def evaluate(self) -> Callable[[Any], Any]: ...
+    def evaluate(self) -> Callable[[dict[str, object]], object]: ...  # a decoded message -> its value
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar, TypeVar, cast
 from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError, Problem
@@ -94,8 +94,8 @@ class UndeclaredKey(_Simple):
     kind: ClassVar[str] = "undeclared_key"
 
 
-def _as_written(value: Any) -> JsonValue:
-    return value  # a logged mutation's values are already in their tagged form
+def _as_written(value: object) -> JsonValue:
+    return cast(JsonValue, value)  # a logged mutation's values are already in their tagged form
 
 
 @dataclass(frozen=True)
@@ -146,7 +146,7 @@ class MutationRecord:
                                      self.delivered_sequence)
 
     @classmethod
-    def from_json(cls, body: Mapping[str, Any], *, time_ns: int = 0, where: str = "the log") -> MutationRecord:
+    def from_json(cls, body: Mapping[str, object], *, time_ns: int = 0, where: str = "the log") -> MutationRecord:
         """The record of its body (the mutations topic's has no ``kind``; its time is the message's,
         ``time_ns``); RecordError if a field change is not an object."""
         read = JsonFields(body)
