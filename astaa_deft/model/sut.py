@@ -106,6 +106,8 @@ class Channel:
     type: str
     encoding: str = "json"  # a codec name: json, cbor, or cdr:<ROS 2 type> for `encoding: cdr`
     topic: str | None = None  # the ROS 2 topic of a CDR channel, when the spec names one
+    time: str | None = None  # the field holding the message's own time (seconds), e.g. a simulator's clock
+    pair_by: str | None = None  # the field whose equal values mark messages of several channels as one tick
 
 
 @dataclass(frozen=True)
