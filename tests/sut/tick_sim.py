@@ -4,7 +4,9 @@ Imports nothing from astaa-deft; finds its Zenoh config through ZENOH_CONFIG.
 Both messages of a tick carry the tick's number (header.seq) and the
 simulator's time (sim_time). One vehicle (id 14) drives --clearance metres
 ahead of the ego at the ego's speed (negative: overlapping). After --ticks
-ticks the simulator exits at once (code 0), as a scenario's end.
+ticks the simulator publishes nothing more and exits (code 0) --teardown
+seconds later, as a real simulator writing its results and closing its
+sessions does.
 """
 
 import argparse
@@ -23,6 +25,8 @@ ap.add_argument("--split-ms", type=float, default=20.0)
 ap.add_argument("--clearance", type=float, default=0.1)
 ap.add_argument("--speed", type=float, default=10.0)
 ap.add_argument("--start-delay", type=float, default=0.3)
+ap.add_argument("--teardown", type=float, default=0.3, help="seconds its exit takes after the last tick (results"
+                " written, sessions closed), as a real simulator's does")
 args = ap.parse_args()
 
 EGO_LENGTH, VEHICLE_LENGTH = 4.5, 4.5
@@ -50,4 +54,5 @@ for tick in range(1, args.ticks + 1):
     if tick < args.ticks:
         stop.wait(max(0.0, start + tick * period - time.monotonic()))
 print(f"tick_sim: {tick} ticks, clearance {args.clearance} m", flush=True)
-sys.exit(0)  # right after the last tick: the scenario is over
+time.sleep(args.teardown)  # writing its results, closing its sessions: silent, and no more ticks
+sys.exit(0)  # the scenario is over
