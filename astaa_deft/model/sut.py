@@ -111,6 +111,15 @@ class Channel:
 
 
 @dataclass(frozen=True)
+class LivelinessToken:
+    """A Zenoh liveliness token a module holds (the spec's ``liveliness:`` section), wired like a channel."""
+
+    key: str
+    producer: str  # the module holding it
+    consumers: tuple[str, ...] | None = None  # the modules that see it; None: every other module
+
+
+@dataclass(frozen=True)
 class Ros2Section:
     """The spec's ``ros2:`` section (see astaa_deft.engine.spec.ros2_section)."""
 
@@ -138,6 +147,7 @@ class Spec:
     decictor: DecictorSection | None = None  # the 'decictor:' section (None: the spec has none)
     source_text: str = ""
     ros2: Ros2Section = Ros2Section()
+    liveliness: tuple[LivelinessToken, ...] = ()  # the tokens modules hold ('liveliness:')
 
     def module(self, name: str) -> Module:
         return next(m for m in self.modules if m.name == name)

@@ -28,7 +28,9 @@ from typing import ClassVar
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, LogLineInfo, MonitorContext
-from astaa_deft.engine.monitor.error_signature import ErrorSignature, ReportReader, folded, line_signature, start_of_report
+from astaa_deft.engine.monitor.error_signature import (
+    ErrorSignature, ReportReader, folded, line_signature, start_of_report,
+)
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
 from astaa_deft.engine.monitor.kinds.log import LogInvariant, LogMonitor, read_watched_output
