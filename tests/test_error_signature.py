@@ -161,3 +161,13 @@ def test_a_case_raising_keyerror_early_whose_twin_raises_valueerror_late_is_a_bu
         assert [f.signature for f in twin.findings] == ["ValueError in steady_worker.py:finish_route"], twin
     finally:
         journal.close()
+
+
+def test_a_traceback_is_reported_at_its_exception_line_without_waiting_for_the_next_line():
+    from astaa_deft.engine.monitor.monitorset import MonitorSet
+
+    monitors = MonitorSet(load("- {name: planner_errors, kind: exceptions, modules: [planning]}\n"), 0)
+    found = [monitors.on_log_line("planning", line, 10 + k) for k, line in enumerate(PYTHON)]
+    assert [len(f) for f in found] == [0] * (len(PYTHON) - 1) + [1]  # a quiet module after it: no wait
+    assert found[-1][0].time_ns == 10 and found[-1][0].message["signature"] == "KeyError in planner.py:step"
+    assert monitors.on_log_line("planning", "", 20) == [] and monitors.finish(30) == []  # once

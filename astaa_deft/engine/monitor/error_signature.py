@@ -93,6 +93,11 @@ class ReportReader:
         self._state = "frames"
         self._go_function = ""
 
+    @property
+    def named(self) -> bool:
+        """Its signature is complete: what follows (a chained traceback) does not change it."""
+        return self.done or (self.kind == "python" and self._state != "frames")
+
     def signature(self) -> ErrorSignature:
         return ErrorSignature(self.error or _UNREAD[self.kind], self.frame)
 

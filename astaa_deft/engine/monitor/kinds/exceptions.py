@@ -75,15 +75,19 @@ class ExceptionsMonitor(LogMonitor):
     """The ``log`` monitor that reads a multi-line report whole: one finding per traceback, naming its error.
 
     A report (a Python traceback, a Go panic, a Java exception, a faulthandler
-    dump) is read to its end — the next line of that module that is not part
-    of it, or the run's end — and gives one finding, dated by its first line,
-    carrying its signature (``error_signature``): the exception's type and
-    innermost frame. Its other lines never count as matches of their own.
+    dump) gives one finding, dated by its first line, carrying its signature
+    (``error_signature``): the exception's type and innermost frame. It is
+    reported as soon as both are read (a traceback's exception line, a
+    panic's first frame), else when the report ends — the next line of that
+    module that is not part of it, or the run's end; what follows of it (a
+    chained traceback) is read as part of it. Its other lines never count as
+    matches of their own.
     """
 
     def __init__(self, invariant: LogInvariant, context: MonitorContext):
         super().__init__(invariant, context)
-        self._open: dict[str, tuple[LogLineInfo, ReportReader, bool]] = {}  # module -> (first line, reader, counts)
+        # module -> (first line, reader, counts, reported yet)
+        self._open: dict[str, tuple[LogLineInfo, ReportReader, bool, bool]] = {}
 
     def on_log_line(self, line: LogLineInfo) -> list[Violation]:
         if line.module not in self.inv.modules:
@@ -91,9 +95,15 @@ class ExceptionsMonitor(LogMonitor):
         out: list[Violation] = []
         opened = self._open.get(line.module)
         if opened is not None:
-            if opened[1].feed(line.text):
+            first, reader, counts, reported = opened
+            if reader.feed(line.text):
                 self.evaluations += 1
-                return self._close(line.module) if opened[1].done else NO_VIOLATIONS
+                if reader.done:
+                    return self._close(line.module)
+                if reader.named and not reported:  # its error is known: no need to wait for its end
+                    self._open[line.module] = (first, reader, counts, True)
+                    return [self._finding(first, reader.signature(), reader.message)] if counts else NO_VIOLATIONS
+                return NO_VIOLATIONS
             out = self._close(line.module)
         self.evaluations += 1
         if self._search(line.text) is None:
@@ -102,7 +112,7 @@ class ExceptionsMonitor(LogMonitor):
         counts = self.matches > self.inv.max_count
         reader = start_of_report(line.text)
         if reader is not None:
-            self._open[line.module] = (line, reader, counts)
+            self._open[line.module] = (line, reader, counts, False)
             return out or NO_VIOLATIONS
         if counts:
             out.append(self._finding(line, line_signature(line.text), ""))
@@ -115,8 +125,8 @@ class ExceptionsMonitor(LogMonitor):
         return out or NO_VIOLATIONS
 
     def _close(self, module: str) -> list[Violation]:
-        line, reader, counts = self._open.pop(module)
-        return [self._finding(line, reader.signature(), reader.message)] if counts else []
+        line, reader, counts, reported = self._open.pop(module)
+        return [self._finding(line, reader.signature(), reader.message)] if counts and not reported else []
 
     def _finding(self, line: LogLineInfo, signature: ErrorSignature, message: str) -> Violation:
         self.violating += 1
