@@ -51,6 +51,7 @@ class OnlineMonitors:
         self._subs: list = []
         self.ended_ns: int | None = None  # the run's end: nothing is judged past it
         self.horizon: Callable[[int], int] | None = None  # now -> the latest time that may be judged yet
+        self._horizon_ns = -(2**63)  # its last answer: it only grows, so it is asked again only once passed
         self._side = 0  # numbers exits and output lines in the queue
         self._thread = threading.Thread(target=self._work, name="monitors", daemon=True)
         self._thread.start()
@@ -145,8 +146,9 @@ class OnlineMonitors:
         """The time judged up to: the reorder window behind the clock, never past the horizon or the run's end."""
         clock = time.time_ns()
         now = clock - REORDER_WINDOW_NS
-        if self.horizon is not None:
-            now = min(now, self.horizon(clock))
+        if self.horizon is not None and now > self._horizon_ns:
+            self._horizon_ns = self.horizon(clock)
+            now = min(now, self._horizon_ns)
         return now if self.ended_ns is None else min(now, self.ended_ns)
 
     def finish(self, time_ns: int) -> RunVerdict:
