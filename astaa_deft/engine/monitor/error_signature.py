@@ -42,7 +42,7 @@ MAX_TEXT = 120
 _PY_START = "Traceback (most recent call last):"
 _PY_CHAIN = ("During handling of the above exception, another exception occurred:",
              "The above exception was the direct cause of the following exception:")
-_PY_FRAME = re.compile(r'^\s+File "([^"]+)", line \d+, in (\S+)')
+_PY_FRAME = re.compile(r'^\s+File "([^"]+)", line \d+(?:, in (\S+))?')  # no function: a SyntaxError's
 _PY_TYPE = re.compile(r"^([A-Za-z_][\w.]*)(?::\s|:$|$)")
 _FAULT_START = re.compile(r"Fatal Python error: (.*)")
 _FAULT_FRAME = re.compile(r'^\s+File "([^"]+)", line \d+ in (\S+)')
@@ -72,6 +72,10 @@ class ErrorSignature:
 
 def _base(path: str) -> str:
     return path.replace("\\", "/").rsplit("/", 1)[-1]
+
+
+def _frame(path: str, function: str | None) -> str:
+    return f"{_base(path)}:{function}" if function else _base(path)
 
 
 def folded(line: str) -> str:
@@ -132,7 +136,7 @@ class ReportReader:
             return False
         frame = _PY_FRAME.match(line)
         if frame:
-            self.frame = f"{_base(frame.group(1))}:{frame.group(2)}"
+            self.frame = _frame(frame.group(1), frame.group(2))
             return True
         if line[:1].isspace() or not stripped:
             return True
@@ -249,7 +253,7 @@ def _cut_traceback(lines: list[str]) -> ErrorSignature | None:
     for line in lines:
         match = _PY_FRAME.match(line)
         if match:
-            frame = f"{_base(match.group(1))}:{match.group(2)}"
+            frame = _frame(match.group(1), match.group(2))
             continue
         typed = _PY_TYPE.match(line.strip()) if frame and not line[:1].isspace() else None
         if typed:
