@@ -110,9 +110,9 @@ class ExceptionsMonitor(LogMonitor):
             return out or NO_VIOLATIONS
         self.matches += 1
         counts = self.matches > self.inv.max_count
-        reader = start_of_report(line.text)
-        if reader is not None:
-            self._open[line.module] = (line, reader, counts, False)
+        started = start_of_report(line.text)
+        if started is not None:
+            self._open[line.module] = (line, started, counts, False)
             return out or NO_VIOLATIONS
         if counts:
             out.append(self._finding(line, line_signature(line.text), ""))
