@@ -136,3 +136,26 @@ def test_online_pastified_verdicts_equal_rtamt_offline_evaluation(formula):
     judged = [r for r in got if r is not None]  # sample k's verdict arrives horizon samples later
     assert len(judged) == n - online.formula.horizon_samples
     assert judged == pytest.approx(expected[:len(judged)])
+
+
+PREV = """
+- name: x_never_falls
+  kind: temporal
+  period: 0.1
+  signals:
+    x: {channel: localization, field: x}
+  formula: "always(x >= prev x)"
+"""
+
+
+def test_prev_at_the_first_sample_is_the_sample_itself_so_a_monotone_signal_holds_there(tmp_path):
+    # issue 32: rtamt alone gives prev x = +inf at the first sample, and this formula failed there
+    (tmp_path / "rising").mkdir()
+    (tmp_path / "falling").mkdir()
+    rising = drive(tmp_path / "rising", PREV, speed_at=lambda t: 1.0, light_at=lambda t: "green",
+                   x_at=lambda t: 10.0 + t, seconds=2.0)
+    assert rising.violations == [] and rising.stats["x_never_falls"]["evaluations"] >= 19
+    falling = drive(tmp_path / "falling", PREV, speed_at=lambda t: 1.0, light_at=lambda t: "green",
+                    x_at=lambda t: 10.0 - t, seconds=2.0)
+    [found] = falling.violations
+    assert found.time_ns == ns(0.2)  # the first sample (0.1 s) holds: prev x is x; the second, lower, breaks it

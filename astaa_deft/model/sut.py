@@ -105,6 +105,17 @@ class Channel:
     type: str
     encoding: str = "json"  # a codec name: json, cbor, or cdr:<ROS 2 type> for `encoding: cdr`
     topic: str | None = None  # the ROS 2 topic of a CDR channel, when the spec names one
+    time: str | None = None  # the field holding the message's own time (seconds), e.g. a simulator's clock
+    pair_by: str | None = None  # the field whose equal values mark messages of several channels as one tick
+
+
+@dataclass(frozen=True)
+class LivelinessToken:
+    """A Zenoh liveliness token a module holds (the spec's ``liveliness:`` section), wired like a channel."""
+
+    key: str
+    producer: str  # the module holding it
+    consumers: tuple[str, ...] | None = None  # the modules that see it; None: every other module
 
 
 @dataclass(frozen=True)
@@ -135,6 +146,7 @@ class Spec:
     decictor: DecictorSection | None = None  # the 'decictor:' section (None: the spec has none)
     source_text: str = ""
     ros2: Ros2Section = Ros2Section()
+    liveliness: tuple[LivelinessToken, ...] = ()  # the tokens modules hold ('liveliness:')
 
     def module(self, name: str) -> Module:
         return next(m for m in self.modules if m.name == name)

@@ -18,6 +18,7 @@ import signal
 import sys
 import threading
 import time
+import traceback
 
 ap = argparse.ArgumentParser()
 ap.add_argument("--burn", default="0")
@@ -26,6 +27,11 @@ ap.add_argument("--fail-launches", default="")
 ap.add_argument("--fail-after", type=float, default=0.8)
 ap.add_argument("--fail-key", default="")
 ap.add_argument("--crash-on-nan", default="0", help="1: exit with code 3 on a non-finite 'value' on --fail-key")
+ap.add_argument("--raise-launches", default="", help="launches that log a KeyError raised in step, --fail-after"
+                " seconds in, and carry on")
+ap.add_argument("--late-launches", default="", help="launches that log a ValueError raised in finish_route,"
+                " --late-after seconds in, and carry on")
+ap.add_argument("--late-after", type=float, default=2.5)
 args = ap.parse_args()
 
 stop = threading.Event()
@@ -42,11 +48,31 @@ def launch_number(directory: str) -> int:
             n += 1
 
 
-fail = False
+fail = raises = late = False
 if args.counter_dir:
     number = launch_number(args.counter_dir)
     fail = str(number) in args.fail_launches.split(",")
+    raises = str(number) in args.raise_launches.split(",")
+    late = str(number) in args.late_launches.split(",")
     print(f"worker: launch {number}{' (fails)' if fail else ''}", flush=True)
+
+
+def step(world: dict) -> float:
+    return world["lane"]  # KeyError: the early bug a test case triggers
+
+
+def finish_route(remaining: float) -> float:
+    if remaining <= 0:
+        raise ValueError("route already finished")  # the late error of an unmutated run
+    return remaining
+
+
+def logged(call, *args) -> None:
+    try:
+        call(*args)
+    except Exception:  # noqa: BLE001 - logged, and the worker carries on, as many stacks do
+        traceback.print_exc()
+        sys.stderr.flush()
 first_message = threading.Event()
 non_finite = threading.Event()
 
@@ -62,18 +88,24 @@ def on_sample(sample) -> None:
 
 
 crash_on_nan = args.crash_on_nan == "1"
-if args.fail_key and (fail or crash_on_nan):
+if args.fail_key and (fail or crash_on_nan or raises or late):
     import zenoh
 
     session = zenoh.open(zenoh.Config.from_env())
     subscriber = session.declare_subscriber(args.fail_key, on_sample)
-if not fail:
+if not (fail or raises or late):
     first_message.set()
 print("worker ready", flush=True)
 first_message.wait()
 started = time.monotonic()
 while not stop.is_set():
-    if (fail and time.monotonic() - started >= args.fail_after) or non_finite.is_set():
+    if raises and time.monotonic() - started >= args.fail_after:
+        raises = False
+        logged(step, {})
+    if late and time.monotonic() - started >= args.late_after:
+        late = False
+        logged(finish_route, 0.0)
+    if (fail and time.monotonic() - started >= args.fail_after) or (crash_on_nan and non_finite.is_set()):
         sys.stderr.write("worker: simulated crash\n")
         sys.stderr.flush()
         os._exit(3)  # at once: an open Zenoh session would hold a normal exit

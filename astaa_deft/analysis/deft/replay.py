@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import importlib
+import importlib.util
 import json
 import queue
 import signal
@@ -54,9 +55,14 @@ def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.
     """The factory named 'module:attr', imported from sys.path or else from the spec's directory.
 
     A planner that sits next to its spec (a user's own stack, not an installed
-    package) is found without setting PYTHONPATH by hand.
+    package) is found without setting PYTHONPATH by hand. ``path/to/file.py:Name``
+    names a file relative to the spec's directory (a module beside the SUT's
+    sources, not beside the spec): only a spec the user gave as a file has one
+    (``spec_dir``; a spec read from a log names no file to run).
     """
-    module_name, _, attr = path.partition(":")
+    module_name, _, attr = path.rpartition(":")
+    if module_name.endswith(".py"):
+        return getattr(_module_from_file(module_name, spec_dir, where), attr, None) or _no_attribute(path, where)
     try:
         try:
             module = importlib.import_module(module_name)
@@ -73,6 +79,44 @@ def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.
         raise InputError(Problem("<spec>", None, None, f"replay factory '{path}' cannot be loaded: {exc}",
                                  f"check '{where}.factory': its module must be importable from sys.path"
                                  f"{beside} (set PYTHONPATH, or install its package)")) from None
+
+
+def _module_from_file(relative: str, spec_dir: Path | None, where: str) -> Any:
+    """The module in the file ``relative`` to the spec's directory, imported under its own name (so its objects
+    pickle), its directory added after installed packages (so it finds the modules beside it)."""
+    if spec_dir is None:
+        raise InputError(Problem("<spec>", None, None, f"replay factory file '{relative}' ({where}.factory) is"
+                                 " relative to a spec file, and this spec was not read from one",
+                                 "give the spec file (--spec), or name the factory as package.module:Name"))
+    file = (spec_dir / relative).resolve()
+    name = file.stem
+    loaded = sys.modules.get(name)
+    if loaded is not None and Path(getattr(loaded, "__file__", "") or "").resolve() == file:
+        return loaded
+    if loaded is not None or not file.is_file() or not name.isidentifier():
+        why = (f"another module named '{name}' is loaded already" if loaded is not None
+               else f"{file} is not a Python file" if file.is_file() else f"{file} does not exist")
+        raise InputError(Problem("<spec>", None, None, f"replay factory file '{relative}' cannot be loaded: {why}",
+                                 f"check '{where}.factory': a path relative to the spec, to a file whose name is"
+                                 " a free module name"))
+    if str(file.parent) not in sys.path:
+        sys.path.append(str(file.parent))  # after installed packages: never shadows them
+    spec = importlib.util.spec_from_file_location(name, file)
+    assert spec is not None and spec.loader is not None  # a .py file always has a source loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:  # the user's module failing to import is their input problem
+        del sys.modules[name]
+        raise InputError(Problem("<spec>", None, None, f"replay factory file '{relative}' cannot be imported:"
+                                 f" {type(exc).__name__}: {exc}", f"check '{where}.factory' and that file")) from None
+    return module
+
+
+def _no_attribute(path: str, where: str) -> Any:
+    raise InputError(Problem("<spec>", None, None, f"replay factory '{path}' cannot be loaded: its file has no"
+                             f" '{path.rpartition(':')[2]}'", f"check '{where}.factory'"))
 
 
 def importable_from(directory: Path, top: str) -> bool:

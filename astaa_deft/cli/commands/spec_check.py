@@ -64,8 +64,19 @@ def _check_factory(spec: Spec, path: Path) -> None:
         return
     from astaa_deft.analysis.deft.replay import importable_from
 
-    module_name, _, attr = factory.partition(":")
+    module_name, _, attr = factory.rpartition(":")
     line = _line_of(path, factory)
+    if module_name.endswith(".py"):  # a file relative to the spec: loaded as replay loads it
+        from astaa_deft.analysis.deft.replay import load_factory
+
+        try:
+            made = load_factory(factory, path.resolve().parent)
+        except InputError as exc:
+            raise InputError(Problem(str(path), line, None, exc.problems[0].message, exc.problems[0].fix)) from None
+        if not callable(made):
+            raise InputError(Problem(str(path), line, None, f"planner replay factory '{factory}' is not callable",
+                                     "name a class or function in that file"))
+        return
     try:
         try:
             module = importlib.import_module(module_name)

@@ -148,8 +148,9 @@ class StarLiveliness:
                 self._reported.add(mismatch)
                 self.on_undeclared(module, mismatch)
             return  # otherwise graph, not data: an undeclared topic is reported when its messages flow
-        if not any(ch.key == key for ch in self.spec.channels):
-            self.on_undeclared(module, f"liveliness:{key}")
+        if not any(ch.key == key for ch in self.spec.channels) and \
+                not any(t.key == key and t.producer == module for t in self.spec.liveliness):
+            self.on_undeclared(module, f"liveliness:{key}")  # declare it under 'liveliness:' (docs/spec.md)
 
 
 class StarQueries:

@@ -267,8 +267,14 @@ def token_destinations(spec: Spec, module: str, key: str) -> tuple[str, ...]:
     A token is wired like a publication: a channel on that key produced by
     `module` sends it to the channel's consumers; a key no channel declares
     reaches every other module (the catch-all); a declared key produced by
-    another module reaches nobody.
+    another module reaches nobody. A token the spec's ``liveliness:`` section
+    declares for `module` reaches its consumers (every other module when it
+    lists none).
     """
+    tokens = [t for t in spec.liveliness if t.producer == module and _keys_meet(t.key, key)]
+    if tokens:
+        others = tuple(m.name for m in spec.modules if m.name != module)
+        return tuple(dict.fromkeys(c for t in tokens for c in (others if t.consumers is None else t.consumers)))
     declared = [ch for ch in spec.channels if _keys_meet(ch.key, key)]
     if not declared:
         return tuple(m.name for m in spec.modules if m.name != module)

@@ -3,8 +3,13 @@
 Messages are stamped in Zenoh's callback (their Zenoh timestamp, else the
 receive time) and queued; decoding and evaluation happen on a worker thread,
 off the proxy's forwarding path, in the order ``order`` states (the one
-offline checking uses), after a short reorder wait. The worker also ticks
-the deadline monitors every TICK seconds.
+offline checking uses), after a short reorder wait. Process exits and
+module output lines wait in the same queue, at their times, so they take
+their place among the messages as offline. The worker also ticks the
+deadline monitors every TICK seconds. Nothing later than ``horizon(now)``
+(the run's end cannot come before it) is judged yet, and nothing later than
+the run's end (``end_at``) ever is: an end may be dated before the tool
+noticed it.
 """
 
 from __future__ import annotations
@@ -27,6 +32,8 @@ from astaa_deft.engine.monitor.violation import Violation
 
 TICK_SECONDS = 0.05
 _STOP = object()
+EXIT = "__exit__"  # queue items that are not messages
+LINE = "__log__"
 
 
 class OnlineMonitors:
@@ -42,7 +49,10 @@ class OnlineMonitors:
         self._held: list = []  # heap of (order key, channel, time, payload, seq) waiting for their turn
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._subs: list = []
-        self.ended_ns: int | None = None  # the run's end: deadlines are not judged past it
+        self.ended_ns: int | None = None  # the run's end: nothing is judged past it
+        self.horizon: Callable[[int], int] | None = None  # now -> the latest time that may be judged yet
+        self._horizon_ns = -(2**63)  # its last answer: it only grows, so it is asked again only once passed
+        self._side = 0  # numbers exits and output lines in the queue
         self._thread = threading.Thread(target=self._work, name="monitors", daemon=True)
         self._thread.start()
 
@@ -67,14 +77,14 @@ class OnlineMonitors:
 
     def process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int,
                      during_shutdown: bool, stderr_tail: str) -> None:
-        self._q.put(("__exit__", time_ns, (module, returncode, signal, during_shutdown, stderr_tail)))
+        self._q.put((EXIT, time_ns, (module, returncode, signal, during_shutdown, stderr_tail)))
 
     def wants_log_lines(self) -> bool:
         return self.set.wants_log_lines()
 
     def log_line(self, module: str, text: str, time_ns: int) -> None:
         """A line a module wrote on its output (read by the session from the module's output file)."""
-        self._q.put(("__log__", time_ns, (module, text)))
+        self._q.put((LINE, time_ns, (module, text)))
 
     def _work(self) -> None:
         next_tick = time.monotonic() + TICK_SECONDS
@@ -89,18 +99,13 @@ class OnlineMonitors:
             found: list[Violation] = []
             if item is not None:
                 name, t, body = item
-                if name == "__exit__":
-                    found = self._release(t)  # what came before the exit first
-                    module, code, sig, shutdown, tail = body
-                    found = found + self.set.on_process_exit(module, code, sig, t, shutdown, tail)
-                elif name == "__log__":
-                    found = self._release(t)
-                    module, text = body
-                    found = found + self.set.on_log_line(module, text, t)
+                if name in (EXIT, LINE):  # before the messages of their time, as offline
+                    self._side += 1
+                    heapq.heappush(self._held, (order_key(t, -1, self._side), name, t, body))
                 else:
                     self._seq[name] += 1  # per channel in arrival order, as the recorder numbers them
                     heapq.heappush(self._held, (order_key(t, self._ranks[name], self._seq[name]), name, t, body))
-            found = found + self._release(time.time_ns() - REORDER_WINDOW_NS)
+            found = found + self._release(self._now())
             if time.monotonic() >= next_tick:
                 next_tick = time.monotonic() + TICK_SECONDS
                 found = found + self.set.on_tick(self._now())
@@ -108,10 +113,20 @@ class OnlineMonitors:
                 self.on_violation(v)
 
     def _release(self, up_to_ns: int | None) -> list[Violation]:
-        """Evaluate held messages stamped at or before up_to_ns (all of them for None), in order."""
+        """Judge what is held up to up_to_ns (all of it for None), in order; nothing past the run's end."""
         found: list[Violation] = []
         while self._held and (up_to_ns is None or self._held[0][0][0] <= up_to_ns):
             (_, _, seq), name, t, body = heapq.heappop(self._held)
+            if self.ended_ns is not None and t > self.ended_ns:
+                continue  # the shutdown after the end: `check` does not judge it either
+            if name == EXIT:
+                module, code, sig, shutdown, tail = body
+                found.extend(self.set.on_process_exit(module, code, sig, t, shutdown, tail))
+                continue
+            if name == LINE:
+                module, text = body
+                found.extend(self.set.on_log_line(module, text, t))
+                continue
             try:
                 value = self._codecs[name].decode(body)
             except DecodeError:
@@ -128,8 +143,12 @@ class OnlineMonitors:
         self.ended_ns = time_ns
 
     def _now(self) -> int:
-        """The time the deadlines are judged at: the reorder window behind the clock, never past the run's end."""
-        now = time.time_ns() - REORDER_WINDOW_NS
+        """The time judged up to: the reorder window behind the clock, never past the horizon or the run's end."""
+        clock = time.time_ns()
+        now = clock - REORDER_WINDOW_NS
+        if self.horizon is not None and now > self._horizon_ns:
+            self._horizon_ns = self.horizon(clock)
+            now = min(now, self._horizon_ns)
         return now if self.ended_ns is None else min(now, self.ended_ns)
 
     def finish(self, time_ns: int) -> RunVerdict:

@@ -209,6 +209,12 @@ class OnlineStl:
 
     ``update`` returns the robustness of the sample ``horizon_samples``
     updates ago (None while fewer samples than that have been given).
+
+    The first sample is given twice, one period apart, and the first
+    copy's verdict dropped: the signals held their first values a period
+    before sampling began. So ``prev x`` at the first sample is x itself
+    (rtamt alone gives +inf there, and ``always(x >= prev x)`` would fail at
+    the first sample of any signal), and ``rise``/``fall`` see no edge there.
     """
 
     def __init__(self, formula: StlFormula):
@@ -218,7 +224,9 @@ class OnlineStl:
         self._count = 0
 
     def update(self, values: Sequence[tuple[str, float]]) -> float | None:
-        robustness = self._spec.update(self._count * self._step, list(values))
+        if self._count == 0:
+            self._spec.update(0.0, list(values))  # the held first values, one period before: prev's value
+        robustness = self._spec.update((self._count + 1) * self._step, list(values))
         self._count += 1
         return robustness if self._count > self.formula.horizon_samples else None
 

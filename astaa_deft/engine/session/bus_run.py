@@ -205,17 +205,24 @@ class BusRun:
         """Log one event (the recorder writes what the tool publishes) and hand it to ``on_event``."""
         return self.events.emit(record)
 
-    def end(self, reason: str) -> None:
-        """Say in the log why the run ends (before the modules are stopped).
+    def end(self, reason: str, at_ns: int | None = None) -> None:
+        """Say in the log why the run ends (before the modules are stopped); ``at_ns``: when the end happened,
+        if the tool noticed it later (an ending module's exit), else now.
 
         Time is judged up to this event, not through the shutdown that follows
         (no deadline findings after the end); `check` ends its judgement there too.
         """
         self.end_reason = reason
         if self.judge is not None:
-            self.judge.end(reason)
+            self.judge.end(reason, at_ns)
         else:
-            self.emit(rec.RunEnd(time.time_ns(), reason))
+            self.emit(rec.RunEnd(time.time_ns() if at_ns is None else at_ns, reason))
+
+    def hold_judgement(self, horizon: Callable[[int], int]) -> None:
+        """The online monitors judge no further than ``horizon(now)`` (the end, dated when it happened, cannot
+        come before it), so they judge nothing of the shutdown that `check` would not."""
+        if self.judge is not None:
+            self.judge.hold(horizon)
 
     def add_finding(self, violation: Violation) -> None:
         """A finding made outside the monitors (the spec's run: outcome): in the verdict and the log."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
+from collections.abc import Callable
 
 from astaa_deft.engine.bus import topology
 from astaa_deft.engine.bus.launcher import ModuleNotReady
@@ -64,11 +65,18 @@ class Judge(RunPart):
         self._events.emit(dataclasses.replace(self.verdict, time_ns=time.time_ns()))
         self.monitors = None
 
-    def end(self, reason: str) -> None:
-        """Say in the log why the run ends (before the modules are stopped); time is judged up to here."""
-        ended = self._events.emit(rec.RunEnd(time.time_ns(), reason))
+    def end(self, reason: str, at_ns: int | None = None) -> None:
+        """Say in the log why the run ends (before the modules are stopped); time is judged up to the end
+        (``at_ns``: when it happened, if before now — an ending module's exit, a channel's message)."""
+        now = time.time_ns()
+        ended = self._events.emit(rec.RunEnd(now if at_ns is None else min(at_ns, now), reason))
         if self.monitors is not None:
             self.monitors.end_at(ended.time_ns)
+
+    def hold(self, horizon: Callable[[int], int]) -> None:
+        """Judge no further than ``horizon(now)`` until the end: the end cannot come before it."""
+        if self.monitors is not None:
+            self.monitors.horizon = horizon
 
     def add_finding(self, violation: Violation) -> None:
         """A finding made outside the monitors (the spec's run: outcome): in the verdict and the log."""

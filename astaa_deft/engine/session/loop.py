@@ -58,6 +58,8 @@ def run_session(spec: Spec, options: RunOptions, *,
     with run:
         t0 = time.monotonic()
         ends.attach(view)
+        if ends.section.module_exits:
+            run.hold_judgement(ends.judged_until)
         if on_start is not None:
             on_start(view)
         while True:
@@ -67,10 +69,11 @@ def run_session(spec: Spec, options: RunOptions, *,
             time.sleep(POLL_SECONDS)
         seconds = time.monotonic() - t0
         sent = run.counts()
-        finding = ends.ended.finding() if ends.ended is not None and ends.ended.reason == reason else None
+        by_spec = ends.ended if ends.ended is not None and ends.ended.reason == reason else None
+        finding = by_spec.finding() if by_spec is not None else None
         if finding is not None:
             run.add_finding(finding)
-        run.end(reason)
+        run.end(reason, by_spec.time_ns if by_spec is not None else None)  # dated when it happened
     verdict = run.judge.verdict if run.judge is not None else None
     recorder = run.recorder
     return RunResult(

@@ -6,6 +6,15 @@ every poll whether the run is over. A module whose exit ends the run is not
 a crash: the session marks its exit as the run's own end, and its exit code
 becomes the outcome (a pass, or a finding with the CRASH class the spec
 gives it).
+
+The end is dated when it happened, not when the tool noticed it: a channel
+condition at its message's bus time; a module's exit at the module's last
+message on the bus when that came within ``SHUTDOWN_GRACE_NS`` before its
+exit (a process takes a moment to close its sessions and exit, and the
+modules it drove fall silent from its last message on), else at its exit as
+waitpid saw it. Until the end is known the online monitors judge no further
+than :meth:`RunEndWatch.judged_until` — a time the end cannot come before —
+so nothing of the shutdown is judged online that ``check`` would not judge.
 """
 
 from __future__ import annotations
@@ -13,6 +22,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from typing import TYPE_CHECKING
@@ -22,6 +32,7 @@ import zenoh
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.codecs import Codec, get_codec
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS
+from astaa_deft.engine.monitor.order import sample_time_ns
 from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation, message_copy
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.run_section import ChannelEnd, Outcome, RunSection
@@ -29,6 +40,9 @@ from astaa_deft.engine.spec.run_section import ChannelEnd, Outcome, RunSection
 if TYPE_CHECKING:
     from astaa_deft.model.records import ProcessExit
     from astaa_deft.engine.session.view import RunView
+
+SHUTDOWN_GRACE_NS = 1_000_000_000  # a module's exit this soon after its last message ends the run at that message
+NOTICE_SLACK_NS = 500_000_000  # how late the tool may learn of an exit (a loaded machine, its watcher thread)
 
 
 @dataclass(frozen=True)
@@ -60,13 +74,18 @@ class RunEndWatch:
         self.section: RunSection = spec.run if spec.run is not None else RunSection()
         self.ended: RunEnd | None = None
         self._lock = threading.Lock()
+        self._ending = {end.module for end in self.section.module_exits}
+        self._last_ns: dict[str, int] = {}  # an ending module -> its last message's bus time
+        self._exits: Callable[[], Sequence[ProcessExit]] = tuple
 
     @property
     def time_limit(self) -> float | None:
         return self.section.time_limit
 
     def attach(self, run: RunView) -> None:
-        """Subscribe to every channel a condition reads (``run``: a started run)."""
+        """Subscribe to every channel a condition reads, and to those of the modules whose exit ends the run
+        (``run``: a started run)."""
+        self._exits = lambda: run.exits
         by_channel: dict[str, list[ChannelEnd]] = {}
         for end in self.section.channel_ends:
             by_channel.setdefault(end.channel, []).append(end)
@@ -76,11 +95,50 @@ class RunEndWatch:
                 run.subscribe(name, functools.partial(self._seen, ends, codec))
             except KeyError:  # not observable in this mode: the condition cannot fire
                 continue
+        for channel in self.spec.channels:
+            if channel.producer in self._ending:
+                try:
+                    run.subscribe(channel.name, functools.partial(self._spoke, channel.producer))
+                except KeyError:  # not observable: its exit is dated by waitpid alone
+                    continue
+
+    def _spoke(self, module: str, sample: zenoh.Sample) -> None:
+        at = sample_time_ns(sample.timestamp, time.time_ns())
+        with self._lock:
+            if at > self._last_ns.get(module, 0):
+                self._last_ns[module] = at
+
+    def exit_time(self, exit_: ProcessExit) -> int:
+        """When an ending module's exit ended the run: its last message, if within the grace before its exit."""
+        last = self._last_ns.get(exit_.module)
+        if last is None:
+            return exit_.time_ns
+        return min(exit_.time_ns, max(last, exit_.time_ns - SHUTDOWN_GRACE_NS))
+
+    def judged_until(self, now_ns: int) -> int:
+        """The latest time the online monitors may judge now: the end, once known, cannot come before it.
+
+        An ending module still running ends the run, at the earliest, at its
+        last message or ``SHUTDOWN_GRACE_NS`` before its exit (which is no
+        earlier than now, less the time the tool takes to learn of it).
+        """
+        if self.ended is not None:
+            return self.ended.time_ns
+        if not self._ending:
+            return now_ns
+        for exit_ in self._exits():
+            if exit_.module in self._ending:
+                return self.exit_time(exit_)
+        with self._lock:
+            last = dict(self._last_ns)
+        unnoticed = now_ns - NOTICE_SLACK_NS  # an exit not noticed yet happened after this
+        return min(max(last[module], unnoticed - SHUTDOWN_GRACE_NS) if module in last else unnoticed
+                   for module in self._ending)
 
     def _seen(self, ends: list[ChannelEnd], codec: Codec, sample: zenoh.Sample) -> None:
         if self.ended is not None:
             return
-        now = time.time_ns()
+        now = sample_time_ns(sample.timestamp, time.time_ns())  # its bus time, as the monitors date it
         try:
             value = codec.decode(sample.payload.to_bytes())
         except Exception:  # noqa: BLE001 - a malformed message ends nothing; the monitors report it
@@ -102,7 +160,7 @@ class RunEndWatch:
             if end is not None:
                 outcome = end.outcome(exit_.returncode, exit_.signal)
                 how = f"killed by {exit_.signal}" if exit_.signal else f"exit code {exit_.returncode}"
-                self._end(RunEnd(end.describe(), outcome, exit_.time_ns, module=exit_.module,
+                self._end(RunEnd(end.describe(), outcome, self.exit_time(exit_), module=exit_.module,
                                  message={"returncode": exit_.returncode, "signal": exit_.signal},
                                  detail=f"module '{exit_.module}' ended the run with {how}: {outcome.name}"))
                 break

@@ -90,5 +90,7 @@ class Transport(RunPart):
         self._events.on_event(rec.MutationRecord.of(event, time.time_ns()))
 
     def _undeclared(self, module: str, key: str) -> None:
-        note = "forwarded to every other module; declare it under 'channels' to route it precisely"
+        note = ("seen by every other module; declare it under 'liveliness' to route it precisely"
+                if key.startswith("liveliness:") else
+                "forwarded to every other module; declare it under 'channels' to route it precisely")
         self._events.emit(rec.UndeclaredKey(time.time_ns(), module, key, note))

@@ -11,7 +11,8 @@ Where each section is read:
   (``--param``, ``fuzz --params``) checked against it — ``params.py``
 - ``zenoh:`` — ``zenoh_section.py``
 - ``modules:`` — ``modules_section.py``
-- ``channels:`` — ``channels_section.py``; ``encoding: cdr`` channels and
+- ``channels:`` — ``channels_section.py`` (a channel's ``time:`` and ``pair_by:``
+  too); ``encoding: cdr`` channels and
   ``ros2:`` — ``ros2_section.py``
 - ``types:`` and ``brittle:`` — ``types_section.py``
 - ``invariants:`` — ``engine/monitor/invariants.py`` (each monitor kind
@@ -20,6 +21,7 @@ Where each section is read:
   load into ``replay_module.ReplayModule``
 - ``run:`` — ``run_section.py``
 - ``decictor:`` — ``decictor_section.py``
+- ``liveliness:`` — ``liveliness_section.py``
 
 The checks every section shares are ``reader.SpecReader``'s; what a loaded
 spec would run (and the refusal to run a spec stored in a log) is

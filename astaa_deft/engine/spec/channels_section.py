@@ -17,10 +17,13 @@ from astaa_deft.engine.spec.ros2_section import resolve_cdr_channel
 from astaa_deft.io.codecs import encoding_names
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.model.errors import did_you_mean
+from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 from astaa_deft.model.sut import Channel, MessageType, Module, Ros2Section
 
 KEY_RE = re.compile(r"^[^*$?#\s]+\Z")  # a concrete Zenoh key: no wildcards, no DSL
-CHANNEL_KEYS = ("name", "key", "topic", "producer", "consumers", "type", "encoding")
+CHANNEL_KEYS = ("name", "key", "topic", "producer", "consumers", "type", "encoding", "time", "pair_by")
+NUMBER_KINDS = ("float32", "float64", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64",
+                "time")
 
 
 def read_channels_section(reader: SpecReader, node: Node | None, modules: tuple[Module, ...],
@@ -67,7 +70,28 @@ class _ChannelsReader:
         if encoding == "cdr":
             encoding = cdr[0] if cdr else "cdr"
         topic = v["topic"].value if "topic" in v and isinstance(v["topic"].value, str) else None
-        return Channel(name, key, producer, tuple(consumers), type_name, encoding, topic)
+        own_time = self._field(v, "time", type_name, NUMBER_KINDS, "a number of seconds (or a 'time' field)")
+        pair_by = self._field(v, "pair_by", type_name, (*NUMBER_KINDS, "string", "enum", "bool"),
+                              "a number or a string (a tick's sequence number, its time)")
+        return Channel(name, key, producer, tuple(consumers), type_name, encoding, topic, own_time, pair_by)
+
+    def _field(self, v: dict[str, Node], key: str, type_name: str, kinds: tuple[str, ...], want: str) -> str | None:
+        """``time:`` or ``pair_by:``: a field path of the channel's type holding one value of ``kinds``."""
+        if key not in v or not self.reader.expect(v[key], (str,), f"'{key}'", "a field path, e.g. header.seq"):
+            return None
+        text: str = v[key].value
+        if type_name not in self.types:
+            return text  # the unknown type is reported already
+        try:
+            declared = type_at(self.types, type_name, FieldPath.parse(text))
+        except FieldPathError as exc:
+            self.reader.src.at(v[key], f"'{key}': {exc.reason}", f"name a field of {type_name}, e.g. header.seq")
+            return None
+        if declared.kind not in kinds:
+            self.reader.src.at(v[key], f"'{key}' field '{text}' is {declared.describe()}; it must be {want}",
+                               "pick a field of that type")
+            return None
+        return text
 
     def _key(self, v: dict[str, Node], name: str, topic_key: str) -> str:
         """The channel's Zenoh key: ``key:`` if given, else the one its ROS 2 topic maps to."""

@@ -15,6 +15,7 @@ from pathlib import Path
 from astaa_deft.engine.monitor.invariants import build_invariants
 from astaa_deft.engine.spec.channels_section import read_channels_section
 from astaa_deft.engine.spec.decictor_section import read_decictor_section
+from astaa_deft.engine.spec.liveliness_section import read_liveliness_section
 from astaa_deft.engine.spec.modules_section import check_ready_channels, read_modules_section
 from astaa_deft.engine.spec.params_section import read_params_section
 from astaa_deft.engine.spec.planner import build_planner
@@ -29,7 +30,7 @@ from astaa_deft.io.yamlsource import Source
 from astaa_deft.model.sut import Spec
 
 TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run",
-            "decictor", "ros2", "replay")
+            "decictor", "ros2", "replay", "liveliness")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -72,6 +73,7 @@ def _build(reader: SpecReader, path: Path) -> Spec:
     replay = build_replay_section(src, v.get("replay"), channels, list(modules))
     run = build_run_section(src, v.get("run"), types, channels, module_names)
     decictor = read_decictor_section(src, v.get("decictor"), tuple(c.name for c in channels), reader.base_dir)
+    liveliness = read_liveliness_section(reader, v.get("liveliness"), modules)
     src.raise_if_problems()
     return Spec(
         name=name,
@@ -90,4 +92,5 @@ def _build(reader: SpecReader, path: Path) -> Spec:
         decictor=decictor,
         source_text=src.text,
         ros2=ros2,
+        liveliness=liveliness,
     )

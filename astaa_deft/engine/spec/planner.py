@@ -24,7 +24,7 @@ from astaa_deft.engine.spec.replay_module import (
     TrajectoryLayout,
 )
 
-FACTORY_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*\Z")
+FACTORY_RE = re.compile(r"^(?:[A-Za-z_][\w.]*|[^:\n]+\.py):[A-Za-z_]\w*\Z")  # pkg.module:Name, or path.py:Name
 PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
 
 
@@ -203,12 +203,13 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
     if "factory" in v:
         factory = v["factory"].value
         if not isinstance(factory, str) or not FACTORY_RE.match(factory):
-            message = (f"factory '{factory}' is not 'package.module:Name'" if isinstance(factory, str)
+            message = (f"factory '{factory}' is not 'package.module:Name' (or 'path/to/file.py:Name', relative to"
+                       " the spec)" if isinstance(factory, str)
                        else f"'factory' must be text 'package.module:Name', not {describe_value(factory)}")
             src.at(v["factory"], message, f"e.g. {factory_example}")
             factory = None
-        elif not _module_found(factory.split(":")[0], src.name):
-            src.at(v["factory"], f"factory module '{factory.split(':')[0]}' is neither on the Python path nor in "
+        elif not _module_found(factory.rpartition(":")[0], src.name):
+            src.at(v["factory"], f"factory module '{factory.rpartition(':')[0]}' is neither on the Python path nor in "
                    "the spec's directory", "install the package that provides it, put it in the spec's directory, "
                    "add its directory to PYTHONPATH, or fix the name")
     args: dict[str, str] = {}
@@ -269,6 +270,8 @@ def _module_found(module: str, spec_name: str) -> bool:
     spec_file = Path(spec_name)
     if not spec_file.is_file():
         return True
+    if module.endswith(".py"):  # a file, relative to the spec
+        return (spec_file.resolve().parent / module).is_file()
     top = module.split(".")[0]
     beside = spec_file.resolve().parent
     if (beside / f"{top}.py").is_file() or (beside / top).is_dir():

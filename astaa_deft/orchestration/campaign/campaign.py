@@ -718,8 +718,7 @@ def shows_failure(outcome: CaseOutcome, failing: CaseOutcome) -> bool:
     wanted = sig.primary(failing)
     if wanted is None:
         return outcome.failed and outcome.verdict == failing.verdict
-    return outcome.failed and any(f.invariant == wanted.invariant and f.module == wanted.module
-                                  for f in outcome.findings)
+    return outcome.failed and any(sig.same_failure(f, wanted) for f in outcome.findings)
 
 
 TESTS_DIR = "tests"

@@ -63,15 +63,17 @@ UNKNOWN = "?"  # a failure key's invariant and module when the run has no findin
 
 @dataclass(frozen=True)
 class FailureKey:
-    """The failure alone (no mutation): CRASH class, invariant, module; compared with the baseline's."""
+    """The failure alone (no mutation): CRASH class, invariant, module and, for an error, which error (its
+    signature: type and innermost frame); compared with the baseline's."""
 
     crash: str
     invariant: str
     module: str  # NO_MODULE: the finding named none; UNKNOWN: no finding
+    error: str = ""  # the finding's error signature ("KeyError in planner.py:step"); "" when it has none
 
     def text(self) -> str:
-        """The journal's form, ``crash|invariant|module``."""
-        return f"{self.crash}|{self.invariant}|{self.module}"
+        """The journal's form, ``crash|invariant|module`` (``|error`` after it when the finding names one)."""
+        return f"{self.crash}|{self.invariant}|{self.module}" + (f"|{self.error}" if self.error else "")
 
 
 @dataclass(frozen=True)
@@ -138,6 +140,7 @@ class Finding:
     detail: str
     severity: str = "high"  # the invariant's (low … critical); a crash no invariant named: high
     at: float | None = None  # seconds from the run's start to the violation (None: not known)
+    signature: str = ""  # which error (type and innermost frame, engine.monitor.error_signature); "" if none
 
 
 @dataclass(frozen=True)

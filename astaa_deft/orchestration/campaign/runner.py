@@ -32,6 +32,7 @@ from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.io.log import layout
 from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
 from astaa_deft.engine.monitor import MonitorSet
+from astaa_deft.engine.monitor.error_signature import signature_of_output, violation_signature
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.session import RunOptions, RunResult, RunView, run_session
 from astaa_deft.model.sut import Spec
@@ -155,11 +156,12 @@ class _Watches:
     def findings(self, result: RunResult) -> list[Finding]:
         """The run's violations, and each crashed module no violation names (an implicit Abort)."""
         found = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail, at=self._at(v.time_ns),
-                         severity=v.severity) for v in result.violations]
+                         severity=v.severity, signature=violation_signature(v)) for v in result.violations]
         for exit_ in result.crashes:
             if not any(f.module == exit_.module for f in found):
+                said = signature_of_output(exit_.stderr_tail.splitlines(), exit_.signal)
                 found.append(Finding(IMPLICIT, Verdict.ABORT, exit_.module, None, exit_.describe(),
-                                     at=self._at(exit_.time_ns)))
+                                     at=self._at(exit_.time_ns), signature=said.text() if said else ""))
         return found
 
     def violating(self) -> dict[str, int]:

@@ -71,7 +71,28 @@ def failure_key(outcome: CaseOutcome) -> FailureKey:
     finding = primary(outcome)
     if finding is None:
         return FailureKey(outcome.verdict, UNKNOWN, UNKNOWN)
-    return FailureKey(finding.crash, finding.invariant, finding.module or NO_MODULE)
+    return FailureKey(finding.crash, finding.invariant, finding.module or NO_MODULE, finding.signature)
+
+
+SAME_PHASE_SECONDS = 2.0  # two errors this close in their runs (and …)
+SAME_PHASE_SHARE = 0.25  # … within this share of the later one's time) came at the same phase of the run
+
+
+def same_failure(finding: Finding, wanted: Finding) -> bool:
+    """``finding`` is the failure ``wanted`` is: the same invariant in the same module and, where both name an
+    error (an ``exceptions`` traceback, a crash's last words), the same error — its type and innermost frame —
+    at the same phase of the run. A twin's ``ValueError`` at the end of its route is not the ``KeyError`` a
+    mutated case raised in ``step`` early on, nor is the same error at a far other moment."""
+    if finding.invariant != wanted.invariant or finding.module != wanted.module:
+        return False
+    if not (finding.signature and wanted.signature):
+        return True
+    if finding.signature != wanted.signature:
+        return False
+    if finding.at is None or wanted.at is None:
+        return True
+    later = max(finding.at, wanted.at)
+    return abs(finding.at - wanted.at) <= max(SAME_PHASE_SECONDS, SAME_PHASE_SHARE * later)
 
 
 def signature(outcome: CaseOutcome, testcase_xml: str | None) -> BucketSignature:

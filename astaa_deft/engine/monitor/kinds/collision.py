@@ -25,7 +25,13 @@
 Ego and obstacles are compared at one instant: each message of either
 channel is checked at its own time, with the other side interpolated
 between the messages around that time (per obstacle id, heading the short
-way round). That waits for the other channel's next message, so online a
+way round). The time is the one the channels declare (``pairing.Join``):
+their own ``time:`` field, or the bus time of the first message of a
+``pair_by:`` pair, so the ego and obstacles of one simulator tick meet
+however far apart they were published; else the bus time, and a finding
+whose overlap is within what interpolating across a message gap can move
+a box says so and is not critical (the two channels' messages of one tick
+may have been published apart). That waits for the other channel's next message, so online a
 finding comes up to one message period late, but the one named is the same
 offline. Where no later message comes (the end of a run, an obstacle that
 appears or vanishes), the other side is carried by its velocity when
@@ -41,6 +47,7 @@ from __future__ import annotations
 
 import bisect
 import collections
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -52,6 +59,7 @@ from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, EpisodeGate, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.model.geometry import Box, box_between, box_moved, overlap
+from astaa_deft.engine.monitor.pairing import Join, JoinMode
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation, json_safe
 from astaa_deft.engine.monitor.kinds import Kind
@@ -225,8 +233,13 @@ class _Track:
         self.states: list[Any] = []
 
     def add(self, time_ns: int, state: Any) -> None:
-        self.times.append(time_ns)
-        self.states.append(state)
+        if not self.times or time_ns >= self.times[-1]:
+            self.times.append(time_ns)
+            self.states.append(state)
+            return
+        index = bisect.bisect_right(self.times, time_ns)  # a pair's late half: back in its place
+        self.times.insert(index, time_ns)
+        self.states.insert(index, state)
 
     def covers(self, time_ns: int) -> bool:
         return bool(self.times) and self.times[-1] >= time_ns
@@ -258,9 +271,11 @@ class CollisionMonitor(Monitor):
         self._id = invariant.obstacle_id.segments if invariant.obstacle_id else None
         self._velocity = (None if invariant.obstacle_velocity is None
                           else tuple(p.segments for p in invariant.obstacle_velocity))
+        self._join = Join(context.spec, {invariant.ego_channel, invariant.obstacle_channel})
         self._ego = _Track()
         self._obstacles = _Track()
-        self._pending: collections.deque[tuple[int, str, int]] = collections.deque()  # (time, channel, seq)
+        # instants to check: (joined time, bus time, channel, seq)
+        self._pending: collections.deque[tuple[int, int, str, int]] = collections.deque()
         self._gate = EpisodeGate()
         self.max_skew_s = 0.0  # the longest a side was held or carried over at an evaluation
 
@@ -270,20 +285,23 @@ class CollisionMonitor(Monitor):
     def on_message(self, channel: str, time_ns: int, value: dict | None, seq: int) -> list[Violation]:
         if value is None:
             return NO_VIOLATIONS
+        at = self._join.at(channel, time_ns, value)
+        if at is None:  # no time of its own where the channels join on theirs
+            return self._evaluate_ready(final=False)
         # ego and obstacles may share a channel (one world-state message): update both first
         updated = False
         if channel == self.inv.ego_channel:
             box = self._ego_box(value)
             if box is not None:
-                self._ego.add(time_ns, box)
+                self._ego.add(at, box)
                 updated = True
         if channel == self.inv.obstacle_channel:
             obstacles = self._read_obstacles(value)
             if obstacles is not None:
-                self._obstacles.add(time_ns, obstacles)
+                self._obstacles.add(at, obstacles)
                 updated = True
         if updated:
-            self._pending.append((time_ns, channel, seq))
+            self._pending.append((at, time_ns, channel, seq))
         return self._evaluate_ready(final=False)
 
     def finish(self, time_ns: int) -> list[Violation]:
@@ -293,13 +311,13 @@ class CollisionMonitor(Monitor):
         """Evaluate pending instants both sides now cover (all of them at the end of the run)."""
         out: list[Violation] = []
         while self._pending:
-            time_ns, channel, seq = self._pending[0]
-            if not final and not (self._ego.covers(time_ns) and self._obstacles.covers(time_ns)):
+            at, time_ns, channel, seq = self._pending[0]
+            if not final and not (self._ego.covers(at) and self._obstacles.covers(at)):
                 break
             self._pending.popleft()
-            out.extend(self._check(channel, time_ns, seq))
+            out.extend(self._check(channel, at, time_ns, seq))
         if self._pending:
-            earliest = self._pending[0][0]
+            earliest = min(p[0] for p in self._pending)
             self._ego.prune_before(earliest)
             self._obstacles.prune_before(earliest)
         return out or NO_VIOLATIONS
@@ -340,19 +358,22 @@ class CollisionMonitor(Monitor):
         return found if isinstance(found, (str, int, float, bool)) else f"#{index}"
 
     # -- alignment -------------------------------------------------------------
-    def _ego_at(self, time_ns: int) -> tuple[Box, float] | None:
-        """The ego's box at time_ns and the skew (s) it was held over; None before its first message."""
+    def _ego_at(self, time_ns: int) -> tuple[Box, float, float] | None:
+        """The ego's box at time_ns, the skew (s) it was held over and how far (m) it moved across the gap it
+        was interpolated over; None before its first message."""
         before, after = self._ego.around(time_ns)
         if before is None:
             return None
         if after is None:
-            return before[1], (time_ns - before[0]) * 1e-9
+            return before[1], (time_ns - before[0]) * 1e-9, 0.0
         if after[0] == before[0]:
-            return before[1], 0.0
-        return box_between(before[1], after[1], (time_ns - before[0]) / (after[0] - before[0])), 0.0
+            return before[1], 0.0, 0.0
+        fraction = (time_ns - before[0]) / (after[0] - before[0])
+        return box_between(before[1], after[1], fraction), 0.0, _moved(before[1], after[1])
 
-    def _obstacles_at(self, time_ns: int) -> list[tuple[Any, Box, Any, float]] | None:
-        """(id, box, element, skew s) of each obstacle brought to time_ns; None before the first message."""
+    def _obstacles_at(self, time_ns: int) -> list[tuple[Any, Box, Any, float, float]] | None:
+        """(id, box, element, skew s, moved m across its interpolated gap) of each obstacle brought to time_ns;
+        None before the first message."""
         before, after = self._obstacles.around(time_ns)
         if before is None:
             return None
@@ -362,17 +383,18 @@ class CollisionMonitor(Monitor):
         for ident, (box, element, velocity) in older.items():
             if ident in newer:
                 if t1 == t0:
-                    out.append((ident, box, element, 0.0))
+                    out.append((ident, box, element, 0.0, 0.0))
                 else:
                     box1 = newer[ident][0]
-                    out.append((ident, box_between(box, box1, (time_ns - t0) / (t1 - t0)), element, 0.0))
+                    out.append((ident, box_between(box, box1, (time_ns - t0) / (t1 - t0)), element, 0.0,
+                                _moved(box, box1)))
             else:  # no later state of this obstacle: carry it forward
                 moved, skew = self._carried(box, velocity, (time_ns - t0) * 1e-9)
-                out.append((ident, moved, element, skew))
+                out.append((ident, moved, element, skew, 0.0))
         for ident, (box, element, velocity) in newer.items():
             if ident not in older:  # it appears in the next message: bring it back
                 moved, skew = self._carried(box, velocity, (time_ns - t1) * 1e-9)
-                out.append((ident, moved, element, skew))
+                out.append((ident, moved, element, skew, 0.0))
         return out
 
     @staticmethod
@@ -382,17 +404,19 @@ class CollisionMonitor(Monitor):
             return box_moved(box, velocity[0], velocity[1], dt), abs(dt)
         return box, abs(dt)
 
-    def _check(self, channel: str, time_ns: int, seq: int) -> list[Violation]:
-        ego = self._ego_at(time_ns)
-        obstacles = self._obstacles_at(time_ns)
+    def _check(self, channel: str, at: int, time_ns: int, seq: int) -> list[Violation]:
+        """The instant ``at`` (joined time) of the message of bus time ``time_ns`` (the findings' date)."""
+        ego = self._ego_at(at)
+        obstacles = self._obstacles_at(at)
         if ego is None or obstacles is None:
             return NO_VIOLATIONS
         self.evaluations += 1
-        ego_box, ego_skew = ego
+        ego_box, ego_skew, ego_moved = ego
         grown = ego_box.grown(self.inv.margin)
         colliding = []
         out: list[Violation] = []
-        for obstacle_id, box, element, skew in obstacles:
+        by_bus = self._join.mode == JoinMode.BUS
+        for obstacle_id, box, element, skew, moved in obstacles:
             skew = max(skew, ego_skew)
             self.max_skew_s = max(self.max_skew_s, skew)
             depth = overlap(grown, box)
@@ -400,7 +424,9 @@ class CollisionMonitor(Monitor):
                 continue
             colliding.append(obstacle_id)
             if self._gate.broke(obstacle_id):
-                out.append(self._violation(channel, time_ns, seq, _Overlap(obstacle_id, element, depth, ego_box, skew)))
+                uncertain = max(moved, ego_moved) if by_bus else 0.0
+                out.append(self._violation(channel, time_ns, seq,
+                                           _Overlap(obstacle_id, element, depth, ego_box, skew, uncertain)))
         if colliding:
             self.violating += 1
         self._gate.keep_only(colliding)
@@ -410,13 +436,23 @@ class CollisionMonitor(Monitor):
         margin = f" (with a {self.inv.margin:g} m margin)" if self.inv.margin else ""
         held = f"; a side held or carried over {found.skew:.3f} s" if found.skew else ""
         detail = f"ego footprint overlaps obstacle {found.obstacle_id!r} by {found.depth:.2f} m{margin}{held}"
+        unsure = found.uncertain > 0.0 and found.depth <= found.uncertain
+        if unsure:
+            detail += (f"; within the {found.uncertain:.2f} m a box moved between the messages it was interpolated"
+                       f" over by bus time — if one tick's messages are published apart, declare 'time:' or"
+                       f" 'pair_by:' on channels '{self.inv.ego_channel}' and '{self.inv.obstacle_channel}'")
         ego = found.ego
         context = {"obstacle_id": json_safe(found.obstacle_id), "overlap_m": round(found.depth, 4),
-                   "skew_s": round(found.skew, 6),
+                   "skew_s": round(found.skew, 6), "joined": str(self._join.mode),
                    "ego": {"x": ego.x, "y": ego.y, "heading": ego.heading, "length": ego.length,
                            "width": ego.width},
                    "obstacle": json_safe(found.element)}
-        return self.violation(time_ns, detail, channel=channel, seq=seq, message=context, infer_module=False)
+        if found.uncertain > 0.0:
+            context["interpolation_m"] = round(found.uncertain, 4)
+        found_v = self.violation(time_ns, detail, channel=channel, seq=seq, message=context, infer_module=False)
+        if unsure and found_v.severity == "critical":  # not critical while the join may have made it
+            found_v = dataclasses.replace(found_v, severity="high")
+        return found_v
 
 
 @dataclass(frozen=True)
@@ -428,6 +464,12 @@ class _Overlap:
     depth: float  # m
     ego: Box  # the ego footprint (without the margin)
     skew: float  # s: how far a side was held or carried over to this time
+    uncertain: float = 0.0  # m: how far a side moved across the gap it was interpolated over (by bus time)
+
+
+def _moved(before: Box, after: Box) -> float:
+    """How far a box's centre moved between two states (m)."""
+    return math.hypot(after.x - before.x, after.y - before.y)
 
 
 def monitor(invariant: CollisionInvariant, context: MonitorContext) -> CollisionMonitor:

@@ -118,8 +118,9 @@ class LogMonitor(Monitor):
         self.violating += 1
         shown = line.text if len(line.text) <= 200 else line.text[:200] + "…"
         detail = f"module '{line.module}' {self.inv.what_matched()}: {shown}"
-        return [self.violation(line.time_ns, detail, module=line.module, message={"line": line.text},
-                               copy_message=False)]
+        pattern = f"/{self.inv.pattern.pattern}/"  # a log finding's signature: the pattern it matched
+        return [self.violation(line.time_ns, detail, module=line.module, copy_message=False,
+                               message={"line": line.text, "pattern": pattern, "signature": pattern})]
 
 
 def monitor(invariant: LogInvariant, context: MonitorContext) -> LogMonitor:

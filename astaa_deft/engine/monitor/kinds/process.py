@@ -25,6 +25,7 @@ from astaa_deft.model.records import ProcessExit, Verdict
 from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
+from astaa_deft.engine.monitor.error_signature import signature_of_output
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
@@ -106,6 +107,9 @@ class ProcessMonitor(Monitor):
             detail += " (a clean exit code for a module that stopped serving)"
         tail = exit_.stderr_tail.strip().splitlines()[-5:]
         context = {"returncode": exit_.returncode, "signal": exit_.signal, "stderr_tail": "\n".join(tail)}
+        said = signature_of_output(exit_.stderr_tail.splitlines(), exit_.signal)
+        if said is not None:  # which error it died of: the last traceback or panic of its output, or the signal
+            context["signature"] = said.text()
         return [self.violation(exit_.time_ns, detail, module=exit_.module, message=context,
                                crash=Verdict.HINDERING if clean else Verdict.ABORT)]
 

@@ -32,6 +32,7 @@ from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, EpisodeGate, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.engine.monitor.sampling import GridSampler
+from astaa_deft.engine.monitor.pairing import Join
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.stl import SIGNAL_NAME, StlError, StlFormula, check_formula
 from astaa_deft.engine.monitor.violation import Violation
@@ -177,12 +178,16 @@ class TemporalMonitor(Monitor):
             maxlen=formula.horizon_samples + 1)
         self._last_message: tuple[str, int] | None = None
         self._gate = EpisodeGate()
+        # channels declaring pair_by (or time): a tick's later message joins its first, not the sample between
+        self._join = Join(context.spec, self._by_channel, own_time=False)
 
     def channels(self) -> set[str]:
         return set(self._by_channel)
 
     def on_message(self, channel: str, time_ns: int, value: dict | None, seq: int) -> list[Violation]:
-        out = self._read_grid(time_ns, inclusive=False)
+        at = self._join.at(channel, time_ns, value) if value is not None else None
+        # The second message of a pair completes its tick: no grid point is read between the two.
+        out = self._read_grid(time_ns, inclusive=False) if at is None or at >= time_ns else NO_VIOLATIONS
         if value is not None:
             for signal in self._by_channel.get(channel, ()):
                 try:
