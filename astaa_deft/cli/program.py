@@ -24,6 +24,7 @@ from astaa_deft.cli.commands import (
     policy_check,
     proxy,
     spec_check,
+    verify,
 )
 from astaa_deft.io.output_place import ignore_file_size_signal
 from astaa_deft.model.errors import AstaaDeftError
@@ -54,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     minimise.add_parser(sub)
     campaign_commands.add_fuzz_parser(sub)
     campaign_commands.add_report_parser(sub)
+    verify.add_parser(sub)
     demo.add_parser(sub)
     return p
 

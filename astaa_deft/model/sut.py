@@ -136,6 +136,7 @@ class Spec:
     decictor: DecictorSection | None = None  # the 'decictor:' section (None: the spec has none)
     source_text: str = ""
     ros2: Ros2Section = Ros2Section()
+    source: Path | None = None  # the 'source:' folder: the stack's git checkout (verify's revision, bisect)
 
     def module(self, name: str) -> Module:
         return next(m for m in self.modules if m.name == name)

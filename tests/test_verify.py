@@ -1,0 +1,147 @@
+"""`astaa-deft verify`: a campaign's buckets against the stack as it is now (real runs of tests/sut/steady.yaml).
+
+The steady stack's worker crashes on a NaN on 'aux' while its param crash_on_nan is 1 (the seeded defect);
+a campaign of one test case (a NaN on 'aux') files that crash as a bug. Verified with crash_on_nan=0 the
+bucket is fixed (exit 0); with crash_on_nan=1 it still fails (exit 1). The classification and the history
+are pure logic, tested apart.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
+from astaa_deft.orchestration.campaign.journal import Journal, open_existing
+from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
+from astaa_deft.orchestration.verify.bisect import search
+from astaa_deft.orchestration.verify.history import history
+from astaa_deft.orchestration.verify.model import FailureWay, Tally, VerifyStatus, classify
+from astaa_deft.orchestration.verify.records import VerificationRow, verifications
+
+SUT = Path(__file__).parent / "sut"
+STEADY = SUT / "steady.yaml"
+SET_AUX = ('<testcase id="t" seed="1"><description>x</description><policy id="p1"><channel>aux</channel>'
+           '<window from="0.2" to="30"><after channel="aux" message="1"/></window><select limit="1"/>'
+           '<set><field path="value" value="dict:float.nan"/></set></policy></testcase>')
+
+
+class Fixed(Strategy):
+    """Proposes the given test cases in order (the campaign's strategy interface; nothing mocked)."""
+
+    name = "fixed"
+
+    def __init__(self, cases: list[str]):
+        self.cases = cases
+
+    def propose(self, number: int) -> Proposal:
+        return Proposal(self.cases[number - 1])
+
+
+def run_campaign(out: Path, spec: Path, params: dict[str, list[str]]) -> None:
+    journal = Journal(out)
+    try:
+        run = Campaign(CampaignConfig(spec, out, cases=1, workers=2, horizon=4.0, settle=2.0, minimise=False,
+                                      report=False, baseline_runs=1, reruns=1, params=params),
+                       journal, say=lambda text: None)
+        run.strategy = Fixed([SET_AUX])  # type: ignore[assignment]
+        run.run()
+    finally:
+        journal.close()
+
+
+def verify(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "astaa_deft.cli", "verify", *args], capture_output=True, text=True,
+                          timeout=240)
+
+
+@pytest.fixture(scope="module")
+def steady_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("verify") / "campaign"
+    run_campaign(out, STEADY, {"crash_on_nan": ["1"]})
+    return out
+
+
+def test_verify_says_fixed_when_the_defect_is_off_and_still_failing_when_it_is_on(steady_campaign: Path):
+    journal = open_existing(steady_campaign)
+    try:
+        [bucket] = journal.buckets()
+        assert bucket.kind == "bug" and bucket.family == "aux:value:set", bucket
+    finally:
+        journal.close()
+    fixed = verify(str(steady_campaign), "--param", "crash_on_nan=0", "--runs", "1", "--label", "v2")
+    assert fixed.returncode == 0, fixed.stdout + fixed.stderr
+    assert "B001 fixed: 0/1" in fixed.stdout and "1/1 bucket(s) fixed" in fixed.stdout, fixed.stdout
+    failing = verify(str(steady_campaign), "--param", "crash_on_nan=1", "--runs", "1", "--label", "v3",
+                     "--bucket", "B001")
+    assert failing.returncode == 1, failing.stdout + failing.stderr
+    assert "B001 still failing: 1/1" in failing.stdout and "unmutated twins 0/1" in failing.stdout, failing.stdout
+    journal = open_existing(steady_campaign)
+    try:
+        rows = verifications(journal)
+    finally:
+        journal.close()
+    assert [(r.bucket, r.revision, r.status) for r in rows] == [("B001", "v2", "fixed"),
+                                                                ("B001", "v3", "still failing")]
+    seen = history("B001", rows)
+    assert seen.fixed_on is None and seen.reopened_on == ("v3",) and seen.latest is rows[-1]
+    status = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", "--status", "-o", str(steady_campaign)],
+                            capture_output=True, text=True, timeout=60)
+    assert "reopened on v3" in status.stdout, status.stdout
+
+
+def test_verify_refuses_an_unknown_bucket_and_a_param_the_spec_does_not_have(steady_campaign: Path):
+    done = verify(str(steady_campaign), "--bucket", "B042", "--label", "x")
+    assert done.returncode == 2 and "no bucket B042" in done.stderr and "B001" in done.stderr, done.stderr
+    done = verify(str(steady_campaign), "--param", "nope=1", "--label", "x")
+    assert done.returncode == 2 and "nope" in done.stderr, done.stderr
+
+
+def outcome(*findings: tuple[str, str | None], status: str = "done") -> CaseOutcome:
+    found = [Finding(inv, "Abort", module, None, "") for inv, module in findings]
+    return CaseOutcome(status, "Abort" if found else ("Pass" if status == "done" else "?"), "s", found)
+
+
+def test_classification_fixed_still_failing_changed_flaky_not_observed():
+    way = FailureWay("(module exit)", "worker")
+    same, other, clean, lost = (outcome(("(module exit)", "worker")), outcome(("data_small", "listener")),
+                                outcome(), outcome(status="error"))
+    assert classify(Tally.of([clean, clean], way), Tally.of([clean, clean], way)) == VerifyStatus.FIXED
+    assert classify(Tally.of([same, clean], way), Tally.of([clean, clean], way)) == VerifyStatus.STILL_FAILING
+    assert classify(Tally.of([other, clean], way), Tally.of([clean, clean], way)) == VerifyStatus.CHANGED
+    assert classify(Tally.of([same, same], way), Tally.of([same, clean], way)) == VerifyStatus.FLAKY
+    assert classify(Tally.of([clean, lost], way), Tally.of([clean, clean], way)) == VerifyStatus.NOT_OBSERVED
+    assert Tally.of([same, clean, other], way) == Tally(3, 1, 1, 0, "s")
+
+
+def row(revision: str, status: VerifyStatus) -> VerificationRow:
+    return VerificationRow("B001", revision, status, 0, 1, 0, 1, None, "", 0.0)
+
+
+def test_history_found_fixed_reopened():
+    rows = [row("v1", VerifyStatus.STILL_FAILING), row("v2", VerifyStatus.FIXED), row("v3", VerifyStatus.FIXED)]
+    assert history("B001", rows).fixed_on == "v2"
+    rows += [row("v4", VerifyStatus.CHANGED), row("v5", VerifyStatus.NOT_OBSERVED), row("v6", VerifyStatus.FIXED)]
+    seen = history("B001", rows)
+    assert (seen.failing_on, seen.reopened_on, seen.fixed_on) == (("v1", "v4"), ("v4",), "v6")
+    assert "reopened on v4" in seen.describe() and "fixed on v6" in seen.describe()
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 8, 13])
+def test_bisect_search_finds_every_change_in_log2_n_plus_one_verifies(n: int):
+    for k in range(1, n + 1):  # revisions 0 (GOOD) … n (BAD); revision k is the first that differs
+        asked: list[int] = []
+
+        def fails(index: int) -> bool:
+            asked.append(index)
+            return index < k
+
+        found = search(n, fails)
+        assert found.first == k, (n, k)
+        assert len(asked) <= math.ceil(math.log2(n)) + 1 + (k == n), (n, k, asked)
+        assert len(set(asked)) == len(asked)
