@@ -145,3 +145,26 @@ def test_bisect_search_finds_every_change_in_log2_n_plus_one_verifies(n: int):
         assert found.first == k, (n, k)
         assert len(asked) <= math.ceil(math.log2(n)) + 1 + (k == n), (n, k, asked)
         assert len(set(asked)) == len(asked)
+
+
+def test_export_writes_a_suite_that_fails_while_the_bug_is_there_and_passes_once_fixed(steady_campaign: Path,
+                                                                                       tmp_path: Path):
+    regress = tmp_path / "regress"
+    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "export", str(steady_campaign), "-o", str(regress)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "test_live.py::test_B001_aux_value_set" in done.stdout
+    assert {p.name for p in regress.iterdir()} >= {"README.md", "conftest.py", "pytest.ini", "regress.json",
+                                                   "test_live.py", "cases"}
+
+    def pytest_regress(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(regress), *args],
+                              capture_output=True, text=True, timeout=240, cwd=tmp_path)
+
+    buggy = pytest_regress("-m", "live")
+    assert buggy.returncode == 1 and "FAILED" in buggy.stdout and "test_B001_aux_value_set" in buggy.stdout, \
+        buggy.stdout
+    fixed = pytest_regress("-m", "live", "--param", "crash_on_nan=0")
+    assert fixed.returncode == 0 and "1 passed" in fixed.stdout, fixed.stdout
+    # the fast set holds no test of this bucket (its crash has no module replay): nothing to select
+    assert pytest_regress("-m", "module").returncode == 5

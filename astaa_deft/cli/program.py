@@ -17,6 +17,7 @@ from astaa_deft.cli.commands import (
     check,
     demo,
     discover,
+    export,
     extract,
     generate,
     log_info,
@@ -56,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     campaign_commands.add_fuzz_parser(sub)
     campaign_commands.add_report_parser(sub)
     verify.add_parser(sub)
+    export.add_parser(sub)
     demo.add_parser(sub)
     return p
 
