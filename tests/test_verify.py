@@ -20,8 +20,10 @@ from astaa_deft.orchestration.campaign.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.orchestration.verify.bisect import search
-from astaa_deft.orchestration.verify.history import history
-from astaa_deft.orchestration.verify.model import FailureWay, Tally, VerifyStatus, classify
+from astaa_deft.orchestration.campaign.report import write_report
+from astaa_deft.orchestration.verify import records
+from astaa_deft.orchestration.verify.history import fixed_buckets, history
+from astaa_deft.orchestration.verify.model import BucketCheck, FailureWay, Tally, VerifyStatus, classify
 from astaa_deft.orchestration.verify.records import VerificationRow, verifications
 
 SUT = Path(__file__).parent / "sut"
@@ -43,16 +45,23 @@ class Fixed(Strategy):
         return Proposal(self.cases[number - 1])
 
 
-def run_campaign(out: Path, spec: Path, params: dict[str, list[str]]) -> None:
+def run_campaign(out: Path, spec: Path, params: dict[str, list[str]], cases: list[str] | None = None,
+                 resume: bool = False) -> list[str]:
+    """A campaign of the given test cases (default: one NaN on 'aux'); what it said."""
+    cases = cases or [SET_AUX]
     journal = Journal(out)
+    said: list[str] = []
     try:
-        run = Campaign(CampaignConfig(spec, out, cases=1, workers=2, horizon=4.0, settle=2.0, minimise=False,
-                                      report=False, baseline_runs=1, reruns=1, params=params),
-                       journal, say=lambda text: None)
-        run.strategy = Fixed([SET_AUX])  # type: ignore[assignment]
+        config = CampaignConfig(spec, out, cases=len(cases), workers=2, horizon=4.0, settle=2.0, minimise=False,
+                                report=False, baseline_runs=1, reruns=1, params=params)
+        if resume:
+            config = config.resuming(journal.meta())
+        run = Campaign(config, journal, say=said.append)
+        run.strategy = Fixed(cases)  # type: ignore[assignment]
         run.run()
     finally:
         journal.close()
+    return said
 
 
 def verify(*args: str) -> subprocess.CompletedProcess:
@@ -93,6 +102,29 @@ def test_verify_says_fixed_when_the_defect_is_off_and_still_failing_when_it_is_o
     status = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", "--status", "-o", str(steady_campaign)],
                             capture_output=True, text=True, timeout=60)
     assert "reopened on v3" in status.stdout, status.stdout
+    page = write_report(steady_campaign).read_text()
+    assert "<h2>Verification</h2>" in page and "reopened on v3" in page and "v2: fixed (0/1)" in page
+
+
+def test_a_resumed_campaign_reopens_a_bucket_verified_fixed_when_a_case_fails_its_way_again(
+        steady_campaign: Path):
+    journal = open_existing(steady_campaign)
+    try:  # as `verify --label v4` records it, without its runs
+        records.record(journal, BucketCheck("B001", "v4", VerifyStatus.FIXED, Tally(1), Tally(1), None, "", {},
+                                            False))
+        assert fixed_buckets(verifications(journal)) == {"B001"}
+    finally:
+        journal.close()
+    said = run_campaign(steady_campaign, STEADY, {"crash_on_nan": ["1"]}, cases=[SET_AUX, SET_AUX], resume=True)
+    assert any("B001 verified fixed: skipped" in line for line in said), said
+    assert any("B001 was verified fixed and reappeared in c-000002" in line for line in said), said
+    journal = open_existing(steady_campaign)
+    try:
+        rows = verifications(journal)
+    finally:
+        journal.close()
+    assert [(r.revision, r.status) for r in rows][-2:] == [("v4", "fixed"), ("(campaign)", "reappeared")]
+    assert history("B001", rows).reopened_on[-1] == "(campaign)" and not fixed_buckets(rows)
 
 
 def test_verify_refuses_an_unknown_bucket_and_a_param_the_spec_does_not_have(steady_campaign: Path):
@@ -147,6 +179,7 @@ def test_bisect_search_finds_every_change_in_log2_n_plus_one_verifies(n: int):
         assert len(set(asked)) == len(asked)
 
 
+@pytest.mark.slow
 def test_export_writes_a_suite_that_fails_while_the_bug_is_there_and_passes_once_fixed(steady_campaign: Path,
                                                                                        tmp_path: Path):
     regress = tmp_path / "regress"

@@ -107,6 +107,10 @@ test case failed live; unconfirmed — no re-run reproduced it (not counted as a
 without mutation failed too; without mutation — clean runs fail this way. Ranked by status, severity, rate. \
 rate: re-runs of a bucket's first failure that failed the same way (for a bucket without mutation: clean runs \
 that failed this way). cases: generated cases filed in the bucket.</p>
+{% endif %}{% if verification %}<h2>Verification</h2><p class='muted'>Each bucket re-checked against the stack (astaa-deft verify): its test case run live beside unmutated twins. fixed — no run failed; still failing — runs failed its way (k/N); changed — they fail another way; flaky — its unmutated twins fail that way too.</p>
+<table><tr><th>bucket</th><th>now</th><th>on</th><th>runs failing its way</th><th>history</th><th>every check (oldest first)</th></tr>
+{% for v in verification %}<tr><td><a href='#{{ v.bucket }}'>{{ v.bucket }}</a></td><td><span class='{{ 'ok' if v.status == 'fixed' else 'bad' }}'>{{ v.status }}</span></td><td>{{ v.revision }}</td><td>{{ v.stability }}</td><td>{{ v.history }}</td><td>{% for c in v.checks %}{% if not loop.first %}<br>{% endif %}{{ c }}{% endfor %}</td></tr>
+{% endfor %}</table>
 {% endif %}<h2>Plots</h2><div class='plots'>
 {% for title, png in plots %}<img alt='{{ title }}' title='{{ title }}' src='data:image/png;base64,{{ png }}'>
 {% endfor %}</div></body></html>
@@ -182,7 +186,36 @@ def render(journal: Journal, out: Path) -> str:
         most_severe=top.describe() if top is not None else None,
         summary=_summary(meta, cases, buckets),
         buckets=_bucket_table(journal, out, buckets, by_bucket),
+        verification=_verification(journal),
         plots=_plots(journal, cases.done, buckets))
+
+
+@dataclass(frozen=True)
+class _VerifiedRow:
+    """A bucket's row of the verification table: where it stands now, its history, every check."""
+
+    bucket: str
+    status: str
+    revision: str
+    stability: str
+    history: str
+    checks: list[str]
+
+
+def _verification(journal: Journal) -> list[_VerifiedRow]:
+    """Each verified bucket's latest check and history (``astaa-deft verify``); none: the section is left out."""
+    from astaa_deft.orchestration.verify.history import histories
+    from astaa_deft.orchestration.verify.records import verifications
+
+    rows = verifications(journal)
+    out = []
+    for name, seen in histories(rows).items():
+        latest = seen.latest
+        if latest is None:
+            continue
+        out.append(_VerifiedRow(name, str(latest.status), latest.revision, latest.stability, seen.describe(),
+                                [f"{r.revision}: {r.status} ({r.stability})" for r in rows if r.bucket == name]))
+    return out
 
 
 def _summary(meta: CampaignMeta, cases: _Cases, buckets: list[Bucket]) -> list[tuple[str, object]]:

@@ -67,3 +67,8 @@ def history(bucket: str, rows: Sequence[VerificationRow]) -> BucketHistory:
 def histories(rows: Sequence[VerificationRow]) -> dict[str, BucketHistory]:
     """Bucket → its history, for every bucket checked at least once."""
     return {name: history(name, rows) for name in dict.fromkeys(r.bucket for r in rows)}
+
+
+def fixed_buckets(rows: Sequence[VerificationRow]) -> set[str]:
+    """The buckets whose latest check (not counting "not observed") says fixed."""
+    return {name for name, seen in histories(rows).items() if seen.fixed_now}
