@@ -201,3 +201,51 @@ def test_export_writes_a_suite_that_fails_while_the_bug_is_there_and_passes_once
     assert fixed.returncode == 0 and "1 passed" in fixed.stdout, fixed.stdout
     # the fast set holds no test of this bucket (its crash has no module replay): nothing to select
     assert pytest_regress("-m", "module").returncode == 5
+
+
+def git(repo: Path, *args: str) -> str:
+    done = subprocess.run(["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@example.invalid",
+                           *args], capture_output=True, text=True, check=True, timeout=60)
+    return done.stdout.strip()
+
+
+@pytest.mark.slow
+def test_bisect_finds_the_revision_that_fixed_a_seeded_defect_in_log2_n_plus_one_verifies(tmp_path: Path):
+    # A git repository of the steady stack (its spec names it as 'source: .'): revision 0 crashes on a NaN,
+    # revision FIX guards it, the others change nothing that matters.
+    repo, n, fix = tmp_path / "stack", 8, 5
+    repo.mkdir()
+    for name in ("talker.py", "listener.py", "steady_worker.py"):
+        (repo / name).write_text((SUT / name).read_text())
+    (repo / "steady.yaml").write_text(STEADY.read_text() + "source: .\n")
+    git(repo, "init", "-q")
+    git(repo, "add", ".")
+    git(repo, "commit", "-qm", "r0")
+    revisions = [git(repo, "rev-parse", "HEAD")]
+    for k in range(1, n + 1):
+        if k == fix:
+            worker = repo / "steady_worker.py"
+            worker.write_text(worker.read_text().replace('crash_on_nan = args.crash_on_nan == "1"',
+                                                         "crash_on_nan = False  # fixed: a NaN is ignored"))
+        else:
+            (repo / "NOTES").write_text(f"revision {k}\n")
+        git(repo, "add", ".")
+        git(repo, "commit", "-qm", f"r{k}")
+        revisions.append(git(repo, "rev-parse", "HEAD"))
+    git(repo, "checkout", "-q", revisions[0])
+    out = tmp_path / "campaign"
+    run_campaign(out, repo / "steady.yaml", {"crash_on_nan": ["1"]})
+    git(repo, "checkout", "-q", "master" if git(repo, "branch", "--list", "master") else "main")
+    done = verify(str(out), "--bisect", f"{revisions[0]}..{revisions[-1]}", "--bucket", "B001", "--runs", "1",
+                  "--build", "touch built")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert f"stops failing (fixed) at {revisions[fix]}" in done.stdout, done.stdout
+    verifies = math.ceil(math.log2(n)) + 1
+    assert f"({verifies} verifies)" in done.stdout, done.stdout
+    journal = open_existing(out)
+    try:
+        rows = verifications(journal)
+    finally:
+        journal.close()
+    assert len(rows) == verifies and (repo / "built").is_file()
+    assert git(repo, "rev-parse", "HEAD") == revisions[-1]  # the checkout is back where it was
