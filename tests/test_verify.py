@@ -46,14 +46,15 @@ class Fixed(Strategy):
 
 
 def run_campaign(out: Path, spec: Path, params: dict[str, list[str]], cases: list[str] | None = None,
-                 resume: bool = False) -> list[str]:
+                 resume: bool = False, horizon: float = 4.0, minimise: bool = False) -> list[str]:
     """A campaign of the given test cases (default: one NaN on 'aux'); what it said."""
     cases = cases or [SET_AUX]
     journal = Journal(out)
     said: list[str] = []
     try:
-        config = CampaignConfig(spec, out, cases=len(cases), workers=2, horizon=4.0, settle=2.0, minimise=False,
-                                report=False, baseline_runs=1, reruns=1, params=params)
+        config = CampaignConfig(spec, out, cases=len(cases), workers=2, horizon=horizon, settle=2.0,
+                                minimise=minimise, minimise_timeout=240.0, report=False, baseline_runs=1, reruns=1,
+                                params=params)
         if resume:
             config = config.resuming(journal.meta())
         run = Campaign(config, journal, say=said.append)
@@ -169,7 +170,7 @@ def test_bisect_search_finds_every_change_in_log2_n_plus_one_verifies(n: int):
     for k in range(1, n + 1):  # revisions 0 (GOOD) … n (BAD); revision k is the first that differs
         asked: list[int] = []
 
-        def fails(index: int) -> bool:
+        def fails(index: int, asked: list[int] = asked, k: int = k) -> bool:
             asked.append(index)
             return index < k
 
@@ -249,3 +250,16 @@ def test_bisect_finds_the_revision_that_fixed_a_seeded_defect_in_log2_n_plus_one
         journal.close()
     assert len(rows) == verifies and (repo / "built").is_file()
     assert git(repo, "rev-parse", "HEAD") == revisions[-1]  # the checkout is back where it was
+
+
+def test_the_spec_names_the_stacks_checkout_in_source(tmp_path: Path):
+    from astaa_deft.engine.spec.loader import load_spec
+    from astaa_deft.model.errors import InputError
+
+    spec = tmp_path / "sut.yaml"
+    spec.write_text(STEADY.read_text() + "source: ../stack\n")
+    assert load_spec(spec).source == tmp_path / "../stack"
+    assert load_spec(STEADY).source is None
+    spec.write_text(STEADY.read_text() + "source: [a]\n")
+    with pytest.raises(InputError, match="'source' must be a folder path"):
+        load_spec(spec)

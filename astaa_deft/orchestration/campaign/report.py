@@ -107,9 +107,15 @@ test case failed live; unconfirmed — no re-run reproduced it (not counted as a
 without mutation failed too; without mutation — clean runs fail this way. Ranked by status, severity, rate. \
 rate: re-runs of a bucket's first failure that failed the same way (for a bucket without mutation: clean runs \
 that failed this way). cases: generated cases filed in the bucket.</p>
-{% endif %}{% if verification %}<h2>Verification</h2><p class='muted'>Each bucket re-checked against the stack (astaa-deft verify): its test case run live beside unmutated twins. fixed — no run failed; still failing — runs failed its way (k/N); changed — they fail another way; flaky — its unmutated twins fail that way too.</p>
-<table><tr><th>bucket</th><th>now</th><th>on</th><th>runs failing its way</th><th>history</th><th>every check (oldest first)</th></tr>
-{% for v in verification %}<tr><td><a href='#{{ v.bucket }}'>{{ v.bucket }}</a></td><td><span class='{{ 'ok' if v.status == 'fixed' else 'bad' }}'>{{ v.status }}</span></td><td>{{ v.revision }}</td><td>{{ v.stability }}</td><td>{{ v.history }}</td><td>{% for c in v.checks %}{% if not loop.first %}<br>{% endif %}{{ c }}{% endfor %}</td></tr>
+{% endif %}{% if verification %}<h2>Verification</h2><p class='muted'>Each bucket re-checked against the \
+stack (astaa-deft verify): its test case run live beside unmutated twins. fixed — no run failed; still failing — \
+runs failed its way (k/N); changed — they fail another way; flaky — its unmutated twins fail that way too.</p>
+<table><tr><th>bucket</th><th>now</th><th>on</th><th>runs failing its way</th><th>history</th>\
+<th>every check (oldest first)</th></tr>
+{% for v in verification %}<tr><td><a href='#{{ v.bucket }}'>{{ v.bucket }}</a></td>\
+<td><span class='{{ 'ok' if v.status == 'fixed' else 'bad' }}'>{{ v.status }}</span></td>\
+<td>{{ v.revision }}</td><td>{{ v.stability }}</td><td>{{ v.history }}</td>\
+<td>{% for c in v.checks %}{% if not loop.first %}<br>{% endif %}{{ c }}{% endfor %}</td></tr>
 {% endfor %}</table>
 {% endif %}<h2>Plots</h2><div class='plots'>
 {% for title, png in plots %}<img alt='{{ title }}' title='{{ title }}' src='data:image/png;base64,{{ png }}'>

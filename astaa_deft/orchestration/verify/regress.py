@@ -87,7 +87,8 @@ def parse_params(items: list[str]) -> dict[str, str]:
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
-            raise InputError(Problem("--param", None, None, f"'{item}' is not KEY=VALUE", "write e.g. --param defects=off"))
+            raise InputError(Problem("--param", None, None, f"'{item}' is not KEY=VALUE",
+                                     "write e.g. --param defects=off"))
         out[key] = value
     return out
 

@@ -37,7 +37,9 @@ from astaa_deft.orchestration.campaign.module_tests import is_crash_bucket, run_
 from astaa_deft.orchestration.campaign.payload import CasePayload
 from astaa_deft.orchestration.campaign.rows import Bucket
 from astaa_deft.orchestration.verify import records
-from astaa_deft.orchestration.verify.model import FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify
+from astaa_deft.orchestration.verify.model import (
+    FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify,
+)
 from astaa_deft.orchestration.verify.revision import describe
 
 DEFAULT_RUNS = 3
@@ -134,7 +136,8 @@ def _known(journal: Journal) -> dict[str, KnownFinding]:
     return known_findings(clean)
 
 
-def targets(campaign: CampaignFindings, names: tuple[str, ...], params: dict[str, str]) -> tuple[list[Target], list[str]]:
+def targets(campaign: CampaignFindings, names: tuple[str, ...],
+            params: dict[str, str]) -> tuple[list[Target], list[str]]:
     """The buckets to verify (``names``, or every one not merged) and those left out, each with why.
     InputError for a name the campaign has no bucket of."""
     journal = campaign.journal
@@ -206,8 +209,8 @@ def stack_revision(spec: Spec) -> str:
     return f"unlabelled {time.strftime('%Y-%m-%d %H:%M:%S')}"
 
 
-def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: VerifyOptions, revision: str, out_dir: Path,
-                   say: Callable[[str], None]) -> list[BucketCheck]:
+def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: VerifyOptions, revision: str,
+                   out_dir: Path, say: Callable[[str], None]) -> list[BucketCheck]:
     """Run every target's re-runs and twins (the campaign's pool, its runs at once), then its module tests;
     each check journaled as it is decided."""
     from astaa_deft.orchestration.campaign.executors import LocalPool
@@ -260,7 +263,8 @@ def _judged(campaign: CampaignFindings, outcome: CaseOutcome, xml: str | None) -
     return judged(outcome, campaign.known)
 
 
-def _module_tests(campaign: CampaignFindings, target: Target, out_dir: Path, params: dict[str, str]) -> tuple[bool | None, str]:
+def _module_tests(campaign: CampaignFindings, target: Target, out_dir: Path,
+                  params: dict[str, str]) -> tuple[bool | None, str]:
     """Run the bucket's module tests once, with the params overridden: (still fail on the defect?, why)."""
     if target.tests_dir is None:
         return None, ""
