@@ -20,6 +20,7 @@ from astaa_deft.cli.commands.console import parse_params, say
 
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
+    from astaa_deft.orchestration.verify.model import BucketCheck
     from astaa_deft.orchestration.verify.workflow import VerifyOptions
 
 
@@ -80,7 +81,7 @@ def verify(options: VerifyOptions) -> int:
     return report.exit_code
 
 
-def _counts(checks: list) -> dict[str, int]:  # type: ignore[type-arg]
+def _counts(checks: list[BucketCheck]) -> dict[str, int]:
     out: dict[str, int] = {}
     for check in checks:
         out[str(check.status)] = out.get(str(check.status), 0) + 1

@@ -18,9 +18,12 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_SETTLE, culprit_family
@@ -42,6 +45,36 @@ class ExportReport:
     out: Path
     buckets: list[ExportedBucket]
     skipped: list[str]
+
+
+@dataclass(frozen=True)
+class SuiteCheck:
+    """The exported suite run once on the stack the campaign ran (its params): each test must fail there."""
+
+    selection: str  # the pytest -m expression run ("module", or "" for every test)
+    failed: list[str]  # test ids that failed, as they should
+    passed: list[str]  # test ids that passed on the buggy stack: they would not catch their bug
+    detail: str  # pytest's last line
+
+    @property
+    def holds(self) -> bool:
+        return not self.passed
+
+
+def check_suite(out: Path, selection: str = "module", timeout: float = 3600.0) -> SuiteCheck:
+    """Run the suite in ``out`` once with the campaign's params (``selection``: a pytest -m expression, "" all):
+    which tests fail — as every one should while the bugs are there — and which pass."""
+    args = [sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", str(out.resolve())]
+    if selection:
+        args += ["-m", selection]
+    try:
+        done = process_launch.run(args, timeout=timeout, cwd=str(out.resolve()))
+    except subprocess.TimeoutExpired:
+        return SuiteCheck(selection, [], [], f"pytest did not finish in {timeout:.0f} s")
+    lines = (done.stdout or "").splitlines()
+    failed = [line.split()[1] for line in lines if line.startswith("FAILED ")]
+    passed = [line.split()[1] for line in lines if line.startswith("PASSED ")]
+    return SuiteCheck(selection, failed, passed, (lines[-1] if lines else (done.stderr or "").strip())[:300])
 
 
 def export_suite(campaign_dir: Path, out: Path) -> ExportReport:

@@ -119,7 +119,13 @@ class CampaignFindings:
             journal.close()
             raise
         return cls(journal, spec_path, spec, _known(journal), meta.horizon or DEFAULT_HORIZON,
-                   workers or meta.workers or default_workers(len(spec.modules)))
+                   workers or meta.workers or _ran_at_once(journal) or default_workers(len(spec.modules)))
+
+
+def _ran_at_once(journal: Journal) -> int | None:
+    """The most runs at once the campaign's cases ended at (a campaign given --workers stores no calibration)."""
+    counts = [r.at_once for r in journal.cases() if r.at_once]
+    return max(counts) if counts else None
 
 
 def _known(journal: Journal) -> dict[str, KnownFinding]:
