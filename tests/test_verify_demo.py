@@ -21,7 +21,14 @@ from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.orchestration.campaign.journal import open_existing
 from test_verify import run_campaign, verify
 
-POLICIES = demo_spec_path().parent.parent / "policies" / "examples"
+# Defect 3 (control crashes on an empty trajectory) and defect 1 (a NaN speed limit: the planner overspeeds), each
+# acting once the whole stack runs (after control's first command), however long the start-up takes.
+EMPTY_POINTS = ('<testcase id="empty" seed="1"><description>defect 3</description><policy id="p1">'
+                '<channel>trajectory</channel><window from="0.5"><after channel="command" message="1"/></window>'
+                '<select limit="1"/><set><field path="points" value="dict:array.empty"/></set></policy></testcase>')
+NAN_LIMIT = ('<testcase id="nan" seed="1"><description>defect 1</description><policy id="p1">'
+             '<channel>routing</channel><window from="0.5"><after channel="command" message="1"/></window>'
+             '<set><field path="speed_limit" value="dict:float.nan"/></set></policy></testcase>')
 CONTROL = '"-m", "astaa_deft.demo.control", "--scenario", "{scenario}", "--defects", "{defects}"]'
 
 
@@ -39,16 +46,15 @@ def split_spec(tmp_path: Path) -> Path:
 def test_verify_and_export_on_the_demo_with_its_seeded_defects(tmp_path: Path):
     spec = split_spec(tmp_path)
     out = tmp_path / "campaign"
-    cases = [re.sub(r"<\?xml[^>]*\?>", "", (POLICIES / name).read_text()).strip()
-             for name in ("demo_empty_trajectory.xml", "demo_nan_speed_limit.xml")]
-    run_campaign(out, spec, {}, cases=cases, horizon=12.0, minimise=True)
+    run_campaign(out, spec, {}, cases=[EMPTY_POINTS, NAN_LIMIT], horizon=12.0, minimise=True)
     journal = open_existing(out)
     try:
         bugs = {b.bucket: b for b in journal.buckets(include_merged=False) if b.is_bug}
+        ran = [(r.case_id, r.verdict, r.summary) for r in journal.cases()]
     finally:
         journal.close()
     by_module = {b.module: name for name, b in bugs.items()}
-    assert set(by_module) == {"control", "planning"}, bugs
+    assert set(by_module) == {"control", "planning"}, (bugs, ran)
     off = ("--param", "defects=off", "--param", "control_defects=off")
 
     fixed = verify(str(out), *off, "--runs", "1", "--label", "all-off")
