@@ -23,7 +23,9 @@ from astaa_deft.orchestration.verify.bisect import search
 from astaa_deft.orchestration.campaign.report import write_report
 from astaa_deft.orchestration.verify import records
 from astaa_deft.orchestration.verify.history import fixed_buckets, history
-from astaa_deft.orchestration.verify.model import BucketCheck, FailureWay, Tally, VerifyStatus, classify
+from astaa_deft.orchestration.verify.model import (
+    BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
+)
 from astaa_deft.orchestration.verify.records import VerificationRow, verifications
 
 SUT = Path(__file__).parent / "sut"
@@ -150,6 +152,9 @@ def test_classification_fixed_still_failing_changed_flaky_not_observed():
     assert classify(Tally.of([same, same], way), Tally.of([same, clean], way)) == VerifyStatus.FLAKY
     assert classify(Tally.of([clean, lost], way), Tally.of([clean, clean], way)) == VerifyStatus.NOT_OBSERVED
     assert Tally.of([same, clean, other], way) == Tally(3, 1, 1, 0, "s")
+    # another failure the unmutated twins show too (load, the stack's own flakiness) is not a change
+    background = failure_keys(other)
+    assert classify(Tally.of([other, clean], way, background), Tally.of([other, clean], way)) == VerifyStatus.FIXED
 
 
 def row(revision: str, status: VerifyStatus) -> VerificationRow:

@@ -9,7 +9,9 @@ when it fails otherwise. Then, in this order:
 * a twin failed the bucket's way: **flaky** — the unmutated stack fails so
   too, the test case cannot be blamed (the campaign's rule);
 * a run failed the bucket's way: **still failing** (stability k/N);
-* a run failed another way: **changed**;
+* a run failed another way: **changed** — unless the unmutated twins broke
+  the same invariants in the same modules (the machine's load, the stack's
+  own flakiness: that run is not counted as failing);
 * a run was not observed to its end: **not observed** — never "fixed" on
   runs nobody saw;
 * else **fixed** (0/N fail).
@@ -63,11 +65,20 @@ class Tally:
     other_how: str = ""  # the first other failure, one line
 
     @classmethod
-    def of(cls, outcomes: list[CaseOutcome], way: FailureWay) -> Tally:
+    def of(cls, outcomes: list[CaseOutcome], way: FailureWay,
+           background: frozenset[tuple[str, str]] = frozenset()) -> Tally:
+        """Count ``outcomes``; a run failing another way only with findings in ``background`` (what the
+        unmutated twins broke too: the machine's load, the stack's own flakiness) is not counted as failing."""
         same = [o for o in outcomes if way.shown_by(o)]
-        other = [o for o in outcomes if o.failed and not way.shown_by(o)]
+        other = [o for o in outcomes if o.failed and not way.shown_by(o) and not failure_keys(o) <= background]
         return cls(len(outcomes), len(same), len(other), sum(1 for o in outcomes if o.status != "done"),
                    other[0].summary[:200] if other else "")
+
+
+def failure_keys(outcome: CaseOutcome) -> frozenset[tuple[str, str]]:
+    """(invariant, module) of each of a run's findings."""
+    return frozenset((f.invariant, f.module or NO_MODULE) for f in outcome.findings) if outcome.failed \
+        else frozenset()
 
 
 def classify(reruns: Tally, twins: Tally) -> VerifyStatus:

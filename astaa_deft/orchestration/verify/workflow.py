@@ -38,7 +38,7 @@ from astaa_deft.orchestration.campaign.payload import CasePayload
 from astaa_deft.orchestration.campaign.rows import Bucket
 from astaa_deft.orchestration.verify import records
 from astaa_deft.orchestration.verify.model import (
-    FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify,
+    FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
 )
 from astaa_deft.orchestration.verify.revision import describe
 
@@ -252,7 +252,8 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
         mine = {cid: o for cid, o in outcomes.items() if payloads[cid][0] is target}
         reruns = [_judged(campaign, o, target.testcase_xml) for cid, o in mine.items() if payloads[cid][1]]
         twins = [_judged(campaign, o, None) for cid, o in mine.items() if not payloads[cid][1]]
-        rerun_tally, twin_tally = Tally.of(reruns, target.way), Tally.of(twins, target.way)
+        background = frozenset().union(*(failure_keys(o) for o in twins))
+        rerun_tally, twin_tally = Tally.of(reruns, target.way, background), Tally.of(twins, target.way)
         module, detail = _module_tests(campaign, target, out_dir, options.params)
         check = BucketCheck(target.bucket.bucket, revision, classify(rerun_tally, twin_tally), rerun_tally,
                             twin_tally, module, detail, target.params, target.minimal)
