@@ -137,6 +137,15 @@ def test_verify_refuses_an_unknown_bucket_and_a_param_the_spec_does_not_have(ste
     assert done.returncode == 2 and "nope" in done.stderr, done.stderr
 
 
+
+def test_export_refuses_a_folder_holding_other_files(steady_campaign: Path, tmp_path: Path):
+    (tmp_path / "notes.txt").write_text("mine")
+    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "export", str(steady_campaign), "-o",
+                           str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 4 and "not a regression suite" in done.stderr, done.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
+
+
 def outcome(*findings: tuple[str, str | None], status: str = "done") -> CaseOutcome:
     found = [Finding(inv, "Abort", module, None, "") for inv, module in findings]
     return CaseOutcome(status, "Abort" if found else ("Pass" if status == "done" else "?"), "s", found)

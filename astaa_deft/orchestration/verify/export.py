@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from astaa_deft.engine.bus import process_launch
-from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
-from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.output_place import OutputError, Place, ready_dir, write_atomic, writing
+from astaa_deft.model.errors import Problem
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_SETTLE, culprit_family
 from astaa_deft.orchestration.verify.regress import MANIFEST, MARKERS
 from astaa_deft.orchestration.verify.workflow import CampaignFindings, targets
@@ -81,15 +81,15 @@ def export_suite(campaign_dir: Path, out: Path) -> ExportReport:
     """Write the regression suite of the campaign in ``campaign_dir`` into ``out`` (module doc).
 
     InputError: no campaign there, or its spec is gone; OutputError: ``out`` cannot take the suite (checked
-    before anything is written), or holds files that are not an earlier export.
+    before anything is written: it holds files that are not an earlier export, or cannot be written).
     """
     campaign = CampaignFindings.open(campaign_dir)
     try:
         chosen, skipped = targets(campaign, (), {})
         place = Place(out, "-o")
         if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).is_file():
-            raise InputError(Problem(str(out), None, None, "the folder holds files that are not a regression suite",
-                                     "give an empty or new folder with -o"))
+            raise OutputError(Problem(str(out), None, None, "the folder holds files that are not a regression suite",
+                                      "give an empty or new folder with -o"))
         ready_dir(place)
         exported: list[ExportedBucket] = []
         buckets: dict[str, dict[str, object]] = {}
