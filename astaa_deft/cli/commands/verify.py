@@ -31,7 +31,7 @@ def add_parser(subparsers: SubParsers) -> None:
     ver.add_argument("campaign", type=Path, help="a campaign directory (astaa-deft fuzz -o DIR)")
     ver.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help="override a spec param of every run (as in proxy)")
-    bounded(ver, "--runs", REPEATS, default=3, help="runs of each test case, and as many unmutated twins")
+    bounded(ver, "--runs", REPEATS, default=3, help="runs of each test case, and as many unmutated twins (default 3)")
     ver.add_argument("--label", help="the stack's revision (default: git describe of the spec's source: folder)")
     ver.add_argument("--bucket", action="append", default=[], metavar="B003", help="check only this bucket")
     ver.add_argument("--dictionary", type=Path, action="append", default=[],
