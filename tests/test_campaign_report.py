@@ -74,3 +74,31 @@ def test_report_shows_buckets_culprits_tests_merges_and_how_runs_ended(tmp_path:
     assert "href='cases/c-000001/run.mcap'" in page
     assert page.count("data:image/png;base64,") == 4
     assert "Traceback" not in page
+
+
+EVIL = "<img src=x onerror=alert(2)>"
+
+
+def test_every_cell_is_escaped_whatever_its_declared_type(tmp_path: Path):
+    """SQLite keeps whatever was written, so numeric columns may hold markup: the page never carries it."""
+    import sqlite3
+
+    out = tmp_path / "campaign"
+    journal = Journal(out)
+    try:
+        journal.set_meta(spec=f"/x/{EVIL}.yaml", seed=1, strategy=EVIL, params={EVIL: [EVIL]}, horizon=8.0)
+        speed = Finding("planned_speed", "Silent", "planning", "trajectory", "v 20 > 15")
+        _case(journal, out, "c-000001", MUTATED, 1, "Silent", EVIL, "B001", speed)
+        journal.add_bucket(NewBucket("B001", _signature(f"{EVIL}+x"), "Silent", EVIL, EVIL, "c-000001", False, 2))
+        journal.minimised(Minimisation("B001", EVIL, 0, EVIL, EVIL, str(out / EVIL), str(out / EVIL), 1.0, EVIL))
+        journal.module_tests_checked("B001", EVIL, None, EVIL)
+    finally:
+        journal.close()
+    db = sqlite3.connect(out / "journal.sqlite")
+    db.execute("UPDATE buckets SET cases=?, verdict=?", (EVIL, EVIL))
+    db.execute("UPDATE cases SET log_path=?, testcase_xml=?", (EVIL, EVIL))
+    db.commit()
+    db.close()
+    page = write_report(out).read_text()
+    assert "<img src" not in page and "onerror=alert(2)>" not in page
+    assert "&lt;img src=x onerror=alert(2)&gt;" in page  # shown, as text

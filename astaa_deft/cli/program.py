@@ -17,6 +17,7 @@ from astaa_deft.cli.commands import (
     check,
     demo,
     discover,
+    export,
     extract,
     generate,
     log_info,
@@ -24,6 +25,7 @@ from astaa_deft.cli.commands import (
     policy_check,
     proxy,
     spec_check,
+    verify,
 )
 from astaa_deft.io.output_place import ignore_file_size_signal
 from astaa_deft.model.errors import AstaaDeftError
@@ -54,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
     minimise.add_parser(sub)
     campaign_commands.add_fuzz_parser(sub)
     campaign_commands.add_report_parser(sub)
+    verify.add_parser(sub)
+    export.add_parser(sub)
     demo.add_parser(sub)
     return p
 

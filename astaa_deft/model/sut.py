@@ -147,6 +147,7 @@ class Spec:
     source_text: str = ""
     ros2: Ros2Section = Ros2Section()
     liveliness: tuple[LivelinessToken, ...] = ()  # the tokens modules hold ('liveliness:')
+    source: Path | None = None  # the 'source:' folder: the stack's git checkout (verify's revision, bisect)
 
     def module(self, name: str) -> Module:
         return next(m for m in self.modules if m.name == name)

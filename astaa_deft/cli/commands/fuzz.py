@@ -11,6 +11,8 @@ from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_e
 from astaa_deft.orchestration.campaign.progress import Progress, snapshot
 from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsRow
 from astaa_deft.orchestration.campaign.standing import Standing, headline, most_severe, standings
+from astaa_deft.orchestration.verify.history import histories
+from astaa_deft.orchestration.verify.records import verifications
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.cli.commands.console import PlainLines, say
@@ -51,8 +53,11 @@ def status(out: Path) -> int:
     ranked = standings(journal)
     say(headline(ranked))
     merged = [b for b in journal.buckets() if b.merged_into]
+    checked = histories(verifications(journal))
     for standing in ranked:
         say(_bucket_line(standing, minimised.get(standing.bucket.bucket), tests.get(standing.bucket.bucket)))
+        if standing.bucket.bucket in checked:
+            say(f"      verified: {checked[standing.bucket.bucket].describe()}")
     for b in merged:
         say(f"  {b.bucket} merged into {b.merged_into}: {b.invariant} {b.family}")
     for note in journal.notes("concurrency"):

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import queue
 import signal
 import subprocess
@@ -21,6 +20,7 @@ from pathlib import Path
 from collections.abc import Callable, Mapping
 
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.patterns import UserPattern, compile_user_pattern
 from astaa_deft.model.records import ProcessExit
 from astaa_deft.model.sut import Module, Spec
 from astaa_deft.engine.bus import process_launch
@@ -155,7 +155,7 @@ class Launcher:
             is_ready, what = (lambda: self.channel_seen(ready.channel)), f"no message on '{ready.channel}'"
         else:
             assert ready.log is not None  # the spec loader gives every readiness a channel, a log line or a delay
-            pattern = re.compile(ready.log)
+            pattern = compile_user_pattern(ready.log)  # checked by the spec loader: RE2, linear time
             log_path = self.running[module.name].log_path
             is_ready, what = (lambda: _log_matches(log_path, pattern)), f"no output line matching '{ready.log}'"
         deadline = time.monotonic() + ready.timeout
@@ -241,7 +241,7 @@ class Launcher:
                 pass
 
 
-def _log_matches(path: Path, pattern: re.Pattern[str]) -> bool:
+def _log_matches(path: Path, pattern: UserPattern) -> bool:
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:

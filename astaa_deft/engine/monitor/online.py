@@ -31,6 +31,10 @@ from astaa_deft.engine.monitor.verdict import RunVerdict
 from astaa_deft.engine.monitor.violation import Violation
 
 TICK_SECONDS = 0.05
+# The stop path waits for the monitors to judge what is queued while they make progress, and gives up on
+# them when they judged nothing for STALLED_SECONDS (a monitor stuck on one item) or after STOP_WAIT_SECONDS.
+STALLED_SECONDS = 2.0
+STOP_WAIT_SECONDS = 30.0
 _STOP = object()
 EXIT = "__exit__"  # queue items that are not messages
 LINE = "__log__"
@@ -48,6 +52,7 @@ class OnlineMonitors:
         self._ranks = channel_ranks(spec)
         self._held: list = []  # heap of (order key, channel, time, payload, seq) waiting for their turn
         self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._judged = 0  # items the worker took off the queue: its progress, for the stop path
         self._subs: list = []
         self.ended_ns: int | None = None  # the run's end: nothing is judged past it
         self.horizon: Callable[[int], int] | None = None  # now -> the latest time that may be judged yet
@@ -93,6 +98,7 @@ class OnlineMonitors:
                 item = self._q.get(timeout=max(0.0, min(next_tick - time.monotonic(), TICK_SECONDS)))
             except queue.Empty:
                 item = None
+            self._judged += 1
             if item is _STOP:
                 self._release(None)
                 return
@@ -151,15 +157,27 @@ class OnlineMonitors:
             now = min(now, self._horizon_ns)
         return now if self.ended_ns is None else min(now, self.ended_ns)
 
-    def finish(self, time_ns: int) -> RunVerdict:
-        """Stop listening, judge what is queued and what only the end can decide; the run's verdict."""
+    def finish(self, time_ns: int) -> RunVerdict | None:
+        """Stop listening, judge what is queued and what only the end can decide; the run's verdict — None
+        when the monitors stopped making progress on what was queued (``STALLED_SECONDS``, or
+        ``STOP_WAIT_SECONDS`` in all): the run was not fully observed, so no verdict, and the stop path goes on
+        rather than waiting for them."""
         if self.ended_ns is not None:
             time_ns = min(time_ns, self.ended_ns)
         for sub in self._subs:
             sub.undeclare()
         self._subs = []
         self._q.put(_STOP)
-        self._thread.join(timeout=30.0)
+        give_up = time.monotonic() + STOP_WAIT_SECONDS
+        progress, stalled_since = self._judged, time.monotonic()
+        while self._thread.is_alive() and time.monotonic() < give_up:
+            self._thread.join(timeout=0.1)
+            if self._judged != progress:
+                progress, stalled_since = self._judged, time.monotonic()
+            elif time.monotonic() - stalled_since > STALLED_SECONDS:
+                break
+        if self._thread.is_alive():  # still inside a monitor (which holds the set's lock): judge nothing more
+            return None
         for v in self.set.on_tick(time_ns) + self.set.finish(time_ns):
             self.on_violation(v)
         return self.set.verdict()

@@ -61,8 +61,9 @@ class Judge(RunPart):
         self._judged_until_ns = stopping.time_ns
         # Judged up to the stop, as `check` judges the log: the silence of modules being stopped
         # (one slow to exit, a loaded machine) is the tool's doing, not a hang of the SUT.
-        self.verdict = self.monitors.finish(stopping.time_ns)
-        self._events.emit(dataclasses.replace(self.verdict, time_ns=time.time_ns()))
+        self.verdict = self.monitors.finish(stopping.time_ns)  # None: the monitors fell behind, no verdict
+        if self.verdict is not None:
+            self._events.emit(dataclasses.replace(self.verdict, time_ns=time.time_ns()))
         self.monitors = None
 
     def end(self, reason: str, at_ns: int | None = None) -> None:

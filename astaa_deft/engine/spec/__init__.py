@@ -22,6 +22,7 @@ Where each section is read:
 - ``run:`` — ``run_section.py``
 - ``decictor:`` — ``decictor_section.py``
 - ``liveliness:`` — ``liveliness_section.py``
+- ``source:`` (the stack's git checkout, for ``verify``) — ``source_section.py``
 
 The checks every section shares are ``reader.SpecReader``'s; what a loaded
 spec would run (and the refusal to run a spec stored in a log) is

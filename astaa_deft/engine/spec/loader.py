@@ -23,6 +23,7 @@ from astaa_deft.engine.spec.reader import SpecReader
 from astaa_deft.engine.spec.replay_section import build_replay_section
 from astaa_deft.engine.spec.ros2_section import read_ros2_section
 from astaa_deft.engine.spec.run_section import build_run_section
+from astaa_deft.engine.spec.source_section import read_source_section
 from astaa_deft.engine.spec.types_section import read_brittle_section, read_types_section
 from astaa_deft.engine.spec.zenoh_section import read_zenoh_section
 from astaa_deft.io.inputfile import SPEC
@@ -30,7 +31,7 @@ from astaa_deft.io.yamlsource import Source
 from astaa_deft.model.sut import Spec
 
 TOP_KEYS = ("name", "params", "zenoh", "modules", "channels", "types", "brittle", "invariants", "planner", "run",
-            "decictor", "ros2", "replay", "liveliness")
+            "decictor", "ros2", "replay", "liveliness", "source")
 REQUIRED_TOP = ("name", "modules", "channels")
 
 
@@ -74,6 +75,7 @@ def _build(reader: SpecReader, path: Path) -> Spec:
     run = build_run_section(src, v.get("run"), types, channels, module_names)
     decictor = read_decictor_section(src, v.get("decictor"), tuple(c.name for c in channels), reader.base_dir)
     liveliness = read_liveliness_section(reader, v.get("liveliness"), modules)
+    source = read_source_section(reader, v.get("source"))
     src.raise_if_problems()
     return Spec(
         name=name,
@@ -93,4 +95,5 @@ def _build(reader: SpecReader, path: Path) -> Spec:
         source_text=src.text,
         ros2=ros2,
         liveliness=liveliness,
+        source=source,
     )

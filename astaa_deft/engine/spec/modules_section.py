@@ -6,7 +6,6 @@ and the declared params; an unknown one is reported here, not at launch.
 
 from __future__ import annotations
 
-import re
 import shlex
 import string
 from dataclasses import dataclass
@@ -15,6 +14,7 @@ from astaa_deft.engine.spec.params_section import BUILTIN_PLACEHOLDERS
 from astaa_deft.engine.spec.reader import MAX_WAIT_S, SpecReader, scalar_text
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.model.errors import did_you_mean
+from astaa_deft.model.patterns import PatternError, compile_user_pattern
 from astaa_deft.model.sut import Module, Readiness
 
 ON_CRASH = ("end_run", "keep_running")
@@ -151,9 +151,9 @@ def _ready(reader: SpecReader, node: Node | None) -> Readiness:
     if "log" in v and reader.expect(v["log"], (str,), "'ready.log'", "a regular expression"):
         log = v["log"].value
         try:
-            re.compile(log)
-        except re.error as exc:
-            reader.src.at(v["log"], f"'ready.log' is not a valid regular expression: {exc}", "fix or quote it")
+            compile_user_pattern(log)
+        except PatternError as exc:
+            reader.src.at(v["log"], f"'ready.log' {exc.reason}", exc.fix)
     delay = reader.number(v.get("delay"), "'ready.delay'", minimum=0.0, maximum=MAX_WAIT_S)
     timeout = reader.number(v.get("timeout"), "'ready.timeout'", minimum=0.0, strictly=True, maximum=MAX_WAIT_S)
     if delay is None:

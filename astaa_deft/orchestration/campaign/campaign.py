@@ -44,6 +44,8 @@ from astaa_deft.orchestration.campaign.model import (
     CaseOutcome, CaseStatus, FailureKey, PlannedCase, TextEnum, Timing,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES, Strategy
+from astaa_deft.orchestration.verify import records as verification
+from astaa_deft.orchestration.verify.history import fixed_buckets
 
 T = TypeVar("T")
 
@@ -180,6 +182,7 @@ class Campaign:
         self._minimising: dict[Future, str] = {}  # minimisation in flight → its bucket
         self._running_cases: set[str] = set()
         self._cancel = threading.Event()  # set: minimisations in flight stop (the campaign was interrupted)
+        self._fixed: set[str] = set()  # buckets `astaa-deft verify` found fixed: skipped unless they reappear
 
     # -- the whole campaign --------------------------------------------------
     def run(self) -> CampaignResult:
@@ -191,6 +194,10 @@ class Campaign:
             self.say(f"resume: {requeued} case(s) that were in flight run again")
         if self.journal.requeue_minimisations():
             self.say("resume: the minimisations that were running start again")
+        self._fixed = fixed_buckets(verification.verifications(self.journal))
+        if self._fixed:
+            self.say(f"resume: bucket(s) {', '.join(sorted(self._fixed))} verified fixed: skipped (not minimised)"
+                     f" unless a case fails their way again")
         pool = self._pool()
         stopped = StopReason.DONE
         try:
@@ -492,6 +499,10 @@ class Campaign:
                 if existing is not None:
                     bucket = existing.bucket
                     self.journal.bucket_hit(bucket)
+                    if bucket in self._fixed:  # verified fixed, and here it is again: it reopens
+                        self._fixed.discard(bucket)
+                        verification.reappeared(self.journal, bucket, case_id)
+                        self.say(f"bucket {bucket} was verified fixed and reappeared in {case_id}: reopened")
                 else:
                     bucket = self._bucket(signature, outcome, case_id, CONFIRMING)
                     new = self._plan_confirmation(bucket, row)
@@ -599,7 +610,7 @@ class Campaign:
         for bucket in self.journal.buckets(include_merged=False):
             if len(self._minimising) >= most or self._busy() >= self.workers:
                 return
-            if not bucket.is_bug or bucket.bucket in done or bucket.bucket in in_flight:
+            if not bucket.is_bug or bucket.bucket in done or bucket.bucket in in_flight or bucket.bucket in self._fixed:
                 continue
             row = self.journal.planned(bucket.first_case)
             if not row.log_path or not Path(row.log_path).is_file():

@@ -8,12 +8,16 @@ rate, minimal XML, links to the log and the module tests, and whether those
 fail on the bucket's defect), and plots (new buckets over cases
 and over time, verdict classes, closest approach per invariant by strategy,
 time per case) as embedded base64 PNGs: the page opens from a file, offline.
+
+Escaped by construction: the page is one Jinja2 template with autoescape on
+(``_TEMPLATE``); the functions below hand it plain values and rows, never
+HTML, so no journal cell — whatever its declared type — reaches the page
+as markup.
 """
 
 from __future__ import annotations
 
 import base64
-import html
 import io
 import json
 import os
@@ -22,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING
+
+import jinja2
 
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
@@ -53,6 +59,72 @@ VERDICT_COLOURS = {Verdict.PASS: "#2a9d4b", Verdict.HINDERING: "#e0a030", Verdic
                    "?": "#999999"}
 
 
+# The page. Every {{ value }} is escaped by Jinja2 (autoescape on, no |safe anywhere): the Python code hands it
+# plain values only — text, numbers, rows — never HTML.
+_TEMPLATE = """<!doctype html><html><head><meta charset='utf-8'><title>astaa-deft campaign: {{ spec_name }}</title>
+<style>{{ css }}</style></head><body>
+<h1>astaa-deft campaign: {{ spec_name }}</h1>
+<p class='headline'><span class='{{ 'bad' if confirmed else 'ok' }}'>{{ headline }}</span> in {{ mutated }} \
+generated case(s) and {{ clean }} clean run(s).</p>
+{% if most_severe is not none %}<p>most severe: <b>{{ most_severe }}</b></p>\
+{% else %}<p class='ok'>no failure caused by a mutation</p>{% endif %}
+<h2>Summary</h2><table class='summary'>
+{% for key, value in summary %}<tr><th>{{ key }}</th><td>{{ value }}</td></tr>
+{% endfor %}</table><h2>Buckets</h2>
+{% if not buckets %}<p class='ok'>No failures found.</p>
+{% else %}<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>\
+<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>\
+<th title='re-runs of the first failure that failed the same way'>rate</th><th>files</th></tr>
+{% for row in buckets %}{% set b = row.bucket %}\
+<tr id='{{ b.bucket }}'><td><b>{{ b.bucket }}</b>\
+{% if b.merged_into %}<br><span class='muted'>merged into {{ b.merged_into }}</span>{% endif %}</td>\
+<td>{% if row.standing is not none %}<span class='{{ 'bad' if row.confirmed else 'muted' }}'>\
+{{ row.standing.status }}</span><br><span class='muted'>{{ row.standing.why }}</span>{% endif %}</td>\
+<td>{{ row.standing.severity if row.standing is not none else '' }}</td>\
+<td style='color:{{ row.colour }};font-weight:bold'>{{ b.verdict }}</td>\
+<td>{{ b.invariant }}</td><td>{{ b.module or '-' }}</td>\
+<td class='family'>{% if b.without_mutation %}<span class='muted'>without mutation</span>\
+{% else %}{% for part in row.family %}<div>{{ part }}</div>{% endfor %}{% endif %}</td>\
+<td class='culprit'>{% if row.culprit is not none %}{{ row.culprit }}\
+{% else %}<span class='muted'>not minimised</span>{% endif %}</td>\
+<td>{{ b.cases }}</td><td>{{ row.rate }}</td><td>\
+{% for link in row.links %}{% if not loop.first %}<br>{% endif %}\
+{% if link.what == 'log' %}<a href='{{ link.href }}'>failing log</a> \
+<span class='muted'>(MCAP: Foxglove opens it)</span>\
+{% elif link.what == 'tests' %}<a href='{{ link.href }}'>module tests</a> \
+<span class='muted'>({{ link.tests_kind }}; <code>pytest {{ link.href }}</code>)</span>\
+{% if link.tests is not none %}{% if link.tests.fails_on_defect is true %}\
+<br><span class='ok'>fail on the defect</span> <span class='muted'>({{ link.tests.detail }})</span>\
+{% elif link.tests.fails_on_defect is false %}\
+<br><span class='bad'>do not fail on the defect</span> <span class='muted'>({{ link.tests.detail }})</span>\
+{% else %}<br><span class='muted'>could not run ({{ link.tests.detail }})</span>{% endif %}{% endif %}\
+{% else %}<a href='{{ link.href }}'>minimisation</a>{% endif %}{% endfor %}</td></tr>
+{% if row.xml %}<tr class='xml'><td></td><td colspan='10'><details{{ ' open' if row.minimal else '' }}>\
+<summary>{{ 'minimal test case' if row.minimal else 'first failing test case (not minimised)' }} (XML)</summary>\
+<pre>{{ row.xml }}</pre></details></td></tr>
+{% endif %}{% endfor %}</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal \
+test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky — the campaign's run \
+without mutation failed too; without mutation — clean runs fail this way. Ranked by status, severity, rate. \
+rate: re-runs of a bucket's first failure that failed the same way (for a bucket without mutation: clean runs \
+that failed this way). cases: generated cases filed in the bucket.</p>
+{% endif %}{% if verification %}<h2>Verification</h2><p class='muted'>Each bucket re-checked against the \
+stack (astaa-deft verify): its test case run live beside unmutated twins. fixed — no run failed; still failing — \
+runs failed its way (k/N); changed — they fail another way; flaky — its unmutated twins fail that way too.</p>
+<table><tr><th>bucket</th><th>now</th><th>on</th><th>runs failing its way</th><th>history</th>\
+<th>every check (oldest first)</th></tr>
+{% for v in verification %}<tr><td><a href='#{{ v.bucket }}'>{{ v.bucket }}</a></td>\
+<td><span class='{{ 'ok' if v.status == 'fixed' else 'bad' }}'>{{ v.status }}</span></td>\
+<td>{{ v.revision }}</td><td>{{ v.stability }}</td><td>{{ v.history }}</td>\
+<td>{% for c in v.checks %}{% if not loop.first %}<br>{% endif %}{{ c }}{% endfor %}</td></tr>
+{% endfor %}</table>
+{% endif %}<h2>Plots</h2><div class='plots'>
+{% for title, png in plots %}<img alt='{{ title }}' title='{{ title }}' src='data:image/png;base64,{{ png }}'>
+{% endfor %}</div></body></html>
+"""
+_PAGE = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined,
+                           keep_trailing_newline=True).from_string(_TEMPLATE, globals={"css": CSS})
+
+
 def write_report(out: Path) -> Path:
     """Render the campaign in ``out`` into ``out/report.html``; its path.
 
@@ -72,14 +144,14 @@ def write_report(out: Path) -> Path:
     return path
 
 
-def _rel(path: str | None, out: Path) -> str | None:
+def _rel(path: object, out: Path) -> str | None:
     """``path`` relative to the campaign folder (as given when it is on another drive)."""
     if not path:
         return None
     try:
-        return os.path.relpath(path, out.resolve())
+        return os.path.relpath(str(path), out.resolve())
     except ValueError:
-        return path
+        return str(path)
 
 
 @dataclass(frozen=True)
@@ -102,33 +174,54 @@ class _Cases:
 
 def render(journal: Journal, out: Path) -> str:
     """The report page of the campaign ``journal`` describes (links relative to ``out``): self-contained HTML.
-    Reads the journal only; matplotlib draws the plots (Agg, no display needed)."""
+    Reads the journal only; matplotlib draws the plots (Agg, no display needed).
+
+    The page is the template ``PAGE`` filled with plain values: Jinja2 escapes every value it inserts
+    (autoescape), so no journal cell — whatever its declared type, SQLite keeps what was written — reaches
+    the page as markup."""
     meta = journal.meta()
     cases = _Cases.of(journal.cases())
     ranked = standings(journal)
     by_bucket = {s.bucket.bucket: s for s in ranked}
     buckets = [s.bucket for s in ranked] + [b for b in journal.buckets() if b.bucket not in by_bucket]  # merged last
-    e = html.escape
-    spec_name = Path(str(meta.spec or "?")).stem
-    confirmed = any(s.status == CONFIRMED for s in ranked)
     top = most_severe(ranked)
-    verdict_line = (f"<p>most severe: <b>{e(top.describe())}</b></p>" if top is not None
-                    else "<p class='ok'>no failure caused by a mutation</p>")
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>astaa-deft campaign: {e(spec_name)}</title>"
-             f"<style>{CSS}</style></head><body>",
-             f"<h1>astaa-deft campaign: {e(spec_name)}</h1>",
-             f"<p class='headline'><span class='{'bad' if confirmed else 'ok'}'>{e(headline(ranked))}</span> in"
-             f" {len(cases.mutated)} generated case(s) and {cases.clean} clean"
-             f" run(s).</p>", verdict_line,
-             "<h2>Summary</h2><table class='summary'>"]
-    parts += [f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in _summary(meta, cases, buckets)]
-    parts.append("</table><h2>Buckets</h2>")
-    parts += _bucket_table(journal, out, buckets, by_bucket)
-    parts.append("<h2>Plots</h2><div class='plots'>")
-    for title, png in _plots(journal, cases.done, buckets):
-        parts.append(f"<img alt='{e(title)}' title='{e(title)}' src='data:image/png;base64,{png}'>")
-    parts.append("</div></body></html>")
-    return "\n".join(parts)
+    return _PAGE.render(
+        spec_name=Path(str(meta.spec or "?")).stem,
+        confirmed=any(s.status == CONFIRMED for s in ranked),
+        headline=headline(ranked), mutated=len(cases.mutated), clean=cases.clean,
+        most_severe=top.describe() if top is not None else None,
+        summary=_summary(meta, cases, buckets),
+        buckets=_bucket_table(journal, out, buckets, by_bucket),
+        verification=_verification(journal),
+        plots=_plots(journal, cases.done, buckets))
+
+
+@dataclass(frozen=True)
+class _VerifiedRow:
+    """A bucket's row of the verification table: where it stands now, its history, every check."""
+
+    bucket: str
+    status: str
+    revision: str
+    stability: str
+    history: str
+    checks: list[str]
+
+
+def _verification(journal: Journal) -> list[_VerifiedRow]:
+    """Each verified bucket's latest check and history (``astaa-deft verify``); none: the section is left out."""
+    from astaa_deft.orchestration.verify.history import histories
+    from astaa_deft.orchestration.verify.records import verifications
+
+    rows = verifications(journal)
+    out = []
+    for name, seen in histories(rows).items():
+        latest = seen.latest
+        if latest is None:
+            continue
+        out.append(_VerifiedRow(name, str(latest.status), latest.revision, latest.stability, seen.describe(),
+                                [f"{r.revision}: {r.status} ({r.stability})" for r in rows if r.bucket == name]))
+    return out
 
 
 def _summary(meta: CampaignMeta, cases: _Cases, buckets: list[Bucket]) -> list[tuple[str, object]]:
@@ -147,89 +240,76 @@ def _summary(meta: CampaignMeta, cases: _Cases, buckets: list[Bucket]) -> list[t
             ("generated", time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()))]
 
 
-def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket], by_bucket: dict[str, Standing]) -> list[str]:
-    """The buckets table (ranked, merged ones last) with its legend, or the line saying there was no failure."""
-    if not buckets:
-        return ["<p class='ok'>No failures found.</p>"]
+@dataclass(frozen=True)
+class _Link:
+    """One of a bucket's files: the failing log, its module tests (with whether they fail on the defect),
+    its minimisation."""
+
+    what: str  # "log", "tests" or "minimisation"
+    href: str
+    tests_kind: str = ""  # for "tests": what the tests are
+    tests: ModuleTestsRow | None = None  # for "tests": whether they fail on the defect
+
+
+@dataclass(frozen=True)
+class _BucketRow:
+    """A bucket's row of the buckets table, and its test case's XML (minimal, or the first failing one)."""
+
+    bucket: Bucket
+    standing: Standing | None
+    confirmed: bool
+    colour: str
+    family: list[str]  # one part a line
+    culprit: str | None  # None: not minimised
+    rate: str
+    links: list[_Link]
+    xml: str
+    minimal: bool
+
+
+def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
+                  by_bucket: dict[str, Standing]) -> list[_BucketRow]:
+    """The buckets table's rows (ranked, merged ones last); none: the page says there was no failure."""
     minimised = journal.minimisations()
     checked = journal.module_tests()
-    parts = ["<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>"
-             "<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>"
-             "<th title='re-runs of the first failure that failed the same way'>rate</th>"
-             "<th>files</th></tr>"]
+    rows = []
     for b in buckets:
         fails, runs = journal.rate(b)
-        parts += _bucket_rows(b, by_bucket.get(b.bucket), journal.case(b.first_case), minimised.get(b.bucket),
-                              checked.get(b.bucket), f"{fails}/{runs}" if runs else "-", out)
-    parts.append("</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal"
-                 " test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky —"
-                 " the campaign's run without mutation failed too; without mutation — clean runs fail this way."
-                 " Ranked by status, severity, rate. rate: re-runs of a bucket's first failure that failed the"
-                 " same way (for a bucket without mutation: clean runs that failed this way). cases: generated"
-                 " cases filed in the bucket.</p>")
-    return parts
-
-
-def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
-                 checked: ModuleTestsRow | None, rate: str, out: Path) -> list[str]:
-    """A bucket's row, and the row of its minimal (or first failing) test case's XML when there is one."""
-    e = html.escape
-    links = _links(first, m, checked, out)
-    minimal_xml = m.minimal_xml if m is not None else None
-    minimal = bool(minimal_xml)
-    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
-    family = ("<span class='muted'>without mutation</span>" if b.without_mutation
-              else "".join(f"<div>{e(part)}</div>" for part in b.family.split("+")))
-    merged = f"<br><span class='muted'>merged into {e(b.merged_into)}</span>" if b.merged_into else ""
-    culprit = e(m.culprit or m.status) if m is not None else "<span class='muted'>not minimised</span>"
-    colour = VERDICT_COLOURS.get(b.verdict, "#a00")
-    status = (f"<span class='{'bad' if standing.status == CONFIRMED else 'muted'}'>{e(standing.status)}</span>"
-              f"<br><span class='muted'>{e(standing.why)}</span>" if standing is not None else "")
-    rows = [f"<tr id='{e(b.bucket)}'><td><b>{e(b.bucket)}</b>{merged}</td><td>{status}</td>"
-            f"<td>{e(standing.severity) if standing is not None else ''}</td>"
-            f"<td style='color:{colour};font-weight:bold'>{e(b.verdict)}</td>"
-            f"<td>{e(b.invariant)}</td><td>{e(b.module or '-')}</td><td class='family'>{family}</td>"
-            f"<td class='culprit'>{culprit}</td><td>{b.cases}</td><td>{rate}</td>"
-            f"<td>{'<br>'.join(links)}</td></tr>"]
-    if xml:
-        what = "minimal test case" if minimal else "first failing test case (not minimised)"
-        rows.append(f"<tr class='xml'><td></td><td colspan='10'><details{' open' if minimal else ''}>"
-                    f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
+        rows.append(_bucket_rows(b, by_bucket.get(b.bucket), journal.case(b.first_case), minimised.get(b.bucket),
+                                 checked.get(b.bucket), f"{fails}/{runs}" if runs else "-", out))
     return rows
 
 
-def _links(first: CaseRow | None, m: MinimisationRow | None, checked: ModuleTestsRow | None, out: Path) -> list[str]:
+def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
+                 checked: ModuleTestsRow | None, rate: str, out: Path) -> _BucketRow:
+    """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
+    minimal_xml = m.minimal_xml if m is not None else None
+    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
+    return _BucketRow(
+        bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
+        colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
+        family=[] if b.without_mutation else str(b.family).split("+"),
+        culprit=(m.culprit or m.status) if m is not None else None,
+        rate=rate, links=_links(first, m, checked, out), xml=str(xml), minimal=bool(minimal_xml))
+
+
+def _links(first: CaseRow | None, m: MinimisationRow | None, checked: ModuleTestsRow | None,
+           out: Path) -> list[_Link]:
     """A bucket's files: its failing log, its module tests (and whether they fail on the defect), its
     minimisation."""
-    e = html.escape
     links = []
     log = _rel(first.log_path if first is not None else None, out)
     if log:
-        links.append(f"<a href='{e(log)}'>failing log</a> <span class='muted'>(MCAP: Foxglove opens it)</span>")
+        links.append(_Link("log", log))
     tests = _rel(m.tests_dir, out) if m is not None else None
     if m is not None and tests:
         kind = ("DeFT replay of the failing run" if str(m.tests_dir).endswith(REPLAY_TESTS_SUFFIX)
                 else "fail on the culprit")
-        links.append(f"<a href='{e(tests)}'>module tests</a> "
-                     f"<span class='muted'>({kind}; <code>pytest {e(tests)}</code>)</span>"
-                     f"{_tests_verdict(checked)}")
+        links.append(_Link("tests", tests, kind, checked))
     minimisation = _rel(m.out_dir, out) if m is not None else None
     if minimisation:
-        links.append(f"<a href='{e(minimisation)}'>minimisation</a>")
+        links.append(_Link("minimisation", minimisation))
     return links
-
-
-def _tests_verdict(row: ModuleTestsRow | None) -> str:
-    """Whether a bucket's module tests fail on its defect, as the campaign found when it ran them once."""
-    if row is None:
-        return ""
-    if row.fails_on_defect is True:
-        return (f"<br><span class='ok'>fail on the defect</span> "
-                f"<span class='muted'>({html.escape(row.detail)})</span>")
-    if row.fails_on_defect is False:
-        return (f"<br><span class='bad'>do not fail on the defect</span> "
-                f"<span class='muted'>({html.escape(row.detail)})</span>")
-    return f"<br><span class='muted'>could not run ({html.escape(row.detail)})</span>"
 
 
 def _end_reasons(done: list[CaseRow]) -> str:

@@ -10,7 +10,7 @@ or ``CRITICAL`` word (Python logging, ROS 2's ``[ERROR]``, most C++ loggers;
 upper case and whole words only, so "0 errors" or "ERRORS: 0" do not count),
 a line starting ``Error:`` (OMPL, Rust), C++'s ``terminate called …``, a
 ``Segmentation fault`` message, a Rust or Go panic and a Java exception. The
-optional ``pattern`` (a Python regular expression) matches more lines;
+optional ``pattern`` (a regular expression, RE2: see ``log``) matches more lines;
 ``max_count`` (default 0) lines are tolerated. A Python traceback counts
 once (its first line), not once per frame. Default CRASH class *Silent* (the
 module carried on as if nothing happened; a module that died of it is the

@@ -6,8 +6,10 @@
 A module that catches an exception, logs it and carries on publishes nothing
 for that cycle; no message monitor can see it (the deadline monitor's gap is
 too coarse for one lost cycle). Every output line of the watched modules
-(all modules by default) is matched against ``pattern`` (a Python regular
-expression, searched anywhere in the line); each matching line beyond the
+(all modules by default) is matched against ``pattern`` (a regular
+expression run by RE2 — linear time, so no pattern can hang the tool; no
+lookarounds or backreferences: ``model/patterns.py`` — searched anywhere in
+the line); each matching line beyond the
 first ``max_count`` (default 0) is a violation, dated by when the tool read
 the line. The lines come from the modules' output files (stdout and stderr
 together, as the launcher writes them) and are logged as ``module_log``
@@ -17,10 +19,10 @@ events, so ``check`` judges them again offline. Default CRASH class:
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from typing import ClassVar
 
+from astaa_deft.model.patterns import MAX_PATTERN, PatternError, UserPattern, compile_user_pattern
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, LogLineInfo, Monitor, MonitorContext
@@ -30,7 +32,6 @@ from astaa_deft.engine.monitor.kinds import Kind
 
 KEYS = ("modules", "pattern", "max_count")
 REQUIRED = ("pattern",)
-MAX_PATTERN = 1000  # characters: a pattern is a short regex, not a document
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,7 +40,7 @@ class LogInvariant(Invariant):
     default_crash: ClassVar[Verdict] = Verdict.SILENT
 
     modules: tuple[str, ...]
-    pattern: re.Pattern
+    pattern: UserPattern
     max_count: int = 0
 
     def what_matched(self) -> str:
@@ -52,7 +53,7 @@ class WatchedOutput:
     """The keys every output-watching kind reads: which modules, which lines, how many tolerated."""
 
     modules: tuple[str, ...]
-    pattern: re.Pattern
+    pattern: UserPattern
     max_count: int
 
 
@@ -74,17 +75,14 @@ def read_watched_output(reader: InvariantReader, v: dict[str, Node], built_in: s
     text = reader.text(v.get("pattern"), "'pattern'", "Traceback|ERROR")
     if text is None and ("pattern" in v or built_in is None):  # a bad one reported; a missing one by REQUIRED
         return None
-    if text is not None and len(text) > MAX_PATTERN:
-        reader.problem(v["pattern"], f"'pattern' is {len(text)} characters long", f"keep it under {MAX_PATTERN}")
-        return None
     try:
-        pattern = re.compile(text) if text is not None else None
-    except re.error as exc:
-        reader.problem(v["pattern"], f"'pattern' is not a regular expression: {exc}",
-                       "escape special characters with a backslash, e.g. 'ValueError\\\\('")
+        pattern = compile_user_pattern(text) if text is not None else None
+        if built_in is not None:  # the user's pattern checked alone first: its error names it, not the whole
+            pattern = compile_user_pattern(built_in if pattern is None else f"{built_in}|(?:{pattern.pattern})",
+                                           limit=len(built_in) + MAX_PATTERN + 10)
+    except PatternError as exc:
+        reader.problem(v["pattern"], f"'pattern' {exc.reason}", exc.fix)
         return None
-    if built_in is not None:
-        pattern = re.compile(built_in if pattern is None else f"{built_in}|(?:{pattern.pattern})")
     assert pattern is not None
     max_count = 0
     if "max_count" in v:

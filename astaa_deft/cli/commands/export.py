@@ -1,0 +1,62 @@
+"""`astaa-deft export DIR -o regress/`: a campaign's confirmed bugs as a pytest suite for the stack's CI.
+
+The work is :func:`astaa_deft.orchestration.verify.export.export_suite`; this
+command prints what it wrote. Exit codes: 0 written (and, checked, every
+test fails on the campaign's stack), 1 a checked test passes there, 2 bad
+input, 4 the output cannot be written.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from astaa_deft.cli.commands.console import say
+
+if TYPE_CHECKING:
+    from astaa_deft.cli.arguments import SubParsers
+
+
+def add_parser(subparsers: SubParsers) -> None:
+    """Declare the `export` command."""
+    exp = subparsers.add_parser("export", help="a campaign's confirmed bugs as a pytest regression suite "
+                                               "(module tests and live tests) for the stack's own CI")
+    exp.add_argument("campaign", type=Path, help="a campaign directory (astaa-deft fuzz -o DIR)")
+    exp.add_argument("-o", "--out", type=Path, required=True, help="the suite's folder (e.g. regress/)")
+    exp.add_argument("--check", choices=("module", "all", "none"), default="module",
+                     help="run the suite once on the campaign's stack (its params) and say whether each test fails"
+                          " there as it should: the fast module set (default), all (live runs too), or none")
+    exp.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The parsed `export` arguments to :func:`export`."""
+    return export(args.campaign, args.out, args.check)
+
+
+def export(campaign: Path, out: Path, check: str = "module") -> int:
+    """Export and print the suite's tests, then check them (``check``: module, all, none); exit code 0, or 1
+    when a checked test passes on the stack the campaign ran (it would not catch its bug)."""
+    from astaa_deft.orchestration.verify.export import check_suite, export_suite
+
+    report = export_suite(campaign, out)
+    for b in report.buckets:
+        say(f"  {b.bucket}: test_live.py::test_{b.name}" + (f", module/{b.name}/ (module tests)"
+                                                             if b.module_tests else ""))
+    for line in report.skipped:
+        say(f"  not exported: {line}")
+    say(f"regression suite: {report.out} ({len(report.buckets)} bucket(s)): pytest {report.out}"
+        f" [-m module | -m live] [--param KEY=VALUE]")
+    if check == "none" or not report.buckets:
+        return 0
+    checked = check_suite(report.out, "module" if check == "module" else "")
+    what = "its module tests" if check == "module" else "every test"
+    if checked.holds:
+        say(f"checked {what} on the campaign's stack: {len(checked.failed)} fail there, as they should"
+            f" ({checked.detail})")
+        return 0
+    for test in checked.passed:
+        say(f"  PASSES on the campaign's stack (would not catch its bug): {test}")
+    say(f"checked {what} on the campaign's stack: {len(checked.passed)} pass there ({checked.detail})")
+    return 1

@@ -1,0 +1,138 @@
+"""What an exported regression suite (``astaa-deft export``) runs: its options, markers and live tests.
+
+The suite's generated ``conftest.py`` and ``test_live.py`` call these, so a
+suite runs with the astaa-deft installed beside it. A live test runs its
+bucket's minimal test case once through the proxy (``runner.run_case``: the
+campaign's own run, horizon and settle time) and passes when the bucket's
+invariant holds — it fails while the bug is there, and never passes on a run
+that was not observed to its end. Module tests are the bucket's DeFT suites
+(collected by astaa-deft's pytest plugin), run with the same params.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from astaa_deft.model.errors import InputError, Problem
+
+MANIFEST = "regress.json"
+LIVE_MARK = "live"
+MODULE_MARK = "module"
+MARKERS = {MODULE_MARK: "a bucket's DeFT module tests: replays of the module alone, no bus (fast)",
+           LIVE_MARK: "a bucket's minimal test case run live through the proxy (the full set)"}
+
+
+@dataclass(frozen=True)
+class RegressSuite:
+    """An exported suite: its folder, its manifest, and the params and spec this pytest run uses."""
+
+    directory: Path
+    manifest: dict[str, Any]
+    params: dict[str, str] = field(default_factory=dict)  # --param overrides
+    spec: Path | None = None  # --spec: where the stack's spec is on this machine
+
+    @classmethod
+    def load(cls, directory: Path, params: dict[str, str] | None = None, spec: Path | None = None) -> RegressSuite:
+        return cls(directory, json.loads((directory / MANIFEST).read_text()), dict(params or {}), spec)
+
+    def spec_path(self) -> Path:
+        """--spec, else the campaign's spec where it was, else the copy in the suite."""
+        if self.spec is not None:
+            return self.spec
+        original = Path(self.manifest["spec"])
+        return original if original.is_file() else self.directory / self.manifest["spec_copy"]
+
+    def bucket(self, name: str) -> dict[str, Any]:
+        entry: dict[str, Any] = self.manifest["buckets"][name]
+        return entry
+
+    def params_of(self, name: str) -> dict[str, str]:
+        return {**self.bucket(name)["params"], **self.params}
+
+
+def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
+    """Run bucket ``name``'s minimal test case once, live: how it failed its bucket's way (None: it did not).
+    Raises AssertionError when the run was not observed to its end (no verdict is given about it)."""
+    from astaa_deft.engine.intercept.testcase import parse_testcase
+    from astaa_deft.engine.spec.loader import load_spec
+    from astaa_deft.orchestration.campaign import signature as sig
+    from astaa_deft.orchestration.campaign.known import from_json as known_from_json, judged
+    from astaa_deft.orchestration.campaign.runner import run_case
+    from astaa_deft.orchestration.verify.model import FailureWay
+
+    entry = suite.bucket(name)
+    spec = load_spec(suite.spec_path())
+    xml = (suite.directory / entry["testcase"]).read_text()
+    known = known_from_json(suite.manifest.get("known") or {})
+    outcome = run_case(spec, parse_testcase(xml.encode()), suite.params_of(name), run_dir,
+                       horizon=float(suite.manifest["horizon"]), settle=float(suite.manifest["settle"]),
+                       known=frozenset(known))
+    if outcome.status != "done":
+        raise AssertionError(f"{name}: the run was not observed to its end ({outcome.summary}: {outcome.error})"
+                             f" — no verdict; log in {run_dir}")
+    outcome = judged(sig.without_self_inflicted(outcome, xml, spec), known)
+    way = FailureWay(entry["invariant"], entry["module"])
+    if way.shown_by(outcome):
+        return f"{outcome.summary} (log: {outcome.log_path})"
+    return None
+
+
+def parse_params(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise InputError(Problem("--param", None, None, f"'{item}' is not KEY=VALUE",
+                                     "write e.g. --param defects=off"))
+        out[key] = value
+    return out
+
+
+# -- the generated conftest.py's hooks ---------------------------------------------------------------------------
+def add_options(parser: pytest.Parser) -> None:
+    group = parser.getgroup("astaa-deft regression suite")
+    group.addoption("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a spec param of the live runs and the module replays")
+    group.addoption("--spec", type=Path, default=None, help="the stack's spec on this machine")
+
+
+def configure(config: pytest.Config) -> None:
+    for name, text in MARKERS.items():
+        config.addinivalue_line("markers", f"{name}: {text}")
+
+
+def suite_of(config: pytest.Config, directory: Path) -> RegressSuite:
+    return RegressSuite.load(directory, parse_params(config.getoption("--param")), config.getoption("--spec"))
+
+
+def mark_and_override(config: pytest.Config, items: list[pytest.Item], directory: Path) -> None:
+    """Keep of each bucket's DeFT suite its oracle tests, marked ``module``, their replays given the run's params.
+
+    Its frame tests compare each replayed output with the recorded one — the
+    output of the stack *with* the bug — so a fix changes them too: they say
+    that something changed, not whether the bug is gone, and are left out
+    (deselected). An oracle test fails while the replayed module breaks the
+    bucket's invariant, and passes once it does not.
+    """
+    suite = suite_of(config, directory)
+    kept, dropped = [], []
+    for item in items:
+        replayed = getattr(item, "suite", None)  # the plugin's FrameTest / OracleTest share their suite
+        if replayed is None or directory not in Path(str(item.path)).parents:
+            kept.append(item)
+            continue
+        if not item.name.startswith("oracle_"):
+            dropped.append(item)
+            continue
+        item.add_marker(MODULE_MARK)
+        kept.append(item)
+        if suite.params:
+            replayed.manifest["params"] = {**replayed.manifest.get("params", {}), **suite.params}
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = kept
