@@ -47,7 +47,9 @@ from astaa_deft.orchestration.campaign.strategies import STRATEGIES, Strategy
 
 T = TypeVar("T")
 
-DEFAULT_HORIZON = 20.0
+DEFAULT_HORIZON = 20.0  # s a run may last when the spec's run: section declares no end at all
+CLEAN_RUN_CAP = 600.0  # s a clean run may last when the run: section declares an end but no time_limit
+HORIZON_SLACK = 1.25  # a mutated case may run this many times the longest clean run (a misled SUT runs longer)
 DEFAULT_BASELINE_RUNS = 2
 DEFAULT_RERUNS = 2
 DEFAULT_SETTLE = 3.0  # s a mutated case runs on after its last mutation could act
@@ -74,7 +76,7 @@ class CampaignConfig:
     dictionaries: list[Path] = field(default_factory=list)
     params: dict[str, list[str]] = field(default_factory=dict)  # key → values the cases spread over
     cluster: str | None = None
-    horizon: float = DEFAULT_HORIZON
+    horizon: float | None = None  # None: from the stack (clean runs to the scenario's end; see clean_horizon)
     baseline_runs: int = DEFAULT_BASELINE_RUNS  # clean runs per value of the params grid
     reruns: int = DEFAULT_RERUNS
     settle: float | None = DEFAULT_SETTLE  # None: a mutated case runs to the run's own end
@@ -85,10 +87,12 @@ class CampaignConfig:
 
     def resuming(self, meta: CampaignMeta) -> CampaignConfig:
         """This configuration continuing the campaign ``meta`` describes: its spec, seed, strategy, params and
-        horizon as stored, its case count unless this one gives one."""
+        horizon as stored (a horizon derived from the stack is derived again, from the same clean runs), its case
+        count unless this one gives one."""
+        horizon = self.horizon if meta.horizon_derived else _stored(meta.horizon, self.horizon)
         return replace(self, spec_path=Path(meta.spec) if meta.spec is not None else self.spec_path,
                        seed=_stored(meta.seed, self.seed), strategy=_stored(meta.strategy, self.strategy),
-                       params=_stored(meta.params, self.params), horizon=_stored(meta.horizon, self.horizon),
+                       params=_stored(meta.params, self.params), horizon=horizon,
                        cases=self.cases if self.cases is not None else meta.cases)
 
 
@@ -136,6 +140,27 @@ def live_timing(clean: list[CaseOutcome], horizon: float) -> Timing:
     return Timing(anchor, live)
 
 
+def clean_horizon(spec: Spec, given: float | None) -> float:
+    """Seconds a clean run may last: ``given`` (--horizon), else the spec's ``run: time_limit``, else (an end
+    declared without a limit) CLEAN_RUN_CAP, else (no end declared: nothing to run to) DEFAULT_HORIZON. A clean
+    run is never cut short of the scenario's end by default: it measures the SUT's own run."""
+    if given is not None:
+        return given
+    run = spec.run
+    if run is None or run.empty:
+        return DEFAULT_HORIZON
+    return run.time_limit if run.time_limit is not None else CLEAN_RUN_CAP
+
+
+def derived_horizon(clean: list[CaseOutcome], cap: float) -> float:
+    """Seconds a case may last, from the clean runs: the longest × HORIZON_SLACK, at most ``cap`` (the clean
+    runs' own bound); ``cap`` without any finished clean run."""
+    seconds = [o.seconds for o in clean if o.status == CaseStatus.DONE and o.seconds > 0]
+    if not seconds:
+        return cap
+    return round(min(cap, max(seconds) * HORIZON_SLACK), 1)
+
+
 def default_workers(module_count: int, cores: int | None = None) -> int:
     cores = cores or os.cpu_count() or 1
     per_run = HELPER_CORES + CORES_PER_MODULE * module_count
@@ -164,14 +189,19 @@ class Campaign:
         if config.strategy not in STRATEGIES:
             raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
                                      f"use one of: {', '.join(STRATEGIES)}"))
-        self.strategy: Strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed, config.horizon)
+        # Clean runs run to the scenario's end (capped by the run: section's time_limit); mutated cases get the
+        # horizon derived from them after the baseline (the given --horizon bounds both).
+        self.clean_horizon = clean_horizon(self.spec, config.horizon)
+        self.horizon = self.clean_horizon
+        self.strategy: Strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed,
+                                                              self.clean_horizon)
         self.grid = param_grid(config.params, self.spec)
         self.cores = os.cpu_count() or 1
         # Runs at once: the user's, else measured in the baseline (calibrate); this estimate until then.
         self.calibrated = config.workers is None and config.cluster is None
         self.workers = config.workers or default_workers(len(self.spec.modules))
         self.started = time.monotonic()
-        self.timing = Timing(None, config.horizon)
+        self.timing = Timing(None, self.clean_horizon)
         self.known: dict[str, KnownFinding] = {}  # invariants the unmutated SUT breaks (judged after each run)
         self._clean: list[CaseOutcome] = []  # every finished clean run (baseline, twins, cases that mutated nothing)
         self._solo: dict[str, CaseOutcome] = {}  # params → a run alone: the timing reference
@@ -185,7 +215,8 @@ class Campaign:
     def run(self) -> CampaignResult:
         self.journal.set_meta(spec=str(self.config.spec_path.resolve()), seed=self.config.seed,
                               strategy=self.config.strategy, params=self.config.params, horizon=self.config.horizon,
-                              cases=self.config.cases, budget=self.config.budget)
+                              horizon_derived=self.config.horizon is None, cases=self.config.cases,
+                              budget=self.config.budget)
         requeued = self.journal.requeue_running()
         if requeued:
             self.say(f"resume: {requeued} case(s) that were in flight run again")
@@ -251,6 +282,7 @@ class Campaign:
         clean = [o for r, o in zip(rows, outcomes, strict=False)
                  if o is not None and o.status == CaseStatus.DONE and r.case_id not in overloaded_runs]
         self._calibrate(clean)
+        self._derive_horizon(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
         for row, outcome in zip(rows, outcomes, strict=False):
@@ -261,6 +293,19 @@ class Campaign:
         for name, finding in self.known.items():
             self.say(f"baseline finding: '{name}' breaks without mutation ({finding.rate} clean runs): from now on"
                      f" it counts in a case only where the case makes it worse (earlier, more often)")
+
+    def _derive_horizon(self, clean: list[CaseOutcome]) -> None:
+        """The cases' horizon from the clean runs (unless --horizon gave one): they ran to the scenario's end."""
+        if self.config.horizon is not None:
+            return
+        self.horizon = derived_horizon(clean, self.clean_horizon)
+        self.journal.set_meta(horizon=self.horizon)
+        longest = max((o.seconds for o in clean), default=0.0)
+        why = (f"the longest clean run took {longest:.1f} s to the scenario's end, × {HORIZON_SLACK:g}" if clean
+               else "no clean run finished")
+        self.journal.note("horizon", f"cases run at most {self.horizon:g} s: {why}; clean runs at most"
+                                     f" {self.clean_horizon:g} s")
+        self.say(f"baseline: cases run at most {self.horizon:g} s ({why})")
 
     def _file_baseline(self, rows: list[CaseRow], outcomes: list[CaseOutcome | None],
                        overloaded_runs: set[str]) -> None:
@@ -368,7 +413,7 @@ class Campaign:
     def _calibrate(self, clean: list[CaseOutcome]) -> None:
         """Tell the strategy when the SUT is live: measured once in the baseline, kept in the journal."""
         stored = self.journal.meta().timing
-        timing = stored if stored is not None else live_timing(clean, self.config.horizon)
+        timing = stored if stored is not None else live_timing(clean, self.clean_horizon)
         self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
         self.timing = timing
         self.strategy.calibrate(timing)
@@ -434,8 +479,9 @@ class Campaign:
         return self.config.budget is not None and time.monotonic() - self.started >= self.config.budget
 
     def _submit(self, pool: CasePool, case: PlannedCase) -> None:
+        horizon = self.clean_horizon if case.kind in (BASELINE, CONTROL) else self.horizon
         payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
-                              self.config.horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
+                              horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
                               settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
                               known=tuple(sorted(self.known)))
         self.journal.started(case.case_id)

@@ -164,7 +164,8 @@ class CampaignMeta:
     seed: int | None = None
     strategy: str | None = None
     params: dict[str, list[str]] | None = None
-    horizon: float | None = None
+    horizon: float | None = None  # s a case runs at most: given, or derived from the clean runs
+    horizon_derived: bool = False  # the horizon came from the stack (the clean runs), not --horizon
     cases: int | None = None
     budget: float | None = None
     calibrated: bool = False
