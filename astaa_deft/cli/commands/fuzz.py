@@ -55,6 +55,8 @@ def status(out: Path) -> int:
         say(_bucket_line(standing, minimised.get(standing.bucket.bucket), tests.get(standing.bucket.bucket)))
     for b in merged:
         say(f"  {b.bucket} merged into {b.merged_into}: {b.invariant} {b.family}")
+    for name, blame in journal.blames().items():
+        say(f"  {name} blame: {blame.module or '?'}: {blame.chain}")
     for note in journal.notes("concurrency"):
         say(f"  {note.text}")
     journal.close()

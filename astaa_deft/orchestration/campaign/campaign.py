@@ -30,9 +30,10 @@ from astaa_deft.orchestration.campaign.calibration import (
     DRIFT_TOLERANCE, drift, fewer_after_drift, overloaded, run_share, workers_for,
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
+from astaa_deft.orchestration.campaign.blame import BlameUnavailable, blame_logs
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
 from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
-from astaa_deft.orchestration.campaign.rows import CampaignMeta, CaseRow, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.rows import BlameRow, CampaignMeta, CaseRow, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
@@ -629,10 +630,47 @@ class Campaign:
                  f" {bucket.control_failures}/{bucket.controls}")
         if kind == BUG:
             self.say(f"new bucket {name}: {bucket.verdict}: {bucket.invariant} — {bucket.family} ({rates})")
+            self._blame(bucket)
         else:
             why = "the unmutated twin fails that way too" if twin_failed else "it did not reproduce"
             self.say(f"flaky/environment {name}: {bucket.invariant} — {bucket.family}: {why} ({rates});"
                      f" not filed as a bug")
+
+    # -- blame: the module whose output departed first from the twins'; one bucket per root cause -----------
+    def _blame(self, bucket: Bucket) -> None:
+        """Name the module to blame for a new bug (blame.py), journal the chain, and merge the bucket into an
+        earlier one of the same root cause: the same module to blame, wrong output, failure and field family."""
+        first = self.journal.planned(bucket.first_case)
+        outcome = first.outcome()
+        if outcome is None or not outcome.log_path:
+            return
+        twins = [Path(o.log_path) for r in self.journal.cases(CONTROL) if r.parent == bucket.bucket
+                 for o in (r.outcome(),) if o is not None and o.status == CaseStatus.DONE and o.log_path]
+        finding = sig.primary(outcome)
+        try:
+            found = blame_logs(self.spec, Path(outcome.log_path), twins, self.timing.anchor,
+                               invariant=bucket.invariant, finding_module=finding.module if finding else None)
+        except BlameUnavailable as exc:
+            self.journal.note("blame", f"{bucket.bucket}: no blame: {exc}")
+            return
+        identity = (None if found.module is None else
+                    f"{found.module}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
+                    f"{sig.field_family(bucket.family)}")
+        self.journal.blamed(BlameRow(bucket.bucket, found.module, found.output, found.how, found.chain, found.detail,
+                                     found.twins, identity))
+        self.say(f"  {bucket.bucket} blame: {found.module or '?'} ({found.chain}; {found.detail})")
+        if identity is None:
+            return
+        blames = self.journal.blames()
+        same = next((b for b in self.journal.buckets(include_merged=False)
+                     if b.bucket != bucket.bucket and b.is_bug and blames.get(b.bucket) is not None
+                     and blames[b.bucket].identity == identity), None)
+        if same is not None:
+            self.journal.merge_bucket(bucket.bucket, same.bucket)
+            text = (f"bucket {bucket.bucket} ({bucket.family}) merged into {same.bucket} ({same.family}): one root"
+                    f" cause — {found.module} to blame, {found.wrong_output}, {sig.field_family(bucket.family)}")
+            self.journal.note("blame", text)
+            self.say(f"  {text}")
 
     # -- minimisation: confirmed buckets, alongside the hunt, each in a worker slot ---------------------------
     def _start_minimisations(self, hunting: bool) -> None:

@@ -124,6 +124,7 @@ def render(journal: Journal, out: Path) -> str:
     parts += [f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in _summary(meta, cases, buckets)]
     parts.append("</table><h2>Buckets</h2>")
     parts += _bucket_table(journal, out, buckets, by_bucket)
+    parts += blame_section(journal)
     parts.append("<h2>Plots</h2><div class='plots'>")
     for title, png in _plots(journal, cases.done, buckets):
         parts.append(f"<img alt='{e(title)}' title='{e(title)}' src='data:image/png;base64,{png}'>")
@@ -196,6 +197,28 @@ def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m:
         rows.append(f"<tr class='xml'><td></td><td colspan='10'><details{' open' if minimal else ''}>"
                     f"<summary>{what} (XML)</summary><pre>{e(xml)}</pre></details></td></tr>")
     return rows
+
+
+def blame_section(journal: Journal) -> list[str]:
+    """Which module is to blame for each confirmed bucket (blame.py: the first whose output departed from the
+    unmutated twins'), the chain, and the buckets merged into it as one root cause, each with its culprit."""
+    blames = journal.blames()
+    if not blames:
+        return []
+    e = html.escape
+    buckets = journal.buckets()
+    parts = ["<h2>Blame</h2><table><tr><th>bucket</th><th>module to blame</th><th>chain</th><th>evidence</th>"
+             "<th>same root cause (merged)</th></tr>"]
+    for b in buckets:
+        row = blames.get(b.bucket)
+        if row is None or b.merged_into:
+            continue
+        merged = [m for m in buckets if m.merged_into == b.bucket]
+        also = "".join(f"<div>{e(m.bucket)}: {e(m.family)}</div>" for m in merged)
+        parts.append(f"<tr><td><b>{e(b.bucket)}</b></td><td>{e(row.module or '?')}</td><td>{e(row.chain)}</td>"
+                     f"<td class='muted'>{e(row.detail)} ({row.twins} twin(s))</td><td>{also}</td></tr>")
+    parts.append("</table>")
+    return parts
 
 
 def _links(first: CaseRow | None, m: MinimisationRow | None, checked: ModuleTestsRow | None, out: Path) -> list[str]:

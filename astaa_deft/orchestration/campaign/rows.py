@@ -180,3 +180,17 @@ class CampaignMeta:
         timing = known.pop("timing", None)
         runs = known.pop("overloaded_runs", None)
         return cls(**known, timing=Timing(**timing) if timing else None, overloaded_runs=tuple(runs or ()))
+
+
+@dataclass(frozen=True)
+class BlameRow:
+    """A confirmed bucket's module to blame (``blame.Blame``) and its root-cause identity (None: none)."""
+
+    bucket: str
+    module: str | None
+    output: str | None
+    how: str
+    chain: str
+    detail: str
+    twins: int
+    identity: str | None
