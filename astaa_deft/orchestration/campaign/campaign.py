@@ -27,7 +27,8 @@ from astaa_deft.engine.spec.params import check_param_values, spread_choices
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.calibration import (
-    DRIFT_TOLERANCE, drift, fewer_after_drift, overloaded, run_share, workers_for,
+    CEILING_LOAD_DROP, DRIFT_TOLERANCE, RunShare, drift, fewer_after_drift, overloaded, raised, run_share,
+    workers_for,
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
 from astaa_deft.orchestration.campaign.blame import BlameUnavailable, blame_logs
@@ -207,6 +208,10 @@ class Campaign:
         self._clean: list[CaseOutcome] = []  # every finished clean run (baseline, twins, cases that mutated nothing)
         self._solo: dict[str, CaseOutcome] = {}  # params → a run alone: the timing reference
         self._last_change = time.monotonic()  # when the runs at once last changed (the load average lags)
+        # Timing drifted at this many runs at once (None: never), with the other load then: not raised to it
+        # again until the other load has fallen by CEILING_LOAD_DROP.
+        self._ceiling: int | None = None
+        self._ceiling_other = 0.0
         self._minimiser: ThreadPoolExecutor | None = None
         self._minimising: dict[Future, str] = {}  # minimisation in flight → its bucket
         self._running_cases: set[str] = set()
@@ -385,6 +390,7 @@ class Campaign:
                 break
             overloaded_runs = [*self.journal.meta().overloaded_runs, *(r.case_id for r, _ in loaded)]
             self.journal.set_meta(overloaded_runs=overloaded_runs)
+            self._drifted(self.workers)
             self._concurrency(fewer_after_drift(self.workers, worst),
                               f"timing drifted at {self.workers} at once: {worst.detail}, ×{worst.ratio:.1f}")
             if self.workers == 1:
@@ -494,11 +500,36 @@ class Campaign:
 
     # -- load: fewer runs at once when the machine or the SUT's timing says so -------------------------------
     def _watch_load(self) -> None:
-        if not self.calibrated or self.workers == 1 or time.monotonic() - self._last_change < SETTLE_LOAD_SECONDS:
+        """Fewer runs at once when the machine is overloaded; more when the other load fell and more fit (the
+        twins' timing at the new count is checked as always: drift lowers it again). One step a minute."""
+        if not self.calibrated or time.monotonic() - self._last_change < SETTLE_LOAD_SECONDS:
             return
         load1 = os.getloadavg()[0]
         if overloaded(load1, self.cores):
-            self._concurrency(self.workers - 1, f"load {load1:.1f} above {self.cores} core(s)")
+            if self.workers > 1:
+                self._concurrency(self.workers - 1, f"load {load1:.1f} above {self.cores} core(s)")
+            return
+        share = self._share()
+        if share is None:
+            return
+        ours = self._busy() * share.cores
+        if self._ceiling is not None and load1 - ours < self._ceiling_other - CEILING_LOAD_DROP:
+            self._ceiling = None  # the machine has more room than when the timing drifted
+        more = raised(share, self.cores, available_memory_mb(), most=self._most_workers(), load1=load1, ours=ours,
+                      workers=self.workers, ceiling=self._ceiling)
+        if more.workers > self.workers:
+            self._concurrency(more.workers, f"{more.why}; no unmutated twin's timing drifted at {self.workers}")
+
+    def _share(self) -> RunShare | None:
+        """What one run takes (the solo runs of the baseline), None when none was measured."""
+        return run_share(list(self._solo.values()))
+
+    def _drifted(self, workers: int) -> None:
+        """Timing drifted at ``workers`` runs at once: not raised to that again while the other load stays."""
+        share = self._share()
+        ours = self._busy() * share.cores if share is not None else 0.0
+        self._ceiling = workers if self._ceiling is None else min(self._ceiling, workers)
+        self._ceiling_other = max(0.0, os.getloadavg()[0] - ours)
 
     def _watch_timing(self, row: CaseRow, outcome: CaseOutcome) -> None:
         """A control run is a clean run at the campaign's concurrency: its timing against the run alone."""
@@ -508,6 +539,7 @@ class Campaign:
             return
         found = drift(solo, outcome)
         if found.drifted:
+            self._drifted(self.workers)
             self._concurrency(self.workers - 1, f"timing drifted in clean run {row.case_id}: {found.detail},"
                                                 f" ×{found.ratio:.1f}")
 
