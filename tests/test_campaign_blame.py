@@ -60,6 +60,19 @@ def test_twin_to_twin_noise_is_not_a_departure_and_nothing_departing_blames_the_
     assert verdict.module == "relay" and verdict.how == "finding" and verdict.output is None
 
 
+def test_a_string_no_twin_ever_had_departs_at_once_and_a_varying_one_does_not():
+    def statuses(values: list[str], mutated_at: int | None = None) -> RunSeries:
+        bins = {"pose": bin_features((0.1 * i, {"v": 1.0}) for i in range(40)),
+                "command": bin_features((0.1 * i + 0.01, {"status": v}) for i, v in enumerate(values))}
+        return RunSeries(bins, mutated_at, ("pose",) if mutated_at is not None else ())
+
+    varying = ["ok" if i % 6 else "replan" for i in range(40)]
+    twins = [statuses(varying), statuses(["ok" if i % 4 else "replan" for i in range(40)])]
+    assert departures(statuses(["ok" if i % 5 else "replan" for i in range(40)], mutated_at=2), twins) == []
+    stale = statuses(varying[:25] + ["stale input"] * 15, mutated_at=2)
+    assert [(d.channel, d.feature, d.bin) for d in departures(stale, twins)] == [("command", "status=stale input", 5)]
+
+
 def test_a_module_that_falls_silent_departs():
     calm = [1.0] * 40
     failing = series({"pose": calm, "command": calm[:12] + [None] * 28}, mutated_at=2, mutated=("pose",))

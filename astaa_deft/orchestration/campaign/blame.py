@@ -18,11 +18,12 @@ arrays' lengths and short strings' shares. A channel departs in a bin when
 
 * non-finite values appear that no twin had (``non-finite``);
 * it falls silent where every twin sent at least two messages (``silent``);
-* a string value's share or an array's length leaves the twins' range
-  (``value``), or a number's mean leaves it by more than the noise — twice
-  the largest spread seen between twins, or between the failing run and
-  the twins before its first mutation (at least 5 % of the field's scale) —
-  in two bins in a row (one bin of a drifting number is noise).
+* a string value appears that no run without the mutation had (``value``);
+  or a number's mean (an array's length, a string's share) leaves the
+  twins' range by more than the noise — twice the largest spread seen
+  between twins, or between the failing run and the twins before its first
+  mutation (at least 5 % of the field's scale) — in two bins in a row (one
+  bin of a drifting number is noise).
 
 The mutated channels themselves are left out (they depart by construction).
 Pure logic apart from :func:`run_series`, which reads a log.
@@ -181,6 +182,7 @@ def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequenc
     twin_last = min((max(t, default=-1) for t in theirs), default=-1)
     noise = _noise(mine, theirs, start)
     scale = _scale(theirs)
+    seen = {k for t in theirs for f in t.values() for k in f} | {k for b, f in mine.items() if b < start for k in f}
     pending: dict[str, Departure] = {}
     for b in range(start, min(max(last, end), twin_last) + 1):
         here = mine.get(b, {COUNT: 0.0})
@@ -199,21 +201,21 @@ def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequenc
                     found.append(Departure(channel, b, key, "non-finite",
                                            f"{key.removesuffix('#nonfinite') or 'value'} not finite; the twins' were"))
                 continue
+            if "=" in key and key not in seen:  # a string value no run without the mutation ever had
+                found.append(Departure(channel, b, key, "value", f"{key}: a value the twins never had"))
+                continue
             values = [f[key] if key in f else (0.0 if _absent_is_zero(key) else None) for f in there]
             known = [v for v in values if v is not None]
             if not known:
                 continue
             lo, hi = min(known), max(known)
-            exact = _absent_is_zero(key) or key.endswith("#len")
-            tol = 0.0 if exact else max(NOISE_FACTOR * noise.get(key, 0.0), SCALE_SHARE * scale.get(key, 0.0), 1e-9)
+            tol = max(NOISE_FACTOR * noise.get(key, 0.0), SCALE_SHARE * scale.get(key, 0.0), 1e-9)
             if lo - tol <= value <= hi + tol:
                 pending.pop(key, None)
                 continue
             departure = Departure(channel, b, key, "value",
                                   f"{key} {value:.6g} where the twins had {lo:.6g}…{hi:.6g}")
-            if exact:
-                found.append(departure)
-            elif key in pending and pending[key].bin == b - 1:  # two bins in a row: not a drifting number's jitter
+            if key in pending and pending[key].bin == b - 1:  # two bins in a row: not a drifting number's jitter
                 found.append(pending[key])
             else:
                 pending[key] = departure

@@ -287,8 +287,8 @@ class Campaign:
         overloaded_runs = set(self.journal.meta().overloaded_runs)
         clean = [o for r, o in zip(rows, outcomes, strict=False)
                  if o is not None and o.status == CaseStatus.DONE and r.case_id not in overloaded_runs]
-        self._calibrate(clean)
         self._derive_horizon(clean)
+        self._calibrate(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
         for row, outcome in zip(rows, outcomes, strict=False):
@@ -420,7 +420,7 @@ class Campaign:
     def _calibrate(self, clean: list[CaseOutcome]) -> None:
         """Tell the strategy when the SUT is live: measured once in the baseline, kept in the journal."""
         stored = self.journal.meta().timing
-        timing = stored if stored is not None else live_timing(clean, self.clean_horizon)
+        timing = stored if stored is not None else live_timing(clean, self.horizon)
         self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
         self.timing = timing
         self.strategy.calibrate(timing)
@@ -787,8 +787,13 @@ class Campaign:
             self.say(f"  bucket {merged}: same minimised culprit as {into}: merged")
 
     def _planner_caused(self, bucket: Bucket) -> bool:
+        """The planner's bucket: its finding names the planner, or the planner is the module to blame (its
+        module tests, replaying the failing run's frames, then check the blame)."""
         planner = self.spec.planner
-        return planner is not None and bucket.module == planner.module
+        if planner is None:
+            return False
+        blamed = self.journal.blames().get(bucket.bucket)
+        return bucket.module == planner.module or (blamed is not None and blamed.module == planner.module)
 
     def _planner_tests(self, bucket: Bucket, log: Path) -> Path | None:
         """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
