@@ -269,7 +269,7 @@ def _shorten_holds(runs: Sequence[Run], test: Callable[[Sequence[Run]], TestResu
 
     ``margin`` (whole-system re-runs): a hold that needs several messages needs them across the module's
     cycles, whose timing varies from run to run — the shortest hold that failed once sits on that edge
-    (seen: a 23-message hold of a heavy planner's obstacles failed once and not in its confirmation run). It
+    (seen: a ~24-message hold of a heavy planner's obstacles failed once, not in its confirmation run). It
     gets ``margin`` of its length back at each end (never past the original hold) and is tested once so; if
     that does not fail, the whole hold stays.
     Returns the runs and the result of the last failing test of a shortened set (None: nothing shortened)."""

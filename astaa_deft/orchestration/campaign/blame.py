@@ -198,8 +198,8 @@ def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequenc
                 continue
             if key.endswith("#nonfinite"):
                 if value > 0 and all(f.get(key, 0.0) == 0 for f in there):
-                    found.append(Departure(channel, b, key, "non-finite",
-                                           f"{key.removesuffix('#nonfinite') or 'value'} not finite, finite in every twin"))
+                    name = key.removesuffix("#nonfinite") or "value"
+                    found.append(Departure(channel, b, key, "non-finite", f"{name} not finite, finite in every twin"))
                 continue
             if "=" in key and key not in seen:  # a string value no run without the mutation ever had
                 found.append(Departure(channel, b, key, "value", f"{key}: a value the twins never had"))
