@@ -73,10 +73,10 @@ def main() -> int:
         print("decisions (s relative to the end of the load):")
         for note in notes:
             print(f"  {note.time - ended:+7.0f} s  {note.text}")
-        before = [n for n in notes if n.time <= ended]
-        level = int(before[-1].text.split(":")[1].split()[0]) if before else None
-        rises = [n for n in notes if n.time > ended and level is not None
-                 and int(n.text.split(":")[1].split()[0]) > level]
+        changes = [(n, _count(n.text)) for n in notes if n.text.startswith("runs at once:")]
+        before = [k for n, k in changes if n.time <= ended]
+        level = before[-1] if before else None
+        rises = [n for n, k in changes if n.time > ended and level is not None and k > level]
         cases = [r for r in journal.cases() if r.finished and r.at_once is not None and r.finished_at is not None]
         for label, rows in (("before", [r for r in cases if r.finished_at <= ended]),
                             ("after", [r for r in cases if r.finished_at > ended])):
@@ -89,6 +89,11 @@ def main() -> int:
     finally:
         journal.close()
     return 0
+
+
+def _count(text: str) -> int:
+    """The runs at once a decision set: ``runs at once: 2 (was 1): …`` → 2."""
+    return int(text.removeprefix("runs at once:").split()[0])
 
 
 if __name__ == "__main__":
