@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -93,7 +94,7 @@ def main() -> int:
 
 def _count(text: str) -> int:
     """The runs at once a decision set: ``runs at once: 2 (was 1): …`` → 2."""
-    return int(text.removeprefix("runs at once:").split()[0])
+    return int(re.match(r"runs at once: (\d+)", text).group(1))  # type: ignore[union-attr]
 
 
 if __name__ == "__main__":
