@@ -124,6 +124,7 @@ def test_a_nan_in_x_and_in_y_are_one_bucket_blamed_on_the_relay_with_the_chain_j
         first, second = buckets
         assert blames[first.bucket].module == "relay", blames
         assert blames[first.bucket].chain.startswith("pose → relay → command (non-finite"), blames
+        assert blames[first.bucket].detail.endswith("2 of 2 failing runs agree"), blames  # the case and its re-run
         assert second.merged_into == first.bucket, (buckets, said)  # one root cause, both culprits kept
         assert {first.family, second.family} == {"pose:x:set", "pose:y:set"}
         assert any("merged into" in n.text for n in journal.notes("blame")), said

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -339,9 +339,23 @@ def _origin(log: LogContents, spec: Spec, anchor: str | None) -> int:
     return min(bus)
 
 
-def blame_logs(spec: Spec, failing_log: Path, twin_logs: Sequence[Path], anchor: str | None, *, invariant: str,
-               finding_module: str | None) -> Blame:
-    """:func:`blame` over the failing case's log and its twins' logs (BlameUnavailable when one cannot be read)."""
-    failing = run_series(failing_log, spec, anchor)
+def blame_logs(spec: Spec, failing_logs: Sequence[Path], twin_logs: Sequence[Path], anchor: str | None, *,
+               invariant: str, finding_module: str | None) -> Blame:
+    """:func:`blame` over the failing runs' logs (the case first, then its re-runs that failed the same way) and
+    the twins' logs: the answer most failing runs give (the first run's on a tie), which says how many agreed.
+    BlameUnavailable when the first failing log or a twin's cannot be read; a re-run's that cannot is left out."""
     twins = [run_series(p, spec, anchor) for p in twin_logs]
-    return blame(spec, failing, twins, invariant=invariant, finding_module=finding_module)
+    answers = [blame(spec, run_series(failing_logs[0], spec, anchor), twins, invariant=invariant,
+                     finding_module=finding_module)]
+    for path in failing_logs[1:]:
+        try:
+            answers.append(blame(spec, run_series(path, spec, anchor), twins, invariant=invariant,
+                                 finding_module=finding_module))
+        except BlameUnavailable:
+            continue
+    keys = [(a.module, a.output, a.how) for a in answers]
+    best = max(keys, key=lambda k: (keys.count(k), -keys.index(k)))
+    chosen = answers[keys.index(best)]
+    if len(answers) == 1:
+        return chosen
+    return replace(chosen, detail=f"{chosen.detail}; {keys.count(best)} of {len(answers)} failing runs agree")

@@ -678,9 +678,12 @@ class Campaign:
             return
         twins = [Path(o.log_path) for r in self.journal.cases(CONTROL) if r.parent == bucket.bucket
                  for o in (r.outcome(),) if o is not None and o.status == CaseStatus.DONE and o.log_path]
+        reruns = [Path(o.log_path) for r in self.journal.cases(RERUN) if r.parent == bucket.bucket
+                  for o in (r.outcome(),) if o is not None and o.log_path and o.mutations > 0
+                  and shows_failure(o, outcome)]
         finding = sig.primary(outcome)
         try:
-            found = blame_logs(self.spec, Path(outcome.log_path), twins, self.timing.anchor,
+            found = blame_logs(self.spec, [Path(outcome.log_path), *reruns], twins, self.timing.anchor,
                                invariant=bucket.invariant, finding_module=finding.module if finding else None)
         except BlameUnavailable as exc:
             self.journal.note("blame", f"{bucket.bucket}: no blame: {exc}")
