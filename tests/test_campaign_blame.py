@@ -130,3 +130,28 @@ def test_a_nan_in_x_and_in_y_are_one_bucket_blamed_on_the_relay_with_the_chain_j
         assert any("merged into" in n.text for n in journal.notes("blame")), said
     finally:
         journal.close()
+
+
+@pytest.mark.slow  # ~2-3 min: demo runs, then a minimisation
+def test_on_the_demo_the_planner_is_blamed_and_its_replay_confirms_it(tmp_path: Path):
+    # Seeded defect 1: an infinite routing speed limit makes the planner plan over the limit (planned_speed).
+    from astaa_deft.demo.bundled import demo_spec_path
+
+    inf_limit = ('<testcase id="t" seed="1"><description>x</description><policy id="p1"><channel>routing</channel>'
+                 '<window from="0"><after channel="command" message="20"/></window><select limit="1"/>'
+                 '<set><field path="speed_limit" value="dict:float.inf"/></set></policy></testcase>')
+    out = tmp_path / "c"
+    journal = Journal(out)
+    said: list[str] = []
+    run = Campaign(CampaignConfig(demo_spec_path(), out, cases=1, workers=1, baseline_runs=1, reruns=1,
+                                  report=False), journal, say=said.append)
+    run.strategy = Fixed([inf_limit])  # type: ignore[assignment]
+    run.run()
+    try:
+        bucket = journal.buckets()[0]
+        assert bucket.kind == "bug" and bucket.invariant == "planned_speed", (bucket, said)
+        blamed = journal.blames()[bucket.bucket]
+        assert blamed.module == "planning" and blamed.chain.startswith("routing → planning → trajectory"), blamed
+        assert blamed.replay is not None and "a replay of planning alone" in blamed.replay, (blamed, said)
+    finally:
+        journal.close()

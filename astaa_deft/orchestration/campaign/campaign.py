@@ -37,6 +37,7 @@ from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
 from astaa_deft.orchestration.campaign.rows import BlameRow, CampaignMeta, CaseRow, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
+from astaa_deft.orchestration.campaign.minimiser import summary as minimised_summary
 from astaa_deft.orchestration.campaign.module_tests import (
     TestsVerdict, is_crash_bucket, run_module_tests,
 )
@@ -707,6 +708,22 @@ class Campaign:
             self.journal.note("blame", text)
             self.say(f"  {text}")
 
+    def _replay_confirms_blame(self, name: str, result: Minimised) -> None:
+        """A minimisation that reproduced the failure in a replay of the module to blame alone, with the culprit
+        frames, confirms the blame: journalled with it."""
+        blamed = self.journal.blames().get(name)
+        if blamed is None or blamed.module is None or result.exit_code != 0:
+            return
+        summary = minimised_summary(result.out_dir)
+        if summary.get("tester") != "replay" or summary.get("replayed_module") != blamed.module:
+            return
+        frames = summary.get("frames")
+        kept = frames.get("after") if isinstance(frames, dict) else None
+        how = (f"a replay of {blamed.module} alone over {kept} frame(s) with the culprit fails as the run did"
+               if kept is not None else f"a replay of {blamed.module} alone with the culprit fails as the run did")
+        self.journal.blamed(replace(blamed, replay=how))
+        self.say(f"  {name} blame confirmed: {how}")
+
     # -- minimisation: confirmed buckets, alongside the hunt, each in a worker slot ---------------------------
     def _start_minimisations(self, hunting: bool) -> None:
         if not self.config.minimise or self.strategy.exports_own_findings:
@@ -763,6 +780,7 @@ class Campaign:
                                                 str(result.out_dir), str(tests_dir) if tests_dir else None,
                                                 result.seconds, result.detail))
             self.say(f"  {name} {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
+            self._replay_confirms_blame(name, result)
             if tests_dir is not None and verdict is not None:
                 self.say(f"  the minimiser's module tests{self._journal_module_tests(name, tests_dir, verdict)}")
 

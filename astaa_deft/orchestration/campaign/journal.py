@@ -65,7 +65,8 @@ CREATE TABLE IF NOT EXISTS minimisations (
 );
 CREATE TABLE IF NOT EXISTS blames (  -- a confirmed bucket's module to blame (blame.py) and its root-cause identity
     bucket TEXT PRIMARY KEY, module TEXT, output TEXT, how TEXT NOT NULL, chain TEXT NOT NULL, detail TEXT NOT NULL,
-    twins INTEGER NOT NULL, identity TEXT  -- NULL: no identity (no module to blame)
+    twins INTEGER NOT NULL, identity TEXT,  -- NULL: no identity (no module to blame)
+    replay TEXT  -- how a replay of the module to blame confirmed it (NULL: none did)
 );
 CREATE TABLE IF NOT EXISTS module_tests (  -- a bucket's module tests, run once on its defect
     bucket TEXT PRIMARY KEY, tests_dir TEXT NOT NULL,
@@ -296,8 +297,9 @@ class Journal:
     # -- blame --------------------------------------------------------------
     def blamed(self, row: BlameRow) -> None:
         """A confirmed bucket's module to blame, the chain that says why, and its root-cause identity."""
-        self._write("INSERT OR REPLACE INTO blames VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                    (row.bucket, row.module, row.output, row.how, row.chain, row.detail, row.twins, row.identity))
+        self._write("INSERT OR REPLACE INTO blames VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (row.bucket, row.module, row.output, row.how, row.chain, row.detail, row.twins, row.identity,
+                     row.replay))
 
     def blames(self) -> dict[str, BlameRow]:
         """Bucket name → its blame."""

@@ -216,7 +216,8 @@ def blame_section(journal: Journal) -> list[str]:
         merged = [m for m in buckets if m.merged_into == b.bucket]
         also = "".join(f"<div>{e(m.bucket)}: {e(m.family)}</div>" for m in merged)
         parts.append(f"<tr><td><b>{e(b.bucket)}</b></td><td>{e(row.module or '?')}</td><td>{e(row.chain)}</td>"
-                     f"<td class='muted'>{e(row.detail)} ({row.twins} twin(s))</td><td>{also}</td></tr>")
+                     f"<td class='muted'>{e(row.detail)} ({row.twins} twin(s))"
+                     f"{'<br>confirmed: ' + e(row.replay) if row.replay else ''}</td><td>{also}</td></tr>")
     parts.append("</table>")
     return parts
 

@@ -194,3 +194,4 @@ class BlameRow:
     detail: str
     twins: int
     identity: str | None
+    replay: str | None = None  # how a replay of the module to blame confirmed it (None: none did)
