@@ -52,7 +52,9 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
                          "decictor looks for non-optimal decisions: docs/decictor.md)")
     fz.add_argument("--dictionary", type=Path, action="append", default=[])
     fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
-    bounded(fz, "--horizon", WINDOW_SECONDS, default=20.0, help="seconds a case runs at most")
+    bounded(fz, "--horizon", WINDOW_SECONDS, default=None,
+            help="seconds a run lasts at most (default: from the stack — clean runs go to the scenario's end,"
+                 " capped by the spec's run: time_limit, and cases at most 1.25 × the longest)")
     bounded(fz, "--settle", WINDOW_SECONDS, default=3.0,
             help="seconds a mutated case runs on after its last mutation could act")
     bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first, per value of the --params grid")

@@ -427,3 +427,78 @@ def minimise_groups(
     for k, x in fine.minimal:
         minimal.setdefault(k, []).append(x)
     return GroupResult(minimal, coarse, fine)
+
+
+@dataclass
+class ShortenResult(Generic[T]):
+    """A contiguous run shortened: ``kept`` (a contiguous slice of the run, tested to FAIL or the whole run the
+    caller vouched for), the tests run for it, and every result by slice (start, stop)."""
+
+    kept: list[T]
+    tests_run: int
+    complete: bool = True
+    results: dict[tuple[int, int], TestResult] = field(default_factory=dict)
+    span: tuple[int, int] = (0, 0)  # kept = run[span[0]:span[1]]
+
+
+def shorten(run: Sequence[T], tester: Tester[T], *, max_tests: int | None = None) -> ShortenResult[T]:
+    """The shortest contiguous slice of ``run`` that still FAILS, found by shortening it at its ends.
+
+    A held fault (one value on every message of a window) is one cause: its
+    messages act together — a planner that bridges two bad inputs and fails
+    on the third needs three in a row, and ddmin over single messages would
+    break the hold (keep the 1st and 3rd, lose the failure, or keep one that
+    fails only in an open-loop replay). So the run is kept contiguous and
+    shortened from its end first (what came after the failure did not cause
+    it: the slice keeps the original failure's time), then from its start,
+    each by bisection over how many messages to cut: ~2·log2(n) tests. The
+    full run is assumed to FAIL (the caller tested it). Bisection assumes
+    the failure keeps failing as the hold grows; where it does not, the
+    answer is still a slice that was tested to FAIL. ``max_tests`` bounds the
+    tests; once spent, the shortest failing slice so far is returned with
+    ``complete=False``.
+    """
+    results: dict[tuple[int, int], TestResult] = {}
+    tests = 0
+    complete = True
+
+    def fails(start: int, stop: int) -> bool | None:
+        nonlocal tests
+        if (start, stop) not in results:
+            if max_tests is not None and tests >= max_tests:
+                return None
+            tests += 1
+            results[(start, stop)] = tester(list(run[start:stop]))
+        return results[(start, stop)].outcome is Outcome.FAIL
+
+    start, stop = 0, len(run)
+    # The end: the smallest stop that still fails (stop = len(run) fails).
+    lo, hi = start + 1, stop
+    while lo < hi:
+        mid = (lo + hi) // 2
+        answer = fails(start, mid)
+        if answer is None:
+            complete = False
+            break
+        if answer:
+            hi = mid
+        else:
+            lo = mid + 1
+    stop = hi
+    # The start: the largest start that still fails with that stop.
+    lo, hi = start, stop - 1
+    while complete and lo < hi:
+        mid = (lo + hi + 1) // 2
+        answer = fails(mid, stop)
+        if answer is None:
+            complete = False
+            break
+        if answer:
+            lo = mid
+        else:
+            hi = mid - 1
+    start = lo if complete else start
+    if not complete:  # the shortest slice known to fail
+        failing = [(a, b) for (a, b), r in results.items() if r.outcome is Outcome.FAIL]
+        start, stop = min(failing, key=lambda s: (s[1] - s[0], s[0]), default=(0, len(run)))
+    return ShortenResult(list(run[start:stop]), tests, complete, results, (start, stop))

@@ -219,6 +219,7 @@ class MinimiseSummary:
     replay_hits: int = 0  # replay answers found in the replay tester's cache
     live_runs: int = 0  # whole-system runs, the confirmation's included
     live_seconds: float = 0.0
+    replayed_module: str | None = None  # the module the replay tester ran (None: whole-system re-runs)
 
     def to_json(self) -> JsonObject:
         """Everything summary.json holds."""
@@ -249,6 +250,7 @@ class MinimiseSummary:
             "files": {k: str(v) for k, v in self.files.items()},
         }
         if result.tester == TesterKind.REPLAY:
+            out["replayed_module"] = self.replayed_module
             out["frames"] = {"before": result.outputs_replayed, "after": len(result.frames)}
             out["replays"] = self.replay_tests
         else:

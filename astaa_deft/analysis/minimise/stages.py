@@ -1,7 +1,9 @@
 """The three minimisation stages over ddmin, for either tester.
 
 1. **Mutations** — ddmin over the run's mutations: which of them does the
-   failure need?
+   failure need? A held fault (one policy on consecutive messages of a
+   channel) is one item (:mod:`.holds`); each surviving hold is then
+   shortened at its ends (**hold**), never thinned from inside.
 2. **Scaffolding** (replay only) — ddmin over the frames before the first
    failing output: the shortest history the planner needs to fail again
    (planners carry state, so the failing frame alone may not be enough). The
@@ -19,6 +21,7 @@ judge it are decided here too (:func:`find_failure`, :func:`choose_tester`).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -31,7 +34,8 @@ from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.failure import Failure
-from astaa_deft.analysis.minimise.ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin
+from astaa_deft.analysis.minimise.ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin, shorten
+from astaa_deft.analysis.minimise.holds import Run, flatten, held_runs, same_fields
 from astaa_deft.analysis.minimise.live_tester import LiveTester
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation, run_start_ns
 from astaa_deft.analysis.minimise.replay_model import Job, ReplayModel, replay_entry_for
@@ -164,14 +168,18 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
         out.notes.append(f"{ignored} mutation(s) did not reach {who} ({model.cfg.module}) and cannot "
                          f"change its replay: not tested")
 
-    # Stage 1: mutations.
-    items = [m.number for m in relevant]
-    say(f"stage 1: {len(items)} mutations reaching {who}")
-    first = ddmin(items, lambda subset: tester(Job.of({n: None for n in subset})), parallel=parallel,
+    # Stage 1: mutations (a held fault one item), then the holds shortened.
+    runs = held_runs(relevant)
+    say(f"stage 1: {len(relevant)} mutations reaching {who}" + _runs_note(runs))
+    first = ddmin(runs, lambda subset: tester(Job.of({n: None for n in flatten(subset)})), parallel=parallel,
                   max_tests=max_tests, progress=_stage_progress(say, "mutations"))
-    kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
-    out.stages.append(StageReport.of("mutations", "mutations", len(model.mlog.mutations), first,
-                                     note=f"{len(items)} reached {who}"))
+    report = StageReport.of("mutations", "mutations", len(model.mlog.mutations), first,
+                            note=f"{len(relevant)} reached {who}{_runs_note(runs)}")
+    report.after = len(flatten(first.minimal))
+    out.stages.append(report)
+    kept_runs, _ = _shorten_holds(first.minimal, lambda subset: tester(Job.of({n: None for n in flatten(subset)})),
+                                  max_tests, say, out)
+    kept: dict[int, FieldSelection] = {n: None for n in flatten(kept_runs)}
     answer = tester.answer(Job.of(kept))
     failing = answer.failing_output
     if answer.result.outcome is not Outcome.FAIL or failing is None:
@@ -204,7 +212,7 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
 
     # Stage 3: fields.
     by_number = {m.number: m for m in model.mlog.mutations}
-    kept, _ = _minimise_fields(kept, by_number, lambda selection: tester(Job.of(selection, out.frames)),
+    kept, _ = _minimise_fields(kept_runs, by_number, lambda selection: tester(Job.of(selection, out.frames)),
                                parallel, max_tests, say, out)
     final = tester.answer(Job.of(kept, out.frames))
     out.kept, out.failing_output, out.detail = kept, final.failing_output or failing, final.result.detail
@@ -220,43 +228,116 @@ def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Fa
     """
     out = Minimisation(TesterKind.LIVE, failure, list(mutations), {})
     by_number = {m.number: m for m in mutations}
-    items = [m.number for m in mutations]
+    runs = held_runs(mutations)
     cache = OutcomeCache()
-    cache.put(tuple(range(len(items))), full)  # the reproduction check's answer: not run again
-    say(f"stage 1: {len(items)} mutations, {tester.repeats} run(s) per test"
+    cache.put(tuple(range(len(runs))), full)  # the reproduction check's answer: not run again
+    say(f"stage 1: {len(mutations)} mutations{_runs_note(runs)}, {tester.repeats} run(s) per test"
         + (f", {jobs} tests at once" if jobs > 1 else ""))
-    first = ddmin(items, lambda subset: tester([(by_number[n], None) for n in subset]), cache=cache,
-                  max_tests=max_tests, progress=_stage_progress(say, "mutations"), parallel=jobs)
-    out.stages.append(StageReport.of("mutations", "mutations", len(items), first, extra_tests=1,
-                                     note="the full-set reproduction check included"))
-    kept: dict[int, FieldSelection] = {n: None for n in first.minimal}
+
+    def test_runs(subset: Sequence[Run]) -> TestResult:
+        return tester([(by_number[n], None) for n in flatten(subset)])
+
+    first = ddmin(runs, test_runs, cache=cache, max_tests=max_tests, progress=_stage_progress(say, "mutations"),
+                  parallel=jobs)
+    report = StageReport.of("mutations", "mutations", len(mutations), first, extra_tests=1,
+                            note="the full-set reproduction check included" + _runs_note(runs))
+    report.after = len(flatten(first.minimal))
+    out.stages.append(report)
     last = first.results.get(first.indices) or full
-    kept, fields_last = _minimise_fields(kept, by_number, lambda selection: tester(
+    kept_runs, hold_last = _shorten_holds(first.minimal, test_runs, max_tests, say, out, margin=HOLD_MARGIN)
+    last = hold_last or last
+    kept, fields_last = _minimise_fields(kept_runs, by_number, lambda selection: tester(
         [(by_number[n], s) for n, s in sorted(selection.items())]), jobs, max_tests, say, out)
     last = fields_last or last
     out.kept, out.detail, out.failure_rate = kept, last.detail, last.failure_rate
     return out
 
 
-def _minimise_fields(kept: Mapping[int, FieldSelection], by_number: Mapping[int, Mutation],
+def _runs_note(runs: Sequence[Run]) -> str:
+    held = [run for run in runs if len(run) > 1]
+    if not held:
+        return ""
+    return f"; {len(runs)} items: {len(held)} held fault(s) of {sum(len(r) for r in held)} messages, each one item"
+
+
+HOLD_MARGIN = 0.25  # live: a shortened hold of several messages gets this share of its length back at each end
+
+
+def _shorten_holds(runs: Sequence[Run], test: Callable[[Sequence[Run]], TestResult], max_tests: int | None,
+                   say: Say, out: Minimisation, margin: float = 0.0) -> tuple[list[Run], TestResult | None]:
+    """Stage "hold": each kept held run shortened at its ends with the other runs kept (:func:`.ddmin.shorten`).
+
+    ``margin`` (whole-system re-runs): a hold that needs several messages needs them across the module's
+    cycles, whose timing varies from run to run — the shortest hold that failed once sits on that edge
+    (seen: a ~24-message hold of a heavy planner's obstacles failed once, not in its confirmation run). It
+    gets ``margin`` of its length back at each end (never past the original hold) and is tested once so; if
+    that does not fail, the whole hold stays.
+    Returns the runs and the result of the last failing test of a shortened set (None: nothing shortened)."""
+    kept = list(runs)
+    held = [i for i, run in enumerate(kept) if len(run) > 1]
+    if not held:
+        return kept, None
+    started = time.monotonic()
+    before = sum(len(kept[i]) for i in held)
+    say(f"stage hold: {len(held)} held fault(s) of {before} messages, shortened at their ends")
+    tests, complete, last = 0, True, None
+    for i in held:
+        left = None if max_tests is None else max(max_tests - tests, 0)
+
+        def with_slice(part: Sequence[int], at: int = i) -> TestResult:
+            return test([*kept[:at], tuple(part), *kept[at + 1:]])
+
+        result = shorten(kept[i], with_slice, max_tests=left)
+        tests += result.tests_run
+        complete = complete and result.complete
+        chosen = tuple(result.kept)
+        if len(chosen) < len(kept[i]):
+            last = result.results.get(result.span, last)
+            start, stop = result.span
+            pad = math.ceil(margin * (stop - start)) if stop - start > 1 else 0
+            if pad:
+                padded = kept[i][max(0, start - pad):min(len(kept[i]), stop + pad)]
+                if len(padded) < len(kept[i]):
+                    tests += 1
+                    answer = with_slice(padded)
+                    chosen, last = (padded, answer) if answer.outcome is Outcome.FAIL else (kept[i], None)
+                else:
+                    chosen, last = kept[i], None
+            say(f"  [hold] {len(kept[i])} → {len(chosen)} messages ({result.tests_run} tests"
+                + (f", then {pad} back at each end for the runs' timing" if pad else "") + ")")
+        kept[i] = chosen
+    out.stages.append(StageReport("hold", "messages", before, sum(len(kept[i]) for i in held), tests, 0,
+                                  time.monotonic() - started, complete,
+                                  note="held faults shortened at their ends, never thinned inside"))
+    return kept, last
+
+
+def _minimise_fields(runs: Sequence[Run], by_number: Mapping[int, Mutation],
                      test: Callable[[dict[int, FieldSelection]], TestResult], parallel: int,
                      max_tests: int | None, say: Say,
                      out: Minimisation) -> tuple[dict[int, FieldSelection], TestResult | None]:
-    """Stage 3: the field changes that matter within the kept mutations that set several.
+    """Stage 3: the field changes that matter within the kept mutations that set several — a held run's
+    messages keep or revert a field together (they changed the same fields).
 
     Returns the kept selection and the result of its last test (None if it was not tested here).
     """
-    reducible = [n for n in sorted(kept) if by_number[n].fields_reducible]
-    items = [(n, i) for n in reducible for i in range(len(by_number[n].fields))]
+    kept: dict[int, FieldSelection] = {n: None for n in flatten(runs)}
+    reducible = [r for r, run in enumerate(runs)
+                 if by_number[run[0]].fields_reducible and same_fields(run, dict(by_number))]
+    items = [(r, i) for r in reducible for i in range(len(by_number[runs[r][0]].fields))]
     if not items:
         out.stages.append(StageReport("fields", "fields", out_fields(kept, by_number), out_fields(kept, by_number),
                                       note="no surviving mutation sets several fields"))
-        return dict(kept), None
+        return kept, None
 
     def selection(subset: Sequence[tuple[int, int]]) -> dict[int, FieldSelection]:
-        chosen: dict[int, FieldSelection] = {n: (None if n not in reducible else ()) for n in kept}
-        for n, i in subset:
-            chosen[n] = (*(chosen[n] or ()), i)  # a reducible mutation's selection starts as (), never None
+        chosen: dict[int, FieldSelection] = dict(kept)
+        for r in reducible:
+            for n in runs[r]:
+                chosen[n] = ()  # a reducible mutation's selection starts as (), never None
+        for r, i in subset:
+            for n in runs[r]:
+                chosen[n] = (*(chosen[n] or ()), i)
         return chosen
 
     say(f"stage 3: {len(items)} field changes in {len(reducible)} mutation(s)")

@@ -315,7 +315,8 @@ def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> Min
     details = MinimiseSummary(result, log=job.log_path, why=job.choice.why,
                               seconds=time.monotonic() - job.started, confirmation=confirmation, verdict=text,
                               files=files, replay_tests=job.replays, replay_hits=job.replay_hits,
-                              live_runs=live.runs, live_seconds=live.run_seconds)
+                              live_runs=live.runs, live_seconds=live.run_seconds,
+                              replayed_module=job.choice.entry.module if job.choice.entry is not None else None)
     body = details.to_json()
     write_summary(out_dir, body)
     return MinimiseReport(reproduced, text, body, files=files, details=details)

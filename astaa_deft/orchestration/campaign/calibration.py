@@ -109,3 +109,34 @@ def overloaded(load1: float, cores: int) -> bool:
     on its own, any real drift shows in the unmutated twins' timing first.
     """
     return load1 > OVERLOAD_FACTOR * cores
+
+
+CEILING_LOAD_DROP = 1.0  # the other load this much lower than when timing drifted: the drift's limit is lifted
+
+
+@dataclass(frozen=True)
+class Raise:
+    """Whether more runs may go at once now: the count, the other load it was judged on, and why (or why not)."""
+
+    workers: int
+    other_load: float
+    why: str
+
+
+def raised(share: RunShare, cores: int, memory_mb: float | None, *, most: int, load1: float, ours: float,
+           workers: int, ceiling: int | None) -> Raise:
+    """One more run at once when the cores the other work leaves now hold more runs than go at once.
+
+    ``ours``: the load the campaign's own runs make (the runs in flight × a run's share); the rest of the
+    one-minute load is other work's. ``ceiling``: a count at which the runs' timing drifted (None: none) —
+    never reached again while the other load has not fallen by CEILING_LOAD_DROP since (the caller lifts it).
+    One step at a time: the twins' timing at the new count decides the next (as when lowering).
+    """
+    other = max(0.0, load1 - ours)
+    fit = workers_for(share, cores, memory_mb, most=most, other_load=other)
+    if ceiling is not None:
+        fit = min(fit, ceiling - 1)
+    if fit <= workers:
+        return Raise(workers, other, f"{fit} fit{'s' if fit == 1 else ''} beside other load {other:.1f}")
+    return Raise(workers + 1, other, f"the other load fell to {other:.1f} (load {load1:.1f}, the campaign's runs"
+                                     f" {ours:.1f}) on {cores} core(s): {fit} runs of {share.cores:.2f} core fit")

@@ -27,14 +27,17 @@ from astaa_deft.engine.spec.params import check_param_values, spread_choices
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.calibration import (
-    DRIFT_TOLERANCE, drift, fewer_after_drift, overloaded, run_share, workers_for,
+    CEILING_LOAD_DROP, DRIFT_TOLERANCE, RunShare, drift, fewer_after_drift, overloaded, raised, run_share,
+    workers_for,
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
+from astaa_deft.orchestration.campaign.blame import BlameUnavailable, blame_logs
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
 from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
-from astaa_deft.orchestration.campaign.rows import CampaignMeta, CaseRow, Minimisation, NewBucket
+from astaa_deft.orchestration.campaign.rows import BlameRow, CampaignMeta, CaseRow, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
+from astaa_deft.orchestration.campaign.minimiser import summary as minimised_summary
 from astaa_deft.orchestration.campaign.module_tests import (
     TestsVerdict, is_crash_bucket, run_module_tests,
 )
@@ -49,7 +52,9 @@ from astaa_deft.orchestration.verify.history import fixed_buckets
 
 T = TypeVar("T")
 
-DEFAULT_HORIZON = 20.0
+DEFAULT_HORIZON = 20.0  # s a run may last when the spec's run: section declares no end at all
+CLEAN_RUN_CAP = 600.0  # s a clean run may last when the run: section declares an end but no time_limit
+HORIZON_SLACK = 1.25  # a mutated case may run this many times the longest clean run (a misled SUT runs longer)
 DEFAULT_BASELINE_RUNS = 2
 DEFAULT_RERUNS = 2
 DEFAULT_SETTLE = 3.0  # s a mutated case runs on after its last mutation could act
@@ -76,7 +81,7 @@ class CampaignConfig:
     dictionaries: list[Path] = field(default_factory=list)
     params: dict[str, list[str]] = field(default_factory=dict)  # key → values the cases spread over
     cluster: str | None = None
-    horizon: float = DEFAULT_HORIZON
+    horizon: float | None = None  # None: from the stack (clean runs to the scenario's end; see clean_horizon)
     baseline_runs: int = DEFAULT_BASELINE_RUNS  # clean runs per value of the params grid
     reruns: int = DEFAULT_RERUNS
     settle: float | None = DEFAULT_SETTLE  # None: a mutated case runs to the run's own end
@@ -87,10 +92,12 @@ class CampaignConfig:
 
     def resuming(self, meta: CampaignMeta) -> CampaignConfig:
         """This configuration continuing the campaign ``meta`` describes: its spec, seed, strategy, params and
-        horizon as stored, its case count unless this one gives one."""
+        horizon as stored (a horizon derived from the stack is derived again, from the same clean runs), its case
+        count unless this one gives one."""
+        horizon = self.horizon if meta.horizon_derived else _stored(meta.horizon, self.horizon)
         return replace(self, spec_path=Path(meta.spec) if meta.spec is not None else self.spec_path,
                        seed=_stored(meta.seed, self.seed), strategy=_stored(meta.strategy, self.strategy),
-                       params=_stored(meta.params, self.params), horizon=_stored(meta.horizon, self.horizon),
+                       params=_stored(meta.params, self.params), horizon=horizon,
                        cases=self.cases if self.cases is not None else meta.cases)
 
 
@@ -138,6 +145,27 @@ def live_timing(clean: list[CaseOutcome], horizon: float) -> Timing:
     return Timing(anchor, live)
 
 
+def clean_horizon(spec: Spec, given: float | None) -> float:
+    """Seconds a clean run may last: ``given`` (--horizon), else the spec's ``run: time_limit``, else (an end
+    declared without a limit) CLEAN_RUN_CAP, else (no end declared: nothing to run to) DEFAULT_HORIZON. A clean
+    run is never cut short of the scenario's end by default: it measures the SUT's own run."""
+    if given is not None:
+        return given
+    run = spec.run
+    if run is None or run.empty:
+        return DEFAULT_HORIZON
+    return run.time_limit if run.time_limit is not None else CLEAN_RUN_CAP
+
+
+def derived_horizon(clean: list[CaseOutcome], cap: float) -> float:
+    """Seconds a case may last, from the clean runs: the longest × HORIZON_SLACK, at most ``cap`` (the clean
+    runs' own bound); ``cap`` without any finished clean run."""
+    seconds = [o.seconds for o in clean if o.status == CaseStatus.DONE and o.seconds > 0]
+    if not seconds:
+        return cap
+    return round(min(cap, max(seconds) * HORIZON_SLACK), 1)
+
+
 def default_workers(module_count: int, cores: int | None = None) -> int:
     cores = cores or os.cpu_count() or 1
     per_run = HELPER_CORES + CORES_PER_MODULE * module_count
@@ -166,18 +194,27 @@ class Campaign:
         if config.strategy not in STRATEGIES:
             raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
                                      f"use one of: {', '.join(STRATEGIES)}"))
-        self.strategy: Strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed, config.horizon)
+        # Clean runs run to the scenario's end (capped by the run: section's time_limit); mutated cases get the
+        # horizon derived from them after the baseline (the given --horizon bounds both).
+        self.clean_horizon = clean_horizon(self.spec, config.horizon)
+        self.horizon = self.clean_horizon
+        self.strategy: Strategy = STRATEGIES[config.strategy](self.spec, self.dictionary, config.seed,
+                                                              self.clean_horizon)
         self.grid = param_grid(config.params, self.spec)
         self.cores = os.cpu_count() or 1
         # Runs at once: the user's, else measured in the baseline (calibrate); this estimate until then.
         self.calibrated = config.workers is None and config.cluster is None
         self.workers = config.workers or default_workers(len(self.spec.modules))
         self.started = time.monotonic()
-        self.timing = Timing(None, config.horizon)
+        self.timing = Timing(None, self.clean_horizon)
         self.known: dict[str, KnownFinding] = {}  # invariants the unmutated SUT breaks (judged after each run)
         self._clean: list[CaseOutcome] = []  # every finished clean run (baseline, twins, cases that mutated nothing)
         self._solo: dict[str, CaseOutcome] = {}  # params → a run alone: the timing reference
         self._last_change = time.monotonic()  # when the runs at once last changed (the load average lags)
+        # Timing drifted at this many runs at once (None: never), with the other load then: not raised to it
+        # again until the other load has fallen by CEILING_LOAD_DROP.
+        self._ceiling: int | None = None
+        self._ceiling_other = 0.0
         self._minimiser: ThreadPoolExecutor | None = None
         self._minimising: dict[Future, str] = {}  # minimisation in flight → its bucket
         self._running_cases: set[str] = set()
@@ -188,7 +225,8 @@ class Campaign:
     def run(self) -> CampaignResult:
         self.journal.set_meta(spec=str(self.config.spec_path.resolve()), seed=self.config.seed,
                               strategy=self.config.strategy, params=self.config.params, horizon=self.config.horizon,
-                              cases=self.config.cases, budget=self.config.budget)
+                              horizon_derived=self.config.horizon is None, cases=self.config.cases,
+                              budget=self.config.budget)
         requeued = self.journal.requeue_running()
         if requeued:
             self.say(f"resume: {requeued} case(s) that were in flight run again")
@@ -257,6 +295,7 @@ class Campaign:
         overloaded_runs = set(self.journal.meta().overloaded_runs)
         clean = [o for r, o in zip(rows, outcomes, strict=False)
                  if o is not None and o.status == CaseStatus.DONE and r.case_id not in overloaded_runs]
+        self._derive_horizon(clean)
         self._calibrate(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
@@ -268,6 +307,19 @@ class Campaign:
         for name, finding in self.known.items():
             self.say(f"baseline finding: '{name}' breaks without mutation ({finding.rate} clean runs): from now on"
                      f" it counts in a case only where the case makes it worse (earlier, more often)")
+
+    def _derive_horizon(self, clean: list[CaseOutcome]) -> None:
+        """The cases' horizon from the clean runs (unless --horizon gave one): they ran to the scenario's end."""
+        if self.config.horizon is not None:
+            return
+        self.horizon = derived_horizon(clean, self.clean_horizon)
+        self.journal.set_meta(horizon=self.horizon)
+        longest = max((o.seconds for o in clean), default=0.0)
+        why = (f"the longest clean run took {longest:.1f} s to the scenario's end, × {HORIZON_SLACK:g}" if clean
+               else "no clean run finished")
+        self.journal.note("horizon", f"cases run at most {self.horizon:g} s: {why}; clean runs at most"
+                                     f" {self.clean_horizon:g} s")
+        self.say(f"baseline: cases run at most {self.horizon:g} s ({why})")
 
     def _file_baseline(self, rows: list[CaseRow], outcomes: list[CaseOutcome | None],
                        overloaded_runs: set[str]) -> None:
@@ -346,6 +398,7 @@ class Campaign:
                 break
             overloaded_runs = [*self.journal.meta().overloaded_runs, *(r.case_id for r, _ in loaded)]
             self.journal.set_meta(overloaded_runs=overloaded_runs)
+            self._drifted(self.workers)
             self._concurrency(fewer_after_drift(self.workers, worst),
                               f"timing drifted at {self.workers} at once: {worst.detail}, ×{worst.ratio:.1f}")
             if self.workers == 1:
@@ -375,7 +428,7 @@ class Campaign:
     def _calibrate(self, clean: list[CaseOutcome]) -> None:
         """Tell the strategy when the SUT is live: measured once in the baseline, kept in the journal."""
         stored = self.journal.meta().timing
-        timing = stored if stored is not None else live_timing(clean, self.config.horizon)
+        timing = stored if stored is not None else live_timing(clean, self.horizon)
         self.journal.set_meta(timing={"anchor": timing.anchor, "live": timing.live})
         self.timing = timing
         self.strategy.calibrate(timing)
@@ -441,8 +494,9 @@ class Campaign:
         return self.config.budget is not None and time.monotonic() - self.started >= self.config.budget
 
     def _submit(self, pool: CasePool, case: PlannedCase) -> None:
+        horizon = self.clean_horizon if case.kind in (BASELINE, CONTROL) else self.horizon
         payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
-                              self.config.horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
+                              horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
                               settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
                               known=tuple(sorted(self.known)))
         self.journal.started(case.case_id)
@@ -454,11 +508,36 @@ class Campaign:
 
     # -- load: fewer runs at once when the machine or the SUT's timing says so -------------------------------
     def _watch_load(self) -> None:
-        if not self.calibrated or self.workers == 1 or time.monotonic() - self._last_change < SETTLE_LOAD_SECONDS:
+        """Fewer runs at once when the machine is overloaded; more when the other load fell and more fit (the
+        twins' timing at the new count is checked as always: drift lowers it again). One step a minute."""
+        if not self.calibrated or time.monotonic() - self._last_change < SETTLE_LOAD_SECONDS:
             return
         load1 = os.getloadavg()[0]
         if overloaded(load1, self.cores):
-            self._concurrency(self.workers - 1, f"load {load1:.1f} above {self.cores} core(s)")
+            if self.workers > 1:
+                self._concurrency(self.workers - 1, f"load {load1:.1f} above {self.cores} core(s)")
+            return
+        share = self._share()
+        if share is None:
+            return
+        ours = self._busy() * share.cores
+        if self._ceiling is not None and load1 - ours < self._ceiling_other - CEILING_LOAD_DROP:
+            self._ceiling = None  # the machine has more room than when the timing drifted
+        more = raised(share, self.cores, available_memory_mb(), most=self._most_workers(), load1=load1, ours=ours,
+                      workers=self.workers, ceiling=self._ceiling)
+        if more.workers > self.workers:
+            self._concurrency(more.workers, f"{more.why}; no unmutated twin's timing drifted at {self.workers}")
+
+    def _share(self) -> RunShare | None:
+        """What one run takes (the solo runs of the baseline), None when none was measured."""
+        return run_share(list(self._solo.values()))
+
+    def _drifted(self, workers: int) -> None:
+        """Timing drifted at ``workers`` runs at once: not raised to that again while the other load stays."""
+        share = self._share()
+        ours = self._busy() * share.cores if share is not None else 0.0
+        self._ceiling = workers if self._ceiling is None else min(self._ceiling, workers)
+        self._ceiling_other = max(0.0, os.getloadavg()[0] - ours)
 
     def _watch_timing(self, row: CaseRow, outcome: CaseOutcome) -> None:
         """A control run is a clean run at the campaign's concurrency: its timing against the run alone."""
@@ -468,6 +547,7 @@ class Campaign:
             return
         found = drift(solo, outcome)
         if found.drifted:
+            self._drifted(self.workers)
             self._concurrency(self.workers - 1, f"timing drifted in clean run {row.case_id}: {found.detail},"
                                                 f" ×{found.ratio:.1f}")
 
@@ -594,10 +674,66 @@ class Campaign:
                  f" {bucket.control_failures}/{bucket.controls}")
         if kind == BUG:
             self.say(f"new bucket {name}: {bucket.verdict}: {bucket.invariant} — {bucket.family} ({rates})")
+            self._blame(bucket)
         else:
             why = "the unmutated twin fails that way too" if twin_failed else "it did not reproduce"
             self.say(f"flaky/environment {name}: {bucket.invariant} — {bucket.family}: {why} ({rates});"
                      f" not filed as a bug")
+
+    # -- blame: the module whose output departed first from the twins'; one bucket per root cause -----------
+    def _blame(self, bucket: Bucket) -> None:
+        """Name the module to blame for a new bug (blame.py), journal the chain, and merge the bucket into an
+        earlier one of the same root cause: the same module to blame, wrong output, failure and field family."""
+        first = self.journal.planned(bucket.first_case)
+        outcome = first.outcome()
+        if outcome is None or not outcome.log_path:
+            return
+        twins = [Path(o.log_path) for r in self.journal.cases(CONTROL) if r.parent == bucket.bucket
+                 for o in (r.outcome(),) if o is not None and o.status == CaseStatus.DONE and o.log_path]
+        reruns = [Path(o.log_path) for r in self.journal.cases(RERUN) if r.parent == bucket.bucket
+                  for o in (r.outcome(),) if o is not None and o.log_path and o.mutations > 0
+                  and shows_failure(o, outcome)]
+        finding = sig.primary(outcome)
+        try:
+            found = blame_logs(self.spec, [Path(outcome.log_path), *reruns], twins, self.timing.anchor,
+                               invariant=bucket.invariant, finding_module=finding.module if finding else None)
+        except BlameUnavailable as exc:
+            self.journal.note("blame", f"{bucket.bucket}: no blame: {exc}")
+            return
+        identity = (None if found.module is None else
+                    f"{found.module}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
+                    f"{sig.field_family(bucket.family)}")
+        self.journal.blamed(BlameRow(bucket.bucket, found.module, found.output, found.how, found.chain, found.detail,
+                                     found.twins, identity))
+        self.say(f"  {bucket.bucket} blame: {found.module or '?'} ({found.chain}; {found.detail})")
+        if identity is None:
+            return
+        blames = self.journal.blames()
+        same = next((b for b in self.journal.buckets(include_merged=False)
+                     if b.bucket != bucket.bucket and b.is_bug and blames.get(b.bucket) is not None
+                     and blames[b.bucket].identity == identity), None)
+        if same is not None:
+            self.journal.merge_bucket(bucket.bucket, same.bucket)
+            text = (f"bucket {bucket.bucket} ({bucket.family}) merged into {same.bucket} ({same.family}): one root"
+                    f" cause — {found.module} to blame, {found.wrong_output}, {sig.field_family(bucket.family)}")
+            self.journal.note("blame", text)
+            self.say(f"  {text}")
+
+    def _replay_confirms_blame(self, name: str, result: Minimised) -> None:
+        """A minimisation that reproduced the failure in a replay of the module to blame alone, with the culprit
+        frames, confirms the blame: journalled with it."""
+        blamed = self.journal.blames().get(name)
+        if blamed is None or blamed.module is None or result.exit_code != 0:
+            return
+        summary = minimised_summary(result.out_dir)
+        if summary.get("tester") != "replay" or summary.get("replayed_module") != blamed.module:
+            return
+        frames = summary.get("frames")
+        kept = frames.get("after") if isinstance(frames, dict) else None
+        how = (f"a replay of {blamed.module} alone over {kept} frame(s) with the culprit fails as the run did"
+               if kept is not None else f"a replay of {blamed.module} alone with the culprit fails as the run did")
+        self.journal.blamed(replace(blamed, replay=how))
+        self.say(f"  {name} blame confirmed: {how}")
 
     # -- minimisation: confirmed buckets, alongside the hunt, each in a worker slot ---------------------------
     def _start_minimisations(self, hunting: bool) -> None:
@@ -655,6 +791,7 @@ class Campaign:
                                                 str(result.out_dir), str(tests_dir) if tests_dir else None,
                                                 result.seconds, result.detail))
             self.say(f"  {name} {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
+            self._replay_confirms_blame(name, result)
             if tests_dir is not None and verdict is not None:
                 self.say(f"  the minimiser's module tests{self._journal_module_tests(name, tests_dir, verdict)}")
 
@@ -682,8 +819,13 @@ class Campaign:
             self.say(f"  bucket {merged}: same minimised culprit as {into}: merged")
 
     def _planner_caused(self, bucket: Bucket) -> bool:
+        """The planner's bucket: its finding names the planner, or the planner is the module to blame (its
+        module tests, replaying the failing run's frames, then check the blame)."""
         planner = self.spec.planner
-        return planner is not None and bucket.module == planner.module
+        if planner is None:
+            return False
+        blamed = self.journal.blames().get(bucket.bucket)
+        return bucket.module == planner.module or (blamed is not None and blamed.module == planner.module)
 
     def _planner_tests(self, bucket: Bucket, log: Path) -> Path | None:
         """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).

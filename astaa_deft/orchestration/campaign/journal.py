@@ -25,7 +25,7 @@ from astaa_deft.orchestration.campaign.model import (
     FailureKey, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.rows import (
-    Bucket, CampaignMeta, CaseRow, Minimisation, MinimisationRow, ModuleTestsRow, NewBucket, NoteRow,
+    BlameRow, Bucket, CampaignMeta, CaseRow, Minimisation, MinimisationRow, ModuleTestsRow, NewBucket, NoteRow,
 )
 
 FILE_NAME = "journal.sqlite"
@@ -62,6 +62,11 @@ CREATE TABLE IF NOT EXISTS minimisations (
     bucket TEXT PRIMARY KEY, status TEXT NOT NULL, exit_code INTEGER, minimal_xml TEXT, culprit TEXT,
     out_dir TEXT, tests_dir TEXT, seconds REAL, detail TEXT,
     started_at REAL, finished_at REAL  -- status 'running' from the start to the end
+);
+CREATE TABLE IF NOT EXISTS blames (  -- a confirmed bucket's module to blame (blame.py) and its root-cause identity
+    bucket TEXT PRIMARY KEY, module TEXT, output TEXT, how TEXT NOT NULL, chain TEXT NOT NULL, detail TEXT NOT NULL,
+    twins INTEGER NOT NULL, identity TEXT,  -- NULL: no identity (no module to blame)
+    replay TEXT  -- how a replay of the module to blame confirmed it (NULL: none did)
 );
 CREATE TABLE IF NOT EXISTS module_tests (  -- a bucket's module tests, run once on its defect
     bucket TEXT PRIMARY KEY, tests_dir TEXT NOT NULL,
@@ -288,6 +293,17 @@ class Journal:
     def notes(self, topic: str | None = None) -> list[NoteRow]:
         sql = "SELECT * FROM notes" + (" WHERE topic=?" if topic else "") + " ORDER BY time"
         return [NoteRow(**dict(r)) for r in self.db.execute(sql, (topic,) if topic else ())]
+
+    # -- blame --------------------------------------------------------------
+    def blamed(self, row: BlameRow) -> None:
+        """A confirmed bucket's module to blame, the chain that says why, and its root-cause identity."""
+        self._write("INSERT OR REPLACE INTO blames VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (row.bucket, row.module, row.output, row.how, row.chain, row.detail, row.twins, row.identity,
+                     row.replay))
+
+    def blames(self) -> dict[str, BlameRow]:
+        """Bucket name → its blame."""
+        return {r["bucket"]: BlameRow(**dict(r)) for r in self.db.execute("SELECT * FROM blames")}
 
     # -- module tests -------------------------------------------------------
     def module_tests_checked(self, bucket: str, tests_dir: str, fails_on_defect: bool | None, detail: str) -> None:

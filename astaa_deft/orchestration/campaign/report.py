@@ -107,6 +107,12 @@ test case failed live; unconfirmed — no re-run reproduced it (not counted as a
 without mutation failed too; without mutation — clean runs fail this way. Ranked by status, severity, rate. \
 rate: re-runs of a bucket's first failure that failed the same way (for a bucket without mutation: clean runs \
 that failed this way). cases: generated cases filed in the bucket.</p>
+{% endif %}{% if blames %}<h2>Blame</h2><table><tr><th>bucket</th><th>module to blame</th><th>chain</th>\
+<th>evidence</th><th>same root cause (merged)</th></tr>
+{% for r in blames %}<tr><td><b>{{ r.bucket }}</b></td><td>{{ r.module }}</td><td>{{ r.chain }}</td>\
+<td class='muted'>{{ r.evidence }}{% if r.replay %}<br>confirmed: {{ r.replay }}{% endif %}</td>\
+<td>{% for m in r.merged %}<div>{{ m }}</div>{% endfor %}</td></tr>
+{% endfor %}</table>
 {% endif %}{% if verification %}<h2>Verification</h2><p class='muted'>Each bucket re-checked against the \
 stack (astaa-deft verify): its test case run live beside unmutated twins. fixed — no run failed; still failing — \
 runs failed its way (k/N); changed — they fail another way; flaky — its unmutated twins fail that way too.</p>
@@ -192,6 +198,7 @@ def render(journal: Journal, out: Path) -> str:
         most_severe=top.describe() if top is not None else None,
         summary=_summary(meta, cases, buckets),
         buckets=_bucket_table(journal, out, buckets, by_bucket),
+        blames=_blames(journal),
         verification=_verification(journal),
         plots=_plots(journal, cases.done, buckets))
 
@@ -280,21 +287,38 @@ def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
     return rows
 
 
-def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
-                 checked: ModuleTestsRow | None, rate: str, out: Path) -> _BucketRow:
-    """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
-    minimal_xml = m.minimal_xml if m is not None else None
-    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
-    return _BucketRow(
-        bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
-        colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
-        family=[] if b.without_mutation else str(b.family).split("+"),
-        culprit=(m.culprit or m.status) if m is not None else None,
-        rate=rate, links=_links(first, m, checked, out), xml=str(xml), minimal=bool(minimal_xml))
+def _blames(journal: Journal) -> list[_BlameRow]:
+    """Which module is to blame for each confirmed bucket (blame.py: the first whose output departed from the
+    unmutated twins'), the chain, and the buckets merged into it as one root cause, each with its culprit."""
+    blames = journal.blames()
+    if not blames:
+        return []
+    buckets = journal.buckets()
+    rows = []
+    for b in buckets:
+        row = blames.get(b.bucket)
+        if row is None or b.merged_into:
+            continue
+        rows.append(_BlameRow(
+            bucket=b.bucket, module=row.module or "?", chain=row.chain,
+            evidence=f"{row.detail} ({row.twins} twin(s))", replay=row.replay or "",
+            merged=[f"{m.bucket}: {m.family}" for m in buckets if m.merged_into == b.bucket]))
+    return rows
+
+
+@dataclass(frozen=True)
+class _BlameRow:
+    """A confirmed bucket's row of the blame table."""
+
+    bucket: str
+    module: str
+    chain: str
+    evidence: str
+    replay: str  # how a module replay confirmed the blame ("" when none did)
+    merged: list[str]  # the buckets merged into it, each with its culprit family
 
 
 def _links(first: CaseRow | None, m: MinimisationRow | None, checked: ModuleTestsRow | None,
-           out: Path) -> list[_Link]:
     """A bucket's files: its failing log, its module tests (and whether they fail on the defect), its
     minimisation."""
     links = []

@@ -164,7 +164,8 @@ class CampaignMeta:
     seed: int | None = None
     strategy: str | None = None
     params: dict[str, list[str]] | None = None
-    horizon: float | None = None
+    horizon: float | None = None  # s a case runs at most: given, or derived from the clean runs
+    horizon_derived: bool = False  # the horizon came from the stack (the clean runs), not --horizon
     cases: int | None = None
     budget: float | None = None
     calibrated: bool = False
@@ -179,3 +180,18 @@ class CampaignMeta:
         timing = known.pop("timing", None)
         runs = known.pop("overloaded_runs", None)
         return cls(**known, timing=Timing(**timing) if timing else None, overloaded_runs=tuple(runs or ()))
+
+
+@dataclass(frozen=True)
+class BlameRow:
+    """A confirmed bucket's module to blame (``blame.Blame``) and its root-cause identity (None: none)."""
+
+    bucket: str
+    module: str | None
+    output: str | None
+    how: str
+    chain: str
+    detail: str
+    twins: int
+    identity: str | None
+    replay: str | None = None  # how a replay of the module to blame confirmed it (None: none did)

@@ -95,6 +95,30 @@ def same_failure(finding: Finding, wanted: Finding) -> bool:
     return abs(finding.at - wanted.at) <= max(SAME_PHASE_SECONDS, SAME_PHASE_SHARE * later)
 
 
+def failure_signature(outcome: CaseOutcome) -> str:
+    """The failure as one comparable string, for a bucket's root-cause identity (with the module to blame and
+    the culprit's field family): the primary finding's CRASH class, invariant and module. The one place a
+    finer signature of the failure (an exception's type and innermost frame) plugs in."""
+    return failure_key(outcome).text()
+
+
+def field_family(family: str) -> str:
+    """A mutation family (``channel:field:action`` parts joined by ``+``) folded to the culprit's field family:
+    each field to the object holding it, the action and value left out — ``ego:x:set`` and ``ego:v:set`` are
+    ``ego:.{…}``, ``obstacles:obstacles[].length:set`` is ``obstacles:obstacles[].{…}``; a fault on whole
+    messages (``*``) is ``channel:(message)``."""
+    parts = set()
+    for part in family.split("+"):
+        channel, _, rest = part.partition(":")
+        path = rest.rsplit(":", 1)[0] if ":" in rest else rest
+        if not path or path == "*":
+            parts.add(f"{channel}:(message)")
+            continue
+        holder = path.rsplit(".", 1)[0] if "." in path else ""
+        parts.add(f"{channel}:{holder}.{{…}}")
+    return "+".join(sorted(parts))
+
+
 def signature(outcome: CaseOutcome, testcase_xml: str | None) -> BucketSignature:
     """The bucket a failing run of ``testcase_xml`` (None: a clean run) belongs in."""
     testcase = parse_testcase(testcase_xml.encode()) if testcase_xml else None
