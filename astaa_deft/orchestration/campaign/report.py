@@ -319,6 +319,7 @@ class _BlameRow:
 
 
 def _links(first: CaseRow | None, m: MinimisationRow | None, checked: ModuleTestsRow | None,
+           out: Path) -> list[_Link]:
     """A bucket's files: its failing log, its module tests (and whether they fail on the defect), its
     minimisation."""
     links = []
