@@ -287,6 +287,19 @@ def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
     return rows
 
 
+def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
+                 checked: ModuleTestsRow | None, rate: str, out: Path) -> _BucketRow:
+    """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
+    minimal_xml = m.minimal_xml if m is not None else None
+    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
+    return _BucketRow(
+        bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
+        colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
+        family=[] if b.without_mutation else str(b.family).split("+"),
+        culprit=(m.culprit or m.status) if m is not None else None,
+        rate=rate, links=_links(first, m, checked, out), xml=str(xml), minimal=bool(minimal_xml))
+
+
 def _blames(journal: Journal) -> list[_BlameRow]:
     """Which module is to blame for each confirmed bucket (blame.py: the first whose output departed from the
     unmutated twins'), the chain, and the buckets merged into it as one root cause, each with its culprit."""
