@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from astaa_deft.io.inputfile import InputKind, read_input
+from astaa_deft.io.output_place import write_atomic
 from astaa_deft.io.statefile import MAX_INT, StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.sut import Spec
@@ -149,9 +150,7 @@ class Checkpoint:
         manifest.parent.rmdir()
         state = {"version": STATE_VERSION, "extraction": self.extraction, "outputs": self.total,
                  "decided": [_decided_json(d) for d in self.decided]}
-        temporary = self.out_dir / (STATE + ".tmp")
-        temporary.write_text(json.dumps(state) + "\n")
-        os.replace(temporary, self.out_dir / STATE)
+        write_atomic(self.out_dir / STATE, json.dumps(state) + "\n")  # whole, and never through a link
 
     def finished(self) -> None:
         """The extraction is complete: nothing to resume."""

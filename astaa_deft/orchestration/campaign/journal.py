@@ -17,7 +17,7 @@ import sqlite3
 import time
 from pathlib import Path
 
-from astaa_deft.io.output_place import OutputError
+from astaa_deft.io.output_place import OutputError, link_refusal
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.orchestration.campaign.model import (
     BASELINE, BASELINE_FINDING, BUG, CONTROL, RERUN, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus,
@@ -79,6 +79,9 @@ class Journal:
 
     def __init__(self, directory: Path) -> None:
         self.path = directory / FILE_NAME
+        for own in (self.path, self.path.with_name(FILE_NAME + "-wal"), self.path.with_name(FILE_NAME + "-shm")):
+            if own.is_symlink():  # SQLite would write where it points: never through a link
+                raise link_refusal(own, "-o")
         try:
             directory.mkdir(parents=True, exist_ok=True)
             self.db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)
