@@ -34,6 +34,7 @@ from astaa_deft.orchestration.campaign.rows import (
 FIX = "move the damaged journal away (or restore it from a copy), or give another campaign directory (-o)"
 MAX_CELL = 1 << 20  # characters of one text cell (a minimal XML, a summary): far above real ones
 MAX_JSON_CELL = 16 << 20  # characters of one JSON cell (a case outcome)
+CORE_TABLES = ("meta", "cases", "buckets")  # in every journal since the first
 
 Read = Callable[[StateReader], Any]
 
@@ -307,6 +308,15 @@ def check_columns(db: sqlite3.Connection, file: str, schema: str, added: Mapping
         declared = {t: [r[1] for r in model.execute(f"PRAGMA table_info({t})")] for t in tables}
     finally:
         model.close()
+    quick = db.execute("PRAGMA quick_check").fetchone()  # pages cut off or overwritten: damaged, not empty
+    if quick is None or quick[0] != "ok":
+        raise InputError(Problem(file, None, None, f"the journal is damaged ({str(quick[0] if quick else '?')[:200]})",
+                                 FIX))
+    present = {t for t in declared if db.execute(f"PRAGMA table_info({t})").fetchone() is not None}
+    lost = [t for t in CORE_TABLES if t not in present]
+    if present and lost:  # a journal lacking the tables every journal has had: they were removed
+        raise InputError(Problem(file, None, None, f"the journal has no table {', '.join(repr(t) for t in lost)}: it "
+                                 "is damaged, or not a campaign journal", FIX))
     for table, columns in declared.items():
         have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
         if not have:
