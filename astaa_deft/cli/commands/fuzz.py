@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections import Counter
 import time
 from pathlib import Path
 
@@ -34,7 +35,22 @@ def parse_params(items: list[str]) -> dict[str, list[str]]:
         if not sep or not key or not values:
             raise InputError(Problem("--params", None, None, f"'{item}' is not KEY=VALUE[,VALUE…]",
                                      "write e.g. --params scenario=cut_in,red_light"))
-        out[key.strip()] = [v.strip() for v in values.split(",") if v.strip()]
+        key = key.strip()
+        given = [v.strip() for v in values.split(",")]
+        example = f"e.g. --params {key}=cut_in,red_light"
+        if key in out:
+            raise InputError(Problem("--params", None, None, f"param '{key}' is given twice",
+                                     f"give all its values in one item, {example}"))
+        if not any(given):
+            raise InputError(Problem("--params", None, None, f"'{item}' gives '{key}' no value", f"write {example}"))
+        if not all(given):
+            raise InputError(Problem("--params", None, None, f"'{item}' has an empty value",
+                                     f"leave no empty value between the commas, {example}"))
+        repeated = sorted({v for v, n in Counter(given).items() if n > 1})
+        if repeated:
+            raise InputError(Problem("--params", None, None, f"'{key}' lists '{repeated[0][:60]}' more than once",
+                                     "list each value once (repeated values would only repeat the same runs)"))
+        out[key] = given
     return out
 
 
@@ -91,6 +107,11 @@ def _run(config: CampaignConfig, resume: bool) -> int:
     if resume and not exists:
         raise InputError(Problem(str(config.out), None, None, "no campaign to resume here",
                                  "drop --resume to start one"))
+    if not resume:  # bad --params (undeclared, outside the choices, a grid past the cap): no journal left behind
+        from astaa_deft.engine.spec.loader import load_spec
+        from astaa_deft.orchestration.campaign.campaign import param_grid
+
+        param_grid(config.params, load_spec(config.spec_path))
     journal = Journal(config.out)
     if resume:
         config = config.resuming(journal.meta())
