@@ -52,6 +52,7 @@ class RunResult:
     observed: bool  # the monitors saw the run through to its end
     policies: tuple[PolicyApplicationsRecord, ...] = ()  # what each policy of the test case did (with a reason
     # for each that touched nothing)
+    unjudged: str = ""  # why the monitors did not judge every message ("" when they did; observed is then False)
 
     @property
     def crashes(self) -> tuple[ProcessExit, ...]:
