@@ -409,3 +409,20 @@ def test_the_named_journal_tamperings_are_one_clear_error_each(tmp_path):
         assert r["code"] == 2 and not r["traceback"] and not r["hang"], (where, r)
         assert "Traceback" not in r["stderr"] and r["state"] in r["stderr"], (where, r["stderr"])
         assert case["field"] in r["stderr"], (where, r["stderr"])
+
+
+def test_a_resumed_frame_is_judged_again_not_taken_from_the_state(tmp_path):
+    """Verdicts edited in the state file (every frame 'not accepted', far off) change nothing: each resumed
+    frame is stepped and compared with the recorded output again, so the suite is the run's."""
+    spec, log, base = make_checkpoint(tmp_path)
+    state = json.loads((base / "extraction.json").read_text())
+    for item in state["decided"]:
+        if "choice" in item:
+            item.update(accepted=False, exact=False, comparison=dict(item["comparison"], distance=999.0))
+    out = tmp_path / "edited"
+    shutil.copytree(base, out)
+    (out / "extraction.json").write_text(json.dumps(state))
+    [result] = run_cases([{"name": "edited", "argv": ["extract", str(log), "--spec", str(spec), "-o", str(out),
+                                                      "--resume", "--jobs", "1"], "state": ""}], tmp_path)
+    assert result["code"] == 0, result
+    assert len(json.loads((out / "deft.json").read_text())["frames"]) == 30  # every output, as in one go

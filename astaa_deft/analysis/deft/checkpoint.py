@@ -75,8 +75,10 @@ def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Dec
         if shape is not None and name not in shape.inputs:
             choice.fail(f"names '{name[:60]}', not an input of the module ({', '.join(sorted(shape.inputs))})")
         picks[name] = index.whole(0, (shape.inputs[name] - 1) if shape is not None else MAX_INT)
-    if not picks:
-        choice.fail("is empty (a frame has at least one input)")
+    lacking = sorted(set(shape.inputs) - set(picks)) if shape is not None else []
+    if lacking or not picks:  # a decided frame holds a message of every input
+        choice.fail(f"lacks the input{'s' if len(lacking) > 1 else ''} {', '.join(lacking)}" if lacking
+                    else "is empty (a frame has a message of every input)")
     comparison = item.get("comparison").obj()
     frame = ExtractedFrame(
         index=0, output=None, trigger_time=item.get("trigger_time_ns").whole(),
