@@ -14,7 +14,7 @@ from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsR
 from astaa_deft.orchestration.campaign.standing import Standing, headline, most_severe, standings
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
-from astaa_deft.cli.commands.console import PlainLines, say
+from astaa_deft.cli.commands.console import PlainLines, say, stop_as_interrupt
 
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
@@ -91,11 +91,11 @@ def _bucket_line(standing: Standing, m: MinimisationRow | None, t: ModuleTestsRo
 
 def run(config: CampaignConfig, resume: bool) -> int:
     """``fuzz``: run (or with ``resume`` continue) the campaign ``config`` describes; the exit code (0 no
-    bucket, 1 buckets, 130 interrupted). InputError for bad input or a SUT that does not start; OutputError
-    when ``config.out`` cannot take the campaign."""
+    bucket, 1 buckets, 130 interrupted by Ctrl-C or SIGTERM: the summary and the line to resume). InputError
+    for bad input or a SUT that does not start; OutputError when ``config.out`` cannot take the campaign."""
     place = Place(config.out, "-o")
     ready_dir(place, temp=True)  # before the journal and the baseline runs
-    with writing(place):
+    with writing(place), stop_as_interrupt():  # SIGTERM (timeout, a CI cancel) stops it as Ctrl-C does
         return _run(config, resume)
 
 
