@@ -25,6 +25,7 @@ MAX_DEPTH = 32  # nesting of any state value: the tool writes at most ~6
 MAX_TEXT = 16 << 20  # characters of one JSON text (a journal cell, a checkpoint: far more than real ones)
 MAX_INT = 2**63 - 1  # what SQLite, MCAP and nanosecond times hold
 MAX_ITEMS = 10_000_000  # items of one list or object (more than any real state file has)
+MAX_NAME = 1000  # characters of a field name (a channel, an invariant, a param)
 
 
 def load_json(text: str | bytes, file: str, field: str, fix: str, *, max_chars: int = MAX_TEXT,
@@ -132,11 +133,14 @@ class StateReader:
             self.fail(f"has {len(self.value):,} items (at most {max_items:,})")
         return (StateReader(self.file, item, self.fix, f"{self.field}[{n}]") for n, item in enumerate(self.value))
 
-    def entries(self, max_items: int = MAX_ITEMS) -> Iterator[tuple[str, StateReader]]:
-        """The (name, value) pairs of this object (at most ``max_items``)."""
+    def entries(self, max_items: int = MAX_ITEMS, max_name: int = MAX_NAME) -> Iterator[tuple[str, StateReader]]:
+        """The (name, value) pairs of this object (at most ``max_items``, names of at most ``max_name``)."""
         self.obj()
         if len(self.value) > max_items:
             self.fail(f"has {len(self.value):,} fields (at most {max_items:,})")
+        for k in self.value:
+            if len(k) > max_name:
+                self.fail(f"has a field name {len(k):,} characters long (at most {max_name:,})")
         return ((str(k), StateReader(self.file, v, self.fix, self._child(str(k)))) for k, v in self.value.items())
 
     # -- scalars -------------------------------------------------------------

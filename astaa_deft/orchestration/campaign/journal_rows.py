@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import math
 import sqlite3
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
@@ -35,6 +34,8 @@ FIX = "move the damaged journal away (or restore it from a copy), or give anothe
 MAX_CELL = 1 << 20  # characters of one text cell (a minimal XML, a summary): far above real ones
 MAX_JSON_CELL = 16 << 20  # characters of one JSON cell (a case outcome)
 CORE_TABLES = ("meta", "cases", "buckets")  # in every journal since the first
+MAX_SECONDS = 1e11  # an epoch time or a duration in seconds (year 5138): beyond, the cell is damaged
+MAX_VERDICT = 100  # characters of a verdict (a CRASH class name)
 
 Read = Callable[[StateReader], Any]
 
@@ -59,9 +60,11 @@ def _signed(optional: bool = False) -> Read:
     return _integer(optional, -(2**63))
 
 
-def _number(optional: bool = False) -> Read:
-    return _quick(lambda r: r.number(optional=optional),
-                  lambda v: (type(v) in (int, float) and math.isfinite(v)) or (optional and v is None))
+def _number(optional: bool = False, low: float = 0.0, high: float = 1e11) -> Read:
+    """A finite number in [low, high]; by default an epoch time or a duration in seconds (never negative;
+    beyond year 5138 the cell is damaged)."""
+    return _quick(lambda r: r.number(low, high, optional=optional),
+                  lambda v: (type(v) in (int, float) and low <= v <= high) or (optional and v is None))
 
 
 def _flag(optional: bool = False) -> Read:
@@ -140,7 +143,8 @@ def _finding(r: StateReader) -> dict[str, Any]:
 
 
 _FINDING: dict[str, Read] = {
-    "invariant": _text(), "crash": _text(), "module": _text(True), "channel": _text(True),
+    "invariant": _text(max_chars=1000), "crash": _text(max_chars=MAX_VERDICT), "module": _text(True, 1000),
+    "channel": _text(True, 1000),
     "detail": _text(), "severity": _text(), "at": lambda r: r.number(infinite=True, optional=True),
 }
 
@@ -159,12 +163,14 @@ def _channel_rate(r: StateReader) -> None:
 
 
 _OUTCOME: dict[str, Read] = {
-    "status": _text(), "verdict": _text(), "summary": _text(), "findings": lambda r: r.each(_finding, 100_000),
-    "seconds": lambda r: r.real(infinite=True), "log_path": _text(True), "reason": _text(), "mutations": _integer(),
+    "status": _text(max_chars=100), "verdict": _text(max_chars=MAX_VERDICT), "summary": _text(),
+    "findings": lambda r: r.each(_finding, 100_000),
+    "seconds": lambda r: r.real(0.0, MAX_SECONDS), "log_path": _text(True), "reason": _text(),
+    "mutations": _integer(),
     "margins": lambda r: r.map(lambda v: v.real(infinite=True), 100_000), "error": _text(),
     "first_seen": lambda r: r.map(lambda v: v.real(infinite=True), 100_000),
-    "cpu": lambda r: r.real(infinite=True), "cpu_waited": lambda r: r.real(infinite=True),
-    "wall": lambda r: r.real(infinite=True), "rss_mb": lambda r: r.real(infinite=True),
+    "cpu": lambda r: r.real(0.0, MAX_SECONDS), "cpu_waited": lambda r: r.real(0.0, MAX_SECONDS),
+    "wall": lambda r: r.real(0.0, MAX_SECONDS), "rss_mb": lambda r: r.real(0.0, MAX_SECONDS),
     "timing": lambda r: r.map(_channel_rate, 100_000), "violating": lambda r: r.map(lambda v: v.whole(), 100_000),
 }
 
@@ -183,14 +189,16 @@ def _outcome(r: StateReader) -> CaseOutcome:
 CASE_COLUMNS: dict[str, Read] = {
     "case_id": _text(max_chars=1000), "kind": _enum(CaseKind), "number": _integer(), "seed": _signed(),
     "params": _params_cell, "testcase_xml": _text(True, 64 << 20), "strategy": _text(max_chars=1000),
-    "parent": _text(True), "status": _enum(CaseStatus), "verdict": _text(True), "summary": _text(True),
+    "parent": _text(True), "status": _enum(CaseStatus), "verdict": _text(True, MAX_VERDICT),
+    "summary": _text(True),
     "signature": _text(True), "failure_key": _text(True), "bucket": _text(True), "outcome": _outcome_text,
     "planned_at": _number(True), "started_at": _number(True), "finished_at": _number(True),
     "seconds": _number(True), "log_path": _text(True), "worker": _text(True), "cpu": _number(True),
     "load": _number(True), "at_once": _integer(True),
 }
 BUCKET_COLUMNS: dict[str, Read] = {
-    "bucket": _text(max_chars=1000), "signature": _text(), "verdict": _text(), "invariant": _text(),
+    "bucket": _text(max_chars=1000), "signature": _text(), "verdict": _text(max_chars=MAX_VERDICT),
+    "invariant": _text(max_chars=1000),
     "module": _text(True), "family": _text(), "first_case": _text(max_chars=1000), "without_mutation": _flag(),
     "cases": _integer(), "reruns": _integer(), "rerun_failures": _integer(), "merged_into": _text(True),
     "created_at": _number(), "created_after_cases": _integer(), "kind": _enum(BucketKind), "controls": _integer(),
