@@ -62,6 +62,7 @@ class LogShape:
 
 
 MAX_SKIPPED_TEXT = 10_000  # characters of why an output was skipped
+BYTES_PER_OUTPUT = 16_384  # far above what one decided output takes in the state (~300 bytes, ~1 kB skipped)
 
 
 def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Decided:
@@ -101,7 +102,14 @@ def read_state(out_dir: Path, expected: Mapping[str, Any], shape: LogShape | Non
     if not path.is_file():
         raise InputError(Problem(str(path), None, None, "no interrupted extraction to resume here", fix))
     text = read_input(path, STATE_FILE)
-    state = StateReader(str(path), load_json(text, str(path), "", fix, max_chars=STATE_FILE.max_bytes or 0), fix).obj()
+    # What an extraction of this log can have written (a few hundred bytes an output): a larger file is
+    # refused before it is parsed, in time and memory bounded by the log, not by the file.
+    most_bytes = min(STATE_FILE.max_bytes or 0, (1 << 20) + BYTES_PER_OUTPUT * shape.outputs) if shape is not None \
+        else STATE_FILE.max_bytes or 0
+    if len(text) > most_bytes:
+        raise InputError(Problem(str(path), None, None, f"is {len(text):,} bytes: an extraction of this log writes "
+                                 f"at most {most_bytes:,}", fix))
+    state = StateReader(str(path), load_json(text, str(path), "", fix, max_chars=most_bytes), fix).obj()
     version = state.get("version")
     if version.value != STATE_VERSION:
         version.fail(f"is {str(version.value)[:40]}: this version of astaa-deft reads state version {STATE_VERSION}"
