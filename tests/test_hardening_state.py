@@ -358,7 +358,8 @@ def test_the_named_checkpoint_tamperings_are_one_clear_error_each(tmp_path):
     expected = {"a choice key ../../x": "decided[0].choice", "an index of 10^30": "decided[0].choice.pose",
                 "a choice index of -1": "decided[0].choice.pose",
                 "comparison fields as text": "decided[0].comparison.distance",
-                "2 M skipped entries": "an extraction of this log writes at most", "version 99": "field 'version' is 99",
+                "2 M skipped entries": "an extraction of this log writes at most",
+                "version 99": "field 'version' is 99",
                 "trigger_time_ns 1e999": "decided[0].trigger_time_ns", "nested 100,000 deep": "nested deeper"}
     cases = []
     for n, (name, text) in enumerate(texts.items()):
