@@ -152,6 +152,8 @@ def checkpoint_cases(count: int, rng: random.Random, work: Path) -> list[dict]:
 # -- journal ---------------------------------------------------------------------------------------
 FUZZ_SPEC = """\
 name: tiny
+params:
+  scenario: {choices: [a, b]}
 modules: [{name: a, command: "true"}, {name: b, command: "true"}]
 channels: [{name: data, key: t/data, producer: a, consumers: [b], type: Sample}]
 types:
