@@ -172,9 +172,12 @@ def exit_code(outcome: RunResult) -> int:
         # Findings made before the loss are real, but a Pass would claim what nobody saw.
         if outcome.verdict is not None and outcome.verdict.klass != Verdict.PASS:
             say(format_verdict(outcome.verdict))
-        why = outcome.unjudged or (outcome.end_reason if not outcome.observed or "recorder" in outcome.end_reason
-                                   else "the recorder did not finish the log")
+        why = outcome.end_reason if not outcome.observed or "recorder" in outcome.end_reason \
+            else "the recorder did not finish the log"
         say(f"verdict withheld: the run was not fully observed ({why})")
+        return EXIT_NOT_OBSERVED
+    if outcome.verdict is not None and outcome.unjudged and outcome.verdict.klass == Verdict.PASS:
+        say(f"verdict withheld: not every message was judged ({outcome.unjudged})")  # a Pass nobody fully saw
         return EXIT_NOT_OBSERVED
     if outcome.verdict is not None:
         say(format_verdict(outcome.verdict))

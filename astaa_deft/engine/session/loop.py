@@ -81,8 +81,7 @@ def run_session(spec: Spec, options: RunOptions, *,
         exits=tuple(run.exits), sent=sent, recorded=dict(recorder.recorded) if recorder is not None else {},
         mutations=run.mutations, log=options.record,
         complete=options.record is None or (recorder is not None and recorder.finished),
-        observed=verdict is not None and not run.lost and not unjudged,
-        unjudged=unjudged,
+        observed=verdict is not None and not run.lost, unjudged=unjudged,
         policies=tuple(run.transport.policies) if run.transport is not None else ())
 
 
