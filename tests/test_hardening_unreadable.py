@@ -87,3 +87,19 @@ def test_monitors_that_judge_an_unreadable_message_themselves_still_do(tmp_path)
     assert result.unjudged == "'no_collision' could not read 1 message (the payload does not decode)"
     code, _ = run_check(log)
     assert code == 1  # a finding: the verdict stands, it is not a Pass
+
+
+def test_proxy_withholds_the_pass_of_a_run_with_messages_its_monitors_could_not_read(tmp_path):
+    """Live: the talker sends every 10th payload as garbage; a restart counter cannot be read on those."""
+    from proxy_helpers import ECHO_SPEC, run_proxy
+
+    spec = tmp_path / "echo.yaml"
+    spec.write_text(ECHO_SPEC.read_text().replace("{spec_dir}", str(ECHO_SPEC.parent)) + (
+        "invariants:\n  - {name: talker_up, kind: process, modules: [talker], restart_counter: header.seq}\n"))
+    res = run_proxy(spec, "--duration", "3", "--run-dir", str(tmp_path / "run"), "--param", "count=100",
+                    "--param", "garbage_every=10", "--record", str(tmp_path / "run.mcap"))
+    assert res.returncode == 3, res.stdout + res.stderr
+    assert "verdict withheld: not every message was judged ('talker_up' could not read 10 messages" in res.stdout
+    assert "verdict: Pass" not in res.stdout
+    code, out = run_check(tmp_path / "run.mcap")
+    assert code == 3 and "'talker_up' could not read 10 messages" in out  # offline, the same
