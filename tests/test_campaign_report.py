@@ -5,6 +5,10 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
+import pytest
+
+from astaa_deft.model.errors import InputError
+
 from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.model import (
     BASELINE, MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
@@ -80,7 +84,8 @@ EVIL = "<img src=x onerror=alert(2)>"
 
 
 def test_every_cell_is_escaped_whatever_its_declared_type(tmp_path: Path):
-    """SQLite keeps whatever was written, so numeric columns may hold markup: the page never carries it."""
+    """Markup in any text cell shows as text; SQLite keeps whatever was written, so a numeric column may hold
+    markup too: that journal is damaged input (exit 2), never a page."""
     import sqlite3
 
     out = tmp_path / "campaign"
@@ -95,10 +100,17 @@ def test_every_cell_is_escaped_whatever_its_declared_type(tmp_path: Path):
     finally:
         journal.close()
     db = sqlite3.connect(out / "journal.sqlite")
-    db.execute("UPDATE buckets SET cases=?, verdict=?", (EVIL, EVIL))
+    db.execute("UPDATE buckets SET verdict=?", (EVIL,))
     db.execute("UPDATE cases SET log_path=?, testcase_xml=?", (EVIL, EVIL))
     db.commit()
     db.close()
     page = write_report(out).read_text()
     assert "<img src" not in page and "onerror=alert(2)>" not in page
     assert "&lt;img src=x onerror=alert(2)&gt;" in page  # shown, as text
+    db = sqlite3.connect(out / "journal.sqlite")
+    db.execute("UPDATE buckets SET cases=?", (EVIL,))
+    db.commit()
+    db.close()
+    with pytest.raises(InputError) as caught:
+        write_report(out)
+    assert "buckets[B001].cases" in str(caught.value) and "whole number" in str(caught.value)

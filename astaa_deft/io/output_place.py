@@ -11,6 +11,14 @@ went wrong and the fix, exit code :data:`EXIT_CANNOT_WRITE`. Files written
 through :func:`write_atomic` are either whole or absent, so what was written
 before a failure stays readable.
 
+Never through a link: :func:`write_atomic` writes a new temporary file
+(created exclusively, so no link planted at its name is followed) and renames
+it over the target, which replaces a link there rather than writing where it
+points; a file written as it goes (a log) is opened by :func:`open_new`,
+which refuses a symbolic link at the path (:class:`OutputError`) and replaces
+an existing file by a new one (a hard link elsewhere keeps its content).
+:func:`ready_file` refuses a link before the work starts.
+
 A file size limit (``ulimit -f``) sends SIGXFSZ, whose default action kills
 the process without a word; the CLI ignores it (:func:`ignore_file_size_signal`)
 so the write fails with EFBIG instead, which is reported like a full disk.
@@ -24,11 +32,12 @@ import os
 import resource
 import shutil
 import signal
+import stat
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import BinaryIO, ClassVar
 
 from astaa_deft.model.errors import AstaaDeftError, Problem
 
@@ -149,6 +158,8 @@ def ready_file(place: Place, *, overwrite: bool = True) -> Path:
     not created; an existing one is left as it is.
     """
     path = place.path
+    if path.is_symlink():
+        raise link_refusal(path, place.option)
     if path.is_dir():
         raise OutputError(Problem(str(path), None, None, "is a folder, not a file",
                                   f"give a file path with {place.option}"))
@@ -175,20 +186,63 @@ def check_temp_dir() -> None:
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
-    """Write ``path`` whole or not at all: a temporary file beside it, renamed over it once written.
+    """Write ``path`` whole or not at all: a new temporary file beside it, renamed over it once written.
 
-    On a failure the temporary file is removed and the OSError propagates
-    (wrap the caller in :func:`writing`); an existing file at ``path`` stays as it was.
+    The temporary file is created exclusively (a link planted at its name is
+    never followed) and the rename replaces whatever is at ``path`` — a link
+    too — instead of writing through it. On a failure the temporary file is
+    removed and the OSError propagates (wrap the caller in :func:`writing`);
+    an existing file at ``path`` stays as it was.
     """
-    tmp = path.with_name(f".{path.name}.partial")
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+    tmp = Path(name)
     try:
-        with open(tmp, "wb") as f:
+        with os.fdopen(fd, "wb") as f:
             f.write(data.encode() if isinstance(data, str) else data)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+def open_new(path: Path, option: str = "the output path") -> BinaryIO:
+    """``path`` opened for writing as a new file (for a file written as it goes, such as a log).
+
+    A symbolic link at ``path`` is refused (:class:`OutputError`, exit 4): the
+    tool never writes through a link. An existing file is removed first and a
+    new one created in its place (exclusively: a link planted in between is
+    refused too), so a hard link to it elsewhere keeps its content.
+    """
+    path = Path(path)
+    if path.is_symlink():
+        raise link_refusal(path, option)
+    with contextlib.suppress(FileNotFoundError):
+        if stat.S_ISREG(os.lstat(path).st_mode):  # a regular file only: never a device, a FIFO, a folder
+            path.unlink()
+    try:
+        fd = os.open(path, _NEW_FILE, 0o666)
+    except FileExistsError:
+        raise link_refusal(path, option) if path.is_symlink() else OutputError(Problem(
+            str(path), None, None, "is not a regular file (or one appeared there while it was being replaced)",
+            f"give the path of a regular file with {option}")) from None
+    return os.fdopen(fd, "wb")
+
+
+def link_refusal(path: Path, option: str) -> OutputError:
+    """The refusal of an output path that is a symbolic link."""
+    return OutputError(Problem(str(path), None, None, "is a symbolic link: the tool never writes through a link",
+                               f"remove the link, or give the path of a new file with {option}"))
 
 
 def _probe(folder: Path) -> None:

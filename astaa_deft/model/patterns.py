@@ -18,6 +18,8 @@ from typing import Any, Protocol
 
 import re2
 
+from astaa_deft.model.errors import AstaaDeftError
+
 MAX_PATTERN = 1000  # characters: a pattern is a short regex, not a document
 MAX_PROGRAM_BYTES = 8 << 20  # what one compiled pattern may take (RE2's own default)
 
@@ -28,8 +30,9 @@ class Match(Protocol):
     def span(self, index: int | str = 0) -> tuple[int, int]: ...  # pragma: no cover - a protocol
 
 
-class PatternError(ValueError):
-    """A user pattern that cannot run: ``reason`` (what is wrong) and ``fix`` (what to write instead)."""
+class PatternError(AstaaDeftError):
+    """A user pattern that cannot run: ``reason`` (what is wrong) and ``fix`` (what to write instead). The
+    reader of the spec turns it into an InputError at the pattern's place."""
 
     def __init__(self, reason: str, fix: str) -> None:
         super().__init__(reason)

@@ -18,6 +18,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from astaa_deft.io.output_place import write_atomic
 from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.replay import trajectory_points
 from astaa_deft.analysis.deft.suite import Suite
@@ -63,8 +64,8 @@ def write_consistency_test(suite_dir: Path, seed_plans: list[tuple[float, float]
                            note: str = "") -> None:
     body = {"seed_plan_ends": seed_plans, "note": note,
             "lanes": [{"id": lane.id, "width": lane.width, "centre": list(lane.centre)} for lane in lanes]}
-    (suite_dir / SEED_FILE).write_text(json.dumps(body, indent=1) + "\n")
-    (suite_dir / TEST_FILE).write_text(TEST_TEXT)
+    write_atomic(suite_dir / SEED_FILE, json.dumps(body, indent=1) + "\n")  # whole, never through a link
+    write_atomic(suite_dir / TEST_FILE, TEST_TEXT)
 
 
 def replay_consistency(suite_dir: Path, overrides: str | None = None) -> Consistency:

@@ -16,10 +16,13 @@ import os
 import shutil
 import time
 from collections.abc import Mapping
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from astaa_deft.io.inputfile import InputKind, read_input
+from astaa_deft.io.output_place import write_atomic
+from astaa_deft.io.statefile import MAX_INT, StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
@@ -31,6 +34,7 @@ STATE = "extraction.json"
 STATE_VERSION = 1
 WRITE_EVERY_S = 2.0  # the partial suite is rewritten at most this often (and once more at the end)
 _PARTIAL = ".partial"
+STATE_FILE = InputKind("extraction state", 256 << 20, f"the {STATE} an interrupted extract left")
 
 
 def identity(log_path: Path, spec: Spec, entry: ReplayModule) -> dict[str, Any]:
@@ -48,37 +52,77 @@ def _decided_json(outcome: Decided) -> dict[str, Any]:
             "candidates_tried": frame.candidates_tried, "exact": frame.exact}
 
 
-def _decided_of(item: Mapping[str, Any]) -> Decided:
-    if "skipped" in item:
-        return Decided(int(item["output"]), None, None, str(item["skipped"]))
-    frame = ExtractedFrame(index=0, output=None, trigger_time=int(item["trigger_time_ns"]),
-                           frame_time=int(item["frame_time_ns"]), inputs={},
-                           comparison=Comparison(**item["comparison"]), accepted=bool(item["accepted"]),
-                           candidates_tried=int(item["candidates_tried"]), exact=bool(item["exact"]))
-    return Decided(int(item["output"]), frame, {str(k): int(v) for k, v in item["choice"].items()})
+@dataclass(frozen=True)
+class LogShape:
+    """What a resumed state is checked against: the log's recorded outputs of the module and, per input
+    channel, its messages (a choice indexes them)."""
+
+    outputs: int
+    inputs: Mapping[str, int]
 
 
-def read_state(out_dir: Path, expected: Mapping[str, Any]) -> list[Decided]:
+MAX_SKIPPED_TEXT = 10_000  # characters of why an output was skipped
+BYTES_PER_OUTPUT = 16_384  # far above what one decided output takes in the state (~300 bytes, ~1 kB skipped)
+
+
+def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Decided:
+    item.obj()
+    item.get("output").whole(position, position)  # in order from the first
+    if item.has("skipped"):
+        return Decided(position, None, None, item.get("skipped").string(MAX_SKIPPED_TEXT))
+    choice = item.get("choice")
+    picks: dict[str, int] = {}
+    for name, index in choice.entries(max_items=1000):
+        if shape is not None and name not in shape.inputs:
+            choice.fail(f"names '{name[:60]}', not an input of the module ({', '.join(sorted(shape.inputs))})")
+        picks[name] = index.whole(0, (shape.inputs[name] - 1) if shape is not None else MAX_INT)
+    lacking = sorted(set(shape.inputs) - set(picks)) if shape is not None else []
+    if lacking or not picks:  # a decided frame holds a message of every input
+        choice.fail(f"lacks the input{'s' if len(lacking) > 1 else ''} {', '.join(lacking)}" if lacking
+                    else "is empty (a frame has a message of every input)")
+    comparison = item.get("comparison").obj()
+    frame = ExtractedFrame(
+        index=0, output=None, trigger_time=item.get("trigger_time_ns").whole(),
+        frame_time=item.get("frame_time_ns").whole(), inputs={},
+        comparison=Comparison(distance=comparison.get("distance").real(0.0, infinite=True),
+                              max_error=comparison.get("max_error").real(0.0, infinite=True),
+                              points=comparison.get("points").whole(),
+                              how=comparison.get("how").string(100)),
+        accepted=bool(item.get("accepted").flag()), candidates_tried=item.get("candidates_tried").whole(),
+        exact=bool(item.get("exact").flag()))
+    return Decided(position, frame, picks)
+
+
+def read_state(out_dir: Path, expected: Mapping[str, Any], shape: LogShape | None = None) -> list[Decided]:
     """The outputs an interrupted extraction into ``out_dir`` decided, in order (InputError if there is
-    none, or it was of another log, spec, module or threshold)."""
+    none, it was of another log, spec, module or threshold, or any field is not what this version writes:
+    type, range, version, size — checked against the log's ``shape`` when given)."""
     path = out_dir / STATE
     fix = f"drop --resume to extract afresh into {out_dir}"
     if not path.is_file():
         raise InputError(Problem(str(path), None, None, "no interrupted extraction to resume here", fix))
-    try:
-        state = json.loads(path.read_text())
-        decided = [_decided_of(item) for item in state["decided"]]
-        was = state["extraction"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputError(Problem(str(path), None, None, f"unreadable ({exc})", fix)) from None
+    text = read_input(path, STATE_FILE)
+    # What an extraction of this log can have written (a few hundred bytes an output): a larger file is
+    # refused before it is parsed, in time and memory bounded by the log, not by the file.
+    most_bytes = min(STATE_FILE.max_bytes or 0, (1 << 20) + BYTES_PER_OUTPUT * shape.outputs) if shape is not None \
+        else STATE_FILE.max_bytes or 0
+    if len(text) > most_bytes:
+        raise InputError(Problem(str(path), None, None, f"is {len(text):,} bytes: an extraction of this log writes "
+                                 f"at most {most_bytes:,}", fix))
+    state = StateReader(str(path), load_json(text, str(path), "", fix, max_chars=most_bytes), fix).obj()
+    version = state.get("version")
+    if version.value != STATE_VERSION:
+        version.fail(f"is {str(version.value)[:40]}: this version of astaa-deft reads state version {STATE_VERSION}"
+                     " only")
+    was = state.get("extraction").obj()
     for key, value in expected.items():
-        if was.get(key) != value:
-            raise InputError(Problem(str(path), None, None, f"it was an extraction with {key} {was.get(key)!r}, "
-                                     f"not {value!r}", f"resume with the same log, spec, --module and "
-                                     f"--threshold, or {fix}"))
-    if [d.output_index for d in decided] != list(range(len(decided))):
-        raise InputError(Problem(str(path), None, None, "its outputs are not in order from the first", fix))
-    return decided
+        if was.value.get(key) != value:
+            raise InputError(Problem(str(path), None, None, f"it was an extraction with {key} "
+                                     f"{str(was.value.get(key))[:200]!r}, not {value!r}",
+                                     f"resume with the same log, spec, --module and --threshold, or {fix}"))
+    most = shape.outputs if shape is not None else MAX_INT
+    state.get("outputs").whole(0, MAX_INT)
+    return [_decided_of(item, n, shape) for n, item in enumerate(state.get("decided").items(most))]
 
 
 class Checkpoint:
@@ -116,9 +160,7 @@ class Checkpoint:
         manifest.parent.rmdir()
         state = {"version": STATE_VERSION, "extraction": self.extraction, "outputs": self.total,
                  "decided": [_decided_json(d) for d in self.decided]}
-        temporary = self.out_dir / (STATE + ".tmp")
-        temporary.write_text(json.dumps(state) + "\n")
-        os.replace(temporary, self.out_dir / STATE)
+        write_atomic(self.out_dir / STATE, json.dumps(state) + "\n")  # whole, and never through a link
 
     def finished(self) -> None:
         """The extraction is complete: nothing to resume."""

@@ -483,8 +483,12 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
         return
     run.previous = dict(before.choice)
     recorded = run.recorded
-    stepped, step_s = _step_decided(run.planner, before.frame, run.previous, recorded.decode, recorded.messages,
-                                    recorded.outputs[out_index])
+    stepped, step_s, replayed = _step_decided(run.planner, before.frame, run.previous, recorded.decode,
+                                              recorded.messages, recorded.outputs[out_index])
+    # Judged again, never taken from the state file: a hand-edited verdict would make tests that fail on the
+    # run they came from (or drop ones that pass).
+    comparison, exact = _judged(run.cfg, replayed, _expected(run, out_index))
+    stepped = replace(stepped, comparison=comparison, exact=exact, accepted=comparison.within(run.cfg.threshold))
     run.result.frames.append(replace(stepped, index=len(run.result.frames)))
     for cand in generic if before.frame.accepted else ():
         if dict(cand.choice) == run.previous:
@@ -552,13 +556,14 @@ def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expec
 
 def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
                   decode: Callable[[str, int], Any], messages: Mapping[str, list[LoggedMessage]],
-                  output: LoggedMessage) -> tuple[ExtractedFrame, float]:
-    """(the frame, with its messages; the CPU seconds of its step) of an output decided by the extraction
-    resumed: the planner steps once on it, as the interrupted extraction left it."""
+                  output: LoggedMessage) -> tuple[ExtractedFrame, float, Any]:
+    """(the frame, with its messages; the CPU seconds of its step; what the planner replayed) of an output
+    decided by the extraction resumed: the planner steps once on it, as the interrupted extraction left it."""
     started = time.process_time()
-    planner.step({name: decode(name, idx) for name, idx in choice.items()})
+    replayed = planner.step({name: decode(name, idx) for name, idx in choice.items()})
     step_s = time.process_time() - started
-    return replace(decided, output=output, inputs={name: messages[name][idx] for name, idx in choice.items()}), step_s
+    frame = replace(decided, output=output, inputs={name: messages[name][idx] for name, idx in choice.items()})
+    return frame, step_s, replayed
 
 
 def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,

@@ -51,7 +51,8 @@ class ReplayPlanner(Protocol):
     def close(self) -> None: ...
 
 
-def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.replay") -> Any:
+def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.replay", source: str = "<spec>"
+                 ) -> Any:
     """The factory named 'module:attr', imported from sys.path or else from the spec's directory.
 
     A planner that sits next to its spec (a user's own stack, not an installed
@@ -76,7 +77,7 @@ def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.
         return getattr(module, attr)
     except (ImportError, AttributeError) as exc:
         beside = f" or the spec's directory {spec_dir}" if spec_dir is not None else ""
-        raise InputError(Problem("<spec>", None, None, f"replay factory '{path}' cannot be loaded: {exc}",
+        raise InputError(Problem(source, None, None, f"{where}: replay factory '{path}' cannot be loaded: {exc}",
                                  f"check '{where}.factory': its module must be importable from sys.path"
                                  f"{beside} (set PYTHONPATH, or install its package)")) from None
 
@@ -129,13 +130,14 @@ class InProcessPlanner:
     can_snapshot = True
 
     def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None,
-                 where: str = "planner.replay"):
+                 where: str = "planner.replay", source: str = "<spec>"):
         self.factory = factory
-        make = load_factory(factory, spec_dir, where)
-        _check_arguments(make, kwargs, factory, where)
+        make = load_factory(factory, spec_dir, where, source)  # ``source``: the spec's file, named in errors
+        _check_arguments(make, kwargs, factory, where, source)
         self.obj = make(**kwargs)
         if not callable(getattr(self.obj, "step", None)):
-            raise InputError(f"replay factory '{factory}' ({where}) returned an object without a step(frame) method")
+            raise InputError(Problem(source, None, None, f"{where}: replay factory '{factory}' returned an object "
+                                     "without a step(frame) method", f"check '{where}.factory'"))
 
     def step(self, frame: Mapping[str, dict]) -> dict:
         return self.obj.step(frame)
@@ -150,7 +152,8 @@ class InProcessPlanner:
         pass
 
 
-def _check_arguments(make: Callable[..., Any], kwargs: Mapping[str, Any], factory: str, where: str) -> None:
+def _check_arguments(make: Callable[..., Any], kwargs: Mapping[str, Any], factory: str, where: str,
+                     source: str = "<spec>") -> None:
     """InputError when the spec's args do not fit the factory's parameters (a misspelt or missing arg)."""
     import inspect
 
@@ -161,7 +164,8 @@ def _check_arguments(make: Callable[..., Any], kwargs: Mapping[str, Any], factor
     try:
         signature.bind(**kwargs)
     except TypeError as exc:
-        raise InputError(Problem(where, None, None, f"replay factory '{factory}' does not take these args: {exc}",
+        raise InputError(Problem(source, None, None,
+                                 f"{where}: replay factory '{factory}' does not take these args: {exc}",
                                  f"give the args its parameters name ({signature})")) from None
 
 
@@ -260,7 +264,8 @@ def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = F
     if planner.factory and not (prefer_process and planner.command):
         where = "planner.replay" if planner.where == "planner" else planner.where
         return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
-                                spec.path.parent.resolve() if spec.path else spec_dir, where)
+                                spec.path.parent.resolve() if spec.path else spec_dir, where,
+                                str(spec.path) if spec.path else spec.name)
     return LockstepPlanner(spec, planner, params)
 
 

@@ -21,10 +21,13 @@ from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.model.sut import Spec
-from astaa_deft.analysis.deft.checkpoint import Checkpoint, identity, read_state
+from astaa_deft.analysis.deft.checkpoint import Checkpoint, LogShape, identity, read_state
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
-from astaa_deft.analysis.deft.extract import Decided, Extraction, OnOutput, extract, ground_truth_rate
+from astaa_deft.analysis.deft.extract import (
+    Decided, Extraction, OnOutput, channel_messages, extract, ground_truth_rate,
+)
 from astaa_deft.analysis.deft.oracle import oracle_entries
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import make_planner
@@ -117,7 +120,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     if resume and entry.per_trigger:
         raise InputError(Problem(str(out_dir), None, None, f"--resume continues a planner-style extraction; "
                                  f"{entry.module} is replayed per trigger", "drop --resume"))
-    before = read_state(out_dir, names) if resume else []
+    before = read_state(out_dir, names, _shape(log, spec, entry)) if resume else []
     checkpoint = Checkpoint(out_dir, spec, params, entry, names)
     planner = make_planner(spec, params, prefer_process=options.process, entry=entry)
     try:
@@ -142,6 +145,12 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     exact = ground_truth_rate(ex, spec, options.ground_truth) if options.ground_truth else None
     return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry,
                          resumed=len(before))
+
+
+def _shape(log: LogContents, spec: Spec, entry: ReplayModule) -> LogShape:
+    """What a resumed state must fit: the module's recorded outputs and its inputs' messages in the log."""
+    messages = channel_messages(log, spec, list(entry.inputs) + [entry.output])
+    return LogShape(len(messages.pop(entry.output)), {name: len(msgs) for name, msgs in messages.items()})
 
 
 def _following(progress: Callable[[int, int], None], checkpoint: Checkpoint) -> OnOutput:

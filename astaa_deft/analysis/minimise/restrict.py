@@ -42,6 +42,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from astaa_deft.io.output_place import write_atomic
 from astaa_deft.engine.intercept.actions import ACTIONS
 from astaa_deft.engine.intercept.actions.base import ActionConfig, PinnedStep
 from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Window
@@ -140,5 +141,5 @@ def _copies(chosen: Sequence[tuple[Mutation, FieldSelection]]) -> dict[tuple, in
 
 
 def write_testcase(testcase: TestCase, path: Path) -> Path:
-    path.write_bytes(testcase.to_xml())
+    write_atomic(path, testcase.to_xml())  # whole, never through a link
     return path

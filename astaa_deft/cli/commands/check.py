@@ -8,7 +8,9 @@ damage may come from the damage rather than the SUT, so no verdict is given.
 A log that merely stops early (a killed writer) still reports its findings
 with exit 1: what was read is intact. A log whose recorder outlived its tool
 (the tool killed mid-run: a ``run_end`` event says "tool lost") reports its
-findings with exit 1 but withholds a Pass: exit 3, the run was not fully observed. The work is
+findings with exit 1 but withholds a Pass: exit 3, the run was not fully observed. So does a run
+some message of which no monitor reading it could read (a payload that does not decode, on a channel
+a collision, temporal or process monitor reads) or whose monitor failed and was switched off. The work is
 :func:`astaa_deft.engine.session.check.check_recorded_run`; this prints its result.
 """
 
@@ -58,13 +60,18 @@ def check_log(log_path: Path, spec_path: Path | None = None, *, as_json: bool = 
     if as_json:
         print(json.dumps(_as_json(result, log, tool_lost), default=str))
     else:
-        _print(result, log_path, spec_path, len(checked.spec.invariants), show_pass=log.intact and not tool_lost)
+        _print(result, log_path, spec_path, len(checked.spec.invariants),
+               show_pass=log.intact and not tool_lost and not result.unjudged)
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     if log.intact and tool_lost and result.passed:
         if not as_json:
             print("verdict withheld: the tool was lost mid-run (killed), so the run was not observed to its end "
                   "and cannot Pass")
+        return EXIT_NOT_OBSERVED
+    if log.intact and result.unjudged and result.passed:  # a Pass over messages no monitor could read
+        if not as_json:
+            print(f"verdict withheld: not every message was judged ({result.unjudged}), so the run cannot Pass")
         return EXIT_NOT_OBSERVED
     if log.intact:
         return 0 if result.passed else 1
@@ -114,7 +121,9 @@ def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invarian
 
 def _as_json(result: CheckResult, log: LogContents, tool_lost: bool = False) -> dict[str, object]:
     return {
-        "verdict": result.verdict.to_json() if (log.intact and not tool_lost) or not result.passed else None,
+        "verdict": result.verdict.to_json() if (log.intact and not tool_lost and not result.unjudged)
+        or not result.passed else None,
+        "unjudged": result.unjudged,
         "violations": [v.to_json() for v in result.violations],
         "stats": result.stats,
         "messages": result.messages,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections import Counter
 import time
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from astaa_deft.orchestration.verify.history import histories
 from astaa_deft.orchestration.verify.records import verifications
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
-from astaa_deft.cli.commands.console import PlainLines, say
+from astaa_deft.cli.commands.console import PlainLines, say, stop_as_interrupt
 
 DURATION = re.compile(r"^(\d+(?:\.\d+)?)\s*([smh]?)$")
 
@@ -36,7 +37,22 @@ def parse_params(items: list[str]) -> dict[str, list[str]]:
         if not sep or not key or not values:
             raise InputError(Problem("--params", None, None, f"'{item}' is not KEY=VALUE[,VALUE…]",
                                      "write e.g. --params scenario=cut_in,red_light"))
-        out[key.strip()] = [v.strip() for v in values.split(",") if v.strip()]
+        key = key.strip()
+        given = [v.strip() for v in values.split(",")]
+        example = f"e.g. --params {key}=cut_in,red_light"
+        if key in out:
+            raise InputError(Problem("--params", None, None, f"param '{key}' is given twice",
+                                     f"give all its values in one item, {example}"))
+        if not any(given):
+            raise InputError(Problem("--params", None, None, f"'{item}' gives '{key}' no value", f"write {example}"))
+        if not all(given):
+            raise InputError(Problem("--params", None, None, f"'{item}' has an empty value",
+                                     f"leave no empty value between the commas, {example}"))
+        repeated = sorted({v for v, n in Counter(given).items() if n > 1})
+        if repeated:
+            raise InputError(Problem("--params", None, None, f"'{key}' lists '{repeated[0][:60]}' more than once",
+                                     "list each value once (repeated values would only repeat the same runs)"))
+        out[key] = given
     return out
 
 
@@ -83,11 +99,11 @@ def _bucket_line(standing: Standing, m: MinimisationRow | None, t: ModuleTestsRo
 
 def run(config: CampaignConfig, resume: bool) -> int:
     """``fuzz``: run (or with ``resume`` continue) the campaign ``config`` describes; the exit code (0 no
-    bucket, 1 buckets, 130 interrupted). InputError for bad input or a SUT that does not start; OutputError
-    when ``config.out`` cannot take the campaign."""
+    bucket, 1 buckets, 130 interrupted by Ctrl-C or SIGTERM: the summary and the line to resume). InputError
+    for bad input or a SUT that does not start; OutputError when ``config.out`` cannot take the campaign."""
     place = Place(config.out, "-o")
     ready_dir(place, temp=True)  # before the journal and the baseline runs
-    with writing(place):
+    with writing(place), stop_as_interrupt():  # SIGTERM (timeout, a CI cancel) stops it as Ctrl-C does
         return _run(config, resume)
 
 
@@ -99,6 +115,11 @@ def _run(config: CampaignConfig, resume: bool) -> int:
     if resume and not exists:
         raise InputError(Problem(str(config.out), None, None, "no campaign to resume here",
                                  "drop --resume to start one"))
+    if not resume:  # bad --params (undeclared, outside the choices, a grid past the cap): no journal left behind
+        from astaa_deft.engine.spec.loader import load_spec
+        from astaa_deft.orchestration.campaign.campaign import param_grid
+
+        param_grid(config.params, load_spec(config.spec_path))
     journal = Journal(config.out)
     if resume:
         config = config.resuming(journal.meta())

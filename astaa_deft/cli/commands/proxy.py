@@ -178,6 +178,9 @@ def exit_code(outcome: RunResult) -> int:
             else "the recorder did not finish the log"
         say(f"verdict withheld: the run was not fully observed ({why})")
         return EXIT_NOT_OBSERVED
+    if outcome.verdict is not None and outcome.unjudged and outcome.verdict.klass == Verdict.PASS:
+        say(f"verdict withheld: not every message was judged ({outcome.unjudged})")  # a Pass nobody fully saw
+        return EXIT_NOT_OBSERVED
     if outcome.verdict is not None:
         say(format_verdict(outcome.verdict))
         return 0 if outcome.verdict.klass == Verdict.PASS else 1

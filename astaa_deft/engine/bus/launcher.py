@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Callable, Mapping
 
+from astaa_deft.io.output_place import open_new, write_atomic
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.patterns import UserPattern, compile_user_pattern
 from astaa_deft.model.records import ProcessExit
@@ -117,7 +118,7 @@ class Launcher:
         env["ZENOH_SESSION_CONFIG_URI"] = config  # ROS 2 rmw_zenoh
         env.setdefault("PYTHONUNBUFFERED", "1")
         log_path = output_file(self.run_dir, module.name)
-        log = open(log_path, "wb")  # noqa: SIM115 - the module writes to it for its whole life; closed at its exit
+        log = open_new(log_path, "--run-dir")  # the module writes to it for its whole life; closed at its exit
         try:
             # Its own process group (process_launch.start): stop (or the reaper) takes its children too.
             process = process_launch.start(argv, cwd=str(module.cwd) if module.cwd else None, env=env,
@@ -139,7 +140,7 @@ class Launcher:
         self.running[module.name] = running
         self._tell_reaper(str(process.pid))
         # What we started, by id, for whoever has to check or clean up after us.
-        (self.run_dir / "processes.json").write_text(json.dumps(self.pids(), indent=1))
+        write_atomic(self.run_dir / "processes.json", json.dumps(self.pids(), indent=1))
         threading.Thread(target=self._watch, args=(running,), name=f"watch-{module.name}", daemon=True).start()
 
     def _wait_ready(self, module: Module) -> None:

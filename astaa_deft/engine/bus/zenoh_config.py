@@ -15,6 +15,8 @@ from collections.abc import Iterable
 
 import zenoh
 
+from astaa_deft.io.output_place import write_atomic
+
 LOOPBACK = "127.0.0.1"
 
 
@@ -75,7 +77,7 @@ def to_zenoh(cfg: dict[str, Any], base_file: Path | None = None) -> zenoh.Config
 
 def write_config_file(cfg: dict[str, Any], path: Path) -> Path:
     """Write a config as JSON (valid JSON5) for a module to load."""
-    path.write_text(json.dumps(cfg, indent=2) + "\n")
+    write_atomic(path, json.dumps(cfg, indent=2) + "\n")  # a new file, never through a link
     return path
 
 

@@ -60,6 +60,10 @@ class Monitor:
 
     wants_ticks: ClassVar[bool] = False  # on_tick is only called on monitors that say so
     wants_log_lines: ClassVar[bool] = False  # on_log_line likewise
+    # A message on its channels whose payload does not decode (passed as None): True when this monitor judges
+    # it anyway (a violation, or only its arrival matters); False when it cannot read it — the message is then
+    # unjudged, and the MonitorSet withholds a Pass (the run was not fully observed).
+    judges_undecodable: ClassVar[bool] = False
 
     def __init__(self, invariant: Invariant, context: MonitorContext):
         self.invariant = invariant

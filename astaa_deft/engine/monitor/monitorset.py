@@ -15,6 +15,13 @@ times therefore do not change verdicts.
 Calls may come from several threads (bus callbacks, the tick timer): one
 lock serialises them. A monitor that raises (a bug) is switched off with a
 warning instead of ending the run.
+
+What a monitor could not judge is counted, never skipped in silence: a
+message whose payload does not decode, on a channel of a monitor that
+cannot read it (``Monitor.judges_undecodable`` False: collision, temporal,
+process counters), and every message after a monitor was switched off.
+``unjudged()`` says so; a run with any is not fully observed, so its Pass
+is withheld (``check`` exits 3, ``proxy`` says "verdict withheld").
 """
 
 from __future__ import annotations
@@ -48,6 +55,8 @@ class MonitorSet:
         self.exits: list[ProcessExit] = []  # for the run verdict
         self.warnings: list[str] = []
         self.messages = 0
+        self.undecodable: dict[str, int] = {}  # invariant → messages on its channels it could not read
+        self.switched_off: list[str] = []  # invariants whose monitor raised and was switched off
         self._lock = threading.Lock()
         self._finished = False
 
@@ -63,6 +72,11 @@ class MonitorSet:
             return []
         with self._lock:
             self.messages += 1
+            if value is None:
+                for monitor in monitors:
+                    if not monitor.judges_undecodable:
+                        name = monitor.invariant.name
+                        self.undecodable[name] = self.undecodable.get(name, 0) + 1
             return self._collect(monitors, lambda m: m.on_message(channel, time_ns, value, seq))
 
     def on_process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int,
@@ -108,6 +122,15 @@ class MonitorSet:
         with self._lock:
             return run_verdict(self.violations, self.exits, [m.name for m in self.spec.modules], bus_lost=bus_lost)
 
+    def unjudged(self) -> str:
+        """Why the monitors did not judge the whole run ("" when they did): messages they could not read,
+        monitors switched off."""
+        with self._lock:
+            parts = [f"'{name}' could not read {n} message{'s' if n != 1 else ''} (the payload does not decode)"
+                     for name, n in sorted(self.undecodable.items())]
+            parts += [f"'{name}' failed and was switched off" for name in self.switched_off]
+        return "; ".join(parts)
+
     def stats(self) -> dict[str, dict[str, int]]:
         """Per invariant: how many messages/samples were judged and how many broke it."""
         return {m.invariant.name: {"evaluations": m.evaluations, "violating": m.violating} for m in self.monitors}
@@ -134,6 +157,7 @@ class MonitorSet:
         return found
 
     def _switch_off(self, broken: list[Monitor]) -> None:
+        self.switched_off.extend(m.invariant.name for m in broken)
         self.monitors = [m for m in self.monitors if m not in broken]
         self._tickers = [m for m in self._tickers if m not in broken]
         for channel, monitors in list(self._routes.items()):

@@ -46,6 +46,7 @@ class CheckResult:
     online_verdict: RunVerdict | None = None  # the verdict the proxy logged during the run, if any
     online_violations: list[rec.Violation] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    unjudged: str = ""  # why the monitors did not judge every message ("": they did): a Pass is then withheld
 
     @property
     def passed(self) -> bool:
@@ -99,7 +100,7 @@ def check_log(log: LogContents, spec: Spec) -> CheckResult:
         start_ns=start_ns, end_ns=end_ns, messages=monitors.messages, stats=monitors.stats(), seconds=seconds,
         online_verdict=online[-1] if online else None,
         online_violations=[e for e in events if isinstance(e, rec.Violation)],
-        warnings=list(log.warnings) + monitors.warnings,
+        warnings=list(log.warnings) + monitors.warnings, unjudged=monitors.unjudged(),
     )
 
 

@@ -22,6 +22,7 @@ from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus.processes import ChildProcess, python_module, stop_process, tail
 from astaa_deft.engine.session.parts import EventLog, RunPart
 from astaa_deft.io.inputfile import SPEC, read_input
+from astaa_deft.io.output_place import open_new
 from astaa_deft.io.log import records as rec
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.sut import Spec
@@ -61,7 +62,7 @@ class HelperProcess:
         if how.warm is not None:
             proc = how.warm
         else:
-            with open(log_path, "wb") as err:
+            with open_new(log_path, "--run-dir") as err:
                 proc = process_launch.start(how.args, stdout=subprocess.PIPE, stderr=err, text=True,
                                             stdin=subprocess.DEVNULL if how.stdin_text is None else subprocess.PIPE)
         if how.stdin_text is not None:

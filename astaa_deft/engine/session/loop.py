@@ -75,13 +75,16 @@ def run_session(spec: Spec, options: RunOptions, *,
             run.add_finding(finding)
         run.end(reason, by_spec.time_ns if by_spec is not None else None)  # dated when it happened
     verdict = run.judge.verdict if run.judge is not None else None
+    monitor_set = run.judge.monitor_set if run.judge is not None else None
+    # messages the monitors could not read, a monitor switched off: not fully observed, no Pass
+    unjudged = monitor_set.unjudged() if monitor_set is not None and verdict is not None else ""
     recorder = run.recorder
     return RunResult(
         end_reason=reason, seconds=seconds, verdict=verdict, violations=tuple(run.violations),
         exits=tuple(run.exits), sent=sent, recorded=dict(recorder.recorded) if recorder is not None else {},
         mutations=run.mutations, log=options.record,
         complete=options.record is None or (recorder is not None and recorder.finished),
-        observed=verdict is not None and not run.lost,
+        observed=verdict is not None and not run.lost, unjudged=unjudged,
         policies=tuple(run.transport.policies) if run.transport is not None else ())
 
 

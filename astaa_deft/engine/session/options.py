@@ -57,6 +57,7 @@ class RunResult:
     observed: bool  # the monitors saw the run through to its end
     policies: tuple[PolicyApplicationsRecord, ...] = ()  # what each policy of the test case did (with a reason
     # for each that touched nothing)
+    unjudged: str = ""  # why the monitors did not judge every message ("": they did); a Pass is then withheld
 
     @property
     def crashes(self) -> tuple[ProcessExit, ...]:
@@ -64,4 +65,5 @@ class RunResult:
 
     @property
     def passed(self) -> bool:
-        return (self.verdict is not None and self.verdict.klass == Verdict.PASS and self.complete and self.observed)
+        return (self.verdict is not None and self.verdict.klass == Verdict.PASS and self.complete and self.observed
+                and not self.unjudged)

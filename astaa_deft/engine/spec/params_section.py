@@ -6,12 +6,14 @@ the first choice). Problems are reported on the reader's source.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 from astaa_deft.engine.spec.reader import FIELD_NAME_RE, SpecReader, scalar_text
 from astaa_deft.io.yamlsource import Node
 
 BUILTIN_PLACEHOLDERS = ("python", "zenoh_config", "module", "run_dir", "spec_dir")
+MAX_CHOICES = 1000  # a param's choices: a campaign's grid runs every one (engine/spec/params.py: MAX_GRID)
 
 
 @dataclass(frozen=True)
@@ -56,12 +58,16 @@ def _param_with_choices(reader: SpecReader, key: str, node: Node) -> tuple[str, 
     if not reader.keys(node, ("default", "choices"), ("choices",), f"param '{key}'") or "choices" not in node.value:
         return None
     listed = node.value["choices"]
+    if listed.is_list and len(listed.value) > MAX_CHOICES:
+        reader.src.at(listed, f"param '{key}' lists {len(listed.value):,} choices (at most {MAX_CHOICES:,})",
+                      "list fewer values: a campaign runs every choice (docs/spec.md, params)")
+        return None
     if not listed.is_list or not listed.value or any(c.is_map or c.is_list or c.value is None
                                                      for c in listed.value):
         reader.src.at(listed, f"param '{key}': 'choices' must be a non-empty list of values", f"e.g. {example}")
         return None
     choices = tuple(_param_text(c) for c in listed.value)
-    repeated = sorted({c for c in choices if choices.count(c) > 1})
+    repeated = sorted(c for c, n in Counter(choices).items() if n > 1)  # linear: 100,000 choices in no time
     if repeated:
         reader.src.at(listed, f"param '{key}': choice '{repeated[0]}' is listed twice", "list each value once")
         return None

@@ -19,6 +19,7 @@ from astaa_deft.io.ros2.types import shared_types
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records
 from astaa_deft.io.log.mcap_writer import McapWriter
+from astaa_deft.io.output_place import open_new
 
 DEFAULT_CHUNK_SIZE = 64 * 1024
 
@@ -27,7 +28,8 @@ class LogWriter:
     def __init__(self, path: Path, spec: Spec | None, chunk_size: int = DEFAULT_CHUNK_SIZE,
                  compression: str = "zstd"):
         self.path = Path(path)
-        self._stream: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - lives as long as the writer (finish)
+        # a new file, never through a link (io/output_place.py); lives as long as the writer (finish)
+        self._stream: BinaryIO = open_new(self.path)
         self._writer = McapWriter(
             self._stream,
             chunk_size=chunk_size,

@@ -23,7 +23,7 @@ from astaa_deft.model.records import Verdict
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.model.sut import Spec
-from astaa_deft.engine.spec.params import check_param_values, spread_choices
+from astaa_deft.engine.spec.params import check_grid, check_param_values, spread_choices
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.calibration import (
@@ -178,6 +178,7 @@ def param_grid(params: dict[str, list[str]], spec: Spec | None = None) -> list[d
     if spec is not None:
         check_param_values(spec, params, "--params")
         params = spread_choices(spec, params)
+    check_grid(params, "--params")
     keys = sorted(params)
     return [dict(zip(keys, values, strict=False)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
 

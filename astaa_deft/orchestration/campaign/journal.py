@@ -17,12 +17,14 @@ import sqlite3
 import time
 from pathlib import Path
 
-from astaa_deft.io.output_place import OutputError
+from astaa_deft.io.output_place import OutputError, link_refusal
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.json import JsonObject
 from astaa_deft.orchestration.campaign.model import (
     BASELINE, BASELINE_FINDING, BUG, CONTROL, RERUN, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus,
     FailureKey, PlannedCase,
+)
+from astaa_deft.orchestration.campaign.journal_rows import (
+    blame_row, bucket_row, case_row, check_columns, meta_of, minimisation_row, module_tests_row, note_row,
 )
 from astaa_deft.orchestration.campaign.rows import (
     BlameRow, Bucket, CampaignMeta, CaseRow, Minimisation, MinimisationRow, ModuleTestsRow, NewBucket, NoteRow,
@@ -82,11 +84,15 @@ class Journal:
 
     def __init__(self, directory: Path) -> None:
         self.path = directory / FILE_NAME
+        for own in (self.path, self.path.with_name(FILE_NAME + "-wal"), self.path.with_name(FILE_NAME + "-shm")):
+            if own.is_symlink():  # SQLite would write where it points: never through a link
+                raise link_refusal(own, "-o")
         try:
             directory.mkdir(parents=True, exist_ok=True)
             self.db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")
+            check_columns(self.db, str(self.path), SCHEMA, ADDED_COLUMNS)  # damaged: InputError, not OutputError
             self.db.executescript(SCHEMA)
             self._add_columns()
         except (sqlite3.OperationalError, OSError) as exc:  # read-only, full, over the size limit
@@ -124,8 +130,7 @@ class Journal:
             self._write("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, json.dumps(value)))
 
     def meta(self) -> CampaignMeta:
-        stored: JsonObject = {r["key"]: json.loads(r["value"]) for r in self.db.execute("SELECT key, value FROM meta")}
-        return CampaignMeta.from_json(stored)
+        return meta_of(str(self.path), self.db.execute("SELECT key, value FROM meta"))
 
     # -- cases --------------------------------------------------------------
     def plan(self, case: PlannedCase) -> None:
@@ -169,16 +174,16 @@ class Journal:
     def pending(self, kind: CaseKind | None = None) -> list[PlannedCase]:
         """The planned cases not started yet (of ``kind``), in order."""
         sql = "SELECT * FROM cases WHERE status='planned'" + (" AND kind=?" if kind else "") + " ORDER BY number"
-        return [_case(r).planned() for r in self.db.execute(sql, (kind,) if kind else ())]
+        return [case_row(str(self.path), r).planned() for r in self.db.execute(sql, (kind,) if kind else ())]
 
     def cases(self, kind: CaseKind | None = None) -> list[CaseRow]:
         """Every case (of ``kind``), in order."""
         sql = "SELECT * FROM cases" + (" WHERE kind=?" if kind else "") + " ORDER BY number"
-        return [_case(r) for r in self.db.execute(sql, (kind,) if kind else ())]
+        return [case_row(str(self.path), r) for r in self.db.execute(sql, (kind,) if kind else ())]
 
     def case(self, case_id: str) -> CaseRow | None:
         row = self.db.execute("SELECT * FROM cases WHERE case_id=?", (case_id,)).fetchone()
-        return _case(row) if row is not None else None
+        return case_row(str(self.path), row) if row is not None else None
 
     def planned(self, case_id: str) -> CaseRow:
         """A case the campaign planned itself (a KeyError if the journal lost it: a bug, not bad input)."""
@@ -244,14 +249,7 @@ class Journal:
         return [b for b in out if include_merged or b.merged_into is None]
 
     def _bucket(self, row: sqlite3.Row) -> Bucket:
-        fields = dict(row)
-        try:
-            kind = BucketKind(fields["kind"])
-        except ValueError:
-            raise InputError(Problem(str(self.path), None, None,
-                                     f"bucket {fields['bucket']} has an unknown kind '{fields['kind']}'",
-                                     "open this journal with the astaa-deft version that wrote it")) from None
-        return Bucket(**{**fields, "without_mutation": bool(fields["without_mutation"]), "kind": kind})
+        return bucket_row(str(self.path), row)  # schema-checked: InputError naming the field
 
     def rate(self, bucket: Bucket) -> tuple[int, int]:
         """(failures, runs) behind a bucket's rate: its re-runs, or the baseline runs for a clean-run failure."""
@@ -284,7 +282,8 @@ class Journal:
 
     def minimisations(self) -> dict[str, MinimisationRow]:
         """Bucket name → its minimisation (running or over)."""
-        return {r["bucket"]: MinimisationRow(**dict(r)) for r in self.db.execute("SELECT * FROM minimisations")}
+        return {r["bucket"]: minimisation_row(str(self.path), r)
+                for r in self.db.execute("SELECT * FROM minimisations")}
 
     # -- notes: what the campaign decided about itself (runs at once, back-offs), with why -------------
     def note(self, topic: str, text: str) -> None:
@@ -292,7 +291,7 @@ class Journal:
 
     def notes(self, topic: str | None = None) -> list[NoteRow]:
         sql = "SELECT * FROM notes" + (" WHERE topic=?" if topic else "") + " ORDER BY time"
-        return [NoteRow(**dict(r)) for r in self.db.execute(sql, (topic,) if topic else ())]
+        return [note_row(str(self.path), r) for r in self.db.execute(sql, (topic,) if topic else ())]
 
     # -- blame --------------------------------------------------------------
     def blamed(self, row: BlameRow) -> None:
@@ -303,7 +302,8 @@ class Journal:
 
     def blames(self) -> dict[str, BlameRow]:
         """Bucket name → its blame."""
-        return {r["bucket"]: BlameRow(**dict(r)) for r in self.db.execute("SELECT * FROM blames")}
+        return {row.bucket: row for row in (blame_row(str(self.path), r)
+                                            for r in self.db.execute("SELECT * FROM blames"))}
 
     # -- module tests -------------------------------------------------------
     def module_tests_checked(self, bucket: str, tests_dir: str, fails_on_defect: bool | None, detail: str) -> None:
@@ -313,17 +313,7 @@ class Journal:
 
     def module_tests(self) -> dict[str, ModuleTestsRow]:
         """Bucket name → whether its module tests fail on its defect."""
-        return {r["bucket"]: ModuleTestsRow(r["bucket"], r["tests_dir"],
-                                            None if r["fails_on_defect"] is None else bool(r["fails_on_defect"]),
-                                            r["detail"])
-                for r in self.db.execute("SELECT * FROM module_tests")}
-
-
-def _case(row: sqlite3.Row) -> CaseRow:
-    fields = dict(row)
-    outcome = fields.pop("outcome")
-    return CaseRow(**{**fields, "kind": CaseKind(fields["kind"]), "status": CaseStatus(fields["status"]),
-                      "params": json.loads(fields["params"]), "outcome_json": outcome})
+        return {r["bucket"]: module_tests_row(str(self.path), r) for r in self.db.execute("SELECT * FROM module_tests")}
 
 
 def open_existing(directory: Path) -> Journal:

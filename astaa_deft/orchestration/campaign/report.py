@@ -20,6 +20,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -41,6 +42,7 @@ if TYPE_CHECKING:  # matplotlib is imported when the plots are drawn, not with t
     from matplotlib.figure import Figure
 
 REPORT_NAME = "report.html"
+PLOTTED_MOST = 1e12  # a closest approach beyond this is off any plot's scale (left out)
 
 CSS = """
 body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1150px;padding:0 1em;color:#222}
@@ -399,7 +401,8 @@ def _plots(journal: Journal, done: list[CaseRow], buckets: list[Bucket]) -> list
 
     classes: dict[str, int] = {}
     for r in done:
-        classes[r.verdict or "?"] = classes.get(r.verdict or "?", 0) + 1
+        label = _label(r.verdict or "?")
+        classes[label] = classes.get(label, 0) + 1
     fig, ax = plt.subplots(figsize=(5, 3.2))
     ax.bar(list(classes), list(classes.values()), color=[VERDICT_COLOURS.get(c, "#a00") for c in classes])
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
@@ -412,7 +415,9 @@ def _plots(journal: Journal, done: list[CaseRow], buckets: list[Bucket]) -> list
         if outcome is None:
             continue
         for inv, margin in outcome.margins.items():
-            series = closest.setdefault((r.strategy, inv), [])
+            if not math.isfinite(margin) or abs(margin) > PLOTTED_MOST:  # off any useful scale
+                continue
+            series = closest.setdefault((_label(r.strategy), _label(inv)), [])
             best = min(margin, series[-1][1]) if series else margin
             series.append((n, best))
     fig, ax = plt.subplots(figsize=(5, 3.2))
@@ -433,6 +438,11 @@ def _plots(journal: Journal, done: list[CaseRow], buckets: list[Bucket]) -> list
     ax.set_title("Time per case")
     out.append(("Time per case", _png(fig, plt)))
     return out
+
+
+def _label(text: str) -> str:
+    """A plot's label, short: a journal cell may hold anything, and laying out a long label takes forever."""
+    return text if len(text) <= 40 else text[:39] + "…"
 
 
 def _png(fig: Figure, plt: ModuleType) -> str:

@@ -94,6 +94,9 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                            log_path=str(log_path), reason=reason,
                            error="no verdict" if result.verdict is None else "the log was not finished",
                            cpu=cost.cpu, wall=cost.wall)
+    if result.unjudged and result.verdict.klass == Verdict.PASS:  # messages no monitor could read: no Pass
+        return CaseOutcome("error", "?", "not every message was judged", seconds=result.seconds,
+                           log_path=str(log_path), reason=reason, error=result.unjudged, cpu=cost.cpu, wall=cost.wall)
     timing = watches.timing
     return CaseOutcome("done", result.verdict.klass, result.verdict.summary, watches.findings(result),
                        result.seconds, str(log_path), reason, result.mutations,

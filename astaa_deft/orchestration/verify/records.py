@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from astaa_deft.io.output_place import OutputError
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.journal_rows import VERIFICATION_COLUMNS, checked_columns
 from astaa_deft.orchestration.verify.model import BucketCheck, VerifyStatus
 
 TABLE = """
@@ -96,12 +97,15 @@ def verifications(journal: Journal) -> list[VerificationRow]:
     if have is None:
         return []
     out = []
-    for r in journal.db.execute("SELECT * FROM verifications ORDER BY at, id"):
+    file = str(journal.path)
+    for row in journal.db.execute("SELECT * FROM verifications ORDER BY at, id"):
+        r = checked_columns(file, row, "verifications", "bucket", VERIFICATION_COLUMNS)
         try:
             status = VerifyStatus(r["status"])
         except ValueError:
-            raise InputError(Problem(str(journal.path), None, None,
-                                     f"verification of {r['bucket']} has an unknown status '{r['status']}'",
+            raise InputError(Problem(file, None, None,
+                                     f"verification of {str(r['bucket'])[:60]} has an unknown status "
+                                     f"'{str(r['status'])[:60]}'",
                                      "open this journal with the astaa-deft version that wrote it")) from None
         out.append(VerificationRow(r["bucket"], r["revision"], status, r["failing"], r["runs"], r["twin_failures"],
                                    r["twins"], None if r["module_tests"] is None else bool(r["module_tests"]),

@@ -162,6 +162,12 @@ class Participant(ActionConfig):
     # -- XML ------------------------------------------------------------
     @classmethod
     def from_xml(cls, element: etree._Element, checker: ActionChecker) -> Participant:
+        for node in (element, *element.iterfind("at")):  # a decimal of 400 digits is a float infinity: refused
+            for attr in ("t", "x", "y", "heading", "length", "width"):
+                text = node.get(attr)
+                if text is not None and not math.isfinite(float(text)):
+                    checker.report(node, f"{attr}={text[:40]}{'…' if len(text) > 40 else ''} is not a finite number",
+                                   f"give {attr} as a finite decimal (its magnitude below 1e308)", attribute=attr)
         path = tuple(Waypoint(float(required(at, "t")), float(required(at, "x")), float(required(at, "y")))
                      for at in element.iterfind("at"))
         start = float(element.get("t", "0"))

@@ -112,6 +112,8 @@ def _value_check(inv: BoundInvariant) -> Callable[[Any], str | None]:
 
 
 class BoundMonitor(Monitor):
+    judges_undecodable: ClassVar[bool] = True  # an undecodable payload breaks it
+
     def __init__(self, invariant: BoundInvariant, context: MonitorContext):
         super().__init__(invariant, context)
         self.inv = invariant

@@ -87,6 +87,7 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> DeadlineInvarian
 
 
 class DeadlineMonitor(Monitor):
+    judges_undecodable: ClassVar[bool] = True  # its arrival is all it reads
     wants_ticks = True
 
     def __init__(self, invariant: DeadlineInvariant, context: MonitorContext):

@@ -44,6 +44,8 @@ def parse(reader: InvariantReader, node: Node, common: dict) -> ExpressionInvari
 
 
 class ExpressionMonitor(Monitor):
+    judges_undecodable: ClassVar[bool] = True  # an undecodable payload breaks it
+
     def __init__(self, invariant: ExpressionInvariant, context: MonitorContext):
         super().__init__(invariant, context)
         self.inv = invariant
