@@ -20,11 +20,13 @@ import pkgutil
 from collections.abc import Callable, Iterator
 from typing import Generic, TypeVar
 
+from astaa_deft.model.errors import AstaaDeftError
+
 T = TypeVar("T")
 C = TypeVar("C", bound=type)
 
 
-class DuplicateExtension(RuntimeError):
+class DuplicateExtension(AstaaDeftError, RuntimeError):
     """Two extensions of one kind claim the same name (a programming error, found at import)."""
 
 
