@@ -153,7 +153,7 @@ def test_a_participant_at_epoch_seconds_is_accepted_and_applied():
 
 
 def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
-    from astaa_deft.orchestration.campaign.strategies.decictor import area_around, scene_of, scene_xml
+    from astaa_deft.orchestration.campaign.strategies.decictor import area_around, scene_of, scene_testcase
     from astaa_deft.analysis.decictor.feasible import ForbiddenRegion, check_placement
     from astaa_deft.analysis.decictor.oracle import LaneGrid, RunObservation, straight_lanes
     from astaa_deft.analysis.decictor.paths import EgoPath, EgoState
@@ -167,9 +167,9 @@ def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
     participants = 0
     for number in range(1, 9):
         scene = search.propose(number)
-        xml = scene_xml(scene, f"tc-{number:06d}", number, "prediction")
-        parse_testcase(xml.encode(), "tc", SPEC, load_dictionary())  # valid against the XSD, spec and mapping
-        assert scene_of(xml).participants == scene.participants
+        testcase = scene_testcase(scene, f"tc-{number:06d}", number, "prediction")
+        read = parse_testcase(testcase.to_xml(), "tc", SPEC, load_dictionary())  # valid: XSD, spec and mapping
+        assert scene_of(read).participants == scene.participants
         for participant in scene.participants:
             check_placement(participant, search.region)
             assert WALL <= participant.t <= WALL + 10.0  # on the seed's clock

@@ -64,7 +64,7 @@ FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure
 Progress = Callable[[str], None]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MinimiseOptions:
     spec_path: Path | None = None  # None: the spec stored in the log
     invariant: str | None = None  # the failure to keep (None: the run's first violation)

@@ -22,6 +22,7 @@ from typing import TypeVar
 from astaa_deft.model.records import Verdict
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.params import check_param_values, spread_choices
 from astaa_deft.engine.spec.loader import load_spec
@@ -33,7 +34,7 @@ from astaa_deft.orchestration.campaign.calibration import (
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
 from astaa_deft.orchestration.campaign.blame import BlameUnavailable, blame_logs
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
+from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool, read_testcase
 from astaa_deft.orchestration.campaign.rows import BlameRow, CampaignMeta, CaseRow, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
@@ -69,7 +70,7 @@ CORES_PER_MODULE = 0.08
 HELPER_CORES = 0.15  # the tool's own session, proxy and recorder per run
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class CampaignConfig:
     spec_path: Path
     out: Path
@@ -220,6 +221,7 @@ class Campaign:
         self._running_cases: set[str] = set()
         self._cancel = threading.Event()  # set: minimisations in flight stop (the campaign was interrupted)
         self._fixed: set[str] = set()  # buckets `astaa-deft verify` found fixed: skipped unless they reappear
+        self._testcases: dict[str, TestCase | None] = {}  # case id → its test case (the journal keeps the text)
 
     # -- the whole campaign --------------------------------------------------
     def run(self) -> CampaignResult:
@@ -336,11 +338,11 @@ class Campaign:
         """Baseline runs up to ``count``: run n has the grid's value (n-1) mod its size (every value in turn)."""
         for n in range(1, count + 1):
             params = {**self.grid[(n - 1) % len(self.grid)]}
-            self.journal.plan(PlannedCase(f"b-{n:04d}", BASELINE, n, self.config.seed, params, None, "baseline"))
+            self._plan(PlannedCase(f"b-{n:04d}", BASELINE, n, self.config.seed, params, None, "baseline"))
 
     def _run_pending_baseline(self, pool: CasePool, at_once: int | None = None, last: int | None = None) -> None:
         """Run the planned baseline runs (numbered up to ``last``), ``at_once`` (default: the campaign's) at a time."""
-        queue = [c for c in self.journal.pending(BASELINE) if last is None or c.number <= last]
+        queue = [self._planned(c) for c in self.journal.pending(BASELINE) if last is None or c.number <= last]
         limit = at_once or self.workers
         while queue or pool.pending():
             while queue and pool.pending() < limit:
@@ -440,15 +442,15 @@ class Campaign:
     def _main(self, pool: CasePool) -> StopReason:
         rows = self.journal.cases(MUTATED)
         if rows:  # guided: its schedule goes on where it was
-            self.strategy.resume([row.planned() for row in rows])
+            self.strategy.resume([self._planned(row) for row in rows])
         for row in rows:  # a resumed guided search learns its corpus again
             outcome = self.journal.outcome(row)
             if outcome is not None:
-                self.strategy.observe(row.case_id, row.testcase_xml, outcome)
+                self.strategy.observe(row.case_id, self._testcase(row), outcome)
         for bucket in self.journal.buckets():  # resumed between a bucket's last control run and its decision
             if bucket.kind == CONFIRMING and not self.journal.unfinished(bucket.bucket):
                 self._decide(bucket.bucket)
-        queue = self.journal.pending(MUTATED) + self.journal.pending(RERUN) + self.journal.pending(CONTROL)
+        queue = [self._planned(row) for kind in (MUTATED, RERUN, CONTROL) for row in self.journal.pending(kind)]
         number = self.journal.max_number(MUTATED)
         stopped = StopReason.DONE
         while True:
@@ -485,10 +487,26 @@ class Campaign:
     def _plan_mutated(self, number: int) -> PlannedCase:
         proposal = self.strategy.propose(number)
         params = self.grid[(number - 1) % len(self.grid)]
-        case = PlannedCase(f"c-{number:06d}", MUTATED, number, self.config.seed, params, proposal.testcase_xml,
+        case = PlannedCase(f"c-{number:06d}", MUTATED, number, self.config.seed, params, proposal.testcase,
                            self.config.strategy, proposal.parent)
-        self.journal.plan(case)
+        self._plan(case)
         return case
+
+    def _plan(self, case: PlannedCase) -> None:
+        """Journal a planned case; its test case stays at hand as an object (the journal keeps its text)."""
+        self._testcases[case.case_id] = case.testcase
+        self.journal.plan(case)
+
+    def _testcase(self, row: CaseRow) -> TestCase | None:
+        """A planned case's test case: as planned, or (planned before a resume) read back from the journal,
+        checked against the spec and dictionaries."""
+        if row.case_id not in self._testcases:
+            self._testcases[row.case_id] = read_testcase(row.testcase_xml, f"{self.journal.path}: {row.case_id}",
+                                                         self.spec, self.dictionary)
+        return self._testcases[row.case_id]
+
+    def _planned(self, row: CaseRow) -> PlannedCase:
+        return row.planned(self._testcase(row))
 
     def _budget_over(self) -> bool:
         return self.config.budget is not None and time.monotonic() - self.started >= self.config.budget
@@ -555,10 +573,10 @@ class Campaign:
     def _finished(self, case_id: str, outcome: CaseOutcome) -> list[PlannedCase]:
         self._running_cases.discard(case_id)
         row = self.journal.planned(case_id)
-        kind, xml = row.kind, row.testcase_xml
-        outcome = sig.without_self_inflicted(outcome, xml, self.spec)
+        kind, testcase = row.kind, self._testcase(row)
+        outcome = sig.without_self_inflicted(outcome, testcase, self.spec)
         if kind in (MUTATED, RERUN):  # decictor: its oracle turns a run into a finding
-            outcome = self.strategy.judge(case_id, xml, outcome, kind == MUTATED)
+            outcome = self.strategy.judge(case_id, testcase, outcome, kind == MUTATED)
         if kind != BASELINE:  # a known baseline finding counts only where this run makes it worse
             outcome = judged(outcome, self.known)
         new: list[PlannedCase] = []
@@ -574,7 +592,7 @@ class Campaign:
                     bucket = self._bucket(signature, outcome, case_id, BASELINE_FINDING)
                     self._learn_clean_failure(outcome)
             elif kind == MUTATED:
-                signature = sig.signature(outcome, xml)
+                signature = sig.signature(outcome, testcase)
                 existing = self.journal.bucket_by_signature(signature)
                 if existing is not None:
                     bucket = existing.bucket
@@ -589,7 +607,7 @@ class Campaign:
                     if not new:  # --reruns 0: nothing to confirm it with, filed as it is
                         self._decide(bucket)
             elif kind == RERUN:
-                signature = sig.signature(outcome, xml)
+                signature = sig.signature(outcome, testcase)
             elif kind == CONTROL:
                 signature = BucketSignature.clean(key)
                 self._learn_clean_failure(outcome)
@@ -609,7 +627,7 @@ class Campaign:
         if confirms is not None and not self.journal.unfinished(confirms):
             self._decide(confirms)
         if kind == MUTATED:
-            self.strategy.observe(case_id, xml, outcome)
+            self.strategy.observe(case_id, testcase, outcome)
         return new
 
     def _learn_clean_failure(self, outcome: CaseOutcome) -> None:
@@ -653,12 +671,12 @@ class Campaign:
         for k in range(1, max(self.config.reruns, self._controls()) + 1):
             if k <= self.config.reruns:
                 cases.append(PlannedCase(f"r-{bucket}-{k}", RERUN, row.number, row.seed, params,
-                                         row.testcase_xml, row.strategy, parent=bucket))
+                                         self._testcase(row), row.strategy, parent=bucket))
             if k <= self._controls():
                 cases.append(PlannedCase(f"t-{bucket}-{k}", CONTROL, row.number, row.seed, params, None,
                                          row.strategy, parent=bucket))
         for case in cases:
-            self.journal.plan(case)
+            self._plan(case)
         return cases
 
     def _decide(self, name: str) -> None:

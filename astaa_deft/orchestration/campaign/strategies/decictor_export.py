@@ -32,6 +32,7 @@ from astaa_deft.analysis.decictor.search import Scene
 from astaa_deft.engine.intercept.actions.participant import Participant
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.rows import CaseRow, Minimisation
+from astaa_deft.orchestration.campaign.payload import read_testcase
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, scene_of
 
 if TYPE_CHECKING:
@@ -78,7 +79,9 @@ def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spe
             detail = f"{report.accepted} frames; {detail}"
         except InputError as exc:
             status, detail = "error", "; ".join(map(str, exc.problems))
-        scene = scene_of(row.testcase_xml)
+        testcase = read_testcase(row.testcase_xml, f"{journal.path}: {row.case_id}", strategy.spec)
+        assert testcase is not None  # skipped above when the row holds none
+        scene = scene_of(testcase)
         culprit = ", ".join(f"{p.kind} {p.id}" for p in scene.participants)
         journal.minimised(Minimisation(bucket.bucket, status, 1 if status.endswith("(fail)") else 0,
                                        row.testcase_xml, culprit, None, str(tests_dir), time.monotonic() - started,
