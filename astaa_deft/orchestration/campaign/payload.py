@@ -49,12 +49,12 @@ def case_json(case: PlannedCase, text: str | None = None) -> JsonObject:
 def _case_of(body: JsonObject) -> tuple[PlannedCase, str | None]:
     """The case :func:`case_json` wrote, without its test case, and that test case's text (KeyError, ValueError
     or TypeError for another shape: a bug, not input)."""
-    params, text, parent = body["params"], body.get("testcase_xml"), body.get("parent")
+    params, text, parent = body["params"], body["testcase_xml"], body["parent"]
     if not isinstance(params, dict) or not isinstance(text, (str, type(None))):
         raise ValueError(f"a planned case, not {body!r}")
     case = PlannedCase(str(body["case_id"]), CaseKind(body["kind"]), int(_number(body["number"])),
                        int(_number(body["seed"])), {str(k): str(v) for k, v in params.items()}, None,
-                       str(body.get("strategy", "random")), None if parent is None else str(parent))
+                       str(body["strategy"]), None if parent is None else str(parent))
     return case, text
 
 
