@@ -61,8 +61,8 @@ def search_once(mode: str, seed: int, scenarios: int, defects: bool, first_only:
     started = time.perf_counter()
     seed_run = observe_closed_loop(SCENARIO, (), config.participants, defects)
     seed_seconds = time.perf_counter() - started
-    search = Search(mode, seed, seed_run, LaneGrid(LANES), area_around(seed_run, LANES),
-                    ForbiddenRegion(seed_run.ego, config.dt, config.clearance))
+    search = Search(mode, seed, seed_run, LaneGrid(LANES), area=area_around(seed_run, LANES),
+                    region=ForbiddenRegion(seed_run.ego, config.dt, config.clearance))
     mutation = simulation = oracle = 0.0
     first = None
     run = 0

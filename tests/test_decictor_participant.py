@@ -162,8 +162,8 @@ def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
     lanes = straight_lanes(2, 3.5, 300.0)
     seed = RunObservation(EgoPath(tuple(EgoState(WALL + k * 0.1, 10.0 + k * 1.2, 0.0, 0.0, 12.0)
                                         for k in range(101))), True)
-    search = Search("decictor", 1, seed, LaneGrid(lanes), area_around(seed, lanes),
-                    ForbiddenRegion(seed.ego, clearance=1.5))
+    search = Search("decictor", 1, seed, LaneGrid(lanes), area=area_around(seed, lanes),
+                    region=ForbiddenRegion(seed.ego, clearance=1.5))
     participants = 0
     for number in range(1, 9):
         scene = search.propose(number)

@@ -36,8 +36,8 @@ SEED = RunObservation(straight(), True)
 
 
 def search(mode: str, seed: int = 1) -> Search:
-    return Search(mode, seed, SEED, LaneGrid(LANES), area_around(SEED, LANES),
-                  ForbiddenRegion(SEED.ego, clearance=1.5))
+    return Search(mode, seed, SEED, LaneGrid(LANES), area=area_around(SEED, LANES),
+                  region=ForbiddenRegion(SEED.ego, clearance=1.5))
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -69,8 +69,8 @@ def test_selection_keeps_the_best_and_findings_leave_the_pool():
 
 def test_the_seed_must_reach_its_goal():
     with pytest.raises(ValueError, match="seed run must reach its goal"):
-        Search("decictor", 1, RunObservation(straight(), False), LaneGrid(LANES), area_around(SEED, LANES),
-               ForbiddenRegion(SEED.ego))
+        Search("decictor", 1, RunObservation(straight(), False), LaneGrid(LANES), area=area_around(SEED, LANES),
+               region=ForbiddenRegion(SEED.ego))
 
 
 def test_scene_testcase_round_trips_through_a_checked_test_case():

@@ -195,7 +195,7 @@ def verify_campaign(options: VerifyOptions, say: Callable[[str], None] = print) 
         ready_dir(place, temp=True)
         out_dir = options.campaign / VERIFY_DIR / f"{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}"
         with writing(place):
-            checks = verify_targets(campaign, chosen, options, revision, out_dir, say)
+            checks = verify_targets(campaign, chosen, options, revision, out_dir=out_dir, say=say)
         return VerifyReport(revision, checks, skipped, out_dir)
     finally:
         campaign.journal.close()
@@ -218,7 +218,7 @@ def stack_revision(spec: Spec) -> str:
 
 
 def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: VerifyOptions, revision: str,
-                   out_dir: Path, say: Callable[[str], None]) -> list[BucketCheck]:
+                   *, out_dir: Path, say: Callable[[str], None]) -> list[BucketCheck]:
     """Run every target's re-runs and twins (the campaign's pool, its runs at once), then its module tests;
     each check journaled as it is decided."""
     from astaa_deft.orchestration.campaign.executors import LocalPool

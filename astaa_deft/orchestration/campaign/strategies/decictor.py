@@ -91,7 +91,7 @@ class DecictorStrategy(Strategy):
         self.lanes = logged.lanes
         region = ForbiddenRegion(seed_run.ego, self.config.dt, self.config.clearance)
         self.search = Search(self.mode, self.seed, seed_run, LaneGrid(self.lanes),
-                             area_around(seed_run, self.lanes), region)
+                             area=area_around(seed_run, self.lanes), region=region)
         self.seed_case, self.seed_log = case_id, outcome.log_path
 
     def _search(self) -> Search:
@@ -141,7 +141,7 @@ class DecictorStrategy(Strategy):
     def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:
         from astaa_deft.orchestration.campaign.strategies.decictor_export import export_findings
 
-        export_findings(self, journal, out, spec_path, say)
+        export_findings(self, journal, out, spec_path, say=say)
 
 
 @STRATEGIES.register_class

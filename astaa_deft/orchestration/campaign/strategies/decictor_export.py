@@ -52,7 +52,7 @@ def seed_plan_ends(strategy: DecictorStrategy, log_path: Path) -> list[tuple[flo
 
 
 def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spec_path: Path,
-                    say: Callable[[str], None]) -> None:
+                    *, say: Callable[[str], None]) -> None:
     """Each path-consistency bucket of ``journal`` as DeFT module tests under ``out/tests`` (journalled as the
     bucket's minimisation), and ``out/decictor.html``: seed vs mutated paths. Nothing without a seed run."""
     buckets = [b for b in journal.buckets(include_merged=False) if b.invariant == INVARIANT]
