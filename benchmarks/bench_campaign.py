@@ -109,9 +109,9 @@ class UntilAllFound(Campaign):
 def campaign(out: Path, *, cases: int | None, budget: float | None, seed: int, strategy: str = "random",
              cluster: str | None = None, params: dict[str, list[str]] | None = None,
              workers: int | None = None, until_all_found: bool = False, reruns: int = 0) -> Campaigned:
-    config = CampaignConfig(demo_spec_path(), out, cases=cases, budget=budget, seed=seed, strategy=strategy,
-                            cluster=cluster, params=params or {}, horizon=HORIZON, baseline_runs=1, reruns=reruns,
-                            minimise=False, report=False, workers=workers)
+    config = CampaignConfig(spec_path=demo_spec_path(), out=out, cases=cases, budget=budget, seed=seed,
+                            strategy=strategy, cluster=cluster, params=params or {}, horizon=HORIZON,
+                            baseline_runs=1, reruns=reruns, minimise=False, report=False, workers=workers)
     journal = Journal(out)
     started = time.time()
     cpu_before, own_before = _children_cpu(), _own_cpu()

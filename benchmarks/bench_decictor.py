@@ -61,8 +61,8 @@ def search_once(mode: str, seed: int, scenarios: int, defects: bool, first_only:
     started = time.perf_counter()
     seed_run = observe_closed_loop(SCENARIO, (), config.participants, defects)
     seed_seconds = time.perf_counter() - started
-    search = Search(mode, seed, seed_run, LaneGrid(LANES), area_around(seed_run, LANES),
-                    ForbiddenRegion(seed_run.ego, config.dt, config.clearance))
+    search = Search(mode, seed, seed_run, LaneGrid(LANES), area=area_around(seed_run, LANES),
+                    region=ForbiddenRegion(seed_run.ego, config.dt, config.clearance))
     mutation = simulation = oracle = 0.0
     first = None
     run = 0
@@ -89,15 +89,15 @@ def search_once(mode: str, seed: int, scenarios: int, defects: bool, first_only:
 def live_cost(count: int) -> list[float]:
     """Seconds per scenario through the proxy (real processes), one scenario at a time, as fuzz runs them."""
     from astaa_deft.orchestration.campaign.runner import run_case
-    from astaa_deft.orchestration.campaign.strategies.decictor import scene_xml
+    from astaa_deft.orchestration.campaign.strategies.decictor import scene_testcase
     from astaa_deft.analysis.decictor.search import Scene
     from astaa_deft.engine.intercept.dictionary import load_dictionary
     from astaa_deft.engine.intercept.testcase import parse_testcase
 
     spec = load_spec(SPEC)
     cone = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)
-    xml = scene_xml(Scene((cone,), "add"), "tc-000001", 1, "prediction")
-    testcase = parse_testcase(xml.encode(), "tc", spec, load_dictionary())
+    proposed = scene_testcase(Scene((cone,), "add"), "tc-000001", 1, "prediction")
+    testcase = parse_testcase(proposed.to_xml(), "tc", spec, load_dictionary())
     seconds = []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(count):

@@ -13,6 +13,7 @@ from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import CaseOutcome
 from astaa_deft.orchestration.campaign.signature import field_family
+from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 
 SUT = Path(__file__).parent / "sut"
@@ -101,7 +102,7 @@ class Fixed(Strategy):
         self.cases = cases
 
     def propose(self, number: int) -> Proposal:
-        return Proposal(self.cases[number - 1])
+        return Proposal(parse_testcase(self.cases[number - 1].encode()))  # the campaign holds an object
 
     def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
         pass
@@ -113,8 +114,8 @@ def test_a_nan_in_x_and_in_y_are_one_bucket_blamed_on_the_relay_with_the_chain_j
     journal = Journal(out)
     cases = [NAN_ON.format(field="x"), NAN_ON.format(field="y")]
     said: list[str] = []
-    run = Campaign(CampaignConfig(PIPE, out, cases=2, workers=1, baseline_runs=1, reruns=1, minimise=False,
-                                  report=False, params={"seconds": ["2"]}), journal, say=said.append)
+    run = Campaign(CampaignConfig(spec_path=PIPE, out=out, cases=2, workers=1, baseline_runs=1, reruns=1,
+                                  minimise=False, report=False, params={"seconds": ["2"]}), journal, say=said.append)
     run.strategy = Fixed(cases)  # type: ignore[assignment]
     run.run()
     try:
@@ -143,7 +144,7 @@ def test_on_the_demo_the_planner_is_blamed_and_its_replay_confirms_it(tmp_path: 
     out = tmp_path / "c"
     journal = Journal(out)
     said: list[str] = []
-    run = Campaign(CampaignConfig(demo_spec_path(), out, cases=1, workers=1, baseline_runs=1, reruns=1,
+    run = Campaign(CampaignConfig(spec_path=demo_spec_path(), out=out, cases=1, workers=1, baseline_runs=1, reruns=1,
                                   report=False), journal, say=said.append)
     run.strategy = Fixed([inf_limit])  # type: ignore[assignment]
     run.run()

@@ -19,6 +19,7 @@ from dask.distributed import Client, LocalCluster
 
 from astaa_deft.orchestration.campaign.executors import DaskPool
 from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.campaign.payload import case_json
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.orchestration.campaign.strategies.base import Timing
 from astaa_deft.engine.intercept.dictionary import load_dictionary
@@ -51,7 +52,7 @@ def test_cluster_campaign_runs_the_same_cases_as_local_and_brings_logs_back(tmp_
     random = STRATEGIES["random"](load_spec(ECHO), load_dictionary(), 11, 2.0)
     (timing,), = db.execute("SELECT value FROM meta WHERE key='timing'").fetchall()
     random.calibrate(Timing(**json.loads(timing)))  # as measured in the campaign's baseline
-    assert [c[1] for c in cases] == [random.propose(n).testcase_xml for n in (1, 2, 3)]
+    assert [c[1] for c in cases] == [random.propose(n).testcase.to_xml().decode() for n in (1, 2, 3)]
     for _number, _xml, status, log_path in cases:
         assert status == "done" and Path(log_path).is_file() and Path(log_path).is_relative_to(out.resolve())
 
@@ -63,7 +64,7 @@ def test_a_killed_workers_cases_are_requeued(tmp_path: Path):
         pool = DaskPool(cluster.scheduler_address, 2)
         for n in range(1, 5):
             case = PlannedCase(f"b-{n}", BASELINE, n, 0, {"count": "20"}, None)
-            pool.submit(case.case_id, {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / str(n)),
+            pool.submit(case.case_id, {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / str(n)),
                                        "horizon": 4.0, "dictionaries": []})
         time.sleep(3.0)  # both workers are inside a case now
         with Client(cluster.scheduler_address) as client:

@@ -20,6 +20,7 @@ from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
 from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.engine.spec.loader import load_spec
 
@@ -51,7 +52,7 @@ class Fixed(Strategy):
         self.cases = cases
 
     def propose(self, number: int) -> Proposal:
-        return Proposal(xml_of(self.cases[number - 1]))
+        return Proposal(parse_testcase(xml_of(self.cases[number - 1]).encode()))  # the campaign holds an object
 
     def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
         pass
@@ -60,7 +61,7 @@ class Fixed(Strategy):
 def campaign(out: Path, spec: Path, cases: list[str], *, workers: int | None = 1, minimise: bool = False,
              **config) -> Journal:
     journal = Journal(out)
-    run = Campaign(CampaignConfig(spec, out, cases=len(cases), workers=workers, horizon=4.0, settle=2.0,
+    run = Campaign(CampaignConfig(spec_path=spec, out=out, cases=len(cases), workers=workers, horizon=4.0, settle=2.0,
                                   minimise=minimise, report=False, **config), journal, say=lambda text: None)
     run.strategy = Fixed(cases)  # type: ignore[assignment]
     run.run()

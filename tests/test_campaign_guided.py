@@ -5,7 +5,7 @@ with its schedule where it was."""
 
 from __future__ import annotations
 
-import re
+from dataclasses import replace
 
 import pytest
 
@@ -13,6 +13,7 @@ from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, Planne
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.engine.spec.loader import load_spec
 
 BASELINE = CaseOutcome("done", "Pass", "", margins={"planned_speed": 2.0, "finite_command": 0.5})
@@ -23,9 +24,9 @@ def demo():
     return load_spec(demo_spec_path()), load_dictionary(())
 
 
-def _body(xml: str) -> str:
+def _body(testcase: TestCase) -> TestCase:
     """A test case without its id (guided numbers its cases itself)."""
-    return re.sub(r'id="tc-\d+"', 'id="-"', xml)
+    return replace(testcase, id="-")
 
 
 def test_without_evidence_guided_proposes_the_random_cases_in_order(demo):
@@ -36,9 +37,9 @@ def test_without_evidence_guided_proposes_the_random_cases_in_order(demo):
     for n in range(1, 31):
         proposal = guided.propose(n)
         assert proposal.parent is None
-        assert _body(proposal.testcase_xml) == _body(random.propose(n).testcase_xml)
+        assert _body(proposal.testcase) == _body(random.propose(n).testcase)
         # Jitter of a clean stack, a few % closer than the baseline: no evidence of anything.
-        guided.observe(f"c-{n}", proposal.testcase_xml,
+        guided.observe(f"c-{n}", proposal.testcase,
                        CaseOutcome("done", "Pass", "", margins={"planned_speed": 1.9, "finite_command": 0.48}))
     assert guided.corpus == []
 
@@ -48,7 +49,7 @@ def test_a_case_clearly_closer_than_the_baseline_is_steered_by(demo):
     guided = STRATEGIES["guided"](spec, dictionary, 5, 20.0)
     guided.observe_baseline("b-0001", BASELINE)
     first = guided.propose(1)
-    guided.observe("c-1", first.testcase_xml, CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.8}))
+    guided.observe("c-1", first.testcase, CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.8}))
     assert [case for case, _ in guided.corpus] == ["c-1"]
     parents = [guided.propose(n).parent for n in range(2, 22)]
     assert "c-1" in parents and None in parents  # half steered, half the schedule
@@ -61,9 +62,9 @@ def test_a_resumed_guided_search_goes_on_with_its_schedule(demo):
     planned = []
     for n in range(1, 11):
         proposal = first.propose(n)
-        planned.append((f"c-{n:06d}", proposal.testcase_xml, proposal.parent))
+        planned.append((f"c-{n:06d}", proposal.testcase, proposal.parent))
         if n == 3:  # evidence: the corpus holds c-3 from here on
-            first.observe("c-000003", proposal.testcase_xml,
+            first.observe("c-000003", proposal.testcase,
                           CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.5}))
     resumed = STRATEGIES["guided"](spec, dictionary, 5, 20.0)
     resumed.observe_baseline("b-0001", BASELINE)
@@ -72,7 +73,7 @@ def test_a_resumed_guided_search_goes_on_with_its_schedule(demo):
     resumed.observe("c-000003", planned[2][1], CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.5}))
     already = {_body(xml) for _, xml, parent in planned if parent is None}
     fresh = [p for p in (resumed.propose(n) for n in range(11, 31)) if p.parent is None]
-    assert fresh and not any(_body(p.testcase_xml) in already for p in fresh)
+    assert fresh and not any(_body(p.testcase) in already for p in fresh)
     continuing = STRATEGIES["random"](spec, dictionary, 5, 20.0)
     next_index = sum(1 for _, _, parent in planned if parent is None) + 1
-    assert _body(fresh[0].testcase_xml) == _body(continuing.propose(next_index).testcase_xml)
+    assert _body(fresh[0].testcase) == _body(continuing.propose(next_index).testcase)

@@ -42,14 +42,14 @@ def test_clean_runs_are_bounded_by_the_specs_run_section_and_cases_by_the_clean_
 def test_a_resumed_campaign_derives_its_horizon_again_and_keeps_a_given_one():
     from astaa_deft.orchestration.campaign.rows import CampaignMeta
 
-    config = CampaignConfig(SCENARIO, Path("c"))
+    config = CampaignConfig(spec_path=SCENARIO, out=Path("c"))
     assert config.resuming(CampaignMeta(horizon=14.5, horizon_derived=True)).horizon is None
     assert config.resuming(CampaignMeta(horizon=8.0)).horizon == 8.0  # --horizon 8 then (or an older journal)
 
 
 def fuzz(out: Path, done_after: int, *extra: str) -> Journal:
     journal = Journal(out)
-    Campaign(CampaignConfig(SCENARIO, out, cases=1, workers=1, baseline_runs=1, reruns=0, minimise=False,
+    Campaign(CampaignConfig(spec_path=SCENARIO, out=out, cases=1, workers=1, baseline_runs=1, reruns=0, minimise=False,
                             report=False, params={"done_after": [str(done_after)]}), journal,
              say=lambda text: None).run()
     return journal

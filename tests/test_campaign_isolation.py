@@ -6,6 +6,7 @@ from pathlib import Path
 
 from astaa_deft.orchestration.campaign.executors import LocalPool
 from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.campaign.payload import case_json
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"
 
@@ -17,7 +18,7 @@ def test_two_concurrent_cases_never_hear_each_other(tmp_path: Path):
     try:
         for name, count in counts.items():
             case = PlannedCase(name, BASELINE, 1, 0, {"count": count, "rate": "100"}, None)
-            pool.submit(name, {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / name),
+            pool.submit(name, {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / name),
                                "horizon": 3.0, "dictionaries": []})
         outcomes = {}
         while pool.pending():

@@ -45,7 +45,7 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
     said: list[str] = []
     journal = Journal(out)
     try:
-        campaign = Campaign(CampaignConfig(demo_spec_path(), out), journal, say=said.append)
+        campaign = Campaign(CampaignConfig(spec_path=demo_spec_path(), out=out), journal, say=said.append)
         assert campaign._planner_caused(_bucket("B001", "planning"))
         assert not campaign._planner_caused(_bucket("B002", "control"))
         tests = campaign._planner_tests(_bucket("B001", "planning"), Path(outcome.log_path))

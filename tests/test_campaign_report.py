@@ -9,20 +9,21 @@ import pytest
 
 from astaa_deft.model.errors import InputError
 
+from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
 from astaa_deft.orchestration.campaign.model import (
     BASELINE, MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.report import write_report
 
-XML = '<testcase id="tc-{n}" seed="{n}"><policy id="p"><channel>routing</channel>' \
+XML = '<testcase id="tc-{n}" seed="{n}"><description/><policy id="p"><channel>routing</channel>' \
       '<set><field path="speed_limit" value="dict:float.nan"/></set></policy></testcase>'
 
 
 def _case(journal: Journal, out: Path, case_id: str, kind: str, n: int, verdict: str, reason: str,
           bucket: str | None = None, finding: Finding | None = None) -> None:
     journal.plan(PlannedCase(case_id, kind, n, 1, {"scenario": "lane_follow"},
-                             None if kind == BASELINE else XML.format(n=n), "random"))
+                             None if kind == BASELINE else parse_testcase(XML.format(n=n).encode()), "random"))
     journal.started(case_id)
     log = out / "cases" / case_id / "run.mcap"
     outcome = CaseOutcome("done", verdict, f"{verdict}: …", [finding] if finding else [], 3.0, str(log), reason,

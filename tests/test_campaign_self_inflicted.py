@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.originals import broken_on_originals
 from astaa_deft.engine.session.check import check_recorded_run
@@ -33,6 +34,11 @@ SPEC = STACK / "spec.yaml"
 def obstacles_policy(field: str, value: str) -> str:
     return (f'<testcase id="t" seed="1"><description>x</description><policy id="p"><channel>obstacles</channel>'
             f'<set><field path="{field}" value="{value}"/></set></policy></testcase>')
+
+
+def case(xml: str) -> TestCase:
+    """The policy as the campaign holds a test case: an object."""
+    return parse_testcase(xml.encode(), "case.xml")
 
 
 BLOWN_UP = obstacles_policy("obstacles[0].length", "60")  # the parked car reaches back over the ego
@@ -72,14 +78,14 @@ def test_a_collision_only_with_a_rewritten_obstacle_is_self_inflicted_whichever_
     spec = load_spec(SPEC)
     outcome = outcome_of(blown)
     assert {"no_collision", "clearance"} <= {f.invariant for f in outcome.findings}
-    judged = sig.without_self_inflicted(outcome, BLOWN_UP, spec)
+    judged = sig.without_self_inflicted(outcome, case(BLOWN_UP), spec)
     assert {f.invariant for f in judged.findings} == {"run_end:goal_not_reached"}  # what the SUT really did
     assert "not counted: clearance, no_collision (broke on the rewritten messages only" in judged.summary
     # Online, the same collision is often reported on the ego's message (the other channel it reads): before,
     # the rule looked at that one channel and counted it.
     on_ego = [Finding("no_collision", "Silent", None, "ego", "ego footprint overlaps obstacle 1")]
     judged = sig.without_self_inflicted(CaseOutcome("done", "Silent", "Silent: no_collision", on_ego,
-                                                    log_path=str(blown)), BLOWN_UP, spec)
+                                                    log_path=str(blown)), case(BLOWN_UP), spec)
     assert not judged.failed and judged.verdict == "Pass"
 
 
@@ -88,7 +94,7 @@ def test_a_collision_that_exists_in_the_producers_originals_counts(logs):
     spec = load_spec(SPEC)
     assert broken_on_originals(hit, spec, {"no_collision", "clearance"}, {"obstacles"}) == {"no_collision",
                                                                                              "clearance"}
-    judged = sig.without_self_inflicted(outcome_of(hit), NARROWER, spec)
+    judged = sig.without_self_inflicted(outcome_of(hit), case(NARROWER), spec)
     assert judged.failed and "no_collision" in {f.invariant for f in judged.findings}
     assert "counted: clearance, no_collision broke on the producers' originals too" in judged.summary
 
@@ -98,5 +104,5 @@ def test_without_a_readable_log_a_finding_on_a_rewritten_channel_does_not_count(
     assert broken_on_originals(tmp_path / "missing.mcap", spec, {"no_collision"}, {"obstacles"}) is None
     lost = CaseOutcome("done", "Silent", "Silent: no_collision",
                        [Finding("no_collision", "Silent", None, "ego", "overlap")], log_path=str(tmp_path / "x.mcap"))
-    judged = sig.without_self_inflicted(lost, NARROWER, spec)
+    judged = sig.without_self_inflicted(lost, case(NARROWER), spec)
     assert not judged.failed and "not judged on the originals" in judged.summary

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -22,7 +24,7 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
-from astaa_deft.engine.intercept.testcase import parse_testcase
+from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.io.output_place import OutputError
 from astaa_deft.engine.spec.loader import load_spec
 
@@ -42,7 +44,7 @@ def test_random_strategy_covers_every_channel_and_field_first_with_values_class_
     stamp_probes = round(gen.STAMP_SHARE * (len(targets) + len(channels)))
     assert length == len(targets) + len(channels) + stamp_probes
     for round_number in (0, 1):
-        cases = [parse_testcase(strategy.propose(n).testcase_xml.encode(), "t", spec, dictionary)
+        cases = [parse_testcase(strategy.propose(n).testcase.to_xml(), "t", spec, dictionary)
                  for n in range(1 + round_number * length, 1 + (round_number + 1) * length)]
         fields, faults, stamps = {}, set(), set()
         for case in cases:
@@ -92,7 +94,7 @@ def test_calibrated_windows_count_from_the_anchor_and_fall_inside_the_live_run(d
         strategy = STRATEGIES[name](spec, dictionary, 3, 20.0)
         strategy.calibrate(Timing("command", 6.0))
         for n in range(1, 200, 7):
-            for policy in parse_testcase(strategy.propose(n).testcase_xml.encode()).policies:
+            for policy in parse_testcase(strategy.propose(n).testcase.to_xml()).policies:
                 window = policy.window
                 assert (window.anchor_channel, window.anchor_message) == ("command", 1)
                 assert 0 <= window.start <= 6.0 and window.end is not None and window.end <= 6.0 + 5.0
@@ -115,8 +117,8 @@ def test_guided_strategy_mutates_its_corpus_deterministically(demo):
     def run() -> list[tuple[str | None, str]]:
         guided = STRATEGIES["guided"](spec, dictionary, 3, 20.0)
         first = guided.propose(1)
-        guided.observe("c-1", first.testcase_xml, CaseOutcome("done", "Pass", "", margins={"speed_limit": 2.0}))
-        return [(p.parent, p.testcase_xml) for p in (guided.propose(n) for n in range(2, 12))]
+        guided.observe("c-1", first.testcase, CaseOutcome("done", "Pass", "", margins={"speed_limit": 2.0}))
+        return [(p.parent, p.testcase.to_xml().decode()) for p in (guided.propose(n) for n in range(2, 12))]
 
     a, b = run(), run()
     assert a == b
@@ -129,7 +131,7 @@ def test_guided_strategy_mutates_its_corpus_deterministically(demo):
 def test_guided_corpus_keeps_only_cases_that_came_closer(demo):
     spec, dictionary = demo
     guided = STRATEGIES["guided"](spec, dictionary, 3, 20.0)
-    xml = guided.propose(1).testcase_xml
+    xml = guided.propose(1).testcase
     guided.observe("a", xml, CaseOutcome("done", "Pass", "", margins={"i": 2.0}))
     guided.observe("b", xml, CaseOutcome("done", "Pass", "", margins={"i": 3.0}))
     guided.observe("c", xml, CaseOutcome("done", "Pass", "", margins={"i": 1.0}))
@@ -139,12 +141,12 @@ def test_guided_corpus_keeps_only_cases_that_came_closer(demo):
 def test_signature_separates_mutation_families_and_folds_indices(demo):
     spec, dictionary = demo
     outcome = CaseOutcome("done", "Silent", "", [Finding("speed_limit", "Silent", None, "status", "")])
-    one = parse_testcase(STRATEGIES["random"](spec, dictionary, 25, 8.0).propose(1).testcase_xml.encode())
+    one = parse_testcase(STRATEGIES["random"](spec, dictionary, 25, 8.0).propose(1).testcase.to_xml())
     assert sig.mutation_family(one) == "trajectory:points:set"
     assert sig.signature(outcome, None).text().endswith(sig.NO_MUTATION)
     assert sig.failure_key(outcome).text() == "Silent|speed_limit|-"
     xml = one.to_xml().decode().replace('path="points"', 'path="points[3].v"')
-    assert sig.signature(outcome, xml).text().endswith("trajectory:points[].v:set")
+    assert sig.signature(outcome, parse_testcase(xml.encode())).text().endswith("trajectory:points[].v:set")
 
 
 def test_params_spread_over_every_combination():
@@ -167,7 +169,7 @@ def test_budget_and_default_workers():
 def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
     journal = Journal(tmp_path)
     for n in range(1, 4):
-        journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, "<x/>"))
+        journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, TestCase(f"tc-{n}", n, "x", ())))
         journal.started(f"c-{n}")
     journal.finished("c-1", CaseOutcome("done", "Pass", "ok"))
     journal.close()
@@ -275,8 +277,9 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
 
 def test_a_finding_on_the_channel_the_case_itself_mutates_is_not_a_failure(demo):
     spec, _ = demo
-    xml = ('<testcase id="t" seed="1"><description>x</description><policy id="p"><channel>command</channel>'
-           '<set><field path="acceleration" value="dict:float.nan"/></set></policy></testcase>')
+    xml = parse_testcase(b'<testcase id="t" seed="1"><description>x</description><policy id="p">'
+                         b'<channel>command</channel><set><field path="acceleration" value="dict:float.nan"/></set>'
+                         b'</policy></testcase>')
     own = Finding("finite_command", "Silent", "control", "command", "acceleration nan")
     crash = Finding("modules_alive", "Abort", "simulator", None, "exit 1")
     only_own = CaseOutcome("done", "Silent", "Silent: finite_command", [own], margins={"finite_command": 0.0,
@@ -363,27 +366,48 @@ def test_every_strategy_declares_the_campaigns_hooks_and_the_defaults_change_not
             self.seed = seed
 
         def propose(self, number: int) -> Proposal:
-            return Proposal(f"<testcase id='tc-{number}' seed='{self.seed}'/>")
+            return Proposal(TestCase(f"tc-{number}", self.seed, "", ()))
 
     strategy = Minimal(None, None, 3, 20.0)
     outcome = CaseOutcome("done", "Silent", "Silent: …")
-    assert strategy.judge("c-1", "<x/>", outcome) is outcome  # the monitors' verdict stands
+    assert strategy.judge("c-1", TestCase("tc-1", 3, "", ()), outcome) is outcome  # the monitors' verdict stands
     assert not strategy.exports_own_findings  # the campaign minimises its buckets
-    assert strategy.propose(1).testcase_xml == "<testcase id='tc-1' seed='3'/>"
+    assert strategy.propose(1).testcase == TestCase("tc-1", 3, "", ())
 
 
 def test_vocabularies_and_signatures_keep_their_text_forms():
     import json
 
     from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind
+    from astaa_deft.orchestration.campaign.payload import case_json
     from astaa_deft.orchestration.campaign.standing import BucketStatus
 
     assert (f"{CaseKind.RERUN}", str(BucketKind.BASELINE), f"{BucketStatus.WITHOUT_MUTATION:18}|") == (
         "rerun", "baseline", "without mutation  |")
-    assert json.dumps(PlannedCase("c-1", MUTATED, 1, 2, {}, None).to_json()).startswith(
+    assert json.dumps(case_json(PlannedCase("c-1", MUTATED, 1, 2, {}, None))).startswith(
         '{"case_id": "c-1", "kind": "mutated"')
-    assert PlannedCase.from_json(json.loads(json.dumps(PlannedCase("c-1", MUTATED, 1, 2, {}, None).to_json()))).kind \
-        is CaseKind.MUTATED
     signature = BucketSignature(FailureKey("Silent", "speed_limit", "-"), "routing:speed_limit:set")
     assert signature.text() == "Silent|speed_limit|-|routing:speed_limit:set"
     assert BucketSignature.clean(signature.failure).text() == "Silent|speed_limit|-|(no mutation)"
+
+
+def test_a_test_case_is_an_object_until_the_payload_or_the_journal_stores_it(demo, tmp_path: Path):
+    """The payload and the journal keep a case's text; read back, it is the same test case (checked against the
+    worker's spec and dictionary), and a clean run stays without one."""
+    from astaa_deft.orchestration.campaign.payload import CasePayload
+
+    spec, dictionary = demo
+    testcase = STRATEGIES["random"](spec, dictionary, 7, 20.0).propose(1).testcase
+    case = PlannedCase("c-000001", MUTATED, 1, 7, {}, testcase)
+    payload = CasePayload("spec.yaml", case, "run", 5.0, (), settle=1.0, known=())
+    received = CasePayload.from_json(json.loads(json.dumps(payload.to_json())))
+    assert received.to_json() == payload.to_json()  # a pool forwards it as it came
+    assert received.testcase(spec, dictionary) == testcase == payload.testcase(spec, dictionary)
+    clean = CasePayload.from_json(CasePayload("spec.yaml", replace(case, testcase=None), "run", 5.0, (), None,
+                                              ()).to_json())
+    assert clean.testcase(spec, dictionary) is None
+    journal = Journal(tmp_path)
+    journal.plan(case)
+    (row,) = journal.pending(MUTATED)
+    assert parse_testcase(row.testcase_xml.encode(), "journal", spec, dictionary) == testcase
+    journal.close()

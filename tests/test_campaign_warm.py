@@ -62,10 +62,10 @@ def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_ful
     from astaa_deft.io import pipe_messages
     from astaa_deft.io.pipe_messages import bytes_reader
     from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
-    from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
+    from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage, case_json
 
     case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
-    payload = {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
+    payload = {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
     done = subprocess.run([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", str(ECHO)],
                           input=pipe_messages.encode(CaseMessage(CasePayload.from_json(payload))),
                           capture_output=True, timeout=60)
@@ -106,9 +106,10 @@ def test_no_recorder_is_forked_from_a_process_with_other_threads():
 
 def _echo_payload(tmp_path: Path, name: str) -> dict:
     from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.campaign.payload import case_json
 
     case = PlannedCase(name, BASELINE, 1, 0, PARAMS, None)
-    return {"spec": str(ECHO), "case": case.to_json(), "run_dir": str(tmp_path / name), "horizon": 3.0,
+    return {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / name), "horizon": 3.0,
             "dictionaries": []}
 
 

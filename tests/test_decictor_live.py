@@ -11,7 +11,7 @@ import pytest
 from astaa_deft.orchestration.campaign.journal import Journal, NewBucket
 from astaa_deft.orchestration.campaign.model import MUTATED, BucketSignature, FailureKey, PlannedCase
 from astaa_deft.orchestration.campaign.runner import run_case
-from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_xml
+from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_testcase
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.analysis.decictor.module_test import check_suite
 from astaa_deft.analysis.decictor.search import Scene
@@ -45,15 +45,15 @@ def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp
     strategy.observe_baseline("b-0001", seed)
     assert strategy.search is not None, strategy.why_no_seed
 
-    xml = scene_xml(Scene((CONE,), "add"), "tc-000001", 1, "prediction")
-    testcase = parse_testcase(xml.encode(), "tc", spec, load_dictionary())
+    proposed = scene_testcase(Scene((CONE,), "add"), "tc-000001", 1, "prediction")
+    testcase = parse_testcase(proposed.to_xml(), "tc", spec, load_dictionary())
     mutated = run_case(spec, testcase, {}, tmp_path / "cases" / "c-000001", horizon=15.0)
-    judged = strategy.judge("c-000001", xml, mutated)
+    judged = strategy.judge("c-000001", testcase, mutated)
     assert judged.findings and judged.findings[0].invariant == INVARIANT, judged.summary
     assert judged.findings[0].module == "planning" and judged.failed
 
     journal = Journal(tmp_path)
-    journal.plan(PlannedCase("c-000001", MUTATED, 1, 0, {}, xml, "decictor"))
+    journal.plan(PlannedCase("c-000001", MUTATED, 1, 0, {}, testcase, "decictor"))
     journal.started("c-000001")
     signature = BucketSignature(FailureKey(judged.verdict, INVARIANT, "planning"), "prediction:*:participant")
     journal.add_bucket(NewBucket("B001", signature, judged.verdict, INVARIANT, "planning", "c-000001", False, 1))

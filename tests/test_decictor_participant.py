@@ -153,7 +153,7 @@ def test_a_participant_at_epoch_seconds_is_accepted_and_applied():
 
 
 def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
-    from astaa_deft.orchestration.campaign.strategies.decictor import area_around, scene_of, scene_xml
+    from astaa_deft.orchestration.campaign.strategies.decictor import area_around, scene_of, scene_testcase
     from astaa_deft.analysis.decictor.feasible import ForbiddenRegion, check_placement
     from astaa_deft.analysis.decictor.oracle import LaneGrid, RunObservation, straight_lanes
     from astaa_deft.analysis.decictor.paths import EgoPath, EgoState
@@ -162,14 +162,14 @@ def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
     lanes = straight_lanes(2, 3.5, 300.0)
     seed = RunObservation(EgoPath(tuple(EgoState(WALL + k * 0.1, 10.0 + k * 1.2, 0.0, 0.0, 12.0)
                                         for k in range(101))), True)
-    search = Search("decictor", 1, seed, LaneGrid(lanes), area_around(seed, lanes),
-                    ForbiddenRegion(seed.ego, clearance=1.5))
+    search = Search("decictor", 1, seed, LaneGrid(lanes), area=area_around(seed, lanes),
+                    region=ForbiddenRegion(seed.ego, clearance=1.5))
     participants = 0
     for number in range(1, 9):
         scene = search.propose(number)
-        xml = scene_xml(scene, f"tc-{number:06d}", number, "prediction")
-        parse_testcase(xml.encode(), "tc", SPEC, load_dictionary())  # valid against the XSD, spec and mapping
-        assert scene_of(xml).participants == scene.participants
+        testcase = scene_testcase(scene, f"tc-{number:06d}", number, "prediction")
+        read = parse_testcase(testcase.to_xml(), "tc", SPEC, load_dictionary())  # valid: XSD, spec and mapping
+        assert scene_of(read).participants == scene.participants
         for participant in scene.participants:
             check_placement(participant, search.region)
             assert WALL <= participant.t <= WALL + 10.0  # on the seed's clock

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.strategies.decictor import DecictorStrategy, area_around, scene_of, scene_xml
+from astaa_deft.orchestration.campaign.strategies.decictor import (
+    DecictorStrategy, area_around, scene_of, scene_testcase,
+)
 from astaa_deft.analysis.decictor.config import read_config
 from astaa_deft.analysis.decictor.feasible import ForbiddenRegion, check_placement
 from astaa_deft.analysis.decictor.oracle import LaneGrid, RunObservation, straight_lanes
@@ -34,8 +36,8 @@ SEED = RunObservation(straight(), True)
 
 
 def search(mode: str, seed: int = 1) -> Search:
-    return Search(mode, seed, SEED, LaneGrid(LANES), area_around(SEED, LANES),
-                  ForbiddenRegion(SEED.ego, clearance=1.5))
+    return Search(mode, seed, SEED, LaneGrid(LANES), area=area_around(SEED, LANES),
+                  region=ForbiddenRegion(SEED.ego, clearance=1.5))
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -67,15 +69,15 @@ def test_selection_keeps_the_best_and_findings_leave_the_pool():
 
 def test_the_seed_must_reach_its_goal():
     with pytest.raises(ValueError, match="seed run must reach its goal"):
-        Search("decictor", 1, RunObservation(straight(), False), LaneGrid(LANES), area_around(SEED, LANES),
-               ForbiddenRegion(SEED.ego))
+        Search("decictor", 1, RunObservation(straight(), False), LaneGrid(LANES), area=area_around(SEED, LANES),
+               region=ForbiddenRegion(SEED.ego))
 
 
-def test_scene_xml_round_trips_through_a_checked_test_case():
+def test_scene_testcase_round_trips_through_a_checked_test_case():
     scene = search("random").propose(3)
-    xml = scene_xml(scene, "tc-000003", 3, "prediction")
-    parse_testcase(xml.encode(), "tc", SPEC, load_dictionary())  # valid against XSD, spec and mapping
-    assert scene_of(xml).participants == scene.participants
+    testcase = scene_testcase(scene, "tc-000003", 3, "prediction")
+    read = parse_testcase(testcase.to_xml(), "tc", SPEC, load_dictionary())  # valid against XSD, spec and mapping
+    assert scene_of(read).participants == scene_of(testcase).participants == scene.participants
 
 
 def without(key: str) -> str:

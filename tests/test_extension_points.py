@@ -139,7 +139,7 @@ FILES = {
 
             def propose(self, number):
                 policy = Policy("p", Delay(1.0), channels=(self.channel,))
-                return Proposal(TestCase(f"tc-{number:06d}", 0, "idle", (policy,)).to_xml().decode())
+                return Proposal(TestCase(f"tc-{number:06d}", 0, "idle", (policy,)))
     ''',
 }
 
@@ -222,7 +222,7 @@ def test_the_command_line_and_the_campaign_offer_the_new_strategy(extensions, ca
     assert "'idle'" in capsys.readouterr().err  # the choices listed are the registry's
     spec = load_spec_text(SPEC % {"encoding": "json", "kind": "silence"}, "throwaway.yaml")
     proposal = STRATEGIES["idle"](spec, load_dictionary(), 1, 10.0).propose(3)
-    assert parse_testcase(proposal.testcase_xml.encode(), "p.xml", spec).id == "tc-000003"
+    assert parse_testcase(proposal.testcase.to_xml(), "p.xml", spec).id == "tc-000003"
 
 
 def test_without_the_package_none_of_them_exists():

@@ -61,7 +61,7 @@ def test_stamps_are_reached_though_brittle_and_only_by_the_stamp_family():
 def test_campaign_strategies_hold_a_third_of_their_field_probes_and_try_a_nan_stamp_in_the_first_round(name):
     strategy = STRATEGIES[name](OMPL_SPEC, DICTIONARY, 5, 20.0)
     length = (strategy.fresh if name == "guided" else strategy).round_length
-    cases = [parse_testcase(strategy.propose(n).testcase_xml.encode(), "t", OMPL_SPEC, DICTIONARY)
+    cases = [parse_testcase(strategy.propose(n).testcase.to_xml(), "t", OMPL_SPEC, DICTIONARY)
              for n in range(1, 4 * length + 1)]  # two pure coverage rounds, then rounds and weighted draws
     families = Counter(family(c.description) for c in cases)
     field_probes = families["sustained"] + families["one field of one message"]

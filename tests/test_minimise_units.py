@@ -302,14 +302,14 @@ def test_reproduction_check_tells_flaky_from_not_reproducible():
     m = mutation(0, (Step("p", "set", {}),), [FieldChange("heading", 0.0, 1e16)])
     failure = Failure("control_alive", "deadline", "control", "command", 3.0, "silent", "Restart")
     flaky = ScriptedTester([False, True, False])
-    result, per_test = workflow.reproduce(flaky, [m], failure, 1, lambda line: None)
+    result, per_test = workflow.reproduce(flaky, [m], failure, 1, say=lambda line: None)
     assert result.outcome is Outcome.FAIL and result.failure_rate == pytest.approx(0.5) and per_test == 3
     assert flaky.runs == 2  # it stopped at the first failure once it knew the full set fails
     never = ScriptedTester([False, False, False])
-    assert workflow.reproduce(never, [m], failure, 1, lambda line: None) == (None, 1)
+    assert workflow.reproduce(never, [m], failure, 1, say=lambda line: None) == (None, 1)
     assert never.runs == 3
     steady = ScriptedTester([True])
-    result, per_test = workflow.reproduce(steady, [m], failure, 1, lambda line: None)
+    result, per_test = workflow.reproduce(steady, [m], failure, 1, say=lambda line: None)
     assert result.failure_rate == 1.0 and per_test == 1
 
 

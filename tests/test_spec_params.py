@@ -84,7 +84,8 @@ def test_a_campaign_spreads_declared_choices_unless_given_values(tmp_path):
     with pytest.raises(InputError, match="'prediction' is 'ml'"):
         param_grid({"prediction": ["ml"]}, spec)
     # The campaign itself (its spec loaded, a real journal): the grid it cycles its cases through.
-    campaign = Campaign(CampaignConfig(spec_file(tmp_path), tmp_path / "out", cases=1), Journal(tmp_path / "out"))
+    campaign = Campaign(CampaignConfig(spec_path=spec_file(tmp_path), out=tmp_path / "out", cases=1),
+                        Journal(tmp_path / "out"))
     assert {g["prediction"] for g in campaign.grid} == {"oracle", "cv"}
 
 

@@ -18,6 +18,7 @@ import pytest
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.orchestration.verify.bisect import search
 from astaa_deft.orchestration.campaign.report import write_report
@@ -44,7 +45,7 @@ class Fixed(Strategy):
         self.cases = cases
 
     def propose(self, number: int) -> Proposal:
-        return Proposal(self.cases[number - 1])
+        return Proposal(parse_testcase(self.cases[number - 1].encode()))  # the campaign holds an object
 
 
 def run_campaign(out: Path, spec: Path, params: dict[str, list[str]], cases: list[str] | None = None,
@@ -54,7 +55,7 @@ def run_campaign(out: Path, spec: Path, params: dict[str, list[str]], cases: lis
     journal = Journal(out)
     said: list[str] = []
     try:
-        config = CampaignConfig(spec, out, cases=len(cases), workers=2, horizon=horizon, settle=2.0,
+        config = CampaignConfig(spec_path=spec, out=out, cases=len(cases), workers=2, horizon=horizon, settle=2.0,
                                 minimise=minimise, minimise_timeout=240.0, report=False, baseline_runs=1, reruns=1,
                                 params=params)
         if resume:

@@ -86,7 +86,7 @@ def run_fuzz(args: argparse.Namespace) -> int:
     if args.cases is None and args.budget is None and not args.resume:
         raise InputError(Problem("astaa-deft fuzz", None, None, "no size given for the campaign",
                                  "give --cases N or --budget DURATION (e.g. 10m)"))
-    config = CampaignConfig(args.spec or Path("."), args.out, cases=args.cases,
+    config = CampaignConfig(spec_path=args.spec or Path("."), out=args.out, cases=args.cases,
                             budget=args.budget, workers=args.workers,
                             seed=args.seed, strategy=args.strategy, dictionaries=args.dictionary,
                             params=fuzz.parse_params(args.params), cluster=args.cluster, horizon=args.horizon,

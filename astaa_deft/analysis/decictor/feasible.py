@@ -167,7 +167,7 @@ TRIES = 60
 
 
 def sample_participant(rng: random.Random, participant_id: int, region: ForbiddenRegion, area: Area,
-                       moving: bool | None = None) -> Participant | None:
+                       *, moving: bool | None = None) -> Participant | None:
     """A random participant wholly outside the region (None if none was found in TRIES draws)."""
     if moving is None:
         moving = rng.random() < 0.5
@@ -182,13 +182,13 @@ def sample_participant(rng: random.Random, participant_id: int, region: Forbidde
         if region.hit(_box(placed, placed.t)) is not None:
             continue
         if moving:
-            placed = _extend(rng, placed, kind, region, area, end)
+            placed = _extend(rng, placed, kind, region, area=area, end=end)
         if is_feasible(placed, region):
             return placed
     return None
 
 
-def _extend(rng: random.Random, placed: Participant, kind: Kind, region: ForbiddenRegion, area: Area,
+def _extend(rng: random.Random, placed: Participant, kind: Kind, region: ForbiddenRegion, *, area: Area,
             end: float) -> Participant:
     """Waypoints every dt, each drawn from the sector of the last one minus the region (Algorithm 2, Adding)."""
     heading, speed = placed.heading, rng.uniform(0.3, 1.0) * kind.max_speed
@@ -214,7 +214,7 @@ def _extend(rng: random.Random, placed: Participant, kind: Kind, region: Forbidd
 
 
 def perturb(rng: random.Random, participant: Participant, region: ForbiddenRegion, area: Area,
-            scale: float = 2.0) -> Participant | None:
+            *, scale: float = 2.0) -> Participant | None:
     """The participant moved a little (pose, start time, waypoints, speed); None if no feasible variant."""
     for _ in range(TRIES // 3):
         dx, dy = rng.gauss(0.0, scale), rng.gauss(0.0, 0.5 * scale)

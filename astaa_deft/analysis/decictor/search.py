@@ -57,7 +57,7 @@ class SearchStats:
 
 
 class Search:
-    def __init__(self, mode: str, seed: int, seed_run: RunObservation, grid: LaneGrid, area: Area,
+    def __init__(self, mode: str, seed: int, seed_run: RunObservation, grid: LaneGrid, *, area: Area,
                  region: ForbiddenRegion, population: int = POPULATION):
         if mode not in MODES:
             raise ValueError(f"unknown Decictor mode {mode!r}; one of {', '.join(MODES)}")

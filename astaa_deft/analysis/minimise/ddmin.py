@@ -157,7 +157,7 @@ class _Search(Generic[T]):
         tester: Tester[T],
         cache: OutcomeCache,
         executor: Executor | None,
-        window: int,
+        *, window: int,
         max_tests: int | None,
     ):
         self.items = items
@@ -311,9 +311,8 @@ def ddmin(
         raise ValueError(f"max_tests must not be negative, got {max_tests}")
     started = time.monotonic()
     own_pool = ThreadPoolExecutor(parallel, thread_name_prefix="ddmin") if executor is None and parallel > 1 else None
-    search = _Search(
-        items, tester, cache if cache is not None else OutcomeCache(), executor or own_pool, parallel, max_tests
-    )
+    search = _Search(items, tester, cache if cache is not None else OutcomeCache(), executor or own_pool,
+                     window=parallel, max_tests=max_tests)
     say = progress or (lambda message: None)
     current: Config = tuple(range(len(items)))
     complete = True

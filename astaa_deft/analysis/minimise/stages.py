@@ -118,7 +118,7 @@ class StageReport:
     note: str = ""
 
     @classmethod
-    def of(cls, name: str, unit: str, before: int, result: DDResult, extra_tests: int = 0,
+    def of(cls, name: str, unit: str, before: int, result: DDResult, *, extra_tests: int = 0,
            note: str = "") -> StageReport:
         return cls(name, unit, before, len(result.minimal), result.tests_run + extra_tests, result.cache_hits,
                    result.seconds, result.complete, note)
@@ -158,7 +158,7 @@ def _stage_progress(say: Say, name: str) -> Callable[[str], None]:
 
 
 def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, parallel: int,
-                    say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
+                    *, say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
     """The three stages with the planner replay (raises NotReproducible / FailsWithoutItems from stage 1)."""
     relevant = model.streams.relevant
     out = Minimisation(TesterKind.REPLAY, failure, model.mlog.mutations, {})
@@ -178,7 +178,7 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
     report.after = len(flatten(first.minimal))
     out.stages.append(report)
     kept_runs, _ = _shorten_holds(first.minimal, lambda subset: tester(Job.of({n: None for n in flatten(subset)})),
-                                  max_tests, say, out)
+                                  max_tests, say, out=out)
     kept: dict[int, FieldSelection] = {n: None for n in flatten(kept_runs)}
     answer = tester.answer(Job.of(kept))
     failing = answer.failing_output
@@ -213,14 +213,14 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
     # Stage 3: fields.
     by_number = {m.number: m for m in model.mlog.mutations}
     kept, _ = _minimise_fields(kept_runs, by_number, lambda selection: tester(Job.of(selection, out.frames)),
-                               parallel, max_tests, say, out)
+                               parallel, max_tests=max_tests, say=say, out=out)
     final = tester.answer(Job.of(kept, out.frames))
     out.kept, out.failing_output, out.detail = kept, final.failing_output or failing, final.result.detail
     return out
 
 
 def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Failure, full: TestResult,
-                  say: Say = lambda line: None, max_tests: int | None = None, jobs: int = 1) -> Minimisation:
+                  *, say: Say = lambda line: None, max_tests: int | None = None, jobs: int = 1) -> Minimisation:
     """Stages 1 and 3 with whole-system re-runs; ``full`` is the result of the full set, tested already.
 
     ``jobs`` > 1 tests that many subsets of a round at once, each run an isolated session of the SUT
@@ -244,10 +244,10 @@ def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Fa
     report.after = len(flatten(first.minimal))
     out.stages.append(report)
     last = first.results.get(first.indices) or full
-    kept_runs, hold_last = _shorten_holds(first.minimal, test_runs, max_tests, say, out, margin=HOLD_MARGIN)
+    kept_runs, hold_last = _shorten_holds(first.minimal, test_runs, max_tests, say, out=out, margin=HOLD_MARGIN)
     last = hold_last or last
     kept, fields_last = _minimise_fields(kept_runs, by_number, lambda selection: tester(
-        [(by_number[n], s) for n, s in sorted(selection.items())]), jobs, max_tests, say, out)
+        [(by_number[n], s) for n, s in sorted(selection.items())]), jobs, max_tests=max_tests, say=say, out=out)
     last = fields_last or last
     out.kept, out.detail, out.failure_rate = kept, last.detail, last.failure_rate
     return out
@@ -264,7 +264,7 @@ HOLD_MARGIN = 0.25  # live: a shortened hold of several messages gets this share
 
 
 def _shorten_holds(runs: Sequence[Run], test: Callable[[Sequence[Run]], TestResult], max_tests: int | None,
-                   say: Say, out: Minimisation, margin: float = 0.0) -> tuple[list[Run], TestResult | None]:
+                   say: Say, *, out: Minimisation, margin: float = 0.0) -> tuple[list[Run], TestResult | None]:
     """Stage "hold": each kept held run shortened at its ends with the other runs kept (:func:`.ddmin.shorten`).
 
     ``margin`` (whole-system re-runs): a hold that needs several messages needs them across the module's
@@ -314,7 +314,7 @@ def _shorten_holds(runs: Sequence[Run], test: Callable[[Sequence[Run]], TestResu
 
 def _minimise_fields(runs: Sequence[Run], by_number: Mapping[int, Mutation],
                      test: Callable[[dict[int, FieldSelection]], TestResult], parallel: int,
-                     max_tests: int | None, say: Say,
+                     *, max_tests: int | None, say: Say,
                      out: Minimisation) -> tuple[dict[int, FieldSelection], TestResult | None]:
     """Stage 3: the field changes that matter within the kept mutations that set several — a held run's
     messages keep or revert a field together (they changed the same fields).

@@ -64,7 +64,7 @@ FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure
 Progress = Callable[[str], None]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MinimiseOptions:
     spec_path: Path | None = None  # None: the spec stored in the log
     invariant: str | None = None  # the failure to keep (None: the run's first violation)
@@ -119,7 +119,7 @@ def minimise_log(log_path: Path, out_dir: Path, options: MinimiseOptions = Minim
     place = Place(out_dir, "-o")
     ready_dir(place, temp=True)
     with writing(place), tempfile.TemporaryDirectory(prefix="astaa-deft-minimise-") as scratch:
-        return _minimise(log_path, out_dir, options, progress, Path(scratch))
+        return _minimise(log_path, out_dir, options, progress, scratch=Path(scratch))
 
 
 @dataclass
@@ -146,7 +146,7 @@ class _Job:
     replay_hits: int = 0
 
     def stopped(self, message: str, *, notes: list[str] | None = None) -> MinimiseReport:
-        return _stopped(self.out_dir, self.failure, self.started, self.log_path, message, notes=notes)
+        return _stopped(self.out_dir, self.failure, self.started, self.log_path, message=message, notes=notes)
 
     def fall_back_to_live(self, note: str, why: str) -> None:
         """Go on with whole-system re-runs (``note`` says why, to the user and in the summary)."""
@@ -156,8 +156,8 @@ class _Job:
 
 
 def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
-              scratch: Path) -> MinimiseReport:
-    job = _read_failing_run(log_path, out_dir, options, say, scratch)
+              *, scratch: Path) -> MinimiseReport:
+    job = _read_failing_run(log_path, out_dir, options, say, scratch=scratch)
     minimised: Minimisation | None = None
     if job.choice.tester == TesterKind.REPLAY:
         in_replay = _minimise_in_replay(job)
@@ -181,7 +181,7 @@ def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Prog
 
 
 def _read_failing_run(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
-                      scratch: Path) -> _Job:
+                      *, scratch: Path) -> _Job:
     """Read the run, its spec and mutations, find the failure, choose the tester, prepare ``out_dir``
     (InputError when the log cannot be minimised)."""
     started = time.monotonic()
@@ -262,7 +262,7 @@ def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
         tester = DeftTester(pool)
         model = ReplayModel(setup, baseline=False)
         try:
-            result = minimise_replay(tester, model, failure, pool.workers, say, options.max_tests)
+            result = minimise_replay(tester, model, failure, pool.workers, say=say, max_tests=options.max_tests)
         except NotReproducible as exc:
             if not options.live_fallback:
                 return job.stopped(
@@ -273,7 +273,7 @@ def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
             job.replays, job.replay_hits = tester.runs, tester.hits
             return None
         except FailsWithoutItems as exc:
-            return _no_mutation_needed(job.out_dir, failure, exc, job.started, job.log_path)
+            return _no_mutation_needed(job.out_dir, failure, exc, job.started, log_path=job.log_path)
         job.model, job.replays, job.replay_hits = model, tester.runs, tester.hits
         return result
 
@@ -282,16 +282,17 @@ def _minimise_live(job: _Job, live: LiveTester) -> Minimisation | MinimiseReport
     """The minimisation with whole-system re-runs, after checking the full test case reproduces the failure;
     a report when the minimisation stops here."""
     failure, options = job.failure, job.options
-    full, repeats_used = reproduce(live, job.mlog.mutations, failure, options.repeats, job.say)
+    full, repeats_used = reproduce(live, job.mlog.mutations, failure, options.repeats, say=job.say)
     if full is None:
         return job.stopped(
             f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
             f"test case: nothing to minimise (a rare flaky failure? try --repeats N)", notes=job.notes)
     live.repeats = repeats_used
     try:
-        return minimise_live(live, job.mlog.mutations, failure, full, job.say, options.max_tests, jobs=options.jobs)
+        return minimise_live(live, job.mlog.mutations, failure, full, say=job.say, max_tests=options.max_tests,
+                             jobs=options.jobs)
     except FailsWithoutItems as exc:
-        return _no_mutation_needed(job.out_dir, failure, exc, job.started, job.log_path)
+        return _no_mutation_needed(job.out_dir, failure, exc, job.started, log_path=job.log_path)
 
 
 def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> MinimiseReport:
@@ -338,7 +339,7 @@ def original_testcase(log: LogContents) -> TestCase | None:
 
 
 def reproduce(live: LiveTester, mutations: Sequence[Mutation], failure: Failure, repeats: int,
-              say: Progress) -> tuple[TestResult | None, int]:
+              *, say: Progress) -> tuple[TestResult | None, int]:
     """Re-run the full set of mutations: (its result, runs per test from now on); None if it never fails.
 
     ``repeats`` runs first; if none fails, up to FLAKY_CHECK_RUNS in all
@@ -422,12 +423,12 @@ def verdict(result: Minimisation, confirmation: Confirmation) -> tuple[str, bool
 
 
 def _no_mutation_needed(out_dir: Path, failure: Failure, exc: Exception, started: float,
-                        log_path: Path) -> MinimiseReport:
+                        *, log_path: Path) -> MinimiseReport:
     return _stopped(out_dir, failure, started, log_path,
-                    f"the failure happens without any of the mutations ({exc}): nothing to minimise")
+                    message=f"the failure happens without any of the mutations ({exc}): nothing to minimise")
 
 
-def _stopped(out_dir: Path, failure: Failure, started: float, log_path: Path, message: str, *,
+def _stopped(out_dir: Path, failure: Failure, started: float, log_path: Path, *, message: str,
              notes: list[str] | None = None) -> MinimiseReport:
     """A minimisation that ends before minimising: its summary holds the failure and why."""
     body: JsonObject = {"log": str(log_path), "failure": asdict(failure), "verdict": message}

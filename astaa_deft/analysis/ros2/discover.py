@@ -25,7 +25,7 @@ from astaa_deft.analysis.ros2.graph import ADMIN_SPACE, Graph, build_graph, pars
 from astaa_deft.analysis.ros2.skeleton import spec_skeleton
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class DiscoverOptions:
     connect: list[str]
     seconds: float = 3.0

@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from astaa_deft.model.errors import InputError, Problem
     from astaa_deft.orchestration.verify.workflow import VerifyOptions
 
-    options = VerifyOptions(args.campaign, params=parse_params(args.param), runs=args.runs, label=args.label,
+    options = VerifyOptions(campaign=args.campaign, params=parse_params(args.param), runs=args.runs, label=args.label,
                             buckets=tuple(args.bucket), dictionaries=tuple(args.dictionary), workers=args.workers)
     if args.bisect is None:
         if args.build is not None:

@@ -36,7 +36,7 @@ DEFAULT_SEVERITY = "high"
 
 
 def build_invariants(src: Source, node: Node | None, types: Mapping[str, MessageType],
-                     channels: Sequence[Channel], modules: Sequence[str]) -> tuple[Invariant, ...]:
+                     channels: Sequence[Channel], *, modules: Sequence[str]) -> tuple[Invariant, ...]:
     if node is None or node.value is None:
         return ()
     if not node.is_list:
@@ -104,6 +104,6 @@ def with_typed_invariants(spec: Spec, source_name: str | None = None) -> Spec:
     src = Source(spec.source_text, source_name or (str(spec.path) if spec.path else "<spec>"))
     root = src.parse()
     node = root.value.get("invariants") if root.is_map else None
-    invariants = build_invariants(src, node, spec.types, spec.channels, [m.name for m in spec.modules])
+    invariants = build_invariants(src, node, spec.types, spec.channels, modules=[m.name for m in spec.modules])
     src.raise_if_problems()
     return dataclasses.replace(spec, invariants=invariants)

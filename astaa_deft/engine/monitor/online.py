@@ -81,7 +81,7 @@ class OnlineMonitors:
             self._q.put((channel, time.time_ns(), payload))
 
     def process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int,
-                     during_shutdown: bool, stderr_tail: str) -> None:
+                     *, during_shutdown: bool, stderr_tail: str) -> None:
         self._q.put((EXIT, time_ns, (module, returncode, signal, during_shutdown, stderr_tail)))
 
     def wants_log_lines(self) -> bool:

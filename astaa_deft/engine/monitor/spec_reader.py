@@ -167,7 +167,7 @@ class InvariantReader:
         return name
 
     def field(self, node: Node | None, type_name: str, what: str,
-              kinds: Sequence[str] | None = None, relative_to: FieldType | None = None
+              kinds: Sequence[str] | None = None, *, relative_to: FieldType | None = None
               ) -> tuple[FieldPath, FieldType] | None:
         """A field path declared in ``type_name`` (or inside ``relative_to``, an array element's type).
 

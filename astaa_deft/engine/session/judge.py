@@ -105,7 +105,7 @@ class Judge(RunPart):
         """A module's exit, for the monitors (an abnormal one is a finding)."""
         if self.monitors is not None:
             self.monitors.process_exit(exit_.module, exit_.returncode, exit_.signal, exit_.time_ns,
-                                       exit_.during_shutdown, exit_.stderr_tail)
+                                       during_shutdown=exit_.during_shutdown, stderr_tail=exit_.stderr_tail)
 
     def _violated(self, violation: Violation) -> None:
         self.violations.append(violation)

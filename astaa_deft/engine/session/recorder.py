@@ -159,7 +159,7 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
     counts = {channel.name: 0 for _, channel in topology.recorded_keys(spec, args.mode)}
     run_stopped: list[bool] = []  # the tool's orderly stop announced itself
     session = zc.open_session(zc.config_dict(mode="client", connect=args.connect))
-    subscribers = _subscribe(session, spec, args, writer, q, run_stopped)
+    subscribers = _subscribe(session, spec, args, writer, q=q, run_stopped=run_stopped)
     twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
     write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, _Sink(writer, counts, twins)),
                                     daemon=True)
@@ -204,7 +204,7 @@ def _open_log(args: argparse.Namespace, spec: Spec) -> LogWriter:
     return writer
 
 
-def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, writer: LogWriter,  # noqa: PLR0913
+def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, writer: LogWriter, *,  # noqa: PLR0913
                q: queue.SimpleQueue[QueueItem | _Stop], run_stopped: list[bool]) -> list[zenoh.Subscriber]:
     """Subscribers for the recorded channels, the tool's events and undeclared keys, each queueing for ``q``.
 

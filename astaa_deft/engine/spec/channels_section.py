@@ -27,7 +27,7 @@ NUMBER_KINDS = ("float32", "float64", "int8", "int16", "int32", "int64", "uint8"
 
 
 def read_channels_section(reader: SpecReader, node: Node | None, modules: tuple[Module, ...],
-                          types: dict[str, MessageType], ros2: Ros2Section) -> list[Channel]:
+                          types: dict[str, MessageType], *, ros2: Ros2Section) -> list[Channel]:
     """The ``channels:`` section (required, non-empty). ``types`` gains the ROS 2 types of CDR channels."""
     channels = _ChannelsReader(reader, [m.name for m in modules], types, ros2)
     out: list[Channel] = []
@@ -70,12 +70,12 @@ class _ChannelsReader:
         if encoding == "cdr":
             encoding = cdr[0] if cdr else "cdr"
         topic = v["topic"].value if "topic" in v and isinstance(v["topic"].value, str) else None
-        own_time = self._field(v, "time", type_name, NUMBER_KINDS, "a number of seconds (or a 'time' field)")
+        own_time = self._field(v, "time", type_name, NUMBER_KINDS, want="a number of seconds (or a 'time' field)")
         pair_by = self._field(v, "pair_by", type_name, (*NUMBER_KINDS, "string", "enum", "bool"),
-                              "a number or a string (a tick's sequence number, its time)")
+                              want="a number or a string (a tick's sequence number, its time)")
         return Channel(name, key, producer, tuple(consumers), type_name, encoding, topic, own_time, pair_by)
 
-    def _field(self, v: dict[str, Node], key: str, type_name: str, kinds: tuple[str, ...], want: str) -> str | None:
+    def _field(self, v: dict[str, Node], key: str, type_name: str, kinds: tuple[str, ...], *, want: str) -> str | None:
         """``time:`` or ``pair_by:``: a field path of the channel's type holding one value of ``kinds``."""
         if key not in v or not self.reader.expect(v[key], (str,), f"'{key}'", "a field path, e.g. header.seq"):
             return None

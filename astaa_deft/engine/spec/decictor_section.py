@@ -99,7 +99,7 @@ class _Reader:
             return None
         return name
 
-    def number(self, node: Node, where: str, low: float, high: float, example: str) -> float | None:
+    def number(self, node: Node, where: str, low: float, high: float, *, example: str) -> float | None:
         value = node.value
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                 or not low <= value <= high:
@@ -147,8 +147,8 @@ class _Reader:
         v = node.value
         array = self.path(v["array"], f"{where}.array")
         points = {k: self.path(v[k], f"{where}.{k}") for k in POINT_ATTRIBUTES if k in v}
-        horizon = self.number(v["horizon"], f"{where}.horizon", 0.001, 3600.0, "5.0") if "horizon" in v else 5.0
-        step = self.number(v["step"], f"{where}.step", 0.001, 3600.0, "0.1") if "step" in v else 0.1
+        horizon = self.number(v["horizon"], f"{where}.horizon", 0.001, 3600.0, example="5.0") if "horizon" in v else 5.0
+        step = self.number(v["step"], f"{where}.step", 0.001, 3600.0, example="0.1") if "step" in v else 0.1
         if array is None or horizon is None or step is None or any(p is None for p in points.values()):
             return None
         if step > horizon or horizon / step > MAX_TRAJECTORY_POINTS:
@@ -196,7 +196,7 @@ class _Reader:
         v = node.value
         channel = self.channel(v["channel"], f"{where}.channel")
         names = {k: self.path(v[k], f"{where}.{k}") for k in EGO_FIELDS if k in v}
-        sizes = {k: self.number(v[k], f"{where}.{k}", 0.01, 100.0, "4.6") for k in EGO_SIZES if k in v}
+        sizes = {k: self.number(v[k], f"{where}.{k}", 0.01, 100.0, example="4.6") for k in EGO_SIZES if k in v}
         if channel is None or any(x is None for x in (*names.values(), *sizes.values())):
             return None
         given: dict[str, Any] = {**{k: str(p) for k, p in names.items()}, **sizes}
@@ -232,8 +232,9 @@ def read_decictor_section(src: Source, node: Node | None, channels: tuple[str, .
                 mapping = reader.participant(item, f"decictor.participants[{k}]")
                 if mapping is not None:
                     participants.append(mapping)
-    clearance = reader.number(v["clearance"], "decictor.clearance", 0.0, 100.0, "1.5") if "clearance" in v else None
-    dt = reader.number(v["dt"], "decictor.dt", 0.1, 60.0, "2.0") if "dt" in v else None
+    clearance = (reader.number(v["clearance"], "decictor.clearance", 0.0, 100.0, example="1.5")
+                 if "clearance" in v else None)
+    dt = reader.number(v["dt"], "decictor.dt", 0.1, 60.0, example="2.0") if "dt" in v else None
     return DecictorSection(
         participants=tuple(participants),
         lanes=reader.lanes(v["lanes"]) if v.get("lanes") is not None else None,

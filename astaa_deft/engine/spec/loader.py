@@ -65,14 +65,14 @@ def _build(reader: SpecReader, path: Path) -> Spec:
     ros2 = read_ros2_section(src, v.get("ros2"), reader.base_dir, reader.from_file)
     modules_section = read_modules_section(reader, v.get("modules"), params.defaults)
     modules = modules_section.modules
-    channels = read_channels_section(reader, v.get("channels"), modules, types, ros2)
+    channels = read_channels_section(reader, v.get("channels"), modules, types, ros2=ros2)
     check_ready_channels(reader, modules_section.ready_channels, {c.name for c in channels})
     brittle = read_brittle_section(reader, v.get("brittle"), types)
     module_names = [m.name for m in modules]
-    invariants = build_invariants(src, v.get("invariants"), types, channels, module_names)
+    invariants = build_invariants(src, v.get("invariants"), types, channels, modules=module_names)
     planner = build_planner(src, v.get("planner"), types, channels, list(modules))
     replay = build_replay_section(src, v.get("replay"), channels, list(modules))
-    run = build_run_section(src, v.get("run"), types, channels, module_names)
+    run = build_run_section(src, v.get("run"), types, channels, modules=module_names)
     decictor = read_decictor_section(src, v.get("decictor"), tuple(c.name for c in channels), reader.base_dir)
     liveliness = read_liveliness_section(reader, v.get("liveliness"), modules)
     source = read_source_section(reader, v.get("source"))

@@ -73,7 +73,7 @@ class SpecReader:
         return entries
 
     def number(self, node: Node | None, what: str, minimum: float | None = None, strictly: bool = False,
-               maximum: float | None = None) -> float | None:
+               *, maximum: float | None = None) -> float | None:
         """A finite number within the bounds (``strictly``: above ``minimum``); None when absent or reported."""
         if node is None:
             return None

@@ -40,7 +40,7 @@ MAX_TIME_LIMIT = 7 * 24 * 3600.0
 
 
 def build_run_section(src: Source, node: Node | None, types: Mapping[str, MessageType],
-                      channels: Sequence[Channel], modules: Sequence[str]) -> RunSection:
+                      channels: Sequence[Channel], *, modules: Sequence[str]) -> RunSection:
     """The ``run:`` section, or an empty one; every problem reported to ``src`` with its place and a fix."""
     if node is None or node.value is None:
         return RunSection()

@@ -50,7 +50,7 @@ def read_types_section(reader: SpecReader, node: Node | None) -> dict[str, Messa
 
 def _field_type(reader: SpecReader, node: Node, type_names: list[str], where: str) -> FieldType:
     if isinstance(node.value, str):
-        return _type_expr(reader, node.value, node, type_names, where)
+        return _type_expr(reader, node.value, node, type_names, where=where)
     if not node.is_map:
         reader.src.at(node, f"field '{where}' has no type", "write a type name, 'T[]', {enum: […]} or {array: T}")
         return FieldType("string")
@@ -88,7 +88,7 @@ def _field_type(reader: SpecReader, node: Node, type_names: list[str], where: st
     if not isinstance(tnode.value, str):
         reader.src.at(tnode, f"'type' of '{where}' must be a type name", "e.g. float64")
         return FieldType("string")
-    base = _type_expr(reader, tnode.value, tnode, type_names, where)
+    base = _type_expr(reader, tnode.value, tnode, type_names, where=where)
     if (minimum is not None or maximum is not None) and base.kind not in SCALAR_KINDS[:10] + ("time",):
         reader.src.at(node, f"'min'/'max' on '{where}' need a numeric type, not {base.describe()}", "remove them")
     if base.kind == "array":
@@ -99,10 +99,10 @@ def _field_type(reader: SpecReader, node: Node, type_names: list[str], where: st
                      minimum=minimum, maximum=maximum)
 
 
-def _type_expr(reader: SpecReader, text: str, node: Node, type_names: list[str], where: str) -> FieldType:
+def _type_expr(reader: SpecReader, text: str, node: Node, type_names: list[str], *, where: str) -> FieldType:
     text = text.strip()
     if text.endswith("[]"):
-        return FieldType("array", items=_type_expr(reader, text[:-2], node, type_names, where + "[]"))
+        return FieldType("array", items=_type_expr(reader, text[:-2], node, type_names, where=where + "[]"))
     if text in SCALAR_KINDS:
         return FieldType(text)
     if text in type_names:

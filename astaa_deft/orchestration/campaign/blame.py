@@ -170,14 +170,14 @@ def departures(failing: RunSeries, twins: Sequence[RunSeries]) -> list[Departure
         if channel in failing.mutated:
             continue
         theirs = [t.bins.get(channel, {}) for t in twins]
-        first = _first_departure(channel, bins, theirs, start, end)
+        first = _first_departure(channel, bins, theirs, start, end=end)
         if first is not None:
             found.append(first)
     return sorted(found, key=lambda d: (d.bin, RANK.get(d.how, 9), d.channel))
 
 
 def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequence[Mapping[int, Features]],
-                     start: int, end: int) -> Departure | None:
+                     start: int, *, end: int) -> Departure | None:
     last = max(mine, default=start)
     twin_last = min((max(t, default=-1) for t in theirs), default=-1)
     noise = _noise(mine, theirs, start)

@@ -61,7 +61,7 @@ def run_share(outcomes: list[CaseOutcome]) -> RunShare | None:
 
 
 def workers_for(share: RunShare, cores: int, memory_mb: float | None, most: int | None = None,
-                other_load: float = 0.0) -> int:
+                *, other_load: float = 0.0) -> int:
     """Runs at once that fit the cores other work leaves (``other_load``: runnable tasks not ours), with
     headroom, and the available memory, at most ``most``; at least 1.
 

@@ -19,10 +19,10 @@ DEMO_HORIZON = 6.0
 
 
 def campaign_step(spec_path: Path, out_dir: Path, say: Callable[[str], None] = print,
-                  cases: int = DEMO_CASES, seed: int = DEMO_SEED) -> int:
+                  cases: int = DEMO_CASES, *, seed: int = DEMO_SEED) -> int:
     """Run the short campaign into ``out_dir``; the number of buckets it found (its report is written)."""
-    config = CampaignConfig(spec_path, out_dir, cases=cases, seed=seed, horizon=DEMO_HORIZON, baseline_runs=1,
-                            reruns=1, minimise=False)
+    config = CampaignConfig(spec_path=spec_path, out=out_dir, cases=cases, seed=seed, horizon=DEMO_HORIZON,
+                            baseline_runs=1, reruns=1, minimise=False)
     journal = Journal(out_dir)
     try:
         result = Campaign(config, journal, say=say).run()

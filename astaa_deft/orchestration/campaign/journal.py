@@ -26,6 +26,7 @@ from astaa_deft.orchestration.campaign.model import (
 from astaa_deft.orchestration.campaign.journal_rows import (
     blame_row, bucket_row, case_row, check_columns, meta_of, minimisation_row, module_tests_row, note_row,
 )
+from astaa_deft.orchestration.campaign.payload import testcase_text
 from astaa_deft.orchestration.campaign.rows import (
     BlameRow, Bucket, CampaignMeta, CaseRow, Minimisation, MinimisationRow, ModuleTestsRow, NewBucket, NoteRow,
 )
@@ -137,7 +138,7 @@ class Journal:
         self._write("INSERT OR IGNORE INTO cases(case_id, kind, number, seed, params, testcase_xml, strategy, parent,"
                     " planned_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (case.case_id, case.kind, case.number, case.seed, json.dumps(case.params, sort_keys=True),
-                     case.testcase_xml, case.strategy, case.parent, time.time()))
+                     testcase_text(case.testcase), case.strategy, case.parent, time.time()))
 
     def started(self, case_id: str, worker: str = "") -> None:
         self._write("UPDATE cases SET status='running', started_at=?, worker=? WHERE case_id=?",
@@ -171,10 +172,10 @@ class Journal:
         cur = self.db.execute("UPDATE cases SET status='planned', started_at=NULL WHERE status='running'")
         return cur.rowcount
 
-    def pending(self, kind: CaseKind | None = None) -> list[PlannedCase]:
-        """The planned cases not started yet (of ``kind``), in order."""
+    def pending(self, kind: CaseKind | None = None) -> list[CaseRow]:
+        """The planned cases not started yet (of ``kind``), in order (``CaseRow.planned``: what a worker runs)."""
         sql = "SELECT * FROM cases WHERE status='planned'" + (" AND kind=?" if kind else "") + " ORDER BY number"
-        return [case_row(str(self.path), r).planned() for r in self.db.execute(sql, (kind,) if kind else ())]
+        return [case_row(str(self.path), r) for r in self.db.execute(sql, (kind,) if kind else ())]
 
     def cases(self, kind: CaseKind | None = None) -> list[CaseRow]:
         """Every case (of ``kind``), in order."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.engine.monitor.verdict import ORDER
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.vocabulary import TextEnum
@@ -111,22 +112,11 @@ class PlannedCase:
     case_id: str  # "b-0001", "c-000042", "r-<bucket>-1", "t-<bucket>-1"
     kind: CaseKind
     number: int  # order in the campaign
-    seed: int  # the strategy's seed for this case (the test case's own is inside the XML)
+    seed: int  # the strategy's seed for this case (the test case's own is inside it)
     params: dict[str, str]
-    testcase_xml: str | None  # None: a clean run
+    testcase: TestCase | None  # None: a clean run
     strategy: str = "random"
     parent: str | None = None  # guided: the corpus case this one mutates
-
-    def to_json(self) -> JsonObject:
-        """Its JSON form (it crosses process and machine boundaries)."""
-        return asdict(self)
-
-    @classmethod
-    def from_json(cls, body: JsonObject) -> PlannedCase:
-        """The case :meth:`to_json` wrote (KeyError, ValueError or TypeError for another shape: a bug, not
-        input)."""
-        fields: dict[str, Any] = dict(body)
-        return cls(**{**fields, "kind": CaseKind(fields["kind"])})
 
 
 @dataclass(frozen=True)

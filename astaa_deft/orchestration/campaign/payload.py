@@ -2,7 +2,11 @@
 
 :class:`CasePayload` is the case's JSON form on the way to a worker (the
 keys ``worker.execute`` reads) and back from it (``from_json``, in the
-worker's process). :class:`CaseMessage` (the payload, to the case process)
+worker's process). A test case is an object everywhere in the campaign;
+it becomes text only here and in the journal, through one pair of
+functions (:func:`testcase_text`, :func:`read_testcase`). A payload read
+back keeps its case's text until the worker checks it against its own spec
+and dictionaries (:meth:`CasePayload.testcase`). :class:`CaseMessage` (the payload, to the case process)
 and :class:`OutcomeMessage` (its outcome, back) are the two messages on
 that channel, framed by :mod:`astaa_deft.io.pipe_messages`. :class:`CasePool`
 is the interface the campaign drives (``executors.LocalPool`` and
@@ -13,11 +17,45 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
+from astaa_deft.engine.intercept.dictionary import Dictionary
+from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.model.json import JsonObject, JsonValue
-from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
+from astaa_deft.model.sut import Spec
+from astaa_deft.orchestration.campaign.model import CaseKind, CaseOutcome, PlannedCase
+
+
+def testcase_text(testcase: TestCase | None) -> str | None:
+    """A test case's stored form (the journal's column, the payload's key); None for a clean run."""
+    return testcase.to_xml().decode() if testcase is not None else None
+
+
+def read_testcase(text: str | None, name: str, spec: Spec | None = None,
+                  dictionary: Dictionary | None = None) -> TestCase | None:
+    """The test case :func:`testcase_text` wrote (None for a clean run), checked against ``spec`` and
+    ``dictionary`` when given (InputError naming ``name`` when it does not fit them)."""
+    return parse_testcase(text.encode(), name, spec, dictionary) if text else None
+
+
+def case_json(case: PlannedCase, text: str | None = None) -> JsonObject:
+    """A planned case's JSON form (its test case as text: ``text`` when it is at hand already)."""
+    return {"case_id": case.case_id, "kind": case.kind.value, "number": case.number, "seed": case.seed,
+            "params": dict(case.params), "testcase_xml": text if text is not None else testcase_text(case.testcase),
+            "strategy": case.strategy, "parent": case.parent}
+
+
+def _case_of(body: JsonObject) -> tuple[PlannedCase, str | None]:
+    """The case :func:`case_json` wrote, without its test case, and that test case's text (KeyError, ValueError
+    or TypeError for another shape: a bug, not input)."""
+    params, text, parent = body["params"], body["testcase_xml"], body["parent"]
+    if not isinstance(params, dict) or not isinstance(text, (str, type(None))):
+        raise ValueError(f"a planned case, not {body!r}")
+    case = PlannedCase(str(body["case_id"]), CaseKind(body["kind"]), int(_number(body["number"])),
+                       int(_number(body["seed"])), {str(k): str(v) for k, v in params.items()}, None,
+                       str(body["strategy"]), None if parent is None else str(parent))
+    return case, text
 
 
 def _strings(value: JsonValue) -> tuple[str, ...]:
@@ -43,12 +81,21 @@ class CasePayload:
     dictionaries: tuple[str, ...]  # dictionary files beside the bundled one
     settle: float | None  # a mutated run ends this long after its last mutation could act (None: never)
     known: tuple[str, ...]  # known baseline findings: a mutated run does not end at these
+    # Read back (from_json): the case's test case as text, checked by testcase() against the worker's spec.
+    received_text: str | None = field(default=None, compare=False)
+
+    def testcase(self, spec: Spec, dictionary: Dictionary) -> TestCase | None:
+        """The case's test case, checked against ``spec`` and ``dictionary`` when the payload was read back
+        (InputError when it does not fit them); None for a clean run."""
+        if self.received_text is None:
+            return self.case.testcase
+        return read_testcase(self.received_text, self.case.case_id, spec, dictionary)
 
     def to_json(self) -> JsonObject:
         """The payload's JSON form (what the pools pass on to the workers)."""
-        return {"spec": self.spec, "case": self.case.to_json(), "run_dir": self.run_dir, "horizon": self.horizon,
-                "dictionaries": [path for path in self.dictionaries], "settle": self.settle,
-                "known": [name for name in self.known]}
+        return {"spec": self.spec, "case": case_json(self.case, self.received_text), "run_dir": self.run_dir,
+                "horizon": self.horizon, "dictionaries": [path for path in self.dictionaries],
+                "settle": self.settle, "known": [name for name in self.known]}
 
     @classmethod
     def from_json(cls, data: JsonObject) -> CasePayload:
@@ -59,9 +106,11 @@ class CasePayload:
         case, settle = data["case"], data.get("settle")
         if not isinstance(case, dict):
             raise ValueError(f"a case is an object, not {case!r}")
-        return cls(spec=str(data["spec"]), case=PlannedCase.from_json(case), run_dir=str(data["run_dir"]),
+        planned, text = _case_of(case)
+        return cls(spec=str(data["spec"]), case=planned, run_dir=str(data["run_dir"]),
                    horizon=_number(data["horizon"]), dictionaries=_strings(data.get("dictionaries", [])),
-                   settle=None if settle is None else _number(settle), known=_strings(data.get("known", [])))
+                   settle=None if settle is None else _number(settle), known=_strings(data.get("known", [])),
+                   received_text=text)
 
 
 @dataclass(frozen=True)

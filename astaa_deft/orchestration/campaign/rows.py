@@ -12,6 +12,7 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.json import JsonObject
 from astaa_deft.orchestration.campaign.model import (
     BUG, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus, PlannedCase, Timing,
@@ -60,9 +61,10 @@ class CaseRow:
         """What its run gave (None: not finished)."""
         return CaseOutcome.from_json(json.loads(self.outcome_json)) if self.outcome_json else None
 
-    def planned(self) -> PlannedCase:
-        """The case as it was planned (what a worker runs)."""
-        return PlannedCase(self.case_id, self.kind, self.number, self.seed, self.params, self.testcase_xml,
+    def planned(self, testcase: TestCase | None) -> PlannedCase:
+        """The case as it was planned (what a worker runs), with its test case read back from
+        :attr:`testcase_xml` (``payload.read_testcase``: the row keeps the stored text)."""
+        return PlannedCase(self.case_id, self.kind, self.number, self.seed, self.params, testcase,
                            self.strategy, self.parent)
 
 

@@ -38,6 +38,7 @@ from astaa_deft.engine.session import RunOptions, RunResult, RunView, run_sessio
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
 from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
+from astaa_deft.orchestration.campaign.payload import testcase_text
 
 POLL_SECONDS = 0.05
 LOG_NAME = "run.mcap"
@@ -115,7 +116,7 @@ def _run_options(spec: Spec, testcase: TestCase | None, params: dict[str, str], 
     interceptor = None
     if testcase is not None and testcase.policies:
         policy_file = run_dir / POLICY_NAME
-        policy_file.write_bytes(testcase.to_xml())
+        policy_file.write_text(testcase_text(testcase) or "", encoding="utf-8")  # stored: the log attaches it
         attachments[layout.POLICY_ATTACHMENT] = policy_file
         interceptor = Interceptor(testcase, spec, dictionary or load_dictionary())
     return RunOptions(mode=RunMode.STAR, launch=True, record=run_dir / LOG_NAME, params=dict(params),

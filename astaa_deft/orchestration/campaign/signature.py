@@ -15,7 +15,7 @@ from collections.abc import Callable, Collection
 from dataclasses import replace
 from pathlib import Path
 
-from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.verdict import ORDER
 from astaa_deft.model.records import Verdict
@@ -119,17 +119,15 @@ def field_family(family: str) -> str:
     return "+".join(sorted(parts))
 
 
-def signature(outcome: CaseOutcome, testcase_xml: str | None) -> BucketSignature:
-    """The bucket a failing run of ``testcase_xml`` (None: a clean run) belongs in."""
-    testcase = parse_testcase(testcase_xml.encode()) if testcase_xml else None
+def signature(outcome: CaseOutcome, testcase: TestCase | None) -> BucketSignature:
+    """The bucket a failing run of ``testcase`` (None: a clean run) belongs in."""
     return BucketSignature(failure_key(outcome), mutation_family(testcase))
 
 
-def mutated_channels(testcase_xml: str | None, spec: Spec) -> set[str]:
+def mutated_channels(testcase: TestCase | None, spec: Spec) -> set[str]:
     """Names of the channels the test case's policies rewrite (by channel or by message type)."""
-    if not testcase_xml:
+    if testcase is None:
         return set()
-    testcase = parse_testcase(testcase_xml.encode())
     return {c.name for policy in testcase.policies for c in policy.target_channels(spec)}
 
 
@@ -141,7 +139,7 @@ def invariant_channels(spec: Spec) -> dict[str, frozenset[str]]:
 Judge = Callable[[Path, Spec, Collection[str], Collection[str]], "set[str] | None"]
 
 
-def without_self_inflicted(outcome: CaseOutcome, testcase_xml: str | None, spec: Spec,
+def without_self_inflicted(outcome: CaseOutcome, testcase: TestCase | None, spec: Spec,
                            judge: Judge = broken_on_originals) -> CaseOutcome:
     """The outcome without the findings the test case inflicted on itself.
 
@@ -159,7 +157,7 @@ def without_self_inflicted(outcome: CaseOutcome, testcase_xml: str | None, spec:
     invariant on channels the case leaves alone — counts as the monitors
     said. A run left with no finding is not a failure.
     """
-    mutated = mutated_channels(testcase_xml, spec)
+    mutated = mutated_channels(testcase, spec)
     if not mutated or outcome.status != "done":
         return outcome
     reads = invariant_channels(spec)

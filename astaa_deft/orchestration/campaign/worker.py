@@ -31,7 +31,6 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.model.sut import Spec
 from astaa_deft.io.inputfile import SPEC, read_input
 from astaa_deft.engine.intercept.dictionary import load_dictionary
-from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.engine.session.bus_run import release_warm_recorder, warm_recorder
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.forked import fork_recorder
@@ -79,8 +78,7 @@ def execute(payload: CasePayload, preloaded: Preloaded | None = None,
         else:
             spec = load_spec(Path(payload.spec))
             dictionary = load_dictionary([Path(p) for p in payload.dictionaries])
-        testcase = parse_testcase(case.testcase_xml.encode(), case.case_id, spec, dictionary) \
-            if case.testcase_xml else None
+        testcase = payload.testcase(spec, dictionary)
     except InputError as exc:
         return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems)))
     return run_case(spec, testcase, case.params, Path(payload.run_dir), horizon=payload.horizon,

@@ -85,7 +85,7 @@ class BisectResult:
 
 
 def bisect_bucket(options: VerifyOptions, good: str, bad: str, build: str | None,
-                  say: Callable[[str], None] = print) -> BisectResult:
+                  *, say: Callable[[str], None] = print) -> BisectResult:
     """Bisect ``options.buckets[0]`` over GOOD..BAD (module doc). InputError: no ``source:`` in the spec, a
     checkout with changes, revisions git does not know or in the wrong order, a build or a run that fails."""
     [bucket] = options.buckets
@@ -155,7 +155,7 @@ def _verify_one(options: VerifyOptions, revision: str) -> VerifyStatus:
     try:
         chosen, _ = targets(campaign, options.buckets, options.params)
         out_dir = options.campaign / VERIFY_DIR / f"bisect-{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}"
-        checks = verify_targets(campaign, chosen, options, revision, out_dir, say=lambda text: None)
+        checks = verify_targets(campaign, chosen, options, revision, out_dir=out_dir, say=lambda text: None)
     finally:
         campaign.journal.close()
     return checks[0].status if checks else VerifyStatus.NOT_OBSERVED

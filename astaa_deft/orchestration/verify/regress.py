@@ -58,7 +58,7 @@ class RegressSuite:
 def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
     """Run bucket ``name``'s minimal test case once, live: how it failed its bucket's way (None: it did not).
     Raises AssertionError when the run was not observed to its end (no verdict is given about it)."""
-    from astaa_deft.engine.intercept.testcase import parse_testcase
+    from astaa_deft.engine.intercept.testcase import load_testcase
     from astaa_deft.engine.spec.loader import load_spec
     from astaa_deft.orchestration.campaign import signature as sig
     from astaa_deft.orchestration.campaign.known import from_json as known_from_json, judged
@@ -67,15 +67,15 @@ def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
 
     entry = suite.bucket(name)
     spec = load_spec(suite.spec_path())
-    xml = (suite.directory / entry["testcase"]).read_text()
+    testcase = load_testcase(suite.directory / entry["testcase"])
     known = known_from_json(suite.manifest.get("known") or {})
-    outcome = run_case(spec, parse_testcase(xml.encode()), suite.params_of(name), run_dir,
+    outcome = run_case(spec, testcase, suite.params_of(name), run_dir,
                        horizon=float(suite.manifest["horizon"]), settle=float(suite.manifest["settle"]),
                        known=frozenset(known))
     if outcome.status != "done":
         raise AssertionError(f"{name}: the run was not observed to its end ({outcome.summary}: {outcome.error})"
                              f" — no verdict; log in {run_dir}")
-    outcome = judged(sig.without_self_inflicted(outcome, xml, spec), known)
+    outcome = judged(sig.without_self_inflicted(outcome, testcase, spec), known)
     way = FailureWay(entry["invariant"], entry["module"])
     if way.shown_by(outcome):
         return f"{outcome.summary} (log: {outcome.log_path})"

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from astaa_deft.analysis.deft.export import MANIFEST
+from astaa_deft.engine.intercept.dictionary import load_dictionary
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.engine.spec.params import check_param_values
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -34,7 +36,7 @@ from astaa_deft.orchestration.campaign.model import (
     BASELINE, CONTROL, MUTATED, RERUN, CaseOutcome, CaseStatus, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.module_tests import is_crash_bucket, run_module_tests
-from astaa_deft.orchestration.campaign.payload import CasePayload
+from astaa_deft.orchestration.campaign.payload import CasePayload, read_testcase
 from astaa_deft.orchestration.campaign.rows import Bucket
 from astaa_deft.orchestration.verify import records
 from astaa_deft.orchestration.verify.model import (
@@ -47,7 +49,7 @@ VERIFY_DIR = "verify"
 EXIT_NOT_OBSERVED = 3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class VerifyOptions:
     campaign: Path
     params: dict[str, str] = field(default_factory=dict)  # overrides of each case's params
@@ -193,7 +195,7 @@ def verify_campaign(options: VerifyOptions, say: Callable[[str], None] = print) 
         ready_dir(place, temp=True)
         out_dir = options.campaign / VERIFY_DIR / f"{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}"
         with writing(place):
-            checks = verify_targets(campaign, chosen, options, revision, out_dir, say)
+            checks = verify_targets(campaign, chosen, options, revision, out_dir=out_dir, say=say)
         return VerifyReport(revision, checks, skipped, out_dir)
     finally:
         campaign.journal.close()
@@ -216,7 +218,7 @@ def stack_revision(spec: Spec) -> str:
 
 
 def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: VerifyOptions, revision: str,
-                   out_dir: Path, say: Callable[[str], None]) -> list[BucketCheck]:
+                   *, out_dir: Path, say: Callable[[str], None]) -> list[BucketCheck]:
     """Run every target's re-runs and twins (the campaign's pool, its runs at once), then its module tests;
     each check journaled as it is decided."""
     from astaa_deft.orchestration.campaign.executors import LocalPool
@@ -227,6 +229,10 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
     say(f"verify: {len(chosen)} bucket(s) on {revision}: {runs} run(s) of each test case beside {runs} unmutated"
         f" twin(s), {campaign.workers} at once")
     payloads: dict[str, tuple[Target, bool]] = {}  # case id → (target, is a re-run)
+    dictionary = load_dictionary(list(options.dictionaries))
+    testcases = {target.bucket.bucket: read_testcase(target.testcase_xml, f"{campaign.journal.path}:"
+                                                     f" {target.bucket.bucket}", campaign.spec, dictionary)
+                 for target in chosen}  # the journal's text, checked as a worker checks it
     pool = LocalPool(campaign.workers)
     try:
         for n, target in enumerate(chosen, start=1):
@@ -234,7 +240,8 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
                 for rerun in (True, False):
                     case_id = f"{'r' if rerun else 't'}-{target.bucket.bucket}-{k}"
                     case = PlannedCase(case_id, RERUN if rerun else CONTROL, n, 0, target.params,
-                                       target.testcase_xml if rerun else None, "verify", parent=target.bucket.bucket)
+                                       testcases[target.bucket.bucket] if rerun else None, "verify",
+                                       parent=target.bucket.bucket)
                     payload = CasePayload(str(campaign.spec_path.resolve()), case,
                                           str((out_dir / target.bucket.bucket / case_id).resolve()), campaign.horizon,
                                           tuple(str(p.resolve()) for p in options.dictionaries),
@@ -250,7 +257,7 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
     checks = []
     for target in chosen:
         mine = {cid: o for cid, o in outcomes.items() if payloads[cid][0] is target}
-        reruns = [_judged(campaign, o, target.testcase_xml) for cid, o in mine.items() if payloads[cid][1]]
+        reruns = [_judged(campaign, o, testcases[target.bucket.bucket]) for cid, o in mine.items() if payloads[cid][1]]
         twins = [_judged(campaign, o, None) for cid, o in mine.items() if not payloads[cid][1]]
         background = frozenset().union(*(failure_keys(o) for o in twins))
         rerun_tally, twin_tally = Tally.of(reruns, target.way, background), Tally.of(twins, target.way)
@@ -263,10 +270,10 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
     return checks
 
 
-def _judged(campaign: CampaignFindings, outcome: CaseOutcome, xml: str | None) -> CaseOutcome:
+def _judged(campaign: CampaignFindings, outcome: CaseOutcome, testcase: TestCase | None) -> CaseOutcome:
     """A run as the campaign counts it: self-inflicted findings and known baseline findings no worse apart."""
-    if xml is not None:
-        outcome = sig.without_self_inflicted(outcome, xml, campaign.spec)
+    if testcase is not None:
+        outcome = sig.without_self_inflicted(outcome, testcase, campaign.spec)
     return judged(outcome, campaign.known)
 
 

@@ -127,12 +127,12 @@ def _check_targets(policy: Policy, element: etree._Element, checker: Checker) ->
     names = [c.name for c in spec.channels]
     for child in element.iterfind("channel"):
         if _text(child) not in names:
-            _unknown(checker, child, "channel", _text(child), names)
+            _unknown(checker, child, "channel", _text(child), known=names)
     type_element = element.find("type")
     if type_element is not None:
         carried = sorted({c.type for c in spec.channels})
         if policy.message_type not in spec.types:
-            _unknown(checker, type_element, "message type", policy.message_type, list(spec.types))
+            _unknown(checker, type_element, "message type", policy.message_type, known=list(spec.types))
         elif policy.message_type not in carried:
             checker.report(type_element, f"no channel carries type '{policy.message_type}'",
                            "types carried by channels: " + ", ".join(carried))
@@ -146,11 +146,11 @@ def _check_targets(policy: Policy, element: etree._Element, checker: Checker) ->
                            "consumers there: " + (", ".join(consumers) or "none"))
     after = element.find("window/after")
     if after is not None and after.get("channel") not in names:
-        _unknown(checker, after, "channel", after.get("channel"), names, attribute="channel")
+        _unknown(checker, after, "channel", after.get("channel"), known=names, attribute="channel")
     return channels
 
 
-def _unknown(checker: Checker, element: etree._Element, what: str, name: str | None, known: Sequence[str],
+def _unknown(checker: Checker, element: etree._Element, what: str, name: str | None, *, known: Sequence[str],
              attribute: str | None = None) -> None:
     hint = did_you_mean(str(name), known)
     shown = ", ".join(list(known)[:12]) + (", ..." if len(known) > 12 else "")

@@ -31,7 +31,7 @@ MAX_FILE_BYTES = POLICY.max_bytes or 0  # the cap of a file read, applied to byt
 DOCS = "docs/policies.md"
 
 
-def _error(name: str, line: int | None, column: int | None, message: str, fix: str) -> InputError:
+def _error(name: str, line: int | None, column: int | None, message: str, *, fix: str) -> InputError:
     return InputError(Problem(name, line, column, message, fix))
 
 
@@ -43,23 +43,23 @@ _DANGEROUS = re.compile(r"<!\s*(DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)", re.IG
 def safe_text(data: bytes, name: str) -> str:
     """The file as text, after refusing what could make a parser expand or fetch anything."""
     if len(data) > MAX_FILE_BYTES:
-        raise _error(name, 1, 1, f"larger than {MAX_FILE_BYTES // (1024 * 1024)} MB", "check the file")
+        raise _error(name, 1, 1, f"larger than {MAX_FILE_BYTES // (1024 * 1024)} MB", fix="check the file")
     declared = _ENCODING_DECL.match(data.removeprefix(b"\xef\xbb\xbf"))
     if declared and declared.group(1).lower().replace(b"_", b"-") not in (b"utf-8", b"utf8", b"us-ascii", b"ascii"):
         raise _error(name, 1, declared.start(1) + 1, f"encoding {declared.group(1).decode()} is not supported",
-                     'save the file as UTF-8 and write encoding="UTF-8"')
+                     fix='save the file as UTF-8 and write encoding="UTF-8"')
     try:
         text = data.decode("utf-8").removeprefix("\ufeff")
     except UnicodeDecodeError as exc:
         line = data[:exc.start].count(b"\n") + 1
         raise _error(name, line, exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1,
-                     "not valid UTF-8 (test cases are UTF-8 text)", "save the file as UTF-8") from None
+                     "not valid UTF-8 (test cases are UTF-8 text)", fix="save the file as UTF-8") from None
     danger = _DANGEROUS.search(text)
     if danger:
         line, column = _line_col(text, danger.start())
         raise _error(name, line, column,
                      f"<!{danger.group(1).upper()} declarations are refused (they enable entity expansion "
-                     "and external entities)", "remove the DOCTYPE; test cases need no DTD or entities")
+                     "and external entities)", fix="remove the DOCTYPE; test cases need no DTD or entities")
     return text
 
 
@@ -77,10 +77,10 @@ def parse_xml(data: bytes, name: str) -> etree._Element:
         line, column = exc.position if exc.position else (exc.lineno, None)
         message = re.sub(r", line \d+, column \d+$", "", exc.msg or str(exc))
         raise _error(name, line or 1, column or 1, f"not well-formed XML: {message}",
-                     "fix the XML syntax here") from None
+                     fix="fix the XML syntax here") from None
     docinfo = root.getroottree().docinfo
     if docinfo.internalDTD is not None or docinfo.externalDTD is not None or docinfo.doctype:
-        raise _error(name, 1, 1, "DOCTYPE declarations are refused", "remove the DOCTYPE")
+        raise _error(name, 1, 1, "DOCTYPE declarations are refused", fix="remove the DOCTYPE")
     return root
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import ClassVar
 
 from astaa_deft.engine.intercept.dictionary import Dictionary
+from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase, Timing
@@ -22,9 +23,9 @@ from astaa_deft.model.registry import Registry
 
 @dataclass(frozen=True)
 class Proposal:
-    """A strategy's next test case (its XML) and the case it was derived from, if any."""
+    """A strategy's next test case and the case it was derived from, if any."""
 
-    testcase_xml: str
+    testcase: TestCase
     parent: str | None = None  # the case it was derived from, if any
 
 
@@ -53,7 +54,7 @@ class Strategy(ABC):
     def propose(self, number: int) -> Proposal:
         """The ``number``-th test case; deterministic given the seed and what was observed before."""
 
-    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
+    def observe(self, case_id: str, testcase: TestCase | None, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
         """A finished generated case (in the order results arrive). Default: nothing learnt."""
 
     def observe_baseline(self, case_id: str, outcome: CaseOutcome) -> None:  # noqa: B027 (optional hook)
@@ -67,7 +68,7 @@ class Strategy(ABC):
         """On resume: the generated cases the campaign had planned already, in order (before their outcomes
         reach :meth:`observe`). Default: ignored."""
 
-    def judge(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome, learn: bool = True) -> CaseOutcome:
+    def judge(self, case_id: str, testcase: TestCase | None, outcome: CaseOutcome, learn: bool = True) -> CaseOutcome:
         """The outcome of a generated case or its re-run as this strategy's oracle sees it (``learn``: a
         generated case, not a re-run). Default: the outcome as the monitors judged it."""
         return outcome

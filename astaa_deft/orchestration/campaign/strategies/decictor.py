@@ -26,7 +26,7 @@ from astaa_deft.analysis.decictor.search import Scene, Search
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.engine.intercept.actions.participant import Participant
 from astaa_deft.engine.intercept.dictionary import Dictionary
-from astaa_deft.engine.intercept.testcase import Policy, TestCase, parse_testcase
+from astaa_deft.engine.intercept.testcase import Policy, TestCase
 from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
@@ -48,15 +48,14 @@ def area_around(seed: RunObservation, lanes: tuple[Lane, ...]) -> Area:
                 max(ys) + half + AREA_MARGIN)
 
 
-def scene_xml(scene: Scene, case_id: str, seed: int, channel: str) -> str:
+def scene_testcase(scene: Scene, case_id: str, seed: int, channel: str) -> TestCase:
     policies = tuple(Policy(f"p{k + 1}", p, channels=(channel,)) for k, p in enumerate(scene.participants))
     described = ", ".join(f"{p.kind} {p.id} at ({p.x:g}, {p.y:g})" + (" moving" if p.path else "")
                           for p in scene.participants) or "no participant (the seed)"
-    return TestCase(case_id, seed, f"decictor ({scene.operator}): {described}", policies).to_xml().decode()
+    return TestCase(case_id, seed, f"decictor ({scene.operator}): {described}", policies)
 
 
-def scene_of(testcase_xml: str) -> Scene:
-    testcase = parse_testcase(testcase_xml.encode())
+def scene_of(testcase: TestCase) -> Scene:
     return Scene(tuple(p.action for p in testcase.policies if isinstance(p.action, Participant)))
 
 
@@ -92,7 +91,7 @@ class DecictorStrategy(Strategy):
         self.lanes = logged.lanes
         region = ForbiddenRegion(seed_run.ego, self.config.dt, self.config.clearance)
         self.search = Search(self.mode, self.seed, seed_run, LaneGrid(self.lanes),
-                             area_around(seed_run, self.lanes), region)
+                             area=area_around(seed_run, self.lanes), region=region)
         self.seed_case, self.seed_log = case_id, outcome.log_path
 
     def _search(self) -> Search:
@@ -105,15 +104,15 @@ class DecictorStrategy(Strategy):
     # -- ask / tell ----------------------------------------------------------------
     def propose(self, number: int) -> Proposal:
         scene = self._search().propose(number)
-        return Proposal(scene_xml(scene, f"tc-{number:06d}", number, self.config.participants.channel),
+        return Proposal(scene_testcase(scene, f"tc-{number:06d}", number, self.config.participants.channel),
                         parent=self.seed_case)
 
-    def judge(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome, learn: bool = True) -> CaseOutcome:
+    def judge(self, case_id: str, testcase: TestCase | None, outcome: CaseOutcome, learn: bool = True) -> CaseOutcome:
         """The outcome with a path_consistency finding when the run was a non-optimal decision."""
-        if testcase_xml is None or outcome.status != "done" or not outcome.log_path:
+        if testcase is None or outcome.status != "done" or not outcome.log_path:
             return outcome
         search = self._search()
-        scene = scene_of(testcase_xml)
+        scene = scene_of(testcase)
         try:
             run = observe_log(Path(outcome.log_path), self.spec, self.config).observation
         except (ObservationError, InputError) as exc:
@@ -142,7 +141,7 @@ class DecictorStrategy(Strategy):
     def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:
         from astaa_deft.orchestration.campaign.strategies.decictor_export import export_findings
 
-        export_findings(self, journal, out, spec_path, say)
+        export_findings(self, journal, out, spec_path, say=say)
 
 
 @STRATEGIES.register_class

@@ -32,6 +32,7 @@ from astaa_deft.analysis.decictor.search import Scene
 from astaa_deft.engine.intercept.actions.participant import Participant
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.rows import CaseRow, Minimisation
+from astaa_deft.orchestration.campaign.payload import read_testcase
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, scene_of
 
 if TYPE_CHECKING:
@@ -51,7 +52,7 @@ def seed_plan_ends(strategy: DecictorStrategy, log_path: Path) -> list[tuple[flo
 
 
 def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spec_path: Path,
-                    say: Callable[[str], None]) -> None:
+                    *, say: Callable[[str], None]) -> None:
     """Each path-consistency bucket of ``journal`` as DeFT module tests under ``out/tests`` (journalled as the
     bucket's minimisation), and ``out/decictor.html``: seed vs mutated paths. Nothing without a seed run."""
     buckets = [b for b in journal.buckets(include_merged=False) if b.invariant == INVARIANT]
@@ -78,7 +79,9 @@ def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spe
             detail = f"{report.accepted} frames; {detail}"
         except InputError as exc:
             status, detail = "error", "; ".join(map(str, exc.problems))
-        scene = scene_of(row.testcase_xml)
+        testcase = read_testcase(row.testcase_xml, f"{journal.path}: {row.case_id}", strategy.spec)
+        assert testcase is not None  # skipped above when the row holds none
+        scene = scene_of(testcase)
         culprit = ", ".join(f"{p.kind} {p.id}" for p in scene.participants)
         journal.minimised(Minimisation(bucket.bucket, status, 1 if status.endswith("(fail)") else 0,
                                        row.testcase_xml, culprit, None, str(tests_dir), time.monotonic() - started,

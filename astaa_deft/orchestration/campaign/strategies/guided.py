@@ -28,7 +28,7 @@ from dataclasses import replace
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.dictionary import Dictionary
-from astaa_deft.engine.intercept.testcase import Selection, TestCase, parse_testcase
+from astaa_deft.engine.intercept.testcase import Selection, TestCase
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
 from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy, Timing
@@ -52,7 +52,7 @@ class GuidedStrategy(Strategy):
         self.duration = duration
         self.targets = {(t.channel.name, str(t.path)): t for ts in self.fresh.by_channel.values() for t in ts}
         self.best: dict[str, float] = {}  # invariant → closest approach so far
-        self.corpus: list[tuple[str, str]] = []  # (case id, test case XML), newest last
+        self.corpus: list[tuple[str, TestCase]] = []  # (case id, test case), newest last
         self.closeness: dict[str, float] = {}  # corpus case → the smallest margin it reached
         self.fresh_planned = 0  # schedule cases proposed so far (the next one is fresh_planned + 1)
 
@@ -74,15 +74,14 @@ class GuidedStrategy(Strategy):
         rng.random()  # the draw _exploits made
         if not (self.corpus and self._exploits(number)):
             self.fresh_planned += 1
-            fresh = parse_testcase(self.fresh.propose(self.fresh_planned).testcase_xml.encode())
-            return Proposal(replace(fresh, id=f"tc-{number:06d}").to_xml().decode())
+            fresh = self.fresh.propose(self.fresh_planned).testcase
+            return Proposal(replace(fresh, id=f"tc-{number:06d}"))
         # Steer: the closer an entry came to breaking an invariant, the more often it is the parent.
         weights = [1.0 / (self.closeness.get(case, 1.0) + 0.05) for case, _ in self.corpus]
-        parent_id, parent_xml = rng.choices(self.corpus, weights=weights)[0]
-        parent = parse_testcase(parent_xml.encode())
+        parent_id, parent = rng.choices(self.corpus, weights=weights)[0]
         operator = rng.choice(OPERATORS)
         child = self._mutate(parent, operator, rng, number)
-        return Proposal(child.to_xml().decode(), parent=parent_id)
+        return Proposal(child, parent=parent_id)
 
     def observe_baseline(self, case_id: str, outcome: CaseOutcome) -> None:
         """A clean run: where each invariant stands without mutation (what a case must beat)."""
@@ -92,8 +91,8 @@ class GuidedStrategy(Strategy):
             if math.isfinite(margin):
                 self.best[invariant] = min(margin, self.best.get(invariant, math.inf))
 
-    def observe(self, case_id: str, testcase_xml: str | None, outcome: CaseOutcome) -> None:
-        if testcase_xml is None or outcome.status != "done":
+    def observe(self, case_id: str, testcase: TestCase | None, outcome: CaseOutcome) -> None:
+        if testcase is None or outcome.status != "done":
             return
         closer = False
         for invariant, margin in outcome.margins.items():
@@ -102,7 +101,7 @@ class GuidedStrategy(Strategy):
                 self.best[invariant] = margin
                 closer = True
         if closer:
-            self.corpus.append((case_id, testcase_xml))
+            self.corpus.append((case_id, testcase))
             self.closeness[case_id] = min(m for m in outcome.margins.values() if math.isfinite(m))
             del self.corpus[:-CORPUS_LIMIT]
 
@@ -113,7 +112,7 @@ class GuidedStrategy(Strategy):
         policy = policies[index]
         channel = policy.channels[0] if policy.channels else None
         if operator == "policy":
-            extra = parse_testcase(self.fresh.propose(number).testcase_xml.encode()).policies[0]
+            extra = self.fresh.propose(number).testcase.policies[0]
             policies.append(replace(extra, id=f"p{len(policies) + 1}"))
         elif isinstance(policy.action, Set) and operator in ("value", "field") and channel is not None:
             fields = list(policy.action.fields)

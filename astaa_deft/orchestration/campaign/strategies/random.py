@@ -62,9 +62,9 @@ class RandomStrategy(Strategy):
             if (index - covered) % 2:
                 testcase = gen.weighted_testcase(testcase_id, rng, self.by_channel, self.timing.live,
                                                  self.timing.anchor, message_faults=True, stamps=self.stamps)
-                return Proposal(testcase.to_xml().decode())
+                return Proposal(testcase)
             index = covered + (index - covered) // 2
         round_number, position = divmod(index, self.round_length)
         probe = self._round(round_number)[position]
         testcase = gen.probe_testcase(testcase_id, rng, probe, round_number, self.timing.live, self.timing.anchor)
-        return Proposal(testcase.to_xml().decode())
+        return Proposal(testcase)
