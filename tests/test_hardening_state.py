@@ -155,9 +155,11 @@ name: tiny
 params:
   scenario: {choices: [a, b]}
 modules: [{name: a, command: "true"}, {name: b, command: "true"}]
-channels: [{name: data, key: t/data, producer: a, consumers: [b], type: Sample}]
+channels: [{name: data, key: t/data, producer: a, consumers: [b], type: Sample},
+           {name: routing, key: t/routing, producer: a, consumers: [b], type: Route}]
 types:
   Sample: {seq: uint64, value: float64}
+  Route: {speed_limit: float64}
 invariants:
   - {name: value_small, kind: expression, channel: data, expr: "value < 10"}
 """
