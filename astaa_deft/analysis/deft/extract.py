@@ -23,10 +23,11 @@ from astaa_deft.io.log.reader import LogContents, LoggedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.deft.fork_replay import (
-    Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
-    tell,
+    Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, in_two_forks, next_word, run_supervised,
+    shadow, tell,
 )
-from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, trigger_candidates
+from astaa_deft.analysis.deft.frames import AT_OUTPUT, AT_PREVIOUS, AT_START, Candidate, Stream, candidates, \
+    trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
@@ -87,6 +88,10 @@ class Extraction:
     # accepted, and not (the shadow then searched the others).
     first_stepped_in_runner: int = 0
     first_missed_in_runner: int = 0
+    declared: int = 0  # outputs that named the inputs they used (the spec's provenance), tried first
+    # Measured at the first output reproduced within 1e-9 but not exactly: how far apart two copies of the
+    # module's state answer one frame (0.0: bit for bit); None: not measured.
+    copies_differ: float | None = None
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -334,6 +339,29 @@ class _Recorded:
                    codecs={name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]},
                    index_of={name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in messages.items()})
 
+    def declared(self, cfg: ReplayModule, output_message: Any, previous: Mapping[str, int], until: int
+                 ) -> Candidate | None:
+        """The frame the output says it used (``cfg.provenance``: {input: its header.seq or header.stamp}; an
+        input it names with null, or not at all, was absent), or None when the output names none we have."""
+        named = provenance_of(output_message, cfg.provenance)
+        if named is None:
+            return None
+        choice: dict[str, int] = {}
+        for name in cfg.inputs:
+            if named.get(name) is None:
+                if name == cfg.trigger:
+                    return None
+                continue
+            times = self.streams[name].times
+            newest = bisect_right(times, until) - 1
+            found = next((i for i in range(newest, previous.get(name, 0) - 1, -1)
+                          if names_message(self.decode(name, i), named[name])), None)
+            if found is None:
+                return None
+            choice[name] = found
+        return Candidate(self.streams[cfg.trigger].times[choice[cfg.trigger]], choice,
+                         frozenset({(DECLARED, ())}))
+
     def decode(self, name: str, idx: int) -> Any:
         """Message ``idx`` of input ``name`` decoded, or None if it does not decode."""
         k = (name, idx)
@@ -377,6 +405,7 @@ class _Run:
     previous: dict[str, int] = field(default_factory=dict)  # the choice kept for the output before
     memory: SearchMemory = field(default_factory=SearchMemory)  # how earlier kept frames were derived, their time
     speculation: Speculation = field(default_factory=lambda: Speculation())
+    last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
 
     def report(self, out_index: int, skipped: str | None = None) -> None:
         """Pass on the output just decided (its frame is the last one; ``skipped``: none, and why).
@@ -433,8 +462,14 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     cfg, result, recorded, planner = run.cfg, run.result, run.recorded, run.planner
     outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
     output = outputs[out_index]
+    read_at = [(output.log_time, AT_OUTPUT)]  # a plain replay: everything logged by then, in arrival order
+    if run.last_step_s is not None:  # the cycle's start: the output's time minus the step's measured cost
+        read_at.append((output.log_time - int(run.last_step_s * 1e9), AT_START))
+    if out_index:
+        read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
     generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
-                         int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None)
+                         int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
+                         read_at)
     window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
                                 if out_index else None, skew) if generic else 0.0
     if before is not None:
@@ -449,6 +484,10 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     result.reconstruction_seconds += t1 - t0
     expected = _expected(run, out_index)
     result.validation_seconds += time.perf_counter() - t1
+    declared = recorded.declared(cfg, expected.message, run.previous, output.log_time + skew)
+    if declared is not None:  # the module said which inputs it used: that frame first, checked by replay
+        result.declared += 1
+        options = [declared] + [c for c in options if dict(c.choice) != dict(declared.choice)]
     if not options:
         run.report(out_index, "an input had no message yet")
         return
@@ -472,7 +511,42 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     result.capped += capped and not within
     if within:
         run.memory.learn(cand, step_s, window, expensive)
+        run.last_step_s = step_s
     run.keep(out_index, cand, judged)
+    if 0.0 < judged.comparison.distance <= NEAR_MISS_M and result.copies_differ is None:
+        _measure_copies(run, cand, full_limit)
+
+
+def _measure_copies(run: _Run, cand: Candidate, limit_s: float) -> None:
+    """Step two copies of the module's state on one frame (forked copies, or deep copies where the search
+    made those) and record how far apart their answers are: whether the state survives copying is then
+    measured, not guessed. The state carried on is untouched (forks), or a deep copy (as in that search)."""
+    if run.speculation.following is not None or not run.planner.can_snapshot:
+        return  # a shadow leaves it to the runner; a process replay cannot copy its module
+    frame = {name: run.recorded.decode(name, idx) for name, idx in cand.choice.items()}
+    pair: tuple[Any, Any] | None
+    if run.search is not None:
+        pair = in_two_forks(lambda: run.planner.step(frame), limit_s)
+    else:
+        planner = run.planner
+        kept = planner.snapshot()
+        answers = []
+        for _ in range(2):
+            planner.restore(copy.deepcopy(kept))
+            try:
+                answers.append(planner.step(frame))
+            except Exception:  # the module's failure on a frame is data, not a measurement
+                answers.append(None)
+        planner.restore(kept)
+        pair = None if None in answers else (answers[0], answers[1])
+    if pair is None:
+        return
+    first, second = pair
+    cfg = run.cfg
+    reference = _Expected(first, trajectory_points(first, cfg.trajectory) if cfg.trajectory is not None else [],
+                          _text(first))
+    cmp, exact = _judged(cfg, second, reference)
+    run.result.copies_differ = 0.0 if exact else cmp.distance
 
 
 def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[Candidate], window: float) -> None:
@@ -491,6 +565,31 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
             run.memory.learn(cand, step_s, window,
                              expensive=run.search is not None and window > SPECULATE_MAX_WINDOW_S)
     run.report(out_index)
+
+
+DECLARED = "declared"  # a frame the module's own output names (provenance)
+
+
+def provenance_of(message: Any, path: str | None) -> Mapping[str, Any] | None:
+    """The inputs an output names as used (``path``: the spec's ``provenance``), or None."""
+    from astaa_deft.model.fields import get
+
+    if path is None or message is None:
+        return None
+    found = get(message, path)
+    return found[0][1] if found and isinstance(found[0][1], Mapping) else None
+
+
+def names_message(message: Any, named: Any) -> bool:
+    """Is ``message`` the one an output names by ``named`` (its header.seq, or its header.stamp)?"""
+    header = message.get("header") if isinstance(message, Mapping) else None
+    if not isinstance(header, Mapping):
+        return False
+    if isinstance(named, bool):
+        return False
+    if isinstance(named, int) and header.get("seq") == named:
+        return True
+    return header.get("stamp") == named
 
 
 def _expected(run: _Run, out_index: int) -> _Expected:
@@ -530,12 +629,14 @@ def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expec
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
         t2 = time.perf_counter()
         result.planner_seconds += t2 - t1
+        step_s = t2 - t1
         cmp, exact = _judged(cfg, replayed, expected)
         t1 = time.perf_counter()
         result.validation_seconds += t1 - t2
         if cmp.within(cfg.threshold):
             best = (cmp, cand, exact, None, tries)
             run.memory.learn(cand)
+            run.last_step_s = step_s
             break
         if best is None or cmp.distance < best[0].distance:
             state = planner.snapshot() if start_state is not None else None
@@ -777,17 +878,26 @@ def search_note(extraction: Extraction) -> str | None:
 NEAR_MISS_M = 1e-9
 
 
-def near_miss_note(extraction: Extraction) -> str | None:
-    """Why outputs that match at 1e-9 m are not counted at θ = 0: the distances, and the flag that sets θ."""
+def near_miss_note(extraction: Extraction, unit: str = " m") -> str | None:
+    """Why outputs that match at 1e-9 m are not counted at θ = 0: the distances, what was measured about their
+    cause, and the flag that sets θ (``unit``: "" for a module compared field by field)."""
     near = sorted(f.comparison.distance for f in extraction.frames if 0.0 < f.comparison.distance <= NEAR_MISS_M)
     if not near:
         return None
-    quantiles = ", ".join(f"{name} {near[min(len(near) - 1, int(q * len(near)))]:.3g} m"
+    quantiles = ", ".join(f"{name} {near[min(len(near) - 1, int(q * len(near)))]:.3g}{unit}"
                           for name, q in (("min", 0.0), ("median", 0.5), ("p90", 0.9)))
-    return (f"{len(near)} output(s) match within {NEAR_MISS_M:g} m but not exactly (distances: {quantiles}, "
-            f"max {near[-1]:.3g} m): floating-point noise, e.g. a planner state that does not survive copying "
-            f"bit for bit. If that is acceptable, set θ with --threshold {NEAR_MISS_M:g} "
-            f"(or planner.threshold in the spec).")
+    measured = extraction.copies_differ
+    if measured is None:
+        why = "floating-point noise (not measured whether copies of the module's state answer alike)"
+    elif measured == 0.0:
+        why = ("not the copying: two copies of the module's state stepped on the same frame answer bit for bit "
+               "(measured), so the frame or the module's own run-to-run noise differs")
+    else:
+        why = (f"the module's state does not survive copying bit for bit: two copies stepped on the same frame "
+               f"answer {measured:.3g}{unit} apart (measured)")
+    return (f"{len(near)} output(s) match within {NEAR_MISS_M:g}{unit} but not exactly (distances: {quantiles}, "
+            f"max {near[-1]:.3g}{unit}): {why}. If that is acceptable, set θ with --threshold {NEAR_MISS_M:g} "
+            f"(or the module's threshold in the spec).")
 
 
 def _text(value: Any) -> str:
@@ -799,32 +909,37 @@ def _same(a: Any, b: Any) -> bool:
     return _text(a) == _text(b)
 
 
-def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "debug.inputs") -> tuple[int, int]:
-    """(frames whose chosen inputs match the planner's own debug record, frames checked).
+def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "debug.inputs",
+                      entry: ReplayModule | None = None) -> tuple[int, int]:
+    """(frames whose chosen inputs are those the module's output names, frames checked).
 
-    Evaluation only: reads the demo planner's debug block naming the header
-    sequence numbers of the inputs it used.
+    Evaluation only: reads the output's record (``debug_path``, e.g. the demo
+    planner's debug block) naming the header sequence numbers (or stamps) of
+    the inputs it used; an input named null was absent. ``entry``: the module
+    (default: the planner).
     """
-    from astaa_deft.model.fields import get
-
-    codec = get_codec(spec.channel(planner_of(spec).output).encoding)
+    cfg = entry if entry is not None else planner_of(spec)
+    codec = get_codec(spec.channel(cfg.output).encoding)
     exact = checked = 0
     for f in extraction.frames:
         if f.output is None:
             continue
         try:
-            truth = get(codec.decode(f.output.data), debug_path)
+            truth = provenance_of(codec.decode(f.output.data), debug_path)
         except DecodeError:
             continue
-        if not truth or not isinstance(truth[0][1], Mapping):
+        if truth is None:
             continue
         checked += 1
-        used = {}
-        for name, msg in f.inputs.items():
+        same = True
+        for name, named in truth.items():
+            msg = f.inputs.get(name)
+            if msg is None:
+                same = same and named is None
+                continue
             try:
-                used[name] = get_codec(spec.channel(name).encoding).decode(msg.data)["header"]["seq"]
-            except (DecodeError, KeyError, TypeError):
-                used[name] = None
-        if all(used.get(name) == seq for name, seq in truth[0][1].items()):
-            exact += 1
+                same = same and names_message(get_codec(spec.channel(name).encoding).decode(msg.data), named)
+            except DecodeError:
+                same = False
+        exact += same
     return exact, checked

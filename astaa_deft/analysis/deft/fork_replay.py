@@ -121,6 +121,44 @@ def _receive(fd: int, *, what: str) -> object:
     return decode_pickle(*got, source=what)
 
 
+def in_two_forks(run: Callable[[], Any], timeout_s: float) -> tuple[Any, Any] | None:
+    """``run()`` in two forked copies of this process (each from the same memory, bit for bit), their
+    results; None when a copy died or ran past ``timeout_s`` (wall). Measures whether a module's step is
+    bit-stable across copies of its state: two copies stepped on the same frame must answer the same."""
+    results: list[Any] = []
+    children: list[tuple[int, int]] = []
+    for _ in range(2):
+        read_end, write_end = os.pipe()
+        pid = _fork("a copy measuring bit stability")
+        if pid == 0:
+            os.close(read_end)
+            try:
+                result = run()
+            except BaseException:  # noqa: BLE001 - a child must never return into the caller's loop
+                result = None
+            with contextlib.suppress(OSError):
+                _send(write_end, result)
+            os._exit(0)
+        os.close(write_end)
+        children.append((pid, read_end))
+    deadline = time.monotonic() + timeout_s
+    for pid, read_end in children:
+        ready, _, _ = select.select([read_end], [], [], max(0.0, deadline - time.monotonic()))
+        result = None
+        if ready:
+            with contextlib.suppress(EOFError, FrameError):
+                result = _receive(read_end, what="a copy's result pipe")
+        else:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        os.close(read_end)
+        reap_later(pid)
+        results.append(result)
+    if any(r is None for r in results):
+        return None
+    return results[0], results[1]
+
+
 _Running = tuple[int, int, int, float]
 """A candidate's child while it runs: (pid, the fd its result comes on, the fd its verdict goes down, started)."""
 

@@ -66,8 +66,10 @@ def newest_at_or_before(times: Sequence[int], t: int) -> int:
 
 
 def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_f: int,
-             previous: Mapping[str, int]) -> dict[str, int] | None:
-    """The frame at time t_F; None if some input has had no message yet."""
+             previous: Mapping[str, int], absent: bool = False) -> dict[str, int] | None:
+    """The frame at time t_F; None if some input has had no message yet — unless ``absent``: then that
+    input is left out of the frame (the module has not heard from it; the factory contract: an absent
+    input is not a key of the frame)."""
     choice = {trigger: trigger_index}
     for name, stream in streams.items():
         if name == trigger:
@@ -77,6 +79,8 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
         if idx < 0:
             if len(stream.times) == 1:
                 idx = 0  # a lone message (sent once, e.g. a route) is the only one there is
+            elif absent:
+                continue
             else:
                 return None
         choice[name] = idx
@@ -84,17 +88,21 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
 
 
 def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
-               lookback_ns: int, previous_output_ns: int | None = None) -> list[Candidate]:
+               lookback_ns: int, previous_output_ns: int | None = None,
+               read_at: Sequence[tuple[int, str]] = ()) -> list[Candidate]:
     """Distinct candidate frames for an output at t_P, most likely first.
 
     ``previous_output_ns``: when the previous output was logged. A planner
     busier than its trigger period starts its next cycle as it finishes one,
     on the newest trigger then: that trigger comes right after the newest.
+    ``read_at``: (time, rule) of frames to try first, each the newest trigger
+    and inputs at that time (see :func:`frame_read_at`).
     """
     trig = streams[trigger]
     newest = newest_at_or_before(trig.times, t_p)
     if newest < 0:
         return []
+    timed = [c for c in (frame_read_at(streams, trigger, t, previous, rule) for t, rule in read_at) if c is not None]
     # The first output (no previous frame) may answer a trigger some periods before the newest.
     oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
     busy = newest_at_or_before(trig.times, previous_output_ns) if previous_output_ns is not None else -1
@@ -115,17 +123,44 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                       if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
         if first_plannable is not None:
             rules[first_plannable].add(FIRST)
+    found = timed + [cand for t_index in order_of_triggers
+             for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
+    return complete_first(merged(found), len(streams))
+
+
+# Frames read at a time rather than derived from a trigger (:func:`frame_read_at`): everything that had
+# arrived when the output was logged (a plain replay of the logged inputs in arrival order), at the cycle's
+# start (the output's time minus the step's measured cost), when the previous output was logged (a busy
+# module starts its next cycle as it ends one).
+AT_OUTPUT, AT_START, AT_PREVIOUS = "at output", "at cycle start", "at previous output"
+
+
+def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int],
+                  rule: str) -> Candidate | None:
+    """The frame of a module that read, at time ``t``, the newest trigger and the newest message of each
+    other input (absent inputs left out); None when no trigger newer than the previous frame's had come."""
+    index = newest_at_or_before(streams[trigger].times, t)
+    if index < 0 or index <= previous.get(trigger, -1):
+        return None
+    choice = frame_at(streams, trigger, index, t, previous, absent=True)
+    at_trigger = frame_at(streams, trigger, index, streams[trigger].times[index], previous, absent=True)
+    if choice is None or at_trigger is None:
+        return None
+    return Candidate(t, choice, frozenset({(rule, ()), (rule, _offsets(streams, trigger, choice, at_trigger))}))
+
+
+def merged(found: Sequence[Candidate]) -> list[Candidate]:
+    """Distinct frames in first-found order; a frame reached several ways carries all of them."""
     out: list[Candidate] = []
     seen: dict[tuple, int] = {}
-    for t_index in order_of_triggers:
-        for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index]):
-            key = tuple(sorted(cand.choice.items()))
-            if key not in seen:
-                seen[key] = len(out)
-                out.append(cand)
-            else:  # the same frame reached another way: it carries both ways
-                first = out[seen[key]]
-                out[seen[key]] = Candidate(first.frame_time, first.choice, first.patterns | cand.patterns)
+    for cand in found:
+        key = tuple(sorted(cand.choice.items()))
+        if key not in seen:
+            seen[key] = len(out)
+            out.append(cand)
+        else:  # the same frame reached another way: it carries both ways
+            first = out[seen[key]]
+            out[seen[key]] = Candidate(first.frame_time, first.choice, first.patterns | cand.patterns)
     return out
 
 
@@ -144,14 +179,34 @@ def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p:
         # "Just before" each message logged shortly before (or with) the trigger.
         earlier.update(t - 1 for t in times[lo_back:lo])
     out = []
-    at_trigger = frame_at(streams, trigger, t_index, t_t, previous)
+    at_trigger = frame_at(streams, trigger, t_index, t_t, previous, absent=True)
+    assert at_trigger is not None  # with absent inputs allowed a frame always exists
     for t_f in [t_t] + sorted(later) + sorted(earlier, reverse=True):
-        choice = frame_at(streams, trigger, t_index, t_f, previous)
-        if choice is not None:
-            offsets = tuple(sorted((name, idx - at_trigger[name]) for name, idx in choice.items()
-                                   if name != trigger)) if at_trigger is not None else (("?", 0),)
-            out.append(Candidate(t_f, choice, frozenset((rule, offsets) for rule in rules)))
+        choice = frame_at(streams, trigger, t_index, t_f, previous, absent=True)
+        assert choice is not None
+        out.append(Candidate(t_f, choice, frozenset((rule, _offsets(streams, trigger, choice, at_trigger))
+                                                    for rule in rules)))
     return out
+
+
+def _offsets(streams: Mapping[str, Stream], trigger: str, choice: Mapping[str, int],
+             at_trigger: Mapping[str, int]) -> tuple[tuple[str, int], ...]:
+    """Each other input's index in ``choice`` minus its index in the frame at the trigger's own time (an input
+    absent from both: 0; from one: its distance from having had no message)."""
+    out = []
+    for name in streams:
+        if name == trigger:
+            continue
+        idx, base = choice.get(name, -1), at_trigger.get(name, -1)
+        out.append((name, idx - base))
+    return tuple(sorted(out))
+
+
+def complete_first(found: Sequence[Candidate], inputs: int) -> list[Candidate]:
+    """The frames with every input first, then those some input is absent from (the module had not heard
+    from it yet: a first cycle before an input's first message), each group in the given order."""
+    full = [c for c in found if len(c.choice) >= inputs]
+    return full + [c for c in found if len(c.choice) < inputs]
 
 
 # -- per-trigger modules: one frame per trigger message ----------------------------------------

@@ -26,7 +26,7 @@ from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, TypeVar
 
-from astaa_deft.analysis.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Candidate
+from astaa_deft.analysis.deft.frames import AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, FIRST, NEWEST, OLDEST, Candidate
 
 
 class HasPatterns(Protocol):
@@ -94,7 +94,8 @@ def first_cycle_first(candidates: Sequence[Candidate]) -> list[Candidate]:
     return at_own_time + [c for c in candidates if c not in at_own_time]
 
 
-LIKELY_RULES = frozenset({NEWEST, BUSY, OLDEST, FIRST})  # trigger rules a planner follows (not merely "between")
+# Trigger rules a planner follows (not merely "between"), and the times a module reads its inputs at.
+LIKELY_RULES = frozenset({NEWEST, BUSY, OLDEST, FIRST, AT_OUTPUT, AT_START, AT_PREVIOUS})
 
 
 def nearest_first(candidates: Sequence[Candidate]) -> list[Candidate]:

@@ -1,0 +1,91 @@
+"""DeFT on a stack it was not tuned on (issue 31): a warm-started controller, rebuilt from the issue.
+
+Its first cycles run before the first message of one input arrived (the
+factory gets a frame without that input), it answers the newest trigger
+when a solve ends, and each answer carries every earlier one (a warm
+start): one wrong first frame would spoil every output. Extraction must
+reproduce every output at θ = 0, its suite must pass on the run it came
+from, a declared provenance is taken first, and --ground-truth works with
+--module and is checked before the work.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from astaa_deft.analysis.deft.extract import extract, ground_truth_rate
+from astaa_deft.analysis.deft.fork_replay import can_fork
+from astaa_deft.analysis.deft.planner_section import replay_module_of
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
+from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.io.log.reader import read_log
+
+import astaa_deft
+from proxy_helpers import SUT_DIR
+from warm_mpc_log import write_mpc_log
+
+# The subprocesses import this checkout of the tool (its pytest plugin included) and the factory beside the spec.
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SUT_DIR), str(Path(astaa_deft.__file__).parent.parent)])}
+
+
+@pytest.fixture(autouse=True)
+def _factory_on_path(monkeypatch):
+    monkeypatch.syspath_prepend(str(SUT_DIR))
+
+
+def _extract(spec_path, log_path, jobs):
+    spec = load_spec(spec_path)
+    entry = replay_module_of(spec, "mpc")
+    return spec, entry, extract(read_log(log_path), spec, make_planner(spec, {}, entry=entry), entry=entry, jobs=jobs)
+
+
+@pytest.mark.parametrize("jobs", [None, pytest.param(2, marks=pytest.mark.skipif(not can_fork(), reason="POSIX"))])
+def test_first_cycles_without_an_input_and_a_warm_start_reproduce_exactly(tmp_path, jobs):
+    spec_path, log_path, outputs = write_mpc_log(tmp_path)
+    spec, entry, ex = _extract(spec_path, log_path, jobs)
+    assert ex.outputs == outputs and not ex.skipped
+    first = ex.frames[0]
+    assert set(first.inputs) == {"state"}  # the path had not arrived: the frame leaves it out
+    assert ex.accepted_at(0.0) == outputs  # every output, though each depends on all before it
+    assert ground_truth_rate(ex, spec, "used", entry) == (outputs, outputs)  # the frames the module used
+
+
+def test_a_declared_provenance_is_taken_first_and_checked_by_replay(tmp_path):
+    spec_path, log_path, outputs = write_mpc_log(tmp_path, provenance=True)
+    spec, entry, ex = _extract(spec_path, log_path, None)
+    assert entry.provenance == "used"
+    assert ex.declared == outputs and ex.accepted_at(0.0) == outputs
+    assert all(f.candidates_tried == 1 for f in ex.frames)  # the named frame, reproduced: nothing searched
+
+
+def test_the_suite_carries_the_state_of_frames_it_does_not_test(tmp_path):
+    # Output 5 is logged off: no frame reproduces it, but the state its step built carries every later one.
+    spec_path, log_path, outputs = write_mpc_log(tmp_path, tampered=5)
+    out = tmp_path / "suite"
+    report = extract_module_tests(log_path, spec_path, out, ExtractOptions(module="mpc", jobs=1))
+    assert report.accepted == outputs - 1 and report.suite_failures == []
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(out)],
+                          capture_output=True, text=True, cwd=out, timeout=120, env=ENV)
+    assert done.returncode == 0, done.stdout[-2000:]
+    assert f"{outputs - 1} passed" in done.stdout
+
+
+def test_ground_truth_works_with_module_and_is_checked_before_the_work(tmp_path):
+    spec_path, log_path, outputs = write_mpc_log(tmp_path)
+    command = [sys.executable, "-m", "astaa_deft.cli", "extract", str(log_path), "--spec", str(spec_path),
+               "--module", "mpc", "-o", str(tmp_path / "suite")]
+    env = ENV
+    bad = subprocess.run([*command, "--ground-truth", "used[", "--jobs", "1"], capture_output=True, text=True,
+                         env=env, timeout=60)
+    assert bad.returncode == 2 and "--ground-truth" in bad.stderr and "outputs" not in bad.stdout
+    good = subprocess.run([*command, "--ground-truth", "used", "--jobs", "1"], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert good.returncode == 0, good.stderr
+    assert f"outputs of module 'mpc' found: {outputs}" in good.stdout and "planning" not in good.stdout
+    assert f"ground truth (used): {outputs}/{outputs} frames used exactly module 'mpc''s inputs" in good.stdout
