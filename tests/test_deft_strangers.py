@@ -89,3 +89,43 @@ def test_ground_truth_works_with_module_and_is_checked_before_the_work(tmp_path)
     assert good.returncode == 0, good.stderr
     assert f"outputs of module 'mpc' found: {outputs}" in good.stdout and "planning" not in good.stdout
     assert f"ground truth (used): {outputs}/{outputs} frames used exactly module 'mpc''s inputs" in good.stdout
+
+
+@pytest.mark.skipif(not can_fork(), reason="the suite runs beside a forked search")
+def test_the_suite_run_beside_the_search_reports_what_fails_from_a_fresh_module(tmp_path):
+    from astaa_deft.analysis.deft.extract import SuiteRun
+    from astaa_deft.io.codecs import get_codec
+
+    spec_path, log_path, outputs = write_mpc_log(tmp_path)
+    spec = load_spec(spec_path)
+    entry = replay_module_of(spec, "mpc")
+    decided = []
+    clean = extract(read_log(log_path), spec, make_planner(spec, {}, entry=entry), entry=entry, jobs=1,
+                    on_output=lambda done, total, outcome: decided.append(outcome))
+    assert clean.suite_failures == [] and len(decided) == outputs
+    # The same frames on a module that is not fresh (one step before): with a warm start every test fails.
+    used = make_planner(spec, {}, entry=entry)
+    used.step({"state": {"header": {"seq": 0, "stamp": 0.0}, "y": 5.0, "v": 1.0}})
+    run = SuiteRun(used, entry, {name: get_codec(spec.channel(name).encoding) for name in ("state", "path", "command")})
+    for outcome in decided:
+        run.add(outcome)
+    while run.step_one():
+        pass
+    assert [index for index, _ in run.failures] == list(range(outputs))
+
+
+def test_a_written_suite_is_checked_on_its_own_run_and_failing_tests_are_unchecked(tmp_path):
+    import json
+
+    from astaa_deft.analysis.deft.workflow import check_suite, uncheck_frames
+
+    spec_path, log_path, outputs = write_mpc_log(tmp_path)
+    out = tmp_path / "suite"
+    extract_module_tests(log_path, spec_path, out, ExtractOptions(module="mpc", jobs=1))
+    assert check_suite(out) == []
+    manifest = json.loads((out / "deft.json").read_text())
+    manifest["frames"][3]["output"] = manifest["frames"][4]["output"]  # frame 3 now expects another answer
+    (out / "deft.json").write_text(json.dumps(manifest))
+    assert [f.index for f in check_suite(out)] == [3]
+    uncheck_frames(out, {3})
+    assert check_suite(out) == []  # frame 3 is stepped for its state, not tested

@@ -10,6 +10,7 @@ import json
 import math
 import os
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import pairwise
@@ -92,6 +93,9 @@ class Extraction:
     # Measured at the first output reproduced within 1e-9 but not exactly: how far apart two copies of the
     # module's state answer one frame (0.0: bit for bit); None: not measured.
     copies_differ: float | None = None
+    # The suite run once on its own run beside the search (forked extraction): its tests that failed, (frame
+    # index, what); None: not run here (the workflow runs the written suite).
+    suite_failures: list[tuple[int, str]] | None = None
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -131,11 +135,60 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     if cfg.per_trigger:
         return _extract_per_trigger(log, spec, planner, cfg, on_output)
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
-        return run_supervised(
+        # The search runs in forked copies; here, beside it, the fresh ``planner`` runs the suite: it steps
+        # every frame as it is decided and compares the accepted ones, as `pytest DIR` will.
+        follower = SuiteRun(planner, cfg, {name: get_codec(spec.channel(name).encoding)
+                                           for name in list(cfg.inputs) + [cfg.output]})
+
+        def on_message(message: tuple[int, int, Decided]) -> None:
+            on_output(*message)
+            follower.add(message[2])
+
+        result: Extraction = run_supervised(
             lambda send: _extract(log, spec, planner, lambda *message: send(message),
                                   ForkedSearch(jobs, send), cfg, resume),
-            on_message=lambda message: on_output(*message))
+            on_message=on_message, idle=follower.step_one)
+        while follower.step_one():
+            pass
+        result.suite_failures = follower.failures
+        return result
     return _extract(log, spec, planner, on_output, None, cfg, resume)
+
+
+class SuiteRun:
+    """The extracted suite run once on its own run: a fresh module stepped on every frame kept, in order, the
+    accepted ones compared with their recorded outputs (what `pytest DIR` does), frame by frame as decided."""
+
+    def __init__(self, planner: ReplayPlanner, cfg: ReplayModule, codecs: Mapping[str, Codec]) -> None:
+        self.planner, self.cfg, self.codecs = planner, cfg, codecs
+        self.waiting: deque[ExtractedFrame] = deque()
+        self.failures: list[tuple[int, str]] = []  # (frame index, what failed)
+
+    def add(self, outcome: Decided) -> None:
+        if outcome.frame is not None:
+            self.waiting.append(outcome.frame)
+
+    def step_one(self) -> bool:
+        """Step the next frame decided (False: none waiting)."""
+        if not self.waiting:
+            return False
+        frame = self.waiting.popleft()
+        cfg = self.cfg
+        try:
+            replayed = self.planner.step({name: self.codecs[name].decode(msg.data)
+                                          for name, msg in frame.inputs.items()})
+        except Exception as exc:  # the module's failure on a frame is a failing test, not ours
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        if frame.accepted and frame.output is not None:
+            try:
+                recorded = self.codecs[cfg.output].decode(frame.output.data)
+            except DecodeError:
+                recorded = None
+            points = trajectory_points(recorded, cfg.trajectory) if cfg.trajectory is not None else []
+            cmp, _ = _judged(cfg, replayed, _Expected(recorded, points, _text(recorded)))
+            if not cmp.within(cfg.threshold):
+                self.failures.append((frame.index, f"distance {cmp.distance:.3g} (θ = {cfg.threshold:g})"))
+        return bool(self.waiting)
 
 
 @dataclass(frozen=True)

@@ -491,11 +491,14 @@ def _supervise(body: Callable[[Callable[[Any], None]], Any], write_fd: int) -> N
             os._exit(0)
 
 
-def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None]) -> Any:
+def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None],
+                   idle: Callable[[], bool] = lambda: False) -> Any:
     """Run ``body(send)`` in a forked runner under a reaping supervisor; return what it finally returned.
 
     ``send(obj)`` passes a message to ``on_message`` in the caller (progress);
     the runner's return value comes back once the last runner finishes.
+    While no message is waiting the caller calls ``idle()`` (a unit of its own
+    work; False: nothing left to do for now), never holding the runner up.
     Raises the runner's ``InputError`` as the same InputError (its problems
     cross the pipe), so bad input reaches the user as one clear message;
     RuntimeError when the runner failed otherwise or died without a result.
@@ -510,6 +513,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     os.close(write_fd)
     try:
         while True:
+            while not select.select([read_fd], [], [], 0)[0] and idle():
+                pass
             try:
                 message = _receive(read_fd, what="the replay runner's pipe")
             except (EOFError, FrameError):
