@@ -129,3 +129,13 @@ def test_a_written_suite_is_checked_on_its_own_run_and_failing_tests_are_uncheck
     assert [f.index for f in check_suite(out)] == [3]
     uncheck_frames(out, {3})
     assert check_suite(out) == []  # frame 3 is stepped for its state, not tested
+
+
+@pytest.mark.skipif(not can_fork(), reason="forked search")
+def test_a_module_not_bit_stable_across_a_fork_is_reproduced_by_the_suites_own_run(tmp_path):
+    # Forked copies answer 1e-15 off; the suite's run (a fresh module, never forked) answers exactly: the
+    # near misses the search kept are the right frames, and the suite says they pass.
+    spec_path, log_path, outputs = write_mpc_log(tmp_path, factory="NoisyAfterForkMpc")
+    spec, entry, ex = _extract(spec_path, log_path, 2)
+    assert ex.accepted_at(0.0) == outputs and ex.suite_failures == []
+    assert ex.confirmed_unforked == outputs  # the runner itself is a forked copy: every output was a near miss

@@ -23,12 +23,13 @@ MS = 1_000_000
 
 
 def write_mpc_log(directory: Path, seconds: float = 4.0, *, provenance: bool = False, seed: int = 7,
-                  tampered: int | None = None) -> tuple[Path, Path, int]:
+                  tampered: int | None = None, factory: str = "WarmMpc") -> tuple[Path, Path, int]:
     """(spec path, log path, outputs) of a simulated run; ``provenance``: the spec declares ``used``;
-    ``tampered``: that output is logged 1.0 off (no frame reproduces it; the state it built still counts)."""
-    from warm_mpc import WarmMpc  # tests/sut, on the path (the callers prepend it)
+    ``tampered``: that output is logged 1.0 off (no frame reproduces it; the state it built still counts);
+    ``factory``: the class of tests/sut/warm_mpc.py the spec replays (the run is recorded with it)."""
+    import warm_mpc  # tests/sut, on the path (the callers prepend it)
 
-    text = (SUT_DIR / "warm_mpc.yaml").read_text()
+    text = (SUT_DIR / "warm_mpc.yaml").read_text().replace("warm_mpc:WarmMpc", f"warm_mpc:{factory}")
     if provenance:
         text = text.replace("      frames: per_output\n", "      frames: per_output\n      provenance: used\n")
     spec_path = directory / "warm_mpc.yaml"
@@ -44,7 +45,7 @@ def write_mpc_log(directory: Path, seconds: float = 4.0, *, provenance: bool = F
         t = t0 + 400 * MS + k * 1000 * MS
         events.append((t, "path", {"header": {"seq": k + 1, "stamp": t / 1e9}, "y": 1.0 + k}))
     events.sort(key=lambda e: e[0])
-    module = WarmMpc()
+    module = getattr(warm_mpc, factory)()
     outputs: list[tuple[int, dict]] = []
     busy_until, newest, newest_path, used_state = 0, None, None, 0
     i = 0

@@ -9,6 +9,7 @@ their header.seq, null for an absent one) — the provenance a spec may declare.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 
@@ -26,3 +27,19 @@ class WarmMpc:
         return {"header": {"seq": self.k, "stamp": state["header"]["stamp"]}, "u": self.u,
                 "used": {"state": state["header"]["seq"],
                          "path": path["header"]["seq"] if path is not None else None}}
+
+
+class NoisyAfterForkMpc(WarmMpc):
+    """The same controller, a little off (1e-15 relative) in any process forked after it was made — like a
+    native solver whose thread pool restarts after a fork: not bit-stable across forked copies."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.pid = os.getpid()
+
+    def step(self, frame: dict[str, Any]) -> dict[str, Any]:
+        out = super().step(frame)
+        if os.getpid() != self.pid:
+            self.u += 1e-15 * (1.0 + abs(self.u))
+            out["u"] = self.u
+        return out
