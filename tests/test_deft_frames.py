@@ -61,10 +61,11 @@ def test_an_input_with_no_message_yet_is_left_out_of_the_frame():
     assert frame_at(s, "trigger", 0, 120 * MS, {}, absent=True) == {"trigger": 0}
 
 
-def test_frames_with_every_input_come_before_those_without_one():
+def test_a_frame_without_an_input_is_as_likely_as_its_time():
+    # At the trigger's own time pose had not arrived (a module latching its inputs then had none); later it had.
     s = streams(trigger=[100], pose=[110, 160])
     c = candidates(s, "trigger", t_p=int(120 * MS), previous={}, lookback_ns=0)
-    assert [dict(x.choice) for x in c] == [{"trigger": 0, "pose": 0}, {"trigger": 0}]
+    assert [dict(x.choice) for x in c] == [{"trigger": 0}, {"trigger": 0, "pose": 0}]
 
 
 def test_lookback_candidates_come_last_newest_first():

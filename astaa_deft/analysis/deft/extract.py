@@ -24,8 +24,8 @@ from astaa_deft.io.log.reader import LogContents, LoggedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.deft.fork_replay import (
-    Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, in_two_forks, next_word, run_supervised,
-    shadow, tell,
+    Following, ForkedSearch, Shadow, candidate_limit, cpu_limit, drop, hand_over, in_two_forks, next_word,
+    run_supervised, shadow, tell,
 )
 from astaa_deft.analysis.deft.frames import AT_OUTPUT, AT_PREVIOUS, AT_START, Candidate, Stream, candidates, \
     trigger_candidates
@@ -571,7 +571,12 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         return
     full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
     limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
+    _t = time.perf_counter()
     searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive)
+    if os.environ.get("DEFT_TRACE"):
+        import sys as _s
+        print(f"TRACE {out_index} exp={expensive} n={len(options)} {(time.perf_counter()-_t)*1e3:.0f}ms "
+              f"step={searched[2]*1e3 if searched else -1:.0f}ms pid={os.getpid()}", file=_s.stderr)
     if searched is None:
         run.report(out_index, "no candidate frame decodes or finishes within its time limit")
         return
@@ -850,6 +855,45 @@ def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any
         speculation.tell(TRY_ON, tried)  # does not return: the shadow carries on from the state before
 
 
+DONE = "done"  # the runner's word to an output's checkpoint copy: its first candidate was kept, exit
+DIED = "died"  # what a checkpoint copy reads when its runner died on the first candidate (cut, or crashed)
+
+
+def _step_first_here(run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
+                     limit_s: float) -> tuple[tuple[int, Any] | None, list[int]]:
+    """(candidate and outcome kept, or None; candidates tried in vain) of an expensive output: its first
+    candidate stepped right here, as a plain replay would — no fork to wait for — a checkpoint copy forked
+    just before holding the state from before the output.
+
+    Right (the usual case: the learned way first), the copy is told to exit.
+    Wrong, the output goes over to the copy, which searches the others
+    (forked, with their time limits) and this process ends. The step may
+    use ``limit_s`` of CPU time: past it this process is killed (native code
+    too) and the copy takes over as from a wrong candidate, retrying it
+    last under the full limit if nothing else is accepted.
+    """
+    if speculation.following is not None:  # a shadow of cheap outputs: the runner drops it here, it exits
+        speculation.word()
+    speculation.let_go()  # a shadow following cheap outputs is not this output's checkpoint
+    handle = shadow()
+    if isinstance(handle, Following):  # the checkpoint copy, at the state from before the output
+        word = next_word(handle, at_end=(DIED, None, (speculation.hits, speculation.misses)))
+        os.close(handle.word_fd)
+        kind, argument, (speculation.hits, speculation.misses) = word
+        if kind == DONE:
+            os._exit(0)
+        return None, [0]  # tried in vain (or cut): the others first, then it again under the search's limits
+    with cpu_limit(limit_s):
+        outcome = run(0)
+    counters = (speculation.hits, speculation.misses)
+    if accepted(outcome):
+        tell(handle, (DONE, None, counters))
+        drop(handle)
+        return (0, outcome), []
+    hand_over(handle, (TRY_ON, {0: outcome}, counters))  # does not return: the copy carries on
+    raise AssertionError("unreachable")
+
+
 def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected, *, limit_s: float,
                    full_limit_s: float, cheap: bool) -> tuple[Candidate, _Judged, float] | None:
     """(candidate, its judgement, its step's CPU seconds) kept for one output, in the process that carries
@@ -887,9 +931,14 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
             not speculation.expect_exact and 0.0 < cmp.distance <= NEAR_MISS_M)
 
     t1 = time.perf_counter()
-    kept, in_vain = _step_in_turn(len(options), run_candidate,
-                                  lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
-                                  speculation, in_turn=cheap and len(options) > 1)
+    if cheap or len(options) == 1:
+        kept, in_vain = _step_in_turn(len(options), run_candidate,
+                                      lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
+                                      speculation, in_turn=cheap and len(options) > 1)
+    else:
+        kept, in_vain = _step_first_here(
+            run_candidate, lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
+            speculation, limit_s)
     # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
     order = [i for i in range(len(options)) if i not in in_vain] + in_vain
     if kept is None:

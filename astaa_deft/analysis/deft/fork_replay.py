@@ -35,7 +35,7 @@ import os
 import select
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
@@ -410,12 +410,29 @@ def tell(copy: Shadow, word: Any) -> None:
     _send(copy.word_fd, word)
 
 
-def next_word(following: Following) -> Any:
-    """In the copy: the runner's next word; the copy exits when there is none (dropped, or the runner ended)."""
+def next_word(following: Following, *, at_end: Any = None) -> Any:
+    """In the copy: the runner's next word; when there is none (dropped, or the runner ended or died) the copy
+    exits — or, given ``at_end``, returns that (a checkpoint copy takes over from a runner that died)."""
     try:
         return _receive(following.word_fd, what="the runner's word pipe")
     except (EOFError, OSError, FrameError):
-        os._exit(0)
+        if at_end is None:
+            os._exit(0)
+        return at_end
+
+
+@contextlib.contextmanager
+def cpu_limit(seconds: float) -> Iterator[None]:
+    """This process is killed (SIGPROF at its default action) once it has used ``seconds`` more CPU time:
+    a step in native code that never returns to the interpreter is stopped too. Only for a runner whose
+    checkpoint copy takes over when it dies."""
+    previous = signal.signal(signal.SIGPROF, signal.SIG_DFL)
+    signal.setitimer(signal.ITIMER_PROF, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
+        signal.signal(signal.SIGPROF, previous)
 
 
 def drop(copy: Shadow) -> None:

@@ -48,6 +48,9 @@ class Stream:
 # output one before the newest — FIRST if it is the first the planner could plan from (every input had a
 # message) and the log reaches back to it.
 NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "between", "earlier", "first"
+# … or, for a first output, the first trigger in the log when some input had not been heard from by then (a
+# module that cycles with an input absent, see frame_at).
+FIRST_HEARD = "first heard"
 
 
 @dataclass(frozen=True)
@@ -123,9 +126,11 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                       if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
         if first_plannable is not None:
             rules[first_plannable].add(FIRST)
+        if first_plannable != oldest:  # the module may have cycled before every input was heard from
+            rules[oldest].add(FIRST_HEARD)
     found = timed + [cand for t_index in order_of_triggers
              for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
-    return complete_first(merged(found), len(streams))
+    return merged(found)
 
 
 # Frames read at a time rather than derived from a trigger (:func:`frame_read_at`): everything that had
@@ -202,11 +207,6 @@ def _offsets(streams: Mapping[str, Stream], trigger: str, choice: Mapping[str, i
     return tuple(sorted(out))
 
 
-def complete_first(found: Sequence[Candidate], inputs: int) -> list[Candidate]:
-    """The frames with every input first, then those some input is absent from (the module had not heard
-    from it yet: a first cycle before an input's first message), each group in the given order."""
-    full = [c for c in found if len(c.choice) >= inputs]
-    return full + [c for c in found if len(c.choice) < inputs]
 
 
 # -- per-trigger modules: one frame per trigger message ----------------------------------------
