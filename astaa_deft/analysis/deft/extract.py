@@ -571,12 +571,7 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         return
     full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
     limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
-    _t = time.perf_counter()
     searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive)
-    if os.environ.get("DEFT_TRACE"):
-        import sys as _s
-        print(f"TRACE {out_index} exp={expensive} n={len(options)} {(time.perf_counter()-_t)*1e3:.0f}ms "
-              f"step={searched[2]*1e3 if searched else -1:.0f}ms pid={os.getpid()}", file=_s.stderr)
     if searched is None:
         run.report(out_index, "no candidate frame decodes or finishes within its time limit")
         return
