@@ -43,3 +43,23 @@ class NoisyAfterForkMpc(WarmMpc):
             self.u += 1e-15 * (1.0 + abs(self.u))
             out["u"] = self.u
         return out
+
+
+class NoisyAfterCopyMpc(WarmMpc):
+    """The same controller, a little off (1e-15 relative) once its state was deep-copied or unpickled — like
+    an extension object whose state round-trips through a narrower type."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.copied = False
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.copied = True
+
+    def step(self, frame: dict[str, Any]) -> dict[str, Any]:
+        out = super().step(frame)
+        if self.copied:
+            self.u += 1e-15 * (1.0 + abs(self.u))
+            out["u"] = self.u
+        return out

@@ -20,6 +20,7 @@ from astaa_deft.engine.bus.process_launch import fork_is_safe
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import Codec, DecodeError
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
@@ -83,7 +84,7 @@ class Extraction:
     candidates_cut: int = 0
     cut_retried: int = 0
     retried_kept: int = 0
-    capped: int = 0  # expensive outputs not reproduced by their EXPENSIVE_TRIES likeliest candidates (no others tried)
+    capped: int = 0  # outputs not reproduced by their likeliest candidates (the others not tried: see _extract_output)
     reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
     # Cheap outputs whose first candidate the replay process stepped itself, a shadow copy following:
     # accepted, and not (the shadow then searched the others).
@@ -397,13 +398,17 @@ class _Recorded:
     codecs: dict[str, Codec]
     index_of: dict[str, dict[int, int]]  # input channel → id(message) → its index in ``messages``
     decoded: dict[tuple[str, int], Any] = field(default_factory=dict)
+    module_started_in_log: bool = False  # the run's start is logged before the module's first trigger
 
     @classmethod
     def read(cls, log: LogContents, spec: Spec, cfg: ReplayModule) -> _Recorded:
         """Raises InputError when the log lacks one of the module's channels."""
         messages = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
         outputs = messages.pop(cfg.output)
+        started = [r.time_ns for r in log.records(rec.RunStarted)]
+        triggers = messages[cfg.trigger]
         return cls(messages=messages, outputs=outputs,
+                   module_started_in_log=bool(started and triggers and started[0] <= triggers[0].log_time),
                    streams={name: Stream(name, [m.log_time for m in msgs]) for name, msgs in messages.items()},
                    codecs={name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]},
                    index_of={name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in messages.items()})
@@ -475,6 +480,7 @@ class _Run:
     memory: SearchMemory = field(default_factory=SearchMemory)  # how earlier kept frames were derived, their time
     speculation: Speculation = field(default_factory=lambda: Speculation())
     last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
+    misses_in_row: int = 0  # outputs kept just before this one that no candidate reproduced (forked search)
 
     def report(self, out_index: int, skipped: str | None = None) -> None:
         """Pass on the output just decided (its frame is the last one; ``skipped``: none, and why).
@@ -538,7 +544,7 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
     generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
                          int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                         read_at)
+                         read_at, recorded.module_started_in_log)
     window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
                                 if out_index else None, skew) if generic else 0.0
     if before is not None:
@@ -548,6 +554,13 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
     options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot)
+    if run.misses_in_row and run.search is not None:
+        # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
+        # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 4, 2,
+        # then the likeliest only) until an output reproduces again: a plain replay's cost, not a search's.
+        budget = max(1, EXPENSIVE_TRIES >> (run.misses_in_row - 1))
+        capped = capped or len(options) > budget
+        options = options[:budget]
     result.reordered += options[:1] != generic[:1]
     t1 = time.perf_counter()
     result.reconstruction_seconds += t1 - t0
@@ -577,12 +590,15 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         return
     cand, judged, step_s = searched
     within = judged.comparison.within(cfg.threshold)
-    result.capped += capped and not within
+    result.capped += capped and not within and not 0.0 < judged.comparison.distance <= NEAR_MISS_M
     # A frame within floating-point noise (forked copies of a module not bit-stable across a fork) teaches
     # the search as a reproduced one does: it is the right frame, the suite's own run confirms it.
     if within or judged.comparison.distance <= NEAR_MISS_M:
         run.memory.learn(cand, step_s, window, expensive)
         run.last_step_s = step_s
+        run.misses_in_row = 0
+    else:
+        run.misses_in_row += 1
     run.keep(out_index, cand, judged)
     if 0.0 < judged.comparison.distance <= NEAR_MISS_M and result.copies_differ is None:
         _measure_copies(run, cand, full_limit)
@@ -947,7 +963,7 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
         return None
     index, (cmp, exact, step_s) = kept
     speculation.expect_exact = exact
-    tries = index + 1 if cmp.within(cfg.threshold) else len(options)
+    tries = index + 1 if cmp.within(cfg.threshold) or 0.0 < cmp.distance <= NEAR_MISS_M else len(options)
     return options[index], _Judged(cmp, exact, tries), step_s
 
 
@@ -982,8 +998,9 @@ def search_note(extraction: Extraction) -> str | None:
         parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
                      f"({extraction.first_missed_in_runner} wrong: searched on by a copy one output behind)")
     if extraction.capped:
-        parts.append(f"{extraction.capped} expensive output(s) not reproduced by their {EXPENSIVE_TRIES} likeliest "
-                     f"candidates (nearest their trigger, in the learned order), the others not tried")
+        parts.append(f"{extraction.capped} output(s) not reproduced by their likeliest candidates (at most "
+                     f"{EXPENSIVE_TRIES} for an expensive output; after outputs in a row not reproduced, 8, 4, 2, "
+                     f"then 1: the module's state has left the recorded one), the others not tried")
     if extraction.candidates_cut:
         parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
                      f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "

@@ -92,7 +92,7 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
 
 def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
                lookback_ns: int, previous_output_ns: int | None = None,
-               read_at: Sequence[tuple[int, str]] = ()) -> list[Candidate]:
+               read_at: Sequence[tuple[int, str]] = (), module_started_in_log: bool = False) -> list[Candidate]:
     """Distinct candidate frames for an output at t_P, most likely first.
 
     ``previous_output_ns``: when the previous output was logged. A planner
@@ -100,6 +100,9 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     on the newest trigger then: that trigger comes right after the newest.
     ``read_at``: (time, rule) of frames to try first, each the newest trigger
     and inputs at that time (see :func:`frame_read_at`).
+    ``module_started_in_log``: the log began before the module's first
+    trigger (the tool started the run): a first output may answer the log's
+    first triggers however many came since.
     """
     trig = streams[trigger]
     newest = newest_at_or_before(trig.times, t_p)
@@ -121,13 +124,18 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     for index in order_of_triggers:
         if not rules[index]:
             rules[index].add(BETWEEN if trigger in previous else EARLIER)
-    if trigger not in previous and oldest == 0:  # a first output, and the log starts before its triggers
-        first_plannable = next((i for i in range(oldest, newest + 1)
-                      if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
-        if first_plannable is not None:
-            rules[first_plannable].add(FIRST)
-        if first_plannable != oldest:  # the module may have cycled before every input was heard from
-            rules[oldest].add(FIRST_HEARD)
+    if trigger not in previous and (oldest == 0 or module_started_in_log):
+        # A first output may answer the first trigger in the log (a slow first cycle, however many triggers
+        # came meanwhile) — the first every input had been heard by, or the very first (some input absent).
+        first_plannable = next((i for i in range(0, newest + 1)
+                                if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
+        for index, rule in ((first_plannable, FIRST), (0, FIRST_HEARD)):
+            if index is None or (rule == FIRST_HEARD and index == first_plannable):
+                continue
+            if index not in rules:
+                order_of_triggers.append(index)
+                rules[index] = set()
+            rules[index].add(rule)
     found = timed + [cand for t_index in order_of_triggers
              for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
     return merged(found)

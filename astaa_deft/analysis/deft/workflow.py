@@ -144,11 +144,15 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
         # Every frame kept is stepped by the suite (those not accepted for their state only): the test of
         # an output runs after the frames before it, as the extraction stepped them.
         manifest = export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
-        if accepted:
-            failing = check_suite(out_dir) if ex.suite_failures is None else [
-                SuiteFailure(index, detail) for index, detail in ex.suite_failures]
-            if failing:  # an extraction defect: the suite says so, and those tests no longer assert
-                uncheck_frames(out_dir, {f.index for f in failing})
+        if ex.suite_failures is None and ex.frames:  # not run beside the search: run the written suite now
+            failing, confirmed = check_suite(out_dir, ex)
+            if confirmed:  # its own run reproduces frames the search's copies did not: they are tests
+                export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
+                accepted = [f for f in ex.frames if f.accepted]
+        else:
+            failing = [SuiteFailure(index, detail) for index, detail in ex.suite_failures or ()]
+        if failing:  # an extraction defect: the suite says so, and those tests no longer assert
+            uncheck_frames(out_dir, {f.index for f in failing})
         if oracles:
             add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
         checkpoint.finished()
@@ -165,20 +169,36 @@ class SuiteFailure:
     detail: str  # the distance or the error
 
 
-def check_suite(out_dir: Path) -> list[SuiteFailure]:
-    """Run the written suite once, as ``pytest DIR`` would (a fresh module, every frame in order), and name
-    the tests that fail: a suite must pass on the run it came from."""
+def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[list[SuiteFailure], int]:
+    """Run the written suite once, as ``pytest DIR`` would (a fresh module, every frame in order): (the tests
+    that fail — a suite must pass on the run it came from —, frames confirmed).
+
+    With ``extraction``, that run has the last word on its frames: one kept
+    but not accepted (the search stepped it on a copy of the state) that the
+    fresh module reproduces within θ becomes accepted — a test that passes
+    (counted in ``extraction.confirmed_unforked`` and the second number).
+    """
     from astaa_deft.analysis.deft.suite import Suite
 
     suite = Suite(out_dir)
+    frames = {f.index: f for f in extraction.frames} if extraction is not None else {}
     out = []
+    confirmed = 0
     for entry, result in zip(suite.frames, suite.results(), strict=True):
+        passes = result.error is None and result.comparison.within(suite.threshold)
         if not entry.get("check", True):
+            frame = frames.get(int(entry["index"]))
+            if passes and frame is not None and frame.output is not None and not result.stopped:
+                frame.comparison, frame.accepted = result.comparison, True
+                frame.exact = result.comparison.distance == 0.0
+                confirmed += 1
             continue
-        if result.error is not None or not result.comparison.within(suite.threshold):
+        if not passes:
             out.append(SuiteFailure(int(entry["index"]), result.error
                                     or f"distance {result.comparison.distance:.3g} (θ = {suite.threshold:g})"))
-    return out
+    if extraction is not None:
+        extraction.confirmed_unforked += confirmed
+    return out, confirmed
 
 
 def uncheck_frames(out_dir: Path, indices: set[int]) -> None:
