@@ -51,6 +51,7 @@ NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "bet
 # … or, for a first output, the first trigger in the log when some input had not been heard from by then (a
 # module that cycles with an input absent, see frame_at).
 FIRST_HEARD = "first heard"
+AFTER = "after"  # the first trigger logged after the previous output (a module that drops those while busy)
 
 
 @dataclass(frozen=True)
@@ -112,13 +113,23 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     # The first output (no previous frame) may answer a trigger some periods before the newest.
     oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
     busy = newest_at_or_before(trig.times, previous_output_ns) if previous_output_ns is not None else -1
+    # A busy module's cycle ended a little before its output was logged (the output's own delivery): the
+    # triggers logged up to ``lookback`` before the previous output may be the newest it had then.
+    jitter = [] if previous_output_ns is None else [
+        i for i in range(busy - 1, max(oldest, bisect_right(trig.times, previous_output_ns - lookback_ns)) - 1, -1)]
+    # A module that drops the triggers coming while it is busy answers the first one after its previous output.
+    after = busy + 1 if previous_output_ns is not None and oldest <= busy + 1 < newest else None
     order_of_triggers = list(dict.fromkeys(
-        [newest] + ([busy] if oldest <= busy < newest else []) + ([oldest] if oldest < newest else [])
-        + list(range(oldest + 1, newest))))
+        [newest] + ([busy] if oldest <= busy < newest else []) + ([after] if after is not None else []) + jitter
+        + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
     rules[newest].add(NEWEST)
     if oldest <= busy <= newest:
         rules[busy].add(BUSY)
+    for index in jitter:
+        rules[index].add(BUSY)
+    if after is not None:
+        rules[after].add(AFTER)
     if trigger in previous and oldest <= newest:
         rules[oldest].add(OLDEST)
     for index in order_of_triggers:
