@@ -1,7 +1,7 @@
 """DeFT on the zoo of module behaviours (issue 31; tests/zoo): the generator, its floor, extraction held to both.
 
 The generator's own checks run on their own (no bus). A short form of the
-zoo (``zoo.SHORT``: three members, 2.5 s of bus time each) runs in the
+zoo (``zoo.SHORT``: three members, 2 s of bus time each) runs in the
 default run, the whole zoo behind ``-m slow``; for each member, one real run
 on the bus, then: the plain-replay floor is computed; extraction at θ = 0
 reproduces at least what the floor does; the extracted suite passes every
@@ -32,8 +32,8 @@ from astaa_deft.engine.spec.loader import load_spec
 ISSUE = "issue 31: extraction does not yet cover this behaviour (absent inputs, arrival order, cycle start, " \
         "suites carrying state)"
 # (member, what) that fail on the extraction of main before issue 31's changes (measured: the zoo benchmark).
-XFAIL_THETA = {"mpc"}
-XFAIL_SUITE: set[str] = set()
+XFAIL_THETA = {"mpc", "timer_several"}
+XFAIL_SUITE = {"mpc"}
 
 
 # -- the generator ----------------------------------------------------------------------------------
@@ -49,7 +49,7 @@ def test_the_catalogue_covers_every_value_of_every_axis_with_issue_31s_two_stack
         "newest_idle", "absent_first", "latched", "warm", 15.0, 1.0)
     assert (SLOW_PLANNER.reading, SLOW_PLANNER.state, SLOW_PLANNER.numerics, SLOW_PLANNER.cost_ms) == (
         "cycle_start", "warm", "noisy_fork", (500.0, 1200.0))
-    assert {m.name for m in SHORT} <= {m.name for m in MEMBERS} and all(m.seconds <= 2.5 for m in SHORT)
+    assert {m.name for m in SHORT} <= {m.name for m in MEMBERS} and all(m.seconds <= 2.0 for m in SHORT)
 
 
 def test_a_member_off_its_axes_is_refused():
