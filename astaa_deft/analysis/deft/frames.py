@@ -140,13 +140,14 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
         # came meanwhile) — the first every input had been heard by, or the very first (some input absent).
         first_plannable = next((i for i in range(0, newest + 1)
                                 if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
-        for index, rule in ((first_plannable, FIRST), (0, FIRST_HEARD)):
-            if index is None or (rule == FIRST_HEARD and index == first_plannable):
-                continue
-            if index not in rules:
-                order_of_triggers.append(index)
-                rules[index] = set()
-            rules[index].add(rule)
+        firsts: list[tuple[int, str]] = [] if first_plannable is None else [(first_plannable, FIRST)]
+        if first_plannable != 0:
+            firsts.append((0, FIRST_HEARD))
+        for first, rule in firsts:
+            if first not in rules:
+                order_of_triggers.append(first)
+                rules[first] = set()
+            rules[first].add(rule)
     found = timed + [cand for t_index in order_of_triggers
              for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
     return merged(found)
