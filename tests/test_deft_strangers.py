@@ -155,3 +155,16 @@ def test_without_forks_the_written_suite_has_the_last_word_on_copied_states(tmp_
     failing, confirmed = check_suite(out, ex)
     assert failing == [] and confirmed == ex.confirmed_unforked > 0
     assert ex.accepted_at(0.0) == outputs
+
+
+def test_a_provenance_that_is_no_field_path_is_one_located_spec_error(tmp_path):
+    from astaa_deft.model.errors import InputError
+
+    text = (SUT_DIR / "warm_mpc.yaml").read_text().replace("      frames: per_output\n",
+                                                           "      frames: per_output\n      provenance: used[\n")
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError) as caught:
+        load_spec(path)
+    problem = caught.value.problems[0]
+    assert "provenance" in problem.message and problem.line == text.splitlines().index("      provenance: used[") + 1
