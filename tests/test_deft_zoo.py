@@ -32,8 +32,9 @@ from astaa_deft.engine.spec.loader import load_spec
 ISSUE = "issue 31: extraction does not yet cover this behaviour (absent inputs, arrival order, cycle start, " \
         "suites carrying state)"
 # (member, what) that fail on the extraction of main before issue 31's changes (measured: the zoo benchmark).
-XFAIL_THETA = {"mpc", "timer_several"}
-XFAIL_SUITE = {"mpc"}
+# With issue 31's extraction (branch deft) every member of the short zoo passes: none expected to fail.
+XFAIL_THETA: set[str] = set()
+XFAIL_SUITE: set[str] = set()
 
 
 # -- the generator ----------------------------------------------------------------------------------
