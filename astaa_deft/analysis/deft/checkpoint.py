@@ -106,7 +106,7 @@ class Checkpoint:
 
     def kept(self) -> list[ExtractedFrame]:
         """Every frame stepped so far, accepted or not (the suite steps them all for their state)."""
-        return [d.frame for d in self.decided if d.frame is not None]
+        return [f for d in self.decided if d.frame is not None for f in (*d.before, d.frame)]
 
     def write(self) -> None:
         """The suite of the frames so far (tests of the accepted ones) and the state, each file replaced whole."""

@@ -29,7 +29,7 @@ from astaa_deft.analysis.deft.fork_replay import (
     run_supervised, shadow, tell,
 )
 from astaa_deft.analysis.deft.frames import AT_OUTPUT, AT_PREVIOUS, AT_START, Candidate, Stream, candidates, \
-    trigger_candidates
+    frame_at, plain_walk, trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
@@ -63,6 +63,9 @@ class Decided:
     frame: ExtractedFrame | None
     choice: Mapping[str, int] | None = None
     skipped: str | None = None
+    # Frames stepped before ``frame``, cycles that published nothing (no output of their own; their state
+    # counts): the suite steps them too. (Not kept for --resume, which steps ``choice`` alone.)
+    before: tuple[ExtractedFrame, ...] = ()
 
 
 OnOutput = Callable[[int, int, Decided], None]  # (outputs done, outputs in all, the one just decided)
@@ -170,6 +173,7 @@ class SuiteRun:
 
     def add(self, outcome: Decided) -> None:
         if outcome.frame is not None:
+            self.waiting.extend(outcome.before)
             self.waiting.append(outcome.frame)
 
     def step_one(self) -> bool:
@@ -482,31 +486,40 @@ class _Run:
     last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
     misses_in_row: int = 0  # outputs kept just before this one that no candidate reproduced (forked search)
 
-    def report(self, out_index: int, skipped: str | None = None) -> None:
-        """Pass on the output just decided (its frame is the last one; ``skipped``: none, and why).
+    def report(self, out_index: int, skipped: str | None = None, silent: int = 0) -> None:
+        """Pass on the output just decided (its frame is the last one, after ``silent`` frames of cycles that
+        published nothing; ``skipped``: none, and why).
 
         A shadow following the runner reports nothing: the runner does.
         """
         if skipped is not None:
             self.result.skipped.append((out_index, skipped))
         frame = self.result.frames[-1] if skipped is None else None
+        before = tuple(self.result.frames[-1 - silent:-1]) if silent and frame is not None else ()
         if self.speculation.following is None:
             index_of = self.recorded.index_of
             self.progress(out_index + 1, len(self.recorded.outputs), Decided(
                 out_index, frame, None if frame is None else {
-                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped))
+                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped, before))
 
     def keep(self, out_index: int, cand: Candidate, judged: _Judged) -> None:
         """Record ``cand`` as the frame of output ``out_index`` and report it."""
         self.previous = dict(cand.choice)
         recorded, cfg = self.recorded, self.cfg
+        for silent in cand.silent:  # cycles that published nothing, stepped first: in the suite for their state
+            self.result.frames.append(ExtractedFrame(
+                index=len(self.result.frames), output=None,
+                trigger_time=recorded.streams[cfg.trigger].times[silent[cfg.trigger]],
+                frame_time=recorded.streams[cfg.trigger].times[silent[cfg.trigger]],
+                inputs={name: recorded.messages[name][idx] for name, idx in silent.items()},
+                comparison=Comparison(0.0, 0.0, 0, "silent"), accepted=False, candidates_tried=0, exact=False))
         self.result.frames.append(ExtractedFrame(
             index=len(self.result.frames), output=recorded.outputs[out_index],
             trigger_time=recorded.streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
             inputs={name: recorded.messages[name][idx] for name, idx in cand.choice.items()},
             comparison=judged.comparison, accepted=judged.comparison.within(cfg.threshold),
             candidates_tried=judged.tries, exact=judged.exact))
-        self.report(out_index)
+        self.report(out_index, silent=len(cand.silent))
 
 
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
@@ -566,6 +579,11 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     result.reconstruction_seconds += t1 - t0
     expected = _expected(run, out_index)
     result.validation_seconds += time.perf_counter() - t1
+    walk = plain_walk(recorded.streams, cfg.trigger, run.previous) if (
+        run.search is not None and cfg.trajectory is None and planner.can_snapshot) else None
+    if walk is not None:  # a module (not the planner): the plain walk first, unless another way won more
+        first = bool(options) and run.memory.winning.score(options[0]) > run.memory.winning.score(walk)
+        options = [*options[:1], walk, *options[1:]] if first else [walk, *options]
     declared = recorded.declared(cfg, expected.message, run.previous, output.log_time + skew)
     if declared is not None:  # the module said which inputs it used: that frame first, checked by replay
         result.declared += 1
@@ -584,7 +602,8 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         return
     full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
     limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
-    searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive)
+    searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive,
+                              until_ns=output.log_time + skew)
     if searched is None:
         run.report(out_index, "no candidate frame decodes or finishes within its time limit")
         return
@@ -760,7 +779,7 @@ def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, pr
 
 
 # One candidate stepped: (its comparison, equal to the recorded output field for field, its step's CPU seconds).
-_Outcome = tuple[Comparison, bool, float]
+_Outcome = tuple[Comparison, bool, float, tuple[dict[str, int], ...] | None]  # … for a plain walk: its frames
 
 # A cheap output's candidates are stepped in the runner itself, one after another, a shadow copy following
 # one output behind (see fork_replay.shadow), when the recorded planner answered within this window: a cheap
@@ -905,8 +924,36 @@ def _step_first_here(run: Callable[[int], Any], accepted: Callable[[Any], bool],
     raise AssertionError("unreachable")
 
 
+def _walk(run: _Run, start: Candidate, expected: _Expected, until_ns: int) -> _Outcome:
+    """The plain walk (frames.WALK) stepped: each trigger after the previous frame's at its own time until the
+    module answers; that answer judged, the frames stepped carried in the outcome."""
+    cfg, recorded = run.cfg, run.recorded
+    times = recorded.streams[cfg.trigger].times
+    previous = dict(run.previous)
+    walked: list[dict[str, int]] = []
+    started = time.process_time()
+    replayed: Any = None
+    index = start.choice[cfg.trigger]
+    while index < len(times) and times[index] <= until_ns and replayed is None:
+        choice = frame_at(recorded.streams, cfg.trigger, index, times[index], previous, absent=True)
+        if choice is None:
+            break
+        frame = {name: recorded.decode(name, idx) for name, idx in choice.items()}
+        try:
+            replayed = run.planner.step(frame)
+        except Exception as exc:  # the module's crash on a frame is data
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        walked.append(choice)
+        previous = choice
+        index += 1
+    step_s = time.process_time() - started
+    if replayed is None:
+        return Comparison(math.inf, math.inf, 0, "no answer"), False, step_s, tuple(walked)
+    return (*_judged(cfg, replayed, expected), step_s, tuple(walked))
+
+
 def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected, *, limit_s: float,
-                   full_limit_s: float, cheap: bool) -> tuple[Candidate, _Judged, float] | None:
+                   full_limit_s: float, cheap: bool, until_ns: int = 0) -> tuple[Candidate, _Judged, float] | None:
     """(candidate, its judgement, its step's CPU seconds) kept for one output, in the process that carries
     on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted.
     A ``cheap`` output's candidates are stepped right here, one after another (see :func:`_step_in_turn`)."""
@@ -918,6 +965,8 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
     result.reconstruction_seconds += time.perf_counter() - t0
 
     def run_candidate(index: int) -> _Outcome | None:
+        if options[index].walk:
+            return _walk(run, options[index], expected, until_ns)
         frame = frames[index]
         if any(v is None for v in frame.values()):
             return None
@@ -927,7 +976,7 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
         step_s = time.process_time() - started
-        return (*_judged(cfg, replayed, expected), step_s)
+        return (*_judged(cfg, replayed, expected), step_s, None)
 
     def accepted(outcome: _Outcome | None) -> bool:
         """Within θ; and field for field while the outputs before were (else the closest is kept)."""
@@ -961,10 +1010,14 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
     result.planner_seconds += time.perf_counter() - t1
     if kept is None or kept[1] is None:
         return None
-    index, (cmp, exact, step_s) = kept
+    index, (cmp, exact, step_s, walked) = kept
     speculation.expect_exact = exact
     tries = index + 1 if cmp.within(cfg.threshold) or 0.0 < cmp.distance <= NEAR_MISS_M else len(options)
-    return options[index], _Judged(cmp, exact, tries), step_s
+    cand = options[index]
+    if walked:  # the plain walk: the frames it stepped, the last answering
+        cand = Candidate(run.recorded.streams[cfg.trigger].times[walked[-1][cfg.trigger]], walked[-1],
+                         cand.patterns, tuple(walked[:-1]))
+    return cand, _Judged(cmp, exact, tries), step_s
 
 
 def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list[Any]) -> Comparison:

@@ -62,6 +62,10 @@ class Candidate:
     # per rule that names its trigger, offsets = each other input's index minus its index in the frame at
     # the trigger's own time (-1: the planner got that input's newest message only after the trigger).
     patterns: frozenset[tuple[str, tuple[tuple[str, int], ...]]] = frozenset()
+    # Frames the module is stepped on first, each a cycle that published nothing (its state moved all the
+    # same): the recorder has no output of them, the output comes after them (see WALK).
+    silent: tuple[Mapping[str, int], ...] = ()
+    walk: bool = False  # the plain walk (see WALK): its frames are known once stepped
 
 
 def newest_at_or_before(times: Sequence[int], t: int) -> int:
@@ -158,6 +162,21 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
 # start (the output's time minus the step's measured cost), when the previous output was logged (a busy
 # module starts its next cycle as it ends one).
 AT_OUTPUT, AT_START, AT_PREVIOUS = "at output", "at cycle start", "at previous output"
+# The plain walk: every trigger after the previous frame's, in order, each with the inputs as they stood at
+# its arrival, until the module answers (a plain replay of a module answering each trigger; the cycles that
+# answered nothing are stepped too — their state counts). Its frames are known once it has been stepped.
+WALK = "plain walk"
+
+
+def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[str, int]) -> Candidate | None:
+    """The plain walk's candidate (its first frame: the trigger after the previous frame's), or None."""
+    first = previous.get(trigger, -1) + 1
+    if first >= len(streams[trigger].times):
+        return None
+    choice = frame_at(streams, trigger, first, streams[trigger].times[first], previous, absent=True)
+    if choice is None:
+        return None
+    return Candidate(streams[trigger].times[first], choice, frozenset({(WALK, ())}), walk=True)
 
 
 def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int],
