@@ -23,7 +23,7 @@ from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_sup
 from astaa_deft.analysis.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
-    EXPENSIVE_TRIES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
+    EXPENSIVE_TRIES, LIKELY_RULES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
 )
 from astaa_deft.io.log.reader import read_log
 
@@ -132,7 +132,7 @@ def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
     def spread(c):
         return min(max(abs(o) for _, o in offsets) for _, offsets in c.patterns)
 
-    likely = [c for c in ordered if any(rule in (NEWEST, BUSY, OLDEST) for rule, _ in c.patterns)]
+    likely = [c for c in ordered if any(rule in LIKELY_RULES for rule, _ in c.patterns)]  # newest, busy, after …
     head = ordered[:len(likely)]
     assert head == likely  # the newest, busy and oldest triggers' frames before those of triggers between
     assert [spread(c) for c in head] == sorted(spread(c) for c in head)  # nearest their trigger's time first

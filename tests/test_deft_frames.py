@@ -52,10 +52,20 @@ def test_lone_message_is_reused_even_if_logged_after_the_frame_time():
     assert c[0].choice["route"] == 0
 
 
-def test_no_candidate_while_an_input_has_no_message():
+def test_an_input_with_no_message_yet_is_left_out_of_the_frame():
+    # A module's first cycles may run before an input's first message (issue 31): the frame lacks it.
     s = streams(trigger=[100], pose=[150, 160])
-    assert candidates(s, "trigger", t_p=int(120 * MS), previous={}, lookback_ns=0) == []
-    assert frame_at(s, "trigger", 0, 120 * MS, {}) is None
+    c = candidates(s, "trigger", t_p=int(120 * MS), previous={}, lookback_ns=0)
+    assert [dict(x.choice) for x in c] == [{"trigger": 0}]
+    assert frame_at(s, "trigger", 0, 120 * MS, {}) is None  # a complete frame: none yet
+    assert frame_at(s, "trigger", 0, 120 * MS, {}, absent=True) == {"trigger": 0}
+
+
+def test_a_frame_without_an_input_is_as_likely_as_its_time():
+    # At the trigger's own time pose had not arrived (a module latching its inputs then had none); later it had.
+    s = streams(trigger=[100], pose=[110, 160])
+    c = candidates(s, "trigger", t_p=int(120 * MS), previous={}, lookback_ns=0)
+    assert [dict(x.choice) for x in c] == [{"trigger": 0}, {"trigger": 0, "pose": 0}]
 
 
 def test_lookback_candidates_come_last_newest_first():

@@ -87,6 +87,9 @@ class ReplayModule:
     trajectory: TrajectoryLayout | None = None  # outputs compared as trajectories (the planner) …
     collision: CollisionOracle | None = None  # … with its collision oracle
     where: str = "replay.modules"  # the spec section it came from (for messages)
+    # Where the module's output names the inputs it used (a field path to {input channel: its header.seq or
+    # header.stamp}): that frame is tried first, checked by replay like any other.
+    provenance: str | None = None
 
     @property
     def per_trigger(self) -> bool:

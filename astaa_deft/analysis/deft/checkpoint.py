@@ -148,13 +148,17 @@ class Checkpoint:
     def accepted(self) -> list[ExtractedFrame]:
         return [d.frame for d in self.decided if d.frame is not None and d.frame.accepted]
 
+    def kept(self) -> list[ExtractedFrame]:
+        """Every frame stepped so far, accepted or not (the suite steps them all for their state)."""
+        return [f for d in self.decided if d.frame is not None for f in (*d.before, d.frame)]
+
     def write(self) -> None:
-        """The suite of the accepted frames so far and the state, each file replaced whole."""
+        """The suite of the frames so far (tests of the accepted ones) and the state, each file replaced whole."""
         self._written_at = time.monotonic()
         self.out_dir.mkdir(parents=True, exist_ok=True)
         staging = self.out_dir / _PARTIAL
         shutil.rmtree(staging, ignore_errors=True)
-        manifest = export_suite(self.accepted(), self.spec, self.params, staging, entry=self.entry)
+        manifest = export_suite(self.kept(), self.spec, self.params, staging, entry=self.entry)
         for path in sorted(staging.iterdir(), key=lambda p: p.name == MANIFEST):  # the manifest last
             os.replace(path, self.out_dir / path.name)
         manifest.parent.rmdir()

@@ -43,6 +43,8 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
                  oracles: Sequence[Mapping[str, Any]] = (), entry: ReplayModule | None = None) -> Path:
     """Write the suite of ``entry``'s module (default: the planner); the manifest names any other module.
 
+    ``frames``: every frame the module is stepped on, in order; those not
+    ``accepted`` carry ``"check": false`` (stepped for their state, no test).
     A frame a per-trigger module answered with nothing has ``"output": null``.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -70,6 +72,9 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
             "trigger_time_ns": f.trigger_time,
             "output_time_ns": f.output.log_time if f.output is not None else f.trigger_time,
             "recorded_distance": f.comparison.distance,
+            # A frame kept but not reproduced within θ is stepped for the state it builds, not tested: the
+            # test of every later frame runs after the frames before it, as the extraction stepped them.
+            "check": f.accepted,
         })
     writer.finish()
     manifest = {

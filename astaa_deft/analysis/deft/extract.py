@@ -10,6 +10,7 @@ import json
 import math
 import os
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import pairwise
@@ -19,14 +20,16 @@ from astaa_deft.engine.bus.process_launch import fork_is_safe
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import Codec, DecodeError
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.deft.fork_replay import (
-    Following, ForkedSearch, Shadow, candidate_limit, drop, hand_over, next_word, run_supervised, shadow,
-    tell,
+    Following, ForkedSearch, Shadow, candidate_limit, cpu_limit, drop, hand_over, in_two_forks, next_word,
+    run_supervised, shadow, tell,
 )
-from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, trigger_candidates
+from astaa_deft.analysis.deft.frames import AT_OUTPUT, AT_PREVIOUS, AT_START, Candidate, Stream, candidates, \
+    frame_at, plain_walk, trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
@@ -60,6 +63,9 @@ class Decided:
     frame: ExtractedFrame | None
     choice: Mapping[str, int] | None = None
     skipped: str | None = None
+    # Frames stepped before ``frame``, cycles that published nothing (no output of their own; their state
+    # counts): the suite steps them too. (Not kept for --resume, which steps ``choice`` alone.)
+    before: tuple[ExtractedFrame, ...] = ()
 
 
 OnOutput = Callable[[int, int, Decided], None]  # (outputs done, outputs in all, the one just decided)
@@ -81,12 +87,21 @@ class Extraction:
     candidates_cut: int = 0
     cut_retried: int = 0
     retried_kept: int = 0
-    capped: int = 0  # expensive outputs not reproduced by their EXPENSIVE_TRIES likeliest candidates (no others tried)
+    capped: int = 0  # outputs not reproduced by their likeliest candidates (the others not tried: see _extract_output)
     reordered: int = 0  # outputs whose candidates were tried in a learned order other than the generic one
     # Cheap outputs whose first candidate the replay process stepped itself, a shadow copy following:
     # accepted, and not (the shadow then searched the others).
     first_stepped_in_runner: int = 0
     first_missed_in_runner: int = 0
+    declared: int = 0  # outputs that named the inputs they used (the spec's provenance), tried first
+    # Measured at the first output reproduced within 1e-9 but not exactly: how far apart two copies of the
+    # module's state answer one frame (0.0: bit for bit); None: not measured.
+    copies_differ: float | None = None
+    # The suite run once on its own run beside the search (forked extraction): its tests that failed, (frame
+    # index, what); None: not run here (the workflow runs the written suite).
+    suite_failures: list[tuple[int, str]] | None = None
+    # Frames the search judged off on forked copies that the suite's run (a fresh, unforked module) reproduces.
+    confirmed_unforked: int = 0
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -126,11 +141,75 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     if cfg.per_trigger:
         return _extract_per_trigger(log, spec, planner, cfg, on_output)
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
-        return run_supervised(
+        # The search runs in forked copies; here, beside it, the fresh ``planner`` runs the suite: it steps
+        # every frame as it is decided and compares the accepted ones, as `pytest DIR` will.
+        follower = SuiteRun(planner, cfg, {name: get_codec(spec.channel(name).encoding)
+                                           for name in list(cfg.inputs) + [cfg.output]})
+
+        def on_message(message: tuple[int, int, Decided]) -> None:
+            on_output(*message)
+            follower.add(message[2])
+
+        result: Extraction = run_supervised(
             lambda send: _extract(log, spec, planner, lambda *message: send(message),
                                   ForkedSearch(jobs, send), cfg, resume),
-            on_message=lambda message: on_output(*message))
+            on_message=on_message, idle=follower.step_one)
+        while follower.step_one():
+            pass
+        follower.settle(result)
+        return result
     return _extract(log, spec, planner, on_output, None, cfg, resume)
+
+
+class SuiteRun:
+    """The extracted suite run once on its own run: a fresh module stepped on every frame kept, in order, the
+    accepted ones compared with their recorded outputs (what `pytest DIR` does), frame by frame as decided."""
+
+    def __init__(self, planner: ReplayPlanner, cfg: ReplayModule, codecs: Mapping[str, Codec]) -> None:
+        self.planner, self.cfg, self.codecs = planner, cfg, codecs
+        self.waiting: deque[ExtractedFrame] = deque()
+        self.failures: list[tuple[int, str]] = []  # (frame index, what failed)
+        self.judged: dict[int, tuple[Comparison, bool]] = {}  # frame index → its comparison here, field for field
+
+    def add(self, outcome: Decided) -> None:
+        if outcome.frame is not None:
+            self.waiting.extend(outcome.before)
+            self.waiting.append(outcome.frame)
+
+    def step_one(self) -> bool:
+        """Step the next frame decided (False: none waiting)."""
+        if not self.waiting:
+            return False
+        frame = self.waiting.popleft()
+        cfg = self.cfg
+        try:
+            replayed = self.planner.step({name: self.codecs[name].decode(msg.data)
+                                          for name, msg in frame.inputs.items()})
+        except Exception as exc:  # the module's failure on a frame is a failing test, not ours
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        if frame.output is not None:
+            try:
+                recorded = self.codecs[cfg.output].decode(frame.output.data)
+            except DecodeError:
+                recorded = None
+            points = trajectory_points(recorded, cfg.trajectory) if cfg.trajectory is not None else []
+            cmp, exact = _judged(cfg, replayed, _Expected(recorded, points, _text(recorded)))
+            self.judged[frame.index] = (cmp, exact)
+            if frame.accepted and not cmp.within(cfg.threshold):
+                self.failures.append((frame.index, f"distance {cmp.distance:.3g} (θ = {cfg.threshold:g})"))
+        return bool(self.waiting)
+
+    def settle(self, result: Extraction) -> None:
+        """The suite's own run has the last word on each frame kept: a frame the search judged on forked
+        copies a little off (a module not bit-stable across a fork) that the suite's fresh module reproduces
+        within θ is a test that passes; one the search accepted but the suite's run does not is a failure
+        (``result.suite_failures``: an extraction defect)."""
+        result.suite_failures = self.failures
+        for frame in result.frames:
+            judged = self.judged.get(frame.index)
+            if judged is not None and not frame.accepted and judged[0].within(self.cfg.threshold):
+                frame.comparison, frame.exact, frame.accepted = judged[0], judged[1], True
+                result.confirmed_unforked += 1
 
 
 @dataclass(frozen=True)
@@ -323,16 +402,43 @@ class _Recorded:
     codecs: dict[str, Codec]
     index_of: dict[str, dict[int, int]]  # input channel → id(message) → its index in ``messages``
     decoded: dict[tuple[str, int], Any] = field(default_factory=dict)
+    module_started_in_log: bool = False  # the run's start is logged before the module's first trigger
 
     @classmethod
     def read(cls, log: LogContents, spec: Spec, cfg: ReplayModule) -> _Recorded:
         """Raises InputError when the log lacks one of the module's channels."""
         messages = channel_messages(log, spec, list(cfg.inputs) + [cfg.output])
         outputs = messages.pop(cfg.output)
+        started = [r.time_ns for r in log.records(rec.RunStarted)]
+        triggers = messages[cfg.trigger]
         return cls(messages=messages, outputs=outputs,
+                   module_started_in_log=bool(started and triggers and started[0] <= triggers[0].log_time),
                    streams={name: Stream(name, [m.log_time for m in msgs]) for name, msgs in messages.items()},
                    codecs={name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]},
                    index_of={name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in messages.items()})
+
+    def declared(self, cfg: ReplayModule, output_message: Any, previous: Mapping[str, int], until: int
+                 ) -> Candidate | None:
+        """The frame the output says it used (``cfg.provenance``: {input: its header.seq or header.stamp}; an
+        input it names with null, or not at all, was absent), or None when the output names none we have."""
+        named = provenance_of(output_message, cfg.provenance)
+        if named is None:
+            return None
+        choice: dict[str, int] = {}
+        for name in cfg.inputs:
+            if named.get(name) is None:
+                if name == cfg.trigger:
+                    return None
+                continue
+            times = self.streams[name].times
+            newest = bisect_right(times, until) - 1
+            found = next((i for i in range(newest, previous.get(name, 0) - 1, -1)
+                          if names_message(self.decode(name, i), named[name])), None)
+            if found is None:
+                return None
+            choice[name] = found
+        return Candidate(self.streams[cfg.trigger].times[choice[cfg.trigger]], choice,
+                         frozenset({(DECLARED, ())}))
 
     def decode(self, name: str, idx: int) -> Any:
         """Message ``idx`` of input ``name`` decoded, or None if it does not decode."""
@@ -377,32 +483,43 @@ class _Run:
     previous: dict[str, int] = field(default_factory=dict)  # the choice kept for the output before
     memory: SearchMemory = field(default_factory=SearchMemory)  # how earlier kept frames were derived, their time
     speculation: Speculation = field(default_factory=lambda: Speculation())
+    last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
+    misses_in_row: int = 0  # outputs kept just before this one that no candidate reproduced (forked search)
 
-    def report(self, out_index: int, skipped: str | None = None) -> None:
-        """Pass on the output just decided (its frame is the last one; ``skipped``: none, and why).
+    def report(self, out_index: int, skipped: str | None = None, silent: int = 0) -> None:
+        """Pass on the output just decided (its frame is the last one, after ``silent`` frames of cycles that
+        published nothing; ``skipped``: none, and why).
 
         A shadow following the runner reports nothing: the runner does.
         """
         if skipped is not None:
             self.result.skipped.append((out_index, skipped))
         frame = self.result.frames[-1] if skipped is None else None
+        before = tuple(self.result.frames[-1 - silent:-1]) if silent and frame is not None else ()
         if self.speculation.following is None:
             index_of = self.recorded.index_of
             self.progress(out_index + 1, len(self.recorded.outputs), Decided(
                 out_index, frame, None if frame is None else {
-                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped))
+                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped, before))
 
     def keep(self, out_index: int, cand: Candidate, judged: _Judged) -> None:
         """Record ``cand`` as the frame of output ``out_index`` and report it."""
         self.previous = dict(cand.choice)
         recorded, cfg = self.recorded, self.cfg
+        for silent in cand.silent:  # cycles that published nothing, stepped first: in the suite for their state
+            self.result.frames.append(ExtractedFrame(
+                index=len(self.result.frames), output=None,
+                trigger_time=recorded.streams[cfg.trigger].times[silent[cfg.trigger]],
+                frame_time=recorded.streams[cfg.trigger].times[silent[cfg.trigger]],
+                inputs={name: recorded.messages[name][idx] for name, idx in silent.items()},
+                comparison=Comparison(0.0, 0.0, 0, "silent"), accepted=False, candidates_tried=0, exact=False))
         self.result.frames.append(ExtractedFrame(
             index=len(self.result.frames), output=recorded.outputs[out_index],
             trigger_time=recorded.streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,
             inputs={name: recorded.messages[name][idx] for name, idx in cand.choice.items()},
             comparison=judged.comparison, accepted=judged.comparison.within(cfg.threshold),
             candidates_tried=judged.tries, exact=judged.exact))
-        self.report(out_index)
+        self.report(out_index, silent=len(cand.silent))
 
 
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
@@ -433,8 +550,14 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     cfg, result, recorded, planner = run.cfg, run.result, run.recorded, run.planner
     outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
     output = outputs[out_index]
+    read_at = [(output.log_time, AT_OUTPUT)]  # a plain replay: everything logged by then, in arrival order
+    if run.last_step_s is not None:  # the cycle's start: the output's time minus the step's measured cost
+        read_at.append((output.log_time - int(run.last_step_s * 1e9), AT_START))
+    if out_index:
+        read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
     generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
-                         int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None)
+                         int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
+                         read_at, recorded.module_started_in_log)
     window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
                                 if out_index else None, skew) if generic else 0.0
     if before is not None:
@@ -444,11 +567,27 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
     options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot)
+    if run.misses_in_row and run.search is not None:
+        # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
+        # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 4, 2,
+        # then the likeliest only) until an output reproduces again: a plain replay's cost, not a search's.
+        budget = max(1, EXPENSIVE_TRIES >> (run.misses_in_row - 1))
+        capped = capped or len(options) > budget
+        options = options[:budget]
     result.reordered += options[:1] != generic[:1]
     t1 = time.perf_counter()
     result.reconstruction_seconds += t1 - t0
     expected = _expected(run, out_index)
     result.validation_seconds += time.perf_counter() - t1
+    walk = plain_walk(recorded.streams, cfg.trigger, run.previous) if (
+        run.search is not None and cfg.trajectory is None and planner.can_snapshot) else None
+    if walk is not None:  # a module (not the planner): the plain walk first, unless another way won more
+        first = bool(options) and run.memory.winning.score(options[0]) > run.memory.winning.score(walk)
+        options = [*options[:1], walk, *options[1:]] if first else [walk, *options]
+    declared = recorded.declared(cfg, expected.message, run.previous, output.log_time + skew)
+    if declared is not None:  # the module said which inputs it used: that frame first, checked by replay
+        result.declared += 1
+        options = [declared] + [c for c in options if dict(c.choice) != dict(declared.choice)]
     if not options:
         run.report(out_index, "an input had no message yet")
         return
@@ -463,16 +602,57 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         return
     full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
     limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
-    searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive)
+    searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive,
+                              until_ns=output.log_time + skew)
     if searched is None:
         run.report(out_index, "no candidate frame decodes or finishes within its time limit")
         return
     cand, judged, step_s = searched
     within = judged.comparison.within(cfg.threshold)
-    result.capped += capped and not within
-    if within:
+    result.capped += capped and not within and not 0.0 < judged.comparison.distance <= NEAR_MISS_M
+    # A frame within floating-point noise (forked copies of a module not bit-stable across a fork) teaches
+    # the search as a reproduced one does: it is the right frame, the suite's own run confirms it.
+    if within or judged.comparison.distance <= NEAR_MISS_M:
         run.memory.learn(cand, step_s, window, expensive)
+        run.last_step_s = step_s
+        run.misses_in_row = 0
+    else:
+        run.misses_in_row += 1
     run.keep(out_index, cand, judged)
+    if 0.0 < judged.comparison.distance <= NEAR_MISS_M and result.copies_differ is None:
+        _measure_copies(run, cand, full_limit)
+
+
+def _measure_copies(run: _Run, cand: Candidate, limit_s: float) -> None:
+    """Step two copies of the module's state on one frame (forked copies, or deep copies where the search
+    made those) and record how far apart their answers are: whether the state survives copying is then
+    measured, not guessed. The state carried on is untouched (forks), or a deep copy (as in that search)."""
+    if run.speculation.following is not None or not run.planner.can_snapshot:
+        return  # a shadow leaves it to the runner; a process replay cannot copy its module
+    frame = {name: run.recorded.decode(name, idx) for name, idx in cand.choice.items()}
+    pair: tuple[Any, Any] | None
+    if run.search is not None:
+        pair = in_two_forks(lambda: run.planner.step(frame), limit_s)
+    else:
+        planner = run.planner
+        kept = planner.snapshot()
+        answers: list[Any] = []
+        for _ in range(2):
+            planner.restore(copy.deepcopy(kept))
+            try:
+                answers.append(planner.step(frame))
+            except Exception:  # the module's failure on a frame is data, not a measurement
+                answers.append(None)
+        planner.restore(kept)
+        pair = None if None in answers else (answers[0], answers[1])
+    if pair is None:
+        return
+    first, second = pair
+    cfg = run.cfg
+    reference = _Expected(first, trajectory_points(first, cfg.trajectory) if cfg.trajectory is not None else [],
+                          _text(first))
+    cmp, exact = _judged(cfg, second, reference)
+    run.result.copies_differ = 0.0 if exact else cmp.distance
 
 
 def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[Candidate], window: float) -> None:
@@ -495,6 +675,31 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
             run.memory.learn(cand, step_s, window,
                              expensive=run.search is not None and window > SPECULATE_MAX_WINDOW_S)
     run.report(out_index)
+
+
+DECLARED = "declared"  # a frame the module's own output names (provenance)
+
+
+def provenance_of(message: Any, path: str | None) -> Mapping[str, Any] | None:
+    """The inputs an output names as used (``path``: the spec's ``provenance``), or None."""
+    from astaa_deft.model.fields import get
+
+    if path is None or message is None:
+        return None
+    found = get(message, path)
+    return found[0][1] if found and isinstance(found[0][1], Mapping) else None
+
+
+def names_message(message: Any, named: Any) -> bool:
+    """Is ``message`` the one an output names by ``named`` (its header.seq, or its header.stamp)?"""
+    header = message.get("header") if isinstance(message, Mapping) else None
+    if not isinstance(header, Mapping):
+        return False
+    if isinstance(named, bool):
+        return False
+    if isinstance(named, int) and header.get("seq") == named:
+        return True
+    return header.get("stamp") == named
 
 
 def _expected(run: _Run, out_index: int) -> _Expected:
@@ -534,12 +739,14 @@ def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expec
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
         t2 = time.perf_counter()
         result.planner_seconds += t2 - t1
+        step_s = t2 - t1
         cmp, exact = _judged(cfg, replayed, expected)
         t1 = time.perf_counter()
         result.validation_seconds += t1 - t2
         if cmp.within(cfg.threshold):
             best = (cmp, cand, exact, None, tries)
             run.memory.learn(cand)
+            run.last_step_s = step_s
             break
         if best is None or cmp.distance < best[0].distance:
             state = planner.snapshot() if start_state is not None else None
@@ -577,7 +784,7 @@ def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, pr
 
 
 # One candidate stepped: (its comparison, equal to the recorded output field for field, its step's CPU seconds).
-_Outcome = tuple[Comparison, bool, float]
+_Outcome = tuple[Comparison, bool, float, tuple[dict[str, int], ...] | None]  # … for a plain walk: its frames
 
 # A cheap output's candidates are stepped in the runner itself, one after another, a shadow copy following
 # one output behind (see fork_replay.shadow), when the recorded planner answered within this window: a cheap
@@ -683,8 +890,75 @@ def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any
         speculation.tell(TRY_ON, tried)  # does not return: the shadow carries on from the state before
 
 
+DONE = "done"  # the runner's word to an output's checkpoint copy: its first candidate was kept, exit
+DIED = "died"  # what a checkpoint copy reads when its runner died on the first candidate (cut, or crashed)
+
+
+def _step_first_here(run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
+                     limit_s: float) -> tuple[tuple[int, Any] | None, list[int]]:
+    """(candidate and outcome kept, or None; candidates tried in vain) of an expensive output: its first
+    candidate stepped right here, as a plain replay would — no fork to wait for — a checkpoint copy forked
+    just before holding the state from before the output.
+
+    Right (the usual case: the learned way first), the copy is told to exit.
+    Wrong, the output goes over to the copy, which searches the others
+    (forked, with their time limits) and this process ends. The step may
+    use ``limit_s`` of CPU time: past it this process is killed (native code
+    too) and the copy takes over as from a wrong candidate, retrying it
+    last under the full limit if nothing else is accepted.
+    """
+    if speculation.following is not None:  # a shadow of cheap outputs: the runner drops it here, it exits
+        speculation.word()
+    speculation.let_go()  # a shadow following cheap outputs is not this output's checkpoint
+    handle = shadow()
+    if isinstance(handle, Following):  # the checkpoint copy, at the state from before the output
+        word = next_word(handle, at_end=(DIED, None, (speculation.hits, speculation.misses)))
+        os.close(handle.word_fd)
+        kind, argument, (speculation.hits, speculation.misses) = word
+        if kind == DONE:
+            os._exit(0)
+        return None, [0]  # tried in vain (or cut): the others first, then it again under the search's limits
+    with cpu_limit(limit_s):
+        outcome = run(0)
+    counters = (speculation.hits, speculation.misses)
+    if accepted(outcome):
+        tell(handle, (DONE, None, counters))
+        drop(handle)
+        return (0, outcome), []
+    hand_over(handle, (TRY_ON, {0: outcome}, counters))  # does not return: the copy carries on
+    raise AssertionError("unreachable")
+
+
+def _walk(run: _Run, start: Candidate, expected: _Expected, until_ns: int) -> _Outcome:
+    """The plain walk (frames.WALK) stepped: each trigger after the previous frame's at its own time until the
+    module answers; that answer judged, the frames stepped carried in the outcome."""
+    cfg, recorded = run.cfg, run.recorded
+    times = recorded.streams[cfg.trigger].times
+    previous = dict(run.previous)
+    walked: list[dict[str, int]] = []
+    started = time.process_time()
+    replayed: Any = None
+    index = start.choice[cfg.trigger]
+    while index < len(times) and times[index] <= until_ns and replayed is None:
+        choice = frame_at(recorded.streams, cfg.trigger, index, times[index], previous, absent=True)
+        if choice is None:
+            break
+        frame = {name: recorded.decode(name, idx) for name, idx in choice.items()}
+        try:
+            replayed = run.planner.step(frame)
+        except Exception as exc:  # the module's crash on a frame is data
+            replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+        walked.append(choice)
+        previous = choice
+        index += 1
+    step_s = time.process_time() - started
+    if replayed is None:
+        return Comparison(math.inf, math.inf, 0, "no answer"), False, step_s, tuple(walked)
+    return (*_judged(cfg, replayed, expected), step_s, tuple(walked))
+
+
 def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected, *, limit_s: float,
-                   full_limit_s: float, cheap: bool) -> tuple[Candidate, _Judged, float] | None:
+                   full_limit_s: float, cheap: bool, until_ns: int = 0) -> tuple[Candidate, _Judged, float] | None:
     """(candidate, its judgement, its step's CPU seconds) kept for one output, in the process that carries
     on; or None. Candidates cut by ``limit_s`` run again under ``full_limit_s`` if no other is accepted.
     A ``cheap`` output's candidates are stepped right here, one after another (see :func:`_step_in_turn`)."""
@@ -696,6 +970,8 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
     result.reconstruction_seconds += time.perf_counter() - t0
 
     def run_candidate(index: int) -> _Outcome | None:
+        if options[index].walk:
+            return _walk(run, options[index], expected, until_ns)
         frame = frames[index]
         if any(v is None for v in frame.values()):
             return None
@@ -705,7 +981,7 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
         except Exception as exc:  # the planner under test may crash on a frame: that is data
             replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
         step_s = time.process_time() - started
-        return (*_judged(cfg, replayed, expected), step_s)
+        return (*_judged(cfg, replayed, expected), step_s, None)
 
     def accepted(outcome: _Outcome | None) -> bool:
         """Within θ; and field for field while the outputs before were (else the closest is kept)."""
@@ -720,8 +996,14 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
             not speculation.expect_exact and 0.0 < cmp.distance <= NEAR_MISS_M)
 
     t1 = time.perf_counter()
-    kept, in_vain = _step_in_turn(len(options), run_candidate, accepted, speculation,
-                                  in_turn=cheap and len(options) > 1)
+    if cheap or len(options) == 1:
+        kept, in_vain = _step_in_turn(len(options), run_candidate,
+                                      lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
+                                      speculation, in_turn=cheap and len(options) > 1)
+    else:
+        kept, in_vain = _step_first_here(
+            run_candidate, lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
+            speculation, limit_s)
     # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
     order = [i for i in range(len(options)) if i not in in_vain] + in_vain
     if kept is None:
@@ -733,10 +1015,14 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
     result.planner_seconds += time.perf_counter() - t1
     if kept is None or kept[1] is None:
         return None
-    index, (cmp, exact, step_s) = kept
+    index, (cmp, exact, step_s, walked) = kept
     speculation.expect_exact = exact
-    tries = index + 1 if cmp.within(cfg.threshold) else len(options)
-    return options[index], _Judged(cmp, exact, tries), step_s
+    tries = index + 1 if cmp.within(cfg.threshold) or 0.0 < cmp.distance <= NEAR_MISS_M else len(options)
+    cand = options[index]
+    if walked:  # the plain walk: the frames it stepped, the last answering
+        cand = Candidate(run.recorded.streams[cfg.trigger].times[walked[-1][cfg.trigger]], walked[-1],
+                         cand.patterns, tuple(walked[:-1]))
+    return cand, _Judged(cmp, exact, tries), step_s
 
 
 def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list[Any]) -> Comparison:
@@ -770,29 +1056,45 @@ def search_note(extraction: Extraction) -> str | None:
         parts.append(f"{stepped} cheap output(s) stepped their first candidate in the replay process "
                      f"({extraction.first_missed_in_runner} wrong: searched on by a copy one output behind)")
     if extraction.capped:
-        parts.append(f"{extraction.capped} expensive output(s) not reproduced by their {EXPENSIVE_TRIES} likeliest "
-                     f"candidates (nearest their trigger, in the learned order), the others not tried")
+        parts.append(f"{extraction.capped} output(s) not reproduced by their likeliest candidates (at most "
+                     f"{EXPENSIVE_TRIES} for an expensive output; after outputs in a row not reproduced, 8, 4, 2, "
+                     f"then 1: the module's state has left the recorded one), the others not tried")
     if extraction.candidates_cut:
         parts.append(f"{extraction.candidates_cut} candidate(s) cut by the time limit learned from the accepted "
                      f"steps, {extraction.cut_retried} of them retried under the full limit (nothing else was "
                      f"accepted), {extraction.retried_kept} kept after that")
+    if extraction.declared:
+        parts.append(f"{extraction.declared} output(s) named the inputs they used (provenance): that frame tried "
+                     f"first")
+    if extraction.confirmed_unforked:
+        parts.append(f"{extraction.confirmed_unforked} output(s) reproduced by the suite's own run (a fresh module, "
+                     f"not forked) though forked copies answered a little off")
     return "candidate search: " + "; ".join(parts) if parts else None
 
 
 NEAR_MISS_M = 1e-9
 
 
-def near_miss_note(extraction: Extraction) -> str | None:
-    """Why outputs that match at 1e-9 m are not counted at θ = 0: the distances, and the flag that sets θ."""
+def near_miss_note(extraction: Extraction, unit: str = " m") -> str | None:
+    """Why outputs that match at 1e-9 m are not counted at θ = 0: the distances, what was measured about their
+    cause, and the flag that sets θ (``unit``: "" for a module compared field by field)."""
     near = sorted(f.comparison.distance for f in extraction.frames if 0.0 < f.comparison.distance <= NEAR_MISS_M)
     if not near:
         return None
-    quantiles = ", ".join(f"{name} {near[min(len(near) - 1, int(q * len(near)))]:.3g} m"
+    quantiles = ", ".join(f"{name} {near[min(len(near) - 1, int(q * len(near)))]:.3g}{unit}"
                           for name, q in (("min", 0.0), ("median", 0.5), ("p90", 0.9)))
-    return (f"{len(near)} output(s) match within {NEAR_MISS_M:g} m but not exactly (distances: {quantiles}, "
-            f"max {near[-1]:.3g} m): floating-point noise, e.g. a planner state that does not survive copying "
-            f"bit for bit. If that is acceptable, set θ with --threshold {NEAR_MISS_M:g} "
-            f"(or planner.threshold in the spec).")
+    measured = extraction.copies_differ
+    if measured is None:
+        why = "floating-point noise (not measured whether copies of the module's state answer alike)"
+    elif measured == 0.0:
+        why = ("not the copying: two copies of the module's state stepped on the same frame answer bit for bit "
+               "(measured), so the frame or the module's own run-to-run noise differs")
+    else:
+        why = (f"the module's state does not survive copying bit for bit: two copies stepped on the same frame "
+               f"answer {measured:.3g}{unit} apart (measured)")
+    return (f"{len(near)} output(s) match within {NEAR_MISS_M:g}{unit} but not exactly (distances: {quantiles}, "
+            f"max {near[-1]:.3g}{unit}): {why}. If that is acceptable, set θ with --threshold {NEAR_MISS_M:g} "
+            f"(or the module's threshold in the spec).")
 
 
 def _text(value: Any) -> str:
@@ -804,32 +1106,37 @@ def _same(a: Any, b: Any) -> bool:
     return _text(a) == _text(b)
 
 
-def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "debug.inputs") -> tuple[int, int]:
-    """(frames whose chosen inputs match the planner's own debug record, frames checked).
+def ground_truth_rate(extraction: Extraction, spec: Spec, debug_path: str = "debug.inputs",
+                      entry: ReplayModule | None = None) -> tuple[int, int]:
+    """(frames whose chosen inputs are those the module's output names, frames checked).
 
-    Evaluation only: reads the demo planner's debug block naming the header
-    sequence numbers of the inputs it used.
+    Evaluation only: reads the output's record (``debug_path``, e.g. the demo
+    planner's debug block) naming the header sequence numbers (or stamps) of
+    the inputs it used; an input named null was absent. ``entry``: the module
+    (default: the planner).
     """
-    from astaa_deft.model.fields import get
-
-    codec = get_codec(spec.channel(planner_of(spec).output).encoding)
+    cfg = entry if entry is not None else planner_of(spec)
+    codec = get_codec(spec.channel(cfg.output).encoding)
     exact = checked = 0
     for f in extraction.frames:
         if f.output is None:
             continue
         try:
-            truth = get(codec.decode(f.output.data), debug_path)
+            truth = provenance_of(codec.decode(f.output.data), debug_path)
         except DecodeError:
             continue
-        if not truth or not isinstance(truth[0][1], Mapping):
+        if truth is None:
             continue
         checked += 1
-        used = {}
-        for name, msg in f.inputs.items():
+        same = True
+        for name, named in truth.items():
+            msg = f.inputs.get(name)
+            if msg is None:
+                same = same and named is None
+                continue
             try:
-                used[name] = get_codec(spec.channel(name).encoding).decode(msg.data)["header"]["seq"]
-            except (DecodeError, KeyError, TypeError):
-                used[name] = None
-        if all(used.get(name) == seq for name, seq in truth[0][1].items()):
-            exact += 1
+                same = same and names_message(get_codec(spec.channel(name).encoding).decode(msg.data), named)
+            except DecodeError:
+                same = False
+        exact += same
     return exact, checked

@@ -35,7 +35,7 @@ import os
 import select
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
@@ -119,6 +119,44 @@ def _receive(fd: int, *, what: str) -> object:
     if got is None:
         raise EOFError(what)
     return decode_pickle(*got, source=what)
+
+
+def in_two_forks(run: Callable[[], Any], timeout_s: float) -> tuple[Any, Any] | None:
+    """``run()`` in two forked copies of this process (each from the same memory, bit for bit), their
+    results; None when a copy died or ran past ``timeout_s`` (wall). Measures whether a module's step is
+    bit-stable across copies of its state: two copies stepped on the same frame must answer the same."""
+    results: list[Any] = []
+    children: list[tuple[int, int]] = []
+    for _ in range(2):
+        read_end, write_end = os.pipe()
+        pid = _fork("a copy measuring bit stability")
+        if pid == 0:
+            os.close(read_end)
+            try:
+                result = run()
+            except BaseException:  # noqa: BLE001 - a child must never return into the caller's loop
+                result = None
+            with contextlib.suppress(OSError):
+                _send(write_end, result)
+            os._exit(0)
+        os.close(write_end)
+        children.append((pid, read_end))
+    deadline = time.monotonic() + timeout_s
+    for pid, read_end in children:
+        ready, _, _ = select.select([read_end], [], [], max(0.0, deadline - time.monotonic()))
+        result = None
+        if ready:
+            with contextlib.suppress(EOFError, FrameError):
+                result = _receive(read_end, what="a copy's result pipe")
+        else:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        os.close(read_end)
+        reap_later(pid)
+        results.append(result)
+    if any(r is None for r in results):
+        return None
+    return results[0], results[1]
 
 
 _Running = tuple[int, int, int, float]
@@ -372,12 +410,29 @@ def tell(copy: Shadow, word: Any) -> None:
     _send(copy.word_fd, word)
 
 
-def next_word(following: Following) -> Any:
-    """In the copy: the runner's next word; the copy exits when there is none (dropped, or the runner ended)."""
+def next_word(following: Following, *, at_end: Any = None) -> Any:
+    """In the copy: the runner's next word; when there is none (dropped, or the runner ended or died) the copy
+    exits — or, given ``at_end``, returns that (a checkpoint copy takes over from a runner that died)."""
     try:
         return _receive(following.word_fd, what="the runner's word pipe")
     except (EOFError, OSError, FrameError):
-        os._exit(0)
+        if at_end is None:
+            os._exit(0)
+        return at_end
+
+
+@contextlib.contextmanager
+def cpu_limit(seconds: float) -> Iterator[None]:
+    """This process is killed (SIGPROF at its default action) once it has used ``seconds`` more CPU time:
+    a step in native code that never returns to the interpreter is stopped too. Only for a runner whose
+    checkpoint copy takes over when it dies."""
+    previous = signal.signal(signal.SIGPROF, signal.SIG_DFL)
+    signal.setitimer(signal.ITIMER_PROF, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
+        signal.signal(signal.SIGPROF, previous)
 
 
 def drop(copy: Shadow) -> None:
@@ -453,11 +508,14 @@ def _supervise(body: Callable[[Callable[[Any], None]], Any], write_fd: int) -> N
             os._exit(0)
 
 
-def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None]) -> Any:
+def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None],
+                   idle: Callable[[], bool] = lambda: False) -> Any:
     """Run ``body(send)`` in a forked runner under a reaping supervisor; return what it finally returned.
 
     ``send(obj)`` passes a message to ``on_message`` in the caller (progress);
     the runner's return value comes back once the last runner finishes.
+    While no message is waiting the caller calls ``idle()`` (a unit of its own
+    work; False: nothing left to do for now), never holding the runner up.
     Raises the runner's ``InputError`` as the same InputError (its problems
     cross the pipe), so bad input reaches the user as one clear message;
     RuntimeError when the runner failed otherwise or died without a result.
@@ -472,6 +530,8 @@ def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Cal
     os.close(write_fd)
     try:
         while True:
+            while not select.select([read_fd], [], [], 0)[0] and idle():
+                pass
             try:
                 message = _receive(read_fd, what="the replay runner's pipe")
             except (EOFError, FrameError):

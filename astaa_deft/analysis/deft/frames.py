@@ -48,6 +48,10 @@ class Stream:
 # output one before the newest — FIRST if it is the first the planner could plan from (every input had a
 # message) and the log reaches back to it.
 NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "between", "earlier", "first"
+# … or, for a first output, the first trigger in the log when some input had not been heard from by then (a
+# module that cycles with an input absent, see frame_at).
+FIRST_HEARD = "first heard"
+AFTER = "after"  # the first trigger logged after the previous output (a module that drops those while busy)
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,10 @@ class Candidate:
     # per rule that names its trigger, offsets = each other input's index minus its index in the frame at
     # the trigger's own time (-1: the planner got that input's newest message only after the trigger).
     patterns: frozenset[tuple[str, tuple[tuple[str, int], ...]]] = frozenset()
+    # Frames the module is stepped on first, each a cycle that published nothing (its state moved all the
+    # same): the recorder has no output of them, the output comes after them (see WALK).
+    silent: tuple[Mapping[str, int], ...] = ()
+    walk: bool = False  # the plain walk (see WALK): its frames are known once stepped
 
 
 def newest_at_or_before(times: Sequence[int], t: int) -> int:
@@ -66,8 +74,10 @@ def newest_at_or_before(times: Sequence[int], t: int) -> int:
 
 
 def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_f: int,
-             previous: Mapping[str, int]) -> dict[str, int] | None:
-    """The frame at time t_F; None if some input has had no message yet."""
+             previous: Mapping[str, int], absent: bool = False) -> dict[str, int] | None:
+    """The frame at time t_F; None if some input has had no message yet — unless ``absent``: then that
+    input is left out of the frame (the module has not heard from it; the factory contract: an absent
+    input is not a key of the frame)."""
     choice = {trigger: trigger_index}
     for name, stream in streams.items():
         if name == trigger:
@@ -77,6 +87,8 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
         if idx < 0:
             if len(stream.times) == 1:
                 idx = 0  # a lone message (sent once, e.g. a route) is the only one there is
+            elif absent:
+                continue
             else:
                 return None
         choice[name] = idx
@@ -84,48 +96,115 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
 
 
 def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
-               lookback_ns: int, previous_output_ns: int | None = None) -> list[Candidate]:
+               lookback_ns: int, previous_output_ns: int | None = None,
+               read_at: Sequence[tuple[int, str]] = (), module_started_in_log: bool = False) -> list[Candidate]:
     """Distinct candidate frames for an output at t_P, most likely first.
 
     ``previous_output_ns``: when the previous output was logged. A planner
     busier than its trigger period starts its next cycle as it finishes one,
     on the newest trigger then: that trigger comes right after the newest.
+    ``read_at``: (time, rule) of frames to try first, each the newest trigger
+    and inputs at that time (see :func:`frame_read_at`).
+    ``module_started_in_log``: the log began before the module's first
+    trigger (the tool started the run): a first output may answer the log's
+    first triggers however many came since.
     """
     trig = streams[trigger]
     newest = newest_at_or_before(trig.times, t_p)
     if newest < 0:
         return []
+    timed = [c for c in (frame_read_at(streams, trigger, t, previous, rule) for t, rule in read_at) if c is not None]
     # The first output (no previous frame) may answer a trigger some periods before the newest.
     oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
     busy = newest_at_or_before(trig.times, previous_output_ns) if previous_output_ns is not None else -1
+    # A busy module's cycle ended a little before its output was logged (the output's own delivery): the
+    # triggers logged up to ``lookback`` before the previous output may be the newest it had then.
+    jitter = [] if previous_output_ns is None else [
+        i for i in range(busy - 1, max(oldest, bisect_right(trig.times, previous_output_ns - lookback_ns)) - 1, -1)]
+    # A module that drops the triggers coming while it is busy answers the first one after its previous output.
+    after = busy + 1 if previous_output_ns is not None and oldest <= busy + 1 < newest else None
     order_of_triggers = list(dict.fromkeys(
-        [newest] + ([busy] if oldest <= busy < newest else []) + ([oldest] if oldest < newest else [])
-        + list(range(oldest + 1, newest))))
+        [newest] + ([busy] if oldest <= busy < newest else []) + ([after] if after is not None else []) + jitter
+        + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
     rules[newest].add(NEWEST)
     if oldest <= busy <= newest:
         rules[busy].add(BUSY)
+    for index in jitter:
+        rules[index].add(BUSY)
+    if after is not None:
+        rules[after].add(AFTER)
     if trigger in previous and oldest <= newest:
         rules[oldest].add(OLDEST)
     for index in order_of_triggers:
         if not rules[index]:
             rules[index].add(BETWEEN if trigger in previous else EARLIER)
-    if trigger not in previous and oldest == 0:  # a first output, and the log starts before its triggers
-        first_plannable = next((i for i in range(oldest, newest + 1)
-                      if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
-        if first_plannable is not None:
-            rules[first_plannable].add(FIRST)
+    if trigger not in previous and (oldest == 0 or module_started_in_log):
+        # A first output may answer the first trigger in the log (a slow first cycle, however many triggers
+        # came meanwhile) — the first every input had been heard by, or the very first (some input absent).
+        first_plannable = next((i for i in range(0, newest + 1)
+                                if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
+        firsts: list[tuple[int, str]] = [] if first_plannable is None else [(first_plannable, FIRST)]
+        if first_plannable != 0:
+            firsts.append((0, FIRST_HEARD))
+        for first, rule in firsts:
+            if first not in rules:
+                order_of_triggers.append(first)
+                rules[first] = set()
+            rules[first].add(rule)
+    found = timed + [cand for t_index in order_of_triggers
+             for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
+    return merged(found)
+
+
+# Frames read at a time rather than derived from a trigger (:func:`frame_read_at`): everything that had
+# arrived when the output was logged (a plain replay of the logged inputs in arrival order), at the cycle's
+# start (the output's time minus the step's measured cost), when the previous output was logged (a busy
+# module starts its next cycle as it ends one).
+AT_OUTPUT, AT_START, AT_PREVIOUS = "at output", "at cycle start", "at previous output"
+# The plain walk: every trigger after the previous frame's, in order, each with the inputs as they stood at
+# its arrival, until the module answers (a plain replay of a module answering each trigger; the cycles that
+# answered nothing are stepped too — their state counts). Its frames are known once it has been stepped.
+WALK = "plain walk"
+
+
+def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[str, int]) -> Candidate | None:
+    """The plain walk's candidate (its first frame: the trigger after the previous frame's), or None."""
+    first = previous.get(trigger, -1) + 1
+    if first >= len(streams[trigger].times):
+        return None
+    choice = frame_at(streams, trigger, first, streams[trigger].times[first], previous, absent=True)
+    if choice is None:
+        return None
+    return Candidate(streams[trigger].times[first], choice, frozenset({(WALK, ())}), walk=True)
+
+
+def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int],
+                  rule: str) -> Candidate | None:
+    """The frame of a module that read, at time ``t``, the newest trigger and the newest message of each
+    other input (absent inputs left out); None when no trigger newer than the previous frame's had come."""
+    index = newest_at_or_before(streams[trigger].times, t)
+    if index < 0 or index <= previous.get(trigger, -1):
+        return None
+    choice = frame_at(streams, trigger, index, t, previous, absent=True)
+    at_trigger = frame_at(streams, trigger, index, streams[trigger].times[index], previous, absent=True)
+    if choice is None or at_trigger is None:
+        return None
+    return Candidate(t, choice, frozenset({(rule, ()), (rule, _offsets(streams, trigger, choice, at_trigger))}))
+
+
+def merged(found: Sequence[Candidate]) -> list[Candidate]:
+    """Distinct frames in first-found order; a frame reached several ways carries all of them."""
     out: list[Candidate] = []
     seen: dict[tuple, int] = {}
-    for t_index in order_of_triggers:
-        for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index]):
-            key = tuple(sorted(cand.choice.items()))
-            if key not in seen:
-                seen[key] = len(out)
-                out.append(cand)
-            else:  # the same frame reached another way: it carries both ways
-                first = out[seen[key]]
-                out[seen[key]] = Candidate(first.frame_time, first.choice, first.patterns | cand.patterns)
+    for cand in found:
+        key = tuple(sorted(cand.choice.items()))
+        if key not in seen:
+            seen[key] = len(out)
+            out.append(cand)
+        else:  # the same frame reached another way: it carries both ways
+            first = out[seen[key]]
+            out[seen[key]] = Candidate(first.frame_time, first.choice, first.patterns | cand.patterns)
     return out
 
 
@@ -144,14 +223,29 @@ def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p:
         # "Just before" each message logged shortly before (or with) the trigger.
         earlier.update(t - 1 for t in times[lo_back:lo])
     out = []
-    at_trigger = frame_at(streams, trigger, t_index, t_t, previous)
+    at_trigger = frame_at(streams, trigger, t_index, t_t, previous, absent=True)
+    assert at_trigger is not None  # with absent inputs allowed a frame always exists
     for t_f in [t_t] + sorted(later) + sorted(earlier, reverse=True):
-        choice = frame_at(streams, trigger, t_index, t_f, previous)
-        if choice is not None:
-            offsets = tuple(sorted((name, idx - at_trigger[name]) for name, idx in choice.items()
-                                   if name != trigger)) if at_trigger is not None else (("?", 0),)
-            out.append(Candidate(t_f, choice, frozenset((rule, offsets) for rule in rules)))
+        choice = frame_at(streams, trigger, t_index, t_f, previous, absent=True)
+        assert choice is not None
+        out.append(Candidate(t_f, choice, frozenset((rule, _offsets(streams, trigger, choice, at_trigger))
+                                                    for rule in rules)))
     return out
+
+
+def _offsets(streams: Mapping[str, Stream], trigger: str, choice: Mapping[str, int],
+             at_trigger: Mapping[str, int]) -> tuple[tuple[str, int], ...]:
+    """Each other input's index in ``choice`` minus its index in the frame at the trigger's own time (an input
+    absent from both: 0; from one: its distance from having had no message)."""
+    out = []
+    for name in streams:
+        if name == trigger:
+            continue
+        idx, base = choice.get(name, -1), at_trigger.get(name, -1)
+        out.append((name, idx - base))
+    return tuple(sorted(out))
+
+
 
 
 # -- per-trigger modules: one frame per trigger message ----------------------------------------

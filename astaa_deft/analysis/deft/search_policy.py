@@ -26,7 +26,9 @@ from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, TypeVar
 
-from astaa_deft.analysis.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Candidate
+from astaa_deft.analysis.deft.frames import (
+    AFTER, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, FIRST, FIRST_HEARD, NEWEST, OLDEST, Candidate,
+)
 
 
 class HasPatterns(Protocol):
@@ -89,12 +91,18 @@ def first_cycle_first(candidates: Sequence[Candidate]) -> list[Candidate]:
     "analysis"). A planner that keeps up answers the newest, one more step. Only where several candidates are
     tried (a process replay tries one: the generic order keeps the newest).
     """
-    at_own_time = [c for c in candidates
-                   if any(rule == FIRST and all(offset == 0 for _, offset in offsets) for rule, offsets in c.patterns)]
-    return at_own_time + [c for c in candidates if c not in at_own_time]
+    def at_own_time(rule: str) -> list[Candidate]:
+        return [c for c in candidates
+                if any(r == rule and all(offset == 0 for _, offset in offsets) for r, offsets in c.patterns)]
+
+    # The first trigger every input had been heard by, then the very first one (some input absent then).
+    first = at_own_time(FIRST)
+    first += [c for c in at_own_time(FIRST_HEARD) if c not in first]
+    return first + [c for c in candidates if c not in first]
 
 
-LIKELY_RULES = frozenset({NEWEST, BUSY, OLDEST, FIRST})  # trigger rules a planner follows (not merely "between")
+# Trigger rules a planner follows (not merely "between"), and the times a module reads its inputs at.
+LIKELY_RULES = frozenset({NEWEST, BUSY, AFTER, OLDEST, FIRST, FIRST_HEARD, AT_OUTPUT, AT_START, AT_PREVIOUS})
 
 
 def nearest_first(candidates: Sequence[Candidate]) -> list[Candidate]:

@@ -51,6 +51,13 @@ class Suite:
         self._by_channel: dict[str, _Decoded] | None = None
 
     @property
+    def hang_after(self) -> float:
+        """Seconds a step may take before it counts as a hang: a per-trigger module's ``hang_after`` (its
+        extraction judged hangs so); a module replayed per output, as extracted, has no limit (a slow cycle
+        of a planner is no hang)."""
+        return self.entry.hang_after if self.entry.per_trigger else 0.0
+
+    @property
     def frames(self) -> list[dict]:
         return self.manifest["frames"]
 
@@ -72,7 +79,7 @@ class Suite:
                     if stopped is not None:
                         replayed_msg = None
                     else:
-                        replayed_msg = within_limit(functools.partial(planner.step, frame), cfg.hang_after)
+                        replayed_msg = within_limit(functools.partial(planner.step, frame), self.hang_after)
                 except StepHang as exc:
                     replayed_msg, error, how = None, f"the module hangs: {exc}", "hang"
                 except Exception as exc:  # the module under test crashing is a test failure, not ours
@@ -111,7 +118,7 @@ class Suite:
         error, how = None, ""
         try:
             planner.restore(pickle.loads((self.directory / snapshot).read_bytes()))
-            replayed_msg = within_limit(functools.partial(planner.step, self.frame_inputs(entry)), cfg.hang_after)
+            replayed_msg = within_limit(functools.partial(planner.step, self.frame_inputs(entry)), self.hang_after)
         except StepHang as exc:
             replayed_msg, error, how = None, f"the module hangs: {exc}", "hang"
         except Exception as exc:  # the module under test crashing is a test failure, not ours

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +64,9 @@ class ExtractReport:
     entry: Any = None  # the replayed module's ReplayModule, with the threshold used
     interrupted: bool = False  # stopped early: ``extraction`` holds the outputs decided so far
     resumed: int = 0  # outputs an interrupted extraction had decided, stepped once each
+    # Module tests that failed when the written suite ran once on its own run (an extraction defect); the
+    # suite keeps their frames for the state they build, without asserting them.
+    suite_failures: list[SuiteFailure] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     if module is not None and spec.planner is not None and module == spec.planner.module:
         module = None  # the planner, as its own section describes it
     entry = replay_module_of(spec, module)
+    if options.ground_truth is not None:  # checked before the work, not after it
+        _check_ground_truth(options.ground_truth, spec_path)
     if threshold is not None:
         entry = replace(entry, threshold=threshold)
         if module is None and spec.planner is not None:
@@ -137,14 +142,94 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     collisions = [v.time_ns for v in log.records(rec.Violation) if v.invariant_kind == "collision"]
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
+    failing: list[SuiteFailure] = []
     with writing(place):
-        manifest = export_suite(accepted, spec, params, out_dir, oracles=oracles, entry=entry)
+        # Every frame kept is stepped by the suite (those not accepted for their state only): the test of
+        # an output runs after the frames before it, as the extraction stepped them.
+        manifest = export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
+        if ex.suite_failures is None and ex.frames:  # not run beside the search: run the written suite now
+            failing, confirmed = check_suite(out_dir, ex)
+            if confirmed:  # its own run reproduces frames the search's copies did not: they are tests
+                export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
+                accepted = [f for f in ex.frames if f.accepted]
+        else:
+            failing = [SuiteFailure(index, detail) for index, detail in ex.suite_failures or ()]
+        if failing:  # an extraction defect: the suite says so, and those tests no longer assert
+            uncheck_frames(out_dir, {f.index for f in failing})
         if oracles:
             add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
         checkpoint.finished()
-    exact = ground_truth_rate(ex, spec, options.ground_truth) if options.ground_truth else None
-    return ExtractReport(ex, spec, len(accepted), len(oracles), bool(collisions), manifest, exact, entry,
-                         resumed=len(before))
+    exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
+    return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, exact,
+                         entry, resumed=len(before), suite_failures=failing)
+
+
+@dataclass(frozen=True)
+class SuiteFailure:
+    """A module test that failed when the suite ran once on the run it came from (an extraction defect)."""
+
+    index: int  # the frame's index
+    detail: str  # the distance or the error
+
+
+def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[list[SuiteFailure], int]:
+    """Run the written suite once, as ``pytest DIR`` would (a fresh module, every frame in order): (the tests
+    that fail — a suite must pass on the run it came from —, frames confirmed).
+
+    With ``extraction``, that run has the last word on its frames: one kept
+    but not accepted (the search stepped it on a copy of the state) that the
+    fresh module reproduces within θ becomes accepted — a test that passes
+    (counted in ``extraction.confirmed_unforked`` and the second number).
+    """
+    from astaa_deft.analysis.deft.suite import Suite
+
+    suite = Suite(out_dir)
+    frames = {f.index: f for f in extraction.frames} if extraction is not None else {}
+    out = []
+    confirmed = 0
+    for entry, result in zip(suite.frames, suite.results(), strict=True):
+        passes = result.error is None and result.comparison.within(suite.threshold)
+        if not entry.get("check", True):
+            frame = frames.get(int(entry["index"]))
+            if passes and frame is not None and frame.output is not None and not result.stopped:
+                frame.comparison, frame.accepted = result.comparison, True
+                frame.exact = result.comparison.distance == 0.0
+                confirmed += 1
+            continue
+        if not passes:
+            out.append(SuiteFailure(int(entry["index"]), result.error
+                                    or f"distance {result.comparison.distance:.3g} (θ = {suite.threshold:g})"))
+    if extraction is not None:
+        extraction.confirmed_unforked += confirmed
+    return out, confirmed
+
+
+def uncheck_frames(out_dir: Path, indices: set[int]) -> None:
+    """Mark these frames of the suite as stepped for their state only (no test): their tests fail on the
+    run they came from, and the suite says only what it can show."""
+    import json
+
+    from astaa_deft.io.output_place import write_atomic
+
+    path = out_dir / MANIFEST
+    manifest = json.loads(path.read_text())
+    for entry in manifest["frames"]:
+        if entry["index"] in indices:
+            entry["check"] = False
+            entry["unchecked_because"] = "failed when the suite was run on the run it came from"
+    write_atomic(path, json.dumps(manifest, indent=1) + "\n")
+
+
+def _check_ground_truth(path: str, spec_path: Path) -> None:
+    """InputError when ``--ground-truth`` is not a field path (the output field naming the inputs used)."""
+    from astaa_deft.model.fields import FieldPath, FieldPathError
+
+    try:
+        FieldPath.parse(path)
+    except FieldPathError as exc:
+        raise InputError(Problem("--ground-truth", None, None, f"'{path}' is not a field path: {exc}",
+                                 f"name the field of the module's output (per {spec_path}) that lists the inputs "
+                                 f"it used, e.g. debug.inputs")) from None
 
 
 def _shape(log: LogContents, spec: Spec, entry: ReplayModule) -> LogShape:

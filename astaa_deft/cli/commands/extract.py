@@ -47,17 +47,18 @@ def run(args: argparse.Namespace) -> int:
         module=args.module, resume=args.resume))
 
 
-def summary_table(ex: Extraction, thresholds: Sequence[float] | None = None) -> str:
-    """The extraction's counts and its reproduction rate at each threshold (default: the paper's) as text."""
+def summary_table(ex: Extraction, thresholds: Sequence[float] | None = None, module: str | None = None) -> str:
+    """The extraction's counts and its reproduction rate at each threshold (default: the paper's) as text;
+    ``module``: a module of the spec's replay: section (None: the planner)."""
     from astaa_deft.engine.spec.planner import PAPER_THRESHOLDS
 
     thresholds = PAPER_THRESHOLDS if thresholds is None else thresholds
-    lines = [f"planning outputs found: {ex.outputs}; frames reconstructed: {len(ex.frames)}; "
-             f"skipped: {len(ex.skipped)}"]
+    found = "planning outputs found" if module is None else f"outputs of module '{module}' found"
+    lines = [f"{found}: {ex.outputs}; frames reconstructed: {len(ex.frames)}; skipped: {len(ex.skipped)}"]
     if ex.recorded_outputs is not None:  # a per-trigger module: one frame per trigger message
         lines = [f"trigger messages: {ex.outputs} (recorded outputs: {ex.recorded_outputs}); frames replayed: "
                  f"{len(ex.frames)}; skipped: {len(ex.skipped)}"]
-    lines.append(f"{'θ (m)':>8} {'reproduced':>11} {'rate':>8}")
+    lines.append(f"{'θ (m)' if module is None else 'θ':>8} {'reproduced':>11} {'rate':>8}")
     for th in thresholds:
         n = ex.accepted_at(th)
         lines.append(f"{th:8.2f} {n:11d} {n / ex.outputs if ex.outputs else 0:8.1%}")
@@ -95,22 +96,29 @@ def extract(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOpti
             f"-o {out_dir}{' --module ' + module if module else ''}"
             f"{f' --threshold {threshold:g}' if threshold is not None else ''} --resume")
         return 130
-    say(summary_table(report.extraction))
+    entry = report.entry
+    unit = " m" if entry.trajectory is not None else ""
+    say(summary_table(report.extraction, module=None if entry.where == "planner" else entry.module))
     searched = search_note(report.extraction)
     if searched:
         say(searched)
-    note = near_miss_note(report.extraction)
+    note = near_miss_note(report.extraction, unit)
     if note:
         say(note)
+    if report.suite_failures:
+        shown = ", ".join(f"frame {f.index} ({f.detail})" for f in report.suite_failures[:5])
+        more = f" and {len(report.suite_failures) - 5} more" if len(report.suite_failures) > 5 else ""
+        say(f"extraction defect: {len(report.suite_failures)} module test(s) failed when the suite ran once on the "
+            f"run it came from: {shown}{more}; those frames stay in the suite for the state they build, not as "
+            f"tests")
     if report.collision:
         say(f"collision observed in the run: {report.oracles} frame(s) planned into a predicted obstacle "
             f"beforehand → oracle tests that fail while the planner still does so")
     if report.ground_truth is not None:
         exact, checked = report.ground_truth
-        say(f"ground truth ({ground_truth}): {exact}/{checked} frames used exactly the planner's inputs"
+        who = "the planner's" if entry.where == "planner" else f"module '{entry.module}''s"
+        say(f"ground truth ({ground_truth}): {exact}/{checked} frames used exactly {who} inputs"
             + (f" ({exact / checked:.1%})" if checked else ""))
-    entry = report.entry
-    unit = " m" if entry.trajectory is not None else ""
     say(f"{report.accepted} module tests (θ = {entry.threshold:g}{unit}) written to {out_dir}; "
         f"run them with: pytest {out_dir}")
     return 0 if report.manifest else 1

@@ -12,7 +12,7 @@ from typing import Any
 from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.errors import did_you_mean
-from astaa_deft.model.fields import FieldPathError, type_at
+from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 from astaa_deft.model.sut import Channel, MessageType, Module
 from astaa_deft.io.yamlsource import Node, Source, describe_value
 from astaa_deft.engine.spec.reader import declared_channel
@@ -29,7 +29,7 @@ PAPER_THRESHOLDS = (0.0, 0.1, 0.23, 1.62, 6.99, 17.15)
 
 
 KEYS = ("module", "inputs", "trigger", "output", "trajectory", "replay", "threshold", "lookback_ms", "skew_ms",
-        "oracle")
+        "oracle", "provenance")
 REPLAY_KEYS = ("factory", "args", "command")
 TRAJ_KEYS = ("points", "x", "y", "t", "heading", "time", "stamp")
 COLLISION_KEYS = ("ego", "obstacles", "margin")
@@ -101,7 +101,24 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     # output, outputs compared as trajectories; an exception from step() is not judged (unresolved).
     return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames=FrameMode.PER_OUTPUT,
                         exceptions=StepExceptions.UNRESOLVED, hang_after=0.0, threshold=threshold, lookback_ms=lookback,
-                        skew_ms=skew, trajectory=layout, collision=collision, where="planner")
+                        skew_ms=skew, trajectory=layout, collision=collision, where="planner",
+                        provenance=read_provenance(src, v.get("provenance"), "planner.provenance"))
+
+
+def read_provenance(src: Source, node: Node | None, what: str) -> str | None:
+    """The ``provenance:`` field path (where the output names the inputs it used), or None."""
+    if node is None:
+        return None
+    if not isinstance(node.value, str) or not node.value:
+        src.at(node, f"'{what}' must be a field path of the output, not {describe_value(node.value)}",
+               "e.g. provenance: debug.inputs (a mapping {input channel: its header.seq or header.stamp})")
+        return None
+    try:
+        FieldPath.parse(node.value)
+    except FieldPathError as exc:
+        src.at(node, f"'{what}' is not a field path: {exc}", "e.g. provenance: debug.inputs")
+        return None
+    return node.value
 
 
 def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracle | None:

@@ -14,6 +14,7 @@ replay:
       hang_after: 1.0                       # s: a step that has not returned by then is a hang
       threshold: 0.0                        # accept a replayed output this far from the recorded one
       ignore: [header.stamp]                # output fields the comparison skips
+      provenance: debug.inputs              # optional: where the output names its inputs' header.seq/stamp
 ```
 
 The ``planner:`` section loads into the same record (``spec/replay_module.py``):
@@ -28,7 +29,7 @@ from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.sut import Channel, Module
-from astaa_deft.engine.spec.planner import read_runner, read_setting
+from astaa_deft.engine.spec.planner import read_provenance, read_runner, read_setting
 from astaa_deft.engine.spec.replay_module import EXCEPTIONS, FRAME_MODES, FrameMode, ReplayModule, StepExceptions
 from astaa_deft.io.yamlsource import Node, Source, describe_value
 from astaa_deft.engine.spec.reader import declared_channel
@@ -38,7 +39,7 @@ __all__ = ["ReplayModule", "build_replay_section"]
 DOCS = "see docs/spec.md (replay:)"
 
 ENTRY_KEYS = ("module", "inputs", "trigger", "outputs", "factory", "args", "command", "frames", "exceptions",
-              "hang_after", "threshold", "lookback_ms", "skew_ms", "ignore")
+              "hang_after", "threshold", "lookback_ms", "skew_ms", "ignore", "provenance")
 REQUIRED = ("module", "inputs", "trigger", "outputs")
 
 
@@ -143,7 +144,8 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
         else:
             src.at(n, f"'{where}.ignore' must be a list of output field paths", "e.g. [header.stamp]")
     return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames, exceptions,
-                        hang_after, threshold, lookback, skew, ignore, where=where)
+                        hang_after, threshold, lookback, skew, ignore, where=where,
+                        provenance=read_provenance(src, v.get("provenance"), f"{where}.provenance"))
 
 
 def _text(src: Source, node: Node, what: str) -> str:

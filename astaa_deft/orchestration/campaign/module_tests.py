@@ -76,15 +76,15 @@ def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: Extra
     for name in planner.inputs:
         if name != planner.trigger:
             before = [m for m in log.on(spec.channel(name).key) if m.log_time <= trigger.log_time]
-            if not before:
-                return False
-            inputs[name] = before[-1]
-    accepted = [f for f in report.extraction.frames if f.accepted]
-    failing = ExtractedFrame(index=max((f.index for f in accepted), default=-1) + 1, output=None,
+            if before:  # an input not heard from yet (a slow channel) is absent from the frame
+                inputs[name] = before[-1]
+    # Every frame kept (those not reproduced are stepped for their state): the failing cycle's state is the run's.
+    kept = list(report.extraction.frames)
+    failing = ExtractedFrame(index=max((f.index for f in kept), default=-1) + 1, output=None,
                              trigger_time=trigger.log_time, frame_time=trigger.log_time, inputs=inputs,
                              comparison=Comparison(math.inf, math.inf, 0, "failed cycle"), accepted=True,
                              candidates_tried=0, exact=False)
-    frames = sorted([*accepted, failing], key=lambda f: f.trigger_time)
+    frames = sorted([*kept, failing], key=lambda f: f.trigger_time)
     oracles = json.loads((tests_dir / MANIFEST).read_text()).get("oracles", [])
     export_suite(frames, spec, run_params(log, spec), tests_dir, oracles=oracles)
     return True

@@ -1,0 +1,213 @@
+"""DeFT on the zoo of module behaviours (issue 31; tests/zoo): the generator, its floor, extraction held to both.
+
+The generator's own checks run on their own (no bus). A short form of the
+zoo (``zoo.SHORT``: three members, 2 s of bus time each) runs in the
+default run, the whole zoo behind ``-m slow``; for each member, one real run
+on the bus, then: the plain-replay floor is computed; extraction at θ = 0
+reproduces at least what the floor does; the extracted suite passes every
+test on the very run it came from (issue 31's acceptance). Where current
+extraction does not meet that yet the assertion is marked xfail (not strict)
+naming issue 31: it is expected to pass once the frame space, suites with
+state and provenance land.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from zoo import AXES, MEMBERS, MPC, SHORT, SLOW_PLANNER, Floor, Member, record, write_member
+from zoo.judge import Extracted, SuiteRun, extract, lost, plain_replay, run_suite
+from zoo.runtime.zoo_module import Step
+from astaa_deft.analysis.deft.planner_section import replay_module_of
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.engine.spec.loader import load_spec
+
+ISSUE = "issue 31: extraction does not yet cover this behaviour (absent inputs, arrival order, cycle start, " \
+        "suites carrying state)"
+# (member, what) that fail on the extraction of main before issue 31's changes (measured: the zoo benchmark).
+# With issue 31's extraction (branch deft) every member of the short zoo passes: none expected to fail.
+XFAIL_THETA: set[str] = set()
+XFAIL_SUITE: set[str] = set()
+
+
+# -- the generator ----------------------------------------------------------------------------------
+
+
+def test_the_catalogue_covers_every_value_of_every_axis_with_issue_31s_two_stacks():
+    assert len(MEMBERS) >= 24 and len({m.name for m in MEMBERS}) == len(MEMBERS)
+    for axis, values in AXES.items():
+        assert {getattr(m, axis) for m in MEMBERS} == set(values), axis
+    assert {m.frames_mode for m in MEMBERS} == {"per_trigger", "per_output"}
+    assert min(m.cost_ms[0] for m in MEMBERS) <= 1.0 and max(m.cost_ms[1] for m in MEMBERS) >= 1000.0
+    assert (MPC.trigger, MPC.readiness, MPC.reading, MPC.state, MPC.rate_hz, MPC.c_rate) == (
+        "newest_idle", "absent_first", "latched", "warm", 15.0, 1.0)
+    assert (SLOW_PLANNER.reading, SLOW_PLANNER.state, SLOW_PLANNER.numerics, SLOW_PLANNER.cost_ms) == (
+        "cycle_start", "warm", "noisy_fork", (500.0, 1200.0))
+    assert {m.name for m in SHORT} <= {m.name for m in MEMBERS} and all(m.seconds <= 2.0 for m in SHORT)
+
+
+def test_a_member_off_its_axes_is_refused():
+    with pytest.raises(ValueError, match="trigger 'sometimes' is not one of each, timer"):
+        Member("odd", trigger="sometimes")
+    with pytest.raises(ValueError, match="cost_ms"):
+        Member("odd", cost_ms=(5.0, 1.0))
+
+
+def test_every_member_is_a_stack_the_tool_accepts(tmp_path):
+    for member in MEMBERS:
+        stack = write_member(member, tmp_path / member.name)
+        spec = load_spec(stack.spec_path)
+        entry = replay_module_of(spec, "module")
+        assert (entry.inputs, entry.trigger, entry.output, entry.frames) == (("a", "b", "c"), "a", "out",
+                                                                              member.frames_mode)
+        assert entry.ignore == ("debug",) and entry.hang_after >= 2.0
+        assert {m.name for m in spec.modules} == {"module", "producer"}
+    # The factory beside the spec builds the member's step with the spec's args.
+    planner = make_planner(load_spec(tmp_path / "mpc" / "spec.yaml"), {}, entry=replay_module_of(
+        load_spec(tmp_path / "mpc" / "spec.yaml"), "module"))
+    assert (planner.obj.state, planner.obj.cost) == ("warm", (0.010, 0.045))
+
+
+def frame(seq: int, *, c: bool = True) -> dict:
+    out = {"a": {"header": {"seq": seq, "stamp": 0.05 * seq}, "v": [0.3 + 0.01 * seq, -0.2]},
+           "b": {"header": {"seq": seq // 2, "stamp": 0.1 * (seq // 2)}, "v": [0.1, 0.7]}}
+    if c:
+        out["c"] = {"header": {"seq": 0, "stamp": 0.0}, "v": [0.9, 0.4]}
+    return out
+
+
+def test_the_step_keeps_the_factory_contract():
+    fast = {"cost_ms": "0.01-0.01"}
+    # An absent input (no key) is a frame of its own, recorded as absent in the evaluation record.
+    with_c, without_c = Step(**fast).step(frame(1)), Step(**fast).step(frame(1, c=False))
+    assert with_c["x"] != without_c["x"] and (with_c["absent"], without_c["absent"]) == (0, 1)
+    assert without_c["debug"]["inputs"] == {"a": 1, "b": 0, "c": None}
+    # Several messages a cycle: one per step call, the later calls ignoring their frame.
+    several = Step(outputs="several", **fast)
+    parts = [several.step(frame(5)), several.step(frame(6)), several.step(frame(7)), several.step(frame(8))]
+    assert [(m["part"], m["header"]["seq"]) for m in parts] == [(0, 15), (1, 16), (2, 17), (0, 24)]
+    # None for some cycles; the warm state moved all the same.
+    quiet = Step(outputs="none_some", state="warm", **fast)
+    assert quiet.step(frame(3)) is None and quiet.x != [0.0, 0.0]
+    # A warm start: the same frame after another history answers otherwise.
+    warm_a, warm_b = Step(state="warm", **fast), Step(state="warm", **fast)
+    warm_a.step(frame(1))
+    assert warm_a.step(frame(2))["x"] != warm_b.step(frame(2))["x"]
+
+
+def test_noisy_numerics_differ_by_an_ulp_in_a_copy_or_a_fork_and_stable_ones_not_at_all():
+    fast = {"cost_ms": "0.01-0.01", "state": "warm"}
+    for numerics, differs in (("stable", False), ("noisy_fork", True)):
+        def built(numerics: str = numerics) -> Step:
+            step = Step(numerics=numerics, **fast)
+            for seq in range(3):
+                step.step(frame(seq))
+            return step
+
+        reference = built().step(frame(3))["x"]
+        for copied in (copy.deepcopy(built()), pickle.loads(pickle.dumps(built()))):
+            errors = [abs(p - q) for p, q in zip(reference, copied.step(frame(3))["x"], strict=True)]
+            assert (max(errors) > 0) == differs and max(errors) < 1e-15, (numerics, errors)
+    read, write = os.pipe()
+    noisy = Step(numerics="noisy_fork", **fast)
+    here = noisy.step(frame(0))["x"]
+    noisy = Step(numerics="noisy_fork", **fast)
+    pid = os.fork()
+    if pid == 0:  # the instance built before the fork, stepped in the child
+        os.write(write, repr(noisy.step(frame(0))["x"]).encode())
+        os._exit(0)
+    os.waitpid(pid, 0)
+    there = eval(os.read(read, 1000).decode())  # noqa: S307 — our own repr of two floats
+    os.close(read)
+    os.close(write)
+    assert here != there and max(abs(p - q) for p, q in zip(here, there, strict=True)) < 1e-15
+    assert all(math.isfinite(v) for v in here + there)
+
+
+# -- members on the bus ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ZooRun:
+    member: Member
+    floor: Floor
+    extracted: Extracted
+    suite: SuiteRun
+    lost: int
+
+
+def zoo_run(member: Member, directory: Path) -> ZooRun:
+    stack = write_member(member, directory / member.name)
+    log = record(stack)
+    extracted = extract(stack, log, stack.directory / "suite")
+    floor = plain_replay(stack, log)
+    return ZooRun(member, floor, extracted, run_suite(stack.directory / "suite"), lost(floor, extracted, stack, log))
+
+
+def check_floor(run: ZooRun) -> None:
+    floor = run.floor
+    assert floor.outputs > 0 and len(floor.reproduced) == floor.outputs and floor.steps > 0
+    assert floor.way in floor.ways and floor.count == max(floor.ways.values()) and floor.seconds > 0
+    assert run.extracted.outputs == floor.outputs  # extraction and floor count the same recorded outputs
+
+
+def check_theta0(run: ZooRun, request: pytest.FixtureRequest) -> None:
+    if run.member.name in XFAIL_THETA:
+        request.applymarker(pytest.mark.xfail(strict=False, reason=ISSUE))
+    assert run.extracted.exact >= run.floor.count and run.lost == 0, (
+        f"{run.member.name}: θ = 0 {run.extracted.exact}, floor {run.floor.count} ({run.floor.way}), "
+        f"lost {run.lost} of {run.floor.outputs}")
+
+
+def check_suite(run: ZooRun, request: pytest.FixtureRequest) -> None:
+    if run.member.name in XFAIL_SUITE:
+        request.applymarker(pytest.mark.xfail(strict=False, reason=ISSUE))
+    assert run.suite.tests == run.extracted.tests
+    assert run.suite.all_pass, f"{run.member.name}: {run.suite.output}"
+
+
+@pytest.fixture(scope="module", params=SHORT, ids=[m.name for m in SHORT])
+def short_run(request, tmp_path_factory) -> ZooRun:
+    return zoo_run(request.param, tmp_path_factory.mktemp("zoo"))
+
+
+def test_the_plain_replay_floor_is_computed(short_run):
+    check_floor(short_run)
+
+
+def test_extraction_at_theta_0_reproduces_at_least_the_floor(short_run, request):
+    check_theta0(short_run, request)
+
+
+def test_the_extracted_suite_passes_on_the_run_it_came_from(short_run, request):
+    check_suite(short_run, request)
+
+
+# -- the whole zoo (-m slow) ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module", params=MEMBERS, ids=[m.name for m in MEMBERS])
+def zoo_member_run(request, tmp_path_factory) -> ZooRun:
+    return zoo_run(request.param, tmp_path_factory.mktemp("zoo-all"))
+
+
+@pytest.mark.slow
+def test_whole_zoo_floor_is_computed(zoo_member_run):
+    check_floor(zoo_member_run)
+
+
+@pytest.mark.slow
+def test_whole_zoo_extraction_at_theta_0_reproduces_at_least_the_floor(zoo_member_run, request):
+    check_theta0(zoo_member_run, request)
+
+
+@pytest.mark.slow
+def test_whole_zoo_suite_passes_on_the_run_it_came_from(zoo_member_run, request):
+    check_suite(zoo_member_run, request)
