@@ -103,6 +103,22 @@ def test_the_step_keeps_the_factory_contract():
     assert warm_a.step(frame(2))["x"] != warm_b.step(frame(2))["x"]
 
 
+def test_a_seeded_defect_kills_the_step_on_a_nan_and_the_spec_says_so(tmp_path):
+    fast = {"cost_ms": "0.01-0.01"}
+    poisoned = frame(2)
+    poisoned["c"] = {**poisoned["c"], "v": [float("nan"), 0.4]}
+    assert math.isnan(Step(**fast).step(poisoned)["x"][0])  # no defect: a NaN goes through
+    with pytest.raises(ValueError, match="seeded defect: NaN in input c"):
+        Step(defect="crash_on_nan", **fast).step(poisoned)
+    with pytest.raises(ValueError, match="defect 'sometimes'"):
+        Member("odd", defect="sometimes")
+    stack = write_member(Member("defective", defect="crash_on_nan"), tmp_path / "defective")
+    entry = replay_module_of(load_spec(stack.spec_path), "module")
+    assert entry.exceptions == "crash" and entry.factory_args["defect"] == "crash_on_nan"
+    assert replay_module_of(load_spec(write_member(MPC, tmp_path / "mpc").spec_path), "module").exceptions \
+        == "unresolved"
+
+
 def test_noisy_numerics_differ_by_an_ulp_in_a_copy_or_a_fork_and_stable_ones_not_at_all():
     fast = {"cost_ms": "0.01-0.01", "state": "warm"}
     for numerics, differs in (("stable", False), ("noisy_fork", True)):
