@@ -66,7 +66,8 @@ def measure(member, out: Path, pairs: int, jobs: int | None, mode: str) -> dict:
     ratio, extraction_s, plain_s = sorted(ratios)[len(ratios) // 2]
     return {"member": member.name, "axes": member.axes(), "cost_ms": list(member.cost_ms),
             "frames": member.frames_mode, "outputs": floor.outputs, "floor": floor.count, "floor_way": floor.way,
-            "floor_ways": floor.ways, "theta0": extracted.exact, "lost": lost(floor, extracted, stack, log),
+            "floor_ways": floor.ways, "theta0": extracted.exact, "within_1e-9": extracted.near,
+            "lost": lost(floor, extracted, stack, log),
             "right": extracted.right, "answered": extracted.frames, "tests": suite.tests, "passed": suite.passed,
             "failed": suite.failed, "suite_all_pass": suite.all_pass, "suite_tail": suite.output,
             "ratio": ratio, "ratios": [r[0] for r in ratios], "extraction_s": extraction_s, "plain_s": plain_s,
@@ -126,7 +127,8 @@ def main() -> int:
         f"÷ plain ≤ 2× (≥ {EXPENSIVE_MS:g} ms a cycle): {sum(r['ratio'] <= 2.0 for r in expensive)}/{len(expensive)}"
         + (f", median {statistics.median(r['ratio'] for r in expensive):.2f}×" if expensive else ""))
     say(f"outputs: {sum(r['outputs'] for r in done)}, floor {sum(r['floor'] for r in done)}, "
-        f"θ = 0 {sum(r['theta0'] for r in done)}, right frames {sum(r['right'] for r in done)}/"
+        f"θ = 0 {sum(r['theta0'] for r in done)} (within 1e-9: {sum(r['within_1e-9'] for r in done)}), "
+        f"right frames {sum(r['right'] for r in done)}/"
         f"{sum(r['answered'] for r in done)}; load average now {os.getloadavg()[0]:.1f}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")

@@ -31,8 +31,10 @@ from astaa_deft.engine.spec.loader import load_spec
 
 ISSUE = "issue 31: extraction does not yet cover this behaviour (absent inputs, arrival order, cycle start, " \
         "suites carrying state)"
-# (member, what) that fail on the extraction of main before issue 31's changes (measured: the zoo benchmark).
-# With issue 31's extraction (branch deft) every member of the short zoo passes: none expected to fail.
+# Members whose check failed before issue 31's extraction (main: drop_cycle_none, each_several, mpc,
+# newest_none_slow1hz, oldest_several_late, timer_counters_late, timer_cycle, timer_several, timer_warm_absent;
+# suites: mpc, timer_warm_absent). With issue 31's extraction every member reaches its floor and its suite
+# passes on its own run (bench_deft_zoo.py --pairs 3): none is expected to fail.
 XFAIL_THETA: set[str] = set()
 XFAIL_SUITE: set[str] = set()
 
@@ -102,6 +104,22 @@ def test_the_step_keeps_the_factory_contract():
     assert warm_a.step(frame(2))["x"] != warm_b.step(frame(2))["x"]
 
 
+def test_a_seeded_defect_kills_the_step_on_a_nan_and_the_spec_says_so(tmp_path):
+    fast = {"cost_ms": "0.01-0.01"}
+    poisoned = frame(2)
+    poisoned["c"] = {**poisoned["c"], "v": [float("nan"), 0.4]}
+    assert math.isnan(Step(**fast).step(poisoned)["x"][0])  # no defect: a NaN goes through
+    with pytest.raises(ValueError, match="seeded defect: NaN in input c"):
+        Step(defect="crash_on_nan", **fast).step(poisoned)
+    with pytest.raises(ValueError, match="defect 'sometimes'"):
+        Member("odd", defect="sometimes")
+    stack = write_member(Member("defective", defect="crash_on_nan"), tmp_path / "defective")
+    entry = replay_module_of(load_spec(stack.spec_path), "module")
+    assert entry.exceptions == "crash" and entry.factory_args["defect"] == "crash_on_nan"
+    assert replay_module_of(load_spec(write_member(MPC, tmp_path / "mpc").spec_path), "module").exceptions \
+        == "unresolved"
+
+
 def test_noisy_numerics_differ_by_an_ulp_in_a_copy_or_a_fork_and_stable_ones_not_at_all():
     fast = {"cost_ms": "0.01-0.01", "state": "warm"}
     for numerics, differs in (("stable", False), ("noisy_fork", True)):
@@ -159,6 +177,8 @@ def check_floor(run: ZooRun) -> None:
 
 
 def check_theta0(run: ZooRun, request: pytest.FixtureRequest) -> None:
+    """Every output the floor reproduces, extraction reproduces too (so θ = 0 ≥ the floor): a cut that loses
+    one the plain replay gets is a bug (issue 31)."""
     if run.member.name in XFAIL_THETA:
         request.applymarker(pytest.mark.xfail(strict=False, reason=ISSUE))
     assert run.extracted.exact >= run.floor.count and run.lost == 0, (

@@ -58,7 +58,8 @@ def spec_text(member: Member, replay_extra: Mapping[str, Any] | None = None) -> 
     entry: dict[str, Any] = {
         "module": MODULE, "inputs": list(INPUTS), "trigger": INPUTS[0], "outputs": [OUTPUT], "factory": FACTORY,
         "args": member.factory_args(), "frames": member.frames_mode, "hang_after": member.hang_after,
-        "threshold": 0.0, "ignore": ["debug"], **(replay_extra or {})}
+        "threshold": 0.0, "ignore": ["debug"],
+        **({"exceptions": "crash"} if member.defect != "none" else {}), **(replay_extra or {})}
     lines = [
         f"# Zoo member '{member.name}' (tests/zoo): {json.dumps(member.axes())}",
         f"# cost {member.cost_ms[0]:g}-{member.cost_ms[1]:g} ms a step; {member.note}".rstrip("; "),

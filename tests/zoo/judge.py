@@ -47,6 +47,7 @@ class Extracted:
     tests: int  # module tests written
     seconds: float  # wall time of the extraction (reading the log, searching, writing the suite)
     report: ExtractReport
+    near: int = 0  # recorded outputs reproduced within 1e-9 (θ = 0 included): off by rounding, not by frame
 
 
 def extract(stack: Stack, log: Path, out_dir: Path, *, jobs: int | None = None) -> Extracted:
@@ -60,8 +61,9 @@ def extract(stack: Stack, log: Path, out_dir: Path, *, jobs: int | None = None) 
     exact = [f for f in answered if f.comparison.distance == 0.0]
     outputs = ex.recorded_outputs if ex.recorded_outputs is not None else ex.outputs
     right = sum(right_frame(f.output.data, f.inputs) for f in answered if f.output is not None)
+    near = sum(1 for f in answered if f.comparison.distance <= 1e-9)
     return Extracted(outputs, len(exact), frozenset(output_key(f.output) for f in exact if f.output is not None),
-                     right, len(answered), report.accepted, seconds, report)
+                     right, len(answered), report.accepted, seconds, report, near)
 
 
 def lost(floor: Floor, extracted: Extracted, stack: Stack, log: Path) -> int:

@@ -36,6 +36,10 @@ AXES: dict[str, tuple[str, ...]] = {
     "numerics": ("stable", "noisy_fork"),
 }
 
+# Seeded defects (not an axis: the zoo's members have none unless asked): 'crash_on_nan' — a step given a NaN
+# in any input's values raises, which kills the module's process (its spec says `exceptions: crash`).
+DEFECTS = ("none", "crash_on_nan")
+
 INPUTS = ("a", "b", "c")  # 'a' is the trigger channel (a timer module names it as its spec trigger too)
 OUTPUT = "out"
 
@@ -65,6 +69,7 @@ class Member:
     seconds: float = 4.0  # bus time the producer runs (the recorded run)
     frames: str | None = None  # the spec's frames mode (None: per_trigger for 'each' with one output a cycle)
     note: str = ""  # what the member stands for (the two of issue 31 say so)
+    defect: str = "none"  # a seeded defect (DEFECTS), for campaigns that must find it
 
     def __post_init__(self) -> None:
         for axis, values in AXES.items():
@@ -76,6 +81,8 @@ class Member:
         lo, hi = self.cost_ms
         if not 0 < lo <= hi:
             raise ValueError(f"member {self.name}: cost_ms {self.cost_ms} must be 0 < from <= to")
+        if self.defect not in DEFECTS:
+            raise ValueError(f"member {self.name}: defect '{self.defect}' is not one of {', '.join(DEFECTS)}")
         if self.frames not in (None, "per_trigger", "per_output"):
             raise ValueError(f"member {self.name}: frames '{self.frames}'")
 
@@ -118,7 +125,7 @@ class Member:
         return {"state": self.state, "outputs": self.outputs, "numerics": self.numerics,
                 "cost_ms": f"{self.cost_ms[0]:g}-{self.cost_ms[1]:g}", "parts": str(self.parts),
                 "silent_every": str(self.silent_every), "warm": repr(self.warm), "trigger": INPUTS[0],
-                "inputs": ",".join(INPUTS)}
+                "inputs": ",".join(INPUTS), "defect": self.defect}
 
     def describe(self) -> dict[str, Any]:
         """The member as JSON (written beside its stack: the process and producer read it)."""

@@ -48,12 +48,13 @@ class Step:
 
     def __init__(self, state: str = "none", outputs: str = "one", numerics: str = "stable",
                  cost_ms: str = "1-3", parts: str = "3", silent_every: str = "4", warm: str = "0.5",
-                 trigger: str = "a", inputs: str = "a,b,c"):
+                 trigger: str = "a", inputs: str = "a,b,c", defect: str = "none"):
         self.state, self.outputs, self.numerics = state, outputs, numerics
         lo, _, hi = cost_ms.partition("-")
         self.cost = (float(lo) * 1e-3, float(hi or lo) * 1e-3)
         self.parts, self.silent_every, self.warm = int(parts), int(silent_every), float(warm)
         self.trigger, self.inputs = trigger, tuple(inputs.split(","))
+        self.defect = defect  # 'crash_on_nan': a NaN in an input's values raises (the process dies of it)
         self.x = [0.0, 0.0]  # the warm start: the previous cycle's result
         self.steps = 0  # cycles computed (state 'counters')
         self.seen: dict[str, int] = {}  # per input: cycles that had it (state 'counters')
@@ -84,6 +85,8 @@ class Step:
             message = frame.get(name)
             v = message["v"] if message is not None else ABSENT
             absent += message is None
+            if self.defect == "crash_on_nan" and any(math.isnan(float(value)) for value in v):
+                raise ValueError(f"zoo seeded defect: NaN in input {name}")
             u = [u[0] + weight * float(v[0]), u[1] + weight * float(v[1])]
         if self.state == "warm":
             x = [self.warm * self.x[i] + (1.0 - self.warm) * u[i] for i in range(2)]
