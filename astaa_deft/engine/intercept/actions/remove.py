@@ -23,7 +23,7 @@ from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.fields import FieldPath, FieldPathError, get
 from astaa_deft.engine.intercept.dictionary import field_site
 from astaa_deft.engine.intercept.actions.base import (
-    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PolicyContext, required,
+    ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, required,
 )
 
 if TYPE_CHECKING:
@@ -76,6 +76,12 @@ class Remove(ActionConfig):
 
     def start(self, context: PolicyContext) -> ActionRuntime:
         return RemoveRuntime(self, context)
+
+    @classmethod
+    def pinned(cls, step: PinnedStep) -> Remove | None:
+        """The places the step removed (concrete paths); None when it removed none."""
+        removed = step.detail.get("removed")
+        return cls(tuple(str(path) for path in removed)) if removed else None
 
 
 class RemoveRuntime(ActionRuntime):
