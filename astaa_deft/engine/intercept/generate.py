@@ -131,10 +131,10 @@ def targets_to_mutate(spec: Spec, dictionary: Dictionary, include_brittle: bool 
 
 
 def check_families(names: Iterable[str]) -> None:
-    """InputError naming an unknown family (``--families``)."""
+    """InputError naming an unknown family (``--family``)."""
     for name in names:
         if name not in FAMILIES:
-            raise InputError(Problem("--families", None, None, f"unknown fault family {name!r}",
+            raise InputError(Problem("--family", None, None, f"unknown fault family {name!r}",
                                      "families are " + ", ".join(FAMILIES.names())))
 
 

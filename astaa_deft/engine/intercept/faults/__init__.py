@@ -3,7 +3,7 @@
 To add a family, add a module here with a :class:`FaultFamily` subclass
 whose instance it registers (``FAMILIES.register(name, instance)``): the
 generator draws it by its ``weight``, a campaign probes it if it is
-``semantic``, and ``astaa-deft generate --families`` lists it. Nothing else
+``semantic``, and ``astaa-deft generate --family NAME`` draws it alone. Nothing else
 changes.
 """
 

@@ -56,7 +56,7 @@ class Siblings(FaultFamily):
     def _testcase(self, testcase_id: str, rng: random.Random, target: Target, span: Span) -> TestCase:
         a, b = str(target.path), str(target.partner)
         return one_policy(testcase_id, rng, target.channel.name, Swap(a, b), span=span,
-                          description=describe(self.name, target.channel.name, f"{a} <-> {b}", span.window(),
+                          description=describe(self.name, target.channel.name, f"{a} swapped with {b}", span.window(),
                                                span.selection))
 
 
