@@ -31,7 +31,7 @@ from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 
 ID_WIDTH = 6
 COVERAGE_ROUNDS = 2  # pure coverage rounds before weighted draws are mixed in
-SEMANTIC_EVERY = 3  # every third case probes a semantic fault family (when the spec offers one a target)
+SEMANTIC_EVERY = 2  # every other case probes a semantic fault family (when the spec offers one a target)
 
 
 class RandomStrategy(Strategy):
