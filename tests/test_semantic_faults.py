@@ -129,7 +129,8 @@ def test_every_semantic_case_passes_policy_check(tmp_path, spec):
 
 def run_case(policy_xml: str, message: dict) -> tuple[dict, dict]:
     """What one message becomes under one policy on the zoo's channel, and its event's detail."""
-    xml = f'<testcase id="t" seed="1"><description/><policy id="p"><channel>state</channel>{policy_xml}</policy></testcase>'
+    xml = (f'<testcase id="t" seed="1"><description/><policy id="p"><channel>state</channel>{policy_xml}</policy>'
+           '</testcase>')
     interceptor = Interceptor(parse_testcase(xml.encode(), "t.xml", ZOO_SPEC, DICTIONARY), ZOO_SPEC, DICTIONARY)
     [delivery] = interceptor.on_message("state", ("consumer",), JSON.encode(message), 0.5)
     assert delivery.event is not None
@@ -190,3 +191,29 @@ def test_on_the_zoo_each_family_reaches_its_own_defect_and_no_other_and_defects_
         assert reached(testcase, defects=False) is None, testcase.description
     assert {defect for _, defect in hits} == set(SEMANTIC)  # every seeded defect is reached …
     assert all(name == defect for name, defect in hits), hits  # … by its own family only
+
+
+def test_a_family_is_one_class_registered_by_name_and_generate_draws_it():
+    """What docs/policies.md shows for "Adding a fault family", registered here and taken out again."""
+    from astaa_deft.engine.intercept.faults.base import ValueFamily
+    from astaa_deft.model.sut import FLOAT_KINDS
+
+    class SpeedLimit(ValueFamily):
+        name = "speed_limit"
+        weight = 3
+        rank = 99
+        keys_of_kind = {kind: ("float.at_max", "float.above_max") for kind in FLOAT_KINDS}
+
+        def accepts(self, channel, path, field_type):
+            return "speed" in str(path)
+
+    FAMILIES.register(SpeedLimit.name, SpeedLimit())
+    try:
+        cases = gen.generate(ZOO_SPEC, DICTIONARY, 20, seed=1, families=["speed_limit"])
+        assert {(family(c.description), c.policies[0].action.fields[0].path) for c in cases} == {
+            ("speed_limit", "speed")}
+        assert {c.policies[0].action.fields[0].value for c in cases} == {"dict:float.at_max", "dict:float.above_max"}
+        assert "speed_limit" in weights()
+    finally:
+        FAMILIES.unregister(SpeedLimit.name)
+    assert "speed_limit" not in FAMILIES

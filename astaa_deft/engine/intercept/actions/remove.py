@@ -101,7 +101,8 @@ class RemoveRuntime(ActionRuntime):
         removed = [str(where) for path in self.paths for where in _remove(item.message, path)]
         if not removed and decoded_here:
             item.message = None  # nothing changed: the real payload goes on
-        detail = RemoveDetail(removed=tuple(removed)) if removed else RemoveDetail(skipped="no such field in this message")
+        detail = (RemoveDetail(removed=tuple(removed)) if removed
+                  else RemoveDetail(skipped="no such field in this message"))
         item.events.append(self.context.event("remove", info, item.consumers, **detail.to_json()))
         return [item]
 
