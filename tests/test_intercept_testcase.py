@@ -325,7 +325,7 @@ def test_every_action_module_has_its_schema_element():
     ns = {"xs": "http://www.w3.org/2001/XMLSchema"}
     in_schema = set(schema.xpath("//xs:group[@name='Action']//xs:element/@name", namespaces=ns))
     assert in_schema == set(ACTIONS) == {"set", "drop", "delay", "duplicate", "reorder", "interleave", "corrupt",
-                                                 "participant", "remove", "swap"}
+                                                 "participant", "remove", "swap", "hold"}
 
 
 def test_the_documented_example_is_valid():

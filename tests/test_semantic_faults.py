@@ -153,6 +153,25 @@ def test_remove_takes_fields_out_and_swap_exchanges_siblings():
     assert event["skipped"] == "no such field in this message"
 
 
+def test_hold_freezes_fields_at_the_value_before_its_window():
+    from zoo_helpers import SOURCE
+
+    xml = ('<testcase id="t" seed="1"><description/><policy id="p"><channel>state</channel>'
+           '<window from="0.12"/><select limit="4"/><hold><field path="odometer"/><field path="path[*].s"/></hold>'
+           '</policy></testcase>')
+    interceptor = Interceptor(parse_testcase(xml.encode(), "t.xml", ZOO_SPEC, DICTIONARY), ZOO_SPEC, DICTIONARY)
+    sent = []
+    for i in range(1, 9):  # at 0.05 s … 0.4 s: messages 3-6 are selected, 2 is the one before
+        [delivery] = interceptor.on_message("state", ("consumer",), JSON.encode(SOURCE.state(i)), i * 0.05)
+        sent.append(JSON.decode(delivery.payload)["odometer"])
+    real = [SOURCE.state(i)["odometer"] for i in range(1, 9)]
+    assert sent == real[:2] + [real[1]] * 4 + real[6:]
+    first = Interceptor(parse_testcase(xml.replace('from="0.12"', 'from="0"').encode(), "t.xml", ZOO_SPEC,
+                                       DICTIONARY), ZOO_SPEC, DICTIONARY)
+    [delivery] = first.on_message("state", ("consumer",), JSON.encode(SOURCE.state(1)), 0.05)
+    assert delivery.event.detail["skipped"] == "no previous message on this channel"
+
+
 @pytest.mark.parametrize("policy, says", [
     ('<remove><field path="path[0]"/></remove>', "ends in an array index"),
     ('<remove><field path="pose.z"/></remove>', "Pose has no field 'z'"),
