@@ -1,7 +1,7 @@
 """Generate ASTAA test cases from a SUT spec and the dictionary.
 
-Each test case holds one ``set`` policy on one channel, drawn from the
-spec's channels, their leaf fields and the dictionary values of each
+Each test case holds one policy on one channel (mostly ``set``), drawn from
+the spec's channels, their leaf fields and the dictionary values of each
 field's declared type. The mix follows what ASTAA's bugs needed
 (Hutchison et al., ICSE-SEIP 2018, Fig. 3): 42 % one bad value in one
 field of one message, 22 % several fields of one message, only 8 %
