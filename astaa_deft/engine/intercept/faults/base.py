@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import random
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -151,7 +151,7 @@ def consumed_fields(sources: Sources) -> Iterable[tuple[Channel, FieldPath, Fiel
 
 
 def entry_targets(sources: Sources, keys_of_kind: dict[str, Sequence[str]],
-                  accept: object = None) -> Targets:
+                  accept: Callable[[Channel, FieldPath, FieldType], bool] | None = None) -> Targets:
     """Targets whose values are the dictionary ``keys_of_kind[field kind]`` the field can take (in that
     order; keys missing from the dictionary left out). ``accept(channel, path, field_type)``, if given,
     narrows the fields."""
@@ -159,7 +159,7 @@ def entry_targets(sources: Sources, keys_of_kind: dict[str, Sequence[str]],
     found: Targets = {}
     for channel, path, field_type in consumed_fields(sources):
         keys = keys_of_kind.get(field_type.kind)
-        if not keys or (callable(accept) and not accept(channel, path, field_type)):
+        if not keys or (accept is not None and not accept(channel, path, field_type)):
             continue
         site = field_site(sources.spec.types, channel.type, path)
         entries = [dictionary.get(key) for key in keys if key in dictionary]
