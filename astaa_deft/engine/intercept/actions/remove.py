@@ -52,6 +52,9 @@ class Remove(ActionConfig):
         for path in self.paths:
             etree.SubElement(element, "field", path=path)
 
+    def field_paths(self) -> tuple[str, ...]:
+        return self.paths  # the fields it acts on (a bucket's signature names them)
+
     def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
         for text, child in zip(self.paths, checker.element.iterfind("field"), strict=True):
             try:
