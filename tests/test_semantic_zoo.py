@@ -2,7 +2,7 @@
 loopback, a real MCAP log): each semantic family's generated case, run directly, reaches that family's
 seeded defect (the consumer's traceback names it); the same cases with the defects off leave the run clean.
 
-Each family's case is the first of its probes in the campaign's semantic rounds that reaches the defect
+Each family's case is the first of its probes in the campaign's semantic schedule that reaches the defect
 through the real Interceptor (tests/zoo_helpers.py), so what runs live is what a campaign would propose.
 """
 
@@ -26,15 +26,17 @@ SAYS = {"boundary": "IndexError", "angle": "angle defect", "units": "units defec
 
 
 def family_case(name: str) -> TestCase:
-    """The first probe of ``name`` in the semantic rounds that reaches its defect (offline)."""
+    """The first probe of ``name`` in the semantic schedule that reaches its defect (offline)."""
     targets = gen.FaultTargets.of(ZOO_SPEC, DICTIONARY)
-    for round_number in range(8):
-        for i, probe in enumerate(gen.semantic_round(targets, 1, round_number)):
-            if probe.family != name:
-                continue
-            testcase = gen.probe_testcase(f"zoo-{name}", random.Random(i), probe, round_number, 1.5, anchor="state")
-            if reached(testcase, defects=True) == name:
-                return testcase
+    for number in range(400):
+        found = gen.semantic_probe(targets, 1, number)
+        assert found is not None
+        probe, lap = found
+        if probe.family != name:
+            continue
+        testcase = gen.probe_testcase(f"zoo-{name}", random.Random(number), probe, lap, 1.5, anchor="state")
+        if reached(testcase, defects=True) == name:
+            return testcase
     raise AssertionError(f"no probe of {name} reaches its defect")
 
 

@@ -64,7 +64,7 @@ from astaa_deft.engine.intercept.testcase import Selection, TestCase
 __all__ = ["DELAYS_MS", "MESSAGE_FAULTS", "SEQUENCE_FAULTS", "STAMP_FAULTS", "STAMP_NAMES", "FaultTargets",
            "GenerateReport", "Probe", "Target", "coverage_round", "fault_testcase", "generate",
            "generate_to_directory", "is_generation_brittle", "iter_testcases", "mutation_targets",
-           "probe_testcase", "semantic_round", "stamp_targets", "stamp_targets_by_channel", "targets_to_mutate",
+           "probe_testcase", "semantic_probe", "stamp_targets", "stamp_targets_by_channel", "targets_to_mutate",
            "value_class", "weighted_testcase", "write_testcases"]
 
 # The families of the release before the semantic ones: ``families=EXCEPTIONAL`` draws what it drew.
@@ -290,8 +290,8 @@ def _draw(testcase_id: str, rng: random.Random, targets: FaultTargets, scene: Sc
 # A third of the field probes hold their value (sustained); a round also
 # puts the round's stamp fault (NaN first) into a stamp or sequence field of
 # a few channels, about STAMP_SHARE of the round, the channels taking turns.
-# The semantic families have rounds of their own (:func:`semantic_round`):
-# every target of every semantic family once, its k-th value in round k.
+# The semantic families have a schedule of their own (:func:`semantic_probe`):
+# the families take turns, each walking its targets lap by lap, its k-th value in lap k.
 
 MESSAGE_FAULT_WEIGHT = FAMILIES["message"].weight
 # Value classes in the order a round uses them: what breaks code most often first (Ballista, ASTAA).
@@ -398,21 +398,26 @@ def _stamp_probes(stamps: dict[str, list[Target]], round_number: int, round_leng
     return probes
 
 
-def semantic_round(targets: FaultTargets, seed: int, round_number: int) -> list[Probe]:
-    """Every target of every semantic family once, the families taking turns (each family's targets in a
-    seeded order, channels interleaved)."""
-    rng = random.Random(f"semantic/{seed}/{round_number}")
-    lanes = []
-    for family in targets.semantic():
-        by_channel = targets.by_family[family.name]
-        channel_lanes = []
-        for channel in sorted(by_channel):
-            probes = [Probe(channel, target, family=family.name) for target in by_channel[channel]]
-            rng.shuffle(probes)
-            channel_lanes.append(probes)
-        rng.shuffle(channel_lanes)
-        lanes.append(_interleaved(channel_lanes))
-    return _interleaved(lanes)
+def semantic_probe(targets: FaultTargets, seed: int, number: int) -> tuple[Probe, int] | None:
+    """The ``number``-th (from 0) probe of the semantic families and its lap; None if none has a target.
+
+    The families take turns, each walking its own targets: a family's k-th
+    probe visits its targets in a seeded order, one lap after another, and
+    lap L gives each target its family's L-th value (the most telling first).
+    A family with one target tries its next value every few probes instead
+    of waiting for the families with many targets to finish a round.
+    """
+    families = targets.semantic()
+    if not families:
+        return None
+    family = families[number % len(families)]
+    own = [(channel, target) for channel in sorted(targets.by_family[family.name])
+           for target in targets.by_family[family.name][channel]]
+    k = number // len(families)
+    lap, position = divmod(k, len(own))
+    order = random.Random(f"semantic/{seed}/{family.name}/{lap}").sample(own, len(own))
+    channel, target = order[position]
+    return Probe(channel, target, family=family.name), lap
 
 
 def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,

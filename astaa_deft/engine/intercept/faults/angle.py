@@ -14,7 +14,9 @@ from astaa_deft.model.sut import FLOAT_KINDS, Channel, FieldType
 from astaa_deft.engine.intercept.faults import FAMILIES
 from astaa_deft.engine.intercept.faults.base import ValueFamily
 
-_KEYS = ("float.plus_2pi", "float.unwrapped", "float.plus_pi", "float.minus_2pi", "float.minus_pi")
+# Two turns on first: code that breaks on one turn off (no normalisation at all) breaks on it too, and so
+# does code that wraps only once.
+_KEYS = ("float.unwrapped", "float.plus_pi", "float.plus_2pi", "float.minus_2pi", "float.minus_pi")
 # A name part that says "angle": heading, yaw_rate is not one (a rate), steering_angle is.
 ANGLE_NAME = re.compile(r"(heading|yaw|theta|angle|bearing|orientation|azimuth|course|phi|psi|roll|pitch)",
                         re.IGNORECASE)

@@ -10,9 +10,9 @@ or sequence fault to a few (about 7 % of a round, NaN first); after them,
 cases alternate between further rounds and the weighted generation (every
 registered fault family by its weight, message faults included). Every
 ``SEMANTIC_EVERY``-th case is instead a probe of the semantic fault families'
-own rounds (:func:`astaa_deft.engine.intercept.generate.semantic_round`:
-every target of every semantic family once a round), so plausible-but-wrong
-values are tried from the first minutes on.
+own schedule (:func:`astaa_deft.engine.intercept.generate.semantic_probe`:
+the families take turns, each walking its targets with its most telling
+value first), so plausible-but-wrong values are tried from the first minutes on.
 Windows fall inside the run's live part, counted from the first message of
 the channel that came last in the baseline runs (the
 campaign's :class:`Timing`), so a case mutates the running SUT, not its
@@ -44,7 +44,6 @@ class RandomStrategy(Strategy):
         self.seed = seed
         self.timing = Timing(None, duration)
         self._rounds: dict[int, list[gen.Probe]] = {}
-        self._semantic_rounds: dict[int, list[gen.Probe]] = {}
 
     def calibrate(self, timing: Timing) -> None:
         """Windows from now on count from ``timing.anchor`` and fall inside ``timing.live`` seconds."""
@@ -59,21 +58,16 @@ class RandomStrategy(Strategy):
             self._rounds[number] = gen.coverage_round(self.by_channel, self.seed, number, self.stamps)
         return self._rounds[number]
 
-    def _semantic_round(self, number: int) -> list[gen.Probe]:
-        if number not in self._semantic_rounds:
-            self._semantic_rounds[number] = gen.semantic_round(self.targets, self.seed, number)
-        return self._semantic_rounds[number]
-
     def propose(self, number: int) -> Proposal:
         testcase_id = f"tc-{number:0{ID_WIDTH}d}"
         rng = random.Random(f"{self.seed}/{number}")
         index = number - 1
-        semantic_length = len(self._semantic_round(0))
-        if semantic_length:  # every SEMANTIC_EVERY-th case: the semantic families' rounds
+        if self.targets.semantic():  # every SEMANTIC_EVERY-th case: the semantic families' schedule
             if index % SEMANTIC_EVERY == SEMANTIC_EVERY - 1:
-                round_number, position = divmod(index // SEMANTIC_EVERY, semantic_length)
-                testcase = gen.probe_testcase(testcase_id, rng, self._semantic_round(round_number)[position],
-                                              round_number, self.timing.live, self.timing.anchor)
+                found = gen.semantic_probe(self.targets, self.seed, index // SEMANTIC_EVERY)
+                assert found is not None
+                probe, lap = found
+                testcase = gen.probe_testcase(testcase_id, rng, probe, lap, self.timing.live, self.timing.anchor)
                 return Proposal(testcase.to_xml().decode())
             index -= index // SEMANTIC_EVERY
         covered = COVERAGE_ROUNDS * self.round_length
