@@ -184,6 +184,23 @@ def test_bad_remove_and_swap_policies_are_reported(policy, says):
         parse_testcase(xml.encode(), "t.xml", ZOO_SPEC, DICTIONARY)
 
 
+def test_the_semantic_schedule_tries_every_value_of_every_target_once_a_pass_the_families_in_turn():
+    targets = gen.FaultTargets.of(ZOO_SPEC, DICTIONARY)
+    order, totals = gen._semantic_pass(targets)
+    assert len(order) == sum(totals.values()) and totals["angle"] == 5 and totals["type"] == 11 * 5
+    probes = [gen.semantic_probe(targets, 1, number) for number in range(len(order))]
+    assert [probe.family for probe, _ in probes[:7]] == [f.name for f in targets.semantic()]  # one turn each
+    for name in SEMANTIC:
+        family_ = FAMILIES[name]
+        tried = {(str(probe.target.path), lap % family_.visits(probe.target)) for probe, lap in probes
+                 if probe.family == name}
+        every = {(str(t.path), v) for t in targets.by_family[name]["state"] for v in range(family_.visits(t))}
+        assert tried == every, name
+    # the next pass starts again, in other seeded orders
+    again = [gen.semantic_probe(targets, 1, len(order) + n)[0].family for n in range(7)]
+    assert again == [f.name for f in targets.semantic()]
+
+
 # ---------------------------------------------------------------- the zoo
 
 def zoo_cases():

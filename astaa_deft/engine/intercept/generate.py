@@ -40,7 +40,7 @@ from __future__ import annotations
 import random
 from collections import Counter
 from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from astaa_deft.io.codecs import get_codec
@@ -77,6 +77,7 @@ class FaultTargets:
     left out)."""
 
     by_family: Mapping[str, Targets]
+    cache: dict[str, object] = field(default_factory=dict, compare=False, repr=False)  # schedules built from it
 
     @classmethod
     def of(cls, spec: Spec, dictionary: Dictionary, include_brittle: bool = False,
@@ -404,20 +405,38 @@ def semantic_probe(targets: FaultTargets, seed: int, number: int) -> tuple[Probe
     The families take turns, each walking its own targets: a family's k-th
     probe visits its targets in a seeded order, one lap after another, and
     lap L gives each target its family's L-th value (the most telling first).
-    A family with one target tries its next value every few probes instead
-    of waiting for the families with many targets to finish a round.
+    A family whose every target has had every value (``FaultFamily.visits``)
+    leaves the turns to the others until all have; then it starts again. So
+    a family with one target tries its next value every few probes, and a
+    family with many targets is not slowed by one that has nothing new.
     """
-    families = targets.semantic()
-    if not families:
+    order, totals = _semantic_pass(targets)
+    if not order:
         return None
-    family = families[number % len(families)]
-    own = [(channel, target) for channel in sorted(targets.by_family[family.name])
-           for target in targets.by_family[family.name][channel]]
-    k = number // len(families)
-    lap, position = divmod(k, len(own))
-    order = random.Random(f"semantic/{seed}/{family.name}/{lap}").sample(own, len(own))
-    channel, target = order[position]
-    return Probe(channel, target, family=family.name), lap
+    passes, position = divmod(number, len(order))
+    name, k = order[position]
+    family = FAMILIES[name]
+    own = [(channel, target) for channel in sorted(targets.by_family[name])
+           for target in targets.by_family[name][channel]]
+    lap, index = divmod(passes * totals[name] + k, len(own))
+    channel, target = random.Random(f"semantic/{seed}/{family.name}/{lap}").sample(own, len(own))[index]
+    return Probe(channel, target, family=name), lap
+
+
+def _semantic_pass(targets: FaultTargets) -> tuple[list[tuple[str, int]], dict[str, int]]:
+    """One pass of the semantic schedule: (family, its probe number) in turn order, and each family's probes
+    in a pass (laps until its every target had every value)."""
+    cached = targets.cache.get("semantic_pass")
+    if cached is None:
+        families = targets.semantic()
+        totals = {}
+        for family in families:
+            own = [t for channel_targets in targets.by_family[family.name].values() for t in channel_targets]
+            totals[family.name] = len(own) * max(family.visits(t) for t in own)
+        order = [(family.name, turn) for turn in range(max(totals.values(), default=0))
+                 for family in families if turn < totals[family.name]]
+        cached = targets.cache["semantic_pass"] = (order, totals)
+    return cached  # type: ignore[return-value]
 
 
 def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,

@@ -112,6 +112,10 @@ class FaultFamily(ABC):
         on that target alone."""
         return self.draw(testcase_id, rng, {target.channel.name: [target]}, scene)
 
+    def visits(self, target: Target) -> int:
+        """How many probes of ``target`` differ before they repeat (default: one per value, at least one)."""
+        return max(1, len(target.values))
+
     def __repr__(self) -> str:
         return f"<fault family {self.name}>"
 

@@ -53,6 +53,9 @@ class JsonType(FaultFamily):
         return self._testcase(testcase_id, rng, target, fault,
                               Span(start, *once_or_held(rng, start, scene.duration), scene.anchor))
 
+    def visits(self, target: Target) -> int:
+        return len(faults_of(target))
+
     def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
         faults = faults_of(target)
         start = scene.start(rng)

@@ -48,6 +48,9 @@ class Siblings(FaultFamily):
         return self._testcase(testcase_id, rng, target, Span(start, *once_or_held(rng, start, scene.duration),
                                                              scene.anchor))
 
+    def visits(self, target: Target) -> int:
+        return 2  # once, held
+
     def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
         start = scene.start(rng)
         until = held(rng, start, scene.duration) if visit % 2 else (scene.duration, Selection(limit=1))
