@@ -13,6 +13,8 @@ import pytest
 
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.engine.intercept import generate as gen
+from astaa_deft.engine.intercept.faults import FAMILIES
+from astaa_deft.orchestration.campaign.strategies.random import SEMANTIC_EVERY
 from astaa_deft.engine.intercept import load_dictionary, load_testcase
 from astaa_deft.engine.intercept.testcase import Selection, parse_testcase
 from astaa_deft.io.log.reader import read_log
@@ -32,7 +34,9 @@ def test_every_family_is_drawn_deterministically_and_every_case_validates(tmp_pa
     report = gen.generate_to_directory(OMPL_SPEC, 300, 11, tmp_path / "a", duration=20.0)
     again = gen.generate_to_directory(OMPL_SPEC, 300, 11, tmp_path / "b", duration=20.0)
     assert [p.read_bytes() for p in report.paths] == [p.read_bytes() for p in again.paths]
-    assert set(report.shapes) == {"single", "multi_field", "repeated", "sustained", "stamp"}
+    # every family but the campaign's message faults: ASTAA's shapes, sustained, stamp and the semantic ones
+    assert set(report.shapes) == {"single", "multi_field", "repeated", "sustained", "stamp", "boundary", "angle",
+                                  "units", "arrays", "type", "siblings", "stale"}
     assert 0.12 <= report.shapes["sustained"] / 300 <= 0.28 and 0.03 <= report.shapes["stamp"] / 300 <= 0.12
     drawn = Counter()
     for path in report.paths:
@@ -47,9 +51,9 @@ def test_stamps_are_reached_though_brittle_and_only_by_the_stamp_family():
     brittle = {("ego", "header.stamp"), ("ego", "header.seq"), ("obstacles", "header.stamp"),
                ("obstacles", "header.seq"), ("plan", "header.stamp"), ("plan", "header.seq")}
     by_family: dict[str, set[tuple[str, str, str]]] = {}
-    for testcase in gen.generate(OMPL_SPEC, DICTIONARY, 400, seed=2):
+    for testcase in gen.generate(OMPL_SPEC, DICTIONARY, 600, seed=2):  # ~5 % stamp faults: ~30 of them
         [policy] = testcase.policies
-        for assignment in policy.action.fields:
+        for assignment in getattr(policy.action, "fields", ()):  # set policies (not remove, swap)
             by_family.setdefault(family(testcase.description), set()).add(
                 (policy.channels[0], assignment.path, assignment.value))
     stamp_fields = {(channel, path) for channel, path, _ in by_family.pop("stamp")}
@@ -61,12 +65,20 @@ def test_stamps_are_reached_though_brittle_and_only_by_the_stamp_family():
 def test_campaign_strategies_hold_a_third_of_their_field_probes_and_try_a_nan_stamp_in_the_first_round(name):
     strategy = STRATEGIES[name](OMPL_SPEC, DICTIONARY, 5, 20.0)
     length = (strategy.fresh if name == "guided" else strategy).round_length
-    cases = [parse_testcase(strategy.propose(n).testcase.to_xml(), "t", OMPL_SPEC, DICTIONARY)
-             for n in range(1, 4 * length + 1)]  # two pure coverage rounds, then rounds and weighted draws
+    proposed = [parse_testcase(strategy.propose(n).testcase.to_xml(), "t", OMPL_SPEC, DICTIONARY)
+                for n in range(1, 4 * length * SEMANTIC_EVERY // (SEMANTIC_EVERY - 1) + 1)]
+    semantic = {f.name for f in FAMILIES.values() if f.semantic}
+    # every SEMANTIC_EVERY-th case probes a semantic family (tests/test_semantic_faults.py); of the others,
+    # two pure coverage rounds, then rounds and weighted draws
+    assert [family(c.description) in semantic for c in proposed[:30]] == [
+        n % SEMANTIC_EVERY == SEMANTIC_EVERY - 1 for n in range(30)]
+    cases = [c for n, c in enumerate(proposed) if n % SEMANTIC_EVERY != SEMANTIC_EVERY - 1][:4 * length]
     families = Counter(family(c.description) for c in cases)
     field_probes = families["sustained"] + families["one field of one message"]
     assert 0.2 <= families["sustained"] / field_probes <= 0.5
-    assert 0.05 <= families["stamp"] / len(cases) <= 0.10
+    # a round's stamp share (the weighted draws' share is the stamp weight's, smaller next to the semantic ones)
+    rounds = Counter(family(c.description) for c in cases[:2 * length])
+    assert 0.05 <= rounds["stamp"] / (2 * length) <= 0.10
     first_round = [c.policies[0] for c in cases[:length] if family(c.description) == "stamp"]
     assert {(p.channels[0], p.action.fields[0].path, p.action.fields[0].value) for p in first_round} == {
         ("ego", "header.stamp", "dict:time.nan"), ("obstacles", "header.stamp", "dict:time.nan")}

@@ -38,7 +38,7 @@ def test_flags_come_from_the_action_files():
     assert sorted(mutations.EXTRA_ACTIONS) == ["duplicate", "interleave"]
     assert sorted(mutations.DEFERRING_ACTIONS) == ["delay", "reorder"]
     assert sorted(mutations.FIELDS_INSEPARABLE) == ["corrupt", "drop"]
-    assert {n for n, a in ACTIONS.items() if a.carries_fields} == {"set", "interleave"}
+    assert {n for n, a in ACTIONS.items() if a.carries_fields} == {"set", "interleave", "swap", "hold"}
     assert {n for n, a in ACTIONS.items() if a.pins_copies} == {"duplicate"}
 
 

@@ -327,7 +327,7 @@ def test_every_action_module_has_its_schema_element():
     schema = schema_document()
     in_schema = set(schema.xpath("//xs:group[@name='Action']/xs:choice/xs:element/@name", namespaces=ns))
     assert in_schema == set(ACTIONS) == {"set", "drop", "delay", "duplicate", "reorder", "interleave", "corrupt",
-                                         "participant"}
+                                         "participant", "remove", "swap", "hold"}
 
 
 def test_the_documented_example_is_valid():

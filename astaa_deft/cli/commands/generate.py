@@ -26,28 +26,37 @@ def add_parser(subparsers: SubParsers) -> None:
     bounded(gen, "--duration", WINDOW_SECONDS, default=30.0, help="windows fall inside this many seconds")
     gen.add_argument("--include-brittle", action="store_true", help="also target timestamps, sequence numbers…")
     gen.add_argument("--dictionary", type=Path, action="append", default=[])
+    gen.add_argument("--family", action="append", default=None, metavar="NAME",
+                     help="draw only these fault families (repeat the option; default: every family but the "
+                          "campaign's message faults; docs/policies.md lists them)")
     gen.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """The parsed `generate` arguments to :func:`generate`."""
     return generate(args.spec, args.count, args.seed, args.out, duration=args.duration,
-                    include_brittle=args.include_brittle, dictionaries=args.dictionary)
+                    include_brittle=args.include_brittle, dictionaries=args.dictionary, families=args.family)
 
 
 def generate(spec_path: Path, count: int, seed: int, out_dir: Path, *, duration: float = 30.0,
-             include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> int:
+             include_brittle: bool = False, dictionaries: Sequence[Path] = (),
+             families: Sequence[str] | None = None) -> int:
     """Write ``count`` test cases drawn with ``seed`` into ``out_dir`` and print their shapes: 0.
 
-    Raises InputError for a spec or dictionary that does not load, a bad count or duration, or an
-    output directory that holds test cases already; OutputError when ``out_dir`` cannot be written.
+    Raises InputError for a spec or dictionary that does not load, a bad count or duration, an unknown
+    family, or an output directory that holds test cases already; OutputError when ``out_dir`` cannot be
+    written.
     """
+    from astaa_deft.engine.intercept.faults import FAMILIES
     from astaa_deft.engine.intercept.generate import generate_to_directory
     from astaa_deft.engine.spec.loader import load_spec
 
-    report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration, include_brittle, dictionaries)
+    report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration, include_brittle, dictionaries,
+                                   families)
     shapes = report.shapes
+    semantic = ", ".join(f"{shapes[f.name]} {f.name}" for f in FAMILIES.values() if f.semantic and shapes[f.name])
     print(f"wrote {report.count} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "
           f"message, {shapes['multi_field']} several fields of one message, {shapes['repeated']} repeated, "
-          f"{shapes['sustained']} sustained, {shapes['stamp']} stamp or sequence faults")
+          f"{shapes['sustained']} sustained, {shapes['stamp']} stamp or sequence faults"
+          + (f"; plausible but wrong: {semantic}" if semantic else ""))
     return 0

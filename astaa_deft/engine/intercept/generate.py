@@ -1,7 +1,7 @@
 """Generate ASTAA test cases from a SUT spec and the dictionary.
 
-Each test case holds one ``set`` policy on one channel, drawn from the
-spec's channels, their leaf fields and the dictionary values of each
+Each test case holds one policy on one channel (mostly ``set``), drawn from
+the spec's channels, their leaf fields and the dictionary values of each
 field's declared type. The mix follows what ASTAA's bugs needed
 (Hutchison et al., ICSE-SEIP 2018, Fig. 3): 42 % one bad value in one
 field of one message, 22 % several fields of one message, only 8 %
@@ -21,81 +21,109 @@ sequence numbers in header-like structs) are left alone unless asked (the
 stamp family excepted): mutating them mostly tests the middleware's
 bookkeeping, not the robot.
 
-Deterministic: the same spec, dictionary, count, seed and duration give
-byte-identical files.
+The families themselves are extensions (``astaa_deft/engine/intercept/faults/``,
+one module each, in the ``FAMILIES`` registry): each says its weight, where
+it can act, how it draws a case and describes it. This module is the
+driver: it finds each family's targets once, draws a family by weight, and
+runs the campaign's coverage rounds. Beyond the families above, the
+*semantic* families draw plausible but wrong values (a bound hit exactly, an
+angle a turn off, a unit mixed up, an array reordered, a field removed or
+of another type, two siblings swapped, a stale copy; docs/policies.md).
+
+Deterministic: the same spec, dictionary, count, seed, duration and
+families give byte-identical files; with the families of an earlier release
+(``families=``), the same files it gave.
 """
 
 from __future__ import annotations
 
 import random
 from collections import Counter
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
-from astaa_deft.model.fields import FieldPath, is_brittle, leaf_fields, type_at
-from astaa_deft.model.sut import INT_KINDS, Channel, Spec
-from astaa_deft.engine.intercept.actions.base import ActionConfig
-from astaa_deft.engine.intercept.actions.delay import Delay
-from astaa_deft.engine.intercept.actions.drop import Drop
-from astaa_deft.engine.intercept.actions.duplicate import Duplicate
-from astaa_deft.engine.intercept.actions.reorder import Reorder
-from astaa_deft.engine.intercept.actions.set import Assignment, Set
-from astaa_deft.engine.intercept.dictionary import Dictionary, Entry, FieldSite, field_site, load_dictionary
-from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Window
+from astaa_deft.model.fields import leaf_fields
+from astaa_deft.model.sut import Spec
+from astaa_deft.engine.intercept.actions.set import Assignment
+from astaa_deft.engine.intercept.dictionary import Dictionary, Entry, field_site, load_dictionary
+from astaa_deft.engine.intercept.faults import FAMILIES, FaultFamily, Scene, Sources, Target, Targets, by_rank
+from astaa_deft.engine.intercept.faults import owned_entries
+from astaa_deft.engine.intercept.faults.base import (
+    Span, held, is_generation_brittle, overlaps, set_testcase,
+)
+from astaa_deft.engine.intercept.faults.message import DELAYS_MS, MESSAGE_FAULTS, fault_testcase
+from astaa_deft.engine.intercept.faults.stamp import (
+    SEQUENCE_FAULTS, STAMP_FAULTS, STAMP_NAMES, stamp_targets, stamp_testcase,
+)
+from astaa_deft.engine.intercept.testcase import Selection, TestCase
 
-# (shape, weight in % of the bugs ASTAA found that needed it)
-SHAPES = (("single", 42), ("multi_field", 22), ("repeated", 8))
-# Families beyond ASTAA's shapes, weighted next to SHAPES' 72: of generate's cases about 20 % sustained and
-# 7 % stamp faults (17 % and 6 % when a campaign adds its message faults).
-SUSTAINED_WEIGHT = 20
-STAMP_WEIGHT = 7
-SUSTAINED_SECONDS = (1.0, 5.0)  # a held value: every message of a window this long …
-SUSTAINED_MESSAGES = (5, 50)  # … or this many messages in a row
-# Stamp and sequence fields, found by name anywhere in a message (brittle or not), and their faults: a
-# stamp (any non-integer field) gets NaN, a jump back (previous stamp - 1 s), the far future or the previous
-# stamp again; an integer (a sequence number, a stamp's seconds) the previous value again (a duplicate seq).
-# A fault the field's codec cannot carry is left out for that field.
-STAMP_NAMES = frozenset({"stamp", "timestamp", "seq", "sequence"})
-STAMP_FAULTS = ("time.nan", "time.jump_back", "time.far_future", "time.repeat_previous")
-SEQUENCE_FAULTS = ("time.repeat_previous",)
-# Field names that are bookkeeping when they sit in a header-like struct.
-HEADER_BOOKKEEPING = frozenset({"stamp", "timestamp", "seq", "sequence", "frame_id"})
-MAX_FIELDS_PER_MESSAGE = 4
+__all__ = ["DELAYS_MS", "MESSAGE_FAULTS", "SEQUENCE_FAULTS", "STAMP_FAULTS", "STAMP_NAMES", "FaultTargets",
+           "GenerateReport", "Probe", "Target", "coverage_round", "fault_testcase", "generate",
+           "generate_to_directory", "is_generation_brittle", "iter_testcases", "mutation_targets",
+           "probe_testcase", "semantic_probe", "stamp_targets", "stamp_targets_by_channel", "targets_to_mutate",
+           "value_class", "weighted_testcase", "write_testcases"]
+
+# The families of the release before the semantic ones: ``families=EXCEPTIONAL`` draws what it drew.
+EXCEPTIONAL = ("single", "multi_field", "repeated", "sustained", "stamp", "message")
 
 
 @dataclass(frozen=True)
-class Target:
-    """A field generation may mutate, with the dictionary values its channel can carry."""
+class FaultTargets:
+    """Each family's targets by channel, found once for a spec and dictionary (families without a target
+    left out)."""
 
-    channel: Channel
-    path: FieldPath
-    site: FieldSite
-    values: tuple[Entry, ...]
+    by_family: Mapping[str, Targets]
+    cache: dict[str, object] = field(default_factory=dict, compare=False, repr=False)  # schedules built from it
+
+    @classmethod
+    def of(cls, spec: Spec, dictionary: Dictionary, include_brittle: bool = False,
+           families: Collection[str] | None = None) -> FaultTargets:
+        """InputError if the spec offers no field to mutate (for the exceptional-value families)."""
+        sources = Sources(spec, dictionary, include_brittle, targets_to_mutate(spec, dictionary, include_brittle),
+                          stamp_targets_by_channel(spec, dictionary))
+        found = {family.name: family.targets(sources) for family in by_rank()
+                 if families is None or family.name in families}
+        return cls({name: targets for name, targets in found.items() if targets})
+
+    @classmethod
+    def exceptional(cls, by_channel: Targets, stamps: Targets | None = None) -> FaultTargets:
+        """The families of ASTAA's shapes, sustained, message (and stamp, given ``stamps``) on given targets."""
+        found = {name: by_channel for name in ("single", "multi_field", "repeated", "sustained", "message")}
+        return cls({**found, **({"stamp": stamps} if stamps else {})})
+
+    def families(self, *, message_faults: bool) -> list[FaultFamily]:
+        """The families a weighted draw chooses from, in draw order."""
+        return [family for family in by_rank()
+                if family.name in self.by_family and (message_faults or not family.campaign_only)]
+
+    def semantic(self) -> list[FaultFamily]:
+        return [family for family in by_rank() if family.semantic and family.name in self.by_family]
 
 
 def generate(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
-             include_brittle: bool = False) -> list[TestCase]:
+             include_brittle: bool = False, families: Collection[str] | None = None) -> list[TestCase]:
     """``count`` test cases in a list (see :func:`iter_testcases`)."""
-    return list(iter_testcases(spec, dictionary, count, seed, duration, include_brittle))
+    return list(iter_testcases(spec, dictionary, count, seed, duration, include_brittle, families))
 
 
 def iter_testcases(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
-                   include_brittle: bool = False) -> Iterator[TestCase]:
+                   include_brittle: bool = False, families: Collection[str] | None = None) -> Iterator[TestCase]:
     """``count`` test cases, each drawn when the iterator reaches it (memory stays flat with the count).
 
+    ``families``: the family names to draw from (None: every registered one).
     Raises ``InputError`` at once (not on the first draw) if the spec offers no field to mutate.
     """
-    by_channel = targets_to_mutate(spec, dictionary, include_brittle)
-    return (testcase for _shape, testcase in _drawn(spec, dictionary, by_channel, count, seed, duration))
+    targets = FaultTargets.of(spec, dictionary, include_brittle, families)
+    return (testcase for _family, testcase in _drawn(targets, count, seed, duration))
 
 
 def targets_to_mutate(spec: Spec, dictionary: Dictionary, include_brittle: bool = False) -> dict[str, list[Target]]:
-    """The bulk's targets by channel; InputError if the spec offers no field to mutate."""
-    by_channel = _targets_by_channel(spec, dictionary, include_brittle)
+    """The exceptional-value targets by channel; InputError if the spec offers no field to mutate."""
+    by_channel = _by_channel(mutation_targets(spec, dictionary, include_brittle))
     if not by_channel:
         raise InputError(Problem(str(spec.path or spec.name), None, None,
                                  "no field to mutate: every channel lacks consumers or non-brittle leaf fields",
@@ -103,14 +131,20 @@ def targets_to_mutate(spec: Spec, dictionary: Dictionary, include_brittle: bool 
     return by_channel
 
 
-def _drawn(spec: Spec, dictionary: Dictionary, by_channel: dict[str, list[Target]], count: int, seed: int,
-           duration: float) -> Iterator[tuple[str, TestCase]]:
+def check_families(names: Iterable[str]) -> None:
+    """InputError naming an unknown family (``--family``)."""
+    for name in names:
+        if name not in FAMILIES:
+            raise InputError(Problem("--family", None, None, f"unknown fault family {name!r}",
+                                     "families are " + ", ".join(FAMILIES.names())))
+
+
+def _drawn(targets: FaultTargets, count: int, seed: int, duration: float) -> Iterator[tuple[str, TestCase]]:
     """(family, test case) for each of ``count`` cases, drawn one at a time."""
-    stamps = stamp_targets_by_channel(spec, dictionary)
     width = _id_width(count)
+    scene = Scene(duration)
     for number in range(1, count + 1):
-        yield _draw(_testcase_id(number, width), random.Random(f"{seed}/{number}"), by_channel, duration,
-                    stamps=stamps)
+        yield _draw(_testcase_id(number, width), random.Random(f"{seed}/{number}"), targets, scene)
 
 
 def _id_width(count: int) -> int:
@@ -139,7 +173,7 @@ def _write_testcase(testcase: TestCase, directory: Path) -> Path:
 class GenerateReport:
     directory: Path
     count: int  # test case files written
-    shapes: Counter[str]  # test cases per family: single, multi_field, repeated, sustained, stamp
+    shapes: Counter[str]  # test cases per family (single, multi_field, …, boundary, angle, …)
 
     @property
     def paths(self) -> list[Path]:
@@ -149,22 +183,26 @@ class GenerateReport:
 
 
 def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, duration: float = 30.0,
-                          include_brittle: bool = False, dictionaries: Sequence[Path] = ()) -> GenerateReport:
+                          include_brittle: bool = False, dictionaries: Sequence[Path] = (),
+                          families: Collection[str] | None = None) -> GenerateReport:
     """Write ``count`` test cases drawn from ``spec`` and the dictionaries into a new or empty ``out_dir``.
 
-    InputError for a bad count or duration, an output directory holding test
-    cases already, or a dictionary that does not load; OutputError (checked
-    before drawing) when ``out_dir`` cannot take files, or when a write fails.
+    InputError for a bad count or duration, an unknown family, an output
+    directory holding test cases already, or a dictionary that does not load;
+    OutputError (checked before drawing) when ``out_dir`` cannot take files,
+    or when a write fails.
     """
     if count < 1:
         raise InputError(Problem("--count", None, None, f"{count} test cases", "ask for at least 1"))
     if not duration > 0:
         raise InputError(Problem("--duration", None, None, f"{duration} s", "give a positive number of seconds"))
+    if families is not None:
+        check_families(families)
     _check_output_directory(out_dir)
     place = Place(out_dir, "-o")
     ready_dir(place)
     dictionary = load_dictionary(dictionaries)
-    drawn = _drawn(spec, dictionary, targets_to_mutate(spec, dictionary, include_brittle), count, seed, duration)
+    drawn = _drawn(FaultTargets.of(spec, dictionary, include_brittle, families), count, seed, duration)
     shapes: Counter[str] = Counter()
     with writing(place):
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -186,7 +224,9 @@ def _check_output_directory(out_dir: Path) -> None:
 # ---------------------------------------------------------------- what may be mutated
 
 def mutation_targets(spec: Spec, dictionary: Dictionary, include_brittle: bool = False) -> list[Target]:
-    """Every (channel, leaf field) with at least one usable dictionary value, in spec order."""
+    """Every (channel, leaf field) with at least one usable exceptional value, in spec order (entries a
+    family owns, ``FaultFamily.owns``, left out)."""
+    owned = owned_entries()
     targets = []
     for channel in spec.channels:
         if not channel.consumers:  # nobody would receive the mutation
@@ -196,34 +236,11 @@ def mutation_targets(spec: Spec, dictionary: Dictionary, include_brittle: bool =
             if not include_brittle and is_generation_brittle(spec, channel.type, path):
                 continue
             site = field_site(spec.types, channel.type, path)
-            usable, _skipped = dictionary.usable(site, codec)
+            usable, _skipped = dictionary.usable(site, codec,
+                                                 [e for e in dictionary.entries_for(site) if e.key not in owned])
             if usable:
                 targets.append(Target(channel, path, site, tuple(usable)))
     return targets
-
-
-def is_generation_brittle(spec: Spec, type_name: str, path: FieldPath) -> bool:
-    """The spec's brittle fields, plus stamps and sequence numbers of header-like structs.
-
-    Header-like: a struct whose field name or type name contains "header"
-    (``header.stamp``, ``meta.seq`` where ``meta`` is a ``Header``), or the
-    message type itself when its name does.
-    """
-    if is_brittle(spec.types, type_name, path, spec.brittle):
-        return True
-    segments = path.segments
-    for index, segment in enumerate(segments):
-        if type(segment) is not str or segment.lower() not in HEADER_BOOKKEEPING:
-            continue
-        owner_type = type_name if index == 0 else type_at(spec.types, type_name, FieldPath(segments[:index])).ref
-        owner_name = next((s for s in reversed(segments[:index]) if type(s) is str), "")
-        if "header" in str(owner_type).lower() or "header" in owner_name.lower():
-            return True
-    return False
-
-
-def _targets_by_channel(spec: Spec, dictionary: Dictionary, include_brittle: bool) -> dict[str, list[Target]]:
-    return _by_channel(mutation_targets(spec, dictionary, include_brittle))
 
 
 def _by_channel(targets: Sequence[Target]) -> dict[str, list[Target]]:
@@ -233,159 +250,33 @@ def _by_channel(targets: Sequence[Target]) -> dict[str, list[Target]]:
     return grouped
 
 
-def stamp_targets(spec: Spec, dictionary: Dictionary) -> list[Target]:
-    """Every stamp or sequence field (a name in ``STAMP_NAMES`` on its path, brittle or not) of a channel with
-    consumers, with the faults it can take (``STAMP_FAULTS``, or ``SEQUENCE_FAULTS`` for integers); per
-    channel the stamps first, then the integers, each in spec order. Faults missing from the dictionary
-    (a user's file removed them) are left out."""
-    stamp_faults = [dictionary.get(key) for key in STAMP_FAULTS if key in dictionary]
-    sequence_faults = [dictionary.get(key) for key in SEQUENCE_FAULTS if key in dictionary]
-    targets = []
-    for channel in spec.channels:
-        if not channel.consumers:
-            continue
-        codec = get_codec(channel.encoding)
-        found: list[Target] = []
-        for path, field_type in leaf_fields(spec.types, channel.type):
-            if not any(type(s) is str and s.lower() in STAMP_NAMES for s in path.segments):
-                continue
-            site = field_site(spec.types, channel.type, path)
-            faults = sequence_faults if field_type.kind in INT_KINDS else stamp_faults
-            usable, _skipped = dictionary.usable(site, codec, faults)
-            if usable:
-                found.append(Target(channel, path, site, tuple(usable)))
-        targets.extend(sorted(found, key=lambda t: t.site.field_type.kind in INT_KINDS))  # stable: spec order
-    return targets
-
-
 def stamp_targets_by_channel(spec: Spec, dictionary: Dictionary) -> dict[str, list[Target]]:
     return _by_channel(stamp_targets(spec, dictionary))
 
 
 # ---------------------------------------------------------------- drawing one test case
 
-def weighted_testcase(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]],
-                      duration: float, anchor: str | None = None, *, message_faults: bool = False,
-                      stamps: dict[str, list[Target]] | None = None) -> TestCase:
-    """One weighted draw (:func:`_draw`) without its shape's name."""
-    return _draw(testcase_id, rng, by_channel, duration, anchor, message_faults=message_faults, stamps=stamps)[1]
+def weighted_testcase(testcase_id: str, rng: random.Random, targets: FaultTargets | Targets, duration: float,
+                      anchor: str | None = None, *, message_faults: bool = False,
+                      stamps: Targets | None = None) -> TestCase:
+    """One weighted draw (:func:`_draw`) without its family's name.
+
+    ``targets``: every family's (:class:`FaultTargets`), or the exceptional
+    targets by channel alone (then ASTAA's shapes and sustained, plus the
+    stamp family given ``stamps``, and the message family given ``message_faults``).
+    """
+    if not isinstance(targets, FaultTargets):
+        targets = FaultTargets.exceptional(targets, stamps)
+    return _draw(testcase_id, rng, targets, Scene(duration, anchor), message_faults=message_faults)[1]
 
 
-def _draw(testcase_id: str, rng: random.Random, by_channel: dict[str, list[Target]], duration: float,
-          anchor: str | None = None, *, message_faults: bool = False,
-          stamps: dict[str, list[Target]] | None = None) -> tuple[str, TestCase]:
-    """ASTAA's weighted draw plus the sustained family and (given ``stamps``, the stamp targets by channel)
-    the stamp family; returns (shape, test case). ``anchor``: windows count from that channel's first
-    message; ``message_faults``: a share of cases reorder, delay, duplicate or drop messages instead."""
-    shapes = SHAPES + (("sustained", SUSTAINED_WEIGHT),) + ((("stamp", STAMP_WEIGHT),) if stamps else ()) \
-        + ((("message", MESSAGE_FAULT_WEIGHT),) if message_faults else ())
-    shape = rng.choices([name for name, _ in shapes], weights=[weight for _, weight in shapes])[0]
-    if shape == "message":
-        channel = rng.choice(sorted(by_channel))
-        return shape, fault_testcase(testcase_id, rng, channel, rng.choice(MESSAGE_FAULTS), duration=duration,
-                                     anchor=anchor)
-    if shape == "stamp":
-        assert stamps
-        channel = rng.choice(sorted(stamps))
-        target = rng.choice(stamps[channel])
-        return shape, stamp_testcase(testcase_id, rng, target, rng.choice(target.values), duration, anchor)
-    channel = rng.choice(sorted(by_channel))  # channels equally likely, whatever their field count
-    targets = by_channel[channel]
-    if shape == "multi_field":
-        chosen = _disjoint_sample(rng, targets, rng.randint(2, MAX_FIELDS_PER_MESSAGE))
-    else:
-        chosen = [rng.choice(targets)]
-    assignments = tuple(Assignment(str(t.path), rng.choice(t.values).ref) for t in chosen)
-    start = round(rng.uniform(0.0, duration * 0.8), 1)
-    if shape == "sustained":
-        return shape, _one_policy(testcase_id, rng, channel, assignments,
-                                  span=_Span(start, *_held(rng, start, duration), anchor), shape="sustained")
-    if shape == "repeated":
-        end = min(round(start + rng.uniform(1.0, 5.0), 1), duration)
-        selection = rng.choice([Selection(), Selection(every=rng.choice([2, 5, 10])),
-                                Selection(probability=rng.choice([0.1, 0.25, 0.5]))])
-    else:  # one message: the first one in the window
-        end = duration
-        selection = Selection(limit=1)
-    return shape, _one_policy(testcase_id, rng, channel, assignments, span=_Span(start, end, selection, anchor),
-                              shape=shape)
-
-
-def _held(rng: random.Random, start: float, duration: float) -> tuple[float, Selection]:
-    """Where a held value's window ends and what it selects: every message of a 1–5 s window, or the
-    next 5–50 messages (the window stays open until ``duration``; the limit ends it)."""
-    if rng.random() < 0.5:
-        return min(round(start + rng.uniform(*SUSTAINED_SECONDS), 1), duration), Selection()
-    return duration, Selection(limit=rng.randint(*SUSTAINED_MESSAGES))
-
-
-@dataclass(frozen=True)
-class _Span:
-    """A policy's window from ``start`` s to ``end`` s (at least 0.1 s), selecting ``selection``; its times
-    count from ``anchor``'s first message (None: from the run's start)."""
-
-    start: float
-    end: float
-    selection: Selection
-    anchor: str | None
-
-
-def _one_policy(testcase_id: str, rng: random.Random, channel: str, assignments: tuple[Assignment, ...], *,
-                span: _Span, shape: str) -> TestCase:
-    """A test case of one ``set`` policy on ``channel`` over ``span`` (``shape`` names it in the description)."""
-    window = Window(span.start, max(span.end, round(span.start + 0.1, 1)), *_anchored(span.anchor))
-    policy = Policy("p1", Set(assignments), channels=(channel,), window=window, selection=span.selection)
-    return TestCase(testcase_id, rng.getrandbits(32),
-                    _describe(shape, channel, assignments, window, span.selection), (policy,))
-
-
-def stamp_testcase(testcase_id: str, rng: random.Random, target: Target, fault: Entry, duration: float,
-                   anchor: str | None = None, latest: float | None = None) -> TestCase:
-    """A stamp or sequence fault on one field: on one message, or (by chance, half of them) held;
-    starting by ``latest`` s (default: 80 % of ``duration``)."""
-    start = round(rng.uniform(0.0, duration * 0.8 if latest is None else latest), 1)
-    until = _held(rng, start, duration) if rng.random() < 0.5 else (duration, Selection(limit=1))
-    return _one_policy(testcase_id, rng, target.channel.name, (Assignment(str(target.path), fault.ref),),
-                       span=_Span(start, *until, anchor), shape="stamp")
-
-
-def _disjoint_sample(rng: random.Random, targets: list[Target], wanted: int) -> list[Target]:
-    """Up to ``wanted`` targets, none inside another (``points`` and ``points[*].v`` would collide)."""
-    chosen: list[Target] = []
-    for target in rng.sample(targets, len(targets)):
-        if not any(_overlaps(target.path, other.path) for other in chosen):
-            chosen.append(target)
-        if len(chosen) == wanted:
-            break
-    return sorted(chosen, key=targets.index)  # declaration order reads better
-
-
-def _overlaps(a: FieldPath, b: FieldPath) -> bool:
-    shorter, longer = sorted((a.segments, b.segments), key=len)
-    return longer[:len(shorter)] == shorter
-
-
-def _describe(shape: str, channel: str, assignments: Sequence[Assignment], window: Window,
-              selection: Selection) -> str:
-    values = ", ".join(f"{a.path} = {a.value}" for a in assignments)
-    if shape in ("sustained", "stamp") and selection != Selection(limit=1):
-        held = (f"every message from {window.start} s to {window.end} s" if selection.limit is None else
-                f"the {selection.limit} messages from {window.start} s")
-        return f"{shape}: {channel}: {values} held on {held}"
-    if shape == "stamp":
-        return f"stamp: {channel}: {values}, first message after {window.start} s"
-    if shape == "repeated":
-        which = ("every message" if selection == Selection() else
-                 f"every {_ordinal(selection.every)} message" if selection.every != 1 else
-                 f"messages with probability {selection.probability}")
-        return f"repeated: {channel}: {values} on {which} from {window.start} s to {window.end} s"
-    fields = "one field" if len(assignments) == 1 else f"{len(assignments)} fields"
-    return f"{fields} of one message: {channel}: {values}, first message after {window.start} s"
-
-
-def _ordinal(number: int) -> str:
-    suffix = "th" if 10 <= number % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(number % 10, "th")
-    return f"{number}{suffix}"
+def _draw(testcase_id: str, rng: random.Random, targets: FaultTargets, scene: Scene, *,
+          message_faults: bool = False) -> tuple[str, TestCase]:
+    """A family drawn by weight, then its case; (family, test case). ``message_faults``: campaign-only
+    families (message faults) take part."""
+    families = targets.families(message_faults=message_faults)
+    family = rng.choices(families, weights=[f.weight for f in families])[0]
+    return family.name, family.draw(testcase_id, rng, dict(targets.by_family[family.name]), scene)
 
 
 # ---------------------------------------------------------------- coverage-first probes (campaigns)
@@ -400,12 +291,10 @@ def _ordinal(number: int) -> str:
 # A third of the field probes hold their value (sustained); a round also
 # puts the round's stamp fault (NaN first) into a stamp or sequence field of
 # a few channels, about STAMP_SHARE of the round, the channels taking turns.
+# The semantic families have a schedule of their own (:func:`semantic_probe`):
+# the families take turns, each walking its targets lap by lap, its k-th value in lap k.
 
-# Message faults: timing and ordering bugs need no bad value (a stamp going
-# backwards after a reorder, a late message overtaken by newer ones).
-MESSAGE_FAULTS = ("reorder", "delay", "duplicate", "drop")
-MESSAGE_FAULT_WEIGHT = 14  # % of weighted cases, next to SHAPES' 72: ASTAA's remaining bug classes were timing
-DELAYS_MS = (50, 100, 200, 500)
+MESSAGE_FAULT_WEIGHT = FAMILIES["message"].weight
 # Value classes in the order a round uses them: what breaks code most often first (Ballista, ASTAA).
 VALUE_CLASSES = ("non_finite", "empty", "extreme", "null", "bound", "zero", "tiny", "other")
 SPREAD_ROUNDS = 3  # round r's windows open in the first (r + 1) / 3 of the live run's 80 %
@@ -456,12 +345,14 @@ def value_for_round(target: Target, round_number: int, rng: random.Random) -> En
 
 @dataclass(frozen=True)
 class Probe:
-    """One case of a coverage round: a field with a value of the round's class, a message fault, or
-    (``fault`` = ``STAMP_PROBE``) a stamp or sequence field with the round's stamp fault."""
+    """One case of a coverage round: a field with a value of the round's class, a message fault,
+    (``fault`` = ``STAMP_PROBE``) a stamp or sequence field with the round's stamp fault, or (``family``)
+    a target of a semantic family."""
 
     channel: str
     target: Target | None  # None: a message fault
     fault: str | None = None
+    family: str | None = None
 
 
 def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number: int,
@@ -483,9 +374,14 @@ def coverage_round(by_channel: dict[str, list[Target]], seed: int, round_number:
         per_channel.append(probes)
     if stamps:
         per_channel.append(_stamp_probes(stamps, round_number, sum(len(p) for p in per_channel)))
+    return _interleaved(per_channel)
+
+
+def _interleaved(lanes: list[list[Probe]]) -> list[Probe]:
+    """The lanes' first probes, then their second ones, …"""
     ordered: list[Probe] = []
-    for turn in range(max(len(p) for p in per_channel)):
-        ordered.extend(p[turn] for p in per_channel if turn < len(p))
+    for turn in range(max((len(p) for p in lanes), default=0)):
+        ordered.extend(p[turn] for p in lanes if turn < len(p))
     return ordered
 
 
@@ -503,52 +399,72 @@ def _stamp_probes(stamps: dict[str, list[Target]], round_number: int, round_leng
     return probes
 
 
+def semantic_probe(targets: FaultTargets, seed: int, number: int) -> tuple[Probe, int] | None:
+    """The ``number``-th (from 0) probe of the semantic families and its lap; None if none has a target.
+
+    The families take turns, each walking its own targets: a family's k-th
+    probe visits its targets in a seeded order, one lap after another, and
+    lap L gives each target its family's L-th value (the most telling first).
+    A family whose every target has had every value (``FaultFamily.visits``)
+    leaves the turns to the others until all have; then it starts again. So
+    a family with one target tries its next value every few probes, and a
+    family with many targets is not slowed by one that has nothing new.
+    """
+    order, totals = _semantic_pass(targets)
+    if not order:
+        return None
+    passes, position = divmod(number, len(order))
+    name, k = order[position]
+    family = FAMILIES[name]
+    own = [(channel, target) for channel in sorted(targets.by_family[name])
+           for target in targets.by_family[name][channel]]
+    lap, index = divmod(passes * totals[name] + k, len(own))
+    channel, target = random.Random(f"semantic/{seed}/{family.name}/{lap}").sample(own, len(own))[index]
+    return Probe(channel, target, family=name), lap
+
+
+def _semantic_pass(targets: FaultTargets) -> tuple[list[tuple[str, int]], dict[str, int]]:
+    """One pass of the semantic schedule: (family, its probe number) in turn order, and each family's probes
+    in a pass (laps until its every target had every value)."""
+    cached = targets.cache.get("semantic_pass")
+    if cached is None:
+        families = targets.semantic()
+        totals = {}
+        for family in families:
+            own = [t for channel_targets in targets.by_family[family.name].values() for t in channel_targets]
+            totals[family.name] = len(own) * max(family.visits(t) for t in own)
+        order = [(family.name, turn) for turn in range(max(totals.values(), default=0))
+                 for family in families if turn < totals[family.name]]
+        cached = targets.cache["semantic_pass"] = (order, totals)
+    return cached  # type: ignore[return-value]
+
+
 def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,
                    anchor: str | None = None) -> TestCase:
-    """The test case of one probe: one message, at a random time inside ``duration``."""
+    """The test case of one probe: one message (or a held value), at a random time inside ``duration``."""
     # Early rounds ask "does this value break the field's consumers at all?": early windows answer that
     # in shorter runs; later rounds spread over the whole live run for state-dependent failures.
     latest = duration * 0.8 * min(1.0, (round_number + 1) / SPREAD_ROUNDS)
+    scene = Scene(duration, anchor, latest)
+    if probe.family is not None:
+        assert probe.target is not None
+        return FAMILIES[probe.family].probe(testcase_id, rng, probe.target, round_number, scene)
     if probe.target is None:
-        return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], duration=duration,
-                              anchor=anchor, repeated=False, latest=latest)
+        return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], scene=scene,
+                              repeated=False)
     if probe.fault == STAMP_PROBE:  # the round's stamp fault, NaN first (the field's own when it cannot take it)
         wanted = STAMP_FAULTS[round_number % len(STAMP_FAULTS)]
         fault = next((e for e in probe.target.values if e.key == wanted),
                      probe.target.values[round_number % len(probe.target.values)])
-        return stamp_testcase(testcase_id, rng, probe.target, fault, duration, anchor, latest=latest)
+        return stamp_testcase(testcase_id, rng, probe.target, fault, scene)
     entry = value_for_round(probe.target, round_number, rng)
     assignments = (Assignment(str(probe.target.path), entry.ref),)
-    start = round(rng.uniform(0.0, latest), 1)
+    start = scene.start(rng)
     if rng.random() < SUSTAINED_PROBE_SHARE:
-        return _one_policy(testcase_id, rng, probe.channel, assignments,
-                           span=_Span(start, *_held(rng, start, duration), anchor), shape="sustained")
-    return _one_policy(testcase_id, rng, probe.channel, assignments,
-                       span=_Span(start, duration, Selection(limit=1), anchor), shape="single")
+        return set_testcase(testcase_id, rng, probe.channel, assignments,
+                            span=Span(start, *held(rng, start, duration), anchor), shape="sustained")
+    return set_testcase(testcase_id, rng, probe.channel, assignments,
+                        span=Span(start, duration, Selection(limit=1), anchor), shape="single")
 
 
-def fault_testcase(testcase_id: str, rng: random.Random, channel: str, fault: str, *, duration: float,
-                   anchor: str | None = None, repeated: bool | None = None, latest: float | None = None) -> TestCase:
-    """One message fault on ``channel``: one message, or (``repeated``, else by chance) a burst;
-    starting by ``latest`` s (default: 80 % of ``duration``)."""
-    action: ActionConfig = {"reorder": Reorder(), "delay": Delay(float(rng.choice(DELAYS_MS))), "drop": Drop(),
-                            "duplicate": Duplicate()}[fault]
-    start = round(rng.uniform(0.0, duration * 0.8 if latest is None else latest), 1)
-    if repeated is None:
-        repeated = rng.random() < 0.5
-    if repeated:
-        end = min(round(start + rng.uniform(0.5, 3.0), 1), duration)
-        selection = Selection(every=rng.choice([1, 2, 5]))
-        which = "every message" if selection.every == 1 else f"every {_ordinal(selection.every)} message"
-        what = f"{which} from {start} s to {end} s"
-    else:
-        end, selection = duration, Selection(limit=1)
-        what = f"first message after {start} s"
-    window = Window(start, max(end, round(start + 0.1, 1)), *_anchored(anchor))
-    policy = Policy("p1", action, channels=(channel,), window=window, selection=selection)
-    return TestCase(testcase_id, rng.getrandbits(32), f"{fault}: {channel}: {what}"
-                    + (f" (counted from the first {anchor} message)" if anchor else ""), (policy,))
-
-
-def _anchored(anchor: str | None) -> tuple[str | None, int | None]:
-    return (anchor, 1) if anchor is not None else (None, None)
+_overlaps = overlaps  # the campaign's guided strategy checks multi-field cases with it

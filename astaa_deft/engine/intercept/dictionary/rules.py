@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import math
+import random
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -189,7 +190,98 @@ def _sibling_arrays(site: FieldSite, ctx: ValueContext) -> list[list]:
             if ftype.kind == "array" and name != ctx.key and type(ctx.container.get(name)) is list]
 
 
+# ---------------------------------------------------------------- semantic rules: plausible but wrong
+#
+# Well-typed values a real upstream module produces by mistake (issue 33): a declared bound hit exactly,
+# a sign flipped, an angle off by a turn, a unit mixed up, an array in another order. The semantic fault
+# families of ``astaa_deft.engine.intercept.faults`` draw them; they are ordinary dictionary entries too.
+
+def _at_bound(which: str) -> Callable[[FieldSite, ValueContext | None], Any]:
+    def at(site: FieldSite, _ctx: ValueContext | None) -> Any:
+        value = _bound(site, which)
+        if site.field_type.kind in INT_KINDS:
+            return math.ceil(value) if which == "min" else math.floor(value)
+        return float(value)
+    return at
+
+
+def _number(ctx: ValueContext | None) -> float | int:
+    assert ctx is not None
+    value = ctx.current
+    if type(value) not in (int, float):
+        raise NotApplicable(f"the current value {value!r} is not a number")
+    if type(value) is float and not math.isfinite(value):
+        raise NotApplicable(f"the current value {value!r} is not finite")
+    return value
+
+
+def _sign_flipped(_site: FieldSite, ctx: ValueContext | None) -> Any:
+    value = _number(ctx)
+    if value == 0:
+        raise NotApplicable("the current value is zero: its sign flipped is itself")
+    return -value
+
+
+def _offset(delta: float) -> Callable[[FieldSite, ValueContext | None], float]:
+    return lambda _site, ctx: float(_number(ctx)) + delta
+
+
+def _scaled(factor: float) -> Callable[[FieldSite, ValueContext | None], Any]:
+    def scale(site: FieldSite, ctx: ValueContext | None) -> Any:
+        value = _number(ctx)
+        if value == 0:
+            raise NotApplicable("the current value is zero: scaling it changes nothing")
+        if site.field_type.kind in INT_KINDS:
+            return round(value * factor)
+        return float(value) * factor
+    return scale
+
+
+def _list_of(ctx: ValueContext | None, at_least: int) -> list:
+    assert ctx is not None
+    if type(ctx.current) is not list:
+        raise NotApplicable("the current value is not an array")
+    if len(ctx.current) < at_least:
+        raise NotApplicable(f"the array has {len(ctx.current)} element(s): fewer than {at_least}")
+    return ctx.current
+
+
+def _reversed(_site: FieldSite, ctx: ValueContext | None) -> list:
+    return copy.deepcopy(_list_of(ctx, 2)[::-1])
+
+
+def _shuffled(_site: FieldSite, ctx: ValueContext | None) -> list:
+    """A fixed shuffle (seeded by the length, so a rerun sends the same order), never the identity."""
+    items = _list_of(ctx, 2)
+    order = list(range(len(items)))
+    random.Random(len(items)).shuffle(order)
+    if order == sorted(order):
+        order = order[1:] + order[:1]
+    return [copy.deepcopy(items[i]) for i in order]
+
+
+def _cut_to_half(_site: FieldSite, ctx: ValueContext | None) -> list:
+    items = _list_of(ctx, 3)
+    return copy.deepcopy(items[:len(items) // 2])
+
+
+def _element_duplicated(_site: FieldSite, ctx: ValueContext | None) -> list:
+    """The middle element twice in a row (same id, same values)."""
+    items = _list_of(ctx, 1)
+    middle = len(items) // 2
+    return copy.deepcopy(items[:middle + 1] + items[middle:])
+
+
+def _two_swapped(_site: FieldSite, ctx: ValueContext | None) -> list:
+    """The first two elements exchanged."""
+    items = copy.deepcopy(_list_of(ctx, 2))
+    items[0], items[1] = items[1], items[0]
+    return items
+
+
 _NUMBERS = frozenset(FLOAT_KINDS + INT_KINDS + ("time",))
+_FLOATS = frozenset(FLOAT_KINDS)
+_ARRAYS = frozenset({"array"})
 RULES: dict[str, Rule] = {rule.name: rule for rule in (
     Rule("below_min", _NUMBERS, _below_min, static=True),
     Rule("above_max", _NUMBERS, _above_max, static=True),
@@ -205,4 +297,22 @@ RULES: dict[str, Rule] = {rule.name: rule for rule in (
     Rule("first_only", frozenset({"array"}), _first_only),
     Rule("ten_times_longer", frozenset({"array"}), _ten_times_longer),
     Rule("sibling_length_mismatch", frozenset({"array"}), _sibling_length_mismatch),
+    # semantic: plausible but wrong
+    Rule("at_min", _NUMBERS, _at_bound("min"), static=True),
+    Rule("at_max", _NUMBERS, _at_bound("max"), static=True),
+    Rule("sign_flipped", _NUMBERS, _sign_flipped),
+    Rule("plus_2pi", _FLOATS, _offset(2 * math.pi)),
+    Rule("minus_2pi", _FLOATS, _offset(-2 * math.pi)),
+    Rule("plus_pi", _FLOATS, _offset(math.pi)),
+    Rule("minus_pi", _FLOATS, _offset(-math.pi)),
+    Rule("unwrapped", _FLOATS, _offset(4 * math.pi)),
+    Rule("times_1000", _NUMBERS, _scaled(1000.0)),
+    Rule("div_1000", _FLOATS, _scaled(0.001)),
+    Rule("deg_to_rad", _FLOATS, _scaled(math.pi / 180.0)),
+    Rule("rad_to_deg", _FLOATS, _scaled(180.0 / math.pi)),
+    Rule("reversed", _ARRAYS, _reversed),
+    Rule("shuffled", _ARRAYS, _shuffled),
+    Rule("cut_to_half", _ARRAYS, _cut_to_half),
+    Rule("element_duplicated", _ARRAYS, _element_duplicated),
+    Rule("two_swapped", _ARRAYS, _two_swapped),
 )}

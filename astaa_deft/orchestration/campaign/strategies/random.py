@@ -7,8 +7,12 @@ with a value of the round's class (non-finite or empty first, then extreme
 magnitudes, …), a third of them holding the value (sustained), apply one
 message fault (reorder, delay, duplicate, drop) to every channel and a stamp
 or sequence fault to a few (about 7 % of a round, NaN first); after them,
-cases alternate between further rounds and the weighted generation (one
-field, several fields, repeated, sustained, stamp; plus message faults).
+cases alternate between further rounds and the weighted generation (every
+registered fault family by its weight, message faults included). Every
+``SEMANTIC_EVERY``-th case is instead a probe of the semantic fault families'
+own schedule (:func:`astaa_deft.engine.intercept.generate.semantic_probe`:
+the families take turns, each walking its targets with its most telling
+value first), so plausible-but-wrong values are tried from the first minutes on.
 Windows fall inside the run's live part, counted from the first message of
 the channel that came last in the baseline runs (the
 campaign's :class:`Timing`), so a case mutates the running SUT, not its
@@ -27,6 +31,7 @@ from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Propos
 
 ID_WIDTH = 6
 COVERAGE_ROUNDS = 2  # pure coverage rounds before weighted draws are mixed in
+SEMANTIC_EVERY = 2  # every other case probes a semantic fault family (when the spec offers one a target)
 
 
 @STRATEGIES.register_class
@@ -34,8 +39,9 @@ class RandomStrategy(Strategy):
     name = "random"
 
     def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None:
-        self.by_channel = gen.targets_to_mutate(spec, dictionary)  # InputError: nothing to mutate
-        self.stamps = gen.stamp_targets_by_channel(spec, dictionary)
+        self.targets = gen.FaultTargets.of(spec, dictionary)  # InputError: nothing to mutate
+        self.by_channel = self.targets.by_family["single"]
+        self.stamps = self.targets.by_family.get("stamp", {})
         self.seed = seed
         self.timing = Timing(None, duration)
         self._rounds: dict[int, list[gen.Probe]] = {}
@@ -57,11 +63,19 @@ class RandomStrategy(Strategy):
         testcase_id = f"tc-{number:0{ID_WIDTH}d}"
         rng = random.Random(f"{self.seed}/{number}")
         index = number - 1
+        if self.targets.semantic():  # every SEMANTIC_EVERY-th case: the semantic families' schedule
+            if index % SEMANTIC_EVERY == SEMANTIC_EVERY - 1:
+                found = gen.semantic_probe(self.targets, self.seed, index // SEMANTIC_EVERY)
+                assert found is not None
+                probe, lap = found
+                testcase = gen.probe_testcase(testcase_id, rng, probe, lap, self.timing.live, self.timing.anchor)
+                return Proposal(testcase)
+            index -= index // SEMANTIC_EVERY
         covered = COVERAGE_ROUNDS * self.round_length
         if index >= covered:  # after the pure rounds: every other case is a weighted draw
             if (index - covered) % 2:
-                testcase = gen.weighted_testcase(testcase_id, rng, self.by_channel, self.timing.live,
-                                                 self.timing.anchor, message_faults=True, stamps=self.stamps)
+                testcase = gen.weighted_testcase(testcase_id, rng, self.targets, self.timing.live,
+                                                 self.timing.anchor, message_faults=True)
                 return Proposal(testcase)
             index = covered + (index - covered) // 2
         round_number, position = divmod(index, self.round_length)
