@@ -35,7 +35,7 @@ from dataclasses import dataclass, fields, replace
 from decimal import Decimal
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
-from astaa_deft.io.codecs import Codec, EncodeError
+from astaa_deft.io.codecs import Codec, DecodeError, EncodeError
 from astaa_deft.model.records import FieldChange, Mutation
 from astaa_deft.model.registry import Registry
 
@@ -135,6 +135,18 @@ class Pending:
         twin.events = list(self.events)
         twin.message = copy.deepcopy(self.message)
         return twin
+
+    def decode(self, codec: Codec) -> str | None:
+        """Decode the payload into ``message`` unless an earlier action did; why it could not, else None.
+
+        The field actions (``remove``, ``swap``, ``hold``) start with it: on an
+        undecodable payload they record a skipped event and pass the message on."""
+        if self.message is None:
+            try:
+                self.message = codec.decode(self.payload)  # type: ignore[arg-type]
+            except DecodeError as exc:
+                return f"undecodable: {exc}"
+        return None
 
     def materialize(self) -> bytes:
         """The payload, encoding the changed message first if needed (EncodeError passes through)."""
@@ -346,6 +358,19 @@ class ActionRuntime:
 
     def flush(self, now: float) -> list[Pending]:
         return []
+
+
+# The test case schema's type of an element listing field paths (``remove``, ``hold``): <field path="…"/>, one or more.
+FIELD_PATHS_SCHEMA = """
+      <xs:complexType>
+        <xs:sequence>
+          <xs:element name="field" maxOccurs="unbounded">
+            <xs:complexType>
+              <xs:attribute name="path" type="FieldPath" use="required"/>
+            </xs:complexType>
+          </xs:element>
+        </xs:sequence>
+      </xs:complexType>"""
 
 
 def required(element: etree._Element, name: str) -> str:

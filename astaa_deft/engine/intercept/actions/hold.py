@@ -23,15 +23,14 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from lxml import etree
 
-from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.fields import FieldPath, FieldPathError, get, set_field
 from astaa_deft.engine.intercept.dictionary import NotApplicable, field_site
 from astaa_deft.engine.intercept.actions.base import (
-    ACTIONS,
+    ACTIONS, FIELD_PATHS_SCHEMA,
     ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, PolicyContext,
     required,
 )
-from astaa_deft.engine.intercept.actions.set import FieldsDetail, Set, literal_assignments
+from astaa_deft.engine.intercept.actions.set import FieldsDetail, Set, pinned_as_set
 
 if TYPE_CHECKING:
     from astaa_deft.model.sut import Channel
@@ -42,18 +41,8 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class Hold(ActionConfig):
     name: ClassVar[str] = "hold"
-    # Its element's type in the test case schema (spliced into testcase.xsd's Action group): the fields it
-    # acts on, each a <field path="…"/>.
-    schema: ClassVar[str] = """
-      <xs:complexType>
-        <xs:sequence>
-          <xs:element name="field" maxOccurs="unbounded">
-            <xs:complexType>
-              <xs:attribute name="path" type="FieldPath" use="required"/>
-            </xs:complexType>
-          </xs:element>
-        </xs:sequence>
-      </xs:complexType>"""
+    # Its element's type in the test case schema (spliced into testcase.xsd's Action group): the fields it acts on.
+    schema: ClassVar[str] = FIELD_PATHS_SCHEMA
     detail_type: ClassVar[type[ActionDetail]] = FieldsDetail
     carries_fields: ClassVar[bool] = True
     paths: tuple[str, ...]
@@ -92,8 +81,7 @@ class Hold(ActionConfig):
 
     @classmethod
     def pinned(cls, step: PinnedStep) -> Set | None:
-        """The kept field changes as a ``set`` of the values sent; None when none is kept."""
-        return Set(literal_assignments(step.fields)) if step.fields else None
+        return pinned_as_set(step)
 
 
 class HoldRuntime(ActionRuntime):
@@ -104,13 +92,11 @@ class HoldRuntime(ActionRuntime):
 
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         decoded_here = item.message is None
-        if decoded_here:
-            try:
-                item.message = info.codec.decode(item.payload)  # type: ignore[arg-type]
-            except DecodeError as exc:
-                item.events.append(self.context.event(
-                    "hold", info, item.consumers, **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
-                return [item]
+        undecodable = item.decode(info.codec)
+        if undecodable is not None:
+            item.events.append(self.context.event("hold", info, item.consumers,
+                                                  **FieldsDetail(skipped=undecodable).to_json()))
+            return [item]
         held = self.held.get(info.channel)
         skipped = None
         if held is None:  # the first selected message: what the previous real message had

@@ -19,11 +19,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from lxml import etree
 
-from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.fields import FieldPath, FieldPathError, get
 from astaa_deft.engine.intercept.dictionary import field_site
 from astaa_deft.engine.intercept.actions.base import (
-    ACTIONS,
+    ACTIONS, FIELD_PATHS_SCHEMA,
     ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, required,
 )
 
@@ -43,18 +42,8 @@ class RemoveDetail(ActionDetail):
 @dataclass(frozen=True)
 class Remove(ActionConfig):
     name: ClassVar[str] = "remove"
-    # Its element's type in the test case schema (spliced into testcase.xsd's Action group): the fields it
-    # acts on, each a <field path="…"/>.
-    schema: ClassVar[str] = """
-      <xs:complexType>
-        <xs:sequence>
-          <xs:element name="field" maxOccurs="unbounded">
-            <xs:complexType>
-              <xs:attribute name="path" type="FieldPath" use="required"/>
-            </xs:complexType>
-          </xs:element>
-        </xs:sequence>
-      </xs:complexType>"""
+    # Its element's type in the test case schema (spliced into testcase.xsd's Action group): the fields it acts on.
+    schema: ClassVar[str] = FIELD_PATHS_SCHEMA
     detail_type: ClassVar[type[ActionDetail]] = RemoveDetail
     paths: tuple[str, ...]
 
@@ -108,13 +97,11 @@ class RemoveRuntime(ActionRuntime):
 
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         decoded_here = item.message is None
-        if decoded_here:
-            try:
-                item.message = info.codec.decode(item.payload)  # type: ignore[arg-type]
-            except DecodeError as exc:
-                item.events.append(self.context.event(
-                    "remove", info, item.consumers, **RemoveDetail(skipped=f"undecodable: {exc}").to_json()))
-                return [item]
+        undecodable = item.decode(info.codec)
+        if undecodable is not None:
+            item.events.append(self.context.event("remove", info, item.consumers,
+                                                  **RemoveDetail(skipped=undecodable).to_json()))
+            return [item]
         removed = [str(where) for path in self.paths for where in _remove(item.message, path)]
         if not removed and decoded_here:
             item.message = None  # nothing changed: the real payload goes on

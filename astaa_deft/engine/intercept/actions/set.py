@@ -85,6 +85,12 @@ def literal_assignments(changes: Sequence[FieldChange]) -> tuple[Assignment, ...
     return tuple(Assignment(change.path, value_text(change.new)) for change in changes)
 
 
+def pinned_as_set(step: PinnedStep) -> Set | None:
+    """A field action's minimised step as a ``set`` of the values it sent (``swap``, ``hold``); None when none
+    is kept."""
+    return Set(literal_assignments(step.fields)) if step.fields else None
+
+
 @dataclass(frozen=True)
 class FieldsDetail(ActionDetail):
     """What ``set`` and ``interleave`` record beyond their field changes."""

@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.fields import FieldPath, FieldPathError, get, set_field
 from astaa_deft.engine.intercept.dictionary import field_site
 from astaa_deft.engine.intercept.actions.base import (
@@ -24,7 +23,7 @@ from astaa_deft.engine.intercept.actions.base import (
     ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, PolicyContext,
     required,
 )
-from astaa_deft.engine.intercept.actions.set import FieldsDetail, Set, literal_assignments
+from astaa_deft.engine.intercept.actions.set import FieldsDetail, Set, pinned_as_set
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -90,8 +89,7 @@ class Swap(ActionConfig):
 
     @classmethod
     def pinned(cls, step: PinnedStep) -> Set | None:
-        """The kept field changes as a ``set`` of the values sent; None when none is kept."""
-        return Set(literal_assignments(step.fields)) if step.fields else None
+        return pinned_as_set(step)
 
 
 class SwapRuntime(ActionRuntime):
@@ -101,13 +99,11 @@ class SwapRuntime(ActionRuntime):
 
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         decoded_here = item.message is None
-        if decoded_here:
-            try:
-                item.message = info.codec.decode(item.payload)  # type: ignore[arg-type]
-            except DecodeError as exc:
-                item.events.append(self.context.event(
-                    "swap", info, item.consumers, **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
-                return [item]
+        undecodable = item.decode(info.codec)
+        if undecodable is not None:
+            item.events.append(self.context.event("swap", info, item.consumers,
+                                                  **FieldsDetail(skipped=undecodable).to_json()))
+            return [item]
         changes = _swapped(item.message, self.a, self.b)
         if not changes:
             if decoded_here:
