@@ -15,10 +15,11 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.io.output_place import write_atomic
+from astaa_deft.model.replay_module import TrajectoryLayout
 from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.replay import trajectory_points
 from astaa_deft.analysis.deft.suite import Suite
@@ -46,8 +47,11 @@ def test_replayed_plans_keep_the_seed_runs_path():
 '''
 
 
-def end_points(messages: list[Any], layout: Any) -> list[tuple[float, float]]:
-    out = []
+def end_points(messages: Sequence[object], layout: TrajectoryLayout | None) -> list[tuple[float, float]]:
+    """Where each plan ends (x, y), in order; a plan without points has none (as has a planner without a layout)."""
+    out: list[tuple[float, float]] = []
+    if layout is None:
+        return out
     for message in messages:
         points = trajectory_points(message, layout)
         if points:

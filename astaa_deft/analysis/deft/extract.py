@@ -723,7 +723,8 @@ def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expec
     t1 = time.perf_counter()
     start_state = planner.snapshot() if len(options) > 1 else None
     result.planner_seconds += time.perf_counter() - t1
-    best = None  # (comparison, candidate, equal to the recording, state after it or None if current, tries)
+    # (comparison, candidate, equal to the recording, state after it or None if current, tries)
+    best: tuple[Comparison, Candidate, bool, object, int] | None = None
     for tries, cand in enumerate(options, start=1):
         t0 = time.perf_counter()
         frame = {name: run.recorded.decode(name, idx) for name, idx in cand.choice.items()}

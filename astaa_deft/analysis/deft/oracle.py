@@ -10,7 +10,7 @@ passes once it does not.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
@@ -29,13 +29,12 @@ from astaa_deft.analysis.deft.replay import trajectory_points
 Pose = tuple[float, float, float, float]  # t, x, y, heading
 
 
-def planned_poses(message: Mapping[str, Any] | None, layout: TrajectoryLayout) -> list[Pose]:
+def planned_poses(message: object, layout: TrajectoryLayout) -> list[Pose]:
     """(t, x, y, heading) of each planned point (heading 0 where the layout's field is missing)."""
     return [(t, x, y, heading) for x, y, t, heading in trajectory_points(message, layout, with_heading=True)]
 
 
-def first_collision(plan: Sequence[Pose], obstacles_msg: Mapping[str, Any] | None,
-                    oracle: CollisionOracle) -> dict | None:
+def first_collision(plan: Sequence[Pose], obstacles_msg: object, oracle: CollisionOracle) -> dict | None:
     """The first planned pose that overlaps a predicted obstacle: {t, obstacle, x, y}, or None."""
     if not isinstance(obstacles_msg, Mapping):
         return None

@@ -22,14 +22,15 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from types import FrameType
-from typing import Any, Literal, NoReturn, Protocol, TypeVar, overload
+from types import FrameType, ModuleType
+from typing import Any, Literal, NoReturn, Protocol, TypeGuard, TypeVar, overload
 
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.engine.bus.processes import stop_process, tail
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.model.fields import get
+from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.planner import resolve_args
 from astaa_deft.engine.spec.replay_module import TrajectoryLayout
@@ -43,17 +44,36 @@ SETTLE_MAX = 0.2
 
 
 class ReplayPlanner(Protocol):
+    """A module replayed on frames: {channel name: decoded message} in, its decoded output (or None) out.
+
+    A snapshot is opaque to the caller: it only goes back into ``restore`` of
+    the planner it came from (after a deep copy or a pickle round trip).
+    """
+
     can_snapshot: bool
 
-    def step(self, frame: Mapping[str, dict]) -> dict: ...
-    def snapshot(self) -> Any: ...
-    def restore(self, snap: Any) -> None: ...
+    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None: ...
+    def snapshot(self) -> object: ...
+    def restore(self, snap: object) -> None: ...
     def close(self) -> None: ...
 
 
+class StepModule(Protocol):
+    """What a replay factory returns (``replay.factory`` of the spec): an object with ``step(frame)``."""
+
+    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None: ...
+
+
+def steps(made: object) -> TypeGuard[StepModule]:
+    """``made`` has a ``step`` to call (the one thing replay asks of what a factory returns)."""
+    return callable(getattr(made, "step", None))
+
+
 def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.replay", source: str = "<spec>"
-                 ) -> Any:
+                 ) -> object:
     """The factory named 'module:attr', imported from sys.path or else from the spec's directory.
+
+    Whatever the module holds under that name (the caller checks it is callable).
 
     A planner that sits next to its spec (a user's own stack, not an installed
     package) is found without setting PYTHONPATH by hand. ``path/to/file.py:Name``
@@ -82,7 +102,7 @@ def load_factory(path: str, spec_dir: Path | None = None, where: str = "planner.
                                  f"{beside} (set PYTHONPATH, or install its package)")) from None
 
 
-def _module_from_file(relative: str, spec_dir: Path | None, where: str) -> Any:
+def _module_from_file(relative: str, spec_dir: Path | None, where: str) -> ModuleType:
     """The module in the file ``relative`` to the spec's directory, imported under its own name (so its objects
     pickle), its directory added after installed packages (so it finds the modules beside it)."""
     if spec_dir is None:
@@ -115,7 +135,7 @@ def _module_from_file(relative: str, spec_dir: Path | None, where: str) -> Any:
     return module
 
 
-def _no_attribute(path: str, where: str) -> Any:
+def _no_attribute(path: str, where: str) -> NoReturn:
     raise InputError(Problem("<spec>", None, None, f"replay factory '{path}' cannot be loaded: its file has no"
                              f" '{path.rpartition(':')[2]}'", f"check '{where}.factory'"))
 
@@ -129,30 +149,36 @@ def importable_from(directory: Path, top: str) -> bool:
 class InProcessPlanner:
     can_snapshot = True
 
-    def __init__(self, factory: str, kwargs: Mapping[str, Any], spec_dir: Path | None = None,
+    def __init__(self, factory: str, kwargs: Mapping[str, object], *, spec_dir: Path | None = None,
                  where: str = "planner.replay", source: str = "<spec>"):
         self.factory = factory
         make = load_factory(factory, spec_dir, where, source)  # ``source``: the spec's file, named in errors
-        _check_arguments(make, kwargs, factory, where, source)
-        self.obj = make(**kwargs)
-        if not callable(getattr(self.obj, "step", None)):
+        if not callable(make):
+            raise InputError(Problem(source, None, None, f"{where}: replay factory '{factory}' is not callable",
+                                     f"check '{where}.factory': name a class or function"))
+        _check_arguments(make, kwargs, factory=factory, where=where, source=source)
+        made = make(**kwargs)
+        if not steps(made):
             raise InputError(Problem(source, None, None, f"{where}: replay factory '{factory}' returned an object "
                                      "without a step(frame) method", f"check '{where}.factory'"))
+        self.obj: StepModule = made
 
-    def step(self, frame: Mapping[str, dict]) -> dict:
+    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None:
         return self.obj.step(frame)
 
-    def snapshot(self) -> Any:
+    def snapshot(self) -> StepModule:
         return copy.deepcopy(self.obj)
 
-    def restore(self, snap: Any) -> None:
+    def restore(self, snap: object) -> None:
+        if not steps(snap):
+            raise TypeError(f"not a snapshot of replay factory '{self.factory}''s module: {type(snap).__name__}")
         self.obj = snap
 
     def close(self) -> None:
         pass
 
 
-def _check_arguments(make: Callable[..., Any], kwargs: Mapping[str, Any], factory: str, where: str,
+def _check_arguments(make: Callable[..., object], kwargs: Mapping[str, object], *, factory: str, where: str,
                      source: str = "<spec>") -> None:
     """InputError when the spec's args do not fit the factory's parameters (a misspelt or missing arg)."""
     import inspect
@@ -202,7 +228,7 @@ class LockstepPlanner:
         with open(self.log_path, "wb") as log:
             self.proc = process_launch.start(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
                                              stderr=subprocess.STDOUT)
-        self._sent: dict[str, dict] = {}
+        self._sent: dict[str, JsonObject] = {}
         self._latencies: deque[float] = deque([0.0], maxlen=10)
         self._wait_connected()
 
@@ -219,7 +245,7 @@ class LockstepPlanner:
             time.sleep(0.05)
         raise InputError("the planner process never subscribed to its trigger channel")
 
-    def step(self, frame: Mapping[str, dict]) -> dict:
+    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None:
         changed = False
         for name, message in frame.items():
             if name != self.planner.trigger and self._sent.get(name) != message:
@@ -241,10 +267,10 @@ class LockstepPlanner:
             raise InputError(f"the planner process gave no output within {OUTPUT_TIMEOUT:g} s:\n"
                              f"{tail(self.log_path)}") from None
 
-    def snapshot(self) -> Any:
+    def snapshot(self) -> object:
         raise NotImplementedError
 
-    def restore(self, snap: Any) -> None:
+    def restore(self, snap: object) -> None:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -254,7 +280,7 @@ class LockstepPlanner:
         self._dir.cleanup()
 
 
-def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = False,
+def make_planner(spec: Spec, params: Mapping[str, str], *, prefer_process: bool = False,
                  entry: ReplayModule | None = None, spec_dir: Path | None = None) -> ReplayPlanner:
     """The module of ``entry`` (default: the planner) ready to step, in-process or as its own process.
 
@@ -264,8 +290,8 @@ def make_planner(spec: Spec, params: Mapping[str, str], prefer_process: bool = F
     if planner.factory and not (prefer_process and planner.command):
         where = "planner.replay" if planner.where == "planner" else planner.where
         return InProcessPlanner(planner.factory, resolve_args(planner.factory_args, {**spec.params, **params}),
-                                spec.path.parent.resolve() if spec.path else spec_dir, where,
-                                str(spec.path) if spec.path else spec.name)
+                                spec_dir=spec.path.parent.resolve() if spec.path else spec_dir, where=where,
+                                source=str(spec.path) if spec.path else spec.name)
     return LockstepPlanner(spec, planner, params)
 
 
@@ -282,7 +308,7 @@ def code_fingerprint(entry: ReplayModule, spec: Spec) -> str | None:
         return None
     try:
         factory = load_factory(entry.factory, spec.path.parent.resolve() if spec.path else None)
-        source = inspect.getsourcefile(factory)
+        source = inspect.getsourcefile(factory) if callable(factory) else None  # no source: not a factory
     except (InputError, TypeError, OSError):
         return None
     if source is None:
@@ -293,7 +319,7 @@ def code_fingerprint(entry: ReplayModule, spec: Spec) -> str | None:
     return digest.hexdigest()
 
 
-def compare_outputs(entry: ReplayModule, replayed: Any, recorded: Any) -> Comparison:
+def compare_outputs(entry: ReplayModule, replayed: object, recorded: object) -> Comparison:
     """A replayed output against the recorded one: as trajectories (the planner), else field by field."""
     if entry.trajectory is not None:
         return compare(trajectory_points(replayed, entry.trajectory), trajectory_points(recorded, entry.trajectory))
@@ -345,16 +371,16 @@ def _getter(path: str) -> Callable[[Any], Any]:
 
 
 @overload
-def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+def trajectory_points(message: object, layout: TrajectoryLayout,
                       with_heading: Literal[False] = False) -> list[Point]: ...
 
 
 @overload
-def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+def trajectory_points(message: object, layout: TrajectoryLayout,
                       with_heading: Literal[True]) -> list[tuple[float, float, float, float]]: ...
 
 
-def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayout,
+def trajectory_points(message: object, layout: TrajectoryLayout,
                       with_heading: bool = False) -> list[Point] | list[tuple[float, float, float, float]]:
     """(x, y, t absolute) of each planned point, per the spec's layout; (x, y, t, heading) with_heading."""
     if not isinstance(message, Mapping):
@@ -387,10 +413,20 @@ def trajectory_points(message: Mapping[str, Any] | None, layout: TrajectoryLayou
     return out
 
 
-def seconds(value: Any) -> float:
-    """A time as seconds: a number, or a ROS 2 ``builtin_interfaces/msg/Time`` decoded ({sec, nanosec})."""
+def seconds(value: JsonValue) -> float:
+    """A time as seconds: a number, or a ROS 2 ``builtin_interfaces/msg/Time`` decoded ({sec, nanosec}).
+
+    KeyError without ``sec`` or ``nanosec``, else what ``float`` raises (TypeError, ValueError).
+    """
     if isinstance(value, Mapping):
-        return float(value["sec"]) + float(value["nanosec"]) * 1e-9
+        return _number(value["sec"]) + _number(value["nanosec"]) * 1e-9
+    return _number(value)
+
+
+def _number(value: JsonValue) -> float:
+    """``float(value)``; TypeError for an object, an array or null, as ``float`` raises it."""
+    if isinstance(value, (dict, list)) or value is None:
+        raise TypeError(f"a number, not {type(value).__name__}")
     return float(value)
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 from itertools import pairwise
 from collections.abc import Sequence
-from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,11 +91,11 @@ def _errors(d: np.ndarray, how: str) -> Comparison:
 # ------------------------------------------------------------ any module's output, field by field
 
 
-def flatten(message: Any, ignore: Sequence[str] = ()) -> dict[str, Any]:
+def flatten(message: object, ignore: Sequence[str] = ()) -> dict[str, object]:
     """Leaf path → value of a decoded message (``a.b[2].c``), without the ``ignore`` paths and what lies below them."""
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
 
-    def walk(value: Any, path: str) -> None:
+    def walk(value: object, path: str) -> None:
         if path and any(path == skip or path.startswith(skip + ".") or path.startswith(skip + "[")
                         for skip in ignore):
             return
@@ -114,7 +113,7 @@ def flatten(message: Any, ignore: Sequence[str] = ()) -> dict[str, Any]:
     return out
 
 
-def _leaf_error(a: Any, b: Any) -> float:
+def _leaf_error(a: object, b: object) -> float:
     numeric = (int, float)
     if isinstance(a, numeric) and isinstance(b, numeric) and not isinstance(a, bool) and not isinstance(b, bool):
         if math.isnan(a) or math.isnan(b):
@@ -125,7 +124,7 @@ def _leaf_error(a: Any, b: Any) -> float:
     return 0.0 if type(a) is type(b) and a == b else math.inf
 
 
-def compare_messages(replayed: Any, recorded: Any, ignore: Sequence[str] = ()) -> Comparison:
+def compare_messages(replayed: object, recorded: object, ignore: Sequence[str] = ()) -> Comparison:
     """A module's replayed output against the recorded one: √Σ of the numeric fields' differences.
 
     A missing output on one side only, a field on one side only or a
@@ -146,11 +145,11 @@ def compare_messages(replayed: Any, recorded: Any, ignore: Sequence[str] = ()) -
     return Comparison(distance, worst, len(errors), "fields")
 
 
-def differing_fields(replayed: Any, recorded: Any, ignore: Sequence[str] = (), limit: int = 6
-                     ) -> list[tuple[str, Any, Any]]:
+def differing_fields(replayed: object, recorded: object, ignore: Sequence[str] = (), limit: int = 6
+                     ) -> list[tuple[str, object, object]]:
     """(path, recorded, replayed) of the first fields that differ (for a failing test's report)."""
     a, b = flatten(replayed, ignore), flatten(recorded, ignore)
-    out = []
+    out: list[tuple[str, object, object]] = []
     for key in list(b) + [k for k in a if k not in b]:
         if key not in a or key not in b or _leaf_error(a[key], b[key]) > 0:
             out.append((key, b.get(key, "—"), a.get(key, "—")))
