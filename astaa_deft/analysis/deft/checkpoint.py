@@ -18,12 +18,12 @@ import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.io.inputfile import InputKind, read_input
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.io.statefile import MAX_INT, StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
@@ -37,13 +37,13 @@ _PARTIAL = ".partial"
 STATE_FILE = InputKind("extraction state", 256 << 20, f"the {STATE} an interrupted extract left")
 
 
-def identity(log_path: Path, spec: Spec, entry: ReplayModule) -> dict[str, Any]:
+def identity(log_path: Path, spec: Spec, entry: ReplayModule) -> JsonObject:
     """What an extraction must share with the one it resumes: the same log, spec, module and threshold."""
     return {"log": str(log_path.resolve()), "log_bytes": log_path.stat().st_size, "spec": spec.name,
             "module": entry.module, "threshold": entry.threshold}
 
 
-def _decided_json(outcome: Decided) -> dict[str, Any]:
+def _decided_json(outcome: Decided) -> JsonObject:
     frame = outcome.frame
     if frame is None or outcome.choice is None:
         return {"output": outcome.output_index, "skipped": outcome.skipped or "skipped"}
@@ -93,7 +93,7 @@ def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Dec
     return Decided(position, frame, picks)
 
 
-def read_state(out_dir: Path, expected: Mapping[str, Any], shape: LogShape | None = None) -> list[Decided]:
+def read_state(out_dir: Path, expected: Mapping[str, JsonValue], shape: LogShape | None = None) -> list[Decided]:
     """The outputs an interrupted extraction into ``out_dir`` decided, in order (InputError if there is
     none, it was of another log, spec, module or threshold, or any field is not what this version writes:
     type, range, version, size — checked against the log's ``shape`` when given)."""
@@ -128,8 +128,8 @@ def read_state(out_dir: Path, expected: Mapping[str, Any], shape: LogShape | Non
 class Checkpoint:
     """Writes the partial suite and the state as outputs are decided (``add``); ``write`` forces it."""
 
-    def __init__(self, out_dir: Path, spec: Spec, params: Mapping[str, str], entry: ReplayModule,
-                 extraction: Mapping[str, Any]) -> None:
+    def __init__(self, out_dir: Path, spec: Spec, params: Mapping[str, str], *, entry: ReplayModule,
+                 extraction: Mapping[str, JsonValue]) -> None:
         self.out_dir = out_dir
         self.spec = spec
         self.params = params

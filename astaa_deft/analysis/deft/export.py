@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.io.log.reader import LoggedMessage
 from astaa_deft.io.log.writer import LogWriter
@@ -39,8 +38,8 @@ testpaths = .
 VERSION = 1
 
 
-def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[str, str], out_dir: Path,
-                 oracles: Sequence[Mapping[str, Any]] = (), entry: ReplayModule | None = None) -> Path:
+def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[str, str], out_dir: Path, *,
+                 oracles: Sequence[Mapping[str, object]] = (), entry: ReplayModule | None = None) -> Path:
     """Write the suite of ``entry``'s module (default: the planner); the manifest names any other module.
 
     ``frames``: every frame the module is stepped on, in order; those not
@@ -98,7 +97,7 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
     return path
 
 
-def _json_default(value: Any) -> Any:
+def _json_default(value: object) -> str:
     if isinstance(value, float):
         return repr(value)
     return str(value)

@@ -11,9 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TypeVar
 
-from astaa_deft.model.json import JsonValue
+from astaa_deft.model.json import JsonObject, JsonValue
+
+T = TypeVar("T")
+_KINDS: dict[type, str] = {str: "a string", int: "an integer", dict: "an object"}
 
 
 @dataclass(frozen=True)
@@ -29,9 +32,32 @@ class OracleEntry:
     snapshot_code: str | None = None  # the module code's fingerprint then (replay.code_fingerprint)
 
     @classmethod
-    def from_json(cls, entry: Mapping[str, Any]) -> OracleEntry:
-        """The entry as the manifest holds it (KeyError without ``kind``; the other fields are optional)."""
-        of = entry.get("snapshot_of") or {}
-        return cls(kind=entry["kind"], frame=entry.get("frame"), invariant=entry.get("invariant"),
-                   start_ns=int(entry.get("start_ns", 0)), snapshot=entry.get("snapshot") or None,
-                   snapshot_params=of.get("params"), snapshot_code=of.get("code"))
+    def from_json(cls, entry: JsonObject) -> OracleEntry:
+        """The entry as the manifest holds it (KeyError without ``kind``; the other fields are optional;
+        ValueError naming the field for a value of another type)."""
+        of = _optional(entry, "snapshot_of", dict) or {}
+        start = entry.get("start_ns", 0)
+        if not isinstance(start, (int, float, str)):
+            raise _wrong("start_ns", start, "a number")
+        return cls(kind=_required(entry, "kind", str), frame=_optional(entry, "frame", int),
+                   invariant=_optional(entry, "invariant", str), start_ns=int(start),
+                   snapshot=_optional(entry, "snapshot", str) or None, snapshot_params=of.get("params"),
+                   snapshot_code=_optional(of, "code", str))
+
+
+def _required(entry: Mapping[str, JsonValue], key: str, kind: type[T]) -> T:
+    value = entry[key]
+    if not isinstance(value, kind):
+        raise _wrong(key, value, _KINDS[kind])
+    return value
+
+
+def _optional(entry: Mapping[str, JsonValue], key: str, kind: type[T]) -> T | None:
+    value = entry.get(key)
+    if value is not None and not isinstance(value, kind):
+        raise _wrong(key, value, f"{_KINDS[kind]} or null")
+    return value
+
+
+def _wrong(key: str, value: JsonValue, expected: str) -> ValueError:
+    return ValueError(f"a manifest's oracle entry: '{key}' is {str(value)[:60]!r}, not {expected}")

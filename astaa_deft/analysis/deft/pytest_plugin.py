@@ -57,6 +57,8 @@ class FrameMismatch(AstaaDeftError):
 
 
 class FrameTest(pytest.Item):
+    # ``kwargs``: pytest's own node arguments (name, parent, ...), passed on untouched, as its cooperative
+    # constructors must; Any because pytest.Item.__init__ types each differently and leaves some untyped.
     def __init__(self, *, suite: Suite, position: int, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.suite = suite  # shared by the file's tests: the frames are replayed once, in order
@@ -124,7 +126,7 @@ class OracleFailure(AstaaDeftError):
 
 
 class OracleTest(pytest.Item):
-    def __init__(self, *, suite: Suite, oracle: OracleEntry, **kwargs: Any) -> None:
+    def __init__(self, *, suite: Suite, oracle: OracleEntry, **kwargs: Any) -> None:  # kwargs: as FrameTest's
         super().__init__(**kwargs)
         self.suite = suite
         self.oracle = oracle

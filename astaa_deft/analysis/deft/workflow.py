@@ -126,7 +126,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
         raise InputError(Problem(str(out_dir), None, None, f"--resume continues a planner-style extraction; "
                                  f"{entry.module} is replayed per trigger", "drop --resume"))
     before = read_state(out_dir, names, _shape(log, spec, entry)) if resume else []
-    checkpoint = Checkpoint(out_dir, spec, params, entry, names)
+    checkpoint = Checkpoint(out_dir, spec, params, entry=entry, extraction=names)
     planner = make_planner(spec, params, prefer_process=options.process, entry=entry)
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
