@@ -16,6 +16,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from astaa_deft.analysis.deft.export import MANIFEST
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.engine.spec.loader import load_spec
@@ -175,3 +177,17 @@ def test_an_oracle_entry_reads_its_optional_fields_as_absent():
                                   "snapshot_of": {"params": {"a": "1"}, "code": "abc"}})
     assert (full.invariant, full.start_ns, full.snapshot, full.snapshot_params, full.snapshot_code) == (
         "planned_speed", 12, "snapshots/frame_00007.pickle", {"a": "1"}, "abc")
+
+
+@pytest.mark.parametrize(("entry", "names"), [
+    ({"kind": 3, "frame": 4}, "'kind' is '3', not a string"),
+    ({"kind": "collision", "frame": "4"}, "'frame' is '4', not an integer or null"),
+    ({"kind": "invariant", "frame": 1, "start_ns": [1]}, "'start_ns' is '[1]', not a number"),
+    ({"kind": "collision", "frame": 1, "snapshot_of": ["x"]}, "'snapshot_of' is \"['x']\", not an object or null"),
+])
+def test_an_oracle_entry_of_the_wrong_type_names_its_field(entry, names):
+    from astaa_deft.analysis.deft.oracle_entry import OracleEntry
+
+    with pytest.raises(ValueError) as caught:
+        OracleEntry.from_json(entry)
+    assert names in str(caught.value)

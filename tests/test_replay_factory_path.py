@@ -84,3 +84,22 @@ def test_a_spec_not_read_from_a_file_names_no_file_to_run(stack: Path):
     assert spec.path is None
     with pytest.raises(InputError, match="not read from one"):
         load_factory(spec.replay[0].factory or "", None, "replay.modules[0]")
+
+
+def test_a_factory_that_is_not_callable_is_a_spec_error_not_a_traceback(stack: Path):
+    (stack.parent.parent / "src" / "verdicts_mpc_constant.py").write_text("MPC = 42\n")
+    stack.write_text(SPEC.replace("FACTORY", "../src/verdicts_mpc_constant.py:MPC"))
+    spec = load_spec(stack)
+    with pytest.raises(InputError, match=r"replay factory '\.\./src/verdicts_mpc_constant\.py:MPC' is not callable"):
+        make_planner(spec, {}, entry=spec.replay[0])
+
+
+def test_a_snapshot_goes_back_only_into_a_module_that_steps(stack: Path):
+    (stack.parent.parent / "src" / "verdicts_mpc_snapshot.py").write_text(CONTROLLER)  # a module name of its own
+    stack.write_text(SPEC.replace("FACTORY", "../src/verdicts_mpc_snapshot.py:MPC"))
+    spec = load_spec(stack)
+    planner = make_planner(spec, {}, entry=spec.replay[0])
+    planner.restore(planner.snapshot())
+    with pytest.raises(TypeError, match="not a snapshot"):
+        planner.restore({"gain": 1.0})
+    assert planner.step({"localization": {"x": 3.0}}) == {"acceleration": -3.0}  # the module it had
