@@ -23,14 +23,14 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import FrameType, ModuleType
-from typing import Any, Literal, NoReturn, Protocol, TypeGuard, TypeVar, overload
+from typing import Any, Literal, NoReturn, Protocol, SupportsFloat, TypeGuard, TypeVar, overload
 
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.engine.bus.processes import stop_process, tail
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.model.fields import get
-from astaa_deft.model.json import JsonObject, JsonValue
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.planner import resolve_args
 from astaa_deft.engine.spec.replay_module import TrajectoryLayout
@@ -64,7 +64,7 @@ class StepModule(Protocol):
     def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None: ...
 
 
-def steps(made: object) -> TypeGuard[StepModule]:
+def _is_step_module(made: object) -> TypeGuard[StepModule]:
     """``made`` has a ``step`` to call (the one thing replay asks of what a factory returns)."""
     return callable(getattr(made, "step", None))
 
@@ -158,7 +158,7 @@ class InProcessPlanner:
                                      f"check '{where}.factory': name a class or function"))
         _check_arguments(make, kwargs, factory=factory, where=where, source=source)
         made = make(**kwargs)
-        if not steps(made):
+        if not _is_step_module(made):
             raise InputError(Problem(source, None, None, f"{where}: replay factory '{factory}' returned an object "
                                      "without a step(frame) method", f"check '{where}.factory'"))
         self.obj: StepModule = made
@@ -170,7 +170,7 @@ class InProcessPlanner:
         return copy.deepcopy(self.obj)
 
     def restore(self, snap: object) -> None:
-        if not steps(snap):
+        if not _is_step_module(snap):
             raise TypeError(f"not a snapshot of replay factory '{self.factory}''s module: {type(snap).__name__}")
         self.obj = snap
 
@@ -413,20 +413,14 @@ def trajectory_points(message: object, layout: TrajectoryLayout,
     return out
 
 
-def seconds(value: JsonValue) -> float:
+def seconds(value: SupportsFloat | str | Mapping[str, SupportsFloat | str]) -> float:
     """A time as seconds: a number, or a ROS 2 ``builtin_interfaces/msg/Time`` decoded ({sec, nanosec}).
 
-    KeyError without ``sec`` or ``nanosec``, else what ``float`` raises (TypeError, ValueError).
+    Anything else raises as ``float`` does (TypeError, ValueError; KeyError without ``sec`` or ``nanosec``):
+    a planned point's time is read from whatever the module wrote, and its caller skips what does not read.
     """
     if isinstance(value, Mapping):
-        return _number(value["sec"]) + _number(value["nanosec"]) * 1e-9
-    return _number(value)
-
-
-def _number(value: JsonValue) -> float:
-    """``float(value)``; TypeError for an object, an array or null, as ``float`` raises it."""
-    if isinstance(value, (dict, list)) or value is None:
-        raise TypeError(f"a number, not {type(value).__name__}")
+        return float(value["sec"]) + float(value["nanosec"]) * 1e-9
     return float(value)
 
 
