@@ -163,7 +163,7 @@ class Mutation:
         return f"{text} (policy {self.policy}, +{self.at:.2f} s)"
 
 
-def _short(value: Any, limit: int = 40) -> str:
+def _short(value: object, limit: int = 40) -> str:
     text = repr(value) if not isinstance(value, str) else json.dumps(value)
     return text if len(text) <= limit else text[:limit - 1] + "…"
 

@@ -19,10 +19,9 @@ from __future__ import annotations
 import json
 import math
 import shutil
-from collections.abc import Mapping
+from collections.abc import Hashable, Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.analysis.deft.export import export_suite
@@ -91,8 +90,8 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
                 topics[name] = writer.bus_channel(spec.channel(channel), topic=name)
             return topics[name]
 
-        records: list[tuple[int, int, bytes, Any]] = []  # (time, MCAP channel, data, what it is)
-        seen: set[Any] = set()
+        records: list[tuple[int, int, bytes, Hashable]] = []  # (time, MCAP channel, data, what it is)
+        seen: set[Hashable] = set()
         for frame in frames:
             for name, delivered in frame.inputs:
                 if delivered.key not in seen:
@@ -112,7 +111,7 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
             if data is not None and key not in seen and mutation.delivered_time_ns is not None:
                 seen.add(key)
                 records.append((mutation.delivered_time_ns, topic(mutation.channel), data, key))
-        sequences: dict[Any, int] = {}
+        sequences: dict[Hashable, int] = {}
         writer.record(log_records.RunStarted(model.start_ns, "replay", spec.name))
         for time_ns, channel_id, data, what in sorted(records, key=lambda r: r[0]):
             sequences[what] = writer.message(channel_id, time_ns, data)
