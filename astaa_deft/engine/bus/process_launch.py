@@ -44,7 +44,7 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from queue import SimpleQueue
-from typing import IO, Any, NoReturn
+from typing import IO, Any, NoReturn, TypeAlias
 
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.engine.bus.processes import stop_process
@@ -138,10 +138,14 @@ os.register_at_fork(after_in_child=_new_starter_after_fork)
 
 # -- programs ----------------------------------------------------------------------------------------
 
+# A child's standard stream as ``subprocess.Popen`` takes it: a file descriptor or one of its
+# constants (DEVNULL, PIPE, STDOUT), an open file (binary or text), or None (the tool's own).
+Stream: TypeAlias = int | IO[bytes] | IO[str] | None
+
 
 def start(argv: Sequence[str], *, cwd: str | None = None, env: Mapping[str, str] | None = None,
-          stdin: int | IO[Any] | None = subprocess.DEVNULL, stdout: int | IO[Any] | None = subprocess.DEVNULL,
-          stderr: int | IO[Any] | None = subprocess.DEVNULL, text: bool = False, pass_fds: Sequence[int] = (),
+          stdin: Stream = subprocess.DEVNULL, stdout: Stream = subprocess.DEVNULL, stderr: Stream = subprocess.DEVNULL,
+          text: bool = False, pass_fds: Sequence[int] = (),
           die_with_tool: bool = True, death_signal: signal.Signals = signal.SIGTERM) -> subprocess.Popen:
     """Start ``argv`` as a child in its own session; return its ``Popen`` once the command itself runs.
 

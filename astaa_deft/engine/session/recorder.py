@@ -556,9 +556,10 @@ def _event_text(body: JsonObject) -> bytes:
 
 def event_json(wire: topology.WireEvent) -> JsonObject:
     """A mutation's JSON form (``Mutation.to_json``), from what the proxy sent."""
-    if wire.form == topology.EVENT_JSON:
-        return dict(wire.value)
-    return Mutation.row_json(wire.value)  # the compact form (topology.intercept_record)
+    value = wire.value
+    if isinstance(value, dict):  # the form EVENT_JSON (read_intercept_record checks the JSON is an object)
+        return dict(value)
+    return Mutation.row_json(value)  # the compact form (topology.intercept_record)
 
 
 if __name__ == "__main__":
