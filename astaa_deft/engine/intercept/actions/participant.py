@@ -352,10 +352,10 @@ class ParticipantRuntime(ActionRuntime):
         array.append(element)
         pose = self.config.pose_at(t)
         detail = ParticipantDetail(self.config.id, round(pose.x, 3), round(pose.y, 3), t)
-        item.events.append(self.context.event("participant", info, item.consumers, **detail.to_json()))
+        item.events.append(self.context.event("participant", info, item.consumers, detail=detail.to_json()))
         return [item]
 
     def _skip(self, item: Pending, info: MessageInfo, why: str) -> list[Pending]:
         item.events.append(self.context.event("participant", info, item.consumers,
-                                              **ParticipantDetail(self.config.id, skipped=why).to_json()))
+                                              detail=ParticipantDetail(self.config.id, skipped=why).to_json()))
         return [item]

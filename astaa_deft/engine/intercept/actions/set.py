@@ -431,7 +431,7 @@ class SetRuntime(ActionRuntime):
                 item.message = info.codec.decode(item.payload)  # type: ignore[arg-type]
             except DecodeError as exc:
                 item.events.append(self.context.event(
-                    "set", info, item.consumers, **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
+                    "set", info, item.consumers, detail=FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
                 return [item]
         changes, skipped = apply_plans(item.message, self.plans[info.channel], info)  # type: ignore[arg-type]
         if changes and not skipped:  # every field set (the common case): an empty detail, built for free
@@ -441,7 +441,7 @@ class SetRuntime(ActionRuntime):
                                   skipped=None if changes else "no field was set").to_json()
             if not changes and decoded_here:  # nothing changed: keep the real payload object (zero copy downstream)
                 item.message = None
-        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail))
+        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), detail=detail))
         return [item]
 
 
