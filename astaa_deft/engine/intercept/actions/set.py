@@ -64,7 +64,7 @@ class Assignment:
     value: str  # as written: a literal, dict:..., json:... or str:...
 
 
-def value_text(value: Any) -> str:
+def value_text(value: object) -> str:
     """A ``<field value=…>`` that sets exactly ``value`` whatever the field's declared type.
 
     ``json:`` with ASCII escapes: the text stays valid XML (control
@@ -96,7 +96,7 @@ class FieldsDetail(ActionDetail):
     """What ``set`` and ``interleave`` record beyond their field changes."""
 
     injection: int | None = None  # interleave: the number of this injection, from 1
-    skipped_fields: tuple[dict[str, Any], ...] | None = None  # assignments that did not apply, and why
+    skipped_fields: tuple[dict[str, str], ...] | None = None  # assignments that did not apply, and why
     skipped: str | None = None  # why nothing was set (or injected)
 
 
@@ -157,7 +157,7 @@ class ValueProblem(AstaaDeftError, ValueError):
 
 @dataclass(frozen=True)
 class Literal:
-    value: Any
+    value: object  # as the field's declared type reads it (parse_literal)
 
 
 def value_source(text: str, site: FieldSite, dictionary: Dictionary) -> Literal | Entry:
@@ -180,7 +180,7 @@ def _group_hint(site: FieldSite, dictionary: Dictionary) -> str:
     return ("values for this field include " + ", ".join(names)) if names else "pick another value"
 
 
-def parse_literal(text: str, field_type: FieldType) -> Any:
+def parse_literal(text: str, field_type: FieldType) -> object:
     """A literal value as the field's declared type reads it (ValueProblem if it cannot)."""
     if text.startswith(JSON_PREFIX):
         return _json_literal(text[len(JSON_PREFIX):])
@@ -236,7 +236,7 @@ def parse_literal(text: str, field_type: FieldType) -> Any:
 _SPELLS_INFINITY = re.compile(r"[+-]?inf(inity)?", re.IGNORECASE)
 
 
-def _json_literal(text: str) -> Any:
+def _json_literal(text: str) -> object:
     try:
         return json.loads(text)  # Python's reader also takes NaN and Infinity
     except (json.JSONDecodeError, ValueError) as exc:
@@ -254,7 +254,7 @@ class FieldPlan:
     path: FieldPath
     site: FieldSite
     source: Literal | Entry
-    value: Any  # the value to set, or DYNAMIC (computed per match)
+    value: object  # the value to set, or DYNAMIC (computed per match)
     skip: str | None = None  # why this assignment never applies on the channel
     text: str = ""  # the path as written, rendered once (events name it per message)
     direct: bool = False  # one place and a scalar value: _set_one, not the general matcher

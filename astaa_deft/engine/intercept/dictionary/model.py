@@ -14,7 +14,6 @@ import copy
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from astaa_deft.io.codecs import Codec
 from astaa_deft.model.errors import AstaaDeftError, did_you_mean
@@ -55,7 +54,7 @@ class Entry:
 
     group: str
     name: str
-    value: Any = None
+    value: object = None  # plain data a codec carries (None, bool, numbers, str, bytes, lists, string-keyed dicts)
     rule: str | None = None
     origin: str = ""  # file:line where it was defined, for messages
 
@@ -75,7 +74,7 @@ class Entry:
         """Why this entry has no value for that field at all (None: it may have one)."""
         return RULES[self.rule].problem(site) if self.rule else None
 
-    def static_value(self, site: FieldSite) -> Any:
+    def static_value(self, site: FieldSite) -> object:
         """The value for ``site`` if it does not depend on the message, else ``DYNAMIC``.
 
         Call ``problem`` first: a static rule raises NotApplicable here otherwise.
@@ -85,7 +84,7 @@ class Entry:
         rule = RULES[self.rule]
         return rule.compute(site, None) if rule.static else _DYNAMIC
 
-    def resolve(self, context: ValueContext) -> Any:
+    def resolve(self, context: ValueContext) -> object:
         """The value for one concrete place; raises NotApplicable with the reason."""
         if self.rule is None:
             return copy.deepcopy(self.value)
@@ -98,7 +97,7 @@ class Entry:
 DYNAMIC = _DYNAMIC
 
 
-def wire_value(value: Any, field_type: FieldType, codec: Codec) -> Any:
+def wire_value(value: object, field_type: FieldType, codec: Codec) -> object:
     """``value`` as it travels in a field of that type: JSON writes ``bytes`` fields as base64 text."""
     if field_type.kind == "bytes" and codec.name == "json" and type(value) is bytes:
         return base64.b64encode(value).decode("ascii")
