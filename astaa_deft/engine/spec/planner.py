@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
 from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.errors import did_you_mean
@@ -266,9 +265,9 @@ def read_setting(src: Source, node: Node | None, what: str, default: float, posi
     return float(value)
 
 
-def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str, Any]:
+def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str, str | bool]:
     """Placeholders filled from the run's params; 'true'/'on' style words become booleans."""
-    out: dict[str, Any] = {}
+    out: dict[str, str | bool] = {}
     for key, value in args.items():
         text = value.format_map(dict(params))
         low = text.lower()

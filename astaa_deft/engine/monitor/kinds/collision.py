@@ -58,6 +58,7 @@ from astaa_deft.model.sut import FieldType
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, EpisodeGate, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
+from astaa_deft.engine.monitor.paths import is_number
 from astaa_deft.model.geometry import Box, box_between, box_moved, overlap
 from astaa_deft.engine.monitor.pairing import Join, JoinMode
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
@@ -344,7 +345,7 @@ class CollisionMonitor(Monitor):
             vx, vy = (follow(element, path) for path in self._velocity)
         except RUNTIME_ERRORS:
             return None
-        if all(type(v) in (int, float) and math.isfinite(v) for v in (vx, vy)):
+        if is_number(vx) and is_number(vy) and math.isfinite(vx) and math.isfinite(vy):
             return float(vx), float(vy)
         return None
 
