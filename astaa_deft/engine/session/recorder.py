@@ -231,8 +231,8 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
             continue
         ros2 = channel.encoding.startswith("cdr:")
 
-        def on_sample(sample: zenoh.Sample, cid: int = cid, codec: Codec = codec, name: str = channel.name,
-                      ros2: bool = ros2) -> None:
+        def on_sample(sample: zenoh.Sample, *, cid: int = cid, codec: Codec = codec, name: str = channel.name,
+                      ros2: bool = ros2) -> None:  # the keywords: this channel's, bound now (Zenoh passes the sample)
             q.put(BusMessage(time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
                              _source_time(sample) if ros2 else sample.timestamp))
 

@@ -335,12 +335,13 @@ def apply_plans(message: dict, plans: Sequence[FieldPlan], info: MessageInfo) ->
             if not replaced:
                 skipped.append({"path": str(plan.path), "reason": "no such field in this message"})
         else:
-            _apply_dynamic(message, plan, info, changes, skipped)
+            _apply_dynamic(message, plan, info, changes=changes, skipped=skipped)
     return changes, skipped
 
 
-def _apply_dynamic(message: dict, plan: FieldPlan, info: MessageInfo,
+def _apply_dynamic(message: dict, plan: FieldPlan, info: MessageInfo, *,
                    changes: list[FieldChange], skipped: list[dict]) -> None:
+    """Each place ``plan`` matches set to its rule's value now; appends to ``changes`` and ``skipped``."""
     matches = get(message, plan.path)
     if not matches:
         skipped.append({"path": str(plan.path), "reason": "no such field in this message"})

@@ -117,7 +117,7 @@ def _ego(reader: InvariantReader, node: Node | None) -> tuple[str, Footprint] | 
     channel = reader.channel(node.value.get("channel"))
     if channel is None:
         return None
-    footprint = _footprint(reader, node, channel.type, None, "ego")
+    footprint = _footprint(reader, node, channel.type, None, what="ego")
     if footprint is None:
         return None
     offset = reader.number(node.value.get("offset"), "'ego.offset'") if "offset" in node.value else 0.0
@@ -160,11 +160,11 @@ def _obstacles(reader: InvariantReader, node: Node | None
         if vx is None or vy is None:
             return None
         velocity = (vx[0], vy[0])
-    footprint = _footprint(reader, node, channel.type, element, "obstacles")
+    footprint = _footprint(reader, node, channel.type, element, what="obstacles")
     return (channel.name, array, obstacle_id, footprint, velocity) if footprint else None
 
 
-def _footprint(reader: InvariantReader, node: Node, type_name: str, element: FieldType | None,
+def _footprint(reader: InvariantReader, node: Node, type_name: str, element: FieldType | None, *,
                what: str) -> Footprint | None:
     """x, y (fields), heading, length, width (fields or numbers), defaults filled in by name."""
     owner = element.ref if element is not None and element.ref else type_name
