@@ -23,7 +23,11 @@ class EvaluationError(AstaaDeftError):
     """A message that does not have the shape a concrete path or expression reads."""
 
 
-Evaluator = Callable[[Any], Any]  # a decoded message -> a value
+# A decoded message -> a value. Any, on purpose: an invariant's expression is type-checked by the
+# expression language itself (``language.Ty``, when the spec is read), so at run time its closures
+# add, compare and index values mypy cannot see the types of; each closure is one operation on the
+# hot path, and narrowing there would cost every message what the reader already proved.
+Evaluator = Callable[[Any], Any]
 
 
 ValuesOf = Callable[[Any], list]
