@@ -61,9 +61,7 @@ def intercept_record(event: Mutation | Mapping[str, object], original: bytes | N
         form, body = EVENT_JSON, json.dumps(event, default=str).encode()
     else:
         try:
-            e = event  # the order of _EVENT_ATTRS, spelt out: this runs for every mutated message
-            body = marshal.dumps((e.testcase, e.policy, e.action, e.channel, e.consumers, e.message_index, e.time,
-                                  tuple([(c.path, c.old, c.new) for c in e.fields]), e.detail), 4)
+            body = marshal.dumps(_event_wire(event), 4)  # its attribute tuple, as a batch row carries it
             form = EVENT_MARSHAL
         except ValueError:  # a value of a type marshal does not carry exactly: the JSON form, as written
             form, body = EVENT_JSON, json.dumps(event.to_json(), default=str).encode()
