@@ -40,8 +40,8 @@ from astaa_deft.model.errors import AstaaDeftError, InputError, Problem, did_you
 from astaa_deft.model.fields import FieldPath, FieldPathError, get, set_field
 from astaa_deft.model.sut import FLOAT_KINDS, INT_KINDS, Channel, FieldType
 from astaa_deft.engine.intercept.dictionary import (
-    DYNAMIC, GROUP_OF_KIND, REF_PREFIX, Dictionary, Entry, FieldSite, NotApplicable, UnknownEntry, ValueContext,
-    field_site, wire_value,
+    DYNAMIC, GROUP_OF_KIND, REF_PREFIX, Dictionary, Dynamic, Entry, FieldSite, FieldValue, NotApplicable,
+    UnknownEntry, ValueContext, field_site, is_field_value, wire_value,
 )
 from astaa_deft.engine.intercept.actions.base import (
     ACTIONS, ActionConfig, ActionDetail, ActionRuntime, FastPath, FieldChange, MessageInfo,
@@ -157,7 +157,7 @@ class ValueProblem(AstaaDeftError, ValueError):
 
 @dataclass(frozen=True)
 class Literal:
-    value: object  # as the field's declared type reads it (parse_literal)
+    value: FieldValue  # as the field's declared type reads it (parse_literal)
 
 
 def value_source(text: str, site: FieldSite, dictionary: Dictionary) -> Literal | Entry:
@@ -180,7 +180,7 @@ def _group_hint(site: FieldSite, dictionary: Dictionary) -> str:
     return ("values for this field include " + ", ".join(names)) if names else "pick another value"
 
 
-def parse_literal(text: str, field_type: FieldType) -> object:
+def parse_literal(text: str, field_type: FieldType) -> FieldValue:
     """A literal value as the field's declared type reads it (ValueProblem if it cannot)."""
     if text.startswith(JSON_PREFIX):
         return _json_literal(text[len(JSON_PREFIX):])
@@ -213,6 +213,9 @@ def parse_literal(text: str, field_type: FieldType) -> object:
     if kind == "enum":
         for declared in field_type.values:
             if str(declared) == text.strip():
+                if not is_field_value(declared):  # a YAML date, say
+                    raise ValueProblem(f"{text!r} is declared as a YAML {type(declared).__name__}, which no "
+                                       "message encoding carries", "quote the value in the spec's enum")
                 return declared
         hint = did_you_mean(text.strip(), [str(v) for v in field_type.values])
         raise ValueProblem(f"{text!r} is not a declared value" + (f"; {hint}" if hint else ""),
@@ -236,7 +239,7 @@ def parse_literal(text: str, field_type: FieldType) -> object:
 _SPELLS_INFINITY = re.compile(r"[+-]?inf(inity)?", re.IGNORECASE)
 
 
-def _json_literal(text: str) -> object:
+def _json_literal(text: str) -> FieldValue:
     try:
         return json.loads(text)  # Python's reader also takes NaN and Infinity
     except (json.JSONDecodeError, ValueError) as exc:
@@ -254,7 +257,7 @@ class FieldPlan:
     path: FieldPath
     site: FieldSite
     source: Literal | Entry
-    value: object  # the value to set, or DYNAMIC (computed per match)
+    value: FieldValue | Dynamic  # the value to set, or DYNAMIC (computed per match)
     skip: str | None = None  # why this assignment never applies on the channel
     text: str = ""  # the path as written, rendered once (events name it per message)
     direct: bool = False  # one place and a scalar value: _set_one, not the general matcher

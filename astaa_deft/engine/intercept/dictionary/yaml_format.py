@@ -14,7 +14,7 @@ from typing import Final, Literal
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.io.yamlsource import Node, Source, describe_value
 from astaa_deft.engine.intercept.dictionary.model import GROUPS, KINDS_OF_GROUP, Entry
-from astaa_deft.engine.intercept.dictionary.rules import RULES
+from astaa_deft.engine.intercept.dictionary.rules import RULES, FieldValue, is_field_value
 
 # Groups whose plain numbers are meant as floats: `one: 1` in the float group is 1.0.
 _FLOAT_GROUPS = ("float", "time")
@@ -119,16 +119,16 @@ class DictionaryFile:
             return _REPORTED
         return Entry(group, name, rule=rule.name, origin=origin)
 
-    def plain(self, node: Node) -> object:
+    def plain(self, node: Node) -> FieldValue | Reported:
         """The node's value if it is plain data a codec can hold, else _REPORTED."""
         value = node.plain()
-        problem = _not_plain(value)
-        if problem:
-            self.src.at(node, problem, "quote it to make it a string, or use !!binary for bytes")
-            return _REPORTED
-        return value
+        if is_field_value(value):
+            return value
+        self.src.at(node, _not_plain(value) or "not plain data",
+                    "quote it to make it a string, or use !!binary for bytes")
+        return _REPORTED
 
-    def as_float(self, node: Node, value: object) -> object:
+    def as_float(self, node: Node, value: FieldValue) -> FieldValue | Reported:
         """Plain numbers and numeric strings in the float/time groups are floats."""
         if type(value) is int:
             try:
