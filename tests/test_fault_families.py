@@ -92,7 +92,7 @@ def first_sustained_for_n_messages(spec, anchor: str):
     """The first weighted draw, in seeded order, that holds one value on the next N messages."""
     targets = gen.targets_to_mutate(spec, DICTIONARY, include_brittle=False)
     for number in range(1, 500):
-        testcase = gen.weighted_testcase(f"tc-{number}", random.Random(f"live/{number}"), targets, 1.5, anchor)
+        testcase = gen.weighted_testcase(f"tc-{number}", random.Random(f"live/{number}"), targets, 1.5, anchor=anchor)
         [policy] = testcase.policies
         if family(testcase.description) == "sustained" and policy.selection.limit is not None:
             return testcase

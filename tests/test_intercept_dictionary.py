@@ -222,3 +222,26 @@ def test_bad_user_files_are_reported_with_place_and_fix(text):
 def test_missing_user_file(tmp_path):
     with pytest.raises(InputError, match="file not found"):
         load_dictionary([tmp_path / "nope.yaml"])
+
+
+def test_a_field_value_is_plain_data_a_codec_can_carry():
+    """``is_field_value``: what a dictionary entry or a literal may put in a field (JSON's values and bytes)."""
+    import datetime
+
+    from astaa_deft.engine.intercept.dictionary import is_field_value
+
+    for plain in (None, True, 3, -0.5, math.nan, "text", b"\x00", [1, [b"x"]], {"a": {"b": [None]}}):
+        assert is_field_value(plain), plain
+    for other in (datetime.date(2024, 1, 1), (1, 2), {1: "key not text"}, [object()], {"a": {1, 2}}):
+        assert not is_field_value(other), other
+
+
+def test_a_set_literal_naming_an_enum_value_yaml_read_as_a_date_is_refused_with_its_reason():
+    import datetime
+
+    from astaa_deft.engine.intercept.actions.set import ValueProblem, parse_literal
+
+    enum = FieldType("enum", values=(datetime.date(2024, 1, 1), "idle"))
+    assert parse_literal("idle", enum) == "idle"
+    with pytest.raises(ValueProblem, match="YAML date, which no message encoding carries"):
+        parse_literal("2024-01-01", enum)

@@ -178,7 +178,7 @@ def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
     files = sorted(out.glob("tc-*.xml"))
     assert len(files) == 25
     assert "wrote 25 test cases" in capsys.readouterr().out
-    assert [f.read_bytes() for f in files] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 25, 9, 20.0)]
+    assert [f.read_bytes() for f in files] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 25, 9, duration=20.0)]
     with pytest.raises(InputError, match="already holds 25 test case"):
         generate_command.generate(SPEC_PATH, 5, 9, out)
     with pytest.raises(InputError, match="at least 1"):
@@ -192,7 +192,8 @@ def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
     assert capsys.readouterr().out == ""
     assert [p.name for p in report.paths] == [f"tc-{n:04d}.xml" for n in range(1, 7)]
     assert sum(report.shapes.values()) == 6
-    assert [p.read_bytes() for p in report.paths] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 6, 4, 10.0)]
+    drawn = generate(SPEC, DICTIONARY, 6, 4, duration=10.0)
+    assert [p.read_bytes() for p in report.paths] == [t.to_xml() for t in drawn]
 
 
 def test_cases_are_drawn_one_at_a_time_not_as_a_whole_list():

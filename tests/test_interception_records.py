@@ -77,6 +77,19 @@ def test_malformed_records_and_batches_raise_value_error() -> None:
             unpack_deliveries(marshal.dumps(rows))
 
 
+def test_an_event_whose_json_is_not_an_object_is_malformed() -> None:
+    """A JSON event is a mutation's JSON object: a list or a number there is a damaged record, not an event."""
+    import marshal
+    import struct
+
+    for body in (b"[1, 2]", b"3", b'"text"'):
+        record = struct.pack("<BI??", EVENT_JSON, len(body), True, False) + body
+        with pytest.raises(ValueError, match="not a JSON object"):
+            read_intercept_record(record)
+        with pytest.raises(ValueError, match="not an object"):
+            unpack_deliveries(marshal.dumps([(1, b"p", None, True, body)]))
+
+
 @pytest.mark.parametrize("old,new", VALUES)
 def test_a_batch_of_deliveries_carries_each_event_as_its_json_form(old, new) -> None:
     events = [_event(old, new, {"skipped_fields": ({"path": "x", "reason": "r"},)}),

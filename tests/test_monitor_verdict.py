@@ -200,7 +200,7 @@ def test_online_and_offline_verdicts_agree_on_the_same_run(tmp_path):
             monitors.on_tick(next_tick)
             next_tick += 50_000_000
         if exit_pending and time_ns >= ns(crash_at):
-            monitors.on_process_exit("control", -11, "SIGSEGV", ns(crash_at), False, "")
+            monitors.on_process_exit("control", -11, "SIGSEGV", ns(crash_at), during_shutdown=False, stderr_tail="")
             exit_pending = False
         counters[channel] = counters.get(channel, 0) + 1
         payload = get_codec(spec.channel(channel).encoding).encode(value)

@@ -215,7 +215,7 @@ def zoo_cases():
         found = gen.semantic_probe(targets, 1, number)
         assert found is not None
         probe, lap = found
-        cases.append((probe.family, gen.probe_testcase(f"s{number}", random.Random(number), probe, lap, 3.0)))
+        cases.append((probe.family, gen.probe_testcase(f"s{number}", random.Random(number), probe, lap, duration=3.0)))
     return cases
 
 

@@ -34,7 +34,7 @@ def family_case(name: str) -> TestCase:
         probe, lap = found
         if probe.family != name:
             continue
-        testcase = gen.probe_testcase(f"zoo-{name}", random.Random(number), probe, lap, 1.5, anchor="state")
+        testcase = gen.probe_testcase(f"zoo-{name}", random.Random(number), probe, lap, duration=1.5, anchor="state")
         if reached(testcase, defects=True) == name:
             return testcase
     raise AssertionError(f"no probe of {name} reaches its defect")

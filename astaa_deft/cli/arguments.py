@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from astaa_deft.model.errors import InputError
 
@@ -70,9 +70,13 @@ MAX_BUDGET_S = 30 * DAY_S
 
 
 def bounded(parser: argparse.ArgumentParser, flag: str, bounds: NumberRange, *, help: str = "",
-            **kwargs: Any) -> None:
-    """``parser.add_argument`` for a number option; its range is checked and said in ``--help``."""
-    parser.add_argument(flag, type=bounds, help=f"{help} [{bounds}]".strip(), **kwargs)
+            default: float | None = None, metavar: str | None = None, required: bool = False) -> None:
+    """``parser.add_argument`` for a number option; its range is checked and said in ``--help``.
+
+    ``default``, ``metavar`` and ``required`` mean what they mean to ``add_argument`` (whose defaults they keep).
+    """
+    parser.add_argument(flag, type=bounds, help=f"{help} [{bounds}]".strip(), default=default, metavar=metavar,
+                        required=required)
 
 
 def budget(text: str) -> float:

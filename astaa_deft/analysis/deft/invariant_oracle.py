@@ -50,7 +50,7 @@ def check_invariant_oracle(suite: Suite, entry: OracleEntry) -> str | None:
         monitors.on_tick(last)
         if result.stopped == "crash" and crash_counts:
             # The module's own process would have died of this exception: judged as its abnormal exit.
-            found = monitors.on_process_exit(cfg.module, 1, None, last, False)
+            found = monitors.on_process_exit(cfg.module, 1, None, last, during_shutdown=False)
             if found or invariant is None:
                 return (f"frame {frame['index']}: module '{cfg.module}' crashes: {result.error}"
                         + (f" (invariant '{invariant.name}': {found[0].detail})" if found and invariant else ""))

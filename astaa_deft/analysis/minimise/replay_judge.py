@@ -136,7 +136,7 @@ class ReplayJudge:
         """The module's process would die of ``exc``: its abnormal exit, judged like the run's."""
         what = f"module '{self.model.cfg.module}' crashes on trigger {frame.output}: {type(exc).__name__}: {exc}"
         time_ns = self.model.output_time(frame)
-        found = self.monitors.on_process_exit(self.model.cfg.module, 1, None, time_ns, False)
+        found = self.monitors.on_process_exit(self.model.cfg.module, 1, None, time_ns, during_shutdown=False)
         if found:
             return ReplayAnswer(TestResult(Outcome.FAIL, f"{format_violation(found[0], self.model.start_ns)} ({what})"),
                                 frame.output)

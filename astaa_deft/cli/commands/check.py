@@ -93,7 +93,7 @@ def _withheld(log: LogContents, result: CheckResult) -> str:
             f"from the damage rather than the system under test")
 
 
-def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invariants: int, show_pass: bool) -> None:
+def _print(result: CheckResult, log_path: Path, spec_path: Path | None, invariants: int, *, show_pass: bool) -> None:
     from astaa_deft.engine.monitor import format_verdict, format_violation
 
     against = str(spec_path) if spec_path else "the spec stored in the log"

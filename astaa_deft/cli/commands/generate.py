@@ -51,8 +51,8 @@ def generate(spec_path: Path, count: int, seed: int, out_dir: Path, *, duration:
     from astaa_deft.engine.intercept.generate import generate_to_directory
     from astaa_deft.engine.spec.loader import load_spec
 
-    report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration, include_brittle, dictionaries,
-                                   families)
+    report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration=duration,
+                                   include_brittle=include_brittle, dictionaries=dictionaries, families=families)
     shapes = report.shapes
     semantic = ", ".join(f"{shapes[f.name]} {f.name}" for f in FAMILIES.values() if f.semantic and shapes[f.name])
     print(f"wrote {report.count} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "

@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     return run_proxy(spec, options, duration=args.duration)
 
 
-def run_bus(spec: Spec, options: RunOptions, duration: float | None,
+def run_bus(spec: Spec, options: RunOptions, duration: float | None, *,
             until: Callable[[RunView], str | None] = lambda run: None,
             on_start: Callable[[RunView], None] = lambda run: None, verbose: bool = True) -> RunResult:
     """:func:`run_session` with the console: events as they come, a status line, Ctrl-C/SIGTERM to stop.

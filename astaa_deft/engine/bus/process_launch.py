@@ -44,7 +44,7 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from queue import SimpleQueue
-from typing import IO, Any, NoReturn
+from typing import IO, NoReturn, TypeAlias, TypeVar
 
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.engine.bus.processes import stop_process
@@ -81,6 +81,8 @@ class UnsafeFork(AstaaDeftError):
 
 # -- the thread every child is forked from -------------------------------------------------------------
 
+ResultT = TypeVar("ResultT")
+
 
 class _Starter:
     """One daemon thread, alive as long as the process, that runs every ``Popen`` of :func:`start`.
@@ -91,7 +93,7 @@ class _Starter:
     """
 
     def __init__(self) -> None:
-        self._jobs: SimpleQueue[tuple[Callable[[], Any], Future[Any]]] = SimpleQueue()
+        self._jobs: SimpleQueue[Callable[[], None]] = SimpleQueue()  # each sets the future its caller waits on
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
         self.working = threading.Lock()  # held while a child is started, and by a fork
@@ -101,7 +103,7 @@ class _Starter:
         """The starter thread (None until the first start)."""
         return self._thread
 
-    def call(self, job: Callable[[], Any]) -> Any:
+    def call(self, job: Callable[[], ResultT]) -> ResultT:
         """``job()`` run in the starter thread; its result, or its exception raised here."""
         with self._lock:
             if self._thread is None:
@@ -110,18 +112,22 @@ class _Starter:
             thread = self._thread
         if threading.current_thread() is thread:
             return job()
-        future: Future[Any] = Future()
-        self._jobs.put((job, future))
+        future: Future[ResultT] = Future()
+
+        def run() -> None:
+            try:
+                future.set_result(job())
+            except BaseException as exc:  # noqa: BLE001 - handed to the caller, whatever it is
+                future.set_exception(exc)
+
+        self._jobs.put(run)
         return future.result()
 
     def _serve(self) -> None:
         while True:
-            job, future = self._jobs.get()
+            run = self._jobs.get()
             with self.working:
-                try:
-                    future.set_result(job())
-                except BaseException as exc:  # noqa: BLE001 - handed to the caller, whatever it is
-                    future.set_exception(exc)
+                run()
 
 
 _starter = _Starter()
@@ -138,10 +144,14 @@ os.register_at_fork(after_in_child=_new_starter_after_fork)
 
 # -- programs ----------------------------------------------------------------------------------------
 
+# A child's standard stream as ``subprocess.Popen`` takes it: a file descriptor or one of its
+# constants (DEVNULL, PIPE, STDOUT), an open file (binary or text), or None (the tool's own).
+Stream: TypeAlias = int | IO[bytes] | IO[str] | None
+
 
 def start(argv: Sequence[str], *, cwd: str | None = None, env: Mapping[str, str] | None = None,
-          stdin: int | IO[Any] | None = subprocess.DEVNULL, stdout: int | IO[Any] | None = subprocess.DEVNULL,
-          stderr: int | IO[Any] | None = subprocess.DEVNULL, text: bool = False, pass_fds: Sequence[int] = (),
+          stdin: Stream = subprocess.DEVNULL, stdout: Stream = subprocess.DEVNULL, stderr: Stream = subprocess.DEVNULL,
+          text: bool = False, pass_fds: Sequence[int] = (),
           die_with_tool: bool = True, death_signal: signal.Signals = signal.SIGTERM) -> subprocess.Popen:
     """Start ``argv`` as a child in its own session; return its ``Popen`` once the command itself runs.
 

@@ -13,7 +13,7 @@ import subprocess
 import sys
 from collections import deque
 from pathlib import Path
-from typing import IO, Any, Protocol
+from typing import IO, Protocol
 import contextlib
 
 # Python 3.10 has no -P: drop the current directory from sys.path by hand, then run the module as -m would.
@@ -35,8 +35,8 @@ def python_module(module: str) -> list[str]:
     return [sys.executable, "-c", _RUN_INSTALLED.format(m=module)]
 
 
-class ChildProcess(Protocol):
-    """What the tool uses of a child it started: a ``subprocess.Popen`` or a forked child (process_launch)."""
+class RunningProcess(Protocol):
+    """What stopping a child takes: a ``subprocess.Popen`` (text or binary) or a forked child (process_launch)."""
 
     @property
     def pid(self) -> int: ...
@@ -44,24 +44,28 @@ class ChildProcess(Protocol):
     @property
     def returncode(self) -> int | None: ...
 
-    @property
-    def stdin(self) -> IO[Any] | None: ...
-
-    @property
-    def stdout(self) -> IO[Any] | None: ...
-
     def poll(self) -> int | None: ...
 
     def wait(self, timeout: float | None = None) -> int: ...
 
 
-def signal_group(process: ChildProcess, sig: signal.Signals) -> None:
+class ChildProcess(RunningProcess, Protocol):
+    """A child the tool talks to on its standard streams, in text (a helper, the recorder, a forked child)."""
+
+    @property
+    def stdin(self) -> IO[str] | None: ...
+
+    @property
+    def stdout(self) -> IO[str] | None: ...
+
+
+def signal_group(process: RunningProcess, sig: signal.Signals) -> None:
     """Signal the process group led by `process` (every child the tool starts leads its own)."""
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(process.pid, sig)
 
 
-def stop_process(process: ChildProcess, grace: float, sig: signal.Signals = signal.SIGTERM) -> int | None:
+def stop_process(process: RunningProcess, grace: float, sig: signal.Signals = signal.SIGTERM) -> int | None:
     """Ask one process group to stop, kill it after `grace` seconds; returns the exit code."""
     if process.poll() is None:
         signal_group(process, sig)

@@ -214,10 +214,10 @@ class StarQueries:
             self._undeclared_seen.add(key)
             self.on_undeclared(caller, f"query:{key}")
         self.forwarded += 1
-        forward_query(self.session, query, caller, key, servers)
+        forward_query(self.session, query, caller, key, servers=servers)
 
 
-def forward_query(session: zenoh.Session, query: zenoh.Query, caller: str, key: str,
+def forward_query(session: zenoh.Session, query: zenoh.Query, caller: str, key: str, *,
                   servers: tuple[str, ...]) -> None:
     """Ask each server's namespace what ``caller`` asked on ``key`` and relay every reply into the caller's.
 
@@ -315,6 +315,6 @@ class StarServices:
 
     def _serve(self, query: zenoh.Query, slot: tuple[str, str], servers: tuple[str, ...]) -> None:
         try:
-            forward_query(self.session, query, slot[0], slot[1], servers)
+            forward_query(self.session, query, slot[0], slot[1], servers=servers)
         finally:
             query.drop()

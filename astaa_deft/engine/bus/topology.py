@@ -19,14 +19,15 @@ from __future__ import annotations
 import json
 import marshal
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from operator import attrgetter
-from typing import Any
+from typing import Any, TypeAlias
 
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Channel, Spec
 from astaa_deft.engine.bus import zenoh_config as zc
-from astaa_deft.model.records import RunMode
+from astaa_deft.model.records import Mutation, MutationRow, RunMode
 
 STAR_PREFIX = "sut"
 TOOL_PREFIX = "astaa-deft"
@@ -48,7 +49,7 @@ EVENT_MARSHAL, EVENT_JSON = 1, 2
 _EVENT_ATTRS = ("testcase", "policy", "action", "channel", "consumers", "message_index", "time")
 
 
-def intercept_record(event: Any, original: bytes | None, delivered: bool) -> bytes:
+def intercept_record(event: Mutation | Mapping[str, object], original: bytes | None, delivered: bool) -> bytes:
     """What was done, whether anything was delivered, the original: one intercepted delivery for the recorder.
 
     ``event`` is a mutation (``model.records.Mutation``, read by its
@@ -56,13 +57,11 @@ def intercept_record(event: Any, original: bytes | None, delivered: bool) -> byt
     as raw bytes, and the event as ``marshal`` data, whose encoding costs a
     tenth of the event's JSON form (which the recorder builds, in its own process).
     """
-    if isinstance(event, dict):
+    if not isinstance(event, Mutation):
         form, body = EVENT_JSON, json.dumps(event, default=str).encode()
     else:
         try:
-            e = event  # the order of _EVENT_ATTRS, spelt out: this runs for every mutated message
-            body = marshal.dumps((e.testcase, e.policy, e.action, e.channel, e.consumers, e.message_index, e.time,
-                                  tuple([(c.path, c.old, c.new) for c in e.fields]), e.detail), 4)
+            body = marshal.dumps(_event_wire(event), 4)  # its attribute tuple, as a batch row carries it
             form = EVENT_MARSHAL
         except ValueError:  # a value of a type marshal does not carry exactly: the JSON form, as written
             form, body = EVENT_JSON, json.dumps(event.to_json(), default=str).encode()
@@ -75,7 +74,7 @@ class WireEvent:
     """A mutation event as the recorder receives it: either its attributes or already its JSON form."""
 
     form: int  # EVENT_MARSHAL or EVENT_JSON
-    value: Any  # the attribute tuple (see intercept_record) or the JSON object
+    value: MutationRow | JsonObject  # the attribute tuple (see intercept_record) or the JSON object
 
 
 def read_intercept_record(attachment: bytes) -> tuple[WireEvent, bytes | None, bool]:
@@ -90,6 +89,8 @@ def read_intercept_record(attachment: bytes) -> tuple[WireEvent, bytes | None, b
                 raise ValueError("not an event tuple")
         elif form == EVENT_JSON:
             value = json.loads(raw)
+            if not isinstance(value, dict):
+                raise ValueError("the event is not a JSON object")
         else:
             raise ValueError(f"unknown event form {form}")
     except (struct.error, EOFError, TypeError, ValueError) as exc:
@@ -98,7 +99,7 @@ def read_intercept_record(attachment: bytes) -> tuple[WireEvent, bytes | None, b
     return WireEvent(form, value), original, delivered
 
 
-def wire_event_parts(event: WireEvent) -> dict[str, Any]:
+def wire_event_parts(event: WireEvent) -> dict[str, object]:
     """The attributes of a marshalled event by name (``fields``: (path, old, new) triples)."""
     return dict(zip((*_EVENT_ATTRS, EVENT_FIELDS, "detail"), event.value, strict=True))
 
@@ -121,8 +122,12 @@ def _event_wire(event: Any) -> Any:
     return (*_event_attrs(event), tuple(map(_change_attrs, event.fields)), event.detail)
 
 
-def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]],
-                    typed: Callable[[tuple], Any] | None = None) -> bytes:
+# One intercepted delivery for ``pack_deliveries``: (time ns, payload, original, delivered, event), the
+# event a ``Mutation``, its compact row (``MutationRow``) or its JSON form (a dict), or None.
+DeliveryRow: TypeAlias = tuple[int, bytes, "bytes | None", bool, object]
+
+
+def pack_deliveries(rows: Sequence[DeliveryRow], typed: Callable[[MutationRow], Mutation] | None = None) -> bytes:
     """Intercepted deliveries of one channel in one message: (time ns, payload, original, delivered, event) each.
 
     ``original`` and ``event`` are None for a message delivered untouched;
@@ -144,7 +149,7 @@ def pack_deliveries(rows: list[tuple[int, bytes, bytes | None, bool, Any]],
                               for row, (t, payload, original, delivered, event) in zip(rows, wire, strict=True)], 4)
 
 
-def _marshal_safe(wire_event: Any, event: Any, typed: Callable[[tuple], Any] | None) -> Any:
+def _marshal_safe(wire_event: Any, event: Any, typed: Callable[[MutationRow], Mutation] | None) -> Any:
     try:
         marshal.dumps(wire_event, 4)
         return wire_event
@@ -179,9 +184,12 @@ def unpack_deliveries(data: bytes) -> list[tuple[int, bytes, bytes | None, bool,
             wire = WireEvent(EVENT_MARSHAL, event)
         elif type(event) is bytes:
             try:
-                wire = WireEvent(EVENT_JSON, json.loads(event))
+                body = json.loads(event)
             except ValueError as exc:
                 raise ValueError(f"malformed interception batch: event JSON: {exc}") from None
+            if not isinstance(body, dict):
+                raise ValueError("malformed interception batch: an event's JSON is not an object")
+            wire = WireEvent(EVENT_JSON, body)
         elif event is not None:
             raise ValueError("malformed interception batch: an event is neither a tuple nor JSON")
         out.append((t, payload, original, delivered, wire))
@@ -212,7 +220,7 @@ def star_routes(spec: Spec) -> list[Route]:
     ]
 
 
-def module_configs(spec: Spec, mode: RunMode, bus_endpoint: str) -> dict[str, dict[str, Any]]:
+def module_configs(spec: Spec, mode: RunMode, bus_endpoint: str) -> dict[str, JsonObject]:
     """The Zenoh config each module gets, by module name: a client of the bus (ValueError: not a mode)."""
     mode = RunMode(mode)
     return {

@@ -10,12 +10,12 @@ from __future__ import annotations
 import json
 import socket
 from pathlib import Path
-from typing import Any
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import zenoh
 
 from astaa_deft.io.output_place import write_atomic
+from astaa_deft.model.json import JsonObject
 
 LOOPBACK = "127.0.0.1"
 
@@ -39,14 +39,15 @@ def config_dict(
     namespace: str | None = None,
     gossip: bool = False,
     timestamping: bool = False,
-) -> dict[str, Any]:
+) -> JsonObject:
     """A minimal Zenoh JSON5-compatible config as a plain dict."""
-    cfg: dict[str, Any] = {
+    scouting: JsonObject = {
+        "multicast": {"enabled": False},
+        "gossip": {"enabled": gossip},
+    }
+    cfg: JsonObject = {
         "mode": mode,
-        "scouting": {
-            "multicast": {"enabled": False},
-            "gossip": {"enabled": gossip},
-        },
+        "scouting": scouting,
         "listen": {"endpoints": list(listen)},
         "connect": {"endpoints": list(connect)},
     }
@@ -54,7 +55,7 @@ def config_dict(
         # A router waits scouting.delay (500 ms by default) at open for peers to scout; with
         # multicast and gossip off there are none to find, so that is half a second added to
         # every run's start (and every live minimisation test) for nothing.
-        cfg["scouting"]["delay"] = 0
+        scouting["delay"] = 0
     if timestamping:
         cfg["timestamping"] = {"enabled": True}
     if namespace:
@@ -62,7 +63,7 @@ def config_dict(
     return cfg
 
 
-def to_zenoh(cfg: dict[str, Any], base_file: Path | None = None) -> zenoh.Config:
+def to_zenoh(cfg: Mapping[str, object], base_file: Path | None = None) -> zenoh.Config:
     """Build a zenoh.Config from a dict, optionally on top of the user's JSON5 file.
 
     Our keys win over the user's file only where we set them; multicast
@@ -75,17 +76,17 @@ def to_zenoh(cfg: dict[str, Any], base_file: Path | None = None) -> zenoh.Config
     return conf
 
 
-def write_config_file(cfg: dict[str, Any], path: Path) -> Path:
+def write_config_file(cfg: Mapping[str, object], path: Path) -> Path:
     """Write a config as JSON (valid JSON5) for a module to load."""
     write_atomic(path, json.dumps(cfg, indent=2) + "\n")  # a new file, never through a link
     return path
 
 
-def open_session(cfg: dict[str, Any], base_file: Path | None = None) -> zenoh.Session:
+def open_session(cfg: Mapping[str, object], base_file: Path | None = None) -> zenoh.Session:
     return zenoh.open(to_zenoh(cfg, base_file))
 
 
-def _flatten(cfg: dict[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
+def _flatten(cfg: Mapping[str, object], prefix: str = "") -> Iterable[tuple[str, object]]:
     # insert_json5 on whole sub-objects would replace the user's sibling keys;
     # descend to leaves (lists are leaves) so only what we set is overwritten.
     for key, value in cfg.items():

@@ -104,13 +104,14 @@ class FaultTargets:
         return [family for family in by_rank() if family.semantic and family.name in self.by_family]
 
 
-def generate(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
+def generate(spec: Spec, dictionary: Dictionary, count: int, seed: int, *, duration: float = 30.0,
              include_brittle: bool = False, families: Collection[str] | None = None) -> list[TestCase]:
     """``count`` test cases in a list (see :func:`iter_testcases`)."""
-    return list(iter_testcases(spec, dictionary, count, seed, duration, include_brittle, families))
+    return list(iter_testcases(spec, dictionary, count, seed, duration=duration, include_brittle=include_brittle,
+                               families=families))
 
 
-def iter_testcases(spec: Spec, dictionary: Dictionary, count: int, seed: int, duration: float = 30.0,
+def iter_testcases(spec: Spec, dictionary: Dictionary, count: int, seed: int, *, duration: float = 30.0,
                    include_brittle: bool = False, families: Collection[str] | None = None) -> Iterator[TestCase]:
     """``count`` test cases, each drawn when the iterator reaches it (memory stays flat with the count).
 
@@ -182,7 +183,7 @@ class GenerateReport:
         return [self.directory / f"{_testcase_id(number, width)}.xml" for number in range(1, self.count + 1)]
 
 
-def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, duration: float = 30.0,
+def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, *, duration: float = 30.0,
                           include_brittle: bool = False, dictionaries: Sequence[Path] = (),
                           families: Collection[str] | None = None) -> GenerateReport:
     """Write ``count`` test cases drawn from ``spec`` and the dictionaries into a new or empty ``out_dir``.
@@ -256,8 +257,8 @@ def stamp_targets_by_channel(spec: Spec, dictionary: Dictionary) -> dict[str, li
 
 # ---------------------------------------------------------------- drawing one test case
 
-def weighted_testcase(testcase_id: str, rng: random.Random, targets: FaultTargets | Targets, duration: float,
-                      anchor: str | None = None, *, message_faults: bool = False,
+def weighted_testcase(testcase_id: str, rng: random.Random, targets: FaultTargets | Targets, duration: float, *,
+                      anchor: str | None = None, message_faults: bool = False,
                       stamps: Targets | None = None) -> TestCase:
     """One weighted draw (:func:`_draw`) without its family's name.
 
@@ -439,7 +440,7 @@ def _semantic_pass(targets: FaultTargets) -> tuple[list[tuple[str, int]], dict[s
     return cached  # type: ignore[return-value]
 
 
-def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, duration: float,
+def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_number: int, *, duration: float,
                    anchor: str | None = None) -> TestCase:
     """The test case of one probe: one message (or a held value), at a random time inside ``duration``."""
     # Early rounds ask "does this value break the field's consumers at all?": early windows answer that
@@ -448,7 +449,7 @@ def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_num
     scene = Scene(duration, anchor, latest)
     if probe.family is not None:
         assert probe.target is not None
-        return FAMILIES[probe.family].probe(testcase_id, rng, probe.target, round_number, scene)
+        return FAMILIES[probe.family].probe(testcase_id, rng, probe.target, visit=round_number, scene=scene)
     if probe.target is None:
         return fault_testcase(testcase_id, rng, probe.channel, probe.fault or MESSAGE_FAULTS[0], scene=scene,
                               repeated=False)
@@ -456,7 +457,7 @@ def probe_testcase(testcase_id: str, rng: random.Random, probe: Probe, round_num
         wanted = STAMP_FAULTS[round_number % len(STAMP_FAULTS)]
         fault = next((e for e in probe.target.values if e.key == wanted),
                      probe.target.values[round_number % len(probe.target.values)])
-        return stamp_testcase(testcase_id, rng, probe.target, fault, scene)
+        return stamp_testcase(testcase_id, rng, probe.target, fault, scene=scene)
     entry = value_for_round(probe.target, round_number, rng)
     assignments = (Assignment(str(probe.target.path), entry.ref),)
     start = scene.start(rng)

@@ -13,9 +13,10 @@ log.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
-from collections.abc import Sequence
+from typing import ClassVar
+from collections.abc import Hashable, Iterable
 
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.records import ProcessExit, Verdict
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.violation import Violation, message_copy
@@ -92,15 +93,19 @@ class Monitor:
 
     # -- helpers for subclasses ----------------------------------------------
     def violation(self, time_ns: int, detail: str, *, channel: str | None = None, seq: int | None = None,
-                  message: Any = None, module: str | None = None, crash: Verdict | None = None,
-                  copy_message: bool = True, infer_module: bool = True) -> Violation:
-        """A violation of this invariant; the module defaults to the channel's producer."""
+                  message: object = None, context: JsonObject | None = None, module: str | None = None,
+                  crash: Verdict | None = None, infer_module: bool = True) -> Violation:
+        """A violation of this invariant; the module defaults to the channel's producer.
+
+        ``message``: the offending message, stored as a bounded JSON-safe copy;
+        ``context``: what a kind without one stores instead, as it is.
+        """
         inv = self.invariant
         if module is None and infer_module and channel is not None:
             module = self.context.producer(channel)
         return Violation(
             invariant=inv.name, invariant_kind=inv.kind, severity=inv.severity, time_ns=time_ns, channel=channel,
-            seq=seq, message=message_copy(message) if copy_message else message, detail=detail,
+            seq=seq, message=message_copy(message) if context is None else context, detail=detail,
             crash=inv.crash or crash or inv.default_crash, module=module,
         )
 
@@ -113,18 +118,18 @@ class EpisodeGate:
     """
 
     def __init__(self) -> None:
-        self._broken: set[Any] = set()
+        self._broken: set[Hashable] = set()
 
-    def broke(self, key: Any = None) -> bool:
+    def broke(self, key: Hashable = None) -> bool:
         """Record a failure; True if it starts a new episode (so it should be reported)."""
         if key in self._broken:
             return False
         self._broken.add(key)
         return True
 
-    def held(self, key: Any = None) -> None:
+    def held(self, key: Hashable = None) -> None:
         self._broken.discard(key)
 
-    def keep_only(self, keys: Sequence[Any]) -> None:
+    def keep_only(self, keys: Iterable[Hashable]) -> None:
         """End the episodes of every key not in ``keys`` (they held, or are gone)."""
         self._broken.intersection_update(keys)

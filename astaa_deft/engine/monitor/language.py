@@ -27,7 +27,7 @@ class Ty:
     kind: str
     ref: str | None = None  # struct: the message type name
     items: Ty | None = None  # array: the element type
-    values: tuple[Any, ...] = ()  # enum: the allowed values
+    values: tuple[object, ...] = ()  # enum: the allowed values
 
     def describe(self) -> str:
         if self.kind == "struct":
@@ -77,7 +77,7 @@ def comparable(a: Ty, b: Ty) -> bool:
     return a.kind == b.kind and a.kind in ("number", "bool", "string", "bytes")
 
 
-def value_ty(value: Any) -> Ty:
+def value_ty(value: object) -> Ty:
     if isinstance(value, bool):
         return BOOL
     if isinstance(value, (int, float)):
@@ -99,7 +99,7 @@ def _length(x: Any) -> int:
 
 @dataclass(frozen=True)
 class Function:
-    impl: Callable[..., Any]
+    impl: Callable[..., object]
     args: tuple[str, ...]  # static kind of each argument ("number" or "sized"); "..." = repeat the last
     result: Ty
     help: str

@@ -79,7 +79,7 @@ class MonitorSet:
                         self.undecodable[name] = self.undecodable.get(name, 0) + 1
             return self._collect(monitors, lambda m: m.on_message(channel, time_ns, value, seq))
 
-    def on_process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int,
+    def on_process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int, *,
                         during_shutdown: bool, stderr_tail: str = "") -> list[Violation]:
         # pid 0: monitors judge a module's exit, never its process id (the log keeps the real one).
         exit_ = ProcessExit(module, 0, returncode, signal, time_ns, during_shutdown, stderr_tail)

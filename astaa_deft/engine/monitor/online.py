@@ -127,7 +127,7 @@ class OnlineMonitors:
                 continue  # the shutdown after the end: `check` does not judge it either
             if name == EXIT:
                 module, code, sig, shutdown, tail = body
-                found.extend(self.set.on_process_exit(module, code, sig, t, shutdown, tail))
+                found.extend(self.set.on_process_exit(module, code, sig, t, during_shutdown=shutdown, stderr_tail=tail))
                 continue
             if name == LINE:
                 module, text = body

@@ -14,9 +14,12 @@ arrivals still take their place in this order.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from astaa_deft.model.sut import Spec
+
+if TYPE_CHECKING:
+    import zenoh
 
 REORDER_WINDOW_NS = 100_000_000  # online: how long a message waits for earlier-stamped ones to arrive
 
@@ -25,7 +28,7 @@ def channel_ranks(spec: Spec) -> dict[str, int]:
     return {ch.name: rank for rank, ch in enumerate(spec.channels)}
 
 
-def sample_time_ns(timestamp: Any, received_ns: int) -> int:
+def sample_time_ns(timestamp: zenoh.Timestamp | None, received_ns: int) -> int:
     """The message time of a Zenoh sample: its timestamp, else when it was received."""
     if timestamp is None:
         return received_ns

@@ -36,6 +36,7 @@ from typing import Any
 from astaa_deft.model.fields import FieldPath
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
+from astaa_deft.engine.monitor.paths import is_number
 from astaa_deft.model.vocabulary import TextEnum
 
 MAX_OPEN_PAIRS = 4096  # pairing values remembered (a pair's partner comes within a few ticks, not thousands)
@@ -73,7 +74,7 @@ class Join:
         return {JoinMode.BUS: "by bus time", JoinMode.OWN_TIME: "on the channels' declared time",
                 JoinMode.PAIRED: "by the channels' pair_by"}[self.mode]
 
-    def at(self, channel: str, bus_ns: int, value: Any) -> int | None:
+    def at(self, channel: str, bus_ns: int, value: object) -> int | None:
         """The message's place (ns) on the joined time; None when it has none."""
         path = self._fields.get(channel)
         if path is None:
@@ -83,7 +84,7 @@ class Join:
         except RUNTIME_ERRORS:
             return None if self.mode == JoinMode.OWN_TIME else bus_ns
         if self.mode == JoinMode.OWN_TIME:
-            if type(found) not in (int, float) or not math.isfinite(found) or abs(found) > 9e9:
+            if not is_number(found) or not math.isfinite(found) or abs(found) > 9e9:
                 return None
             return round(found * 1e9)
         if type(found) not in (int, float, str, bool) or (type(found) is float and not math.isfinite(found)):

@@ -8,11 +8,11 @@ say precisely where the message stops matching its declared shape.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeGuard
 from collections.abc import Callable, Sequence
 
 from astaa_deft.model.errors import AstaaDeftError
-from astaa_deft.model.fields import WILDCARD, FieldPath
+from astaa_deft.model.fields import WILDCARD, FieldPath, Segment
 
 
 class Missing(AstaaDeftError):
@@ -23,7 +23,11 @@ class EvaluationError(AstaaDeftError):
     """A message that does not have the shape a concrete path or expression reads."""
 
 
-Evaluator = Callable[[Any], Any]  # a decoded message -> a value
+# A decoded message -> a value. Any, on purpose: an invariant's expression is type-checked by the
+# expression language itself (``language.Ty``, when the spec is read), so at run time its closures
+# add, compare and index values mypy cannot see the types of; each closure is one operation on the
+# hot path, and narrowing there would cost every message what the reader already proved.
+Evaluator = Callable[[Any], Any]
 
 
 ValuesOf = Callable[[Any], list]
@@ -108,7 +112,7 @@ def compile_getter(segments: tuple[str | int, ...]) -> Evaluator:
     return lambda m: follow(m, segments)
 
 
-def follow(value: Any, segments: Sequence[Any]) -> Any:
+def follow(value: object, segments: Sequence[Segment]) -> object:
     """The value at a concrete path; EvaluationError/KeyError/IndexError when it is not there."""
     for segment in segments:
         if isinstance(segment, str):
@@ -116,7 +120,12 @@ def follow(value: Any, segments: Sequence[Any]) -> Any:
                 raise EvaluationError(f"expected an object holding '{segment}', got {type(value).__name__}")
             value = value[segment]
         else:
-            if type(value) is not list:
+            if type(value) is not list or not isinstance(segment, int):  # a concrete path: no wildcard
                 raise EvaluationError(f"expected an array to index [{segment}], got {type(value).__name__}")
             value = value[segment]
     return value
+
+
+def is_number(value: object) -> TypeGuard[int | float]:
+    """An int or a float exactly, as a decoded message holds numbers (not a bool, nor a subclass)."""
+    return type(value) in (int, float)

@@ -25,8 +25,8 @@ Crashes are always monitored: an abnormal exit counts even when no
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
 
+from astaa_deft.model.json import JsonValue
 from astaa_deft.engine.monitor.violation import SEVERITIES, Violation
 from astaa_deft.model.records import CRASH_SCALE, ProcessExit, RunVerdict, Verdict
 
@@ -98,7 +98,7 @@ def _summary(klass: Verdict, first: Violation | None, findings: Sequence[Violati
     return text
 
 
-def format_verdict(verdict: RunVerdict | Mapping[str, Any], start_ns: int | None = None) -> str:
+def format_verdict(verdict: RunVerdict | Mapping[str, JsonValue], start_ns: int | None = None) -> str:
     """Console lines for a verdict (a RunVerdict or its JSON, e.g. a 'verdict' log event)."""
     if not isinstance(verdict, RunVerdict):
         verdict = RunVerdict.from_json(verdict)

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import base64
 import math
-from typing import Any
-
+from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.records import CRASH_CLASSES, Violation
 
 SEVERITIES = ("low", "medium", "high", "critical")
@@ -35,7 +34,7 @@ def format_violation(v: Violation, start_ns: int | None = None) -> str:
     return f"!! [{v.severity}] {v.invariant} ({v.invariant_kind}){where}{when}: {v.detail}"
 
 
-def json_safe(value: Any, depth: int = 0) -> Any:
+def json_safe(value: object, depth: int = 0) -> JsonValue:
     """A bounded, JSON-safe copy of plain message data.
 
     Non-finite floats become the strings "NaN", "Infinity", "-Infinity"
@@ -69,7 +68,7 @@ def json_safe(value: Any, depth: int = 0) -> Any:
     return repr(value)[:MAX_TEXT]
 
 
-def message_copy(value: Any) -> dict | None:
+def message_copy(value: object) -> JsonObject | None:
     """The offending message as stored in a violation."""
     if value is None:
         return None

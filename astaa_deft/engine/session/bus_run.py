@@ -16,7 +16,7 @@ import contextlib
 import json
 import subprocess
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -46,7 +46,7 @@ PartT = TypeVar("PartT", bound=RunPart)
 class BusPlan:
     """Where the run's bus is: the tool's Zenoh config, what it listens on, what modules connect to."""
 
-    tool_config: dict[str, object]
+    tool_config: Mapping[str, object]
     listen: list[str]
     endpoints: list[str]
     router: bool  # a bus router of ours (passive mode): the tool is one client among the modules

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import tempfile
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 
@@ -109,7 +109,7 @@ class RunDirectory(RunPart):
 class ToolSession(RunPart):
     """The tool's own Zenoh session and its events publisher (attached to ``events`` while open)."""
 
-    def __init__(self, spec: Spec, config: dict[str, object], listen: list[str], events: EventLog):
+    def __init__(self, spec: Spec, config: Mapping[str, object], listen: list[str], events: EventLog):
         self._spec = spec
         self._config = config
         self._listen = listen

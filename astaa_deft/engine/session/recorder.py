@@ -231,8 +231,8 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
             continue
         ros2 = channel.encoding.startswith("cdr:")
 
-        def on_sample(sample: zenoh.Sample, cid: int = cid, codec: Codec = codec, name: str = channel.name,
-                      ros2: bool = ros2) -> None:
+        def on_sample(sample: zenoh.Sample, *, cid: int = cid, codec: Codec = codec, name: str = channel.name,
+                      ros2: bool = ros2) -> None:  # the keywords: this channel's, bound now (Zenoh passes the sample)
             q.put(BusMessage(time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
                              _source_time(sample) if ros2 else sample.timestamp))
 
@@ -556,9 +556,10 @@ def _event_text(body: JsonObject) -> bytes:
 
 def event_json(wire: topology.WireEvent) -> JsonObject:
     """A mutation's JSON form (``Mutation.to_json``), from what the proxy sent."""
-    if wire.form == topology.EVENT_JSON:
-        return dict(wire.value)
-    return Mutation.row_json(wire.value)  # the compact form (topology.intercept_record)
+    value = wire.value
+    if isinstance(value, dict):  # the form EVENT_JSON (read_intercept_record checks the JSON is an object)
+        return dict(value)
+    return Mutation.row_json(value)  # the compact form (topology.intercept_record)
 
 
 if __name__ == "__main__":

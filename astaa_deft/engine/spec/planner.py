@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
 from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.errors import did_you_mean
@@ -36,7 +35,7 @@ COLLISION_KEYS = ("ego", "obstacles", "margin")
 OBSTACLE_KEYS = ("channel", "array", "length", "width", "id", "trajectory")
 
 
-def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageType],
+def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageType], *,
                   channels: Sequence[Channel], modules: Sequence[Module]) -> ReplayModule | None:
     if node is None or node.value is None:
         return None
@@ -93,9 +92,9 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
 
     layout = _trajectory(src, v.get("trajectory"), types, by_name.get(output))
     factory, args, command = _replay(src, v.get("replay"))
-    threshold = read_setting(src, v.get("threshold"), "planner.threshold", 0.0)
-    lookback = read_setting(src, v.get("lookback_ms"), "planner.lookback_ms", 100.0)
-    skew = read_setting(src, v.get("skew_ms"), "planner.skew_ms", 5.0)
+    threshold = read_setting(src, v.get("threshold"), "planner.threshold", default=0.0)
+    lookback = read_setting(src, v.get("lookback_ms"), "planner.lookback_ms", default=100.0)
+    skew = read_setting(src, v.get("skew_ms"), "planner.skew_ms", default=5.0)
     collision = _oracle(src, v.get("oracle"), inputs)
     # The planner is a module that runs alone like any other, with its extras: frames found per recorded
     # output, outputs compared as trajectories; an exception from step() is not judged (unresolved).
@@ -138,8 +137,8 @@ def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracl
     if ego is None or obstacles is None or not ego.is_map or not obstacles.is_map:
         src.at(c, "the collision oracle needs 'ego: {length, width}' and 'obstacles: {channel, …}'", "")
         return None
-    length = read_setting(src, ego.value.get("length"), "oracle ego length", 0.0)
-    width = read_setting(src, ego.value.get("width"), "oracle ego width", 0.0)
+    length = read_setting(src, ego.value.get("length"), "oracle ego length", default=0.0)
+    width = read_setting(src, ego.value.get("width"), "oracle ego width", default=0.0)
     if length <= 0 or width <= 0:
         src.at(ego, "the ego's 'length' and 'width' must be positive numbers (m)", "e.g. {length: 4.6, width: 1.9}")
     fields = {}
@@ -156,7 +155,7 @@ def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracl
     if channel not in inputs:
         src.at(obstacles, f"the oracle's obstacle channel '{channel}' is not a planner input",
                "name the input that carries predicted obstacles")
-    margin = read_setting(src, c.value.get("margin"), "oracle margin", 0.0)
+    margin = read_setting(src, c.value.get("margin"), "oracle margin", default=0.0)
     return CollisionOracle(length, width, channel, margin=margin, **fields)
 
 
@@ -207,10 +206,11 @@ def _replay(src: Source, node: Node | None) -> tuple[str | None, dict[str, str],
     if "factory" not in v and "command" not in v:
         src.at(node, "'planner.replay' needs 'factory', 'command' or both",
                "factory: in-process (pkg.module:Name); command: the planner's own process, fed over Zenoh")
-    return read_runner(src, v, "planner.replay", "mystack.planner:Planner", '["{python}", "-m", "mystack.planner"]')
+    return read_runner(src, v, "planner.replay", factory_example="mystack.planner:Planner",
+                       command_example='["{python}", "-m", "mystack.planner"]')
 
 
-def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example: str,
+def read_runner(src: Source, v: Mapping[str, Node], where: str, *, factory_example: str,
                 command_example: str) -> tuple[str | None, dict[str, str], tuple[str, ...]]:
     """A replayable module's ``factory`` (in-process), ``args`` and ``command`` (its own process).
 
@@ -253,7 +253,7 @@ def read_runner(src: Source, v: Mapping[str, Node], where: str, factory_example:
 MAX_SETTING = 1e9  # beyond any sensible metres, milliseconds or seconds; keeps `x * 1e6` an int64
 
 
-def read_setting(src: Source, node: Node | None, what: str, default: float, positive: bool = False) -> float:
+def read_setting(src: Source, node: Node | None, what: str, *, default: float, positive: bool = False) -> float:
     """A finite number in [0, MAX_SETTING] (> 0 when ``positive``), ``default`` when absent or reported."""
     if node is None:
         return default
@@ -266,9 +266,9 @@ def read_setting(src: Source, node: Node | None, what: str, default: float, posi
     return float(value)
 
 
-def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str, Any]:
+def resolve_args(args: Mapping[str, str], params: Mapping[str, str]) -> dict[str, str | bool]:
     """Placeholders filled from the run's params; 'true'/'on' style words become booleans."""
-    out: dict[str, Any] = {}
+    out: dict[str, str | bool] = {}
     for key, value in args.items():
         text = value.format_map(dict(params))
         low = text.lower()

@@ -66,7 +66,8 @@ def build_replay_section(src: Source, node: Node | None, channels: Sequence[Chan
     out: list[ReplayModule] = []
     seen: set[tuple[str, str]] = set()
     for n, item in enumerate(entries.value):
-        entry = _entry(src, item, f"replay.modules[{n}]", {c.name: c for c in channels}, [m.name for m in modules])
+        entry = _entry(src, item, f"replay.modules[{n}]", by_name={c.name: c for c in channels},
+                       module_names=[m.name for m in modules])
         if entry is None:
             continue
         if (entry.module, entry.output) in seen:
@@ -77,7 +78,7 @@ def build_replay_section(src: Source, node: Node | None, channels: Sequence[Chan
     return tuple(out)
 
 
-def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
+def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel],
            module_names: list[str]) -> ReplayModule | None:
     if not node.is_map:
         src.at(node, f"'{where}' must be a mapping", "e.g. {module: control, inputs: [...], trigger: ..., "
@@ -128,14 +129,14 @@ def _entry(src: Source, node: Node, where: str, by_name: Mapping[str, Channel],
         if ch is not None and module in module_names and ch.producer != module:
             src.at(outs.value[0], f"channel '{output}' is produced by '{ch.producer}', not '{module}'",
                    "name a channel the module produces")
-    factory, args, command = read_runner(src, v, where, "mystack.control:Replay",
-                                         '["{python}", "-m", "mystack.control"]')
+    factory, args, command = read_runner(src, v, where, factory_example="mystack.control:Replay",
+                                         command_example='["{python}", "-m", "mystack.control"]')
     frames = FrameMode(_choice(src, v.get("frames"), f"{where}.frames", FRAME_MODES))
     exceptions = StepExceptions(_choice(src, v.get("exceptions"), f"{where}.exceptions", EXCEPTIONS))
-    hang_after = read_setting(src, v.get("hang_after"), f"{where}.hang_after", 1.0, positive=True)
-    threshold = read_setting(src, v.get("threshold"), f"{where}.threshold", 0.0)
-    lookback = read_setting(src, v.get("lookback_ms"), f"{where}.lookback_ms", 100.0)
-    skew = read_setting(src, v.get("skew_ms"), f"{where}.skew_ms", 5.0)
+    hang_after = read_setting(src, v.get("hang_after"), f"{where}.hang_after", default=1.0, positive=True)
+    threshold = read_setting(src, v.get("threshold"), f"{where}.threshold", default=0.0)
+    lookback = read_setting(src, v.get("lookback_ms"), f"{where}.lookback_ms", default=100.0)
+    skew = read_setting(src, v.get("skew_ms"), f"{where}.skew_ms", default=5.0)
     ignore: tuple[str, ...] = ()
     if "ignore" in v:
         n = v["ignore"]

@@ -36,6 +36,7 @@ from decimal import Decimal
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from astaa_deft.io.codecs import Codec, DecodeError, EncodeError
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.records import FieldChange, Mutation
 from astaa_deft.model.registry import Registry
 
@@ -53,7 +54,7 @@ BuiltT = TypeVar("BuiltT")
 _new_object = object.__new__
 
 
-def built(cls: type[BuiltT], **values: Any) -> BuiltT:
+def built(cls: type[BuiltT], **values: object) -> BuiltT:
     """An instance of the frozen dataclass ``cls`` from ALL its field values, without its ``__init__``.
 
     For the engine's per-message path (why: docs/performance.md, "records").
@@ -206,10 +207,11 @@ class PolicyContext:
     select_slot: Callable[[str, float], bool]
 
     def event(self, action: str, info: MessageInfo, consumers: tuple[str, ...],
-              fields: tuple[FieldChange, ...] = (), **detail: Any) -> Mutation:
+              fields: tuple[FieldChange, ...] = (), *, detail: Mapping[str, object] | None = None) -> Mutation:
+        """The mutation an action made of ``info``'s message; ``detail``: its JSON form (``ActionDetail.to_json``)."""
         return built(Mutation, testcase=self.testcase, policy=self.policy.id, action=action,
                      channel=info.channel, consumers=consumers, message_index=info.index, time=info.now,
-                     fields=fields, detail=detail)
+                     fields=fields, detail={} if detail is None else dict(detail))
 
 
 DetailT = TypeVar("DetailT", bound="ActionDetail")
@@ -227,8 +229,8 @@ class ActionDetail:
 
     shown: ClassVar[tuple[str, ...]] = ()  # the fields a one-line description of a mutation shows
 
-    def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {}
+    def to_json(self) -> JsonObject:
+        out: JsonObject = {}
         for f in fields(self):
             value = getattr(self, f.name)
             if value is not None:
@@ -236,7 +238,7 @@ class ActionDetail:
         return out
 
     @classmethod
-    def from_json(cls: type[DetailT], data: Mapping[str, Any]) -> DetailT:
+    def from_json(cls: type[DetailT], data: Mapping[str, object]) -> DetailT:
         known = {f.name for f in fields(cls)}
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in known})
 
@@ -254,7 +256,7 @@ class NoDetail(ActionDetail):
 class PinnedStep:
     """One logged step of a mutation, to be redone on the one message it hit (see ``ActionConfig.pinned``)."""
 
-    detail: Mapping[str, Any]  # the step's logged detail (JSON form, untagged)
+    detail: Mapping[str, object]  # the step's logged detail (JSON form, untagged)
     fields: tuple[FieldChange, ...]  # the field changes kept for this step (values as sent); () if none
     original: ActionConfig | None  # the logged test case's action of the same kind for this policy, if known
 

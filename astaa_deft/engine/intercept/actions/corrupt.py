@@ -125,5 +125,5 @@ class CorruptRuntime(ActionRuntime):
             del payload[keep:]
         if detail.skipped is None:
             item.payload = bytes(payload)
-        item.events.append(self.context.event("corrupt", info, item.consumers, **detail.to_json()))
+        item.events.append(self.context.event("corrupt", info, item.consumers, detail=detail.to_json()))
         return [item]

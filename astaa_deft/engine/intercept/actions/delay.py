@@ -69,5 +69,5 @@ class DelayRuntime(ActionRuntime):
     def apply(self, item: Pending, info: MessageInfo) -> list[Pending]:
         item.at += self.seconds  # delays of stacked policies add up
         item.deferred = True
-        item.events.append(self.context.event("delay", info, item.consumers, **DelayDetail(self.ms).to_json()))
+        item.events.append(self.context.event("delay", info, item.consumers, detail=DelayDetail(self.ms).to_json()))
         return [item]

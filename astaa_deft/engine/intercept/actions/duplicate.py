@@ -70,6 +70,6 @@ class DuplicateRuntime(ActionRuntime):
         for number in range(1, self.copies + 1):
             twin = item.copy_for(item.consumers, extra=True)
             twin.events.append(self.context.event("duplicate", info, item.consumers,
-                                                  **DuplicateDetail(number, self.copies).to_json()))
+                                                  detail=DuplicateDetail(number, self.copies).to_json()))
             out.append(twin)
         return out

@@ -95,7 +95,7 @@ class HoldRuntime(ActionRuntime):
         undecodable = item.decode(info.codec)
         if undecodable is not None:
             item.events.append(self.context.event("hold", info, item.consumers,
-                                                  **FieldsDetail(skipped=undecodable).to_json()))
+                                                  detail=FieldsDetail(skipped=undecodable).to_json()))
             return [item]
         held = self.held.get(info.channel)
         skipped = None
@@ -116,7 +116,7 @@ class HoldRuntime(ActionRuntime):
                 item.message = None
             skipped = skipped or "no such field in this message"
         detail = FieldsDetail(skipped=skipped).to_json() if skipped else {}
-        item.events.append(self.context.event("hold", info, item.consumers, tuple(changes), **detail))
+        item.events.append(self.context.event("hold", info, item.consumers, tuple(changes), detail=detail))
         return [item]
 
 

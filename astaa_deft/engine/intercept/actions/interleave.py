@@ -153,12 +153,12 @@ class InterleaveRuntime(ActionRuntime):
             info = MessageInfo(channel, template.index, slot, codec, dict)
             item.consumers = ()
             item.events.append(self.context.event("interleave", info, consumers,
-                                                  **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
+                                                  detail=FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
             return [item]
         self.injected += 1
         info = MessageInfo(channel, template.index, slot, codec, lambda: codec.decode(template.payload))
         changes, skipped = apply_plans(message, self.plans[channel], info)
         item.message = message
         detail = FieldsDetail(injection=self.injected, skipped_fields=tuple(skipped) if skipped else None)
-        item.events.append(self.context.event("interleave", info, consumers, tuple(changes), **detail.to_json()))
+        item.events.append(self.context.event("interleave", info, consumers, tuple(changes), detail=detail.to_json()))
         return [item]

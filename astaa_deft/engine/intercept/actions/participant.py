@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from astaa_deft.io.codecs import DecodeError
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.model.fields import FieldPath, FieldPathError, FieldType, get, type_at
+from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.engine.intercept.actions.base import (
     ACTIONS, ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext,
     decimal_text, required,
@@ -305,16 +306,16 @@ def _field_type(spec: Spec, type_name: str, path: FieldPath, where: str) -> Fiel
 
 # ---------------------------------------------------------------- rendering
 
-def render(participant: Participant, mapping: ChannelMapping, t: float) -> dict[str, Any]:
+def render(participant: Participant, mapping: ChannelMapping, t: float) -> JsonObject:
     """The array element for ``participant`` in a message of time ``t``."""
     pose = participant.pose_at(t)
-    values = {"id": participant.id, "kind": participant.kind, "x": pose.x, "y": pose.y, "heading": pose.heading,
-              "vx": pose.vx, "vy": pose.vy, "speed": pose.speed, "length": participant.length,
-              "width": participant.width}
-    element: dict[str, Any] = {field_name: values[attr] for attr, field_name in mapping.fields.items()}
+    values: dict[str, JsonValue] = {
+        "id": participant.id, "kind": participant.kind, "x": pose.x, "y": pose.y, "heading": pose.heading,
+        "vx": pose.vx, "vy": pose.vy, "speed": pose.speed, "length": participant.length, "width": participant.width}
+    element: JsonObject = {field_name: values[attr] for attr, field_name in mapping.fields.items()}
     if mapping.trajectory is not None:
         tm = mapping.trajectory
-        points = []
+        points: list[JsonValue] = []
         for k in range(int(round(tm.horizon / tm.step)) + 1):
             at = round(t + k * tm.step, 9)
             p = participant.pose_at(at)
@@ -352,10 +353,10 @@ class ParticipantRuntime(ActionRuntime):
         array.append(element)
         pose = self.config.pose_at(t)
         detail = ParticipantDetail(self.config.id, round(pose.x, 3), round(pose.y, 3), t)
-        item.events.append(self.context.event("participant", info, item.consumers, **detail.to_json()))
+        item.events.append(self.context.event("participant", info, item.consumers, detail=detail.to_json()))
         return [item]
 
     def _skip(self, item: Pending, info: MessageInfo, why: str) -> list[Pending]:
         item.events.append(self.context.event("participant", info, item.consumers,
-                                              **ParticipantDetail(self.config.id, skipped=why).to_json()))
+                                              detail=ParticipantDetail(self.config.id, skipped=why).to_json()))
         return [item]

@@ -87,7 +87,7 @@ class Remove(ActionConfig):
     def pinned(cls, step: PinnedStep) -> Remove | None:
         """The places the step removed (concrete paths); None when it removed none."""
         removed = step.detail.get("removed")
-        return cls(tuple(str(path) for path in removed)) if removed else None
+        return cls(tuple(str(path) for path in removed)) if isinstance(removed, (list, tuple)) and removed else None
 
 
 class RemoveRuntime(ActionRuntime):
@@ -100,14 +100,14 @@ class RemoveRuntime(ActionRuntime):
         undecodable = item.decode(info.codec)
         if undecodable is not None:
             item.events.append(self.context.event("remove", info, item.consumers,
-                                                  **RemoveDetail(skipped=undecodable).to_json()))
+                                                  detail=RemoveDetail(skipped=undecodable).to_json()))
             return [item]
         removed = [str(where) for path in self.paths for where in _remove(item.message, path)]
         if not removed and decoded_here:
             item.message = None  # nothing changed: the real payload goes on
         detail = (RemoveDetail(removed=tuple(removed)) if removed
                   else RemoveDetail(skipped="no such field in this message"))
-        item.events.append(self.context.event("remove", info, item.consumers, **detail.to_json()))
+        item.events.append(self.context.event("remove", info, item.consumers, detail=detail.to_json()))
         return [item]
 
 

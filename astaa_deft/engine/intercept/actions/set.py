@@ -40,8 +40,8 @@ from astaa_deft.model.errors import AstaaDeftError, InputError, Problem, did_you
 from astaa_deft.model.fields import FieldPath, FieldPathError, get, set_field
 from astaa_deft.model.sut import FLOAT_KINDS, INT_KINDS, Channel, FieldType
 from astaa_deft.engine.intercept.dictionary import (
-    DYNAMIC, GROUP_OF_KIND, REF_PREFIX, Dictionary, Entry, FieldSite, NotApplicable, UnknownEntry, ValueContext,
-    field_site, wire_value,
+    DYNAMIC, GROUP_OF_KIND, REF_PREFIX, Dictionary, Dynamic, Entry, FieldSite, FieldValue, NotApplicable,
+    UnknownEntry, ValueContext, field_site, is_field_value, wire_value,
 )
 from astaa_deft.engine.intercept.actions.base import (
     ACTIONS, ActionConfig, ActionDetail, ActionRuntime, FastPath, FieldChange, MessageInfo,
@@ -64,7 +64,7 @@ class Assignment:
     value: str  # as written: a literal, dict:..., json:... or str:...
 
 
-def value_text(value: Any) -> str:
+def value_text(value: object) -> str:
     """A ``<field value=…>`` that sets exactly ``value`` whatever the field's declared type.
 
     ``json:`` with ASCII escapes: the text stays valid XML (control
@@ -96,7 +96,7 @@ class FieldsDetail(ActionDetail):
     """What ``set`` and ``interleave`` record beyond their field changes."""
 
     injection: int | None = None  # interleave: the number of this injection, from 1
-    skipped_fields: tuple[dict[str, Any], ...] | None = None  # assignments that did not apply, and why
+    skipped_fields: tuple[dict[str, str], ...] | None = None  # assignments that did not apply, and why
     skipped: str | None = None  # why nothing was set (or injected)
 
 
@@ -157,7 +157,7 @@ class ValueProblem(AstaaDeftError, ValueError):
 
 @dataclass(frozen=True)
 class Literal:
-    value: Any
+    value: FieldValue  # as the field's declared type reads it (parse_literal)
 
 
 def value_source(text: str, site: FieldSite, dictionary: Dictionary) -> Literal | Entry:
@@ -180,7 +180,7 @@ def _group_hint(site: FieldSite, dictionary: Dictionary) -> str:
     return ("values for this field include " + ", ".join(names)) if names else "pick another value"
 
 
-def parse_literal(text: str, field_type: FieldType) -> Any:
+def parse_literal(text: str, field_type: FieldType) -> FieldValue:
     """A literal value as the field's declared type reads it (ValueProblem if it cannot)."""
     if text.startswith(JSON_PREFIX):
         return _json_literal(text[len(JSON_PREFIX):])
@@ -213,6 +213,9 @@ def parse_literal(text: str, field_type: FieldType) -> Any:
     if kind == "enum":
         for declared in field_type.values:
             if str(declared) == text.strip():
+                if not is_field_value(declared):  # a YAML date, say
+                    raise ValueProblem(f"{text!r} is declared as a YAML {type(declared).__name__}, which no "
+                                       "message encoding carries", "quote the value in the spec's enum")
                 return declared
         hint = did_you_mean(text.strip(), [str(v) for v in field_type.values])
         raise ValueProblem(f"{text!r} is not a declared value" + (f"; {hint}" if hint else ""),
@@ -236,7 +239,7 @@ def parse_literal(text: str, field_type: FieldType) -> Any:
 _SPELLS_INFINITY = re.compile(r"[+-]?inf(inity)?", re.IGNORECASE)
 
 
-def _json_literal(text: str) -> Any:
+def _json_literal(text: str) -> FieldValue:
     try:
         return json.loads(text)  # Python's reader also takes NaN and Infinity
     except (json.JSONDecodeError, ValueError) as exc:
@@ -254,7 +257,7 @@ class FieldPlan:
     path: FieldPath
     site: FieldSite
     source: Literal | Entry
-    value: Any  # the value to set, or DYNAMIC (computed per match)
+    value: FieldValue | Dynamic  # the value to set, or DYNAMIC (computed per match)
     skip: str | None = None  # why this assignment never applies on the channel
     text: str = ""  # the path as written, rendered once (events name it per message)
     direct: bool = False  # one place and a scalar value: _set_one, not the general matcher
@@ -335,12 +338,13 @@ def apply_plans(message: dict, plans: Sequence[FieldPlan], info: MessageInfo) ->
             if not replaced:
                 skipped.append({"path": str(plan.path), "reason": "no such field in this message"})
         else:
-            _apply_dynamic(message, plan, info, changes, skipped)
+            _apply_dynamic(message, plan, info, changes=changes, skipped=skipped)
     return changes, skipped
 
 
-def _apply_dynamic(message: dict, plan: FieldPlan, info: MessageInfo,
+def _apply_dynamic(message: dict, plan: FieldPlan, info: MessageInfo, *,
                    changes: list[FieldChange], skipped: list[dict]) -> None:
+    """Each place ``plan`` matches set to its rule's value now; appends to ``changes`` and ``skipped``."""
     matches = get(message, plan.path)
     if not matches:
         skipped.append({"path": str(plan.path), "reason": "no such field in this message"})
@@ -431,7 +435,7 @@ class SetRuntime(ActionRuntime):
                 item.message = info.codec.decode(item.payload)  # type: ignore[arg-type]
             except DecodeError as exc:
                 item.events.append(self.context.event(
-                    "set", info, item.consumers, **FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
+                    "set", info, item.consumers, detail=FieldsDetail(skipped=f"undecodable: {exc}").to_json()))
                 return [item]
         changes, skipped = apply_plans(item.message, self.plans[info.channel], info)  # type: ignore[arg-type]
         if changes and not skipped:  # every field set (the common case): an empty detail, built for free
@@ -441,7 +445,7 @@ class SetRuntime(ActionRuntime):
                                   skipped=None if changes else "no field was set").to_json()
             if not changes and decoded_here:  # nothing changed: keep the real payload object (zero copy downstream)
                 item.message = None
-        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), **detail))
+        item.events.append(self.context.event("set", info, item.consumers, tuple(changes), detail=detail))
         return [item]
 
 

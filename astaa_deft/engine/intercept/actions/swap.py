@@ -102,14 +102,14 @@ class SwapRuntime(ActionRuntime):
         undecodable = item.decode(info.codec)
         if undecodable is not None:
             item.events.append(self.context.event("swap", info, item.consumers,
-                                                  **FieldsDetail(skipped=undecodable).to_json()))
+                                                  detail=FieldsDetail(skipped=undecodable).to_json()))
             return [item]
         changes = _swapped(item.message, self.a, self.b)
         if not changes:
             if decoded_here:
                 item.message = None
-            item.events.append(self.context.event("swap", info, item.consumers,
-                                                  **FieldsDetail(skipped="no such field in this message").to_json()))
+            missing = FieldsDetail(skipped="no such field in this message")
+            item.events.append(self.context.event("swap", info, item.consumers, detail=missing.to_json()))
             return [item]
         item.events.append(self.context.event("swap", info, item.consumers, changes))
         return [item]

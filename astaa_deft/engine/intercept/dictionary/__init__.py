@@ -25,14 +25,17 @@ from astaa_deft.engine.intercept.dictionary.model import (
     KINDS_OF_GROUP,
     REF_PREFIX,
     Dictionary,
+    Dynamic,
     Entry,
     UnknownEntry,
     wire_value,
 )
-from astaa_deft.engine.intercept.dictionary.rules import RULES, FieldSite, NotApplicable, Rule, ValueContext, field_site
+from astaa_deft.engine.intercept.dictionary.rules import (
+    RULES, FieldSite, FieldValue, NotApplicable, Rule, ValueContext, field_site, is_field_value,
+)
 
 __all__ = [
     "DEFAULT_DICTIONARY", "DYNAMIC", "GROUPS", "GROUP_OF_KIND", "KINDS_OF_GROUP", "REF_PREFIX", "RULES",
-    "Dictionary", "Entry", "FieldSite", "NotApplicable", "Rule", "UnknownEntry", "ValueContext",
-    "dictionary_from_text", "field_site", "load_dictionary", "wire_value",
+    "Dictionary", "Dynamic", "Entry", "FieldSite", "FieldValue", "NotApplicable", "Rule", "UnknownEntry",
+    "ValueContext", "dictionary_from_text", "field_site", "is_field_value", "load_dictionary", "wire_value",
 ]

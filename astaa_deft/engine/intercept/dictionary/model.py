@@ -11,15 +11,16 @@ from __future__ import annotations
 
 import base64
 import copy
+import enum
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Final, Literal
 
 from astaa_deft.io.codecs import Codec
 from astaa_deft.model.errors import AstaaDeftError, did_you_mean
 from astaa_deft.model.sut import FLOAT_KINDS, INT_KINDS, FieldType
-from astaa_deft.engine.intercept.dictionary.rules import RULES, FieldSite, NotApplicable, ValueContext
+from astaa_deft.engine.intercept.dictionary.rules import RULES, FieldSite, FieldValue, NotApplicable, ValueContext
 
 REF_PREFIX = "dict:"
 
@@ -46,7 +47,14 @@ class UnknownEntry(AstaaDeftError, KeyError):
 
 # ---------------------------------------------------------------- entries
 
-_DYNAMIC = object()  # static_value() of an entry computed per mutation
+class _Dynamic(enum.Enum):
+    """``static_value()`` of an entry computed per mutation."""
+
+    TOKEN = enum.auto()
+
+
+DYNAMIC: Final = _Dynamic.TOKEN
+Dynamic = Literal[_Dynamic.TOKEN]
 
 
 @dataclass(frozen=True)
@@ -55,7 +63,7 @@ class Entry:
 
     group: str
     name: str
-    value: Any = None
+    value: FieldValue = None
     rule: str | None = None
     origin: str = ""  # file:line where it was defined, for messages
 
@@ -75,7 +83,7 @@ class Entry:
         """Why this entry has no value for that field at all (None: it may have one)."""
         return RULES[self.rule].problem(site) if self.rule else None
 
-    def static_value(self, site: FieldSite) -> Any:
+    def static_value(self, site: FieldSite) -> FieldValue | Dynamic:
         """The value for ``site`` if it does not depend on the message, else ``DYNAMIC``.
 
         Call ``problem`` first: a static rule raises NotApplicable here otherwise.
@@ -83,9 +91,9 @@ class Entry:
         if self.rule is None:
             return copy.deepcopy(self.value)
         rule = RULES[self.rule]
-        return rule.compute(site, None) if rule.static else _DYNAMIC
+        return rule.compute(site, None) if rule.static else DYNAMIC
 
-    def resolve(self, context: ValueContext) -> Any:
+    def resolve(self, context: ValueContext) -> FieldValue:
         """The value for one concrete place; raises NotApplicable with the reason."""
         if self.rule is None:
             return copy.deepcopy(self.value)
@@ -95,10 +103,7 @@ class Entry:
         return RULES[self.rule].compute(context.site, context)
 
 
-DYNAMIC = _DYNAMIC
-
-
-def wire_value(value: Any, field_type: FieldType, codec: Codec) -> Any:
+def wire_value(value: FieldValue, field_type: FieldType, codec: Codec) -> FieldValue:
     """``value`` as it travels in a field of that type: JSON writes ``bytes`` fields as base64 text."""
     if field_type.kind == "bytes" and codec.name == "json" and type(value) is bytes:
         return base64.b64encode(value).decode("ascii")
@@ -159,8 +164,9 @@ class Dictionary:
         skipped: list[tuple[Entry, str]] = []
         for entry in self.entries_for(site) if entries is None else entries:
             reason = entry.problem(site)
-            if reason is None and not entry.is_dynamic:
-                reason = codec.carries(wire_value(entry.static_value(site), site.field_type, codec))
+            value = entry.static_value(site) if reason is None else DYNAMIC
+            if value is not DYNAMIC:  # a dynamic entry's value is checked per mutation
+                reason = codec.carries(wire_value(value, site.field_type, codec))
             if reason is None:
                 usable.append(entry)
             else:

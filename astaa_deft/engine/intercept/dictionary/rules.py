@@ -12,13 +12,29 @@ from __future__ import annotations
 import copy
 import math
 import random
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TypeAlias, TypeGuard
 
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.fields import FieldPath, PathLike, as_path, type_at
 from astaa_deft.model.sut import FLOAT_KINDS, INT_KINDS, INT_RANGES, FieldType, MessageType
+
+# The plain data a message field holds, a dictionary entry gives and a rule computes: JSON's values
+# plus byte strings (CBOR and CDR carry them), containers read-only so that any JSON value is one.
+FieldValue: TypeAlias = (None | bool | int | float | str | bytes
+                         | Sequence["FieldValue"] | Mapping[str, "FieldValue"])
+
+
+def is_field_value(value: object) -> TypeGuard[FieldValue]:
+    """Plain data a field can hold: None, a bool, number, str or bytes, or lists and string-keyed dicts of them."""
+    if value is None or type(value) in (bool, int, float, str, bytes):
+        return True
+    if type(value) is list:
+        return all(map(is_field_value, value))
+    if type(value) is dict:
+        return all(type(key) is str and is_field_value(item) for key, item in value.items())
+    return False
 
 
 class NotApplicable(AstaaDeftError):
@@ -56,10 +72,10 @@ class ValueContext:
     """What a derive rule may look at when mutating one concrete place of a message."""
 
     site: FieldSite
-    current: Any  # the value at that place now
-    container: Any  # the dict (or list) holding it, for sibling arrays
+    current: FieldValue  # the value at that place now
+    container: FieldValue  # the dict (or list) holding it, for sibling arrays
     key: str | int  # where it sits in the container
-    previous: Callable[[], Any]  # the same place in the previous real message; raises NotApplicable
+    previous: Callable[[], FieldValue]  # the same place in the previous real message; raises NotApplicable
 
 
 # ---------------------------------------------------------------- derive rules
@@ -74,7 +90,7 @@ class Rule:
 
     name: str
     kinds: frozenset[str] | None
-    compute: Callable[[FieldSite, ValueContext | None], Any]
+    compute: Callable[[FieldSite, ValueContext | None], FieldValue]
     static: bool = False
 
     def problem(self, site: FieldSite) -> str | None:
@@ -98,14 +114,14 @@ def _bound(site: FieldSite, which: str) -> float:
     return value
 
 
-def _below_min(site: FieldSite, _ctx: ValueContext | None) -> Any:
+def _below_min(site: FieldSite, _ctx: ValueContext | None) -> FieldValue:
     low = _bound(site, "min")
     if site.field_type.kind in INT_KINDS:
         return math.ceil(low) - 1
     return math.nextafter(float(low), -math.inf)  # the closest value a range check must reject
 
 
-def _above_max(site: FieldSite, _ctx: ValueContext | None) -> Any:
+def _above_max(site: FieldSite, _ctx: ValueContext | None) -> FieldValue:
     high = _bound(site, "max")
     if site.field_type.kind in INT_KINDS:
         return math.floor(high) + 1
@@ -123,7 +139,7 @@ def _negated(_site: FieldSite, ctx: ValueContext | None) -> bool:
     return not ctx.current
 
 
-def _undefined_enum(site: FieldSite, _ctx: ValueContext | None) -> Any:
+def _undefined_enum(site: FieldSite, _ctx: ValueContext | None) -> FieldValue:
     values = site.field_type.values
     if values and all(type(v) is int for v in values):
         return max(values) + 1
@@ -141,7 +157,7 @@ def _case_swapped(site: FieldSite, _ctx: ValueContext | None) -> str:
     raise NotApplicable("no enum value has letters whose case can be swapped")
 
 
-def _previous(_site: FieldSite, ctx: ValueContext | None) -> Any:
+def _previous(_site: FieldSite, ctx: ValueContext | None) -> FieldValue:
     assert ctx is not None
     return copy.deepcopy(ctx.previous())
 
@@ -149,7 +165,7 @@ def _previous(_site: FieldSite, ctx: ValueContext | None) -> Any:
 def _previous_minus_1s(_site: FieldSite, ctx: ValueContext | None) -> float:
     assert ctx is not None
     previous = ctx.previous()
-    if type(previous) not in (int, float):
+    if not _is_number(previous):
         raise NotApplicable(f"the previous value {previous!r} is not a number of seconds")
     return float(previous) - 1.0
 
@@ -196,8 +212,8 @@ def _sibling_arrays(site: FieldSite, ctx: ValueContext) -> list[list]:
 # a sign flipped, an angle off by a turn, a unit mixed up, an array in another order. The semantic fault
 # families of ``astaa_deft.engine.intercept.faults`` draw them; they are ordinary dictionary entries too.
 
-def _at_bound(which: str) -> Callable[[FieldSite, ValueContext | None], Any]:
-    def at(site: FieldSite, _ctx: ValueContext | None) -> Any:
+def _at_bound(which: str) -> Callable[[FieldSite, ValueContext | None], FieldValue]:
+    def at(site: FieldSite, _ctx: ValueContext | None) -> FieldValue:
         value = _bound(site, which)
         if site.field_type.kind in INT_KINDS:
             return math.ceil(value) if which == "min" else math.floor(value)
@@ -205,17 +221,22 @@ def _at_bound(which: str) -> Callable[[FieldSite, ValueContext | None], Any]:
     return at
 
 
+def _is_number(value: object) -> TypeGuard[int | float]:
+    """An int or a float exactly: not a bool, nor a subclass of either."""
+    return type(value) in (int, float)
+
+
 def _number(ctx: ValueContext | None) -> float | int:
     assert ctx is not None
     value = ctx.current
-    if type(value) not in (int, float):
+    if not _is_number(value):
         raise NotApplicable(f"the current value {value!r} is not a number")
     if type(value) is float and not math.isfinite(value):
         raise NotApplicable(f"the current value {value!r} is not finite")
     return value
 
 
-def _sign_flipped(_site: FieldSite, ctx: ValueContext | None) -> Any:
+def _sign_flipped(_site: FieldSite, ctx: ValueContext | None) -> FieldValue:
     value = _number(ctx)
     if value == 0:
         raise NotApplicable("the current value is zero: its sign flipped is itself")
@@ -226,8 +247,8 @@ def _offset(delta: float) -> Callable[[FieldSite, ValueContext | None], float]:
     return lambda _site, ctx: float(_number(ctx)) + delta
 
 
-def _scaled(factor: float) -> Callable[[FieldSite, ValueContext | None], Any]:
-    def scale(site: FieldSite, ctx: ValueContext | None) -> Any:
+def _scaled(factor: float) -> Callable[[FieldSite, ValueContext | None], FieldValue]:
+    def scale(site: FieldSite, ctx: ValueContext | None) -> FieldValue:
         value = _number(ctx)
         if value == 0:
             raise NotApplicable("the current value is zero: scaling it changes nothing")

@@ -7,19 +7,30 @@ of a file is reported together, at its line and column, with a fix.
 
 from __future__ import annotations
 
+import enum
 import re
-from typing import Any
+from typing import Final, Literal
 
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.io.yamlsource import Node, Source, describe_value
 from astaa_deft.engine.intercept.dictionary.model import GROUPS, KINDS_OF_GROUP, Entry
-from astaa_deft.engine.intercept.dictionary.rules import RULES
+from astaa_deft.engine.intercept.dictionary.rules import RULES, FieldValue, is_field_value
 
 # Groups whose plain numbers are meant as floats: `one: 1` in the float group is 1.0.
 _FLOAT_GROUPS = ("float", "time")
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _MAX_REPEAT = 16 * 1024 * 1024  # a dictionary value is sent in a message: keep it sane
+
+
+class _Reported(enum.Enum):
+    """A problem was reported for this entry; it is left out."""
+
+    TOKEN = enum.auto()
+
+
+_REPORTED: Final = _Reported.TOKEN
+Reported = Literal[_Reported.TOKEN]
 
 
 class DictionaryFile:
@@ -55,7 +66,7 @@ class DictionaryFile:
         self.src.raise_if_problems()
         return found
 
-    def entry(self, group: str, name: str, node: Node) -> Any:
+    def entry(self, group: str, name: str, node: Node) -> Entry | None | Reported:
         """The entry, None for {remove: true}, or _REPORTED after reporting a problem."""
         origin = f"{self.src.name}:{node.line}"
         if not node.is_map:
@@ -84,7 +95,7 @@ class DictionaryFile:
                     "write a plain value, {value: V}, {repeat: V, times: N}, {derive: RULE} or {remove: true}")
         return _REPORTED
 
-    def repeat(self, group: str, name: str, node: Node, origin: str) -> Any:
+    def repeat(self, group: str, name: str, node: Node, origin: str) -> Entry | Reported:
         unit, times = node.value["repeat"], node.value["times"]
         if type(unit.value) not in (str, bytes):
             self.src.at(unit, "'repeat' takes a string or a !!binary byte string", 'e.g. {repeat: "A", times: 8192}')
@@ -95,7 +106,7 @@ class DictionaryFile:
             return _REPORTED
         return Entry(group, name, value=unit.value * times.value, origin=origin)
 
-    def derive(self, group: str, name: str, node: Node, origin: str) -> Any:
+    def derive(self, group: str, name: str, node: Node, origin: str) -> Entry | Reported:
         rule = RULES.get(node.value) if isinstance(node.value, str) else None
         if rule is None:
             hint = did_you_mean(str(node.value), RULES)
@@ -108,16 +119,16 @@ class DictionaryFile:
             return _REPORTED
         return Entry(group, name, rule=rule.name, origin=origin)
 
-    def plain(self, node: Node) -> Any:
+    def plain(self, node: Node) -> FieldValue | Reported:
         """The node's value if it is plain data a codec can hold, else _REPORTED."""
         value = node.plain()
-        problem = _not_plain(value)
-        if problem:
-            self.src.at(node, problem, "quote it to make it a string, or use !!binary for bytes")
-            return _REPORTED
-        return value
+        if is_field_value(value):
+            return value
+        self.src.at(node, _not_plain(value) or "not plain data",
+                    "quote it to make it a string, or use !!binary for bytes")
+        return _REPORTED
 
-    def as_float(self, node: Node, value: Any) -> Any:
+    def as_float(self, node: Node, value: FieldValue) -> FieldValue | Reported:
         """Plain numbers and numeric strings in the float/time groups are floats."""
         if type(value) is int:
             try:
@@ -135,10 +146,7 @@ class DictionaryFile:
         return value
 
 
-_REPORTED = object()  # a problem was reported for this entry; it is left out
-
-
-def _not_plain(value: Any) -> str | None:
+def _not_plain(value: object) -> str | None:
     if type(value) in (str, int, float, bool, bytes) or value is None:
         return None
     if type(value) is list:

@@ -107,7 +107,7 @@ class FaultFamily(ABC):
     def draw(self, testcase_id: str, rng: random.Random, targets: Targets, scene: Scene) -> TestCase:
         """One test case on ``targets`` (never empty)."""
 
-    def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
+    def probe(self, testcase_id: str, rng: random.Random, target: Target, *, visit: int, scene: Scene) -> TestCase:
         """The test case of the ``visit``-th visit (from 0) of ``target`` in a coverage round; default: a draw
         on that target alone."""
         return self.draw(testcase_id, rng, {target.channel.name: [target]}, scene)
@@ -214,11 +214,12 @@ def set_testcase(testcase_id: str, rng: random.Random, channel: str, assignments
     """A test case of one ``set`` policy on ``channel`` over ``span`` (``shape`` names it in the description)."""
     what = ", ".join(f"{a.path} = {a.value}" for a in assignments)
     return one_policy(testcase_id, rng, channel, Set(assignments), span=span,
-                      description=describe(shape, channel, what, span.window(), span.selection, len(assignments)))
+                      description=describe(shape, channel, what, span, fields=len(assignments)))
 
 
-def describe(shape: str, channel: str, what: str, window: Window, selection: Selection, fields: int = 1) -> str:
-    """``shape: channel: what`` and which messages: the one description format of every family."""
+def describe(shape: str, channel: str, what: str, span: Span, *, fields: int = 1) -> str:
+    """``shape: channel: what`` and which messages (``span``'s): the one description format of every family."""
+    window, selection = span.window(), span.selection
     if shape == "repeated":
         which = ("every message" if selection == Selection() else
                  f"every {ordinal(selection.every)} message" if selection.every != 1 else
@@ -288,16 +289,17 @@ class ValueFamily(FaultFamily):
         target = rng.choice(targets[channel])
         entry = rng.choice(target.values)
         start = scene.start(rng)
-        return self._testcase(testcase_id, rng, target, entry, Span(start, *once_or_held(rng, start, scene.duration),
-                                                                    scene.anchor))
+        return self._testcase(testcase_id, rng, target, entry,
+                              span=Span(start, *once_or_held(rng, start, scene.duration), scene.anchor))
 
-    def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
+    def probe(self, testcase_id: str, rng: random.Random, target: Target, *, visit: int, scene: Scene) -> TestCase:
         entry = target.values[visit % len(target.values)]  # the family's most telling value first
         start = scene.start(rng)
         until = held(rng, start, scene.duration) if rng.random() < PROBE_HELD_SHARE else (scene.duration,
                                                                                           Selection(limit=1))
-        return self._testcase(testcase_id, rng, target, entry, Span(start, *until, scene.anchor))
+        return self._testcase(testcase_id, rng, target, entry, span=Span(start, *until, scene.anchor))
 
-    def _testcase(self, testcase_id: str, rng: random.Random, target: Target, entry: Entry, span: Span) -> TestCase:
+    def _testcase(self, testcase_id: str, rng: random.Random, target: Target, entry: Entry, *, span: Span
+                  ) -> TestCase:
         return set_testcase(testcase_id, rng, target.channel.name, (Assignment(str(target.path), entry.ref),),
                             span=span, shape=self.name)

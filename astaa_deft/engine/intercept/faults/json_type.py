@@ -51,24 +51,24 @@ class JsonType(FaultFamily):
         fault = rng.choice(faults_of(target))
         start = scene.start(rng)
         return self._testcase(testcase_id, rng, target, fault,
-                              Span(start, *once_or_held(rng, start, scene.duration), scene.anchor))
+                              span=Span(start, *once_or_held(rng, start, scene.duration), scene.anchor))
 
     def visits(self, target: Target) -> int:
         return len(faults_of(target))
 
-    def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
+    def probe(self, testcase_id: str, rng: random.Random, target: Target, *, visit: int, scene: Scene) -> TestCase:
         faults = faults_of(target)
         start = scene.start(rng)
         until = held(rng, start, scene.duration) if rng.random() < 1 / 3 else (scene.duration, Selection(limit=1))
         return self._testcase(testcase_id, rng, target, faults[visit % len(faults)],
-                              Span(start, *until, scene.anchor))
+                              span=Span(start, *until, scene.anchor))
 
-    def _testcase(self, testcase_id: str, rng: random.Random, target: Target, fault: str, span: Span) -> TestCase:
+    def _testcase(self, testcase_id: str, rng: random.Random, target: Target, fault: str, *, span: Span) -> TestCase:
         path = str(target.path)
         action: ActionConfig = Remove((path,)) if fault == REMOVED else Set((Assignment(path, fault),))
         what = f"{path} removed" if fault == REMOVED else f"{path} = {fault}"
         return one_policy(testcase_id, rng, target.channel.name, action, span=span,
-                          description=describe(self.name, target.channel.name, what, span.window(), span.selection))
+                          description=describe(self.name, target.channel.name, what, span))
 
 
 FAMILIES.register(JsonType.name, JsonType())

@@ -51,7 +51,7 @@ class Siblings(FaultFamily):
     def visits(self, target: Target) -> int:
         return 2  # once, held
 
-    def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
+    def probe(self, testcase_id: str, rng: random.Random, target: Target, *, visit: int, scene: Scene) -> TestCase:
         start = scene.start(rng)
         until = held(rng, start, scene.duration) if visit % 2 else (scene.duration, Selection(limit=1))
         return self._testcase(testcase_id, rng, target, Span(start, *until, scene.anchor))
@@ -59,8 +59,7 @@ class Siblings(FaultFamily):
     def _testcase(self, testcase_id: str, rng: random.Random, target: Target, span: Span) -> TestCase:
         a, b = str(target.path), str(target.partner)
         return one_policy(testcase_id, rng, target.channel.name, Swap(a, b), span=span,
-                          description=describe(self.name, target.channel.name, f"{a} swapped with {b}", span.window(),
-                                               span.selection))
+                          description=describe(self.name, target.channel.name, f"{a} swapped with {b}", span))
 
 
 def _kind_group(kind: str) -> str:

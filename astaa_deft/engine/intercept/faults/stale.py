@@ -40,7 +40,7 @@ class Stale(FaultFamily):
     def visits(self, target: Target) -> int:
         return 2  # one behind, frozen
 
-    def probe(self, testcase_id: str, rng: random.Random, target: Target, visit: int, scene: Scene) -> TestCase:
+    def probe(self, testcase_id: str, rng: random.Random, target: Target, *, visit: int, scene: Scene) -> TestCase:
         start = scene.start(rng)
         until = held(rng, start, scene.duration) if visit % 2 == 0 else (scene.duration, Selection(limit=1))
         return self._testcase(testcase_id, rng, target, Span(start, *until, scene.anchor))
@@ -48,8 +48,7 @@ class Stale(FaultFamily):
     def _testcase(self, testcase_id: str, rng: random.Random, target: Target, span: Span) -> TestCase:
         path = str(target.path)
         return one_policy(testcase_id, rng, target.channel.name, Hold((path,)), span=span,
-                          description=describe(self.name, target.channel.name, f"{path} stale", span.window(),
-                                               span.selection))
+                          description=describe(self.name, target.channel.name, f"{path} stale", span))
 
 
 FAMILIES.register(Stale.name, Stale())

@@ -52,7 +52,7 @@ def stamp_targets(spec: Spec, dictionary: Dictionary) -> list[Target]:
     return targets
 
 
-def stamp_testcase(testcase_id: str, rng: random.Random, target: Target, fault: Entry, scene: Scene) -> TestCase:
+def stamp_testcase(testcase_id: str, rng: random.Random, target: Target, fault: Entry, *, scene: Scene) -> TestCase:
     """A stamp or sequence fault on one field: on one message, or (by chance, half of them) held."""
     start = scene.start(rng)
     return set_testcase(testcase_id, rng, target.channel.name, (Assignment(str(target.path), fault.ref),),
@@ -70,7 +70,7 @@ class Stamp(FaultFamily):
     def draw(self, testcase_id: str, rng: random.Random, targets: Targets, scene: Scene) -> TestCase:
         channel = rng.choice(sorted(targets))
         target = rng.choice(targets[channel])
-        return stamp_testcase(testcase_id, rng, target, rng.choice(target.values), scene)
+        return stamp_testcase(testcase_id, rng, target, rng.choice(target.values), scene=scene)
 
 
 FAMILIES.register(Stamp.name, Stamp())

@@ -40,7 +40,7 @@ class BoundInvariant(Invariant):
     maximum: float | None = None
     finite: bool = False
     non_empty: bool = False
-    enum_values: tuple[Any, ...] | None = None  # in_enum: the declared values
+    enum_values: tuple[object, ...] | None = None  # in_enum: the declared values
 
 
 def parse(reader: InvariantReader, node: Node, common: dict) -> BoundInvariant | None:

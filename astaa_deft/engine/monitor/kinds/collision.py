@@ -58,6 +58,7 @@ from astaa_deft.model.sut import FieldType
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, EpisodeGate, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
+from astaa_deft.engine.monitor.paths import is_number
 from astaa_deft.model.geometry import Box, box_between, box_moved, overlap
 from astaa_deft.engine.monitor.pairing import Join, JoinMode
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
@@ -116,7 +117,7 @@ def _ego(reader: InvariantReader, node: Node | None) -> tuple[str, Footprint] | 
     channel = reader.channel(node.value.get("channel"))
     if channel is None:
         return None
-    footprint = _footprint(reader, node, channel.type, None, "ego")
+    footprint = _footprint(reader, node, channel.type, None, what="ego")
     if footprint is None:
         return None
     offset = reader.number(node.value.get("offset"), "'ego.offset'") if "offset" in node.value else 0.0
@@ -159,11 +160,11 @@ def _obstacles(reader: InvariantReader, node: Node | None
         if vx is None or vy is None:
             return None
         velocity = (vx[0], vy[0])
-    footprint = _footprint(reader, node, channel.type, element, "obstacles")
+    footprint = _footprint(reader, node, channel.type, element, what="obstacles")
     return (channel.name, array, obstacle_id, footprint, velocity) if footprint else None
 
 
-def _footprint(reader: InvariantReader, node: Node, type_name: str, element: FieldType | None,
+def _footprint(reader: InvariantReader, node: Node, type_name: str, element: FieldType | None, *,
                what: str) -> Footprint | None:
     """x, y (fields), heading, length, width (fields or numbers), defaults filled in by name."""
     owner = element.ref if element is not None and element.ref else type_name
@@ -344,7 +345,7 @@ class CollisionMonitor(Monitor):
             vx, vy = (follow(element, path) for path in self._velocity)
         except RUNTIME_ERRORS:
             return None
-        if all(type(v) in (int, float) and math.isfinite(v) for v in (vx, vy)):
+        if is_number(vx) and is_number(vy) and math.isfinite(vx) and math.isfinite(vy):
             return float(vx), float(vy)
         return None
 

@@ -131,8 +131,8 @@ class DeadlineMonitor(Monitor):
         self._reported = True
         self.violating += 1
         return [self.violation(self._since + self._gap, self._detail(), channel=self._since_channel,
-                               seq=self._since_seq, module=self._responsible(), copy_message=False,
-                               message={"since_ns": self._since, "max_gap_s": self._gap / 1e9})]
+                               seq=self._since_seq, module=self._responsible(),
+                               context={"since_ns": self._since, "max_gap_s": self._gap / 1e9})]
 
     def _detail(self) -> str:
         gap = f"{self._gap / 1e9:g} s"

@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, LogLineInfo, MonitorContext
@@ -137,11 +138,11 @@ class ExceptionsMonitor(LogMonitor):
         else:  # which error, where: "KeyError in planner.py:step — KeyError: 'lane'"
             said = message[:200] if message else shown
             detail = f"module '{line.module}' {self.inv.what_matched()}: {signature.text()} — {said}"
-        context = {"line": line.text, "error": signature.error, "frame": signature.frame,
+        context: JsonObject = {"line": line.text, "error": signature.error, "frame": signature.frame,
                    "signature": signature.text()}
         if message:
             context["message"] = message
-        return self.violation(line.time_ns, detail, module=line.module, message=context, copy_message=False)
+        return self.violation(line.time_ns, detail, module=line.module, context=context)
 
 
 Kind.register(ExceptionsInvariant, KEYS, REQUIRED, parse=parse, monitor=monitor)

@@ -117,8 +117,8 @@ class LogMonitor(Monitor):
         shown = line.text if len(line.text) <= 200 else line.text[:200] + "…"
         detail = f"module '{line.module}' {self.inv.what_matched()}: {shown}"
         pattern = f"/{self.inv.pattern.pattern}/"  # a log finding's signature: the pattern it matched
-        return [self.violation(line.time_ns, detail, module=line.module, copy_message=False,
-                               message={"line": line.text, "pattern": pattern, "signature": pattern})]
+        return [self.violation(line.time_ns, detail, module=line.module,
+                               context={"line": line.text, "pattern": pattern, "signature": pattern})]
 
 
 def monitor(invariant: LogInvariant, context: MonitorContext) -> LogMonitor:

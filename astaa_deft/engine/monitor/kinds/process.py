@@ -27,6 +27,7 @@ from astaa_deft.io.yamlsource import Node
 from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.error_signature import signature_of_output
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
+from astaa_deft.engine.monitor.paths import is_number
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
 from astaa_deft.engine.monitor.kinds import Kind
@@ -120,7 +121,7 @@ class ProcessMonitor(Monitor):
             counter = follow(value, self._counter_segments)
         except RUNTIME_ERRORS:
             return NO_VIOLATIONS  # a missing counter is a bound invariant's business
-        if type(counter) not in (int, float):
+        if not is_number(counter):
             return NO_VIOLATIONS
         self.evaluations += 1
         previous = self._last_counter.get(channel)

@@ -50,7 +50,7 @@ class Signal:
     channel: str
     source: str  # the field path or expression, as written
     is_bool: bool
-    read: Callable[[dict], Any]  # message -> raw value; raises one of RUNTIME_ERRORS when it is not there
+    read: Callable[[dict], object]  # message -> raw value; raises one of RUNTIME_ERRORS when it is not there
 
 
 @dataclass(frozen=True, kw_only=True)

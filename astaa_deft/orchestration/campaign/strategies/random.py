@@ -68,17 +68,19 @@ class RandomStrategy(Strategy):
                 found = gen.semantic_probe(self.targets, self.seed, index // SEMANTIC_EVERY)
                 assert found is not None
                 probe, lap = found
-                testcase = gen.probe_testcase(testcase_id, rng, probe, lap, self.timing.live, self.timing.anchor)
+                testcase = gen.probe_testcase(testcase_id, rng, probe, lap, duration=self.timing.live,
+                                              anchor=self.timing.anchor)
                 return Proposal(testcase)
             index -= index // SEMANTIC_EVERY
         covered = COVERAGE_ROUNDS * self.round_length
         if index >= covered:  # after the pure rounds: every other case is a weighted draw
             if (index - covered) % 2:
                 testcase = gen.weighted_testcase(testcase_id, rng, self.targets, self.timing.live,
-                                                 self.timing.anchor, message_faults=True)
+                                                 anchor=self.timing.anchor, message_faults=True)
                 return Proposal(testcase)
             index = covered + (index - covered) // 2
         round_number, position = divmod(index, self.round_length)
         probe = self._round(round_number)[position]
-        testcase = gen.probe_testcase(testcase_id, rng, probe, round_number, self.timing.live, self.timing.anchor)
+        testcase = gen.probe_testcase(testcase_id, rng, probe, round_number, duration=self.timing.live,
+                                      anchor=self.timing.anchor)
         return Proposal(testcase)
