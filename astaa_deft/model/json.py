@@ -1,10 +1,17 @@
-"""The JSON a record's ``to_json`` writes and its ``from_json`` reads.
+"""The JSON a record's ``to_json`` writes and its ``from_json`` reads, and the plain data of a decoded message.
 
 Each record type of the model owns its JSON form (as ``mcap``'s records own
 their wire form); these aliases name that form in signatures instead of
 ``Any``. A ``from_json`` takes a ``JsonObject`` it did not write (a log, a
 journal, a pipe), so it checks what it reads and raises the caller's error
 type with the place, rather than trusting the shape.
+
+A decoded message is the same kind of tree plus byte strings (CBOR and CDR
+carry them; see ``astaa_deft.io.codecs.base``): ``FieldValue`` is any value a
+field path can name in it, ``DecodedMessage`` the message itself (an object
+at the top). Its floats may be NaN or infinite and its strings may hold lone
+surrogates, which strict JSON cannot; ``astaa_deft.model.tagged`` writes such
+a value as a ``JsonValue`` and reads it back.
 """
 
 from __future__ import annotations
@@ -13,3 +20,7 @@ from typing import TypeAlias
 
 JsonValue: TypeAlias = None | bool | int | float | str | list["JsonValue"] | dict[str, "JsonValue"]
 JsonObject: TypeAlias = dict[str, JsonValue]
+
+FieldValue: TypeAlias = (None | bool | int | float | str | bytes
+                         | list["FieldValue"] | dict[str, "FieldValue"])
+DecodedMessage: TypeAlias = dict[str, FieldValue]
