@@ -39,7 +39,7 @@ class FieldType:
 
     kind: str
     ref: str | None = None
-    values: tuple[Any, ...] = ()
+    values: tuple[object, ...] = ()  # an enum's declared values, as the spec writes them (YAML scalars)
     items: FieldType | None = None
     min_length: int | None = None
     max_length: int | None = None
