@@ -16,11 +16,12 @@ a value as a ``JsonValue`` and reads it back.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import TypeAlias
 
 JsonValue: TypeAlias = None | bool | int | float | str | list["JsonValue"] | dict[str, "JsonValue"]
 JsonObject: TypeAlias = dict[str, JsonValue]
 
 FieldValue: TypeAlias = (None | bool | int | float | str | bytes
-                         | list["FieldValue"] | dict[str, "FieldValue"])
+                         | Sequence["FieldValue"] | Mapping[str, "FieldValue"])
 DecodedMessage: TypeAlias = dict[str, FieldValue]
