@@ -146,7 +146,7 @@ class MutationRecord:
                                      self.delivered_sequence)
 
     @classmethod
-    def from_json(cls, body: Mapping[str, object], *, time_ns: int = 0, where: str = "the log") -> MutationRecord:
+    def from_json(cls, body: Mapping[str, JsonValue], *, time_ns: int = 0, where: str = "the log") -> MutationRecord:
         """The record of its body (the mutations topic's has no ``kind``; its time is the message's,
         ``time_ns``); RecordError if a field change is not an object."""
         read = JsonFields(body)

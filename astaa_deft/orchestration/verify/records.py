@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from astaa_deft.io.output_place import OutputError
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.journal_rows import VERIFICATION_COLUMNS, checked_columns
+from astaa_deft.orchestration.campaign.journal_rows import VERIFICATIONS, checked_columns
 from astaa_deft.orchestration.verify.model import BucketCheck, VerifyStatus
 
 TABLE = """
@@ -99,7 +99,7 @@ def verifications(journal: Journal) -> list[VerificationRow]:
     out = []
     file = str(journal.path)
     for row in journal.db.execute("SELECT * FROM verifications ORDER BY at, id"):
-        r = checked_columns(file, row, "verifications", "bucket", VERIFICATION_COLUMNS)
+        r = checked_columns(file, row, VERIFICATIONS)
         try:
             status = VerifyStatus(r["status"])
         except ValueError:
