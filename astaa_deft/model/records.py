@@ -144,9 +144,10 @@ class TaggedFieldChange:
 # tuple because ``marshal`` (the proxy → recorder framing) carries exact built-in types only and
 # building the dataclass and its changes per mutated message costs the proxy (docs/performance.md,
 # "records"). Built only by ``mutation_row`` or ``Mutation.to_row``; read by ``Mutation.from_row``
-# and ``Mutation.row_json``.
+# and ``Mutation.row_json``. Its detail is typed read-only (a Mapping, so that JSON details are field
+# values too); what travels is the dict the action built.
 MutationRow: TypeAlias = tuple[str, str, str, str, tuple[str, ...], int, float,
-                               Sequence[tuple[str, FieldValue, FieldValue]], dict[str, FieldValue]]
+                               Sequence[tuple[str, FieldValue, FieldValue]], Mapping[str, FieldValue]]
 # The first five attributes of a mutation (testcase, policy, action, channel, consumers): fixed for
 # a policy on a channel, so the hot path builds a row from them and the three values per message.
 MutationSource: TypeAlias = tuple[str, str, str, str, tuple[str, ...]]
@@ -173,7 +174,7 @@ class Rewritten:
 
 def mutation_row(source: MutationSource, message_index: int, time: float,
                  changes: Sequence[tuple[str, FieldValue, FieldValue]], *,
-                 detail: dict[str, FieldValue] | None = None) -> MutationRow:
+                 detail: Mapping[str, FieldValue] | None = None) -> MutationRow:
     """The compact form of a mutation: ``source``'s attributes, the message's index and time, its changes.
 
     ``changes``: (path, old, new) triples; ``detail`` None: no detail (a new empty dict).
@@ -193,7 +194,7 @@ class Mutation:
     message_index: int  # 1-based index of the real message on its channel
     time: float  # seconds since run start, when the real message arrived
     fields: tuple[FieldChange, ...] = ()
-    detail: dict[str, FieldValue] = field(default_factory=dict)
+    detail: Mapping[str, FieldValue] = field(default_factory=dict)
 
     def to_row(self) -> MutationRow:
         """Its compact form (see :data:`MutationRow`)."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 import base64
 import json
 import math
-from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.json import FieldValue, JsonValue
 
@@ -20,28 +19,35 @@ from astaa_deft.model.json import FieldValue, JsonValue
 TAGS = ("float", "base64", "str_escaped", "object")
 
 
-def to_tagged(value: FieldValue) -> JsonValue:
+def to_tagged(value: object) -> JsonValue:
     """``value`` as strict JSON data (RFC 8259, valid UTF-8), losslessly.
 
     NaN/inf -> {"float": "nan" | "inf" | "-inf"}; bytes -> {"base64": ...};
     a string with lone surrogates -> {"str_escaped": its JSON escape text}.
+    A value of none of a message's types becomes its text, as the log's
+    writer (``json.dumps(..., default=str)``) has always written it.
     """
-    if isinstance(value, float) and not math.isfinite(value):
+    # The most common types first: the recorder tags every value a mutation changed.
+    if isinstance(value, float):
+        if math.isfinite(value):
+            return value
         return {"float": "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")}
-    if isinstance(value, bytes):
-        return {"base64": base64.b64encode(value).decode("ascii")}
+    if value is None or isinstance(value, int):  # bool included
+        return value
     if isinstance(value, str):
         try:
             value.encode("utf-8")
             return value
         except UnicodeEncodeError:
             return {"str_escaped": json.dumps(value)[1:-1]}
-    if isinstance(value, Sequence):  # a list or a tuple (text and bytes are done above)
+    if isinstance(value, bytes):
+        return {"base64": base64.b64encode(value).decode("ascii")}
+    if isinstance(value, (list, tuple)):
         return [to_tagged(item) for item in value]
-    if isinstance(value, Mapping):
+    if isinstance(value, dict):
         tagged = {str(k): to_tagged(v) for k, v in value.items()}
         return {"object": tagged} if len(tagged) == 1 and next(iter(tagged)) in TAGS else tagged
-    return value  # None, a bool, an int, a finite float
+    return str(value)
 
 
 def from_tagged(value: JsonValue) -> FieldValue:
