@@ -52,9 +52,9 @@ def to_tagged(value: object) -> JsonValue:
 
 def from_tagged(value: JsonValue) -> FieldValue:
     """The inverse of ``to_tagged``."""
-    if isinstance(value, list):
+    if type(value) is list:
         return [from_tagged(item) for item in value]
-    if not isinstance(value, dict):
+    if type(value) is not dict:
         return value
     if len(value) == 1:
         (tag, inner), = value.items()
