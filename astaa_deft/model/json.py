@@ -11,7 +11,12 @@ carry them; see ``astaa_deft.io.codecs.base``): ``FieldValue`` is any value a
 field path can name in it, ``DecodedMessage`` the message itself (an object
 at the top). Its floats may be NaN or infinite and its strings may hold lone
 surrogates, which strict JSON cannot; ``astaa_deft.model.tagged`` writes such
-a value as a ``JsonValue`` and reads it back.
+a value as a ``JsonValue`` and reads it back. A ``FieldValue``'s containers
+are typed read-only (``Sequence``, ``Mapping``; at run time they are the
+lists and dicts the codec built), so that every ``JsonValue`` is a
+``FieldValue`` too (``list`` and ``dict`` are invariant); a message's fields
+are changed through ``astaa_deft.model.fields.set_field``, which checks the
+shape it walks.
 """
 
 from __future__ import annotations
