@@ -292,13 +292,38 @@ def blame_row(file: str, row: sqlite3.Row) -> BlameRow:
     return BlameRow(**_known(BlameRow, _read(file, row, _BLAMES)))
 
 
-def checked_columns(file: str, row: sqlite3.Row, table: Table) -> dict[str, Any]:
-    """A row of a table another module owns (``verifications``) read by its columns' readers.
+class CheckedRow:
+    """A row whose columns its readers checked: each column read back as the type its reader gives."""
 
-    ``Any``: each value is of its column's reader's type (text, a whole number, a number, a flag, an enum
-    member), which differs column by column; the caller builds its typed row from them, as ``case_row`` and
-    the other readers here do through the dataclass's own constructor."""
-    return _read(file, row, table)
+    __slots__ = ("_values",)
+
+    def __init__(self, values: Mapping[str, object]) -> None:
+        self._values = values
+
+    def text(self, column: str) -> str:
+        value = self._values[column]
+        assert isinstance(value, str), column  # a text column's reader gives text
+        return value
+
+    def whole(self, column: str) -> int:
+        value = self._values[column]
+        assert isinstance(value, int) and not isinstance(value, bool), column
+        return value
+
+    def number(self, column: str) -> float:
+        value = self._values[column]
+        assert isinstance(value, (int, float)) and not isinstance(value, bool), column
+        return float(value)
+
+    def flag(self, column: str) -> bool | None:
+        value = self._values[column]
+        assert value is None or isinstance(value, bool), column  # an optional flag column's reader
+        return value
+
+
+def checked_columns(file: str, row: sqlite3.Row, table: Table) -> CheckedRow:
+    """A row of a table another module owns (``verifications``) read by its columns' readers."""
+    return CheckedRow(_read(file, row, table))
 
 
 def note_row(file: str, row: sqlite3.Row) -> NoteRow:
