@@ -117,7 +117,8 @@ def test_fast_mcap_writer_writes_the_bytes_of_mcaps_writer(tmp_path, compression
             if i == 150:
                 b = writer.register_channel("b", "cbor", 0, {})
             cid = b if i > 150 and i % 3 == 0 else a
-            writer.add_message(cid, 1_000 + (i * 7919) % 997, bytes([i % 256]) * (i % 50), 2_000 + i, i)
+            writer.add_message(cid, 1_000 + (i * 7919) % 997, bytes([i % 256]) * (i % 50),
+                               publish_time=2_000 + i, sequence=i)
         writer.finish()
 
     ours, theirs = tmp_path / "ours.mcap", tmp_path / "theirs.mcap"

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Iterator, Mapping
-from typing import Any, NoReturn
+from collections.abc import Callable, Iterator
+from typing import NoReturn, TypeVar
 
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.json import JsonObject, JsonValue
 
 MAX_DEPTH = 32  # nesting of any state value: the tool writes at most ~6
 MAX_TEXT = 16 << 20  # characters of one JSON text (a journal cell, a checkpoint: far more than real ones)
@@ -27,9 +28,11 @@ MAX_INT = 2**63 - 1  # what SQLite, MCAP and nanosecond times hold
 MAX_ITEMS = 10_000_000  # items of one list or object (more than any real state file has)
 MAX_NAME = 1000  # characters of a field name (a channel, an invariant, a param)
 
+T = TypeVar("T")
+
 
 def load_json(text: str | bytes, file: str, field: str, fix: str, *, max_chars: int = MAX_TEXT,
-              max_depth: int = MAX_DEPTH) -> Any:
+              max_depth: int = MAX_DEPTH) -> JsonValue:
     """``text`` parsed as JSON (NaN/Infinity as Python reads them); InputError naming ``file`` and ``field``
     when it is too long, not JSON, or nested deeper than ``max_depth``."""
     if len(text) > max_chars:
@@ -46,7 +49,7 @@ def load_json(text: str | bytes, file: str, field: str, fix: str, *, max_chars: 
     return value
 
 
-def nesting(value: Any) -> int:
+def nesting(value: object) -> int:
     """How deep lists and objects nest in ``value`` (a scalar: 0), without recursion."""
     deepest, stack = 0, [(value, 1)]
     while stack:
@@ -67,7 +70,7 @@ def _fail(file: str, field: str, what: str, fix: str) -> NoReturn:
     raise InputError(Problem(file, None, None, f"{name} {what}", fix))
 
 
-def _kind(value: Any) -> str:
+def _kind(value: object) -> str:
     if value is None:
         return "null"
     if isinstance(value, bool):
@@ -88,14 +91,14 @@ def _kind(value: Any) -> str:
 class StateReader:
     """One value of a state file, at ``field`` of ``file``: read as a given type, or an InputError with ``fix``.
 
-    ``StateReader(file, value, fix).obj()`` checks the value is an object; ``get(name)`` steps into a field
+    ``StateReader(file, value, fix, field=...).obj()`` checks the value is an object; ``get(name)`` steps into a field
     (a missing one reads as absent: ``present``), ``integer``, ``number``, ``text``, ``flag``, ``items``,
     ``entries`` read it.
     """
 
     __slots__ = ("file", "value", "fix", "field", "present")
 
-    def __init__(self, file: str, value: Any, fix: str, field: str = "", present: bool = True) -> None:
+    def __init__(self, file: str, value: object, fix: str, *, field: str = "", present: bool = True) -> None:
         self.file, self.value, self.fix, self.field, self.present = file, value, fix, field, present
 
     def fail(self, what: str) -> NoReturn:
@@ -117,10 +120,17 @@ class StateReader:
             self.fail(f"has {len(self.value):,} fields (at most {MAX_ITEMS:,})")
         return self
 
+    def json_object(self) -> JsonObject:
+        """This value, checked to be an object, as it is: for a record's ``from_json``, which reads its fields."""
+        value = self.obj().value
+        assert isinstance(value, dict)
+        return value
+
     def get(self, name: str) -> StateReader:
         """The field ``name`` of this object (absent: ``present`` False, value None)."""
         assert isinstance(self.value, dict)
-        return StateReader(self.file, self.value.get(name), self.fix, self._child(name), name in self.value)
+        return StateReader(self.file, self.value.get(name), self.fix, field=self._child(name),
+                           present=name in self.value)
 
     def has(self, name: str) -> bool:
         return isinstance(self.value, dict) and name in self.value
@@ -131,17 +141,18 @@ class StateReader:
             self._expected("a list")
         if len(self.value) > max_items:
             self.fail(f"has {len(self.value):,} items (at most {max_items:,})")
-        return (StateReader(self.file, item, self.fix, f"{self.field}[{n}]") for n, item in enumerate(self.value))
+        return (StateReader(self.file, item, self.fix, field=f"{self.field}[{n}]") for n, item in enumerate(self.value))
 
     def entries(self, max_items: int = MAX_ITEMS, max_name: int = MAX_NAME) -> Iterator[tuple[str, StateReader]]:
         """The (name, value) pairs of this object (at most ``max_items``, names of at most ``max_name``)."""
-        self.obj()
-        if len(self.value) > max_items:
-            self.fail(f"has {len(self.value):,} fields (at most {max_items:,})")
-        for k in self.value:
+        value = self.obj().value
+        assert isinstance(value, dict)
+        if len(value) > max_items:
+            self.fail(f"has {len(value):,} fields (at most {max_items:,})")
+        for k in value:
             if len(k) > max_name:
                 self.fail(f"has a field name {len(k):,} characters long (at most {max_name:,})")
-        return ((str(k), StateReader(self.file, v, self.fix, self._child(str(k)))) for k, v in self.value.items())
+        return ((str(k), StateReader(self.file, v, self.fix, field=self._child(str(k)))) for k, v in value.items())
 
     # -- scalars -------------------------------------------------------------
     def integer(self, low: int = 0, high: int = MAX_INT, *, optional: bool = False) -> int | None:
@@ -215,11 +226,11 @@ class StateReader:
             return bool(value)
         self._expected("0 or 1" if numeric else "true or false")
 
-    def map(self, read: Callable[[StateReader], Any], max_items: int = MAX_ITEMS) -> dict[str, Any]:
+    def map(self, read: Callable[[StateReader], T], max_items: int = MAX_ITEMS) -> dict[str, T]:
         """This object with each value read by ``read``."""
         return {name: read(value) for name, value in self.entries(max_items)}
 
-    def each(self, read: Callable[[StateReader], Any], max_items: int = MAX_ITEMS) -> list[Any]:
+    def each(self, read: Callable[[StateReader], T], max_items: int = MAX_ITEMS) -> list[T]:
         """This list with each item read by ``read``."""
         return [read(item) for item in self.items(max_items)]
 
@@ -227,8 +238,3 @@ class StateReader:
 def _clip(value: object) -> str:
     text = str(value)
     return text if len(text) <= 40 else text[:40] + "…"
-
-
-def row_reader(file: str, row: Mapping[str, Any], fix: str, table: str, key: str) -> StateReader:
-    """A database row as a state value: its fields named ``table[key].column`` in messages."""
-    return StateReader(file, dict(row), fix, f"{table}[{key}]")

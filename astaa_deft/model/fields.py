@@ -29,6 +29,7 @@ from typing import Any
 from collections.abc import Iterator, Mapping, Sequence
 
 from astaa_deft.model.errors import AstaaDeftError
+from astaa_deft.model.json import FieldValue
 from astaa_deft.model.sut import FieldType, MessageType
 
 
@@ -203,17 +204,23 @@ def _bad_index_reason(text: str, position: int) -> str:
 
 # ---------------------------------------------------------------- values
 
-def get(value: Any, path: PathLike) -> list[tuple[FieldPath, Any]]:
+def get(value: object, path: PathLike) -> list[tuple[FieldPath, Any]]:
     """Every place ``path`` names in ``value``, as (concrete path, value), in document order.
 
     Missing fields, out-of-range indices and type mismatches (indexing an
     object, a field of a list) simply do not match.
+
+    The values found are ``Any``, not ``FieldValue``: what a path names in a
+    message is whatever the sender put there, and the readers (monitors,
+    oracles, trajectory readers) use it as the shape they expect and take a
+    TypeError/KeyError/ValueError as "not that shape"; a union would make
+    each of them restate a check its ``except`` already makes.
     """
     path = as_path(path)
     return [(FieldPath._trusted(where), found) for where, found in _resolve(value, path.segments)]
 
 
-def set_field(value: Any, path: PathLike, new: Any) -> list[tuple[FieldPath, Any]]:
+def set_field(value: FieldValue, path: PathLike, new: FieldValue) -> list[tuple[FieldPath, FieldValue]]:
     """Replace what ``path`` names in ``value`` (in place) by ``new``; (concrete path, old value) per place.
 
     Only existing places are set: a missing field is not created. Each place
@@ -222,7 +229,7 @@ def set_field(value: Any, path: PathLike, new: Any) -> list[tuple[FieldPath, Any
     """
     path = as_path(path)
     *parent_segments, last = path.segments
-    replaced: list[tuple[FieldPath, Any]] = []
+    replaced: list[tuple[FieldPath, FieldValue]] = []
     for where, parent in _resolve(value, parent_segments):
         for slot in _slots(parent, last):
             replaced.append((FieldPath._trusted(where + (slot,)), parent[slot]))

@@ -9,8 +9,9 @@ the object read; safe to use from any thread.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+
+from astaa_deft.model.json import JsonObject, JsonValue
 
 
 def _integer(value: object) -> int | None:
@@ -22,10 +23,10 @@ class JsonFields:
 
     __slots__ = ("_obj",)
 
-    def __init__(self, obj: Mapping[str, Any]) -> None:
+    def __init__(self, obj: Mapping[str, JsonValue]) -> None:
         self._obj = obj
 
-    def raw(self, name: str) -> Any:
+    def raw(self, name: str) -> JsonValue:
         """The value as it is (None if absent): for fields whose shape is the reader's business."""
         return self._obj.get(name)
 
@@ -58,13 +59,18 @@ class JsonFields:
 
     def texts(self, name: str) -> tuple[str, ...]:
         """The items of a list as text (an absent or empty field: ())."""
-        return tuple(str(item) for item in self._obj.get(name) or ())
+        return tuple(str(item) for item in self._list(name))
 
-    def objects(self, name: str) -> tuple[Mapping[str, Any], ...]:
+    def objects(self, name: str) -> tuple[JsonObject, ...]:
         """The JSON objects among the items of a list (others skipped)."""
-        return tuple(item for item in self._obj.get(name) or () if isinstance(item, Mapping))
+        return tuple(item for item in self._list(name) if isinstance(item, dict))
 
-    def object(self, name: str) -> Mapping[str, Any] | None:
+    def object(self, name: str) -> JsonObject | None:
         """The value if it is a JSON object, else None."""
         value = self._obj.get(name)
-        return value if isinstance(value, Mapping) else None
+        return value if isinstance(value, dict) else None
+
+    def _list(self, name: str) -> Sequence[JsonValue]:
+        """The items of a list (a tuple too: an object built in the process); any other value: none."""
+        value = self._obj.get(name)
+        return value if isinstance(value, (list, tuple)) else ()

@@ -13,6 +13,7 @@ is a clear input error naming the fix, never a silent fallback to ``re``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -25,9 +26,17 @@ MAX_PROGRAM_BYTES = 8 << 20  # what one compiled pattern may take (RE2's own def
 
 
 class Match(Protocol):
-    def group(self, *index: int | str) -> Any: ...  # pragma: no cover - a protocol
+    """A match found by RE2 (``re2._Match``): a group's text (None if the group took no part), its span."""
+
+    def group(self, index: int | str = 0, /) -> str | None: ...  # pragma: no cover - a protocol
 
     def span(self, index: int | str = 0) -> tuple[int, int]: ...  # pragma: no cover - a protocol
+
+
+class CompiledPattern(Protocol):
+    """A pattern as RE2 compiled it (``re2._Regexp``; the binding ships no types)."""
+
+    def search(self, text: str) -> Match | None: ...  # pragma: no cover - a protocol
 
 
 class PatternError(AstaaDeftError):
@@ -55,13 +64,12 @@ class UserPattern:
     """A compiled user pattern: ``search`` finds it anywhere in a text, in linear time."""
 
     pattern: str  # as written
-    _regexp: Any = field(repr=False, compare=False)
+    _regexp: CompiledPattern = field(repr=False, compare=False)
 
     def search(self, text: str) -> Match | None:
-        found: Match | None = self._regexp.search(text)
-        return found
+        return self._regexp.search(text)
 
-    def __reduce__(self) -> tuple[Any, tuple[str]]:  # compiled again where it is unpickled
+    def __reduce__(self) -> tuple[Callable[[str], UserPattern], tuple[str]]:  # compiled again where it is unpickled
         return compile_user_pattern, (self.pattern,)
 
 

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, TypeAlias
+from typing import ClassVar, TypeAlias
 
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.json import JsonObject, JsonValue
+from astaa_deft.model.json import FieldValue, JsonObject, JsonValue
 from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.tagged import from_tagged, to_tagged
 from astaa_deft.model.vocabulary import TextEnum
@@ -104,8 +104,8 @@ class FieldChange:
     """
 
     path: str
-    old: Any = None
-    new: Any = None
+    old: FieldValue = None
+    new: FieldValue = None
 
     def to_json(self) -> JsonObject:
         """``{"path", "old", "new"}`` with the values tagged (strict JSON)."""
@@ -144,9 +144,10 @@ class TaggedFieldChange:
 # tuple because ``marshal`` (the proxy → recorder framing) carries exact built-in types only and
 # building the dataclass and its changes per mutated message costs the proxy (docs/performance.md,
 # "records"). Built only by ``mutation_row`` or ``Mutation.to_row``; read by ``Mutation.from_row``
-# and ``Mutation.row_json``.
+# and ``Mutation.row_json``. Its detail is typed read-only (a Mapping, so that JSON details are field
+# values too); what travels is the dict the action built.
 MutationRow: TypeAlias = tuple[str, str, str, str, tuple[str, ...], int, float,
-                               Sequence[tuple[str, Any, Any]], dict[str, Any]]
+                               Sequence[tuple[str, FieldValue, FieldValue]], Mapping[str, FieldValue]]
 # The first five attributes of a mutation (testcase, policy, action, channel, consumers): fixed for
 # a policy on a channel, so the hot path builds a row from them and the three values per message.
 MutationSource: TypeAlias = tuple[str, str, str, str, tuple[str, ...]]
@@ -172,7 +173,8 @@ class Rewritten:
 
 
 def mutation_row(source: MutationSource, message_index: int, time: float,
-                 changes: Sequence[tuple[str, Any, Any]], detail: dict[str, Any] | None = None) -> MutationRow:
+                 changes: Sequence[tuple[str, FieldValue, FieldValue]], *,
+                 detail: Mapping[str, FieldValue] | None = None) -> MutationRow:
     """The compact form of a mutation: ``source``'s attributes, the message's index and time, its changes.
 
     ``changes``: (path, old, new) triples; ``detail`` None: no detail (a new empty dict).
@@ -192,13 +194,13 @@ class Mutation:
     message_index: int  # 1-based index of the real message on its channel
     time: float  # seconds since run start, when the real message arrived
     fields: tuple[FieldChange, ...] = ()
-    detail: dict[str, Any] = field(default_factory=dict)
+    detail: Mapping[str, FieldValue] = field(default_factory=dict)
 
     def to_row(self) -> MutationRow:
         """Its compact form (see :data:`MutationRow`)."""
         return mutation_row((self.testcase, self.policy, self.action, self.channel, self.consumers),
                             self.message_index, self.time, tuple([(c.path, c.old, c.new) for c in self.fields]),
-                            self.detail)
+                            detail=self.detail)
 
     @classmethod
     def from_row(cls, row: MutationRow) -> Mutation:
@@ -212,7 +214,7 @@ class Mutation:
         return Mutation.row_json(self.to_row())
 
     @staticmethod
-    def row_json(row: MutationRow, tag: Callable[[object], JsonValue] = to_tagged) -> JsonObject:
+    def row_json(row: MutationRow, tag: Callable[[FieldValue], JsonValue] = to_tagged) -> JsonObject:
         """The JSON form of a mutation from its compact form (the recorder's per-event path), without
         building the mutation: the one place that lays out a mutation's keys. ``tag`` writes a value
         (the log's record passes values already tagged through as they are)."""
@@ -290,7 +292,7 @@ class Violation:
     time_ns: int  # when the invariant broke (the message's time, or the deadline that expired)
     channel: str | None
     seq: int | None  # 1-based index of the message on its channel, as the recorder numbers it
-    message: dict[str, Any] | None  # the offending message (truncated, JSON-safe), or context for kinds without one
+    message: JsonObject | None  # the offending message (truncated, JSON-safe), or context for kinds without one
     detail: str
     crash: Verdict = Verdict.SILENT  # the CRASH class this violation points at
     module: str | None = None  # the module held responsible, when one is
@@ -383,7 +385,7 @@ class RunVerdict:
                 "summary": self.summary, "reasons": list(self.reasons)}
 
     @classmethod
-    def from_json(cls, body: Mapping[str, Any], *, where: str = "the log") -> RunVerdict:
+    def from_json(cls, body: Mapping[str, JsonValue], *, where: str = "the log") -> RunVerdict:
         """The verdict of its JSON form (an unknown class reads as Silent, as a damaged finding's does);
         RecordError if ``first`` is damaged. A first finding without a time has the verdict's."""
         read = JsonFields(body)

@@ -7,6 +7,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.records import Verdict
 
 PASS = "pass"
@@ -20,7 +21,7 @@ class Condition(Protocol):
     def text(self) -> str: ...
 
     @property
-    def evaluate(self) -> Callable[[dict[str, object]], object]: ...  # a decoded message -> its value
+    def evaluate(self) -> Callable[[DecodedMessage], object]: ...  # a decoded message -> its value
 
 
 @dataclass(frozen=True)

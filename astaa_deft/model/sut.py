@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Protocol
 from collections.abc import Mapping
 
 from astaa_deft.model.decictor import DecictorSection
@@ -39,7 +39,7 @@ class FieldType:
 
     kind: str
     ref: str | None = None
-    values: tuple[Any, ...] = ()
+    values: tuple[object, ...] = ()  # an enum's declared values, as the spec writes them (YAML scalars)
     items: FieldType | None = None
     min_length: int | None = None
     max_length: int | None = None
@@ -59,6 +59,19 @@ class FieldType:
         if self.kind == "enum":
             return "enum(" + ", ".join(map(str, self.values)) + ")"
         return self.kind
+
+
+class DeclaredInvariant(Protocol):
+    """What every invariant kind declares (``engine.monitor.base.Invariant``; a monitor narrows to its kind)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def kind(self) -> str: ...
+
+    @property
+    def severity(self) -> str: ...
 
 
 @dataclass(frozen=True)
@@ -138,8 +151,9 @@ class Spec:
     params: Mapping[str, str] = field(default_factory=dict)  # every param's default value
     param_choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # declared choices (some params)
     # Typed by the spec loader: invariants are astaa_deft.engine.monitor's Invariant objects (each kind's own
-    # class; the spec layer sits below monitor, so it does not name the type), the planner section its record.
-    invariants: tuple[Any, ...] = ()
+    # class; the spec layer sits below monitor, so it names them by what every kind has), the planner section
+    # its record.
+    invariants: tuple[DeclaredInvariant, ...] = ()
     planner: ReplayModule | None = None  # the 'planner:' section (frames per output, trajectories)
     replay: tuple[ReplayModule, ...] = ()  # the 'replay:' section's modules that can run alone
     run: RunSection | None = None  # how a run ends (None: no 'run:' section)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import base64
 import json
 import math
-from typing import Any
+
+from astaa_deft.model.json import FieldValue, JsonValue
 
 # A value JSON cannot hold exactly becomes a one-key object naming its kind.
 # A real object with exactly one of these keys is wrapped in {"object": ...},
@@ -18,32 +19,38 @@ from typing import Any
 TAGS = ("float", "base64", "str_escaped", "object")
 
 
-def to_tagged(value: Any) -> Any:
+def to_tagged(value: object) -> JsonValue:
     """``value`` as strict JSON data (RFC 8259, valid UTF-8), losslessly.
 
     NaN/inf -> {"float": "nan" | "inf" | "-inf"}; bytes -> {"base64": ...};
     a string with lone surrogates -> {"str_escaped": its JSON escape text}.
+    A value of none of a message's types becomes its text, as the log's
+    writer (``json.dumps(..., default=str)``) has always written it.
     """
-    kind = type(value)
-    if kind is float and not math.isfinite(value):
+    # The most common types first: the recorder tags every value a mutation changed.
+    if isinstance(value, float):
+        if math.isfinite(value):
+            return value
         return {"float": "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")}
-    if kind is bytes:
-        return {"base64": base64.b64encode(value).decode("ascii")}
-    if kind is str:
+    if value is None or isinstance(value, int):  # bool included
+        return value
+    if isinstance(value, str):
         try:
             value.encode("utf-8")
             return value
         except UnicodeEncodeError:
             return {"str_escaped": json.dumps(value)[1:-1]}
-    if kind is list or kind is tuple:
+    if isinstance(value, bytes):
+        return {"base64": base64.b64encode(value).decode("ascii")}
+    if isinstance(value, (list, tuple)):
         return [to_tagged(item) for item in value]
-    if kind is dict:
+    if isinstance(value, dict):
         tagged = {str(k): to_tagged(v) for k, v in value.items()}
         return {"object": tagged} if len(tagged) == 1 and next(iter(tagged)) in TAGS else tagged
-    return value
+    return str(value)
 
 
-def from_tagged(value: Any) -> Any:
+def from_tagged(value: JsonValue) -> FieldValue:
     """The inverse of ``to_tagged``."""
     if type(value) is list:
         return [from_tagged(item) for item in value]
@@ -52,11 +59,22 @@ def from_tagged(value: Any) -> Any:
     if len(value) == 1:
         (tag, inner), = value.items()
         if tag == "float":
-            return float(inner)
+            if isinstance(inner, (str, int, float)):
+                return float(inner)
+            raise _damaged(tag, inner)
         if tag == "base64":
-            return base64.b64decode(inner)
+            if isinstance(inner, str):
+                return base64.b64decode(inner)
+            raise _damaged(tag, inner)
         if tag == "str_escaped":
-            return json.loads(f'"{inner}"')
+            return str(json.loads(f'"{inner}"'))
         if tag == "object":
-            return {k: from_tagged(v) for k, v in inner.items()}
+            if isinstance(inner, dict):
+                return {k: from_tagged(v) for k, v in inner.items()}
+            raise _damaged(tag, inner)
     return {k: from_tagged(v) for k, v in value.items()}
+
+
+def _damaged(tag: str, inner: JsonValue) -> TypeError:
+    """A tag whose content is not of its kind (a damaged log): the TypeError reading it would raise."""
+    return TypeError(f"a damaged {tag!r} tag: {inner!r}")

@@ -116,9 +116,9 @@ def read_state(out_dir: Path, expected: Mapping[str, JsonValue], shape: LogShape
                      " only")
     was = state.get("extraction").obj()
     for key, value in expected.items():
-        if was.value.get(key) != value:
+        if was.get(key).value != value:
             raise InputError(Problem(str(path), None, None, f"it was an extraction with {key} "
-                                     f"{str(was.value.get(key))[:200]!r}, not {value!r}",
+                                     f"{str(was.get(key).value)[:200]!r}, not {value!r}",
                                      f"resume with the same log, spec, --module and --threshold, or {fix}"))
     most = shape.outputs if shape is not None else MAX_INT
     state.get("outputs").whole(0, MAX_INT)

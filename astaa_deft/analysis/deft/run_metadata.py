@@ -31,5 +31,6 @@ class RunMetadata:
             return cls(spec or None, {})
         where, field = str(log.path), f"metadata {layout.RUN_METADATA}: params"
         fix = "re-record the run (the log's record of its params is damaged), or give the params to use"
-        params = StateReader(where, load_json(str(meta["params"]), where, field, fix, max_chars=1 << 20), fix, field)
+        params = StateReader(where, load_json(str(meta["params"]), where, field, fix, max_chars=1 << 20), fix,
+                             field=field)
         return cls(spec or None, params.map(lambda value: value.string(10_000), max_items=10_000))

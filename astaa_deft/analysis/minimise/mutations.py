@@ -40,12 +40,12 @@ from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.fields import FieldPath, FieldPathError, set_field
 from astaa_deft.engine.intercept.actions import ACTIONS
 from astaa_deft.engine.intercept.actions.base import ActionDetail
-from astaa_deft.model.records import FieldChange
+from astaa_deft.model.records import FieldChange, RecordError
 from astaa_deft.model.tagged import from_tagged
 from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import FieldValue, JsonObject
 from astaa_deft.model.sut import Spec
 
 FieldSelection = tuple[int, ...] | None
@@ -64,7 +64,7 @@ class Step:
 
     policy: str
     action: str
-    detail: JsonObject  # the action's detail as logged, values untagged
+    detail: Mapping[str, FieldValue]  # the action's detail as logged, values untagged
 
     @property
     def record(self) -> ActionDetail | None:
@@ -298,13 +298,29 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
 def _steps(event: rec.MutationRecord) -> tuple[Step, ...]:
     policies = event.policy.split("+")
     actions = event.action.split("+")
-    detail = from_tagged(event.detail or {})
+    detail = _logged_object(from_tagged(event.detail or {}), event)
     if len(actions) == 1:
         return (Step(policies[0], actions[0], detail),)
     parts = detail.get("steps") or [{} for _ in actions]
+    if not isinstance(parts, Sequence):
+        raise _damaged_detail(event)
     # Not strict: a damaged event's shorter list yields fewer steps, as it always has.
-    return tuple(Step(p, a, part.get("detail") or {})
+    return tuple(Step(p, a, _logged_object(_logged_object(part, event).get("detail") or {}, event))
                  for p, a, part in zip(policies, actions, parts, strict=False))
+
+
+def _logged_object(value: FieldValue, event: rec.MutationRecord) -> Mapping[str, FieldValue]:
+    """A logged detail (or step) that must be an object; RecordError if the log holds something else."""
+    if not isinstance(value, Mapping):
+        raise _damaged_detail(event)
+    return value
+
+
+def _damaged_detail(event: rec.MutationRecord) -> RecordError:
+    return RecordError(Problem("the log", None, None,
+                               f"a damaged record: the detail of a {event.action} mutation on '{event.channel}' "
+                               f"(message {event.message_index}) is not an object",
+                               "the file was cut or altered; record the run again"))
 
 
 def run_start_ns(log: LogContents) -> int:

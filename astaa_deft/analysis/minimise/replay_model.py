@@ -54,7 +54,7 @@ from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import DecodedMessage, JsonObject
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
@@ -204,7 +204,7 @@ class ReplayModel:
             self.end_ns = min(self.end_ns, self.outputs[-1].log_time if self.outputs else failed_at)
         self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
         self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
-        self._decoded: dict[Hashable, JsonObject | None] = {}  # by Delivered.key
+        self._decoded: dict[Hashable, DecodedMessage | None] = {}  # by Delivered.key
         self.baseline: Baseline | None = Baseline(self) if baseline else None
 
     @property
@@ -213,7 +213,7 @@ class ReplayModel:
         return self.baseline.seconds if self.baseline is not None else 0.0
 
     # -- frames ------------------------------------------------------------
-    def decode(self, channel: str, delivered: Delivered) -> JsonObject | None:
+    def decode(self, channel: str, delivered: Delivered) -> DecodedMessage | None:
         """``delivered`` as ``channel``'s codec decodes it (None: it does not decode), decoded once."""
         if delivered.key not in self._decoded:
             try:
@@ -264,7 +264,7 @@ class ReplayModel:
                              frame_time, t_t))
         return out
 
-    def frame_message(self, frame: Frame) -> dict[str, JsonObject]:
+    def frame_message(self, frame: Frame) -> dict[str, DecodedMessage]:
         """The module's input for ``frame``: channel → decoded message (a frame holds decodable inputs only)."""
         return {name: message for name, d in frame.inputs if (message := self.decode(name, d)) is not None}
 

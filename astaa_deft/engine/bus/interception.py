@@ -37,7 +37,7 @@ import heapq
 import itertools
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol, cast
 
@@ -45,6 +45,7 @@ import zenoh
 
 from astaa_deft.engine.bus.proxy import BLOCK, REMOTE, Forwarder, LiveRoute, plain_forwarder
 from astaa_deft.engine.bus.topology import intercepted_key, pack_deliveries
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.records import Mutation, MutationRow, Rewritten
 
 TICK_SECONDS = 0.01
@@ -73,7 +74,7 @@ class DeliveryLike(Protocol):
 class JsonForm(Protocol):
     """A record that writes its own JSON form."""
 
-    def to_json(self) -> Mapping[str, object]: ...
+    def to_json(self) -> JsonObject: ...
 
 
 class Interceptor(Protocol):

@@ -21,6 +21,7 @@ from abc import ABC, abstractmethod
 from typing import Any
 from collections.abc import Callable
 
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.registry import Registry
 
@@ -43,15 +44,15 @@ class Codec(ABC):
     name: str
 
     @abstractmethod
-    def decode(self, payload: bytes) -> dict[str, Any]:
+    def decode(self, payload: bytes) -> DecodedMessage:
         """Plain data of one message; raises only ``DecodeError``, whatever the bytes."""
 
     @abstractmethod
-    def encode(self, value: Any) -> bytes:
+    def encode(self, value: object) -> bytes:
         """The payload for ``value``; raises only ``EncodeError``."""
 
     @abstractmethod
-    def carries(self, value: Any) -> str | None:
+    def carries(self, value: object) -> str | None:
         """``None`` if ``decode(encode(value))`` gives ``value`` back, else why not.
 
         Used to skip exceptional values an encoding cannot deliver (with the
@@ -73,7 +74,7 @@ CODECS: Registry[Codec] = Registry("codec", "astaa_deft.io.codecs", skip=_NOT_CO
 CODEC_FAMILIES: Registry[Callable[[str], Codec]] = Registry("codec family", "astaa_deft.io.codecs", skip=_NOT_CODECS)
 
 
-def same_value(a: Any, b: Any) -> bool:
+def same_value(a: object, b: object) -> bool:
     """Structural equality of plain data, stricter than ``==`` where it matters here.
 
     NaN equals NaN, ``0.0`` differs from ``-0.0``, ``1`` differs from ``1.0``
@@ -82,18 +83,19 @@ def same_value(a: Any, b: Any) -> bool:
     """
     if type(a) is not type(b):
         return False
-    if isinstance(a, float):
+    # Both of one type from here; each check names both so that the checker knows it too.
+    if isinstance(a, float) and isinstance(b, float):
         if math.isnan(a):
             return math.isnan(b)
         return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
-    if isinstance(a, dict):
+    if isinstance(a, dict) and isinstance(b, dict):
         return list(a) == list(b) and all(same_value(a[k], b[k]) for k in a)
-    if isinstance(a, list):
+    if isinstance(a, list) and isinstance(b, list):
         return len(a) == len(b) and all(same_value(x, y) for x, y in zip(a, b, strict=False))
     return a == b
 
 
-def kind_of(value: Any) -> str:
+def kind_of(value: object) -> str:
     """A short name for a value's type in error messages ("an array", "a string"...)."""
     names = {
         dict: "an object", list: "an array", str: "a string", bytes: "a byte string",
@@ -102,7 +104,7 @@ def kind_of(value: Any) -> str:
     return names.get(type(value)) or f"a {type(value).__name__}"
 
 
-def first_uncarried(value: Any, scalar_problem: Callable[[Any], str | None]) -> str | None:
+def first_uncarried(value: object, scalar_problem: Callable[[object], str | None]) -> str | None:
     """Why a codec cannot carry ``value`` (first problem found, with its place), or None.
 
     Walks objects and arrays (object keys must be strings, cycles are

@@ -17,6 +17,7 @@ from typing import Any
 
 import cbor2
 
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.io.codecs.base import CODECS, Codec, DecodeError, EncodeError, first_uncarried, kind_of
 
 # RFC 8949 §3.4.6: an optional "this is CBOR" tag 55799 in front of the item.
@@ -28,7 +29,7 @@ _PLAIN_SCALARS = frozenset({str, int, float, bool, bytes, type(None)})
 class CborCodec(Codec):
     name = "cbor"
 
-    def decode(self, payload: bytes) -> dict[str, Any]:
+    def decode(self, payload: bytes) -> DecodedMessage:
         try:
             data = bytes(payload)
             if data.startswith(_SELF_DESCRIBE_PREFIX):
@@ -49,13 +50,13 @@ class CborCodec(Codec):
             raise DecodeError(problem)
         return value
 
-    def encode(self, value: Any) -> bytes:
+    def encode(self, value: object) -> bytes:
         try:
             return cbor2.dumps(value)
         except Exception as exc:  # CBOREncodeError, UnicodeEncodeError (surrogates), RecursionError
             raise EncodeError(f"cannot encode as CBOR: {exc}") from None
 
-    def carries(self, value: Any) -> str | None:
+    def carries(self, value: object) -> str | None:
         return first_uncarried(value, _cbor_scalar_problem)
 
 

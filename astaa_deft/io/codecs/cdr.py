@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from rosbags.typesys.base import Nodetype
 
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.io.ros2.types import BYTE_PRIMITIVES, Ros2Types, shared_types
 from astaa_deft.io.codecs.base import Codec, DecodeError, EncodeError, first_uncarried, kind_of
 
@@ -57,7 +58,7 @@ class CdrCodec(Codec):
         self._to_plain = self._converters.to_plain(type_name)
         self._from_plain = self._converters.from_plain(type_name)
 
-    def decode(self, payload: bytes) -> dict[str, Any]:
+    def decode(self, payload: bytes) -> DecodedMessage:
         try:
             data = bytes(payload)
             if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
@@ -69,7 +70,7 @@ class CdrCodec(Codec):
         except Exception as exc:  # struct.error, IndexError, UnicodeDecodeError, SerdeError…
             raise DecodeError(f"malformed CDR for {self.type_name}: {type(exc).__name__}: {exc}") from None
 
-    def encode(self, value: Any) -> bytes:
+    def encode(self, value: object) -> bytes:
         if type(value) is not dict:
             raise EncodeError(f"a {self.type_name} message must be an object, not {kind_of(value)}")
         try:
@@ -80,7 +81,7 @@ class CdrCodec(Codec):
         except Exception as exc:  # OverflowError, struct.error, ValueError, TypeError…
             raise EncodeError(f"cannot encode as {self.type_name} CDR: {type(exc).__name__}: {exc}") from None
 
-    def carries(self, value: Any) -> str | None:
+    def carries(self, value: object) -> str | None:
         return first_uncarried(value, _cdr_scalar_problem)
 
 

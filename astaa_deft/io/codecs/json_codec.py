@@ -18,6 +18,7 @@ import re
 import sys
 from typing import Any
 
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.io.codecs.base import CODECS, Codec, DecodeError, EncodeError, first_uncarried, kind_of
 
 # Built once: json.loads/dumps with options construct a new object per call.
@@ -35,7 +36,7 @@ _SURROGATE_PAIR = re.compile("[\ud800-\udbff][\udc00-\udfff]")
 class JsonCodec(Codec):
     name = "json"
 
-    def decode(self, payload: bytes) -> dict[str, Any]:
+    def decode(self, payload: bytes) -> DecodedMessage:
         try:
             text = str(payload, "utf-8")  # any bytes-like; strict: no BOM skipping, no surrogates
             value = _DECODER.decode(text)
@@ -53,13 +54,13 @@ class JsonCodec(Codec):
             raise DecodeError(f"top level is {kind_of(value)}, expected an object")
         return value
 
-    def encode(self, value: Any) -> bytes:
+    def encode(self, value: object) -> bytes:
         try:
             return _ENCODER.encode(value).encode("ascii")
         except Exception as exc:  # TypeError, ValueError (cycle, digit limit), RecursionError
             raise EncodeError(f"cannot encode as JSON: {exc}") from None
 
-    def carries(self, value: Any) -> str | None:
+    def carries(self, value: object) -> str | None:
         return first_uncarried(value, _json_scalar_problem)
 
 

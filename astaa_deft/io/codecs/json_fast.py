@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import orjson
 
@@ -63,19 +62,18 @@ def dumps(message: dict) -> bytes | None:
     return out
 
 
-def is_exact_scalar(value: Any) -> bool:
+def is_exact_scalar(value: object) -> bool:
     """A value ``loads`` gave that the stdlib reader gives too: a scalar, and no float that may have been an integer.
 
     (Containers are not checked value by value: the fast path leaves a
     field holding one to the codec.)
     """
-    kind = type(value)
-    if kind is float:
+    if type(value) is float:
         return math.isfinite(value) and abs(value) < _BIG
-    return kind in _SCALARS
+    return type(value) in _SCALARS
 
 
-def writes_alike(value: Any, encode: Callable[[Any], bytes]) -> bool:
+def writes_alike(value: object, encode: Callable[[object], bytes]) -> bool:
     """True if orjson writes this value exactly as ``encode`` (the codec's encoder) does."""
     try:
         return _dumps(value) == encode(value)

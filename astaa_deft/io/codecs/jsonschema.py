@@ -13,7 +13,6 @@ declared bounds become ``minimum``/``maximum``, so a mutated message
 
 from __future__ import annotations
 
-from typing import Any
 from collections.abc import Mapping
 
 from astaa_deft.model.fields import message_type
@@ -21,7 +20,7 @@ from astaa_deft.model.sut import INT_RANGES, FieldType, MessageType
 
 DRAFT_2020_12 = "https://json-schema.org/draft/2020-12/schema"
 
-_SCALAR_SCHEMAS: dict[str, dict[str, Any]] = {
+_SCALAR_SCHEMAS: dict[str, dict[str, object]] = {
     "float32": {"type": "number"},
     "float64": {"type": "number"},
     "bool": {"type": "boolean"},
@@ -31,13 +30,13 @@ _SCALAR_SCHEMAS: dict[str, dict[str, Any]] = {
 }
 
 
-def json_schema(types: Mapping[str, MessageType], type_name: str) -> dict[str, Any]:
+def json_schema(types: Mapping[str, MessageType], type_name: str) -> dict[str, object]:
     """The schema of ``type_name`` messages: an object titled with the type name."""
     builder = _SchemaBuilder(types, type_name)
-    schema: dict[str, Any] = {"$schema": DRAFT_2020_12}
+    schema: dict[str, object] = {"$schema": DRAFT_2020_12}
     schema.update(builder.struct(type_name, frozenset()))
     # A recursive type's definition can reference further recursive types.
-    defs: dict[str, Any] = {}
+    defs: dict[str, object] = {}
     while builder.referenced.keys() - defs.keys():
         name = min(builder.referenced.keys() - defs.keys())
         defs[name] = builder.struct(name, frozenset({name}))
@@ -52,7 +51,7 @@ class _SchemaBuilder:
         self.root = root
         self.referenced: dict[str, None] = {}  # struct names written as "$ref" (ordered set)
 
-    def struct(self, name: str, open_structs: frozenset[str]) -> dict[str, Any]:
+    def struct(self, name: str, open_structs: frozenset[str]) -> dict[str, object]:
         fields = message_type(self.types, name).fields
         inner = open_structs | {name}
         return {
@@ -62,7 +61,7 @@ class _SchemaBuilder:
             "required": list(fields),
         }
 
-    def field(self, ftype: FieldType, open_structs: frozenset[str]) -> dict[str, Any]:
+    def field(self, ftype: FieldType, open_structs: frozenset[str]) -> dict[str, object]:
         if ftype.kind == "struct":
             assert ftype.ref is not None
             if ftype.ref in open_structs:  # recursion: inline expansion would never end
@@ -73,7 +72,7 @@ class _SchemaBuilder:
             return self.struct(ftype.ref, open_structs)
         if ftype.kind == "array":
             assert ftype.items is not None
-            schema: dict[str, Any] = {"type": "array", "items": self.field(ftype.items, open_structs)}
+            schema: dict[str, object] = {"type": "array", "items": self.field(ftype.items, open_structs)}
             if ftype.min_length is not None:
                 schema["minItems"] = ftype.min_length
             if ftype.max_length is not None:
@@ -86,7 +85,7 @@ class _SchemaBuilder:
         return _with_bounds(dict(_SCALAR_SCHEMAS[ftype.kind]), ftype)
 
 
-def _integer(ftype: FieldType) -> dict[str, Any]:
+def _integer(ftype: FieldType) -> dict[str, object]:
     low: float
     high: float
     low, high = INT_RANGES[ftype.kind]
@@ -98,7 +97,7 @@ def _integer(ftype: FieldType) -> dict[str, Any]:
     return {"type": "integer", "minimum": low, "maximum": high}
 
 
-def _with_bounds(schema: dict[str, Any], ftype: FieldType) -> dict[str, Any]:
+def _with_bounds(schema: dict[str, object], ftype: FieldType) -> dict[str, object]:
     if schema.get("type") == "number":
         if ftype.minimum is not None:
             schema["minimum"] = ftype.minimum

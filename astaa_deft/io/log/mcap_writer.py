@@ -93,7 +93,7 @@ class McapWriter:
         self._add_to_chunk(channel)
         return channel_id
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int) -> None:
+    def add_message(self, channel_id: int, log_time: int, data: bytes, *, publish_time: int, sequence: int) -> None:
         chunk = self._chunk
         offset = len(chunk)
         chunk += _MESSAGE.pack(Opcode.MESSAGE, _MESSAGE_BODY + len(data), channel_id, sequence, log_time,
@@ -110,7 +110,7 @@ class McapWriter:
         if len(chunk) > self._chunk_size:
             self._finish_chunk()
 
-    def add_attachment(self, create_time: int, log_time: int, name: str, media_type: str, data: bytes) -> None:
+    def add_attachment(self, *, create_time: int, log_time: int, name: str, media_type: str, data: bytes) -> None:
         self._flush()
         offset = self._stream.tell()
         self._attachment_count += 1

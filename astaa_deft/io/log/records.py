@@ -23,7 +23,7 @@ from typing import Any, ClassVar, TypeVar, cast
 from collections.abc import Mapping
 
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.json import JsonObject, JsonValue
+from astaa_deft.model.json import FieldValue, JsonObject, JsonValue
 from astaa_deft.model.json_fields import JsonFields
 from astaa_deft.model.records import (
     FieldChange, Mutation, MutationRow, ProcessExit, RecordError, RunEnd, RunVerdict, TaggedFieldChange, Violation,
@@ -94,7 +94,7 @@ class UndeclaredKey(_Simple):
     kind: ClassVar[str] = "undeclared_key"
 
 
-def _as_written(value: object) -> JsonValue:
+def _as_written(value: FieldValue) -> JsonValue:
     return cast(JsonValue, value)  # a logged mutation's values are already in their tagged form
 
 
@@ -146,7 +146,7 @@ class MutationRecord:
                                      self.delivered_sequence)
 
     @classmethod
-    def from_json(cls, body: Mapping[str, object], *, time_ns: int = 0, where: str = "the log") -> MutationRecord:
+    def from_json(cls, body: Mapping[str, JsonValue], *, time_ns: int = 0, where: str = "the log") -> MutationRecord:
         """The record of its body (the mutations topic's has no ``kind``; its time is the message's,
         ``time_ns``); RecordError if a field change is not an object."""
         read = JsonFields(body)
@@ -175,7 +175,7 @@ class PolicyApplicationsRecord(_Simple):
     in_window: int = 0
     touched: int = 0
     run_end_s: float = 0.0
-    traffic: tuple[Any, ...] = ()  # per target channel: {channel, count, first_s, last_s}
+    traffic: tuple[JsonValue, ...] = ()  # per target channel: {channel, count, first_s, last_s}
     untouched_reason: str | None = None
     kind: ClassVar[str] = "policy_applications"
 
@@ -206,7 +206,7 @@ class OtherEvent:
     """An event of a kind this tool version does not model (kept, never interpreted)."""
     kind: str
     time_ns: int
-    body: tuple[tuple[str, Any], ...] = ()
+    body: tuple[tuple[str, JsonValue], ...] = ()
 
     def to_json(self) -> JsonObject:
         return dict(self.body)
@@ -238,7 +238,7 @@ def to_json_text(record: Record) -> str:
     return json.dumps(encode(record), default=str)
 
 
-def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
+def decode(body: Mapping[str, JsonValue], where: str = "the log") -> Record:
     """The record of a logged JSON object; an unknown kind (or a damaged event of a kind that may be kept
     as one) becomes an :class:`OtherEvent`."""
     if not isinstance(body, Mapping):
@@ -262,5 +262,5 @@ def decode(body: Mapping[str, Any], where: str = "the log") -> Record:
     return record
 
 
-def _other(kind: str, time_ns: int, body: Mapping[str, Any]) -> OtherEvent:
+def _other(kind: str, time_ns: int, body: Mapping[str, JsonValue]) -> OtherEvent:
     return OtherEvent(kind, time_ns, tuple((k, v) for k, v in body.items() if k not in ("kind", "time_ns")))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import BinaryIO
 from collections.abc import Mapping
 
 from astaa_deft import __version__
@@ -88,7 +88,7 @@ class LogWriter:
         self._topics[topic] = cid
         return cid
 
-    def _schema(self, name: str, schema: Mapping[str, Any]) -> int:
+    def _schema(self, name: str, schema: Mapping[str, object]) -> int:
         if name not in self._schemas:
             self._schemas[name] = self._writer.register_schema(
                 name=name, encoding="jsonschema", data=json.dumps(schema).encode()
@@ -106,10 +106,11 @@ class LogWriter:
         seq = self._sequences.get(channel_id, 0) + 1
         self._sequences[channel_id] = seq
         self._writer.add_message(channel_id, log_time_ns, data,
-                                 publish_time_ns if publish_time_ns is not None else log_time_ns, seq)
+                                 publish_time=publish_time_ns if publish_time_ns is not None else log_time_ns,
+                                 sequence=seq)
         return seq
 
-    def event(self, kind: str, time_ns: int | None = None, channel_id: int | None = None, **fields: Any) -> None:
+    def event(self, kind: str, time_ns: int | None = None, channel_id: int | None = None, **fields: object) -> None:
         """A raw event body, as given: for crafting logs (tests, benchmarks); the tool itself writes records."""
         t = time_ns if time_ns is not None else time.time_ns()
         body = {"kind": kind, "time_ns": t, **fields}

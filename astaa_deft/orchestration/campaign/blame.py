@@ -36,7 +36,6 @@ from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.log import layout
@@ -99,7 +98,7 @@ class Blame:
 RANK = {"non-finite": 0, "silent": 1, "value": 2}
 
 
-def features(message: Any, ignore: frozenset[str] = frozenset()) -> Features:
+def features(message: object, ignore: frozenset[str] = frozenset()) -> Features:
     """A message's comparable numbers: per field path (array indices folded to ``[]``), the mean of its finite
     numbers, ``path#nonfinite`` values that are not finite, ``path#len`` array lengths, ``path=s`` short strings.
     Fields named in ``ignore`` (the spec's brittle stamps and sequence numbers: clocks and counters differ
@@ -107,7 +106,7 @@ def features(message: Any, ignore: frozenset[str] = frozenset()) -> Features:
     sums: dict[str, list[float]] = defaultdict(list)
     out: Features = {}
 
-    def walk(value: Any, path: str) -> None:
+    def walk(value: object, path: str) -> None:
         if isinstance(value, bool):
             sums[path].append(1.0 if value else 0.0)
         elif isinstance(value, (int, float)):
@@ -133,7 +132,7 @@ def features(message: Any, ignore: frozenset[str] = frozenset()) -> Features:
     return out
 
 
-def bin_features(messages: Iterable[tuple[float, Any]], ignore: frozenset[str] = frozenset()) -> dict[int, Features]:
+def bin_features(messages: Iterable[tuple[float, object]], ignore: frozenset[str] = frozenset()) -> dict[int, Features]:
     """(seconds from the anchor, decoded message) → bin → features: counts summed, the rest averaged over the
     bin's messages (absent string and non-finite features count as 0)."""
     grouped: dict[int, list[Features]] = defaultdict(list)

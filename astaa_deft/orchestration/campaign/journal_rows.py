@@ -16,6 +16,7 @@ version needs is damaged input (exit 2), not an unwritable place.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 import hashlib
 import json
 import sqlite3
@@ -24,6 +25,7 @@ from typing import Any
 
 from astaa_deft.io.statefile import MAX_INT, StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.vocabulary import TextEnum
 from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseOutcome, CaseStatus, Finding
 from astaa_deft.orchestration.campaign.rows import (
@@ -38,6 +40,16 @@ MAX_SECONDS = 1e11  # an epoch time or a duration in seconds (year 5138): beyond
 MAX_VERDICT = 100  # characters of a verdict (a CRASH class name)
 
 Read = Callable[[StateReader], Any]
+
+
+@dataclass(frozen=True)
+class Table:
+    """A journal table as its rows are read: its name, the column that names a row in messages (None: none
+    does), and each column's reader."""
+
+    name: str
+    key_column: str | None
+    columns: Mapping[str, Read]
 
 
 def _quick(read: Read, accepts: Callable[[Any], bool]) -> Read:
@@ -85,7 +97,7 @@ def _json(read: Read) -> Read:
     def parse(r: StateReader) -> Any:
         text = r.string(MAX_JSON_CELL)
         return read(StateReader(r.file, load_json(text, r.file, r.field, r.fix, max_chars=MAX_JSON_CELL), r.fix,
-                                r.field))
+                                field=r.field))
     return parse
 
 
@@ -124,7 +136,7 @@ def _outcome_text(r: StateReader) -> str | None:
     return text
 
 
-def _finding(r: StateReader) -> dict[str, Any]:
+def _finding(r: StateReader) -> JsonObject:
     r.obj()
     known = Finding.__dataclass_fields__
     for name, value in r.entries(100):
@@ -139,7 +151,7 @@ def _finding(r: StateReader) -> dict[str, Any]:
         if declared.default is dataclasses.MISSING and declared.default_factory is dataclasses.MISSING \
                 and not r.has(name):
             r.get(name).fail("is missing")
-    return dict(r.value)
+    return dict(r.json_object())
 
 
 _FINDING: dict[str, Read] = {
@@ -183,7 +195,7 @@ def _outcome(r: StateReader) -> CaseOutcome:
     for name, read in _OUTCOME.items():
         if r.has(name):
             read(r.get(name))
-    return CaseOutcome.from_json(r.value)
+    return CaseOutcome.from_json(r.json_object())
 
 
 CASE_COLUMNS: dict[str, Read] = {
@@ -225,21 +237,25 @@ VERIFICATION_COLUMNS: dict[str, Read] = {
     "unobserved": _integer(), "twin_failures": _integer(), "twins": _integer(), "module_tests": _flag(True),
     "detail": _text(), "params": _params_cell, "at": _number(),
 }
+VERIFICATIONS = Table("verifications", "bucket", VERIFICATION_COLUMNS)
+_MINIMISATIONS = Table("minimisations", "bucket", MINIMISATION_COLUMNS)
+_MODULE_TESTS = Table("module_tests", "bucket", MODULE_TESTS_COLUMNS)
+_BLAMES = Table("blames", "bucket", BLAME_COLUMNS)
 
 
-def _read(file: str, row: sqlite3.Row | Mapping[str, Any], table: str, key_column: str | None,
-          columns: Mapping[str, Read]) -> dict[str, Any]:
+def _read(file: str, row: sqlite3.Row | Mapping[str, object], table: Table) -> dict[str, Any]:
     """Each column of ``row`` read by its reader (columns this module does not know are passed as they are)."""
     fields = dict(row)
     out: dict[str, Any] = {}
     for name, value in fields.items():
-        read = columns.get(name)
+        read = table.columns.get(name)
         accepts = getattr(read, "accepts", None)
         if read is None or (accepts is not None and accepts(value)):
             out[name] = value
             continue
-        key = fields.get(key_column) if key_column else None
-        out[name] = read(StateReader(file, value, FIX, f"{table}[{str(key)[:60] if key is not None else '?'}].{name}"))
+        key = fields.get(table.key_column) if table.key_column else None
+        out[name] = read(StateReader(file, value, FIX,
+                                     field=f"{table.name}[{str(key)[:60] if key is not None else '?'}].{name}"))
     return out
 
 
@@ -254,37 +270,64 @@ _FIELDS: dict[type, frozenset[str]] = {}
 
 
 def case_row(file: str, row: sqlite3.Row) -> CaseRow:
-    fields = _read(file, row, "cases", "case_id", CASE_COLUMNS)
+    fields = _read(file, row, Table("cases", "case_id", CASE_COLUMNS))
     fields["outcome_json"] = fields.pop("outcome", None)
     return CaseRow(**_known(CaseRow, fields))
 
 
 def bucket_row(file: str, row: sqlite3.Row) -> Bucket:
-    fields = _read(file, row, "buckets", "bucket", BUCKET_COLUMNS)
+    fields = _read(file, row, Table("buckets", "bucket", BUCKET_COLUMNS))
     return Bucket(**_known(Bucket, fields))
 
 
 def minimisation_row(file: str, row: sqlite3.Row) -> MinimisationRow:
-    return MinimisationRow(**_known(MinimisationRow, _read(file, row, "minimisations", "bucket",
-                                                           MINIMISATION_COLUMNS)))
+    return MinimisationRow(**_known(MinimisationRow, _read(file, row, _MINIMISATIONS)))
 
 
 def module_tests_row(file: str, row: sqlite3.Row) -> ModuleTestsRow:
-    return ModuleTestsRow(**_known(ModuleTestsRow, _read(file, row, "module_tests", "bucket", MODULE_TESTS_COLUMNS)))
+    return ModuleTestsRow(**_known(ModuleTestsRow, _read(file, row, _MODULE_TESTS)))
 
 
 def blame_row(file: str, row: sqlite3.Row) -> BlameRow:
-    return BlameRow(**_known(BlameRow, _read(file, row, "blames", "bucket", BLAME_COLUMNS)))
+    return BlameRow(**_known(BlameRow, _read(file, row, _BLAMES)))
 
 
-def checked_columns(file: str, row: sqlite3.Row, table: str, key_column: str | None,
-                    columns: Mapping[str, Read]) -> dict[str, Any]:
+class CheckedRow:
+    """A row whose columns its readers checked: each column read back as the type its reader gives."""
+
+    __slots__ = ("_values",)
+
+    def __init__(self, values: Mapping[str, object]) -> None:
+        self._values = values
+
+    def text(self, column: str) -> str:
+        value = self._values[column]
+        assert isinstance(value, str), column  # a text column's reader gives text
+        return value
+
+    def whole(self, column: str) -> int:
+        value = self._values[column]
+        assert isinstance(value, int) and not isinstance(value, bool), column
+        return value
+
+    def number(self, column: str) -> float:
+        value = self._values[column]
+        assert isinstance(value, (int, float)) and not isinstance(value, bool), column
+        return float(value)
+
+    def flag(self, column: str) -> bool | None:
+        value = self._values[column]
+        assert value is None or isinstance(value, bool), column  # an optional flag column's reader
+        return value
+
+
+def checked_columns(file: str, row: sqlite3.Row, table: Table) -> CheckedRow:
     """A row of a table another module owns (``verifications``) read by its columns' readers."""
-    return _read(file, row, table, key_column, columns)
+    return CheckedRow(_read(file, row, table))
 
 
 def note_row(file: str, row: sqlite3.Row) -> NoteRow:
-    return NoteRow(**_known(NoteRow, _read(file, row, "notes", None, NOTE_COLUMNS)))
+    return NoteRow(**_known(NoteRow, _read(file, row, Table("notes", None, NOTE_COLUMNS))))
 
 
 def _timing(r: StateReader) -> Any:
@@ -313,12 +356,12 @@ def meta_of(file: str, rows: Iterable[sqlite3.Row]) -> CampaignMeta:
     for row in rows:
         key, text = row["key"], row["value"]
         field = f"meta[{str(key)[:60]}]"
-        r = StateReader(file, text, FIX, field)
+        r = StateReader(file, text, FIX, field=field)
         r.string(MAX_JSON_CELL)
         value = load_json(text, file, field, FIX, max_chars=MAX_JSON_CELL)
         read = META_KEYS.get(str(key))
         if read is not None:
-            read(StateReader(file, value, FIX, field))
+            read(StateReader(file, value, FIX, field=field))
         values[str(key)] = value
     if values.get("calibrated") is None:
         values.pop("calibrated", None)

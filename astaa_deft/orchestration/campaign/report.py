@@ -284,12 +284,13 @@ def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
     rows = []
     for b in buckets:
         fails, runs = journal.rate(b)
-        rows.append(_bucket_rows(b, by_bucket.get(b.bucket), journal.case(b.first_case), minimised.get(b.bucket),
-                                 checked.get(b.bucket), f"{fails}/{runs}" if runs else "-", out))
+        rows.append(_bucket_rows(b, standing=by_bucket.get(b.bucket), first=journal.case(b.first_case),
+                                 m=minimised.get(b.bucket), checked=checked.get(b.bucket),
+                                 rate=f"{fails}/{runs}" if runs else "-", out=out))
     return rows
 
 
-def _bucket_rows(b: Bucket, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
+def _bucket_rows(b: Bucket, *, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
                  checked: ModuleTestsRow | None, rate: str, out: Path) -> _BucketRow:
     """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
     minimal_xml = m.minimal_xml if m is not None else None

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from astaa_deft.io.output_place import OutputError
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.journal_rows import VERIFICATION_COLUMNS, checked_columns
+from astaa_deft.orchestration.campaign.journal_rows import VERIFICATIONS, checked_columns
 from astaa_deft.orchestration.verify.model import BucketCheck, VerifyStatus
 
 TABLE = """
@@ -99,15 +99,15 @@ def verifications(journal: Journal) -> list[VerificationRow]:
     out = []
     file = str(journal.path)
     for row in journal.db.execute("SELECT * FROM verifications ORDER BY at, id"):
-        r = checked_columns(file, row, "verifications", "bucket", VERIFICATION_COLUMNS)
+        r = checked_columns(file, row, VERIFICATIONS)
         try:
-            status = VerifyStatus(r["status"])
+            status = VerifyStatus(r.text("status"))
         except ValueError:
             raise InputError(Problem(file, None, None,
-                                     f"verification of {str(r['bucket'])[:60]} has an unknown status "
-                                     f"'{str(r['status'])[:60]}'",
+                                     f"verification of {r.text('bucket')[:60]} has an unknown status "
+                                     f"'{r.text('status')[:60]}'",
                                      "open this journal with the astaa-deft version that wrote it")) from None
-        out.append(VerificationRow(r["bucket"], r["revision"], status, r["failing"], r["runs"], r["twin_failures"],
-                                   r["twins"], None if r["module_tests"] is None else bool(r["module_tests"]),
-                                   r["detail"], r["at"]))
+        out.append(VerificationRow(r.text("bucket"), r.text("revision"), status, r.whole("failing"), r.whole("runs"),
+                                   r.whole("twin_failures"), r.whole("twins"), r.flag("module_tests"),
+                                   r.text("detail"), r.number("at")))
     return out

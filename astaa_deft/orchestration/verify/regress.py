@@ -11,20 +11,31 @@ that was not observed to its end. Module tests are the bucket's DeFT suites
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import pytest
 
+from astaa_deft.io.statefile import StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.json import JsonObject
 
 MANIFEST = "regress.json"
 LIVE_MARK = "live"
 MODULE_MARK = "module"
 MARKERS = {MODULE_MARK: "a bucket's DeFT module tests: replays of the module alone, no bus (fast)",
            LIVE_MARK: "a bucket's minimal test case run live through the proxy (the full set)"}
+_FIX = "export the suite again (astaa-deft export CAMPAIGN -o DIR): its regress.json is damaged"
+
+
+@dataclass(frozen=True)
+class RegressBucket:
+    """One exported bucket as the manifest lists it."""
+
+    testcase: str  # its minimal test case, relative to the suite's folder
+    invariant: str
+    module: str | None  # the module its finding named (None: none)
+    params: dict[str, str]  # the campaign's params it failed with
 
 
 @dataclass(frozen=True)
@@ -32,27 +43,45 @@ class RegressSuite:
     """An exported suite: its folder, its manifest, and the params and spec this pytest run uses."""
 
     directory: Path
-    manifest: dict[str, Any]
+    manifest: JsonObject  # regress.json as export wrote it; each field is checked where it is read
     params: dict[str, str] = field(default_factory=dict)  # --param overrides
     spec: Path | None = None  # --spec: where the stack's spec is on this machine
 
     @classmethod
     def load(cls, directory: Path, params: dict[str, str] | None = None, spec: Path | None = None) -> RegressSuite:
-        return cls(directory, json.loads((directory / MANIFEST).read_text()), dict(params or {}), spec)
+        """The suite in ``directory``; InputError (naming regress.json) if its manifest is not a JSON object."""
+        path = str(directory / MANIFEST)
+        manifest = StateReader(path, load_json((directory / MANIFEST).read_bytes(), path, "", _FIX), _FIX)
+        return cls(directory, manifest.json_object(), dict(params or {}), spec)
+
+    def _read(self) -> StateReader:
+        return StateReader(str(self.directory / MANIFEST), self.manifest, _FIX).obj()
 
     def spec_path(self) -> Path:
         """--spec, else the campaign's spec where it was, else the copy in the suite."""
         if self.spec is not None:
             return self.spec
-        original = Path(self.manifest["spec"])
-        return original if original.is_file() else self.directory / self.manifest["spec_copy"]
+        original = Path(self._read().get("spec").string())
+        return original if original.is_file() else self.directory / self._read().get("spec_copy").string()
 
-    def bucket(self, name: str) -> dict[str, Any]:
-        entry: dict[str, Any] = self.manifest["buckets"][name]
-        return entry
+    def bucket(self, name: str) -> RegressBucket:
+        """Bucket ``name`` as the manifest lists it (InputError if it does not, or a field is damaged)."""
+        entry = self._read().get("buckets").obj().get(name).obj()
+        return RegressBucket(entry.get("testcase").string(), entry.get("invariant").string(),
+                             entry.get("module").text(optional=True),
+                             entry.get("params").map(lambda value: value.string()))
+
+    def setting(self, name: str) -> float:
+        """A number the campaign ran with (``horizon``, ``settle``: seconds)."""
+        return self._read().get(name).real()
+
+    def known(self) -> JsonObject:
+        """The campaign's known findings, as ``known.from_json`` reads them ({} if none)."""
+        known = self._read().get("known")
+        return known.json_object() if known.value is not None else {}
 
     def params_of(self, name: str) -> dict[str, str]:
-        return {**self.bucket(name)["params"], **self.params}
+        return {**self.bucket(name).params, **self.params}
 
 
 def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
@@ -67,16 +96,15 @@ def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
 
     entry = suite.bucket(name)
     spec = load_spec(suite.spec_path())
-    testcase = load_testcase(suite.directory / entry["testcase"])
-    known = known_from_json(suite.manifest.get("known") or {})
+    testcase = load_testcase(suite.directory / entry.testcase)
+    known = known_from_json(suite.known())
     outcome = run_case(spec, testcase, suite.params_of(name), run_dir,
-                       horizon=float(suite.manifest["horizon"]), settle=float(suite.manifest["settle"]),
-                       known=frozenset(known))
+                       horizon=suite.setting("horizon"), settle=suite.setting("settle"), known=frozenset(known))
     if outcome.status != "done":
         raise AssertionError(f"{name}: the run was not observed to its end ({outcome.summary}: {outcome.error})"
                              f" — no verdict; log in {run_dir}")
     outcome = judged(sig.without_self_inflicted(outcome, testcase, spec), known)
-    way = FailureWay(entry["invariant"], entry["module"])
+    way = FailureWay(entry.invariant, entry.module)
     if way.shown_by(outcome):
         return f"{outcome.summary} (log: {outcome.log_path})"
     return None

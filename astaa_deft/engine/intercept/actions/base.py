@@ -36,7 +36,7 @@ from decimal import Decimal
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from astaa_deft.io.codecs import Codec, DecodeError, EncodeError
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import FieldValue, JsonObject
 from astaa_deft.model.records import FieldChange, Mutation
 from astaa_deft.model.registry import Registry
 
@@ -95,7 +95,7 @@ def combine_events(events: list[Mutation]) -> Mutation | None:
     if len(events) == 1:
         return events[0]
     first, last = events[0], events[-1]
-    steps = [{"policy": e.policy, "action": e.action, "detail": e.detail} for e in events]
+    steps: list[FieldValue] = [{"policy": e.policy, "action": e.action, "detail": e.detail} for e in events]
     return Mutation(
         testcase=first.testcase, policy="+".join(e.policy for e in events),
         action="+".join(e.action for e in events), channel=first.channel, consumers=last.consumers,

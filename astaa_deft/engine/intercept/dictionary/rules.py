@@ -141,8 +141,9 @@ def _negated(_site: FieldSite, ctx: ValueContext | None) -> bool:
 
 def _undefined_enum(site: FieldSite, _ctx: ValueContext | None) -> FieldValue:
     values = site.field_type.values
-    if values and all(type(v) is int for v in values):
-        return max(values) + 1
+    numbers = [v for v in values if type(v) is int]
+    if values and len(numbers) == len(values):
+        return max(numbers) + 1
     candidate = "UNDEFINED"
     while candidate in values:
         candidate += "_"
