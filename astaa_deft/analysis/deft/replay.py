@@ -30,7 +30,7 @@ from astaa_deft.engine.bus import zenoh_config as zc
 from astaa_deft.engine.bus.processes import stop_process, tail
 from astaa_deft.model.errors import AstaaDeftError, InputError, Problem
 from astaa_deft.model.fields import get
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.planner import resolve_args
 from astaa_deft.engine.spec.replay_module import TrajectoryLayout
@@ -52,7 +52,7 @@ class ReplayPlanner(Protocol):
 
     can_snapshot: bool
 
-    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None: ...
+    def step(self, frame: Mapping[str, DecodedMessage]) -> DecodedMessage | None: ...
     def snapshot(self) -> object: ...
     def restore(self, snap: object) -> None: ...
     def close(self) -> None: ...
@@ -61,7 +61,7 @@ class ReplayPlanner(Protocol):
 class StepModule(Protocol):
     """What a replay factory returns (``replay.factory`` of the spec): an object with ``step(frame)``."""
 
-    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None: ...
+    def step(self, frame: Mapping[str, DecodedMessage]) -> DecodedMessage | None: ...
 
 
 def _is_step_module(made: object) -> TypeGuard[StepModule]:
@@ -163,7 +163,7 @@ class InProcessPlanner:
                                      "without a step(frame) method", f"check '{where}.factory'"))
         self.obj: StepModule = made
 
-    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None:
+    def step(self, frame: Mapping[str, DecodedMessage]) -> DecodedMessage | None:
         return self.obj.step(frame)
 
     def snapshot(self) -> StepModule:
@@ -228,7 +228,7 @@ class LockstepPlanner:
         with open(self.log_path, "wb") as log:
             self.proc = process_launch.start(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
                                              stderr=subprocess.STDOUT)
-        self._sent: dict[str, JsonObject] = {}
+        self._sent: dict[str, DecodedMessage] = {}
         self._latencies: deque[float] = deque([0.0], maxlen=10)
         self._wait_connected()
 
@@ -245,7 +245,7 @@ class LockstepPlanner:
             time.sleep(0.05)
         raise InputError("the planner process never subscribed to its trigger channel")
 
-    def step(self, frame: Mapping[str, JsonObject]) -> JsonObject | None:
+    def step(self, frame: Mapping[str, DecodedMessage]) -> DecodedMessage | None:
         changed = False
         for name, message in frame.items():
             if name != self.planner.trigger and self._sent.get(name) != message:

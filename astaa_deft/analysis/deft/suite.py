@@ -10,7 +10,7 @@ from pathlib import Path
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.log.reader import read_log
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.engine.spec.loader import load_spec_text
@@ -28,8 +28,8 @@ class FrameResult:
     replayed: list[Point]
     expected: list[Point]
     error: str | None = None
-    message: JsonObject | None = None  # the replayed output message
-    expected_message: JsonObject | None = None  # the recorded one (None: the module answered this frame with nothing)
+    message: DecodedMessage | None = None  # the replayed output message
+    expected_message: DecodedMessage | None = None  # the recorded one (None: the module answered nothing)
     stopped: str = ""  # per-trigger modules: "crash" or "hang" on this frame, "not run" after one
 
 
@@ -102,7 +102,7 @@ class Suite:
         """Whether every frame has been replayed in order already (its results are then the ones to use)."""
         return self._results is not None
 
-    def frame_inputs(self, entry: dict) -> dict[str, JsonObject]:
+    def frame_inputs(self, entry: dict) -> dict[str, DecodedMessage]:
         """The decoded inputs of one manifest frame entry."""
         by_channel = self._messages()
         return {name: by_channel[name][i] for name, i in entry["inputs"].items()}
@@ -142,7 +142,7 @@ class Suite:
                                                   codec.decode)
         return self._by_channel
 
-    def decoded(self, channel: str, index: int) -> JsonObject:
+    def decoded(self, channel: str, index: int) -> DecodedMessage:
         return self._messages()[channel][index]
 
 
@@ -150,12 +150,12 @@ class _Decoded:
     """A channel's messages in the suite, each decoded when first asked for (an oracle run from a snapshot
     needs one frame's, not the whole run's), then the same object every time."""
 
-    def __init__(self, payloads: list[bytes], decode: Callable[[bytes], JsonObject]):
+    def __init__(self, payloads: list[bytes], decode: Callable[[bytes], DecodedMessage]):
         self._payloads = payloads
         self._decode = decode
-        self._cache: dict[int, JsonObject] = {}
+        self._cache: dict[int, DecodedMessage] = {}
 
-    def __getitem__(self, index: int) -> JsonObject:
+    def __getitem__(self, index: int) -> DecodedMessage:
         if index not in self._cache:
             self._cache[index] = self._decode(self._payloads[index])
         return self._cache[index]

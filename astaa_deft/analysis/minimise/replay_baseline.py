@@ -14,7 +14,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from astaa_deft.analysis.deft.replay import ReplayPlanner
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import DecodedMessage
 
 if TYPE_CHECKING:
     from astaa_deft.analysis.minimise.replay_model import ReplayModel
@@ -41,7 +41,7 @@ class Baseline:
         # frame index → planner state: its pickle while the states pickle (``_pickled``), else the state itself
         self.snapshots: dict[int, Any] = {}
         self._pickled = True
-        self.outputs: list[JsonObject | None] = []
+        self.outputs: list[DecodedMessage | None] = []
         self.error: str | None = None
         self.error_frame: int | None = None
         for k, frame in enumerate(self.frames):

@@ -15,7 +15,7 @@ from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
 from astaa_deft.analysis.minimise.replay_records import Frame, ReplayAnswer
 from astaa_deft.engine.monitor import MonitorSet, format_violation
-from astaa_deft.model.json import JsonObject
+from astaa_deft.model.json import DecodedMessage
 
 if TYPE_CHECKING:
     from astaa_deft.analysis.minimise.replay_model import ReplayModel
@@ -45,7 +45,7 @@ class ReplayJudge:
             return ReplayAnswer(TestResult(Outcome.FAIL, f"{answer.result.detail} ({why})"), stopped_at)
         return answer
 
-    def feed(self, frame: Frame, message: JsonObject | None) -> str | None:
+    def feed(self, frame: Frame, message: DecodedMessage | None) -> str | None:
         """``frame``'s output ``message`` judged at its time: the first violation's text, or None."""
         model = self.model
         time_ns = model.output_time(frame)

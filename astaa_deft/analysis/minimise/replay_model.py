@@ -54,7 +54,7 @@ from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
-from astaa_deft.model.json import DecodedMessage, JsonObject
+from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
@@ -273,7 +273,7 @@ class ReplayModel:
         """A new replay of the module, in its initial state (the caller closes it)."""
         return make_planner(self.spec, self.params, entry=self.cfg)
 
-    def step(self, planner: ReplayPlanner, frame: Frame) -> JsonObject | None:
+    def step(self, planner: ReplayPlanner, frame: Frame) -> DecodedMessage | None:
         """The module's answer to ``frame`` (StepHang past ``hang_after``; the module's own exceptions)."""
         return within_limit(functools.partial(planner.step, self.frame_message(frame)), self.cfg.hang_after)
 
@@ -339,10 +339,10 @@ class ReplayModel:
                 planner.close()
         return judge.finish()
 
-    def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, JsonObject | None, str | None]]:
+    def replay(self, frames: Sequence[Frame]) -> list[tuple[Frame, DecodedMessage | None, str | None]]:
         """(frame, replayed output, error) for ``frames`` in order from a fresh planner (for the outputs)."""
         planner = self.fresh_planner()
-        out: list[tuple[Frame, JsonObject | None, str | None]] = []
+        out: list[tuple[Frame, DecodedMessage | None, str | None]] = []
         try:
             for frame in frames:
                 try:

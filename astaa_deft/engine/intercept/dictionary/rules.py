@@ -12,18 +12,15 @@ from __future__ import annotations
 import copy
 import math
 import random
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TypeAlias, TypeGuard
+from typing import TypeGuard
 
 from astaa_deft.model.errors import AstaaDeftError
+from astaa_deft.model.json import FieldValue
 from astaa_deft.model.fields import FieldPath, PathLike, as_path, type_at
 from astaa_deft.model.sut import FLOAT_KINDS, INT_KINDS, INT_RANGES, FieldType, MessageType
 
-# The plain data a message field holds, a dictionary entry gives and a rule computes: JSON's values
-# plus byte strings (CBOR and CDR carry them), containers read-only so that any JSON value is one.
-FieldValue: TypeAlias = (None | bool | int | float | str | bytes
-                         | Sequence["FieldValue"] | Mapping[str, "FieldValue"])
 
 
 def is_field_value(value: object) -> TypeGuard[FieldValue]:
