@@ -51,30 +51,38 @@ def is_crash_bucket(verdict: str, invariant: str, spec: Spec) -> bool:
     return watched is not None and watched.kind in CRASH_KINDS
 
 
-def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: ExtractReport, invariant: str) -> bool:
-    """Add to an extracted planner suite the frame of the cycle its planner failed on (module doc); True if added.
+def replayable(spec: Spec, module: str | None) -> bool:
+    """Whether the spec can replay ``module`` alone: its planner, or an entry of its ``replay:`` section."""
+    if module is None:
+        return False
+    return (spec.planner is not None and spec.planner.module == module) or any(e.module == module for e in spec.replay)
 
-    The failure is the log's first violation of ``invariant``, else the
-    planner's first abnormal exit. Nothing is added when the log does not
-    say when, or no trigger reached the planner before it.
+
+def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: ExtractReport, invariant: str) -> bool:
+    """Add to an extracted suite the frame of the cycle its module failed on (module doc); True if added.
+
+    The module is the one ``report`` replayed (the planner, or a ``replay:``
+    entry). The failure is the log's first violation of ``invariant``, else
+    the module's first abnormal exit. Nothing is added when the log does not
+    say when, or no trigger reached the module before it.
     """
-    planner = spec.planner
-    if planner is None:
+    entry = report.entry if report.entry is not None else spec.planner
+    if entry is None:
         return False
     log = read_log(log_path)
     failed_at = next((v.time_ns for v in log.records(rec.Violation) if v.invariant == invariant), None)
     if failed_at is None:
         failed_at = next((e.time_ns for e in log.records(rec.ProcessExit)
-                          if e.module == planner.module and e.abnormal), None)
+                          if e.module == entry.module and e.abnormal), None)
     if failed_at is None:
         return False
-    triggers = [m for m in log.on(spec.channel(planner.trigger).key) if m.log_time <= failed_at]
+    triggers = [m for m in log.on(spec.channel(entry.trigger).key) if m.log_time <= failed_at]
     if not triggers:
         return False
     trigger = triggers[-1]
-    inputs: dict[str, LoggedMessage] = {planner.trigger: trigger}
-    for name in planner.inputs:
-        if name != planner.trigger:
+    inputs: dict[str, LoggedMessage] = {entry.trigger: trigger}
+    for name in entry.inputs:
+        if name != entry.trigger:
             before = [m for m in log.on(spec.channel(name).key) if m.log_time <= trigger.log_time]
             if before:  # an input not heard from yet (a slow channel) is absent from the frame
                 inputs[name] = before[-1]
@@ -86,7 +94,7 @@ def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: Extra
                              candidates_tried=0, exact=False)
     frames = sorted([*kept, failing], key=lambda f: f.trigger_time)
     oracles = json.loads((tests_dir / MANIFEST).read_text()).get("oracles", [])
-    export_suite(frames, spec, run_params(log, spec), tests_dir, oracles=oracles)
+    export_suite(frames, spec, run_params(log, spec), tests_dir, oracles=oracles, entry=report.entry)
     return True
 
 
