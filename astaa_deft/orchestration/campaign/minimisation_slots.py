@@ -185,7 +185,7 @@ class MinimisationSlots(CampaignParts):
         planner = self.spec.planner is not None and self.spec.planner.module == module
         built = build_replay_tests(log, self.config.spec_path, tests_dir, verdict=bucket.verdict,
                                    invariant=bucket.invariant, module=None if planner else module)
-        if not built.accepted:
+        if not built.accepted and not built.failure_frame:
             self.say(f"  {bucket.bucket}: no module tests of {module}: {built.error}")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
@@ -198,7 +198,8 @@ class MinimisationSlots(CampaignParts):
                      f"({verdict.detail}): the minimiser's stay")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
-        self.say(f"  {bucket.bucket}: {built.accepted} DeFT module test(s) of {module}: pytest {tests_dir}"
+        self.say(f"  {bucket.bucket}: {built.accepted + built.failure_frame} DeFT module test(s) of {module}: "
+                 f"pytest {tests_dir}"
                  f"{self._journal_module_tests(bucket.bucket, tests_dir, verdict)}")
         return tests_dir
 

@@ -1,15 +1,17 @@
-"""A bucket's module tests: the frame its planner failed on, and whether the suite fails on the defect.
+"""A bucket's module tests: the frame its module failed on, and whether the suite fails on the defect.
 
-DeFT extracts one frame per recorded planner output, so a cycle in which
-the planner raised (its node logged the exception and carried on, or died
-of it) answered nothing and is in no frame: the suite of such a run passes
-although the replayed planner would raise. For a crash bucket the frame of
-that cycle — the newest trigger the planner got before the failure, with
-the newest of each other input — is added in time order, with no output
-expected: its replay raising is the failing module test. The suite is then
-run once, and what fails decides whether it fails *on the defect*: an
-invariant oracle failing, or (crash bucket) a frame whose replay raises;
-frames that only differ from the recording do not count.
+DeFT extracts one frame per recorded output (or trigger) of the module the
+spec can replay (the planner, or a ``replay:`` entry), so a cycle in which
+the module raised (its node logged the exception and carried on, or died of
+it) answered nothing and is in no frame: the suite of such a run passes
+although the replayed module would raise. For a crash bucket the frame of
+that cycle — the newest trigger the module got before the failure, with the
+newest of each other input (an input not heard from yet left absent) — is
+added in time order after every frame kept, with no output expected: its
+replay raising is the failing module test. The suite is then run once, and
+what fails decides whether it fails *on the defect*: an invariant oracle
+failing, or (crash bucket) a frame whose replay raises; frames that only
+differ from the recording do not count.
 """
 
 from __future__ import annotations

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.engine.bus.processes import python_module
+from astaa_deft.analysis.deft.export import MANIFEST
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.loader import load_spec
@@ -35,7 +36,7 @@ TIMEOUT_S = 3600.0  # an extraction of a long run of an expensive planner: bound
 
 @dataclass(frozen=True)
 class PlannerTests:
-    accepted: int  # frames replayed exactly and written as tests (0: no suite)
+    accepted: int  # frames replayed exactly and written as tests (0 and no failure frame: no suite)
     failure_frame: bool  # the frame of the cycle the module failed on was added (crash buckets)
     error: str | None = None  # why there is no suite, when extraction refused the run
 
@@ -55,12 +56,14 @@ def build(log: Path, spec_path: Path, tests_dir: Path, *, verdict: str, invarian
         report = extract_module_tests(log, spec_path, tests_dir, ExtractOptions(jobs=1, module=module))
     except AstaaDeftError as exc:
         return PlannerTests(0, False, str(exc))
-    if not report.accepted:
+    # A crash bucket's test is the failing cycle's frame, after every frame found (stepped for the state they
+    # build, exact or not): it stands even when no output of the run replayed exactly (a module that died early).
+    crash = is_crash_bucket(verdict, invariant, spec)
+    added = crash and (tests_dir / MANIFEST).is_file() and add_failure_frame(tests_dir, log, spec, report, invariant)
+    if not report.accepted and not added:
         shutil.rmtree(tests_dir, ignore_errors=True)
         return PlannerTests(0, False, f"no output of {report.entry.module if report.entry else 'the planner'} "
                                       "in the run replayed exactly")
-    crash = is_crash_bucket(verdict, invariant, spec)
-    added = crash and add_failure_frame(tests_dir, log, spec, report, invariant)
     add_invariant_oracle(tests_dir, spec, invariant, output=report.entry.output if report.entry else None)
     return PlannerTests(report.accepted, added)
 
@@ -90,7 +93,6 @@ def add_invariant_oracle(tests_dir: Path, spec: Spec, invariant: str, *, output:
     check that the replay matches the recording, which a defect reproduced
     exactly passes. True if added.
     """
-    from astaa_deft.analysis.deft.export import MANIFEST
     from astaa_deft.analysis.deft.invariant_oracle import oracle_entry
 
     if output is None and spec.planner is not None:
