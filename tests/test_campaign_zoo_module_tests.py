@@ -27,6 +27,7 @@ judgement, ``judge_pytest``; a minimiser's suite passes outright).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import subprocess
 import sys
@@ -34,9 +35,11 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.module_tests import judge_pytest
+from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.orchestration.campaign.module_tests import judge_pytest, replayable
 from zoo import MPC, Member, write_member
 from zoo.campaign import CampaignFound, nan_case, run_campaign, run_suite
+from zoo.runtime.zoo_module import Step
 
 # Short: a module that answers the newest trigger when idle (one output per frame found: per_output), its warm
 # state carrying a NaN from the 1 Hz channel c into the next cycle, which dies of it.
@@ -70,6 +73,18 @@ def check_every_replayable_bucket(found: CampaignFound, scratch: Path, *, says: 
             bucket.bucket, off.output[-3000:])
         assert "zoo seeded defect" not in off.output, off.output[-3000:]
     return [b.bucket for b in buckets]
+
+
+def test_the_state_defect_needs_the_state_and_the_spec_replays_the_module(tmp_path):
+    frame = lambda seq, v: {name: {"header": {"seq": seq, "stamp": 0.0}, "v": v if name == "c" else [0.1, 0.2]}  # noqa: E731
+                            for name in ("a", "b", "c")}
+    step = Step(state="warm", defect="nan_state", cost_ms="0.01")
+    assert math.isnan(step.step(frame(1, [math.nan, 0.0]))["x"][0])  # the NaN goes into the state unchecked
+    with pytest.raises(ValueError, match="a non-finite state from an earlier cycle"):
+        step.step(frame(2, [0.3, 0.4]))  # clean inputs: the state carried from the cycle before raises
+    assert Step(state="warm", defect="nan_state", cost_ms="0.01").step(frame(2, [0.3, 0.4])) is not None  # fresh
+    spec = load_spec(write_member(SLOW_STATE, tmp_path / "stack").spec_path)
+    assert replayable(spec, "module") and not replayable(spec, "producer") and not replayable(spec, None)
 
 
 def test_a_state_defect_reached_through_a_slow_channel_gets_module_tests_that_fail_on_it(tmp_path):
