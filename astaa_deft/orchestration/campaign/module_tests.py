@@ -60,7 +60,7 @@ def replayable(spec: Spec, module: str | None) -> bool:
     return (spec.planner is not None and spec.planner.module == module) or any(e.module == module for e in spec.replay)
 
 
-def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: ExtractReport, invariant: str) -> bool:
+def add_failure_frame(tests_dir: Path, log_path: Path, spec: Spec, report: ExtractReport, *, invariant: str) -> bool:
     """Add to an extracted suite the frame of the cycle its module failed on (module doc); True if added.
 
     The module is the one ``report`` replayed (the planner, or a ``replay:``

@@ -59,7 +59,8 @@ def build(log: Path, spec_path: Path, tests_dir: Path, *, verdict: str, invarian
     # A crash bucket's test is the failing cycle's frame, after every frame found (stepped for the state they
     # build, exact or not): it stands even when no output of the run replayed exactly (a module that died early).
     crash = is_crash_bucket(verdict, invariant, spec)
-    added = crash and (tests_dir / MANIFEST).is_file() and add_failure_frame(tests_dir, log, spec, report, invariant)
+    added = crash and (tests_dir / MANIFEST).is_file() and add_failure_frame(tests_dir, log, spec, report,
+                                                                             invariant=invariant)
     if not report.accepted and not added:
         shutil.rmtree(tests_dir, ignore_errors=True)
         return PlannerTests(0, False, f"no output of {report.entry.module if report.entry else 'the planner'} "
