@@ -51,14 +51,14 @@ def measure(name: str, member: Member, root: Path, cases: int) -> str:
     slow = []
     for bucket in replayable:
         suite = found.suite(bucket)
+        if bucket.family.startswith("c:"):
+            slow.append(f"{bucket.bucket}{'' if suite is not None else ' (no tests)'}")
         if suite is None:
             continue
         written += 1
         checked += found.module_tests[bucket.bucket].fails_on_defect is True
         on = run_suite(suite)
         failing += judge_pytest(on.returncode, on.output, crash=True).fails_on_defect is True
-        if bucket.family.startswith("c:"):
-            slow.append(bucket.bucket)
         if "zoo seeded defect" in on.output:
             seeded += 1
             off = run_suite(suite, defect="none", scratch=root / name)
