@@ -16,7 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.module_tests import add_failure_frame, is_crash_bucket, judge_pytest, run_module_tests
+from astaa_deft.orchestration.campaign.module_tests import (
+    add_failure_frame, is_crash_bucket, judge_pytest, run_module_tests,
+)
 from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 from astaa_deft.engine.spec.loader import load_spec
 
@@ -61,7 +63,7 @@ def test_a_planner_that_raised_in_a_cycle_fails_its_module_tests_on_that_cycle(t
     assert report.accepted >= 1
     before = run_module_tests(tests, crash=True)
     assert before.fails_on_defect is False, before  # every recorded output replays: nothing fails
-    assert add_failure_frame(tests, log, load_spec(SPEC), report, "planner_errors")
+    assert add_failure_frame(tests, log, load_spec(SPEC), report, invariant="planner_errors")
     after = run_module_tests(tests, crash=True)
     assert after.fails_on_defect is True, after
     assert after.detail.startswith("the replay raises ValueError")

@@ -46,9 +46,9 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
     journal = Journal(out)
     try:
         campaign = Campaign(CampaignConfig(spec_path=demo_spec_path(), out=out), journal, say=said.append)
-        assert campaign._planner_caused(_bucket("B001", "planning"))
-        assert not campaign._planner_caused(_bucket("B002", "control"))
-        tests = campaign._planner_tests(_bucket("B001", "planning"), Path(outcome.log_path))
+        assert campaign._module_to_replay(_bucket("B001", "planning")) == "planning"
+        assert campaign._module_to_replay(_bucket("B002", "control")) == "control"  # a replay: entry of the demo's spec
+        tests = campaign._replay_tests(_bucket("B001", "planning"), Path(outcome.log_path), "planning")
         checked = journal.module_tests()["B001"]  # the campaign ran them once: they fail on the defect
         assert checked.fails_on_defect is True and "its oracle fails" in checked.detail, checked
     finally:

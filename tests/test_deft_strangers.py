@@ -84,6 +84,10 @@ def test_ground_truth_works_with_module_and_is_checked_before_the_work(tmp_path)
     bad = subprocess.run([*command, "--ground-truth", "used[", "--jobs", "1"], capture_output=True, text=True,
                          env=env, timeout=60)
     assert bad.returncode == 2 and "--ground-truth" in bad.stderr and "outputs" not in bad.stdout
+    typo = subprocess.run([*command, "--ground-truth", "usd", "--jobs", "1"], capture_output=True, text=True,
+                          env=env, timeout=60)  # a field the output's declared type does not have: before the work
+    assert typo.returncode == 2 and "'usd' names no field of 'command'" in typo.stderr, typo.stderr
+    assert "outputs" not in typo.stdout
     good = subprocess.run([*command, "--ground-truth", "used", "--jobs", "1"], capture_output=True, text=True,
                           env=env, timeout=120)
     assert good.returncode == 0, good.stderr

@@ -37,8 +37,10 @@ AXES: dict[str, tuple[str, ...]] = {
 }
 
 # Seeded defects (not an axis: the zoo's members have none unless asked): 'crash_on_nan' — a step given a NaN
-# in any input's values raises, which kills the module's process (its spec says `exceptions: crash`).
-DEFECTS = ("none", "crash_on_nan")
+# in any input's values raises, which kills the module's process (its spec says `exceptions: crash`);
+# 'nan_state' — a NaN (or inf) input goes into the step's state unchecked, and the next cycle raises on that
+# state: the failing cycle's own inputs are clean, so only a replay that carries the state reaches it.
+DEFECTS = ("none", "crash_on_nan", "nan_state")
 
 INPUTS = ("a", "b", "c")  # 'a' is the trigger channel (a timer module names it as its spec trigger too)
 OUTPUT = "out"

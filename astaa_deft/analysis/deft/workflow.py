@@ -111,8 +111,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     if module is not None and spec.planner is not None and module == spec.planner.module:
         module = None  # the planner, as its own section describes it
     entry = replay_module_of(spec, module)
-    if options.ground_truth is not None:  # checked before the work, not after it
-        _check_ground_truth(options.ground_truth, spec_path)
+    _check_ground_truth(options.ground_truth, spec_path, spec=spec, output=entry.output)  # before the work
     if threshold is not None:
         entry = replace(entry, threshold=threshold)
         if module is None and spec.planner is not None:
@@ -220,14 +219,20 @@ def uncheck_frames(out_dir: Path, indices: set[int]) -> None:
     write_atomic(path, json.dumps(manifest, indent=1) + "\n")
 
 
-def _check_ground_truth(path: str, spec_path: Path) -> None:
-    """InputError when ``--ground-truth`` is not a field path (the output field naming the inputs used)."""
-    from astaa_deft.model.fields import FieldPath, FieldPathError
+def _check_ground_truth(path: str | None, spec_path: Path, *, spec: Spec, output: str) -> None:
+    """InputError when ``--ground-truth`` is not a field path (the output field naming the inputs used), or
+    not a field of the ``output`` channel's declared type."""
+    from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 
+    if path is None:
+        return
     try:
-        FieldPath.parse(path)
+        type_name = spec.channel(output).type
+        parsed = FieldPath.parse(path)
+        if type_name in spec.types:
+            type_at(spec.types, type_name, parsed)
     except FieldPathError as exc:
-        raise InputError(Problem("--ground-truth", None, None, f"'{path}' is not a field path: {exc}",
+        raise InputError(Problem("--ground-truth", None, None, f"'{path}' names no field of '{output}': {exc}",
                                  f"name the field of the module's output (per {spec_path}) that lists the inputs "
                                  f"it used, e.g. debug.inputs")) from None
 

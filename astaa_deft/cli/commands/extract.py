@@ -65,7 +65,7 @@ def summary_table(ex: Extraction, thresholds: Sequence[float] | None = None, mod
     n = max(len(ex.frames), 1)
     lines.append(f"per frame: reconstruction {ex.reconstruction_seconds / n * 1e3:.3f} ms (candidate search and "
                  f"input decoding), validation {ex.validation_seconds / n * 1e3:.3f} ms, "
-                 f"planner replay {ex.planner_seconds / n * 1e3:.2f} ms")
+                 f"{'planner' if module is None else 'module'} replay {ex.planner_seconds / n * 1e3:.2f} ms")
     return "\n".join(lines)
 
 

@@ -1,5 +1,5 @@
 """The campaign's minimisation slots: confirmed buckets minimised alongside the hunt, each in a worker
-slot, then the rest after it; the planner's DeFT module tests; buckets whose culprits coincide merged.
+slot, then the rest after it; DeFT module tests of the module to blame; buckets whose culprits coincide merged.
 
 A part of :class:`~.campaign.Campaign` (its state: :class:`~.parts.CampaignParts`).
 """
@@ -17,9 +17,9 @@ from astaa_deft.orchestration.campaign.journal import Bucket, Journal
 from astaa_deft.orchestration.campaign.rows import Minimisation
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
-    TestsVerdict, is_crash_bucket, run_module_tests,
+    TestsVerdict, is_crash_bucket, replayable, run_module_tests,
 )
-from astaa_deft.orchestration.campaign.planner_tests import build_in_child as build_planner_tests
+from astaa_deft.orchestration.campaign.planner_tests import build_in_child as build_replay_tests
 from astaa_deft.orchestration.campaign.parts import CampaignParts
 
 
@@ -136,7 +136,8 @@ class MinimisationSlots(CampaignParts):
 
     def _minimise_left(self) -> None:
         """After the hunt: the minimisations still running, then the confirmed buckets none took up, all the
-        slots at once; the planner's module tests; buckets whose culprits coincide merged."""
+        slots at once; DeFT module tests where the minimiser's are missing or do not fail on the defect;
+        buckets whose culprits coincide merged."""
         while True:
             self._collect_minimisations()
             self._start_minimisations(hunting=False)
@@ -144,57 +145,63 @@ class MinimisationSlots(CampaignParts):
                 break
             self._collect_minimisations(wait=True)
         minimised = self.journal.minimisations()
+        checked = self.journal.module_tests()
         for bucket in self.journal.buckets(include_merged=False):
             row = minimised.get(bucket.bucket)
-            if row is None or row.tests_dir or not self._planner_caused(bucket):
-                continue
+            module = self._module_to_replay(bucket)
+            own = checked.get(bucket.bucket)
+            if row is None or module is None or (row.tests_dir and (own is None or own.fails_on_defect is not False)):
+                continue  # none to replay, or the minimiser's tests fail on the defect (or could not run)
             log = self.journal.planned(bucket.first_case).log_path
             if log is None:  # minimised from its log, so it has one
                 continue
-            tests_dir = self._planner_tests(bucket, Path(log))
+            tests_dir = self._replay_tests(bucket, Path(log), module, fallback=row.tests_dir is not None)
             if tests_dir is not None:
                 self.journal.minimised(replace(row, tests_dir=str(tests_dir)))
         for merged, into in merge_same_culprits(self.journal):
             self.say(f"  bucket {merged}: same minimised culprit as {into}: merged")
 
-    def _planner_caused(self, bucket: Bucket) -> bool:
-        """The planner's bucket: its finding names the planner, or the planner is the module to blame (its
-        module tests, replaying the failing run's frames, then check the blame)."""
-        planner = self.spec.planner
-        if planner is None:
-            return False
+    def _module_to_replay(self, bucket: Bucket) -> str | None:
+        """The module whose DeFT module tests a bucket gets: the module to blame, else the module its finding
+        names — when the spec can replay it alone (the planner, a ``replay:`` entry); None otherwise."""
         blamed = self.journal.blames().get(bucket.bucket)
-        return bucket.module == planner.module or (blamed is not None and blamed.module == planner.module)
+        for module in (blamed.module if blamed is not None else None, bucket.module):
+            if replayable(self.spec, module):
+                return module
+        return None
 
-    def _planner_tests(self, bucket: Bucket, log: Path) -> Path | None:
-        """DeFT module tests of the planner from the bucket's failing run (its frames with the culprit inputs).
+    def _replay_tests(self, bucket: Bucket, log: Path, module: str, *, fallback: bool = False) -> Path | None:
+        """DeFT module tests of ``module`` from the bucket's failing run (its frames with the culprit inputs).
 
         Built in a child process (``planner_tests``: this one runs threads, and
         the replay forks); a crash bucket's suite also gets the frame of the
-        cycle the planner failed on. The suite is run once and the journal
-        says whether it fails on the bucket's defect.
+        cycle the module failed on. The suite is run once and the journal says
+        whether it fails on the bucket's defect. ``fallback``: the minimiser's
+        tests do not fail on it; these replace them only if they do.
         """
         tests_dir = self.config.out / TESTS_DIR / f"{bucket.bucket}{REPLAY_TESTS_SUFFIX}"
         if tests_dir.exists():
             shutil.rmtree(tests_dir)
-        built = build_planner_tests(log, self.config.spec_path, tests_dir, verdict=bucket.verdict,
-                                    invariant=bucket.invariant)
-        if not built.accepted:
-            self.say(f"  no module tests: {built.error}")
+        planner = self.spec.planner is not None and self.spec.planner.module == module
+        built = build_replay_tests(log, self.config.spec_path, tests_dir, verdict=bucket.verdict,
+                                   invariant=bucket.invariant, module=None if planner else module)
+        if not built.accepted and not built.failure_frame:
+            self.say(f"  {bucket.bucket}: no module tests of {module}: {built.error}")
             shutil.rmtree(tests_dir, ignore_errors=True)
             return None
         if built.failure_frame:
-            self.say("  + the frame of the cycle the planner failed on")
+            self.say(f"  + the frame of the cycle {module} failed on")
         crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
-        self.say(f"  {built.accepted} DeFT module test(s) of the planner: pytest {tests_dir}"
-                 f"{self._check_module_tests(bucket, tests_dir, crash)}")
+        verdict = run_module_tests(tests_dir, crash=crash)
+        if fallback and not verdict.fails_on_defect:
+            self.say(f"  {bucket.bucket}: DeFT module tests of {module} do not fail on the defect either "
+                     f"({verdict.detail}): the minimiser's stay")
+            shutil.rmtree(tests_dir, ignore_errors=True)
+            return None
+        self.say(f"  {bucket.bucket}: {built.accepted + built.failure_frame} DeFT module test(s) of {module}: "
+                 f"pytest {tests_dir}"
+                 f"{self._journal_module_tests(bucket.bucket, tests_dir, verdict)}")
         return tests_dir
-
-    def _check_module_tests(self, bucket: Bucket, tests_dir: Path, crash: bool | None = None) -> str:
-        """Run a bucket's module tests once and journal whether they fail on its defect; a phrase saying so."""
-        if crash is None:
-            crash = is_crash_bucket(bucket.verdict, bucket.invariant, self.spec)
-        return self._journal_module_tests(bucket.bucket, tests_dir, run_module_tests(tests_dir, crash=crash))
 
     def _journal_module_tests(self, bucket: str, tests_dir: Path, verdict: TestsVerdict) -> str:
         """Journal whether a bucket's module tests fail on its defect; a phrase saying so."""

@@ -27,6 +27,7 @@ import signal
 import sys
 import threading
 import time
+import traceback
 from collections import deque
 from collections.abc import Mapping
 from typing import Any
@@ -54,7 +55,9 @@ class Step:
         self.cost = (float(lo) * 1e-3, float(hi or lo) * 1e-3)
         self.parts, self.silent_every, self.warm = int(parts), int(silent_every), float(warm)
         self.trigger, self.inputs = trigger, tuple(inputs.split(","))
-        self.defect = defect  # 'crash_on_nan': a NaN in an input's values raises (the process dies of it)
+        # 'crash_on_nan': a NaN in an input's values raises (the process dies of it); 'nan_state': a non-finite
+        # input goes into the state unchecked and the next cycle raises on it (the defect needs the state)
+        self.defect = defect
         self.x = [0.0, 0.0]  # the warm start: the previous cycle's result
         self.steps = 0  # cycles computed (state 'counters')
         self.seen: dict[str, int] = {}  # per input: cycles that had it (state 'counters')
@@ -80,6 +83,9 @@ class Step:
         trig = frame[self.trigger]
         seq = int(trig["header"]["seq"])
         burn(self.cost[0] + (self.cost[1] - self.cost[0]) * ((seq * 0.6180339887498949) % 1.0))
+        if self.defect == "nan_state" and not all(math.isfinite(value) for value in self.x):
+            # the state an earlier cycle left (a NaN or inf input went into it unchecked): this cycle dies of it
+            raise ValueError("zoo seeded defect: a non-finite state from an earlier cycle")
         u, absent = [0.0, 0.0], 0
         for weight, name in zip(WEIGHTS, self.inputs, strict=True):
             message = frame.get(name)
@@ -214,10 +220,15 @@ def main() -> int:
         frame = scheduler.next_frame(stop, None)
         if frame is None:
             continue
-        message = step.step(frame)
-        while message is not None:
-            pub.put(json.dumps(message))
-            message = step.step(frame) if step.pending else None
+        try:
+            message = step.step(frame)
+            while message is not None:
+                pub.put(json.dumps(message))
+                message = step.step(frame) if step.pending else None
+        except Exception:  # a step that raises kills the module, as a node dies of an uncaught exception
+            traceback.print_exc()
+            sys.stderr.flush()
+            os._exit(1)  # now: Zenoh's threads would keep a process whose main thread raised alive
         scheduler.done()
     del subscribers
     session.close()
