@@ -557,7 +557,8 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
     generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
                          int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                         read_at, recorded.module_started_in_log)
+                         read_at, recorded.module_started_in_log, skew_ns=skew,
+                         earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 5):out_index - 1])])
     window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
                                 if out_index else None, skew) if generic else 0.0
     if before is not None:
@@ -567,13 +568,6 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
     options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot)
-    if run.misses_in_row and run.search is not None:
-        # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
-        # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 4, 2,
-        # then the likeliest only) until an output reproduces again: a plain replay's cost, not a search's.
-        budget = max(1, EXPENSIVE_TRIES >> (run.misses_in_row - 1))
-        capped = capped or len(options) > budget
-        options = options[:budget]
     result.reordered += options[:1] != generic[:1]
     t1 = time.perf_counter()
     result.reconstruction_seconds += t1 - t0
@@ -588,6 +582,14 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     if declared is not None:  # the module said which inputs it used: that frame first, checked by replay
         result.declared += 1
         options = [declared] + [c for c in options if dict(c.choice) != dict(declared.choice)]
+    if run.misses_in_row and run.search is not None:
+        # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
+        # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 4, 2,
+        # then the likeliest only: one step, nothing forked) until an output reproduces again — a plain
+        # replay's cost, not a search's. The budget counts every candidate (the plain walk, a declared frame).
+        budget = max(1, EXPENSIVE_TRIES >> (run.misses_in_row - 1))
+        capped = capped or len(options) > budget
+        options = options[:budget]
     if not options:
         run.report(out_index, "an input had no message yet")
         return

@@ -52,6 +52,10 @@ NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "bet
 # module that cycles with an input absent, see frame_at).
 FIRST_HEARD = "first heard"
 AFTER = "after"  # the first trigger logged after the previous output (a module that drops those while busy)
+# … or after the output m before ("after m": the oldest of a queue m - 1 deep), for m up to 1 + QUEUE_DEPTHS.
+QUEUE_DEPTHS = 3
+AFTER_RULES = frozenset({AFTER} | {f"{AFTER} {m}" for m in range(2, QUEUE_DEPTHS + 2)})
+AFTER_JITTER_NS = 1_000_000  # a trigger logged this long before an output may have reached the module after it
 
 
 @dataclass(frozen=True)
@@ -97,7 +101,8 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
 
 def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
                lookback_ns: int, previous_output_ns: int | None = None,
-               read_at: Sequence[tuple[int, str]] = (), module_started_in_log: bool = False) -> list[Candidate]:
+               read_at: Sequence[tuple[int, str]] = (), module_started_in_log: bool = False, *,
+               skew_ns: int = 0, earlier_outputs_ns: Sequence[int] = ()) -> list[Candidate]:
     """Distinct candidate frames for an output at t_P, most likely first.
 
     ``previous_output_ns``: when the previous output was logged. A planner
@@ -108,6 +113,11 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     ``module_started_in_log``: the log began before the module's first
     trigger (the tool started the run): a first output may answer the log's
     first triggers however many came since.
+    ``skew_ns``: how much of ``previous_output_ns`` is the recorder's skew
+    (the output itself was logged that much earlier). ``earlier_outputs_ns``:
+    when the outputs before the previous one were logged (newest first): a
+    module taking the oldest of a bounded queue answers the trigger that
+    found room when an earlier cycle started (:data:`AFTER` ``m``).
     """
     trig = streams[trigger]
     newest = newest_at_or_before(trig.times, t_p)
@@ -121,10 +131,17 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     # triggers logged up to ``lookback`` before the previous output may be the newest it had then.
     jitter = [] if previous_output_ns is None else [
         i for i in range(busy - 1, max(oldest, bisect_right(trig.times, previous_output_ns - lookback_ns)) - 1, -1)]
-    # A module that drops the triggers coming while it is busy answers the first one after its previous output.
-    after = busy + 1 if previous_output_ns is not None and oldest <= busy + 1 < newest else None
+    # A module that drops the triggers coming while it is busy answers the first one after its previous output
+    # (logged up to AFTER_JITTER_NS before that output: the module was idle before the recorder logged it); one
+    # taking the oldest of a queue m - 1 deep, the first one after the output m before (its cycle freed a place).
+    afters: dict[int, set[str]] = {}
+    if previous_output_ns is not None:
+        for m, t_out in enumerate([previous_output_ns - skew_ns, *earlier_outputs_ns][:QUEUE_DEPTHS + 1], start=1):
+            index = bisect_right(trig.times, t_out - AFTER_JITTER_NS)
+            if oldest <= index <= newest:
+                afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
     order_of_triggers = list(dict.fromkeys(
-        [newest] + ([busy] if oldest <= busy < newest else []) + ([after] if after is not None else []) + jitter
+        [newest] + ([busy] if oldest <= busy < newest else []) + list(afters) + jitter
         + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
     rules[newest].add(NEWEST)
@@ -132,8 +149,8 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
         rules[busy].add(BUSY)
     for index in jitter:
         rules[index].add(BUSY)
-    if after is not None:
-        rules[after].add(AFTER)
+    for index, after_rules in afters.items():
+        rules[index] |= after_rules
     if trigger in previous and oldest <= newest:
         rules[oldest].add(OLDEST)
     for index in order_of_triggers:
