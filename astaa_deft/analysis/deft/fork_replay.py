@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import math
 import os
 import select
 import signal
@@ -193,7 +194,7 @@ class ForkedSearch:
     def search(self, count: int, run: Callable[[int], Any], *, accepted: Callable[[Any], bool],
                closeness: Callable[[Any], float], limit_s: float,
                settles: Callable[[Any], bool] = lambda result: False,
-               retry_limit_s: float | None = None) -> Tried | None:
+               retry_limit_s: float | None = None, rival: float = math.inf) -> Tried | None:
         """Try candidates 0..count-1; return (in the surviving process) the one kept, or None.
 
         ``run(i)`` steps the planner on candidate i and returns a picklable
@@ -209,6 +210,10 @@ class ForkedSearch:
         ``limit_s`` run again from the same state under ``retry_limit_s`` —
         the tight limit only saves time spent on wrong frames, it never costs
         an output.
+
+        ``rival``: the closeness of a candidate outside this search, measured
+        already; when none here is accepted and the closest is farther than
+        it, none is kept (None: the caller steps the rival again instead).
         """
         running: dict[int, _Running] = {}
         done: dict[int, Tried] = {}
@@ -241,6 +246,8 @@ class ForkedSearch:
             self.retried += len(cut)
         if winner is None:
             winner = self._decide(done, count, accepted, closeness, final=True)
+            if winner is not None and not accepted(done[winner].result) and closeness(done[winner].result) > rival:
+                winner = None  # the rival outside this search is closer
         if retrying and winner is not None and winner in cut:
             self.retried_kept += 1
         for pid, result_fd, go_fd, _ in running.values():  # still running: not needed

@@ -131,7 +131,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
             ex = extract(log, spec, planner, on_output=_following(progress, checkpoint), jobs=jobs or idle_cores(),
-                         entry=entry, resume=before)
+                         entry=entry, resume=before,
+                         fresh=lambda: make_planner(spec, params, prefer_process=options.process, entry=entry))
     except KeyboardInterrupt:
         with writing(place):
             checkpoint.write()
