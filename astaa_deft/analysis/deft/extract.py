@@ -204,6 +204,11 @@ class SuiteRun:
         self.judged: dict[int, tuple[Comparison, bool]] = {}  # frame index → its comparison here, field for field
         self.in_replay = 0  # frames checked by the replay's own in-order steps
 
+    @property
+    def failures(self) -> list[tuple[int, str]]:
+        """The tests that failed so far: (frame index, what)."""
+        return sorted(self.failing.items())
+
     def add(self, outcome: Decided) -> None:
         if outcome.frame is None:
             return
@@ -263,7 +268,7 @@ class SuiteRun:
         copies a little off (a module not bit-stable across a fork) that the suite's fresh module reproduces
         within θ is a test that passes; one the search accepted but the suite's run does not is a failure
         (``result.suite_failures``: an extraction defect)."""
-        result.suite_failures = sorted(self.failing.items())
+        result.suite_failures = self.failures
         result.checked_beside = self.stepped
         result.checked_in_replay = 0 if self.beside else self.in_replay
         for frame in result.frames:
