@@ -161,7 +161,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     """
     cfg = entry if entry is not None else replay_module_of(spec)
     if cfg.per_trigger:
-        return _extract_per_trigger(log, spec, planner, cfg, on_output)
+        return _extract_per_trigger(log, spec, planner, cfg=cfg, progress=on_output)
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
         # The search runs in forked copies; here, beside it, the fresh ``planner`` runs the suite: it steps
         # every frame as it is decided and compares the accepted ones, as `pytest DIR` will.
@@ -172,16 +172,16 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             on_output(*message)
             follower.add(message[2])
 
-        def body(send: Callable[[Any], None]) -> Extraction:
+        def body(send: Callable[[tuple[int, int, Decided]], None]) -> Extraction:
             # A module made here, in the replay process: its steps in this process, in order, are the suite's
             # (a fork of the caller's module is not: a module may answer otherwise in a forked process).
             return _extract(log, spec, fresh() if fresh is not None else planner, lambda *message: send(message),
-                            ForkedSearch(jobs, send), cfg, resume, fresh=fresh)
+                            search=ForkedSearch(jobs, send), cfg=cfg, resume=resume, fresh=fresh)
 
         result: Extraction = run_supervised(body, on_message=on_message, idle=follower.step_one)
         follower.finish(result)
         return result
-    return _extract(log, spec, planner, on_output, None, cfg, resume)
+    return _extract(log, spec, planner, on_output, search=None, cfg=cfg, resume=resume)
 
 
 class SuiteRun:
@@ -299,7 +299,7 @@ class _TriggerAnswer:
     tries: int
 
 
-def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
+def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, *, cfg: ReplayModule,
                          progress: OnOutput) -> Extraction:
     """One frame per trigger message, its replayed answer compared with the recorded one.
 
@@ -344,8 +344,9 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
         nothing_plausible = output is None or t_index + 1 >= len(times) or not _answered_in_turn(
             times, t_index, outputs, next_output)
         t1 = time.perf_counter()
-        options = trigger_candidates(streams, cfg.trigger, t_index, previous, int(cfg.lookback_ms * 1e6),
-                                     output.log_time if output is not None else None, int(cfg.skew_ms * 1e6))
+        options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback_ns=int(cfg.lookback_ms * 1e6),
+                                     answered_at=output.log_time if output is not None else None,
+                                     skew_ns=int(cfg.skew_ms * 1e6))
         if not planner.can_snapshot:
             options = options[:1]
         start_state = planner.snapshot() if len(options) > 1 else None
@@ -663,8 +664,8 @@ class _Run:
         return tuple(judged)
 
 
-def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
-             search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = (), *,
+def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput, *,
+             search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = (),
              fresh: Callable[[], ReplayPlanner] | None = None) -> Extraction:
     """A frame per recorded output, in order (see :func:`extract`); ``search`` None: no forking.
 
@@ -705,10 +706,11 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
                          read_at, recorded.module_started_in_log, skew_ns=skew,
                          earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])
                                              ])
-    window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
-                                if out_index else None, skew) if generic else 0.0
+    previous_output = outputs[out_index - 1] if out_index else None
+    window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, previous=previous_output,
+                                skew_ns=skew) if generic else 0.0
     if before is not None:
-        _step_resumed(run, out_index, before, generic, window)
+        _step_resumed(run, out_index, before, generic=generic, window=window)
         return
     # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
@@ -809,7 +811,8 @@ def _measure_copies(run: _Run, cand: Candidate, limit_s: float) -> None:
     run.result.copies_differ = 0.0 if exact else cmp.distance
 
 
-def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[Candidate], window: float) -> None:
+def _step_resumed(run: _Run, out_index: int, before: Decided, *, generic: Sequence[Candidate], window: float
+                  ) -> None:
     """An output decided before the extraction was resumed: stepped once, as then; what it taught is learned
     again."""
     if before.frame is None or before.choice is None:
@@ -817,8 +820,8 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
         return
     run.previous = dict(before.choice)
     recorded = run.recorded
-    stepped, step_s, replayed = _step_decided(run.planner, before.frame, run.previous, recorded.fresh,
-                                              recorded.messages, recorded.outputs[out_index])
+    stepped, step_s, replayed = _step_decided(run.planner, before.frame, run.previous, decode=recorded.fresh,
+                                              messages=recorded.messages, output=recorded.outputs[out_index])
     # Judged again, never taken from the state file: a hand-edited verdict would make tests that fail on the
     # run they came from (or drop ones that pass).
     comparison, exact = _judged(run.cfg, replayed, _expected(run, out_index))
@@ -834,7 +837,7 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
 DECLARED = "declared"  # a frame the module's own output names (provenance)
 
 
-def provenance_of(message: Any, path: str | None) -> Mapping[str, Any] | None:
+def provenance_of(message: object, path: str | None) -> Mapping[str, object] | None:
     """The inputs an output names as used (``path``: the spec's ``provenance``), or None."""
     from astaa_deft.model.fields import get
 
@@ -844,7 +847,7 @@ def provenance_of(message: Any, path: str | None) -> Mapping[str, Any] | None:
     return found[0][1] if found and isinstance(found[0][1], Mapping) else None
 
 
-def names_message(message: Any, named: Any) -> bool:
+def names_message(message: object, named: object) -> bool:
     """Is ``message`` the one an output names by ``named`` (its header.seq, or its header.stamp)?"""
     header = message.get("header") if isinstance(message, Mapping) else None
     if not isinstance(header, Mapping):
@@ -915,7 +918,7 @@ def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expec
     return cand, _Judged(cmp, exact, tries)
 
 
-def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
+def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int], *,
                   decode: Callable[[str, int], Any], messages: Mapping[str, list[LoggedMessage]],
                   output: LoggedMessage) -> tuple[ExtractedFrame, float, Any]:
     """(the frame, with its messages; the CPU seconds of its step; what the planner replayed) of an output
@@ -927,8 +930,8 @@ def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mappi
     return frame, step_s, replayed
 
 
-def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
-                       skew_ns: int) -> float:
+def _recorded_window_s(trigger: Stream, options: list[Candidate], output: LoggedMessage, *,
+                       previous: LoggedMessage | None, skew_ns: int) -> float:
     """The longest the recorded planner can have worked on this output: from the later of its earliest
     candidate trigger and its previous output (a busy planner starts as it publishes) to the output."""
     start = min(trigger.times[c.choice[trigger.channel]] for c in options)
@@ -1009,7 +1012,7 @@ class Speculation:
 
 
 def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
-                  in_turn: bool) -> tuple[tuple[int, Any] | None, dict[int, Any]]:
+                  *, in_turn: bool) -> tuple[tuple[int, Any] | None, dict[int, Any]]:
     """(candidate and outcome kept, or None; candidates tried in vain) for one output, stepped in this process.
 
     ``in_turn`` (a cheap output with several candidates): the first

@@ -123,7 +123,8 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     newest = newest_at_or_before(trig.times, t_p)
     if newest < 0:
         return []
-    timed = [c for c in (frame_read_at(streams, trigger, t, previous, rule) for t, rule in read_at) if c is not None]
+    timed = [c for c in (frame_read_at(streams, trigger, t, previous, rule=rule) for t, rule in read_at)
+             if c is not None]
     # The first output (no previous frame) may answer a trigger some periods before the newest.
     oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
     busy = newest_at_or_before(trig.times, previous_output_ns) if previous_output_ns is not None else -1
@@ -170,7 +171,8 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                 rules[first] = set()
             rules[first].add(rule)
     found = timed + [cand for t_index in order_of_triggers
-             for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
+             for cand in _for_trigger(streams, trigger, t_index, t_p, previous=previous, lookback_ns=lookback_ns,
+                                         rules=rules[t_index])]
     return merged(found)
 
 
@@ -196,7 +198,7 @@ def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[st
     return Candidate(streams[trigger].times[first], choice, frozenset({(WALK, ())}), walk=True)
 
 
-def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int],
+def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int], *,
                   rule: str) -> Candidate | None:
     """The frame of a module that read, at time ``t``, the newest trigger and the newest message of each
     other input (absent inputs left out); None when no trigger newer than the previous frame's had come."""
@@ -225,7 +227,7 @@ def merged(found: Sequence[Candidate]) -> list[Candidate]:
     return out
 
 
-def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p: int,
+def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p: int, *,
                  previous: Mapping[str, int], lookback_ns: int, rules: set[str]) -> list[Candidate]:
     t_t = streams[trigger].times[t_index]
     later: set[int] = set()
@@ -286,7 +288,7 @@ def trigger_frame(streams: Mapping[str, Stream], trigger: str, trigger_index: in
 
 
 def trigger_candidates(streams: Mapping[str, Stream], trigger: str, trigger_index: int,
-                       previous: Mapping[str, int], lookback_ns: int, answered_at: int | None = None,
+                       previous: Mapping[str, int], *, lookback_ns: int, answered_at: int | None = None,
                        skew_ns: int = 0) -> list[dict[str, int]]:
     """Per-trigger frames, most likely first: :func:`trigger_frame`; then, per other input, the frame
     with each of its messages logged after the trigger but before the recorded answer (``answered_at``,

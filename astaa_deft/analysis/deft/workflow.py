@@ -14,7 +14,6 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -59,9 +58,9 @@ class ExtractReport:
     accepted: int  # module tests written
     oracles: int  # oracle tests written (frames that planned into a predicted obstacle before a collision)
     collision: bool  # the run recorded a collision
-    manifest: Any  # export_suite's manifest; empty when nothing was written
+    manifest: Path | None  # export_suite's manifest; None when nothing was written
     ground_truth: tuple[int, int] | None = None  # (frames that used exactly the planner's inputs, checked)
-    entry: Any = None  # the replayed module's ReplayModule, with the threshold used
+    entry: ReplayModule | None = None  # the replayed module, with the threshold used
     interrupted: bool = False  # stopped early: ``extraction`` holds the outputs decided so far
     resumed: int = 0  # outputs an interrupted extraction had decided, stepped once each
     # Module tests that failed when the written suite ran once on its own run (an extraction defect); the
@@ -248,7 +247,7 @@ def _following(progress: Callable[[int, int], None], checkpoint: Checkpoint) -> 
     return on_output
 
 
-def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: Any, resumed: int) -> ExtractReport:
+def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: ReplayModule, resumed: int) -> ExtractReport:
     """The report of an extraction stopped early: the outputs decided before, as written."""
     frames = [d.frame for d in checkpoint.decided if d.frame is not None]
     ex = Extraction(frames=[replace(f, index=i) for i, f in enumerate(frames)],
