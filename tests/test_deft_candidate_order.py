@@ -20,7 +20,7 @@ import pytest
 
 from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.analysis.deft.frames import AFTER, BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
+from astaa_deft.analysis.deft.frames import AFTER, AS_LOGGED, BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
     EXPENSIVE_TRIES, LIKELY_RULES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
@@ -42,8 +42,9 @@ def test_candidates_say_how_they_were_derived():
                        previous_output_ns=150 * MS)
     first = found[0]  # the newest trigger with the ego pose at its own time
     assert first.choice == {"obstacles": 2, "ego": 4}
-    # … and the first trigger logged after the previous output (a module that drops triggers while busy).
-    assert first.patterns == {(NEWEST, (("ego", 0),)), (AFTER, (("ego", 0),))}
+    # … and the first trigger logged after the previous output (a module that drops triggers while busy), and
+    # a plain replay's frame (the newest trigger, the inputs as logged before it).
+    assert first.patterns == {(NEWEST, (("ego", 0),)), (AFTER, (("ego", 0),)), (AS_LOGGED, ())}
     later = next(c for c in found if c.choice == {"obstacles": 1, "ego": 2})
     # Trigger 1 was the newest when the previous output was logged, and the oldest not yet answered.
     assert later.patterns == {(BUSY, (("ego", 0),)), (OLDEST, (("ego", 0),))}
@@ -156,7 +157,7 @@ def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
     assert sorted(ordered, key=found.index) == found  # the same candidates, none lost or added
 
     def spread(c):
-        return min(max(abs(o) for _, o in offsets) for _, offsets in c.patterns)
+        return min(max((abs(o) for _, o in offsets), default=0) for _, offsets in c.patterns)
 
     likely = [c for c in ordered if any(rule in LIKELY_RULES for rule, _ in c.patterns)]  # newest, busy, after …
     head = ordered[:len(likely)]

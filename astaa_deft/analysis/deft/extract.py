@@ -633,9 +633,12 @@ class _Run:
             # Too many frames to step again: the caller's suite run steps every frame, beside the search.
             self.born = None
             return None
-        # Not while forks take over often (a module made now would not last): later, or after the last output.
-        recent = sum(1 for at in self.takeovers if at > len(frames) - TAKEOVER_WINDOW)
-        return self.step_again() if self.quiet >= QUIET and recent < TAKEOVERS_RECENT else None
+        # Not while forks take over often (a module made now would not last): once this process has kept, in a
+        # row, QUIET outputs and twice as many as came between the last takeovers (the median), or after the last
+        # output.
+        gaps = sorted(b - a for a, b in pairwise(self.takeovers[-TAKEOVER_GAPS - 1:]))
+        needed = max(QUIET, 2 * gaps[len(gaps) // 2]) if gaps else QUIET
+        return self.step_again() if self.quiet >= needed else None
 
     def step_again(self) -> tuple[InOrder, ...]:
         """Every frame kept so far stepped in order on a fresh module made here, judged as the suite judges them;
@@ -731,9 +734,17 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     result.validation_seconds += time.perf_counter() - t1
     walk = plain_walk(recorded.streams, cfg.trigger, run.previous) if (
         run.search is not None and cfg.trajectory is None and planner.can_snapshot) else None
+    if walk is not None and walk.frame_time > output.log_time + skew:
+        walk = None  # no trigger came since the previous frame's (a module publishing several messages a cycle)
     if walk is not None:  # a module (not the planner): the plain walk first, unless another way won more
         first = bool(options) and run.memory.winning.score(options[0]) > run.memory.winning.score(walk)
         options = [*options[:1], walk, *options[1:]] if first else [walk, *options]
+    if out_index and run.previous and output.log_time - outputs[out_index - 1].log_time <= skew:
+        # An output right after the previous one (within the skew): most likely the next message of the same
+        # cycle (a module publishing several a cycle answers it whatever the frame). The previous frame again,
+        # first: a frame with a newer trigger would take that trigger from the cycle that answers it.
+        again = Candidate(outputs[out_index - 1].log_time, dict(run.previous), frozenset({(AGAIN, ())}))
+        options = [again] + [c for c in options if dict(c.choice) != run.previous]
     declared = recorded.declared(cfg, expected.message, run.previous, output.log_time + skew)
     if declared is not None:  # the module said which inputs it used: that frame first, checked by replay
         result.declared += 1
@@ -835,6 +846,7 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, *, generic: Sequen
 
 
 DECLARED = "declared"  # a frame the module's own output names (provenance)
+AGAIN = "again"  # the previous output's frame again: the next message of one cycle
 
 
 def provenance_of(message: object, path: str | None) -> Mapping[str, object] | None:
@@ -954,10 +966,9 @@ SPECULATE_MAX_WINDOW_S = 0.05
 KEEP, TRY_ON = "keep", "try on"
 # A replay whose module a fork took over steps the frames kept so far again on a fresh module (the suite's own
 # run, done here) while all such steps stay within this share of the outputs; past it the caller runs the suite.
-REST_SHARE = 0.5
+REST_SHARE = 1.0
 QUIET = 3  # … once the process carrying on has kept this many outputs in a row itself
-# … and forks took over fewer than this many times in the last frames kept.
-TAKEOVERS_RECENT, TAKEOVER_WINDOW = 2, 15
+TAKEOVER_GAPS = 5  # … and twice as many as kept between the last takeovers (the median of this many gaps)
 DEEP_MISSES = 8  # outputs in a row not reproduced after which only the likeliest candidate is stepped
 IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
 

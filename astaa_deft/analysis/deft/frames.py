@@ -51,6 +51,7 @@ NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "bet
 # … or, for a first output, the first trigger in the log when some input had not been heard from by then (a
 # module that cycles with an input absent, see frame_at).
 FIRST_HEARD = "first heard"
+AS_LOGGED = "as logged"  # the newest trigger and the inputs logged before it, whatever the previous frame used
 AFTER = "after"  # the first trigger logged after the previous output (a module that drops those while busy)
 # … or after the output m before ("after m": the oldest of a queue m - 1 deep), for m up to 1 + QUEUE_DEPTHS.
 QUEUE_DEPTHS = 3
@@ -173,6 +174,11 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     found = timed + [cand for t_index in order_of_triggers
              for cand in _for_trigger(streams, trigger, t_index, t_p, previous=previous, lookback_ns=lookback_ns,
                                          rules=rules[t_index])]
+    # Last, a plain replay's frame: the newest trigger with the inputs as logged before it, even older ones than
+    # the previous frame used (that frame may have reproduced its output with an input the module got later).
+    as_logged = frame_at(streams, trigger, newest, trig.times[newest], {}, absent=True)
+    if as_logged is not None:
+        found.append(Candidate(trig.times[newest], as_logged, frozenset({(AS_LOGGED, ())})))
     return merged(found)
 
 
