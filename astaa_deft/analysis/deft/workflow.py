@@ -14,6 +14,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -60,7 +61,7 @@ class ExtractReport:
     collision: bool  # the run recorded a collision
     manifest: Path | None  # export_suite's manifest; None when nothing was written
     ground_truth: tuple[int, int] | None = None  # (frames that used exactly the planner's inputs, checked)
-    entry: ReplayModule | None = None  # the replayed module, with the threshold used
+    entry: Any = None  # the replayed module's ReplayModule, with the threshold used
     interrupted: bool = False  # stopped early: ``extraction`` holds the outputs decided so far
     resumed: int = 0  # outputs an interrupted extraction had decided, stepped once each
     # Module tests that failed when the written suite ran once on its own run (an extraction defect); the
