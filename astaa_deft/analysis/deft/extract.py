@@ -629,8 +629,10 @@ class _Run:
         self.pending = True
         if took_over:
             self.takeovers.append(len(frames))
-        if self.result.restepped + len(frames) > REST_SHARE * len(self.recorded.outputs):
-            # Too many frames to step again: the caller's suite run steps every frame, beside the search.
+        if self.result.restepped + len(frames) > REST_SHARE * len(self.recorded.outputs) or (
+                len(frames) >= TAKEOVERS_AFTER and len(self.takeovers) > TAKEOVER_RATE * len(frames)):
+            # Too many frames to step again, or forks take over too often (past the first frames, while the
+            # search learns) for a module made here to last: the caller's suite run steps every frame, beside.
             self.born = None
             return None
         # Not while forks take over often (a module made now would not last): once this process has kept, in a
@@ -966,9 +968,10 @@ SPECULATE_MAX_WINDOW_S = 0.05
 KEEP, TRY_ON = "keep", "try on"
 # A replay whose module a fork took over steps the frames kept so far again on a fresh module (the suite's own
 # run, done here) while all such steps stay within this share of the outputs; past it the caller runs the suite.
-REST_SHARE = 1.0
+REST_SHARE = 0.5
 QUIET = 3  # … once the process carrying on has kept this many outputs in a row itself
 TAKEOVER_GAPS = 5  # … and twice as many as kept between the last takeovers (the median of this many gaps)
+TAKEOVERS_AFTER, TAKEOVER_RATE = 20, 0.1  # past 20 frames, forks taking over for over 1 in 10: the caller's run
 DEEP_MISSES = 8  # outputs in a row not reproduced after which only the likeliest candidate is stepped
 IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
 
