@@ -20,7 +20,7 @@ import pytest
 
 from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.analysis.deft.frames import BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
+from astaa_deft.analysis.deft.frames import AFTER, AS_LOGGED, BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
     EXPENSIVE_TRIES, LIKELY_RULES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
@@ -42,12 +42,39 @@ def test_candidates_say_how_they_were_derived():
                        previous_output_ns=150 * MS)
     first = found[0]  # the newest trigger with the ego pose at its own time
     assert first.choice == {"obstacles": 2, "ego": 4}
-    assert first.patterns == {(NEWEST, (("ego", 0),))}
+    # … and the first trigger logged after the previous output (a module that drops triggers while busy), and
+    # a plain replay's frame (the newest trigger, the inputs as logged before it).
+    assert first.patterns == {(NEWEST, (("ego", 0),)), (AFTER, (("ego", 0),)), (AS_LOGGED, ())}
     later = next(c for c in found if c.choice == {"obstacles": 1, "ego": 2})
     # Trigger 1 was the newest when the previous output was logged, and the oldest not yet answered.
     assert later.patterns == {(BUSY, (("ego", 0),)), (OLDEST, (("ego", 0),))}
     # The ego pose logged after trigger 1 (at 150 ms) but before the output: the planner got it first.
     assert any(c.patterns == {(BUSY, (("ego", 1),)), (OLDEST, (("ego", 1),))} for c in found)
+
+
+def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_let_in():
+    # Before: "after" was the trigger after the newest at the previous output plus the skew, so a trigger
+    # logged 1-4 ms after that output (the one a module dropping triggers while busy answers) was only
+    # "busy", and "after" named the next one: a wrong expensive step first on ~1 output in 5 (drop_latched);
+    # and a trigger logged just before the output (it reached the idle module after it) was never "after".
+    triggers = Stream("a", [k * 50 * MS for k in range(10)])
+    b = Stream("b", [k * 100 * MS for k in range(5)])
+    skew = 5 * MS
+    found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
+                       previous_output_ns=301 * MS + skew, skew_ns=skew)
+    after = [c for c in found if any(rule == AFTER for rule, _ in c.patterns)]
+    assert {c.choice["a"] for c in after} == {7}  # trigger 7 at 350 ms: the first after 301 ms
+    found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
+                       previous_output_ns=300_500_000 + skew, skew_ns=skew)
+    # Trigger 6 logged at 300 ms, half a millisecond before the output: the module may have had it after.
+    assert {c.choice["a"] for c in found if any(rule == AFTER for rule, _ in c.patterns)} == {6}
+    # The oldest of a queue two deep: the trigger that found room when the cycle of the output three back
+    # started (the output before it was logged), "after 3".
+    found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
+                       previous_output_ns=420 * MS + skew, skew_ns=skew,
+                       earlier_outputs_ns=[360 * MS, 170 * MS])
+    assert {c.choice["a"] for c in found if any(rule == f"{AFTER} 3" for rule, _ in c.patterns)} == {4}
+    assert f"{AFTER} 3" in LIKELY_RULES
 
 
 def test_the_way_that_won_for_earlier_outputs_is_tried_first():
@@ -130,7 +157,7 @@ def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
     assert sorted(ordered, key=found.index) == found  # the same candidates, none lost or added
 
     def spread(c):
-        return min(max(abs(o) for _, o in offsets) for _, offsets in c.patterns)
+        return min(max((abs(o) for _, o in offsets), default=0) for _, offsets in c.patterns)
 
     likely = [c for c in ordered if any(rule in LIKELY_RULES for rule, _ in c.patterns)]  # newest, busy, after …
     head = ordered[:len(likely)]
@@ -316,7 +343,7 @@ def test_candidates_in_turn_carry_on_from_the_kept_ones_state_and_hand_long_sear
             kept, in_vain = _step_in_turn(3, run, lambda r: r == "right", speculation, in_turn=True)
             if kept is None:
                 speculation.let_go()
-                order = [i for i in range(3) if i not in in_vain] + in_vain
+                order = [i for i in range(3) if i not in in_vain] + sorted(in_vain)
                 tried = search.search(3, lambda k, run=run, order=order: run(order[k]),
                                       accepted=lambda r: r == "right", closeness=lambda r: 0.0, limit_s=60.0)
                 kept = (order[tried.index], tried.result)
@@ -328,5 +355,5 @@ def test_candidates_in_turn_carry_on_from_the_kept_ones_state_and_hand_long_sear
 
     state, searched, counters = run_supervised(body, on_message=lambda message: None)
     assert state == [(0, 0), (1, 1), (2, 2)]
-    assert searched == [(2, [0, 1])]
+    assert searched == [(2, {0: "wrong", 1: "wrong"})]  # tried in vain, with their outcomes
     assert counters == (1, 2)  # first candidates: one right, two wrong

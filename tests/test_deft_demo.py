@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -111,7 +110,7 @@ def test_truncated_log_is_extracted_up_to_the_cut(recorded, tmp_path):
     log = read_log(cut)
     assert log.warnings
     ex = extract(log, spec, make_planner(spec, PARAMS))
-    assert 0 < ex.outputs and ex.accepted_at(0.0) >= 0.95 * ex.outputs
+    assert ex.outputs > 0 and ex.accepted_at(0.0) >= 0.95 * ex.outputs
     res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "extract", str(cut), "--spec",
                           str(demo_spec_path()), "-o", str(tmp_path / "o")], capture_output=True, text=True)
     assert res.returncode == 0 and "warning" in res.stdout and "Traceback" not in res.stderr

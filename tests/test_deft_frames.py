@@ -90,9 +90,10 @@ def test_a_per_trigger_frame_may_use_an_input_logged_just_after_the_answer():
     streams = {"localization": Stream("localization", [0, 20 * MS, 40 * MS]),
                "trajectory": Stream("trajectory", [-50 * MS, 24 * MS, 26 * MS])}
     answered = 20 * MS + 100_000  # the answer to localization 1, logged before trajectory 1
-    without = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, 0, answered)
+    without = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, lookback_ns=0, answered_at=answered)
     assert {"localization": 1, "trajectory": 1} not in without
-    found = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, 0, answered, skew_ns=5 * MS)
+    found = trigger_candidates(streams, "localization", 1, {"trajectory": 0}, lookback_ns=0, answered_at=answered,
+                               skew_ns=5 * MS)
     assert found[0] == {"localization": 1, "trajectory": 0}  # the frame at the trigger still comes first
     assert {"localization": 1, "trajectory": 1} in found and {"localization": 1, "trajectory": 2} not in found
 

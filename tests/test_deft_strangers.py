@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -113,6 +114,42 @@ def test_the_suite_run_beside_the_search_reports_what_fails_from_a_fresh_module(
     run = SuiteRun(used, entry, {name: get_codec(spec.channel(name).encoding) for name in ("state", "path", "command")})
     for outcome in decided:
         run.add(outcome)
+    while run.step_one():
+        pass
+    assert [index for index, _ in run.failures] == list(range(outputs))
+
+
+@pytest.mark.skipif(not can_fork(), reason="the suite's run done by the forked replay")
+def test_the_replays_own_in_order_steps_of_a_fresh_module_are_the_suites_run(tmp_path):
+    # Before: the calling process stepped a second fresh module on every frame beside the search (a second
+    # replay competing for the cores). Now the replay makes its module itself and its in-order steps are the
+    # suite's run; the caller steps nothing — unless a frame was not so checked.
+    from astaa_deft.analysis.deft.extract import SuiteRun
+    from astaa_deft.io.codecs import get_codec
+
+    spec_path, log_path, outputs = write_mpc_log(tmp_path)
+    spec = load_spec(spec_path)
+    entry = replay_module_of(spec, "mpc")
+    decided = []
+
+    def fresh():  # called in the replay process
+        return make_planner(spec, {}, entry=entry)
+
+    caller = make_planner(spec, {}, entry=entry)
+    ex = extract(read_log(log_path), spec, caller, entry=entry, jobs=1, fresh=fresh,
+                 on_output=lambda done, total, outcome: decided.append(outcome))
+    # Every frame is checked by one whole in-order run of a fresh module: the replay's own (the module it made,
+    # stepped again on a fresh one after a fork took over), or — when forks took over too often — the caller's.
+    assert ex.suite_failures == [] and len(ex.frames) > 0
+    assert (ex.checked_in_replay, ex.checked_beside) in ((len(ex.frames), 0), (0, len(ex.frames)))
+    assert ex.checked_beside or all(outcome.in_order is not None for outcome in decided) or ex.in_order_tail
+    # A replay that says it will not check the frames (beside) leaves them all to the caller: a module that
+    # is not fresh (one step before) then fails every test there.
+    used = make_planner(spec, {}, entry=entry)
+    used.step({"state": {"header": {"seq": 0, "stamp": 0.0}, "y": 5.0, "v": 1.0}})
+    run = SuiteRun(used, entry, {name: get_codec(spec.channel(name).encoding) for name in ("state", "path", "command")})
+    for outcome in decided:
+        run.add(replace(outcome, in_order=None, beside=True))
     while run.step_one():
         pass
     assert [index for index, _ in run.failures] == list(range(outputs))

@@ -10,7 +10,6 @@ import json
 import math
 import os
 import time
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import pairwise
@@ -49,6 +48,9 @@ class ExtractedFrame:
     exact: bool  # the replayed output message equals the recorded one, field for field
 
 
+InOrder = tuple[int, Comparison | None, bool]  # (frame index, its comparison or None: no output, exact)
+
+
 @dataclass(frozen=True)
 class Decided:
     """One output as the extraction decided it, passed on as soon as it is (partial results, ``--resume``).
@@ -66,6 +68,13 @@ class Decided:
     # Frames stepped before ``frame``, cycles that published nothing (no output of their own; their state
     # counts): the suite steps them too. (Not kept for --resume, which steps ``choice`` alone.)
     before: tuple[ExtractedFrame, ...] = ()
+    # The suite's own run, done by the replay itself (a forked extraction): frames a fresh module stepped in
+    # order — every frame from the first, in the process that made the module — with its judgement of each
+    # (frame index, comparison or None for a frame without output, field for field). It covers every frame up
+    # to ``frame`` (earlier ones again when the replay re-stepped them); None: it does not, the suite's own
+    # run must step them (see SuiteRun).
+    in_order: tuple[InOrder, ...] | None = None
+    beside: bool = False  # the replay will not do the suite's run (any more): the caller must step every frame
 
 
 OnOutput = Callable[[int, int, Decided], None]  # (outputs done, outputs in all, the one just decided)
@@ -102,6 +111,15 @@ class Extraction:
     suite_failures: list[tuple[int, str]] | None = None
     # Frames the search judged off on forked copies that the suite's run (a fresh, unforked module) reproduces.
     confirmed_unforked: int = 0
+    # The suite's own run done by the replay itself: frames checked by its in-order steps of a fresh module
+    # (the replay process that made it stepped them, no fork had taken over); steps it took again on a fresh
+    # module after a fork had taken over; frames the calling process had to step itself.
+    checked_in_replay: int = 0
+    restepped: int = 0
+    checked_beside: int = 0
+    # The replay's last re-stepping of every frame on a fresh module, done after the last output (a fork had
+    # taken over since the last one): as Decided.in_order.
+    in_order_tail: tuple[InOrder, ...] | None = None
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -122,7 +140,7 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             on_output: OnOutput = lambda done, total, outcome: None,
             jobs: int | None = None, entry: ReplayModule | None = None,
-            resume: Sequence[Decided] = ()) -> Extraction:
+            resume: Sequence[Decided] = (), fresh: Callable[[], ReplayPlanner] | None = None) -> Extraction:
     """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
 
     ``entry`` names the module replayed (default: the planner). With ``jobs``
@@ -136,10 +154,14 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     ``resume``: the outputs an earlier extraction of this log decided (in
     order, from the first): their frames are stepped once each, as decided,
     and the search goes on after them.
+    ``fresh`` makes a fresh module like ``planner`` (a forked extraction):
+    the replay makes its own and its in-order steps are the suite's own run
+    (see SuiteRun); without it ``planner`` is forked and this process runs
+    the suite beside the search.
     """
     cfg = entry if entry is not None else replay_module_of(spec)
     if cfg.per_trigger:
-        return _extract_per_trigger(log, spec, planner, cfg, on_output)
+        return _extract_per_trigger(log, spec, planner, cfg=cfg, progress=on_output)
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
         # The search runs in forked copies; here, beside it, the fresh ``planner`` runs the suite: it steps
         # every frame as it is decided and compares the accepted ones, as `pytest DIR` will.
@@ -150,37 +172,75 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             on_output(*message)
             follower.add(message[2])
 
-        result: Extraction = run_supervised(
-            lambda send: _extract(log, spec, planner, lambda *message: send(message),
-                                  ForkedSearch(jobs, send), cfg, resume),
-            on_message=on_message, idle=follower.step_one)
-        while follower.step_one():
-            pass
-        follower.settle(result)
+        def body(send: Callable[[tuple[int, int, Decided]], None]) -> Extraction:
+            # A module made here, in the replay process: its steps in this process, in order, are the suite's
+            # (a fork of the caller's module is not: a module may answer otherwise in a forked process).
+            return _extract(log, spec, fresh() if fresh is not None else planner, lambda *message: send(message),
+                            search=ForkedSearch(jobs, send), cfg=cfg, resume=resume, fresh=fresh)
+
+        result: Extraction = run_supervised(body, on_message=on_message, idle=follower.step_one)
+        follower.finish(result)
         return result
-    return _extract(log, spec, planner, on_output, None, cfg, resume)
+    return _extract(log, spec, planner, on_output, search=None, cfg=cfg, resume=resume)
 
 
 class SuiteRun:
     """The extracted suite run once on its own run: a fresh module stepped on every frame kept, in order, the
-    accepted ones compared with their recorded outputs (what `pytest DIR` does), frame by frame as decided."""
+    accepted ones compared with their recorded outputs (what `pytest DIR` does), frame by frame as decided.
+
+    The replay process does that run itself while it can (``Decided.in_order``): it made a fresh module and
+    steps the kept frames in order in the process that made it, exactly the suite's run, a forked copy holding
+    the state from before each output in case its frame is wrong. Only when a frame was not so checked (a fork
+    took over and the replay chose not to step the frames again on a fresh module) does this process step
+    every frame from the first on its own fresh module, beside the search.
+    """
 
     def __init__(self, planner: ReplayPlanner, cfg: ReplayModule, codecs: Mapping[str, Codec]) -> None:
         self.planner, self.cfg, self.codecs = planner, cfg, codecs
-        self.waiting: deque[ExtractedFrame] = deque()
-        self.failures: list[tuple[int, str]] = []  # (frame index, what failed)
+        self.frames: list[ExtractedFrame] = []  # every frame decided, in order (index = position)
+        self.stepped = 0  # frames this process's module has stepped, from the first
+        self.beside = False  # a frame was not checked by the replay: this process steps them all
+        self.failing: dict[int, str] = {}  # frame index → what failed
         self.judged: dict[int, tuple[Comparison, bool]] = {}  # frame index → its comparison here, field for field
+        self.in_replay = 0  # frames checked by the replay's own in-order steps
+
+    @property
+    def failures(self) -> list[tuple[int, str]]:
+        """The tests that failed so far: (frame index, what)."""
+        return sorted(self.failing.items())
 
     def add(self, outcome: Decided) -> None:
-        if outcome.frame is not None:
-            self.waiting.extend(outcome.before)
-            self.waiting.append(outcome.frame)
+        if outcome.frame is None:
+            return
+        self.frames.extend(outcome.before)
+        self.frames.append(outcome.frame)
+        self.beside = self.beside or outcome.beside
+        self._checked(outcome.in_order)
+
+    def _checked(self, in_order: tuple[InOrder, ...] | None) -> None:
+        """The replay's own in-order steps of frames (every frame up to the last named was so stepped)."""
+        for index, cmp, exact in in_order or ():
+            if cmp is not None:
+                self._judge(self.frames[index], cmp, exact)
+        if in_order:
+            self.in_replay = max(self.in_replay, in_order[-1][0] + 1)
+
+    def finish(self, result: Extraction) -> None:
+        """After the replay: its last in-order run applied; any frame it did not check, and this process steps
+        every frame (the suite's own run, here); then :meth:`settle`."""
+        self._checked(result.in_order_tail)
+        if self.in_replay < len(self.frames):
+            self.beside = True
+        while self.step_one():
+            pass
+        self.settle(result)
 
     def step_one(self) -> bool:
-        """Step the next frame decided (False: none waiting)."""
-        if not self.waiting:
+        """Step the next frame decided, if this process runs the suite (False: none waiting)."""
+        if not self.beside or self.stepped >= len(self.frames):
             return False
-        frame = self.waiting.popleft()
+        frame = self.frames[self.stepped]
+        self.stepped += 1
         cfg = self.cfg
         try:
             replayed = self.planner.step({name: self.codecs[name].decode(msg.data)
@@ -193,11 +253,15 @@ class SuiteRun:
             except DecodeError:
                 recorded = None
             points = trajectory_points(recorded, cfg.trajectory) if cfg.trajectory is not None else []
-            cmp, exact = _judged(cfg, replayed, _Expected(recorded, points, _text(recorded)))
-            self.judged[frame.index] = (cmp, exact)
-            if frame.accepted and not cmp.within(cfg.threshold):
-                self.failures.append((frame.index, f"distance {cmp.distance:.3g} (θ = {cfg.threshold:g})"))
-        return bool(self.waiting)
+            self._judge(frame, *_judged(cfg, replayed, _Expected(recorded, points, _text(recorded))))
+        return self.stepped < len(self.frames)
+
+    def _judge(self, frame: ExtractedFrame, cmp: Comparison, exact: bool) -> None:
+        self.judged[frame.index] = (cmp, exact)
+        if frame.accepted and not cmp.within(self.cfg.threshold):
+            self.failing[frame.index] = f"distance {cmp.distance:.3g} (θ = {self.cfg.threshold:g})"
+        else:
+            self.failing.pop(frame.index, None)
 
     def settle(self, result: Extraction) -> None:
         """The suite's own run has the last word on each frame kept: a frame the search judged on forked
@@ -205,6 +269,8 @@ class SuiteRun:
         within θ is a test that passes; one the search accepted but the suite's run does not is a failure
         (``result.suite_failures``: an extraction defect)."""
         result.suite_failures = self.failures
+        result.checked_beside = self.stepped
+        result.checked_in_replay = 0 if self.beside else self.in_replay
         for frame in result.frames:
             judged = self.judged.get(frame.index)
             if judged is not None and not frame.accepted and judged[0].within(self.cfg.threshold):
@@ -233,7 +299,7 @@ class _TriggerAnswer:
     tries: int
 
 
-def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, cfg: ReplayModule,
+def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, *, cfg: ReplayModule,
                          progress: OnOutput) -> Extraction:
     """One frame per trigger message, its replayed answer compared with the recorded one.
 
@@ -278,8 +344,9 @@ def _extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, c
         nothing_plausible = output is None or t_index + 1 >= len(times) or not _answered_in_turn(
             times, t_index, outputs, next_output)
         t1 = time.perf_counter()
-        options = trigger_candidates(streams, cfg.trigger, t_index, previous, int(cfg.lookback_ms * 1e6),
-                                     output.log_time if output is not None else None, int(cfg.skew_ms * 1e6))
+        options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback_ns=int(cfg.lookback_ms * 1e6),
+                                     answered_at=output.log_time if output is not None else None,
+                                     skew_ns=int(cfg.skew_ms * 1e6))
         if not planner.can_snapshot:
             options = options[:1]
         start_state = planner.snapshot() if len(options) > 1 else None
@@ -440,6 +507,13 @@ class _Recorded:
         return Candidate(self.streams[cfg.trigger].times[choice[cfg.trigger]], choice,
                          frozenset({(DECLARED, ())}))
 
+    def fresh(self, name: str, idx: int) -> Any:
+        """Message ``idx`` of input ``name`` decoded anew (None if it does not decode): what a module steps on
+        gets its own objects, as in the suite's run (a module may change its inputs in place)."""
+        if self.decode(name, idx) is None:
+            return None
+        return self.codecs[name].decode(self.messages[name][idx].data)
+
     def decode(self, name: str, idx: int) -> Any:
         """Message ``idx`` of input ``name`` decoded, or None if it does not decode."""
         k = (name, idx)
@@ -485,6 +559,16 @@ class _Run:
     speculation: Speculation = field(default_factory=lambda: Speculation())
     last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
     misses_in_row: int = 0  # outputs kept just before this one that no candidate reproduced (forked search)
+    # The suite's own run done by the replay (see SuiteRun): ``fresh`` makes a fresh module; ``born`` is the
+    # process that made ``planner`` and stepped it on every frame kept, in order (None: no such process —
+    # then the caller runs the suite). Another process (a fork that took over) steps every frame again on a
+    # fresh module, while those steps stay within REST_SHARE of the outputs.
+    fresh: Callable[[], ReplayPlanner] | None = None
+    born: int | None = None
+    pending: bool = False  # frames were kept by a process that took over, not stepped again on a fresh module yet
+    keeper: int = 0  # the process that kept the last output …
+    quiet: int = 0  # … and how many outputs in a row it kept (no fork took over)
+    takeovers: list[int] = field(default_factory=list)  # frames kept when a fork took over, since the module
 
     def report(self, out_index: int, skipped: str | None = None, silent: int = 0) -> None:
         """Pass on the output just decided (its frame is the last one, after ``silent`` frames of cycles that
@@ -498,9 +582,11 @@ class _Run:
         before = tuple(self.result.frames[-1 - silent:-1]) if silent and frame is not None else ()
         if self.speculation.following is None:
             index_of = self.recorded.index_of
+            in_order = self.in_order(len(before) + 1) if frame is not None else None
             self.progress(out_index + 1, len(self.recorded.outputs), Decided(
                 out_index, frame, None if frame is None else {
-                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped, before))
+                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped, before,
+                in_order, self.born is None))
 
     def keep(self, out_index: int, cand: Candidate, judged: _Judged) -> None:
         """Record ``cand`` as the frame of output ``out_index`` and report it."""
@@ -521,9 +607,71 @@ class _Run:
             candidates_tried=judged.tries, exact=judged.exact))
         self.report(out_index, silent=len(cand.silent))
 
+    def in_order(self, new: int) -> tuple[InOrder, ...] | None:
+        """The suite's run of the ``new`` frames just kept, if this process did it (see Decided.in_order).
 
-def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput,
-             search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = ()) -> Extraction:
+        In the process that made the module, stepping every frame kept in order, they were judged as the
+        suite judges them. When a fork took over (the kept frame was not the first candidate this process
+        stepped), every frame is stepped again, in order, on a fresh module made in the process that carries
+        on — once it has kept QUIET outputs in a row itself (a search that keeps missing would need it again
+        at once), and while all such steps stay within REST_SHARE of the outputs; past that the caller runs
+        the suite, beside.
+        """
+        frames = self.result.frames
+        pid = os.getpid()
+        took_over = pid != self.keeper
+        self.quiet = 0 if took_over else self.quiet + 1
+        self.keeper = pid
+        if self.born is None:
+            return None
+        if self.born == pid:
+            return tuple((f.index, f.comparison if f.output is not None else None, f.exact) for f in frames[-new:])
+        self.pending = True
+        if took_over:
+            self.takeovers.append(len(frames))
+        if self.result.restepped + len(frames) > REST_SHARE * len(self.recorded.outputs) or (
+                len(frames) >= TAKEOVERS_AFTER and len(self.takeovers) > TAKEOVER_RATE * len(frames)):
+            # Too many frames to step again, or forks take over too often (past the first frames, while the
+            # search learns) for a module made here to last: the caller's suite run steps every frame, beside.
+            self.born = None
+            return None
+        # Not while forks take over often (a module made now would not last): once this process has kept, in a
+        # row, QUIET outputs and twice as many as came between the last takeovers (the median), or after the last
+        # output.
+        gaps = sorted(b - a for a, b in pairwise(self.takeovers[-TAKEOVER_GAPS - 1:]))
+        needed = max(QUIET, 2 * gaps[len(gaps) // 2]) if gaps else QUIET
+        return self.step_again() if self.quiet >= needed else None
+
+    def step_again(self) -> tuple[InOrder, ...]:
+        """Every frame kept so far stepped in order on a fresh module made here, judged as the suite judges them;
+        that module carries on."""
+        assert self.fresh is not None
+        planner, cfg, frames = self.fresh(), self.cfg, self.result.frames
+        judged: list[InOrder] = []
+        for f in frames:
+            inputs = {name: self.recorded.fresh(name, self.recorded.index_of[name][id(msg)])
+                      for name, msg in f.inputs.items()}
+            try:
+                replayed = planner.step(inputs)
+            except Exception as exc:  # the module's failure on a frame is a failing test, not ours
+                replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
+            if f.output is None:
+                judged.append((f.index, None, False))
+                continue
+            try:
+                message = self.recorded.codecs[cfg.output].decode(f.output.data)
+            except DecodeError:
+                message = None
+            points = trajectory_points(message, cfg.trajectory) if cfg.trajectory is not None else []
+            judged.append((f.index, *_judged(cfg, replayed, _Expected(message, points, _text(message)))))
+        self.result.restepped += len(frames)
+        self.planner, self.born, self.pending = planner, os.getpid(), False  # made here, stepped in order
+        return tuple(judged)
+
+
+def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput, *,
+             search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = (),
+             fresh: Callable[[], ReplayPlanner] | None = None) -> Extraction:
     """A frame per recorded output, in order (see :func:`extract`); ``search`` None: no forking.
 
     In a forked search, the process that returns is the one holding the
@@ -531,7 +679,8 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
     last output exits here instead (the runner reports).
     """
     recorded = _Recorded.read(log, spec, cfg)
-    run = _Run(planner, cfg, recorded, search, progress, Extraction(outputs=len(recorded.outputs)))
+    run = _Run(planner, cfg, recorded, search, progress, Extraction(outputs=len(recorded.outputs)), fresh=fresh,
+               born=os.getpid() if fresh is not None and search is not None else None, keeper=os.getpid())
     for out_index in range(len(recorded.outputs)):
         _extract_output(run, out_index, resume[out_index] if out_index < len(resume) else None)
     speculation, result = run.speculation, run.result
@@ -539,6 +688,8 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
         os._exit(0)
     if search is not None:  # the counters as the last runner holds them (each winner takes them over)
         speculation.let_go()
+        if run.pending and run.born is not None and result.frames:  # the last frames kept by a fork: step again
+            result.in_order_tail = run.step_again()
         result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
         result.first_stepped_in_runner, result.first_missed_in_runner = speculation.hits, speculation.misses
     return result
@@ -557,11 +708,14 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
     generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
                          int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                         read_at, recorded.module_started_in_log)
-    window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, outputs[out_index - 1]
-                                if out_index else None, skew) if generic else 0.0
+                         read_at, recorded.module_started_in_log, skew_ns=skew,
+                         earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])
+                                             ])
+    previous_output = outputs[out_index - 1] if out_index else None
+    window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, previous=previous_output,
+                                skew_ns=skew) if generic else 0.0
     if before is not None:
-        _step_resumed(run, out_index, before, generic, window)
+        _step_resumed(run, out_index, before, generic=generic, window=window)
         return
     # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
@@ -571,6 +725,7 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
         # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 4, 2,
         # then the likeliest only) until an output reproduces again: a plain replay's cost, not a search's.
+        # (The plain walk comes on top: a module with counters finds the recorded state again by it.)
         budget = max(1, EXPENSIVE_TRIES >> (run.misses_in_row - 1))
         capped = capped or len(options) > budget
         options = options[:budget]
@@ -581,13 +736,27 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     result.validation_seconds += time.perf_counter() - t1
     walk = plain_walk(recorded.streams, cfg.trigger, run.previous) if (
         run.search is not None and cfg.trajectory is None and planner.can_snapshot) else None
+    if walk is not None and walk.frame_time > output.log_time + skew:
+        walk = None  # no trigger came since the previous frame's (a module publishing several messages a cycle)
     if walk is not None:  # a module (not the planner): the plain walk first, unless another way won more
         first = bool(options) and run.memory.winning.score(options[0]) > run.memory.winning.score(walk)
         options = [*options[:1], walk, *options[1:]] if first else [walk, *options]
+    if out_index and run.previous and output.log_time - outputs[out_index - 1].log_time <= skew:
+        # An output right after the previous one (within the skew): most likely the next message of the same
+        # cycle (a module publishing several a cycle answers it whatever the frame). The previous frame again,
+        # first: a frame with a newer trigger would take that trigger from the cycle that answers it.
+        again = Candidate(outputs[out_index - 1].log_time, dict(run.previous), frozenset({(AGAIN, ())}))
+        options = [again] + [c for c in options if dict(c.choice) != run.previous]
     declared = recorded.declared(cfg, expected.message, run.previous, output.log_time + skew)
     if declared is not None:  # the module said which inputs it used: that frame first, checked by replay
         result.declared += 1
         options = [declared] + [c for c in options if dict(c.choice) != dict(declared.choice)]
+    if run.misses_in_row > DEEP_MISSES and run.search is not None:
+        # A long run of outputs not reproduced (a module with counters finds the recorded state again within a
+        # few by the plain walk; a warm start never does): the likeliest candidate alone, walk or not — one
+        # step in the replay process, nothing forked, a plain replay's cost.
+        capped = capped or len(options) > 1
+        options = options[:1]
     if not options:
         run.report(out_index, "an input had no message yet")
         return
@@ -655,7 +824,8 @@ def _measure_copies(run: _Run, cand: Candidate, limit_s: float) -> None:
     run.result.copies_differ = 0.0 if exact else cmp.distance
 
 
-def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[Candidate], window: float) -> None:
+def _step_resumed(run: _Run, out_index: int, before: Decided, *, generic: Sequence[Candidate], window: float
+                  ) -> None:
     """An output decided before the extraction was resumed: stepped once, as then; what it taught is learned
     again."""
     if before.frame is None or before.choice is None:
@@ -663,8 +833,8 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
         return
     run.previous = dict(before.choice)
     recorded = run.recorded
-    stepped, step_s, replayed = _step_decided(run.planner, before.frame, run.previous, recorded.decode,
-                                              recorded.messages, recorded.outputs[out_index])
+    stepped, step_s, replayed = _step_decided(run.planner, before.frame, run.previous, decode=recorded.fresh,
+                                              messages=recorded.messages, output=recorded.outputs[out_index])
     # Judged again, never taken from the state file: a hand-edited verdict would make tests that fail on the
     # run they came from (or drop ones that pass).
     comparison, exact = _judged(run.cfg, replayed, _expected(run, out_index))
@@ -678,9 +848,10 @@ def _step_resumed(run: _Run, out_index: int, before: Decided, generic: Sequence[
 
 
 DECLARED = "declared"  # a frame the module's own output names (provenance)
+AGAIN = "again"  # the previous output's frame again: the next message of one cycle
 
 
-def provenance_of(message: Any, path: str | None) -> Mapping[str, Any] | None:
+def provenance_of(message: object, path: str | None) -> Mapping[str, object] | None:
     """The inputs an output names as used (``path``: the spec's ``provenance``), or None."""
     from astaa_deft.model.fields import get
 
@@ -690,7 +861,7 @@ def provenance_of(message: Any, path: str | None) -> Mapping[str, Any] | None:
     return found[0][1] if found and isinstance(found[0][1], Mapping) else None
 
 
-def names_message(message: Any, named: Any) -> bool:
+def names_message(message: object, named: object) -> bool:
     """Is ``message`` the one an output names by ``named`` (its header.seq, or its header.stamp)?"""
     header = message.get("header") if isinstance(message, Mapping) else None
     if not isinstance(header, Mapping):
@@ -762,7 +933,7 @@ def _search_in_process(run: _Run, options: Sequence[Candidate], expected: _Expec
     return cand, _Judged(cmp, exact, tries)
 
 
-def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int],
+def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mapping[str, int], *,
                   decode: Callable[[str, int], Any], messages: Mapping[str, list[LoggedMessage]],
                   output: LoggedMessage) -> tuple[ExtractedFrame, float, Any]:
     """(the frame, with its messages; the CPU seconds of its step; what the planner replayed) of an output
@@ -774,8 +945,8 @@ def _step_decided(planner: ReplayPlanner, decided: ExtractedFrame, choice: Mappi
     return frame, step_s, replayed
 
 
-def _recorded_window_s(trigger: Stream, options: list, output: LoggedMessage, previous: LoggedMessage | None,
-                       skew_ns: int) -> float:
+def _recorded_window_s(trigger: Stream, options: list[Candidate], output: LoggedMessage, *,
+                       previous: LoggedMessage | None, skew_ns: int) -> float:
     """The longest the recorded planner can have worked on this output: from the later of its earliest
     candidate trigger and its previous output (a busy planner starts as it publishes) to the output."""
     start = min(trigger.times[c.choice[trigger.channel]] for c in options)
@@ -796,6 +967,13 @@ SPECULATE_MAX_WINDOW_S = 0.05
 # (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
 # the candidates not tried yet. Each word also carries the runner's counters.
 KEEP, TRY_ON = "keep", "try on"
+# A replay whose module a fork took over steps the frames kept so far again on a fresh module (the suite's own
+# run, done here) while all such steps stay within this share of the outputs; past it the caller runs the suite.
+REST_SHARE = 0.5
+QUIET = 3  # … once the process carrying on has kept this many outputs in a row itself
+TAKEOVER_GAPS = 5  # … and twice as many as kept between the last takeovers (the median of this many gaps)
+TAKEOVERS_AFTER, TAKEOVER_RATE = 20, 0.1  # past 20 frames, forks taking over for over 1 in 10: the caller's run
+DEEP_MISSES = 8  # outputs in a row not reproduced after which only the likeliest candidate is stepped
 IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
 
 
@@ -849,7 +1027,7 @@ class Speculation:
 
 
 def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
-                  in_turn: bool) -> tuple[tuple[int, Any] | None, list[int]]:
+                  *, in_turn: bool) -> tuple[tuple[int, Any] | None, dict[int, Any]]:
     """(candidate and outcome kept, or None; candidates tried in vain) for one output, stepped in this process.
 
     ``in_turn`` (a cheap output with several candidates): the first
@@ -869,23 +1047,23 @@ def _step_in_turn(count: int, run: Callable[[int], Any], accepted: Callable[[Any
             if kind == TRY_ON:  # a candidate was wrong: this process, in the state from before, tries the next
                 tried = argument
                 if len(tried) >= IN_TURN:
-                    return None, sorted(tried)
+                    return None, dict(tried)
                 continue
-            return (argument, run(argument)), []
+            return (argument, run(argument)), {}
         if count == 1:
             outcome = run(0)
             if outcome is None:
-                return None, []
+                return None, {}
             speculation.tell(KEEP, 0)
-            return (0, outcome), []
+            return (0, outcome), {}
         if not in_turn:
-            return None, []
+            return None, {}
         index = len(tried)  # in turn: the candidates in order
         outcome = run(index)
         if accepted(outcome):
             speculation.hits += index == 0
             speculation.tell(KEEP, index)
-            return (index, outcome), []
+            return (index, outcome), {}
         speculation.misses += index == 0
         tried[index] = outcome
         speculation.tell(TRY_ON, tried)  # does not return: the shadow carries on from the state before
@@ -896,7 +1074,7 @@ DIED = "died"  # what a checkpoint copy reads when its runner died on the first 
 
 
 def _step_first_here(run: Callable[[int], Any], accepted: Callable[[Any], bool], speculation: Speculation,
-                     limit_s: float) -> tuple[tuple[int, Any] | None, list[int]]:
+                     limit_s: float) -> tuple[tuple[int, Any] | None, dict[int, Any]]:
     """(candidate and outcome kept, or None; candidates tried in vain) of an expensive output: its first
     candidate stepped right here, as a plain replay would — no fork to wait for — a checkpoint copy forked
     just before holding the state from before the output.
@@ -918,14 +1096,15 @@ def _step_first_here(run: Callable[[int], Any], accepted: Callable[[Any], bool],
         kind, argument, (speculation.hits, speculation.misses) = word
         if kind == DONE:
             os._exit(0)
-        return None, [0]  # tried in vain (or cut): the others first, then it again under the search's limits
+        # Tried in vain (its outcome), or cut (None): the others first, then it again under the search's limits.
+        return None, {0: argument[0] if kind == TRY_ON else None}
     with cpu_limit(limit_s):
         outcome = run(0)
     counters = (speculation.hits, speculation.misses)
     if accepted(outcome):
         tell(handle, (DONE, None, counters))
         drop(handle)
-        return (0, outcome), []
+        return (0, outcome), {}
     hand_over(handle, (TRY_ON, {0: outcome}, counters))  # does not return: the copy carries on
     raise AssertionError("unreachable")
 
@@ -944,7 +1123,7 @@ def _walk(run: _Run, start: Candidate, expected: _Expected, until_ns: int) -> _O
         choice = frame_at(recorded.streams, cfg.trigger, index, times[index], previous, absent=True)
         if choice is None:
             break
-        frame = {name: recorded.decode(name, idx) for name, idx in choice.items()}
+        frame = {name: recorded.fresh(name, idx) for name, idx in choice.items()}
         try:
             replayed = run.planner.step(frame)
         except Exception as exc:  # the module's crash on a frame is data
@@ -967,13 +1146,16 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
     assert run.search is not None
     search = run.search
     t0 = time.perf_counter()
-    frames = [{name: run.recorded.decode(name, idx) for name, idx in cand.choice.items()} for cand in options]
+    decodes = [all(run.recorded.decode(name, idx) is not None for name, idx in cand.choice.items())
+               for cand in options]
     result.reconstruction_seconds += time.perf_counter() - t0
 
     def run_candidate(index: int) -> _Outcome | None:
         if options[index].walk:
             return _walk(run, options[index], expected, until_ns)
-        frame = frames[index]
+        if not decodes[index]:
+            return None
+        frame = {name: run.recorded.fresh(name, idx) for name, idx in options[index].choice.items()}
         if any(v is None for v in frame.values()):
             return None
         started = time.process_time()  # CPU time, as the limits count it: the load does not count
@@ -1006,13 +1188,22 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
             run_candidate, lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
             speculation, limit_s)
     # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
-    order = [i for i in range(len(options)) if i not in in_vain] + in_vain
-    if kept is None:
+    others = [i for i in range(len(options)) if i not in in_vain]
+    known = all(outcome is not None for outcome in in_vain.values())
+    rounds = [others, sorted(in_vain)] if known and in_vain and others else [others + sorted(in_vain)]
+    # Those tried in vain are stepped again only if none of the others comes as close (their outcome is known;
+    # the kept candidate's state is needed): a module that has left the recorded state costs a step less.
+    rival = min((outcome[0].distance for outcome in in_vain.values()), default=math.inf) if len(rounds) > 1 \
+        else math.inf
+    for order in rounds if kept is None else ():
         speculation.let_go()  # the search's winner carries on: it must not inherit the shadow's pipe
-        tried = search.search(len(order), lambda k: run_candidate(order[k]), accepted=accepted,
+        tried = search.search(len(order), functools.partial(_nth, order, run_candidate), accepted=accepted,
                               closeness=lambda r: r[0].distance, limit_s=limit_s,
-                              settles=lambda r: settles(r), retry_limit_s=full_limit_s)
+                              settles=lambda r: settles(r) or _forked_near(r), retry_limit_s=full_limit_s,
+                              rival=rival if order is others else math.inf)
         kept = None if tried is None else (order[tried.index], tried.result)
+        if kept is not None:
+            break
     result.planner_seconds += time.perf_counter() - t1
     if kept is None or kept[1] is None:
         return None
@@ -1024,6 +1215,18 @@ def _search_forked(run: _Run, options: Sequence[Candidate], expected: _Expected,
         cand = Candidate(run.recorded.streams[cfg.trigger].times[walked[-1][cfg.trigger]], walked[-1],
                          cand.patterns, tuple(walked[:-1]))
     return cand, _Judged(cmp, exact, tries), step_s
+
+
+def _forked_near(outcome: _Outcome) -> bool:
+    """A forked candidate within floating-point noise of the output settles its search even while outputs
+    reproduce field for field: they do in the replay process that made the module (its own steps), a forked copy
+    of a module not bit-stable across a fork never can; the suite's own run judges it on a fresh module."""
+    return 0.0 < outcome[0].distance <= NEAR_MISS_M
+
+
+def _nth(order: Sequence[int], run: Callable[[int], Any], k: int) -> Any:
+    """``run`` on the ``k``-th candidate of ``order``."""
+    return run(order[k])
 
 
 def _judge(cfg: ReplayModule, replayed: Any, expected: Any, expected_points: list[Any]) -> Comparison:
@@ -1067,6 +1270,12 @@ def search_note(extraction: Extraction) -> str | None:
     if extraction.declared:
         parts.append(f"{extraction.declared} output(s) named the inputs they used (provenance): that frame tried "
                      f"first")
+    if extraction.checked_in_replay:
+        parts.append(f"the suite's own run done by the replay's in-order steps of a fresh module for "
+                     f"{extraction.checked_in_replay} frame(s) ({extraction.restepped} step(s) taken again on a "
+                     f"fresh module after a fork took over)")
+    elif extraction.checked_beside:
+        parts.append(f"the suite's own run stepped {extraction.checked_beside} frame(s) beside the search")
     if extraction.confirmed_unforked:
         parts.append(f"{extraction.confirmed_unforked} output(s) reproduced by the suite's own run (a fresh module, "
                      f"not forked) though forked copies answered a little off")

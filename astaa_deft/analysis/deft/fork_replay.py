@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import math
 import os
 import select
 import signal
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TypeVar
 
 from astaa_deft.engine.bus.process_launch import guarded_fork
 from astaa_deft.io.pipe_messages import BULK_LIMIT, FrameError, decode_pickle, encode_pickle, fd_reader, read_frame, \
@@ -45,6 +46,8 @@ from astaa_deft.io.pipe_messages import BULK_LIMIT, FrameError, decode_pickle, e
 from astaa_deft.model.errors import InputError, Problem
 
 PR_SET_CHILD_SUBREAPER = 36
+M = TypeVar("M")  # a runner's progress message
+R = TypeVar("R")  # what a runner finally returns
 MIN_LIMIT_S = 2.0
 LIMIT_FACTOR = 10.0  # a candidate may take this many recorded cycles before it is stopped
 
@@ -193,7 +196,7 @@ class ForkedSearch:
     def search(self, count: int, run: Callable[[int], Any], *, accepted: Callable[[Any], bool],
                closeness: Callable[[Any], float], limit_s: float,
                settles: Callable[[Any], bool] = lambda result: False,
-               retry_limit_s: float | None = None) -> Tried | None:
+               retry_limit_s: float | None = None, rival: float = math.inf) -> Tried | None:
         """Try candidates 0..count-1; return (in the surviving process) the one kept, or None.
 
         ``run(i)`` steps the planner on candidate i and returns a picklable
@@ -209,6 +212,10 @@ class ForkedSearch:
         ``limit_s`` run again from the same state under ``retry_limit_s`` —
         the tight limit only saves time spent on wrong frames, it never costs
         an output.
+
+        ``rival``: the closeness of a candidate outside this search, measured
+        already; when none here is accepted and the closest is farther than
+        it, none is kept (None: the caller steps the rival again instead).
         """
         running: dict[int, _Running] = {}
         done: dict[int, Tried] = {}
@@ -228,7 +235,7 @@ class ForkedSearch:
                 winner = next((i for i in sorted(done) if done[i].result is not None
                                and settles(done[i].result)), None)
                 if winner is None:
-                    winner = self._decide(done, count, accepted, closeness)
+                    winner = self._decide(done, count, accepted, closeness=closeness)
             if retrying or retry_limit_s is None or retry_limit_s <= limit_s:
                 break
             self.cut += self.timeouts - timeouts_before
@@ -240,7 +247,9 @@ class ForkedSearch:
             queue, limit, retrying = list(cut), retry_limit_s, True
             self.retried += len(cut)
         if winner is None:
-            winner = self._decide(done, count, accepted, closeness, final=True)
+            winner = self._decide(done, count, accepted, closeness=closeness, final=True)
+            if winner is not None and not accepted(done[winner].result) and closeness(done[winner].result) > rival:
+                winner = None  # the rival outside this search is closer
         if retrying and winner is not None and winner in cut:
             self.retried_kept += 1
         for pid, result_fd, go_fd, _ in running.values():  # still running: not needed
@@ -334,7 +343,7 @@ class ForkedSearch:
                 done[index] = Tried(index, None, timed_out=True)
 
     @staticmethod
-    def _decide(done: dict[int, Tried], count: int, accepted: Callable[[Any], bool],
+    def _decide(done: dict[int, Tried], count: int, accepted: Callable[[Any], bool], *,
                 closeness: Callable[[Any], float], final: bool = False) -> int | None:
         """The first candidate in order that is accepted, once all before it have reported."""
         for index in range(count):
@@ -405,7 +414,7 @@ def shadow() -> Shadow | Following:
     return Shadow(pid, word_w)
 
 
-def tell(copy: Shadow, word: Any) -> None:
+def tell(copy: Shadow, word: object) -> None:
     """The runner's word on the output the copy waits at; the copy reads it with :func:`next_word`."""
     _send(copy.word_fd, word)
 
@@ -441,7 +450,7 @@ def drop(copy: Shadow) -> None:
     reap_later(copy.pid)
 
 
-def hand_over(copy: Shadow, word: Any) -> None:
+def hand_over(copy: Shadow, word: object) -> None:
     """Tell the copy its last word and exit: this process's state is not the one to carry on."""
     tell(copy, word)
     os.close(copy.word_fd)
@@ -508,8 +517,8 @@ def _supervise(body: Callable[[Callable[[Any], None]], Any], write_fd: int) -> N
             os._exit(0)
 
 
-def run_supervised(body: Callable[[Callable[[Any], None]], Any], on_message: Callable[[Any], None],
-                   idle: Callable[[], bool] = lambda: False) -> Any:
+def run_supervised(body: Callable[[Callable[[M], None]], R], on_message: Callable[[M], None],
+                   idle: Callable[[], bool] = lambda: False) -> R:
     """Run ``body(send)`` in a forked runner under a reaping supervisor; return what it finally returned.
 
     ``send(obj)`` passes a message to ``on_message`` in the caller (progress);

@@ -51,7 +51,12 @@ NEWEST, BUSY, OLDEST, BETWEEN, EARLIER, FIRST = "newest", "busy", "oldest", "bet
 # … or, for a first output, the first trigger in the log when some input had not been heard from by then (a
 # module that cycles with an input absent, see frame_at).
 FIRST_HEARD = "first heard"
+AS_LOGGED = "as logged"  # the newest trigger and the inputs logged before it, whatever the previous frame used
 AFTER = "after"  # the first trigger logged after the previous output (a module that drops those while busy)
+# … or after the output m before ("after m": the oldest of a queue m - 1 deep), for m up to 1 + QUEUE_DEPTHS.
+QUEUE_DEPTHS = 3
+AFTER_RULES = frozenset({AFTER} | {f"{AFTER} {m}" for m in range(2, QUEUE_DEPTHS + 2)})
+AFTER_JITTER_NS = 1_000_000  # a trigger logged this long before an output may have reached the module after it
 
 
 @dataclass(frozen=True)
@@ -97,7 +102,8 @@ def frame_at(streams: Mapping[str, Stream], trigger: str, trigger_index: int, t_
 
 def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: Mapping[str, int],
                lookback_ns: int, previous_output_ns: int | None = None,
-               read_at: Sequence[tuple[int, str]] = (), module_started_in_log: bool = False) -> list[Candidate]:
+               read_at: Sequence[tuple[int, str]] = (), module_started_in_log: bool = False, *,
+               skew_ns: int = 0, earlier_outputs_ns: Sequence[int] = ()) -> list[Candidate]:
     """Distinct candidate frames for an output at t_P, most likely first.
 
     ``previous_output_ns``: when the previous output was logged. A planner
@@ -108,12 +114,18 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     ``module_started_in_log``: the log began before the module's first
     trigger (the tool started the run): a first output may answer the log's
     first triggers however many came since.
+    ``skew_ns``: how much of ``previous_output_ns`` is the recorder's skew
+    (the output itself was logged that much earlier). ``earlier_outputs_ns``:
+    when the outputs before the previous one were logged (newest first): a
+    module taking the oldest of a bounded queue answers the trigger that
+    found room when an earlier cycle started (:data:`AFTER` ``m``).
     """
     trig = streams[trigger]
     newest = newest_at_or_before(trig.times, t_p)
     if newest < 0:
         return []
-    timed = [c for c in (frame_read_at(streams, trigger, t, previous, rule) for t, rule in read_at) if c is not None]
+    timed = [c for c in (frame_read_at(streams, trigger, t, previous, rule=rule) for t, rule in read_at)
+             if c is not None]
     # The first output (no previous frame) may answer a trigger some periods before the newest.
     oldest = previous[trigger] + 1 if trigger in previous else max(0, newest - FIRST_OUTPUT_TRIGGERS + 1)
     busy = newest_at_or_before(trig.times, previous_output_ns) if previous_output_ns is not None else -1
@@ -121,10 +133,17 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     # triggers logged up to ``lookback`` before the previous output may be the newest it had then.
     jitter = [] if previous_output_ns is None else [
         i for i in range(busy - 1, max(oldest, bisect_right(trig.times, previous_output_ns - lookback_ns)) - 1, -1)]
-    # A module that drops the triggers coming while it is busy answers the first one after its previous output.
-    after = busy + 1 if previous_output_ns is not None and oldest <= busy + 1 < newest else None
+    # A module that drops the triggers coming while it is busy answers the first one after its previous output
+    # (logged up to AFTER_JITTER_NS before that output: the module was idle before the recorder logged it); one
+    # taking the oldest of a queue m - 1 deep, the first one after the output m before (its cycle freed a place).
+    afters: dict[int, set[str]] = {}
+    if previous_output_ns is not None:
+        for m, t_out in enumerate([previous_output_ns - skew_ns, *earlier_outputs_ns][:QUEUE_DEPTHS + 1], start=1):
+            index = bisect_right(trig.times, t_out - AFTER_JITTER_NS)
+            if oldest <= index <= newest:
+                afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
     order_of_triggers = list(dict.fromkeys(
-        [newest] + ([busy] if oldest <= busy < newest else []) + ([after] if after is not None else []) + jitter
+        [newest] + ([busy] if oldest <= busy < newest else []) + list(afters) + jitter
         + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
     rules[newest].add(NEWEST)
@@ -132,8 +151,8 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
         rules[busy].add(BUSY)
     for index in jitter:
         rules[index].add(BUSY)
-    if after is not None:
-        rules[after].add(AFTER)
+    for index, after_rules in afters.items():
+        rules[index] |= after_rules
     if trigger in previous and oldest <= newest:
         rules[oldest].add(OLDEST)
     for index in order_of_triggers:
@@ -153,7 +172,13 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                 rules[first] = set()
             rules[first].add(rule)
     found = timed + [cand for t_index in order_of_triggers
-             for cand in _for_trigger(streams, trigger, t_index, t_p, previous, lookback_ns, rules[t_index])]
+             for cand in _for_trigger(streams, trigger, t_index, t_p, previous=previous, lookback_ns=lookback_ns,
+                                         rules=rules[t_index])]
+    # Last, a plain replay's frame: the newest trigger with the inputs as logged before it, even older ones than
+    # the previous frame used (that frame may have reproduced its output with an input the module got later).
+    as_logged = frame_at(streams, trigger, newest, trig.times[newest], {}, absent=True)
+    if as_logged is not None:
+        found.append(Candidate(trig.times[newest], as_logged, frozenset({(AS_LOGGED, ())})))
     return merged(found)
 
 
@@ -179,7 +204,7 @@ def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[st
     return Candidate(streams[trigger].times[first], choice, frozenset({(WALK, ())}), walk=True)
 
 
-def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int],
+def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous: Mapping[str, int], *,
                   rule: str) -> Candidate | None:
     """The frame of a module that read, at time ``t``, the newest trigger and the newest message of each
     other input (absent inputs left out); None when no trigger newer than the previous frame's had come."""
@@ -208,7 +233,7 @@ def merged(found: Sequence[Candidate]) -> list[Candidate]:
     return out
 
 
-def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p: int,
+def _for_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int, t_p: int, *,
                  previous: Mapping[str, int], lookback_ns: int, rules: set[str]) -> list[Candidate]:
     t_t = streams[trigger].times[t_index]
     later: set[int] = set()
@@ -269,7 +294,7 @@ def trigger_frame(streams: Mapping[str, Stream], trigger: str, trigger_index: in
 
 
 def trigger_candidates(streams: Mapping[str, Stream], trigger: str, trigger_index: int,
-                       previous: Mapping[str, int], lookback_ns: int, answered_at: int | None = None,
+                       previous: Mapping[str, int], *, lookback_ns: int, answered_at: int | None = None,
                        skew_ns: int = 0) -> list[dict[str, int]]:
     """Per-trigger frames, most likely first: :func:`trigger_frame`; then, per other input, the frame
     with each of its messages logged after the trigger but before the recorded answer (``answered_at``,

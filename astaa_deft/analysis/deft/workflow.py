@@ -59,7 +59,7 @@ class ExtractReport:
     accepted: int  # module tests written
     oracles: int  # oracle tests written (frames that planned into a predicted obstacle before a collision)
     collision: bool  # the run recorded a collision
-    manifest: Any  # export_suite's manifest; empty when nothing was written
+    manifest: Path | None  # export_suite's manifest; None when nothing was written
     ground_truth: tuple[int, int] | None = None  # (frames that used exactly the planner's inputs, checked)
     entry: Any = None  # the replayed module's ReplayModule, with the threshold used
     interrupted: bool = False  # stopped early: ``extraction`` holds the outputs decided so far
@@ -130,7 +130,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
             ex = extract(log, spec, planner, on_output=_following(progress, checkpoint), jobs=jobs or idle_cores(),
-                         entry=entry, resume=before)
+                         entry=entry, resume=before,
+                         fresh=lambda: make_planner(spec, params, prefer_process=options.process, entry=entry))
     except KeyboardInterrupt:
         with writing(place):
             checkpoint.write()
@@ -252,7 +253,7 @@ def _following(progress: Callable[[int, int], None], checkpoint: Checkpoint) -> 
     return on_output
 
 
-def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: Any, resumed: int) -> ExtractReport:
+def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: ReplayModule, resumed: int) -> ExtractReport:
     """The report of an extraction stopped early: the outputs decided before, as written."""
     frames = [d.frame for d in checkpoint.decided if d.frame is not None]
     ex = Extraction(frames=[replace(f, index=i) for i, f in enumerate(frames)],
