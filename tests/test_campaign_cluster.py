@@ -65,11 +65,16 @@ def test_a_killed_workers_cases_are_requeued(tmp_path: Path):
         for n in range(1, 5):
             case = PlannedCase(f"b-{n}", BASELINE, n, 0, {"count": "20"}, None)
             pool.submit(case.case_id, {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / str(n)),
-                                       "horizon": 4.0, "dictionaries": []})
-        time.sleep(3.0)  # both workers are inside a case now
+                                       "horizon": 2.0, "dictionaries": []})
         with Client(cluster.scheduler_address) as client:
-            processing = client.processing()
-            busy = next(w for w, tasks in processing.items() if tasks)
+            busy = None
+            deadline = time.monotonic() + 60
+            while busy is None and time.monotonic() < deadline:  # until a worker is inside a case (its processes)
+                processing = client.processing()
+                busy = next((w for w, inside in client.run(_has_children).items() if inside and processing.get(w)),
+                            None)
+                time.sleep(0.05)
+            assert busy is not None, "no worker started a case"
             pid = client.run(os.getpid, workers=[busy])[busy]
         os.kill(pid, signal.SIGKILL)
         outcomes = {}
@@ -82,6 +87,13 @@ def test_a_killed_workers_cases_are_requeued(tmp_path: Path):
         pool.client.close()
     finally:
         cluster.close()
+
+
+def _has_children() -> bool:
+    """On a worker: whether it runs processes of a case now."""
+    import psutil
+
+    return bool(psutil.Process().children())
 
 
 def _profiling(dask_worker) -> bool:

@@ -73,7 +73,7 @@ def test_kill_9_then_resume_loses_no_finished_case(tmp_path: Path):
     deadline = time.monotonic() + 120
     try:
         while time.monotonic() < deadline:
-            time.sleep(0.5)
+            time.sleep(0.1)
             if (out / "journal.sqlite").exists():
                 finished_before = rows(out, "SELECT case_id, verdict, finished_at FROM cases WHERE kind='mutated'"
                                             " AND status='done'")

@@ -416,12 +416,13 @@ def test_generated_bad_input_full(family, tmp_path):
     assert not problems_in(results), "\n\n".join(problems_in(results)[:5])
 
 
-def test_a_few_cases_through_the_installed_command(tmp_path):
-    """The same checks on separate `python -m astaa_deft.cli` processes (the entry point users run)."""
+def installed_command_cases(per_family: int, tmp_path: Path) -> None:
+    """The same checks on separate `python -m astaa_deft.cli` processes (the entry point users run): the first
+    ``per_family`` cases of every family (for extract and minimise: the intact log, then damaged ones)."""
     checked = 0
     for family in FAMILIES:
         cases = build_cases(family, 6, seed=7, work=tmp_path / family)
-        for case in cases[:4]:
+        for case in cases[:per_family]:
             res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", *case["argv"]], capture_output=True,
                                  text=True, timeout=60, preexec_fn=_limits, cwd=tmp_path, env=_env())
             r = dict(case, code=res.returncode, stdout=res.stdout, stderr=res.stderr, traceback=None, hang=False,
@@ -429,7 +430,18 @@ def test_a_few_cases_through_the_installed_command(tmp_path):
                      no_failure=case.get("no_failure", False), may_find=case.get("may_find", False))
             assert not problems_in([r]), problems_in([r])
             checked += 1
-    assert checked == 4 * len(FAMILIES)
+    assert checked == per_family * len(FAMILIES)
+
+
+def test_a_few_cases_through_the_installed_command(tmp_path):
+    """Two cases of every family through the entry point users run (each a process of its own)."""
+    installed_command_cases(2, tmp_path)
+
+
+@pytest.mark.slow
+def test_more_cases_through_the_installed_command(tmp_path):
+    """Four cases of every family through the entry point users run."""
+    installed_command_cases(4, tmp_path)
 
 
 def test_extract_of_a_log_cut_before_its_channels_is_one_clear_error(tmp_path):

@@ -176,7 +176,7 @@ def test_with_trust_log_spec_the_logs_own_commands_run(tmp_path):
     policy.write_text(POLICY)
     log = tmp_path / "run.mcap"
     env = dict(os.environ)
-    rec = cli("proxy", "--spec", str(spec), "--policy", str(policy), "--record", str(log), "--duration", "5",
+    rec = cli("proxy", "--spec", str(spec), "--policy", str(policy), "--record", str(log), "--duration", "3",
               env=env, cwd=tmp_path)
     assert log.exists() and "value_small" in rec.stdout + rec.stderr, rec.stdout + rec.stderr
     assert marker.exists()

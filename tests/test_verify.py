@@ -49,7 +49,7 @@ class Fixed(Strategy):
 
 
 def run_campaign(out: Path, spec: Path, params: dict[str, list[str]], cases: list[str] | None = None,
-                 resume: bool = False, horizon: float = 4.0, minimise: bool = False) -> list[str]:
+                 resume: bool = False, horizon: float = 3.0, minimise: bool = False) -> list[str]:
     """A campaign of the given test cases (default: one NaN on 'aux'); what it said."""
     cases = cases or [SET_AUX]
     journal = Journal(out)
