@@ -75,8 +75,11 @@ def test_kill_9_then_resume_loses_no_finished_case(tmp_path: Path):
         while time.monotonic() < deadline:
             time.sleep(0.1)
             if (out / "journal.sqlite").exists():
-                finished_before = rows(out, "SELECT case_id, verdict, finished_at FROM cases WHERE kind='mutated'"
-                                            " AND status='done'")
+                try:
+                    finished_before = rows(out, "SELECT case_id, verdict, finished_at FROM cases WHERE kind='mutated'"
+                                                " AND status='done'")
+                except sqlite3.OperationalError:  # the file is there, its tables not yet: look again
+                    continue
                 if finished_before:
                     break
         assert finished_before, "no case finished before the kill"
