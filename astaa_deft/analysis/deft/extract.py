@@ -629,10 +629,7 @@ class _Run:
         self.pending = True
         if took_over:
             self.takeovers.append(len(frames))
-        # Forks that took over rarely so far (at most 1 frame in 10): a module made now most likely lasts.
-        rare = len(self.takeovers) <= TAKEOVER_RATE * len(frames)
-        share = (RARE_SHARE if rare else REST_SHARE) * len(self.recorded.outputs) - self.result.restepped
-        if len(frames) > share or (
+        if self.result.restepped + len(frames) > REST_SHARE * len(self.recorded.outputs) or (
                 len(frames) >= TAKEOVERS_AFTER and len(self.takeovers) > TAKEOVER_RATE * len(frames)):
             # Too many frames to step again, or forks take over too often (past the first frames, while the
             # search learns) for a module made here to last: the caller's suite run steps every frame, beside.
@@ -643,9 +640,8 @@ class _Run:
         # output.
         gaps = sorted(b - a for a, b in pairwise(self.takeovers[-TAKEOVER_GAPS - 1:]))
         needed = max(QUIET, 2 * gaps[len(gaps) // 2]) if gaps else QUIET
-        # … or, forks taking over rarely, as soon as QUIET when waiting longer would pass the share (the caller's
-        # run would step every frame).
-        late = rare and len(frames) + needed - self.quiet > share
+        # … or as soon as QUIET, when waiting for the rest would pass the share (the caller's run would step them all).
+        late = len(frames) + needed - self.quiet > REST_SHARE * len(self.recorded.outputs) - self.result.restepped
         return self.step_again() if self.quiet >= needed or (late and self.quiet >= QUIET) else None
 
     def step_again(self) -> tuple[InOrder, ...]:
@@ -975,8 +971,7 @@ SPECULATE_MAX_WINDOW_S = 0.05
 KEEP, TRY_ON = "keep", "try on"
 # A replay whose module a fork took over steps the frames kept so far again on a fresh module (the suite's own
 # run, done here) while all such steps stay within this share of the outputs; past it the caller runs the suite.
-REST_SHARE = 0.5
-RARE_SHARE = 0.75  # … three quarters while forks took over for at most 1 frame in 10 (TAKEOVER_RATE)
+REST_SHARE = 0.75
 QUIET = 3  # … once the process carrying on has kept this many outputs in a row itself
 TAKEOVER_GAPS = 5  # … and twice as many as kept between the last takeovers (the median of this many gaps)
 TAKEOVERS_AFTER, TAKEOVER_RATE = 20, 0.1  # past 20 frames, forks taking over for over 1 in 10: the caller's run
