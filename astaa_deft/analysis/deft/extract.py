@@ -640,9 +640,7 @@ class _Run:
         # output.
         gaps = sorted(b - a for a, b in pairwise(self.takeovers[-TAKEOVER_GAPS - 1:]))
         needed = max(QUIET, 2 * gaps[len(gaps) // 2]) if gaps else QUIET
-        # … or as soon as QUIET, when waiting for the rest would pass the share (the caller's run would step them all).
-        late = len(frames) + needed - self.quiet > REST_SHARE * len(self.recorded.outputs) - self.result.restepped
-        return self.step_again() if self.quiet >= needed or (late and self.quiet >= QUIET) else None
+        return self.step_again() if self.quiet >= needed else None
 
     def step_again(self) -> tuple[InOrder, ...]:
         """Every frame kept so far stepped in order on a fresh module made here, judged as the suite judges them;
@@ -971,7 +969,7 @@ SPECULATE_MAX_WINDOW_S = 0.05
 KEEP, TRY_ON = "keep", "try on"
 # A replay whose module a fork took over steps the frames kept so far again on a fresh module (the suite's own
 # run, done here) while all such steps stay within this share of the outputs; past it the caller runs the suite.
-REST_SHARE = 0.75
+REST_SHARE = 0.5
 QUIET = 3  # … once the process carrying on has kept this many outputs in a row itself
 TAKEOVER_GAPS = 5  # … and twice as many as kept between the last takeovers (the median of this many gaps)
 TAKEOVERS_AFTER, TAKEOVER_RATE = 20, 0.1  # past 20 frames, forks taking over for over 1 in 10: the caller's run
