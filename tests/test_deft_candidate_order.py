@@ -20,7 +20,9 @@ import pytest
 
 from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.analysis.deft.frames import AFTER, AS_LOGGED, BUSY, FIRST, NEWEST, OLDEST, Stream, candidates
+from astaa_deft.analysis.deft.frames import (
+    AFTER, AS_LOGGED, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Stream, candidates,
+)
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
     EXPENSIVE_TRIES, LIKELY_RULES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
@@ -46,10 +48,33 @@ def test_candidates_say_how_they_were_derived():
     # a plain replay's frame (the newest trigger, the inputs as logged before it).
     assert first.patterns == {(NEWEST, (("ego", 0),)), (AFTER, (("ego", 0),)), (AS_LOGGED, ())}
     later = next(c for c in found if c.choice == {"obstacles": 1, "ego": 2})
-    # Trigger 1 was the newest when the previous output was logged, and the oldest not yet answered.
-    assert later.patterns == {(BUSY, (("ego", 0),)), (OLDEST, (("ego", 0),))}
+    # Trigger 1 was the newest when the previous output was logged (its cycle's end), and the oldest not yet
+    # answered.
+    assert later.patterns == {(BUSY, (("ego", 0),)), (CYCLE_END, (("ego", 0),)), (OLDEST, (("ego", 0),))}
     # The ego pose logged after trigger 1 (at 150 ms) but before the output: the planner got it first.
-    assert any(c.patterns == {(BUSY, (("ego", 1),)), (OLDEST, (("ego", 1),))} for c in found)
+    assert any(c.patterns == {(BUSY, (("ego", 1),)), (CYCLE_END, (("ego", 1),)), (OLDEST, (("ego", 1),))}
+               for c in found)
+
+
+def test_a_trigger_logged_as_the_previous_output_was_is_not_the_one_its_cycle_end_had():
+    # A module taking the newest trigger when its cycle ends (newest_latched): trigger 3 logged 0.05 ms after
+    # the previous output (or within the skew after it) reached it after that cycle had ended; the next cycle
+    # answered trigger 2. Before: trigger 3 was "busy" (the newest at the output plus the skew) and "after",
+    # trigger 2 only "busy" like every trigger of the lookback — a wrong expensive step first on ~1 output in 8.
+    triggers = Stream("a", [k * 50 * MS for k in range(6)])
+    b = Stream("b", [k * 50 * MS for k in range(6)])
+    skew = 5 * MS
+    for logged in (150 * MS + 50_000, 146 * MS):  # the previous output: just after trigger 3, or 4 ms before it
+        found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=100 * MS,
+                           previous_output_ns=logged + skew, skew_ns=skew)
+        end = [c for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)]
+        assert {c.choice["a"] for c in end} == {2}
+        by_trigger = {c.choice["a"]: c for c in reversed(found) if c.choice["b"] == c.choice["a"]}
+        assert (AFTER, (("b", 0),)) in by_trigger[3].patterns
+        assert not any(rule == BUSY for rule, _ in by_trigger[3].patterns)
+        # In the generic order the cycle's end comes right after the newest trigger.
+        assert [c.choice["a"] for c in found if c.choice["b"] == c.choice["a"]][:3] == [4, 2, 3]
+    assert CYCLE_END in LIKELY_RULES
 
 
 def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_let_in():
@@ -144,8 +169,9 @@ def _slow_planner_candidates():
     """A planner slower than its trigger: two seconds of 20 Hz ego poses after each of several triggers."""
     streams = {"obstacles": Stream("obstacles", [k * 100 * MS for k in range(30)]),
                "ego": Stream("ego", [k * 50 * MS + 5 * MS for k in range(60)])}
+    # (The previous output 20 ms after trigger 15: a trigger logged as an output was is the next cycle's, AFTER.)
     return candidates(streams, "obstacles", 2900 * MS, previous={"obstacles": 5, "ego": 10}, lookback_ns=160 * MS,
-                      previous_output_ns=1500 * MS)
+                      previous_output_ns=1520 * MS)
 
 
 def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():

@@ -57,6 +57,10 @@ AFTER = "after"  # the first trigger logged after the previous output (a module 
 QUEUE_DEPTHS = 3
 AFTER_RULES = frozenset({AFTER} | {f"{AFTER} {m}" for m in range(2, QUEUE_DEPTHS + 2)})
 AFTER_JITTER_NS = 1_000_000  # a trigger logged this long before an output may have reached the module after it
+# The newest trigger logged before the previous output (AFTER_JITTER_NS before it, without the skew): the one a
+# module taking the newest trigger when its cycle ends had then — one logged just before the output (or within
+# the skew after it) reached it after that cycle had ended.
+CYCLE_END = "cycle end"
 
 
 @dataclass(frozen=True)
@@ -142,17 +146,23 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
             index = bisect_right(trig.times, t_out - AFTER_JITTER_NS)
             if oldest <= index <= newest:
                 afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
+    cycle_end = newest_at_or_before(trig.times, previous_output_ns - skew_ns - AFTER_JITTER_NS) if (
+        previous_output_ns is not None) else -1
     order_of_triggers = list(dict.fromkeys(
-        [newest] + ([busy] if oldest <= busy < newest else []) + list(afters) + jitter
+        [newest] + ([cycle_end] if oldest <= cycle_end <= newest else []) + ([busy] if oldest <= busy < newest else [])
+        + list(afters) + jitter
         + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
     rules[newest].add(NEWEST)
-    if oldest <= busy <= newest:
+    if oldest <= busy <= newest and busy == cycle_end:  # (one logged after the cycle end is the AFTER trigger)
         rules[busy].add(BUSY)
     for index in jitter:
-        rules[index].add(BUSY)
+        if index != cycle_end:  # that one is learned by its own rule (a busy trigger's would win its outputs too)
+            rules[index].add(BUSY)
     for index, after_rules in afters.items():
         rules[index] |= after_rules
+    if oldest <= cycle_end <= newest:
+        rules[cycle_end].add(CYCLE_END)
     if trigger in previous and oldest <= newest:
         rules[oldest].add(OLDEST)
     for index in order_of_triggers:

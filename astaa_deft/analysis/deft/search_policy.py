@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Protocol, TypeVar
 
 from astaa_deft.analysis.deft.frames import (
-    AFTER_RULES, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, FIRST, FIRST_HEARD, NEWEST, OLDEST, Candidate,
+    AFTER_RULES, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, CYCLE_END, FIRST, FIRST_HEARD, NEWEST, OLDEST, Candidate,
 )
 
 
@@ -102,7 +102,8 @@ def first_cycle_first(candidates: Sequence[Candidate]) -> list[Candidate]:
 
 
 # Trigger rules a planner follows (not merely "between"), and the times a module reads its inputs at.
-LIKELY_RULES = frozenset({NEWEST, BUSY, OLDEST, FIRST, FIRST_HEARD, AT_OUTPUT, AT_START, AT_PREVIOUS}) | AFTER_RULES
+LIKELY_RULES = frozenset({NEWEST, BUSY, CYCLE_END, OLDEST, FIRST, FIRST_HEARD, AT_OUTPUT, AT_START, AT_PREVIOUS}) | (
+    AFTER_RULES)
 
 
 def nearest_first(candidates: Sequence[Candidate]) -> list[Candidate]:
