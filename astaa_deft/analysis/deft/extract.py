@@ -701,16 +701,7 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     cfg, result, recorded, planner = run.cfg, run.result, run.recorded, run.planner
     outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
     output = outputs[out_index]
-    read_at = [(output.log_time, AT_OUTPUT)]  # a plain replay: everything logged by then, in arrival order
-    if run.last_step_s is not None:  # the cycle's start: the output's time minus the step's measured cost
-        read_at.append((output.log_time - int(run.last_step_s * 1e9), AT_START))
-    if out_index:
-        read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
-    generic = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
-                         int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                         read_at, recorded.module_started_in_log, skew_ns=skew,
-                         earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])
-                                             ])
+    generic = _generic_candidates(run, out_index)
     previous_output = outputs[out_index - 1] if out_index else None
     window = _recorded_window_s(recorded.streams[cfg.trigger], generic, output, previous=previous_output,
                                 skew_ns=skew) if generic else 0.0
@@ -734,6 +725,46 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     result.reconstruction_seconds += t1 - t0
     expected = _expected(run, out_index)
     result.validation_seconds += time.perf_counter() - t1
+    options, capped = _put_first(run, out_index, options, expected, capped=capped)
+    if not options:
+        run.report(out_index, "an input had no message yet")
+        return
+    if not planner.can_snapshot:
+        options = options[:1]
+    if run.search is None:
+        kept = _search_in_process(run, options, expected)
+        if kept is None:
+            run.report(out_index, "no candidate frame decodes")
+            return
+        run.keep(out_index, *kept)
+        return
+    _decide_forked(run, out_index, options, expected, capped=capped, window=window, expensive=expensive)
+
+
+def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
+    """The output's candidate frames from the log alone, most likely first (:func:`.frames.candidates`)."""
+    cfg, recorded = run.cfg, run.recorded
+    outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
+    output = outputs[out_index]
+    read_at = [(output.log_time, AT_OUTPUT)]  # a plain replay: everything logged by then, in arrival order
+    if run.last_step_s is not None:  # the cycle's start: the output's time minus the step's measured cost
+        read_at.append((output.log_time - int(run.last_step_s * 1e9), AT_START))
+    if out_index:
+        read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
+    return candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
+                      int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
+                      read_at, recorded.module_started_in_log, skew_ns=skew,
+                      earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
+
+
+def _put_first(run: _Run, out_index: int, options: list[Candidate], expected: _Expected, *,
+               capped: bool) -> tuple[list[Candidate], bool]:
+    """The search's order: the plain walk, the previous frame again, a declared frame first where they apply;
+    the likeliest alone after a long run of misses. Returns the options and whether they were cut."""
+    cfg, recorded, planner = run.cfg, run.recorded, run.planner
+    outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
+    output = outputs[out_index]
+    result = run.result
     walk = plain_walk(recorded.streams, cfg.trigger, run.previous) if (
         run.search is not None and cfg.trajectory is None and planner.can_snapshot) else None
     if walk is not None and walk.frame_time > output.log_time + skew:
@@ -757,18 +788,14 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
         # step in the replay process, nothing forked, a plain replay's cost.
         capped = capped or len(options) > 1
         options = options[:1]
-    if not options:
-        run.report(out_index, "an input had no message yet")
-        return
-    if not planner.can_snapshot:
-        options = options[:1]
-    if run.search is None:
-        kept = _search_in_process(run, options, expected)
-        if kept is None:
-            run.report(out_index, "no candidate frame decodes")
-            return
-        run.keep(out_index, *kept)
-        return
+    return options, capped
+
+
+def _decide_forked(run: _Run, out_index: int, options: list[Candidate], expected: _Expected, *, capped: bool,
+                   window: float, expensive: bool) -> None:
+    """Search the options in forked copies with their time limits; keep the best and learn from it."""
+    cfg, result, outputs = run.cfg, run.result, run.recorded.outputs
+    output, skew = outputs[out_index], int(cfg.skew_ms * 1e6)
     full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
     limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
     searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive,

@@ -171,16 +171,10 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     if trigger not in previous and (oldest == 0 or module_started_in_log):
         # A first output may answer the first trigger in the log (a slow first cycle, however many triggers
         # came meanwhile) — the first every input had been heard by, or the very first (some input absent).
-        first_plannable = next((i for i in range(0, newest + 1)
-                                if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
-        firsts: list[tuple[int, str]] = [] if first_plannable is None else [(first_plannable, FIRST)]
-        if first_plannable != 0:
-            firsts.append((0, FIRST_HEARD))
-        for first, rule in firsts:
+        for first, rule in _first_triggers(streams, trigger, newest):
             if first not in rules:
                 order_of_triggers.append(first)
-                rules[first] = set()
-            rules[first].add(rule)
+            rules.setdefault(first, set()).add(rule)
     found = timed + [cand for t_index in order_of_triggers
              for cand in _for_trigger(streams, trigger, t_index, t_p, previous=previous, lookback_ns=lookback_ns,
                                          rules=rules[t_index])]
@@ -190,6 +184,17 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     if as_logged is not None:
         found.append(Candidate(trig.times[newest], as_logged, frozenset({(AS_LOGGED, ())})))
     return merged(found)
+
+
+def _first_triggers(streams: Mapping[str, Stream], trigger: str, newest: int) -> list[tuple[int, str]]:
+    """The triggers a first output may answer: the first every input had been heard by, and the very first."""
+    trig = streams[trigger]
+    first_plannable = next((i for i in range(0, newest + 1)
+                            if frame_at(streams, trigger, i, trig.times[i], {}) is not None), None)
+    firsts: list[tuple[int, str]] = [] if first_plannable is None else [(first_plannable, FIRST)]
+    if first_plannable != 0:
+        firsts.append((0, FIRST_HEARD))
+    return firsts
 
 
 # Frames read at a time rather than derived from a trigger (:func:`frame_read_at`): everything that had

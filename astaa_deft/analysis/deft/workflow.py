@@ -104,12 +104,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     place = Place(out_dir, "-o")
     ready_dir(place, temp=True)
     spec = load_spec(spec_path)
-    if module is None and spec.planner is None:
-        raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
-                                 "describe the planning module under 'planner:' (see docs/deft.md), or name a "
-                                 "module of its 'replay:' section with --module"))
-    if module is not None and spec.planner is not None and module == spec.planner.module:
-        module = None  # the planner, as its own section describes it
+    module = _module_named(module, spec, spec_path)
     entry = replay_module_of(spec, module)
     _check_ground_truth(options.ground_truth, spec_path, spec=spec, output=entry.output)  # before the work
     if threshold is not None:
@@ -162,6 +157,17 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
     return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, exact,
                          entry, resumed=len(before), suite_failures=failing)
+
+
+def _module_named(module: str | None, spec: Spec, spec_path: Path) -> str | None:
+    """The ``replay:`` module to extract, None for the planner (named or not); InputError without either."""
+    if module is None and spec.planner is None:
+        raise InputError(Problem(str(spec_path), None, None, "the spec has no 'planner' section",
+                                 "describe the planning module under 'planner:' (see docs/deft.md), or name a "
+                                 "module of its 'replay:' section with --module"))
+    if module is not None and spec.planner is not None and module == spec.planner.module:
+        return None  # the planner, as its own section describes it
+    return module
 
 
 @dataclass(frozen=True)
