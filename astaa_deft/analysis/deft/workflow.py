@@ -14,7 +14,6 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -60,8 +59,8 @@ class ExtractReport:
     oracles: int  # oracle tests written (frames that planned into a predicted obstacle before a collision)
     collision: bool  # the run recorded a collision
     manifest: Path | None  # export_suite's manifest; None when nothing was written
+    entry: ReplayModule  # the replayed module (the planner's own or a replay: entry), with the threshold used
     ground_truth: tuple[int, int] | None = None  # (frames that used exactly the planner's inputs, checked)
-    entry: Any = None  # the replayed module's ReplayModule, with the threshold used
     interrupted: bool = False  # stopped early: ``extraction`` holds the outputs decided so far
     resumed: int = 0  # outputs an interrupted extraction had decided, stepped once each
     # Module tests that failed when the written suite ran once on its own run (an extraction defect); the
@@ -155,8 +154,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
             add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
         checkpoint.finished()
     exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
-    return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, exact,
-                         entry, resumed=len(before), suite_failures=failing)
+    return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, entry,
+                         ground_truth=exact, resumed=len(before), suite_failures=failing)
 
 
 def _module_named(module: str | None, spec: Spec, spec_path: Path) -> str | None:
@@ -267,4 +266,4 @@ def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: ReplayModule, resume
                     outputs=checkpoint.total)
     accepted = len(checkpoint.accepted())
     manifest = checkpoint.out_dir / MANIFEST if accepted else None
-    return ExtractReport(ex, spec, accepted, 0, False, manifest, None, entry, interrupted=True, resumed=resumed)
+    return ExtractReport(ex, spec, accepted, 0, False, manifest, entry, interrupted=True, resumed=resumed)

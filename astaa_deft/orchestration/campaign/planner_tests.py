@@ -63,9 +63,9 @@ def build(log: Path, spec_path: Path, tests_dir: Path, *, verdict: str, invarian
                                                                              invariant=invariant)
     if not report.accepted and not added:
         shutil.rmtree(tests_dir, ignore_errors=True)
-        return PlannerTests(0, False, f"no output of {report.entry.module if report.entry else 'the planner'} "
+        return PlannerTests(0, False, f"no output of {report.entry.module} "
                                       "in the run replayed exactly")
-    add_invariant_oracle(tests_dir, spec, invariant, output=report.entry.output if report.entry else None)
+    add_invariant_oracle(tests_dir, spec, invariant, output=report.entry.output)
     return PlannerTests(report.accepted, added)
 
 
