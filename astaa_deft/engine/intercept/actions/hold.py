@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from lxml import etree
 
-from astaa_deft.model.fields import FieldPath, FieldPathError, get, set_field
-from astaa_deft.engine.intercept.dictionary import NotApplicable, field_site
+from astaa_deft.model.fields import FieldPath, get, set_field
+from astaa_deft.engine.intercept.dictionary import NotApplicable
 from astaa_deft.engine.intercept.actions.base import (
     ACTIONS, FIELD_PATHS_SCHEMA,
     ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, PolicyContext,
@@ -60,21 +60,11 @@ class Hold(ActionConfig):
 
     def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
         for text, child in zip(self.paths, checker.element.iterfind("field"), strict=True):
-            try:
-                path = FieldPath.parse(text)
-            except FieldPathError as exc:
-                checker.report(child, f"invalid field path {text!r}: {exc.reason}",
-                               "write paths like odometer or points[*].x", attribute="path",
-                               offset=exc.position or 0)
+            path = checker.field_path(child, text, "odometer or points[*].x")
+            if path is None:
                 continue
             for channel in channels:
-                assert checker.spec is not None
-                try:
-                    field_site(checker.spec.types, channel.type, path)
-                except FieldPathError as exc:
-                    checker.report(child, f"channel '{channel.name}' ({channel.type}): {exc.reason}",
-                                   "field paths follow the channel's type in the spec",
-                                   attribute="path", offset=exc.position or 0)
+                checker.site(child, channel, path)
 
     def start(self, context: PolicyContext) -> ActionRuntime:
         return HoldRuntime(self, context)

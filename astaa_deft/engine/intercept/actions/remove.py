@@ -19,8 +19,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from lxml import etree
 
-from astaa_deft.model.fields import FieldPath, FieldPathError, get
-from astaa_deft.engine.intercept.dictionary import field_site
+from astaa_deft.model.fields import FieldPath, get
 from astaa_deft.engine.intercept.actions.base import (
     ACTIONS, FIELD_PATHS_SCHEMA,
     ActionConfig, ActionDetail, ActionRuntime, MessageInfo, Pending, PinnedStep, PolicyContext, required,
@@ -60,11 +59,8 @@ class Remove(ActionConfig):
 
     def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
         for text, child in zip(self.paths, checker.element.iterfind("field"), strict=True):
-            try:
-                path = FieldPath.parse(text)
-            except FieldPathError as exc:
-                checker.report(child, f"invalid field path {text!r}: {exc.reason}",
-                               "write paths like ego.x or points[*].id", attribute="path", offset=exc.position or 0)
+            path = checker.field_path(child, text, "ego.x or points[*].id")
+            if path is None:
                 continue
             if type(path.segments[-1]) is not str:
                 checker.report(child, f"{text!r} ends in an array index: only a struct field can be removed",
@@ -72,13 +68,7 @@ class Remove(ActionConfig):
                                attribute="path")
                 continue
             for channel in channels:
-                assert checker.spec is not None
-                try:
-                    field_site(checker.spec.types, channel.type, path)
-                except FieldPathError as exc:
-                    checker.report(child, f"channel '{channel.name}' ({channel.type}): {exc.reason}",
-                                   "field paths follow the channel's type in the spec",
-                                   attribute="path", offset=exc.position or 0)
+                checker.site(child, channel, path)
 
     def start(self, context: PolicyContext) -> ActionRuntime:
         return RemoveRuntime(self, context)

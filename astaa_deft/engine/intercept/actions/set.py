@@ -114,12 +114,8 @@ def check_assignments(assignments: Sequence[Assignment], channels: Sequence[Chan
                       checker: ActionChecker) -> None:
     """Paths exist in every target channel's type; values fit each field's declared type."""
     for assignment, child in zip(assignments, checker.element.iterfind("field"), strict=True):
-        try:
-            path = FieldPath.parse(assignment.path)
-        except FieldPathError as exc:
-            checker.report(child, f"invalid field path {assignment.path!r}: {exc.reason}",
-                           "write paths like header.stamp, points[2].x or points[*].v",
-                           attribute="path", offset=exc.position or 0)
+        path = checker.field_path(child, assignment.path, "header.stamp, points[2].x or points[*].v")
+        if path is None:
             continue
         if assignment.value.startswith(REF_PREFIX):
             try:  # even without a spec: a typo in a reference is always an error
@@ -128,13 +124,8 @@ def check_assignments(assignments: Sequence[Assignment], channels: Sequence[Chan
                 _report_value(checker, child, ValueProblem(str(exc), _ENTRY_FIX))
                 continue
         for channel in channels:  # only given when checking against a spec
-            assert checker.spec is not None
-            try:
-                site = field_site(checker.spec.types, channel.type, path)
-            except FieldPathError as exc:
-                checker.report(child, f"channel '{channel.name}' ({channel.type}): {exc.reason}",
-                               "field paths follow the channel's type in the spec",
-                               attribute="path", offset=exc.position or 0)
+            site = checker.site(child, channel, path)
+            if site is None:
                 continue
             try:
                 value_source(assignment.value, site, checker.dictionary)

@@ -16,8 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from astaa_deft.model.fields import FieldPath, FieldPathError, get, set_field
-from astaa_deft.engine.intercept.dictionary import field_site
+from astaa_deft.model.fields import FieldPath, get, set_field
 from astaa_deft.engine.intercept.actions.base import (
     ACTIONS,
     ActionConfig, ActionDetail, ActionRuntime, FieldChange, MessageInfo, Pending, PinnedStep, PolicyContext,
@@ -61,21 +60,12 @@ class Swap(ActionConfig):
     def check(self, policy: Policy, channels: tuple[Channel, ...], checker: ActionChecker) -> None:
         paths = []
         for attribute in ("a", "b"):
-            text = getattr(self, attribute)
-            try:
-                path = FieldPath.parse(text)
-            except FieldPathError as exc:
-                checker.report(None, f"invalid field path {text!r}: {exc.reason}", "write paths like ego.x",
-                               attribute=attribute, offset=exc.position or 0)
+            path = checker.field_path(None, getattr(self, attribute), "ego.x", attribute=attribute)
+            if path is None:
                 continue
             paths.append(path)
             for channel in channels:
-                assert checker.spec is not None
-                try:
-                    field_site(checker.spec.types, channel.type, path)
-                except FieldPathError as exc:
-                    checker.report(None, f"channel '{channel.name}' ({channel.type}): {exc.reason}",
-                                   "field paths follow the channel's type in the spec", attribute=attribute)
+                checker.site(None, channel, path, attribute=attribute)
         if len(paths) == 2 and paths[0] == paths[1]:
             checker.report(None, f"a and b are the same field {self.a!r}", "name two different fields",
                            attribute="b")

@@ -25,10 +25,12 @@ from lxml import etree
 
 from astaa_deft.model.errors import did_you_mean
 from astaa_deft.io.inputfile import POLICY, read_input
+from astaa_deft.model.fields import FieldPath, FieldPathError
 from astaa_deft.model.sut import Channel, Spec
 from astaa_deft.engine.intercept.actions import ACTIONS
 from astaa_deft.engine.intercept.actions.base import decimal_text
-from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
+from astaa_deft.engine.intercept.dictionary import Dictionary, field_site, load_dictionary
+from astaa_deft.engine.intercept.dictionary.rules import FieldSite
 from astaa_deft.engine.intercept.testcase.model import Policy, Selection, TestCase, Window
 from astaa_deft.engine.intercept.testcase.xml_format import (
     Checker,
@@ -173,3 +175,25 @@ class ActionChecker:
                attribute: str | None = None, offset: int = 0) -> None:
         self._checker.report(self.element if element is None else element, message, fix,
                              attribute=attribute, offset=offset)
+
+    def field_path(self, element: etree._Element | None, text: str, example: str, *,
+                   attribute: str = "path") -> FieldPath | None:
+        """``text`` as a field path, or None with the problem reported (``example``: paths to write instead)."""
+        try:
+            return FieldPath.parse(text)
+        except FieldPathError as exc:
+            self.report(element, f"invalid field path {text!r}: {exc.reason}", f"write paths like {example}",
+                        attribute=attribute, offset=exc.position or 0)
+            return None
+
+    def site(self, element: etree._Element | None, channel: Channel, path: FieldPath, *,
+             attribute: str = "path") -> FieldSite | None:
+        """Where ``path`` lands in ``channel``'s type, or None with the problem reported."""
+        assert self.spec is not None  # channels are given only when checking against a spec
+        try:
+            return field_site(self.spec.types, channel.type, path)
+        except FieldPathError as exc:
+            self.report(element, f"channel '{channel.name}' ({channel.type}): {exc.reason}",
+                        "field paths follow the channel's type in the spec", attribute=attribute,
+                        offset=exc.position or 0)
+            return None
