@@ -154,6 +154,15 @@ def consumed_fields(sources: Sources) -> Iterable[tuple[Channel, FieldPath, Fiel
                 yield channel, path, field_type
 
 
+def every_consumed_field(sources: Sources) -> Targets:
+    """Every field of :func:`consumed_fields` as a target with no values (families whose fault is not a value)."""
+    found: Targets = {}
+    for channel, path, _field_type in consumed_fields(sources):
+        site = field_site(sources.spec.types, channel.type, path)
+        found.setdefault(channel.name, []).append(Target(channel, path, site, ()))
+    return found
+
+
 def entry_targets(sources: Sources, keys_of_kind: dict[str, Sequence[str]],
                   accept: Callable[[Channel, FieldPath, FieldType], bool] | None = None) -> Targets:
     """Targets whose values are the dictionary ``keys_of_kind[field kind]`` the field can take (in that

@@ -11,9 +11,8 @@ from astaa_deft.engine.intercept.actions.remove import Remove
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.faults import FAMILIES
 from astaa_deft.engine.intercept.faults.base import (
-    FaultFamily, Scene, Sources, Span, Target, Targets, consumed_fields, describe, held, once_or_held, one_policy,
+    FaultFamily, Scene, Sources, Span, Target, Targets, every_consumed_field, describe, held, once_or_held, one_policy,
 )
-from astaa_deft.engine.intercept.dictionary import field_site
 from astaa_deft.engine.intercept.testcase import Selection, TestCase
 
 REMOVED = "removed"
@@ -39,11 +38,7 @@ class JsonType(FaultFamily):
     semantic = True
 
     def targets(self, sources: Sources) -> Targets:
-        found: Targets = {}
-        for channel, path, _field_type in consumed_fields(sources):
-            site = field_site(sources.spec.types, channel.type, path)
-            found.setdefault(channel.name, []).append(Target(channel, path, site, ()))
-        return found
+        return every_consumed_field(sources)
 
     def draw(self, testcase_id: str, rng: random.Random, targets: Targets, scene: Scene) -> TestCase:
         channel = rng.choice(sorted(targets))

@@ -6,10 +6,9 @@ from __future__ import annotations
 import random
 
 from astaa_deft.engine.intercept.actions.hold import Hold
-from astaa_deft.engine.intercept.dictionary import field_site
 from astaa_deft.engine.intercept.faults import FAMILIES
 from astaa_deft.engine.intercept.faults.base import (
-    FaultFamily, Scene, Sources, Span, Target, Targets, consumed_fields, describe, held, once_or_held, one_policy,
+    FaultFamily, Scene, Sources, Span, Target, Targets, every_consumed_field, describe, held, once_or_held, one_policy,
 )
 from astaa_deft.engine.intercept.testcase import Selection, TestCase
 
@@ -24,11 +23,7 @@ class Stale(FaultFamily):
     owns = ("float.previous", "int.previous", "string.previous", "enum.previous", "array.previous")
 
     def targets(self, sources: Sources) -> Targets:
-        found: Targets = {}
-        for channel, path, _field_type in consumed_fields(sources):
-            site = field_site(sources.spec.types, channel.type, path)
-            found.setdefault(channel.name, []).append(Target(channel, path, site, ()))
-        return found
+        return every_consumed_field(sources)
 
     def draw(self, testcase_id: str, rng: random.Random, targets: Targets, scene: Scene) -> TestCase:
         channel = rng.choice(sorted(targets))
