@@ -91,8 +91,11 @@ def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_l
     assert {c.choice["a"] for c in after} == {7}  # trigger 7 at 350 ms: the first after 301 ms
     found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
                        previous_output_ns=300_500_000 + skew, skew_ns=skew)
-    # Trigger 6 logged at 300 ms, half a millisecond before the output: the module may have had it after.
-    assert {c.choice["a"] for c in found if any(rule == AFTER for rule, _ in c.patterns)} == {6}
+    # Trigger 6 logged at 300 ms, half a millisecond before the output: the module may have had it after, or
+    # have had it while still busy and dropped it — then trigger 7, the first logged after the output, is the
+    # answer: both are "after". (Before: 6 alone; on drop_latched the right frame, 7, was then not among an
+    # expensive output's 8 likeliest, and the warm state carried the miss on: 7 of 32 outputs → 32 of 32.)
+    assert {c.choice["a"] for c in found if any(rule == AFTER for rule, _ in c.patterns)} == {6, 7}
     # The oldest of a queue two deep: the trigger that found room when the cycle of the output three back
     # started (the output before it was logged), "after 3".
     found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,

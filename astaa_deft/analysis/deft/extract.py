@@ -71,8 +71,7 @@ class Decided:
     # The suite's own run, done by the replay itself (a forked extraction): frames a fresh module stepped in
     # order — every frame from the first, in the process that made the module — with its judgement of each
     # (frame index, comparison or None for a frame without output, field for field). It covers every frame up
-    # to ``frame`` (earlier ones again when the replay re-stepped them); None: it does not, the suite's own
-    # run must step them (see SuiteRun).
+    # to ``frame``; None: it does not, the suite's own run must step them (see SuiteRun).
     in_order: tuple[InOrder, ...] | None = None
     beside: bool = False  # the replay will not do the suite's run (any more): the caller must step every frame
 
@@ -112,14 +111,10 @@ class Extraction:
     # Frames the search judged off on forked copies that the suite's run (a fresh, unforked module) reproduces.
     confirmed_unforked: int = 0
     # The suite's own run done by the replay itself: frames checked by its in-order steps of a fresh module
-    # (the replay process that made it stepped them, no fork had taken over); steps it took again on a fresh
-    # module after a fork had taken over; frames the calling process had to step itself.
+    # (the replay process that made it stepped them, no fork had taken over); frames the calling process
+    # stepped itself (from the first fork that took over on).
     checked_in_replay: int = 0
-    restepped: int = 0
     checked_beside: int = 0
-    # The replay's last re-stepping of every frame on a fresh module, done after the last output (a fork had
-    # taken over since the last one): as Decided.in_order.
-    in_order_tail: tuple[InOrder, ...] | None = None
 
     def accepted_at(self, threshold: float) -> int:
         return sum(1 for f in self.frames if f.comparison.distance <= threshold)
@@ -176,7 +171,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             # A module made here, in the replay process: its steps in this process, in order, are the suite's
             # (a fork of the caller's module is not: a module may answer otherwise in a forked process).
             return _extract(log, spec, fresh() if fresh is not None else planner, lambda *message: send(message),
-                            search=ForkedSearch(jobs, send), cfg=cfg, resume=resume, fresh=fresh)
+                            search=ForkedSearch(jobs, send), cfg=cfg, resume=resume, made_here=fresh is not None)
 
         result: Extraction = run_supervised(body, on_message=on_message, idle=follower.step_one)
         follower.finish(result)
@@ -190,9 +185,8 @@ class SuiteRun:
 
     The replay process does that run itself while it can (``Decided.in_order``): it made a fresh module and
     steps the kept frames in order in the process that made it, exactly the suite's run, a forked copy holding
-    the state from before each output in case its frame is wrong. Only when a frame was not so checked (a fork
-    took over and the replay chose not to step the frames again on a fresh module) does this process step
-    every frame from the first on its own fresh module, beside the search.
+    the state from before each output in case its frame is wrong. Once a frame was not so checked (a fork
+    took over) this process steps every frame from the first on its own fresh module, beside the search.
     """
 
     def __init__(self, planner: ReplayPlanner, cfg: ReplayModule, codecs: Mapping[str, Codec]) -> None:
@@ -228,7 +222,6 @@ class SuiteRun:
     def finish(self, result: Extraction) -> None:
         """After the replay: its last in-order run applied; any frame it did not check, and this process steps
         every frame (the suite's own run, here); then :meth:`settle`."""
-        self._checked(result.in_order_tail)
         if self.in_replay < len(self.frames):
             self.beside = True
         while self.step_one():
@@ -559,16 +552,9 @@ class _Run:
     speculation: Speculation = field(default_factory=lambda: Speculation())
     last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
     misses_in_row: int = 0  # outputs kept just before this one that no candidate reproduced (forked search)
-    # The suite's own run done by the replay (see SuiteRun): ``fresh`` makes a fresh module; ``born`` is the
-    # process that made ``planner`` and stepped it on every frame kept, in order (None: no such process —
-    # then the caller runs the suite). Another process (a fork that took over) steps every frame again on a
-    # fresh module, while those steps stay within REST_SHARE of the outputs.
-    fresh: Callable[[], ReplayPlanner] | None = None
+    # The suite's own run done by the replay (see SuiteRun): ``born`` is the process that made ``planner``
+    # fresh and stepped it on every frame kept, in order (None: no such process — the caller runs the suite).
     born: int | None = None
-    pending: bool = False  # frames were kept by a process that took over, not stepped again on a fresh module yet
-    keeper: int = 0  # the process that kept the last output …
-    quiet: int = 0  # … and how many outputs in a row it kept (no fork took over)
-    takeovers: list[int] = field(default_factory=list)  # frames kept when a fork took over, since the module
 
     def report(self, out_index: int, skipped: str | None = None, silent: int = 0) -> None:
         """Pass on the output just decided (its frame is the last one, after ``silent`` frames of cycles that
@@ -611,76 +597,34 @@ class _Run:
         """The suite's run of the ``new`` frames just kept, if this process did it (see Decided.in_order).
 
         In the process that made the module, stepping every frame kept in order, they were judged as the
-        suite judges them. When a fork took over (the kept frame was not the first candidate this process
-        stepped), every frame is stepped again, in order, on a fresh module made in the process that carries
-        on — once it has kept QUIET outputs in a row itself (a search that keeps missing would need it again
-        at once), and while all such steps stay within REST_SHARE of the outputs; past that the caller runs
-        the suite, beside.
+        suite judges them. Once a fork took over (the kept frame was not the first candidate this process
+        stepped), its module is a copy, not one made where it runs (a module may answer otherwise in a forked
+        process), and the caller steps the suite beside from then on: stepping every frame again here on a
+        fresh module would lengthen the search by as many steps (measured on the zoo: 10-45 % of the
+        extraction's time), while the caller's run uses a core the search mostly leaves idle.
         """
-        frames = self.result.frames
-        pid = os.getpid()
-        took_over = pid != self.keeper
-        self.quiet = 0 if took_over else self.quiet + 1
-        self.keeper = pid
+        if self.born is not None and self.born != os.getpid():
+            self.born = None
         if self.born is None:
             return None
-        if self.born == pid:
-            return tuple((f.index, f.comparison if f.output is not None else None, f.exact) for f in frames[-new:])
-        self.pending = True
-        if took_over:
-            self.takeovers.append(len(frames))
-        if self.result.restepped + len(frames) > REST_SHARE * len(self.recorded.outputs) or (
-                len(frames) >= TAKEOVERS_AFTER and len(self.takeovers) > TAKEOVER_RATE * len(frames)):
-            # Too many frames to step again, or forks take over too often (past the first frames, while the
-            # search learns) for a module made here to last: the caller's suite run steps every frame, beside.
-            self.born = None
-            return None
-        # Not while forks take over often (a module made now would not last): once this process has kept, in a
-        # row, QUIET outputs and twice as many as came between the last takeovers (the median), or after the last
-        # output.
-        gaps = sorted(b - a for a, b in pairwise(self.takeovers[-TAKEOVER_GAPS - 1:]))
-        needed = max(QUIET, 2 * gaps[len(gaps) // 2]) if gaps else QUIET
-        return self.step_again() if self.quiet >= needed else None
-
-    def step_again(self) -> tuple[InOrder, ...]:
-        """Every frame kept so far stepped in order on a fresh module made here, judged as the suite judges them;
-        that module carries on."""
-        assert self.fresh is not None
-        planner, cfg, frames = self.fresh(), self.cfg, self.result.frames
-        judged: list[InOrder] = []
-        for f in frames:
-            inputs = {name: self.recorded.fresh(name, self.recorded.index_of[name][id(msg)])
-                      for name, msg in f.inputs.items()}
-            try:
-                replayed = planner.step(inputs)
-            except Exception as exc:  # the module's failure on a frame is a failing test, not ours
-                replayed = {"__replay_error__": f"{type(exc).__name__}: {exc}"}
-            if f.output is None:
-                judged.append((f.index, None, False))
-                continue
-            try:
-                message = self.recorded.codecs[cfg.output].decode(f.output.data)
-            except DecodeError:
-                message = None
-            points = trajectory_points(message, cfg.trajectory) if cfg.trajectory is not None else []
-            judged.append((f.index, *_judged(cfg, replayed, _Expected(message, points, _text(message)))))
-        self.result.restepped += len(frames)
-        self.planner, self.born, self.pending = planner, os.getpid(), False  # made here, stepped in order
-        return tuple(judged)
+        return tuple((f.index, f.comparison if f.output is not None else None, f.exact)
+                     for f in self.result.frames[-new:])
 
 
 def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnOutput, *,
              search: ForkedSearch | None, cfg: ReplayModule, resume: Sequence[Decided] = (),
-             fresh: Callable[[], ReplayPlanner] | None = None) -> Extraction:
+             made_here: bool = False) -> Extraction:
     """A frame per recorded output, in order (see :func:`extract`); ``search`` None: no forking.
 
     In a forked search, the process that returns is the one holding the
     state after the last output kept; a shadow that was told to keep the
-    last output exits here instead (the runner reports).
+    last output exits here instead (the runner reports). ``made_here``:
+    ``planner`` was made fresh in this process (its in-order steps are the
+    suite's own run until a fork takes over).
     """
     recorded = _Recorded.read(log, spec, cfg)
-    run = _Run(planner, cfg, recorded, search, progress, Extraction(outputs=len(recorded.outputs)), fresh=fresh,
-               born=os.getpid() if fresh is not None and search is not None else None, keeper=os.getpid())
+    run = _Run(planner, cfg, recorded, search, progress, Extraction(outputs=len(recorded.outputs)),
+               born=os.getpid() if made_here and search is not None else None)
     for out_index in range(len(recorded.outputs)):
         _extract_output(run, out_index, resume[out_index] if out_index < len(resume) else None)
     speculation, result = run.speculation, run.result
@@ -688,8 +632,6 @@ def _extract(log: LogContents, spec: Spec, planner: ReplayPlanner, progress: OnO
         os._exit(0)
     if search is not None:  # the counters as the last runner holds them (each winner takes them over)
         speculation.let_go()
-        if run.pending and run.born is not None and result.frames:  # the last frames kept by a fork: step again
-            result.in_order_tail = run.step_again()
         result.candidates_cut, result.cut_retried, result.retried_kept = search.cut, search.retried, search.retried_kept
         result.first_stepped_in_runner, result.first_missed_in_runner = speculation.hits, speculation.misses
     return result
@@ -994,12 +936,6 @@ SPECULATE_MAX_WINDOW_S = 0.05
 # (TRY_ON, outcomes so far by candidate): carry on as the runner from the state before the output, trying
 # the candidates not tried yet. Each word also carries the runner's counters.
 KEEP, TRY_ON = "keep", "try on"
-# A replay whose module a fork took over steps the frames kept so far again on a fresh module (the suite's own
-# run, done here) while all such steps stay within this share of the outputs; past it the caller runs the suite.
-REST_SHARE = 0.5
-QUIET = 3  # … once the process carrying on has kept this many outputs in a row itself
-TAKEOVER_GAPS = 5  # … and twice as many as kept between the last takeovers (the median of this many gaps)
-TAKEOVERS_AFTER, TAKEOVER_RATE = 20, 0.1  # past 20 frames, forks taking over for over 1 in 10: the caller's run
 DEEP_MISSES = 8  # outputs in a row not reproduced after which only the likeliest candidate is stepped
 IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
 
@@ -1299,8 +1235,7 @@ def search_note(extraction: Extraction) -> str | None:
                      f"first")
     if extraction.checked_in_replay:
         parts.append(f"the suite's own run done by the replay's in-order steps of a fresh module for "
-                     f"{extraction.checked_in_replay} frame(s) ({extraction.restepped} step(s) taken again on a "
-                     f"fresh module after a fork took over)")
+                     f"{extraction.checked_in_replay} frame(s)")
     elif extraction.checked_beside:
         parts.append(f"the suite's own run stepped {extraction.checked_beside} frame(s) beside the search")
     if extraction.confirmed_unforked:

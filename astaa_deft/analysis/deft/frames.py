@@ -143,9 +143,12 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     afters: dict[int, set[str]] = {}
     if previous_output_ns is not None:
         for m, t_out in enumerate([previous_output_ns - skew_ns, *earlier_outputs_ns][:QUEUE_DEPTHS + 1], start=1):
-            index = bisect_right(trig.times, t_out - AFTER_JITTER_NS)
-            if oldest <= index <= newest:
-                afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
+            # A trigger logged within the jitter before the output may as well have reached the module while
+            # it was still busy (and been dropped): then the first one logged after the output is the answer.
+            first = bisect_right(trig.times, t_out - AFTER_JITTER_NS)
+            for index in dict.fromkeys((first, bisect_right(trig.times, t_out))):
+                if oldest <= index <= newest:
+                    afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
     cycle_end = newest_at_or_before(trig.times, previous_output_ns - skew_ns - AFTER_JITTER_NS) if (
         previous_output_ns is not None) else -1
     order_of_triggers = list(dict.fromkeys(
