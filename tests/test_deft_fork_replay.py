@@ -10,12 +10,17 @@ forked, all do.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import time
 
 import pytest
 
 from astaa_deft.analysis.deft.extract import extract, near_miss_note
 from astaa_deft.analysis.deft.fork_replay import can_fork
 from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.analysis.deft.workflow import _idle_share, idle_cores
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.spec.loader import load_spec
 
@@ -79,3 +84,19 @@ def test_factory_nowhere_is_one_clear_error(tmp_path):
     with pytest.raises(InputError) as caught:
         make_planner(load_spec(spec_path), {})
     assert "spec's directory" in str(caught.value) and "PYTHONPATH" in str(caught.value)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="idle time is read from /proc/stat")
+def test_idle_cores_counts_a_core_kept_busy_now_as_busy():
+    # The candidates' parallelism follows the cores idle right now, not the minute's load average (which
+    # still counts a recording that just ended). A process spinning while it measures keeps one core busy.
+    cpus = os.cpu_count() or 1
+    assert 1 <= idle_cores() <= cpus
+    spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.2)  # running
+        share = _idle_share(0.5)
+    finally:
+        spinner.kill()
+        spinner.wait()
+    assert share is not None and 0.0 <= share <= 1.0 - 1.0 / cpus + 0.1
