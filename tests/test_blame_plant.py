@@ -113,6 +113,19 @@ def test_a_module_under_test_departing_before_the_plant_is_blamed_as_before(loop
     assert found.module == "control" and found.how == "non-finite" and found.root_cause == "control"
 
 
+def test_a_plant_that_reads_no_mutated_channel_is_not_blamed_either_and_loses_its_bin_to_a_module_under_test(loop):
+    # check is mutated (nobody reads it); the plant's pose departs first: the value reached it some other way.
+    alone = series({"command": CALM, "pose": nan_from(21), "check": CALM, "alert": CALM}, mutated_at=4,
+                   mutated=("check",))
+    found = blame(loop, alone, TWINS, invariant="finite_pose", finding_module="sim")
+    assert found.module is None and found.how == MUTATED_VALUE
+    assert found.chain.startswith("check (mutated) → … → sim (plant: departed before any module under test) → pose")
+    # watcher's alert departs in the same bin: neither reads the mutated channel, the module under test goes first.
+    both = series({"command": CALM, "pose": nan_from(21), "check": CALM, "alert": nan_from(22)}, mutated_at=4,
+                  mutated=("check",))
+    assert blame(loop, both, TWINS, invariant="finite_pose", finding_module="sim").module == "watcher"
+
+
 def test_with_no_departure_a_finding_naming_the_plant_blames_the_value_it_was_fed_not_the_plant(loop):
     failing = series({"command": CALM, "pose": CALM, "check": CALM, "alert": CALM}, mutated_at=4,
                      mutated=("command",))
