@@ -107,6 +107,9 @@ class Module:
     # What an abnormal exit of this module mid-run does: "end_run" (default: the run stops at once with
     # its verdict) or "keep_running" (the others go on until the run's own end, e.g. to see what follows).
     on_crash: str = "end_run"
+    # The plant: the world or vehicle model the software under test drives (a simulator), not a module under
+    # test. A campaign never blames it: it applies what it is sent, so its departure shows the value it got.
+    plant: bool = False
 
 
 @dataclass(frozen=True)
@@ -165,6 +168,10 @@ class Spec:
 
     def module(self, name: str) -> Module:
         return next(m for m in self.modules if m.name == name)
+
+    def is_plant(self, name: str | None) -> bool:
+        """Whether ``name`` is a module the spec marks ``plant: true`` (the world, not a module under test)."""
+        return any(m.plant for m in self.modules if m.name == name)
 
     def channel(self, name: str) -> Channel:
         return next(c for c in self.channels if c.name == name)

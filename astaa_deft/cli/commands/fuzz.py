@@ -77,7 +77,7 @@ def status(out: Path) -> int:
     for b in merged:
         say(f"  {b.bucket} merged into {b.merged_into}: {b.invariant} {b.family}")
     for name, blame in journal.blames().items():
-        say(f"  {name} blame: {blame.module or '?'}: {blame.chain}"
+        say(f"  {name} blame: {blame.root_cause or '?'}: {blame.chain}"
             + (f" — confirmed: {blame.replay}" if blame.replay else ""))
     for note in journal.notes("concurrency"):
         say(f"  {note.text}")

@@ -1,4 +1,5 @@
-"""The spec's ``modules:`` section: each module's command, environment, directory, readiness, crash policy.
+"""The spec's ``modules:`` section: each module's command, environment, directory, readiness, crash policy,
+and whether it is the plant (the world a simulator models, not a module under test).
 
 Commands and environment values may hold ``{placeholders}``: the built-in ones
 and the declared params; an unknown one is reported here, not at launch.
@@ -18,7 +19,7 @@ from astaa_deft.model.patterns import PatternError, compile_user_pattern
 from astaa_deft.model.sut import Module, Readiness
 
 ON_CRASH = ("end_run", "keep_running")
-MODULE_KEYS = ("name", "command", "env", "cwd", "ready", "on_crash")
+MODULE_KEYS = ("name", "command", "env", "cwd", "ready", "on_crash", "plant")
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,11 @@ def read_modules_section(reader: SpecReader, node: Node | None, params: dict[str
             if on_crash not in ON_CRASH:
                 reader.src.at(v["on_crash"], f"'on_crash' must be end_run or keep_running, not '{on_crash}'",
                               did_you_mean(on_crash, ON_CRASH) or "write end_run or keep_running")
-        out.append(Module(name=name, command=command, env=env, cwd=cwd, ready=ready, on_crash=on_crash))
+        plant = False
+        if "plant" in v and reader.expect(v["plant"], (bool,), "'plant'", "true or false"):
+            plant = bool(v["plant"].value)
+        out.append(Module(name=name, command=command, env=env, cwd=cwd, ready=ready, on_crash=on_crash,
+                          plant=plant))
     return ModulesSection(tuple(out), tuple(ready_channels))
 
 

@@ -26,6 +26,14 @@ arrays' lengths and short strings' shares. A channel departs in a bin when
   bin of a drifting number is noise).
 
 The mutated channels themselves are left out (they depart by construction).
+
+A module the spec marks ``plant: true`` (a simulator: the vehicle and its
+world) is never to blame: it applies what it is sent, so when its output
+departs first — no module under test departed before it, nor in the same
+bin while consuming a mutated channel — what caused the failure is the
+mutated value itself (``Blame.module`` None, ``how`` :data:`MUTATED_VALUE`).
+Modules under test departing after it react to the plant's changed world.
+
 Pure logic apart from :func:`run_series`, which reads a log.
 """
 
@@ -49,6 +57,8 @@ NOISE_FACTOR = 2.0  # a number departs beyond this many times the largest spread
 SCALE_SHARE = 0.05  # … and beyond this share of its scale
 MAX_STRING = 32  # longer strings are not compared (ids, free text)
 COUNT = "#count"
+MUTATED_VALUE = "mutated value"  # Blame.how: a plant carried the mutated value on; no module under test is to blame
+THE_MUTATED_VALUE = "the mutated value itself"  # what such a blame names as the root cause
 
 Features = dict[str, float]
 Series = dict[str, dict[int, Features]]  # channel → bin → features
@@ -78,9 +88,10 @@ class Departure:
 class Blame:
     """The module to blame for a bucket and the chain that says why (JSON-able: the journal keeps it)."""
 
-    module: str | None  # None: no module's output departed and the finding names none
+    module: str | None  # None: no module under test is to blame (how says why: mutated value, none)
     output: str | None  # the departed channel (None: none departed)
-    how: str  # non-finite, silent, value — or "finding" when no output departed and the finding names it
+    how: str  # non-finite, silent, value; "finding" when no output departed and the finding names the module;
+    # "mutated value" when a plant's output departed first (no module under test mishandled anything); "none"
     chain: str  # mutated channel → module → channel → invariant
     detail: str
     twins: int  # twins compared with
@@ -93,6 +104,19 @@ class Blame:
     def wrong_output(self) -> str:
         """What went wrong, as bucket identity uses it: the departed channel and how (no values, no bins)."""
         return f"{self.output}:{self.how}" if self.output else self.how
+
+    @property
+    def root_cause(self) -> str | None:
+        """The root cause it names (:func:`root_cause_of`)."""
+        return root_cause_of(self.module, self.how)
+
+
+def root_cause_of(module: str | None, how: str) -> str | None:
+    """The root cause a blame names, as bucket identity and the user see it: the module to blame, "the mutated
+    value itself" when a plant carried the value on, None when nothing says."""
+    if module is not None:
+        return module
+    return THE_MUTATED_VALUE if how == MUTATED_VALUE else None
 
 
 RANK = {"non-finite": 0, "silent": 1, "value": 2}
@@ -260,26 +284,46 @@ def _scale(theirs: Sequence[Mapping[int, Features]]) -> Features:
 
 def blame(spec: Spec, failing: RunSeries, twins: Sequence[RunSeries], *, invariant: str,
           finding_module: str | None) -> Blame:
-    """The module to blame: the producer of the earliest departing channel (a consumer of a mutated channel
-    first, on a tie; then the strongest sign); without any departure, the module the finding names."""
+    """The module to blame: the producer of the earliest departing channel (on a tie: a consumer of a mutated
+    channel first, a module under test before a plant, then the strongest sign); without any departure, the module
+    the finding names. A plant is never to blame: when it is chosen, the mutated value itself is (module None)."""
     mutated = ", ".join(failing.mutated) or "?"
     found = departures(failing, twins)
     if found:
         first_bin = found[0].bin
         consumers = {c for name in failing.mutated for c in _consumers(spec, name)}
         tied = [d for d in found if d.bin == first_bin]
-        chosen = min(tied, key=lambda d: (_producer(spec, d.channel) not in consumers, RANK.get(d.how, 9),
-                                          d.channel))
+        chosen = min(tied, key=lambda d: (_producer(spec, d.channel) not in consumers,
+                                          spec.is_plant(_producer(spec, d.channel)), RANK.get(d.how, 9), d.channel))
         module = _producer(spec, chosen.channel)
-        chain = f"{mutated} → {module} → {chosen.channel} ({chosen.how}: {chosen.feature}) → {invariant}"
+        departed = f"{chosen.channel} ({chosen.how}: {chosen.feature}) → {invariant}"
         at = (first_bin - (failing.first_mutation_bin or 0)) * BIN_SECONDS
-        return Blame(module, chosen.channel, chosen.how, chain,
-                     f"{chosen.detail}, {at:g}–{at + BIN_SECONDS:g} s after the first mutation", len(twins))
+        detail = f"{chosen.detail}, {at:g}–{at + BIN_SECONDS:g} s after the first mutation"
+        if spec.is_plant(module):
+            return Blame(None, chosen.channel, MUTATED_VALUE, f"{_into_plant(spec, failing, module)} → {departed}",
+                         f"{detail}; no module under test departed before the plant {module}", len(twins))
+        return Blame(module, chosen.channel, chosen.how, f"{mutated} → {module} → {departed}", detail, len(twins))
+    nothing = "no channel departed from the twins' range"
+    if finding_module and spec.is_plant(finding_module):
+        why = f"({invariant} names it; no output departed from the twins)"
+        if any(finding_module in _consumers(spec, name) for name in failing.mutated):
+            return Blame(None, None, MUTATED_VALUE, f"{_into_plant(spec, failing, finding_module)} → {why}", nothing,
+                         len(twins))
+        return Blame(None, None, "none", f"{mutated} → ? → {invariant} (names {finding_module}, the plant)", nothing,
+                     len(twins))
     if finding_module:
         chain = f"{mutated} → {finding_module} → ({invariant} names it; no output departed from the twins)"
-        return Blame(finding_module, None, "finding", chain, "no channel departed from the twins' range", len(twins))
-    return Blame(None, None, "none", f"{mutated} → ? → {invariant}", "no channel departed from the twins' range",
-                 len(twins))
+        return Blame(finding_module, None, "finding", chain, nothing, len(twins))
+    return Blame(None, None, "none", f"{mutated} → ? → {invariant}", nothing, len(twins))
+
+
+def _into_plant(spec: Spec, failing: RunSeries, plant: str) -> str:
+    """The start of a chain through a plant: the mutated channels it consumes, which it carries on; else the
+    mutated value reached it through modules under test whose outputs did not depart before its own."""
+    fed = [name for name in failing.mutated if plant in _consumers(spec, name)]
+    if fed:
+        return f"{', '.join(fed)} (mutated) → {plant} (plant: carries the value on)"
+    return f"{', '.join(failing.mutated) or '?'} (mutated) → … → {plant} (plant: departed before any module under test)"
 
 
 def _producer(spec: Spec, channel: str) -> str:

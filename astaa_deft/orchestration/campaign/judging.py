@@ -179,12 +179,12 @@ class Judging(CampaignParts):
         except BlameUnavailable as exc:
             self.journal.note("blame", f"{bucket.bucket}: no blame: {exc}")
             return
-        identity = (None if found.module is None else
-                    f"{found.module}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
+        identity = (None if found.root_cause is None else
+                    f"{found.root_cause}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
                     f"{sig.field_family(bucket.family)}")
         self.journal.blamed(BlameRow(bucket.bucket, found.module, found.output, found.how, found.chain, found.detail,
                                      found.twins, identity))
-        self.say(f"  {bucket.bucket} blame: {found.module or '?'} ({found.chain}; {found.detail})")
+        self.say(f"  {bucket.bucket} blame: {found.root_cause or '?'} ({found.chain}; {found.detail})")
         if identity is None:
             return
         blames = self.journal.blames()
@@ -194,7 +194,7 @@ class Judging(CampaignParts):
         if same is not None:
             self.journal.merge_bucket(bucket.bucket, same.bucket)
             text = (f"bucket {bucket.bucket} ({bucket.family}) merged into {same.bucket} ({same.family}): one root"
-                    f" cause — {found.module} to blame, {found.wrong_output}, {sig.field_family(bucket.family)}")
+                    f" cause — {found.root_cause} to blame, {found.wrong_output}, {sig.field_family(bucket.family)}")
             self.journal.note("blame", text)
             self.say(f"  {text}")
 

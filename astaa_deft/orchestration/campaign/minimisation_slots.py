@@ -13,6 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
 from astaa_deft.orchestration.campaign.rows import Minimisation
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
@@ -163,10 +164,13 @@ class MinimisationSlots(CampaignParts):
 
     def _module_to_replay(self, bucket: Bucket) -> str | None:
         """The module whose DeFT module tests a bucket gets: the module to blame, else the module its finding
-        names — when the spec can replay it alone (the planner, a ``replay:`` entry); None otherwise."""
+        names — when the spec can replay it alone (the planner, a ``replay:`` entry) and it is not the plant;
+        None otherwise, and when the blame is the mutated value itself (no module under test mishandled it)."""
         blamed = self.journal.blames().get(bucket.bucket)
+        if blamed is not None and blamed.how == MUTATED_VALUE:
+            return None
         for module in (blamed.module if blamed is not None else None, bucket.module):
-            if replayable(self.spec, module):
+            if replayable(self.spec, module) and not self.spec.is_plant(module):
                 return module
         return None
 

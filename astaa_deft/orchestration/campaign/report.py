@@ -316,7 +316,7 @@ def _blames(journal: Journal) -> list[_BlameRow]:
         if row is None or b.merged_into:
             continue
         rows.append(_BlameRow(
-            bucket=b.bucket, module=row.module or "?", chain=row.chain,
+            bucket=b.bucket, module=row.root_cause or "?", chain=row.chain,
             evidence=f"{row.detail} ({row.twins} twin(s))", replay=row.replay or "",
             merged=[f"{m.bucket}: {m.family}" for m in buckets if m.merged_into == b.bucket]))
     return rows

@@ -14,6 +14,7 @@ from typing import Any
 
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.json import JsonObject
+from astaa_deft.orchestration.campaign.blame import root_cause_of
 from astaa_deft.orchestration.campaign.model import (
     BUG, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus, PlannedCase, Timing,
 )
@@ -197,3 +198,8 @@ class BlameRow:
     twins: int
     identity: str | None
     replay: str | None = None  # how a replay of the module to blame confirmed it (None: none did)
+
+    @property
+    def root_cause(self) -> str | None:
+        """The root cause it names: the module to blame, the mutated value itself, or None (``blame.Blame``)."""
+        return root_cause_of(self.module, self.how)
