@@ -20,7 +20,7 @@ import pytest
 from astaa_deft.analysis.deft.extract import extract, near_miss_note
 from astaa_deft.analysis.deft.fork_replay import can_fork
 from astaa_deft.analysis.deft.replay import make_planner
-from astaa_deft.analysis.deft.workflow import _idle_share, idle_cores
+from astaa_deft.analysis.deft.idle_cores import cpu_sample, idle_cores, idle_share
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.spec.loader import load_spec
 
@@ -95,7 +95,10 @@ def test_idle_cores_counts_a_core_kept_busy_now_as_busy():
     spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
         time.sleep(0.2)  # running
-        share = _idle_share(0.5)
+        start = cpu_sample()
+        assert start is not None
+        time.sleep(0.5)
+        share = idle_share(start)
     finally:
         spinner.kill()
         spinner.wait()

@@ -60,7 +60,8 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
     bounded(fz, "--baseline", RERUNS, default=2, help="clean runs first, per value of the --params grid")
     bounded(fz, "--reruns", RERUNS, default=2,
             help="re-runs of a new failure and as many unmutated twins, before it is filed as a bug")
-    fz.add_argument("--no-minimise", action="store_true", help="do not minimise the buckets, nor write their module tests")
+    fz.add_argument("--no-minimise", action="store_true",
+                    help="do not minimise the buckets, nor write their module tests")
     bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
             help="seconds one bucket's minimisation may take (it holds a worker slot)")
     fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")

@@ -9,9 +9,6 @@ with oracle tests for a collision the run saw, and returns what it found.
 
 from __future__ import annotations
 
-import math
-import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -25,6 +22,7 @@ from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.deft.checkpoint import Checkpoint, LogShape, identity, read_state
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.idle_cores import cpu_sample, idle_cores
 from astaa_deft.analysis.deft.extract import (
     Decided, Extraction, OnOutput, channel_messages, extract, ground_truth_rate,
 )
@@ -43,48 +41,6 @@ def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
                                  f"this log was recorded with spec '{meta.spec}', not '{spec.name}'",
                                  "pass the spec the run used"))
     return meta.params
-
-
-IDLE_SAMPLE_S = 0.2  # how long idle_cores watches the machine
-
-
-def idle_cores() -> int:
-    """The cores not busy right now, at least one: candidates run in parallel only where that costs the right
-    candidate nothing.
-
-    Measured over IDLE_SAMPLE_S where the system says how long its CPUs idled (/proc/stat); elsewhere the
-    CPUs minus the load average. The load average is a minute's decaying mean: right after a recording or a
-    plain replay it still counts that finished work, and gave 1 core on an idle 2-core machine (the zoo's
-    expensive members: 15-17 % longer extractions than with the 2 cores that were idle).
-    """
-    cpus = os.cpu_count() or 1
-    share = _idle_share(IDLE_SAMPLE_S)
-    if share is not None:
-        return max(1, math.floor(share * cpus + 0.5))
-    return max(1, cpus - math.ceil(os.getloadavg()[0] - 0.5)) if hasattr(os, "getloadavg") else cpus
-
-
-def _idle_share(seconds: float) -> float | None:
-    """The share of all CPUs' time spent idle over ``seconds``, from /proc/stat; None where it cannot be read."""
-    def sample() -> tuple[int, int] | None:
-        try:
-            with open("/proc/stat", encoding="ascii") as stat:
-                fields = [int(v) for v in stat.readline().split()[1:]]
-        except (OSError, ValueError):
-            return None
-        if len(fields) < 5:
-            return None
-        # user nice system idle iowait irq softirq steal (guest time is counted in user already)
-        return fields[3] + fields[4], sum(fields[:8])
-
-    first = sample()
-    if first is None:
-        return None
-    time.sleep(seconds)
-    second = sample()
-    if second is None or second[1] <= first[1]:
-        return None
-    return (second[0] - first[0]) / (second[1] - first[1])
 
 
 @dataclass
@@ -135,6 +91,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     ``interrupted``; ``options.resume`` goes on from such an extraction into the
     same ``out_dir`` (InputError if there is none, or it was another's).
     """
+    started = cpu_sample()  # the idle cores are measured while the log is read (idle_cores)
     threshold, module, jobs, resume = options.threshold, options.module, options.jobs, options.resume
     place = Place(out_dir, "-o")
     ready_dir(place, temp=True)
@@ -159,8 +116,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     planner = make_planner(spec, params, prefer_process=options.process, entry=entry)
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
-            ex = extract(log, spec, planner, on_output=_following(progress, checkpoint), jobs=jobs or idle_cores(),
-                         entry=entry, resume=before,
+            ex = extract(log, spec, planner, on_output=_following(progress, checkpoint),
+                         jobs=jobs or idle_cores(started), entry=entry, resume=before,
                          fresh=lambda: make_planner(spec, params, prefer_process=options.process, entry=entry))
     except KeyboardInterrupt:
         with writing(place):
