@@ -105,6 +105,22 @@ def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_l
     assert f"{AFTER} 3" in LIKELY_RULES
 
 
+def test_the_newest_trigger_before_the_output_itself_is_newest_too():
+    # A trigger logged within the recorder's skew after the output most likely came after the cycle had
+    # started: the newest trigger before the output itself is "newest" too. Before: it was only "between",
+    # and drop_cycle_none lost an output a plain replay reproduces (its right frame was not among the 8 tried).
+    triggers = Stream("a", [k * 50 * MS for k in range(6)])
+    b = Stream("b", [k * 50 * MS + 10 * MS for k in range(6)])
+    skew = 5 * MS
+    output = 250 * MS - 200_000  # trigger 5 logged 0.2 ms after the output
+    found = candidates({"a": triggers, "b": b}, "a", output + skew, previous={"a": 1, "b": 1}, lookback_ns=0,
+                       previous_output_ns=120 * MS + skew, skew_ns=skew)
+    newest = {c.choice["a"] for c in found if any(rule == NEWEST for rule, _ in c.patterns)}
+    assert newest == {4, 5}
+    # Its frame as the module latched it when the trigger came (b 3, logged at 160 ms) is among them.
+    assert any(c.choice == {"a": 4, "b": 3} and any(rule == NEWEST for rule, _ in c.patterns) for c in found)
+
+
 def test_the_way_that_won_for_earlier_outputs_is_tried_first():
     # Before: candidates came in one fixed order whatever the run showed; a planner that always plans on
     # the oldest unanswered trigger had its wrong newest-trigger frame tried first on every busy cycle.

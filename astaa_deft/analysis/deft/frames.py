@@ -151,12 +151,19 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                     afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
     cycle_end = newest_at_or_before(trig.times, previous_output_ns - skew_ns - AFTER_JITTER_NS) if (
         previous_output_ns is not None) else -1
+    # The newest trigger logged before the output itself (not the skew after it): one logged within the skew
+    # after the output most likely came after the cycle had started (a plain replay of the output's newest
+    # trigger takes this one; drop_cycle_none lost such an output to it).
+    unskewed = newest_at_or_before(trig.times, t_p - skew_ns)
     order_of_triggers = list(dict.fromkeys(
-        [newest] + ([cycle_end] if oldest <= cycle_end <= newest else []) + ([busy] if oldest <= busy < newest else [])
+        [newest] + ([unskewed] if oldest <= unskewed < newest else [])
+        + ([cycle_end] if oldest <= cycle_end <= newest else []) + ([busy] if oldest <= busy < newest else [])
         + list(afters) + jitter
         + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
     rules[newest].add(NEWEST)
+    if oldest <= unskewed < newest:
+        rules[unskewed].add(NEWEST)
     if oldest <= busy <= newest and busy == cycle_end:  # (one logged after the cycle end is the AFTER trigger)
         rules[busy].add(BUSY)
     for index in jitter:
