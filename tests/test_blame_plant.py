@@ -18,11 +18,12 @@ from astaa_deft.orchestration.campaign.blame import (
     THE_MUTATED_VALUE,
     Blame,
     RunSeries,
-    bin_features,
     blame,
     root_cause_of,
 )
 from astaa_deft.orchestration.campaign.rows import BlameRow
+
+from blame_series import series
 
 NAN = float("nan")
 
@@ -54,15 +55,6 @@ def loop(tmp_path: Path):
     path = tmp_path / "loop.yaml"
     path.write_text(LOOP)
     return load_spec(path)
-
-
-def series(channel_values: dict[str, list[float | None]], mutated_at: int | None = None,
-           mutated: tuple[str, ...] = ()) -> RunSeries:
-    """Channels at 10 Hz, one value per 0.1 s (None: no message then), as ``{"v": value}`` messages."""
-    bins = {}
-    for channel, values in channel_values.items():
-        bins[channel] = bin_features((0.1 * i + 0.01, {"v": v}) for i, v in enumerate(values) if v is not None)
-    return RunSeries(bins, mutated_at, mutated)
 
 
 CALM = [1.0] * 40

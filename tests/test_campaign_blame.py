@@ -16,18 +16,11 @@ from astaa_deft.orchestration.campaign.signature import field_family
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 
+from blame_series import series
+
 SUT = Path(__file__).parent / "sut"
 PIPE = SUT / "pipe.yaml"
 NAN = float("nan")
-
-
-def series(channel_values: dict[str, list[float | None]], mutated_at: int | None = None,
-           mutated: tuple[str, ...] = ()) -> RunSeries:
-    """Channels at 10 Hz, one value per 0.1 s (None: no message then), as ``{"v": value}`` messages."""
-    bins = {}
-    for channel, values in channel_values.items():
-        bins[channel] = bin_features((0.1 * i + 0.01, {"v": v}) for i, v in enumerate(values) if v is not None)
-    return RunSeries(bins, mutated_at, mutated)
 
 
 def test_features_fold_arrays_count_non_finite_values_and_keep_short_strings():
