@@ -17,7 +17,7 @@ import os
 import time
 from dataclasses import dataclass
 
-MIN_WINDOW_S = 0.2  # a shorter window is waited out: a burst of another process's work must show
+MIN_WINDOW_S = 0.1  # a shorter window is waited out (10 clock ticks a CPU): another process's work must show
 
 
 @dataclass(frozen=True)
