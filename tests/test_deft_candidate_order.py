@@ -21,11 +21,12 @@ import pytest
 from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.analysis.deft.frames import (
-    AFTER, AS_LOGGED, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Stream, candidates,
+    AFTER, AS_LOGGED, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Candidate, Stream, candidates,
 )
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
-    EXPENSIVE_TRIES, LIKELY_RULES, SearchMemory, StepBudget, WinningPatterns, first_cycle_first, nearest_first,
+    EXPENSIVE_TRIES, LIKELY_RULES, PER_TRIGGER, SearchMemory, StepBudget, WinningPatterns, first_cycle_first,
+    nearest_first,
 )
 from astaa_deft.io.log.reader import read_log
 
@@ -119,6 +120,35 @@ def test_the_newest_trigger_before_the_output_itself_is_newest_too():
     assert newest == {4, 5}
     # Its frame as the module latched it when the trigger came (b 3, logged at 160 ms) is among them.
     assert any(c.choice == {"a": 4, "b": 3} and any(rule == NEWEST for rule, _ in c.patterns) for c in found)
+
+
+def test_a_trigger_logged_just_before_the_previous_output_leaves_the_one_before_a_cycle_end_too():
+    # A module publishing a while after its cycle ended: trigger 3 logged 1.2 ms before the previous output
+    # may have come after that end. Both it and trigger 2 are "cycle end". Before: 3 alone; on slow_planner
+    # the right frame (trigger 2) was then not among the 8 tried and the warm state carried the miss on
+    # (3 → 13 of 13 outputs at θ = 0 on one log).
+    triggers = Stream("a", [k * 50 * MS for k in range(6)])
+    b = Stream("b", [k * 50 * MS + 10 * MS for k in range(6)])
+    found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=0,
+                       previous_output_ns=151_200_000)
+    assert {c.choice["a"] for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)} == {2, 3}
+    # A trigger logged 10 ms before the output: the end's alone.
+    found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=0,
+                       previous_output_ns=160 * MS)
+    assert {c.choice["a"] for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)} == {3}
+
+
+def test_an_expensive_outputs_tries_are_not_all_one_triggers():
+    # Eight frames of one trigger (other inputs' offsets) ranked first left the next trigger's likeliest out.
+    same = [Candidate(0, {"a": 7, "b": k}, frozenset({(CYCLE_END, (("b", k),))})) for k in range(10)]
+    other = [Candidate(0, {"a": 6, "b": k}, frozenset({(CYCLE_END, (("b", k),))})) for k in range(6)]
+    options, capped = SearchMemory().order(same + other, expensive=True, first=False, trigger="a")
+    assert capped and len(options) == EXPENSIVE_TRIES
+    assert sum(c.choice["a"] == 7 for c in options) == PER_TRIGGER
+    assert [c for c in options if c.choice["a"] == 7] == same[:PER_TRIGGER] and other[0] in options
+    # With too few others, the cap gives way: still EXPENSIVE_TRIES tried.
+    options, _ = SearchMemory().order(same + other[:1], expensive=True, first=False, trigger="a")
+    assert len(options) == EXPENSIVE_TRIES and other[0] in options
 
 
 def test_the_way_that_won_for_earlier_outputs_is_tried_first():

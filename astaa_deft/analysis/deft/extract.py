@@ -653,7 +653,8 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
-    options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot)
+    options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot,
+                                       trigger=cfg.trigger)
     if run.misses_in_row and run.search is not None:
         # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
         # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 2,

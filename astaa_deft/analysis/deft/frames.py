@@ -57,6 +57,7 @@ AFTER = "after"  # the first trigger logged after the previous output (a module 
 QUEUE_DEPTHS = 3
 AFTER_RULES = frozenset({AFTER} | {f"{AFTER} {m}" for m in range(2, QUEUE_DEPTHS + 2)})
 AFTER_JITTER_NS = 1_000_000  # a trigger logged this long before an output may have reached the module after it
+PUBLISH_JITTER_NS = 5_000_000  # … or, for a module publishing a while after its cycle ended, this long
 # The newest trigger logged before the previous output (AFTER_JITTER_NS before it, without the skew): the one a
 # module taking the newest trigger when its cycle ends had then — one logged just before the output (or within
 # the skew after it) reached it after that cycle had ended.
@@ -151,13 +152,19 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
                     afters.setdefault(index, set()).add(AFTER if m == 1 else f"{AFTER} {m}")
     cycle_end = newest_at_or_before(trig.times, previous_output_ns - skew_ns - AFTER_JITTER_NS) if (
         previous_output_ns is not None) else -1
+    # A module that publishes a while after its cycle ended (a big message, a loaded machine): the trigger logged
+    # up to PUBLISH_JITTER_NS before its output may have come after that end — the one before is then the end's.
+    # (slow_planner: a trigger logged 1.2 ms before the output; its one wrong frame, carried by the warm state.)
+    publish_end = newest_at_or_before(trig.times, previous_output_ns - skew_ns - PUBLISH_JITTER_NS) if (
+        previous_output_ns is not None) else -1
+    ends = [i for i in dict.fromkeys((cycle_end, publish_end)) if oldest <= i <= newest]
     # The newest trigger logged before the output itself (not the skew after it): one logged within the skew
     # after the output most likely came after the cycle had started (a plain replay of the output's newest
     # trigger takes this one; drop_cycle_none lost such an output to it).
     unskewed = newest_at_or_before(trig.times, t_p - skew_ns)
     order_of_triggers = list(dict.fromkeys(
         [newest] + ([unskewed] if oldest <= unskewed < newest else [])
-        + ([cycle_end] if oldest <= cycle_end <= newest else []) + ([busy] if oldest <= busy < newest else [])
+        + ends + ([busy] if oldest <= busy < newest else [])
         + list(afters) + jitter
         + ([oldest] if oldest < newest else []) + list(range(oldest + 1, newest))))
     rules: dict[int, set[str]] = {index: set() for index in order_of_triggers}
@@ -167,12 +174,12 @@ def candidates(streams: Mapping[str, Stream], trigger: str, t_p: int, previous: 
     if oldest <= busy <= newest and busy == cycle_end:  # (one logged after the cycle end is the AFTER trigger)
         rules[busy].add(BUSY)
     for index in jitter:
-        if index != cycle_end:  # that one is learned by its own rule (a busy trigger's would win its outputs too)
+        if index not in ends:  # those are learned by their own rule (a busy trigger's would win its outputs too)
             rules[index].add(BUSY)
     for index, after_rules in afters.items():
         rules[index] |= after_rules
-    if oldest <= cycle_end <= newest:
-        rules[cycle_end].add(CYCLE_END)
+    for index in ends:
+        rules[index].add(CYCLE_END)
     if trigger in previous and oldest <= newest:
         rules[oldest].add(OLDEST)
     for index in order_of_triggers:

@@ -179,6 +179,29 @@ class StepBudget:
 # a planner step: extraction stays a few replays long even when no frame reproduces an output (a planner not
 # bit-stable across copies, or an input the log lacks); the closest of them is kept.
 EXPENSIVE_TRIES = 8
+# … of which at most this many answer one trigger message, when others are left out: the likeliest trigger's
+# frames differ only in the other inputs' offsets, and eight of them left the next trigger's likeliest frame
+# out (slow_planner: its one wrong frame, and the warm state carried it into 10 of 13 outputs).
+PER_TRIGGER = 4
+
+
+def _varied(ranked: Sequence[Candidate], trigger: str | None) -> list[Candidate]:
+    """The likeliest EXPENSIVE_TRIES of ``ranked``, at most PER_TRIGGER of one ``trigger`` message (in
+    rank order; those over the cap come back only where too few others are left)."""
+    if trigger is None:
+        return list(ranked[:EXPENSIVE_TRIES])
+    per: dict[int | None, int] = {}
+    chosen: list[int] = []
+    for index, cand in enumerate(ranked):
+        key = cand.choice.get(trigger)
+        if per.get(key, 0) < PER_TRIGGER:
+            per[key] = per.get(key, 0) + 1
+            chosen.append(index)
+            if len(chosen) == EXPENSIVE_TRIES:
+                break
+    if len(chosen) < EXPENSIVE_TRIES:
+        chosen += [i for i in range(len(ranked)) if i not in chosen][:EXPENSIVE_TRIES - len(chosen)]
+    return [ranked[i] for i in sorted(chosen)]
 
 
 @dataclass
@@ -193,10 +216,12 @@ class SearchMemory:
     winning_expensive: WinningPatterns = field(default_factory=WinningPatterns)
     budget: StepBudget = field(default_factory=StepBudget)
 
-    def order(self, generic: Sequence[Candidate], *, expensive: bool, first: bool) -> tuple[list[Candidate], bool]:
+    def order(self, generic: Sequence[Candidate], *, expensive: bool, first: bool, trigger: str | None = None
+              ) -> tuple[list[Candidate], bool]:
         """(the candidates to try, in order; whether some were left out): an expensive output's likeliest
-        ``EXPENSIVE_TRIES`` (:func:`nearest_first`, ranked by the expensive outputs' ways and rules), else
-        all, ranked by every output's ways; a ``first`` output's first plannable trigger first."""
+        ``EXPENSIVE_TRIES`` (:func:`nearest_first`, ranked by the expensive outputs' ways and rules; at most
+        ``PER_TRIGGER`` of one ``trigger`` message while others are left out), else all, ranked by every
+        output's ways; a ``first`` output's first plannable trigger first."""
         if expensive:
             options = self.winning_expensive.rank(nearest_first(generic), by_rule=True)
         else:
@@ -204,7 +229,7 @@ class SearchMemory:
         if first:
             options = first_cycle_first(options)
         if expensive and len(options) > EXPENSIVE_TRIES:
-            return options[:EXPENSIVE_TRIES], True
+            return _varied(options, trigger), True
         return options, False
 
     def learn(self, kept: Candidate, step_s: float | None = None, window_s: float = 0.0,
