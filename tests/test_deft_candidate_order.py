@@ -21,7 +21,8 @@ import pytest
 from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.analysis.deft.frames import (
-    AFTER, AS_LOGGED, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Candidate, Stream, candidates,
+    AFTER, AS_LOGGED, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Candidate,
+    Stream, candidates, read_times,
 )
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
@@ -136,6 +137,31 @@ def test_a_trigger_logged_just_before_the_previous_output_leaves_the_one_before_
     found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=0,
                        previous_output_ns=160 * MS)
     assert {c.choice["a"] for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)} == {3}
+
+
+def test_a_slow_module_that_ended_a_cycle_with_a_trigger_waiting_read_its_next_inputs_then():
+    # slow_planner (0.5-1.2 s a cycle, 10 Hz triggers, the newest inputs read when a cycle starts): its second
+    # output's frame is the one at the first output, and a message logged 1 ms before that output came after
+    # the read. Before: the frame at the output (a read the step's cost rules out) and the one at the
+    # output minus the previous step's cost came first — 4 steps of 0.5 s for the second output.
+    triggers = Stream("a", [k * 100 * MS for k in range(12)])
+    b = Stream("b", [k * 100 * MS + 30 * MS for k in range(12)])
+    c = Stream("c", [k * 100 * MS + 99 * MS for k in range(12)])  # c 5 logged 1 ms before the first output
+    streams = {"a": triggers, "b": b, "c": c}
+    first_output, output = 600 * MS, 1_150 * MS
+    slow = read_times(streams, "a", {"a": 0, "b": 0, "c": 0}, output_ns=output, previous_output_ns=first_output,
+                      step_ns=500 * MS)
+    # (just before c 5: the frame with c 4)
+    assert slow == [(first_output, AT_PREVIOUS), (599 * MS - 1, AT_PREVIOUS), (output - 500 * MS, AT_START),
+                    (output, AT_OUTPUT)]
+    # A cheap step, or no trigger waiting when the previous cycle ended (the module idle): a plain replay's
+    # frame first.
+    cheap = read_times(streams, "a", {"a": 0}, output_ns=output, previous_output_ns=first_output, step_ns=2 * MS)
+    assert [rule for _, rule in cheap] == [AT_OUTPUT, AT_START, AT_PREVIOUS, AT_PREVIOUS]
+    idle = read_times(streams, "a", {"a": 6}, output_ns=output, previous_output_ns=first_output, step_ns=500 * MS)
+    assert idle[0] == (output, AT_OUTPUT)
+    # A first output: no previous one to read at.
+    assert read_times(streams, "a", {}, output_ns=first_output) == [(first_output, AT_OUTPUT)]
 
 
 def test_an_expensive_outputs_tries_are_not_all_one_triggers():

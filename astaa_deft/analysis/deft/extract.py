@@ -27,7 +27,7 @@ from astaa_deft.analysis.deft.fork_replay import (
     Following, ForkedSearch, Shadow, candidate_limit, cpu_limit, drop, hand_over, in_two_forks, next_word,
     run_supervised, shadow, tell,
 )
-from astaa_deft.analysis.deft.frames import AT_OUTPUT, AT_PREVIOUS, AT_START, Candidate, Stream, candidates, \
+from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, read_times, \
     frame_at, plain_walk, trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
@@ -690,11 +690,11 @@ def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
     cfg, recorded = run.cfg, run.recorded
     outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
     output = outputs[out_index]
-    read_at = [(output.log_time, AT_OUTPUT)]  # a plain replay: everything logged by then, in arrival order
-    if run.last_step_s is not None:  # the cycle's start: the output's time minus the step's measured cost
-        read_at.append((output.log_time - int(run.last_step_s * 1e9), AT_START))
-    if out_index:
-        read_at.append((outputs[out_index - 1].log_time, AT_PREVIOUS))
+    # A plain replay's frame (everything logged by the output), the cycle's start (the output's time minus the
+    # step's measured cost), the previous output's time (a busy module starts a cycle as it ends one).
+    read_at = read_times(recorded.streams, cfg.trigger, run.previous, output_ns=output.log_time,
+                         previous_output_ns=outputs[out_index - 1].log_time if out_index else None,
+                         step_ns=None if run.last_step_s is None else int(run.last_step_s * 1e9))
     return candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
                       int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
                       read_at, recorded.module_started_in_log, skew_ns=skew,

@@ -62,6 +62,9 @@ PUBLISH_JITTER_NS = 5_000_000  # … or, for a module publishing a while after i
 # module taking the newest trigger when its cycle ends had then — one logged just before the output (or within
 # the skew after it) reached it after that cycle had ended.
 CYCLE_END = "cycle end"
+# A step this long could not have read its inputs as its output went out: a module this slow that ended a cycle
+# with a trigger waiting read the next cycle's inputs then (see read_times).
+INSTANT_STEP_NS = 50_000_000
 
 
 @dataclass(frozen=True)
@@ -223,6 +226,34 @@ AT_OUTPUT, AT_START, AT_PREVIOUS = "at output", "at cycle start", "at previous o
 # its arrival, until the module answers (a plain replay of a module answering each trigger; the cycles that
 # answered nothing are stepped too — their state counts). Its frames are known once it has been stepped.
 WALK = "plain walk"
+
+
+def read_times(streams: Mapping[str, Stream], trigger: str, previous: Mapping[str, int], *, output_ns: int,
+               previous_output_ns: int | None = None, step_ns: int | None = None) -> list[tuple[int, str]]:
+    """(time, rule) of the frames read at a time for an output (see :func:`frame_read_at`), likeliest first.
+
+    ``step_ns``: the module's last measured step. When the previous cycle
+    ended with a trigger waiting (one logged before the previous output,
+    newer than the previous frame's) and the step is no instant, the module
+    started its next cycle as it ended the last: the frame at the previous
+    output comes first. Its output was published after that read, so the
+    frame just before each input message logged up to PUBLISH_JITTER_NS
+    before the previous output follows it (slow_planner: a message logged
+    1 ms before the output, its cycle's read come first). Otherwise a plain
+    replay's frame (everything logged by the output) comes first.
+    """
+    at_output = [(output_ns, AT_OUTPUT)]
+    at_start = [] if step_ns is None else [(output_ns - step_ns, AT_START)]
+    if previous_output_ns is None:
+        return at_output + at_start
+    just_before = sorted((t - 1 for name, stream in streams.items() if name != trigger
+                          for t in stream.times[bisect_right(stream.times, previous_output_ns - PUBLISH_JITTER_NS):
+                                                bisect_right(stream.times, previous_output_ns)]), reverse=True)
+    at_previous = [(previous_output_ns, AT_PREVIOUS)] + [(t, AT_PREVIOUS) for t in just_before]
+    waiting = newest_at_or_before(streams[trigger].times, previous_output_ns) > previous.get(trigger, -1)
+    if waiting and step_ns is not None and step_ns > INSTANT_STEP_NS:
+        return at_previous + at_start + at_output
+    return at_output + at_start + at_previous
 
 
 def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[str, int]) -> Candidate | None:
