@@ -75,7 +75,8 @@ generated case(s) and {{ clean }} clean run(s).</p>
 {% endfor %}</table><h2>Buckets</h2>
 {% if not buckets %}<p class='ok'>No failures found.</p>
 {% else %}<table><tr><th>bucket</th><th>status</th><th>severity</th><th>verdict</th><th>invariant</th>\
-<th>module</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>\
+<th title='the module that died, or whose output broke the invariant: not the module to blame (see Blame)'>\
+seen at</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>\
 <th title='re-runs of the first failure that failed the same way'>rate</th><th>files</th></tr>
 {% for row in buckets %}{% set b = row.bucket %}\
 <tr id='{{ b.bucket }}'><td><b>{{ b.bucket }}</b>\

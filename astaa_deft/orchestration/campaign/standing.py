@@ -59,10 +59,13 @@ class Standing:
         return self.failures / self.runs if self.runs else 0.0
 
     def describe(self) -> str:
-        """One line: bucket, severity, verdict, invariant, module, status and its evidence."""
+        """One line: bucket, severity, verdict, invariant, where the failure was seen, status and its evidence.
+
+        Where it was seen (the module that died, or whose output broke the
+        invariant) is not the module to blame: the blame says that."""
         b = self.bucket
         return (f"{b.bucket} {self.severity} {b.verdict}: {b.invariant}"
-                f"{' in ' + b.module if b.module else ''} — {self.status} ({self.why})")
+                f"{' (seen at ' + b.module + ')' if b.module else ''} — {self.status} ({self.why})")
 
 
 def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool) -> tuple[BucketStatus, str]:
