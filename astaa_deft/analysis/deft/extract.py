@@ -134,14 +134,15 @@ def channel_messages(log: LogContents, spec: Spec, names: list[str]) -> dict[str
 
 def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             on_output: OnOutput = lambda done, total, outcome: None,
-            jobs: int | None = None, entry: ReplayModule | None = None,
+            jobs: int | Callable[[], int] | None = None, entry: ReplayModule | None = None,
             resume: Sequence[Decided] = (), fresh: Callable[[], ReplayPlanner] | None = None) -> Extraction:
     """Reconstruct and validate a frame per recorded output (per trigger message for a per-trigger module).
 
     ``entry`` names the module replayed (default: the planner). With ``jobs``
     (an in-process planner on a system that can fork), the candidates of an
     output are tried in forked processes, up to ``jobs`` at a time, from the
-    very same planner state (see fork_replay); otherwise — or while this
+    very same planner state (see fork_replay; a callable ``jobs`` is asked
+    only then: a per-trigger module steps every frame here); otherwise — or while this
     process runs other Python threads, which a fork must not copy in the
     middle of their work — from deep copies of the planner, one after another.
     ``on_output(outputs done, outputs in all, outcome)`` gets each output
@@ -160,6 +161,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
         # The search runs in forked copies; here, beside it, the fresh ``planner`` runs the suite: it steps
         # every frame as it is decided and compares the accepted ones, as `pytest DIR` will.
+        workers = jobs() if callable(jobs) else jobs
         follower = SuiteRun(planner, cfg, {name: get_codec(spec.channel(name).encoding)
                                            for name in list(cfg.inputs) + [cfg.output]})
 
@@ -171,7 +173,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             # A module made here, in the replay process: its steps in this process, in order, are the suite's
             # (a fork of the caller's module is not: a module may answer otherwise in a forked process).
             return _extract(log, spec, fresh() if fresh is not None else planner, lambda *message: send(message),
-                            search=ForkedSearch(jobs, send), cfg=cfg, resume=resume, made_here=fresh is not None)
+                            search=ForkedSearch(workers, send), cfg=cfg, resume=resume, made_here=fresh is not None)
 
         result: Extraction = run_supervised(body, on_message=on_message, idle=follower.step_one)
         follower.finish(result)

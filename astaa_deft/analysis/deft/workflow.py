@@ -91,8 +91,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     ``interrupted``; ``options.resume`` goes on from such an extraction into the
     same ``out_dir`` (InputError if there is none, or it was another's).
     """
-    started = cpu_sample()  # the idle cores are measured while the log is read (idle_cores; a per-trigger
-    # replay steps every frame in this process and needs none)
+    started = cpu_sample()  # the idle cores are measured while the log is read (idle_cores), if a search forks
     threshold, module, jobs, resume = options.threshold, options.module, options.jobs, options.resume
     place = Place(out_dir, "-o")
     ready_dir(place, temp=True)
@@ -118,7 +117,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     try:
         with writing(place):  # the decided outputs' tests are written as the extraction goes
             ex = extract(log, spec, planner, on_output=_following(progress, checkpoint),
-                         jobs=jobs or (1 if entry.per_trigger else idle_cores(started)), entry=entry, resume=before,
+                         jobs=jobs or (lambda: idle_cores(started)), entry=entry, resume=before,
                          fresh=lambda: make_planner(spec, params, prefer_process=options.process, entry=entry))
     except KeyboardInterrupt:
         with writing(place):
