@@ -239,8 +239,9 @@ def read_times(streams: Mapping[str, Stream], trigger: str, previous: Mapping[st
     output comes first. Its output was published after that read, so the
     frame just before each input message logged up to PUBLISH_JITTER_NS
     before the previous output follows it (slow_planner: a message logged
-    1 ms before the output, its cycle's read come first). Otherwise a plain
-    replay's frame (everything logged by the output) comes first.
+    1 ms before the output had reached the module after its read).
+    Otherwise a plain replay's frame (everything logged by the output)
+    comes first.
     """
     at_output = [(output_ns, AT_OUTPUT)]
     at_start = [] if step_ns is None else [(output_ns - step_ns, AT_START)]
