@@ -67,7 +67,9 @@ def test_report_shows_buckets_culprits_tests_merges_and_how_runs_ended(tmp_path:
     assert "<title>astaa-deft campaign: demo_av</title>" in page
     # B001 confirmed by its minimisation (no re-run ran), B002 merged into it, B003 a clean-run failure
     assert "1 confirmed bug (1 high); 1 failing without mutation" in text
-    assert "B001 high Silent: planned_speed in planning — confirmed (its minimal test case failed live)" in text
+    # Where a failure was seen is not whom to blame: the headline and the Buckets column say "seen at".
+    assert "B001 high Silent: planned_speed (seen at planning) — confirmed (its minimal test case failed live)" in text
+    assert "seen at</th>" in page and "not the module to blame (see Blame)" in page
     assert "violation 3, goal reached 2" in text  # how runs ended
     assert "routing:speed_limit = dict:float.nan" in text
     assert "<div>routing:speed_limit:set</div><div>routing:x:set</div>" in page  # one family part a line
