@@ -715,10 +715,11 @@ def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
     read_at = read_times(recorded.streams, cfg.trigger, run.previous, output_ns=output.log_time,
                          previous_output_ns=outputs[out_index - 1].log_time if out_index else None,
                          step_ns=None if run.last_step_s is None else int(run.last_step_s * 1e9))
-    return candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
-                      int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                      read_at, recorded.module_started_in_log, skew_ns=skew,
-                      earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
+    found = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
+                       int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
+                       read_at, recorded.module_started_in_log, skew_ns=skew,
+                       earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
+    return found
 
 
 def _with_stamps(run: _Run, out_index: int, found: list[Candidate]) -> list[Candidate]:
@@ -773,8 +774,7 @@ def _put_first(run: _Run, out_index: int, options: list[Candidate], expected: _E
 
 def _decide_forked(run: _Run, out_index: int, options: list[Candidate], expected: _Expected, *, capped: bool,
                    window: float, expensive: bool, generic: Sequence[Candidate] = ()) -> None:
-    """Search the options in forked copies with their time limits; keep the best and learn from it (and from
-    every candidate of ``generic`` with its frame: :func:`with_ways_of`)."""
+    """Search the options in forked copies with their time limits; keep the best and learn from it."""
     cfg, result, outputs = run.cfg, run.result, run.recorded.outputs
     output, skew = outputs[out_index], int(cfg.skew_ms * 1e6)
     full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
