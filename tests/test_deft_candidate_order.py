@@ -193,30 +193,6 @@ def test_a_synchroniser_on_stamps_pairs_the_trigger_with_the_nearest_stamp_it_ha
     assert synced(streams, "a", 3, 1_000 * MS, {}, stamp_of, rules=()) is None
 
 
-def test_frames_synced_on_stamps_are_tried_once_the_run_shows_a_synchroniser():
-    # A synced frame is most often the trigger's own frame too (merged, it carries both ways). Tried on every
-    # module it came second where the first missed (drop_latched +10 %, the OMPL stack 145 -> 162 steps); so
-    # frames only a synchroniser names, and the synced ways' scores, wait until a kept frame was named by
-    # stamps and not by the trigger's own frame more often than the reverse.
-    own = (NEWEST, (("b", 0),))
-    later = (NEWEST, (("b", 1),))
-    both = Candidate(0, {"a": 1, "b": 1}, frozenset({own, (NEWEST, SYNCED)}))
-    synced_only = Candidate(0, {"a": 1, "b": 3}, frozenset({(NEWEST, SYNCED)}))
-    plain = Candidate(0, {"a": 1, "b": 2}, frozenset({later}))
-    memory = SearchMemory()
-    options, _ = memory.order([both, synced_only, plain], expensive=True, first=False)
-    assert [c.choice for c in options] == [both.choice, plain.choice]  # the synced-only frame waits
-    memory.learn(both, expensive=True)  # the own frame won (named by stamps too): no sign of a synchroniser
-    assert memory.stamps == 0
-    memory.learn(Candidate(0, {"a": 2, "b": 2}, frozenset({own})), expensive=True)
-    assert memory.stamps == -1
-    for _ in range(2):  # a module pairing by stamp: its kept frames are the synced ones, not the own ones
-        memory.learn(Candidate(0, {"a": 3, "b": 4}, frozenset({later, (NEWEST, SYNCED)})), expensive=True)
-    assert memory.stamps == 1
-    options, _ = memory.order([plain, synced_only], expensive=True, first=False)
-    assert synced_only.choice in [c.choice for c in options]
-
-
 def test_a_frame_the_walk_won_teaches_the_rules_that_name_it_too():
     # oldest_sync_noisy: the plain walk won the outputs "after 4" named too (a queue three deep); learned from
     # the walk's wins, "after 4" comes among the tries of the output after a trigger the full queue dropped.

@@ -667,11 +667,6 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
     # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
-    if expensive:
-        # Frames synced on stamps, where a wrong frame costs a step (tried once the run shows a synchroniser on
-        # stamps: SearchMemory.stamps). For cheap outputs, tried in turn, they added 17 steps in 120 on the OMPL
-        # stack (3 ms, inputs read as they came).
-        generic = _with_stamps(run, out_index, generic)
     options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot,
                                        trigger=cfg.trigger)
     if run.misses_in_row and run.search is not None:
@@ -719,16 +714,9 @@ def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
                        int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
                        read_at, recorded.module_started_in_log, skew_ns=skew,
                        earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
-    return found
-
-
-def _with_stamps(run: _Run, out_index: int, found: list[Candidate]) -> list[Candidate]:
-    """``found`` and each of its triggers' frame as a synchroniser on stamps would pair it (:func:`.frames.synced`)
-    from the messages it had when the previous output went out (a busy module's cycle start) or when this one
-    did; a frame found already carries that way too, and learns it when it wins."""
-    cfg, recorded = run.cfg, run.recorded
-    outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
-    output = outputs[out_index]
+    # Each candidate trigger's frame as a synchroniser on stamps would pair it from the messages it had when the
+    # previous output went out (a busy module's cycle start) or when this one did (a frame found already carries
+    # that way too, and learns it when it wins).
     rules: dict[int, set[str]] = {}
     for cand in found:
         rules.setdefault(cand.choice[cfg.trigger], set()).update(rule for rule, _ in cand.patterns)
