@@ -18,12 +18,11 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note, \
-    with_ways_of
+from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.analysis.deft.frames import (
     AFTER, AS_LOGGED, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Candidate,
-    SYNCED, Stream, candidates, read_times, synced,
+    Stream, candidates, read_times,
 )
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
@@ -163,46 +162,6 @@ def test_a_slow_module_that_ended_a_cycle_with_a_trigger_waiting_read_its_next_i
     assert idle[0] == (output, AT_OUTPUT)
     # A first output: no previous one to read at.
     assert read_times(streams, "a", {}, output_ns=first_output) == [(first_output, AT_OUTPUT)]
-
-
-def test_a_synchroniser_on_stamps_pairs_the_trigger_with_the_nearest_stamp_it_had():
-    # oldest_sync_noisy: a queue answering old triggers, its other inputs paired by header stamp (c at 1 Hz).
-    # The frame of trigger 3 (stamp 0.3 s) pairs b by stamp, not by arrival, and c 1 (stamp 1.0 s, logged at
-    # 1.02 s) only if it had come by then. Before: 8 of 51 outputs got the right frame, then 51 of 51.
-    a = Stream("a", [k * 100 * MS for k in range(12)])
-    b = Stream("b", [k * 100 * MS + 13 * MS for k in range(12)])
-    c = Stream("c", [20 * MS, 1_020 * MS])
-    stamps = {"a": [k * 0.1 for k in range(12)], "b": [k * 0.1 for k in range(12)], "c": [0.0, 1.0]}
-
-    def stamp_of(name: str, index: int) -> float | None:
-        return stamps[name][index]
-
-    streams = {"a": a, "b": b, "c": c}
-    before_c1 = synced(streams, "a", 3, 1_000 * MS, {"a": 2, "b": 1, "c": 0}, stamp_of, rules={AFTER})
-    assert before_c1 is not None and before_c1.choice == {"a": 3, "b": 3, "c": 0}
-    assert before_c1.patterns == {(AFTER, SYNCED)}  # learned with the trigger's rule
-    assert synced(streams, "a", 9, 1_100 * MS, {"a": 8}, stamp_of, rules={OLDEST}).choice == {"a": 9, "b": 9, "c": 1}
-    # Never older than the previous frame's message; a tie goes to the newer; an input without a stamped
-    # message is left out; a trigger without a stamp has no such frame.
-    assert synced(streams, "a", 3, 1_000 * MS, {"b": 5}, stamp_of, rules=()).choice["b"] == 5
-    stamps["a"][3], stamps["b"][3], stamps["b"][4] = 0.5, 0.25, 0.75  # b 3 and b 4 a quarter second off
-    assert synced(streams, "a", 3, 450 * MS, {}, stamp_of, rules=()).choice["b"] == 4
-    stamps["c"] = [None, None]
-    assert "c" not in synced(streams, "a", 3, 1_100 * MS, {}, stamp_of, rules=()).choice
-    stamps["a"][3] = None
-    assert synced(streams, "a", 3, 1_000 * MS, {}, stamp_of, rules=()) is None
-
-
-def test_a_frame_the_walk_won_teaches_the_rules_that_name_it_too():
-    # oldest_sync_noisy: the plain walk won the outputs "after 4" named too (a queue three deep); learned from
-    # the walk's wins, "after 4" comes among the tries of the output after a trigger the full queue dropped.
-    walk = Candidate(100 * MS, {"a": 7, "b": 3}, frozenset({("plain walk", ())}), walk=True)
-    named = Candidate(100 * MS, {"a": 7, "b": 3}, frozenset({("after 4", (("b", 0),)), (OLDEST, (("b", 0),))}))
-    other = Candidate(150 * MS, {"a": 8, "b": 3}, frozenset({(NEWEST, (("b", 0),))}))
-    kept = with_ways_of(walk, [other, named])
-    assert kept.walk and kept.choice == walk.choice
-    assert kept.patterns == walk.patterns | named.patterns
-    assert with_ways_of(walk, [other]) is walk
 
 
 def test_an_expensive_outputs_tries_are_not_all_one_triggers():

@@ -27,12 +27,11 @@ from astaa_deft.analysis.deft.fork_replay import (
     Following, ForkedSearch, Shadow, candidate_limit, cpu_limit, drop, hand_over, in_two_forks, next_word,
     run_supervised, shadow, tell,
 )
-from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, merged, read_times, synced, \
+from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, read_times, \
     frame_at, plain_walk, trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
-from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, seconds, trajectory_points, \
-    within_limit
+from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
 from astaa_deft.analysis.deft.validator import Comparison, compare, identical
 
 
@@ -510,17 +509,6 @@ class _Recorded:
             return None
         return self.codecs[name].decode(self.messages[name][idx].data)
 
-    def stamp(self, name: str, idx: int) -> float | None:
-        """Message ``idx`` of input ``name``: its header.stamp in seconds, or None (no stamp, or no message)."""
-        from astaa_deft.model.fields import get
-
-        message = self.decode(name, idx)
-        found = get(message, "header.stamp") if isinstance(message, Mapping) else None
-        try:
-            return seconds(found[0][1]) if found else None
-        except (KeyError, TypeError, ValueError):
-            return None
-
     def decode(self, name: str, idx: int) -> Any:
         """Message ``idx`` of input ``name`` decoded, or None if it does not decode."""
         k = (name, idx)
@@ -696,8 +684,7 @@ def _extract_output(run: _Run, out_index: int, before: Decided | None) -> None:
             return
         run.keep(out_index, *kept)
         return
-    _decide_forked(run, out_index, options, expected, capped=capped, window=window, expensive=expensive,
-                   generic=generic)
+    _decide_forked(run, out_index, options, expected, capped=capped, window=window, expensive=expensive)
 
 
 def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
@@ -710,20 +697,10 @@ def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
     read_at = read_times(recorded.streams, cfg.trigger, run.previous, output_ns=output.log_time,
                          previous_output_ns=outputs[out_index - 1].log_time if out_index else None,
                          step_ns=None if run.last_step_s is None else int(run.last_step_s * 1e9))
-    found = candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
-                       int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                       read_at, recorded.module_started_in_log, skew_ns=skew,
-                       earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
-    # Each candidate trigger's frame as a synchroniser on stamps would pair it from the messages it had when the
-    # previous output went out (a busy module's cycle start) or when this one did (a frame found already carries
-    # that way too, and learns it when it wins).
-    rules: dict[int, set[str]] = {}
-    for cand in found:
-        rules.setdefault(cand.choice[cfg.trigger], set()).update(rule for rule, _ in cand.patterns)
-    bounds = ([outputs[out_index - 1].log_time] if out_index else []) + [output.log_time + skew]
-    stamped = [c for c in (synced(recorded.streams, cfg.trigger, t_index, until, run.previous, recorded.stamp,
-                                  rules[t_index]) for t_index in rules for until in bounds) if c is not None]
-    return merged(found + stamped) if stamped else found
+    return candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
+                      int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
+                      read_at, recorded.module_started_in_log, skew_ns=skew,
+                      earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
 
 
 def _put_first(run: _Run, out_index: int, options: list[Candidate], expected: _Expected, *,
@@ -761,7 +738,7 @@ def _put_first(run: _Run, out_index: int, options: list[Candidate], expected: _E
 
 
 def _decide_forked(run: _Run, out_index: int, options: list[Candidate], expected: _Expected, *, capped: bool,
-                   window: float, expensive: bool, generic: Sequence[Candidate] = ()) -> None:
+                   window: float, expensive: bool) -> None:
     """Search the options in forked copies with their time limits; keep the best and learn from it."""
     cfg, result, outputs = run.cfg, run.result, run.recorded.outputs
     output, skew = outputs[out_index], int(cfg.skew_ms * 1e6)
@@ -778,7 +755,7 @@ def _decide_forked(run: _Run, out_index: int, options: list[Candidate], expected
     # A frame within floating-point noise (forked copies of a module not bit-stable across a fork) teaches
     # the search as a reproduced one does: it is the right frame, the suite's own run confirms it.
     if within or judged.comparison.distance <= NEAR_MISS_M:
-        run.memory.learn(with_ways_of(cand, generic), step_s, window, expensive)
+        run.memory.learn(cand, step_s, window, expensive)
         run.last_step_s = step_s
         run.misses_in_row = 0
     else:
@@ -786,16 +763,6 @@ def _decide_forked(run: _Run, out_index: int, options: list[Candidate], expected
     run.keep(out_index, cand, judged)
     if 0.0 < judged.comparison.distance <= NEAR_MISS_M and result.copies_differ is None:
         _measure_copies(run, cand, full_limit)
-
-
-def with_ways_of(kept: Candidate, generic: Sequence[Candidate]) -> Candidate:
-    """``kept`` carrying also the ways of every candidate of ``generic`` with its frame: a frame the plain walk
-    reached (or the previous frame again, or a declared one) is one that trigger rules name too, and those rules
-    won the output as well. (oldest_sync_noisy: the walk won every output 'after 4' named too — the first
-    trigger after the output four before, a queue three deep — and 'after 4' alone named the next one, after
-    the full queue had dropped a trigger; learned from the walk's wins it comes among the tries.)"""
-    ways = frozenset().union(*(c.patterns for c in generic if dict(c.choice) == dict(kept.choice)))
-    return replace(kept, patterns=kept.patterns | ways) if ways - kept.patterns else kept
 
 
 def _measure_copies(run: _Run, cand: Candidate, limit_s: float) -> None:

@@ -28,7 +28,7 @@ Everything is bisection over sorted arrays: a frame costs microseconds.
 from __future__ import annotations
 
 from bisect import bisect_right
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 
@@ -255,37 +255,6 @@ def read_times(streams: Mapping[str, Stream], trigger: str, previous: Mapping[st
     if waiting and step_ns is not None and step_ns > INSTANT_STEP_NS:
         return at_previous + at_start + at_output
     return at_output + at_start + at_previous
-
-
-# A module synchronising its inputs on their header stamps (ROS message_filters' ApproximateTime and its like):
-# per other input, the message nearest in stamp to the trigger's, whenever it was logged. Its frames' ways are
-# (the trigger's rule, SYNCED): learned with the trigger's rule, never for every trigger at once.
-STAMPS = "stamps"
-SYNCED = ((STAMPS, 0),)
-
-
-def synced(streams: Mapping[str, Stream], trigger: str, t_index: int, until_ns: int, previous: Mapping[str, int],
-           stamp_of: Callable[[str, int], float | None], rules: Iterable[str]) -> Candidate | None:
-    """The frame of a module synchronising on stamps (:data:`STAMPS`): trigger ``t_index`` and, per other
-    input, the message logged by ``until_ns`` (not older than the previous frame's) whose stamp
-    (``stamp_of(channel, index)``, None: it has none) is nearest the trigger's — a tie, the newer; an input
-    with no such message left out (absent). ``rules``: how the trigger was chosen. None when the trigger has
-    no stamp."""
-    target = stamp_of(trigger, t_index)
-    if target is None:
-        return None
-    choice = {trigger: t_index}
-    for name, stream in streams.items():
-        if name == trigger:
-            continue
-        best: tuple[float, int] | None = None
-        for index in range(bisect_right(stream.times, until_ns) - 1, max(previous.get(name, 0), 0) - 1, -1):
-            stamp = stamp_of(name, index)
-            if stamp is not None and (best is None or abs(stamp - target) < best[0]):
-                best = (abs(stamp - target), index)
-        if best is not None:
-            choice[name] = best[1]
-    return Candidate(streams[trigger].times[t_index], choice, frozenset((rule, SYNCED) for rule in rules))
 
 
 def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[str, int]) -> Candidate | None:
