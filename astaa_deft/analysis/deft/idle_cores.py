@@ -2,8 +2,9 @@
 
 Measured from the CPUs' idle time in /proc/stat between two samples, our own
 process's CPU time counted as idle (it is about to search, not to read): the
-first sample is taken when the extraction starts, the second when the search
-does, so reading the log is the window and the measure costs nothing. The
+first sample is taken when the extraction starts, the second only when a search
+forks (``extract``'s ``jobs`` as a callable: a per-trigger replay never asks), so
+reading the log and making the module are the window and the measure costs nothing. The
 load average — a minute's decaying mean — still counts a recording or a plain
 replay that has just ended: it gave one of two idle cores, and 15–17 % longer
 extractions on the zoo's expensive members. Where there is no /proc/stat,
