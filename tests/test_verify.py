@@ -68,9 +68,10 @@ def run_campaign(out: Path, spec: Path, params: dict[str, list[str]], cases: lis
     return said
 
 
-def verify(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "astaa_deft.cli", "verify", *args], capture_output=True, text=True,
-                          timeout=240)
+def verify(*args: str, spec: Path = STEADY) -> subprocess.CompletedProcess:
+    """``astaa-deft verify ARGS --spec SPEC``: the user names the stack's spec (a campaign folder is data)."""
+    return subprocess.run([sys.executable, "-m", "astaa_deft.cli", "verify", *args, "--spec", str(spec)],
+                          capture_output=True, text=True, timeout=240)
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +143,7 @@ def test_verify_refuses_an_unknown_bucket_and_a_param_the_spec_does_not_have(ste
 def test_export_refuses_a_folder_holding_other_files(steady_campaign: Path, tmp_path: Path):
     (tmp_path / "notes.txt").write_text("mine")
     done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "export", str(steady_campaign), "-o",
-                           str(tmp_path)], capture_output=True, text=True, timeout=60)
+                           str(tmp_path), "--spec", str(STEADY)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 4 and "not a regression suite" in done.stderr, done.stderr
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
 
@@ -199,8 +200,8 @@ def test_bisect_search_finds_every_change_in_log2_n_plus_one_verifies(n: int):
 def test_export_writes_a_suite_that_fails_while_the_bug_is_there_and_passes_once_fixed(steady_campaign: Path,
                                                                                        tmp_path: Path):
     regress = tmp_path / "regress"
-    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "export", str(steady_campaign), "-o", str(regress)],
-                          capture_output=True, text=True, timeout=60)
+    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "export", str(steady_campaign), "-o", str(regress),
+                           "--spec", str(STEADY)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "test_live.py::test_B001_aux_value_set" in done.stdout
     assert {p.name for p in regress.iterdir()} >= {"README.md", "conftest.py", "pytest.ini", "regress.json",
@@ -253,7 +254,7 @@ def test_bisect_finds_the_revision_that_fixed_a_seeded_defect_in_log2_n_plus_one
     run_campaign(out, repo / "steady.yaml", {"crash_on_nan": ["1"]})
     git(repo, "checkout", "-q", "master" if git(repo, "branch", "--list", "master") else "main")
     done = verify(str(out), "--bisect", f"{revisions[0]}..{revisions[-1]}", "--bucket", "B001", "--runs", "1",
-                  "--build", "touch built")
+                  "--build", "touch built", spec=repo / "steady.yaml")
     assert done.returncode == 0, done.stdout + done.stderr
     assert f"stops failing (fixed) at {revisions[fix]}" in done.stdout, done.stdout
     verifies = math.ceil(math.log2(n)) + 1

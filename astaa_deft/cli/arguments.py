@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from astaa_deft.model.errors import InputError
+from astaa_deft.model.limits import DAY_S, MAX_PROCESSES, MAX_WINDOW_S
 
 if TYPE_CHECKING:
     # The type of `ArgumentParser.add_subparsers()`'s result, private in argparse.
@@ -54,16 +55,15 @@ class NumberRange:
         return f"{low} and ≤ {self.high:g}{unit}"
 
 
-DAY_S = 86_400.0
 CASES = NumberRange(int, 1, 1_000_000)
 SEED = NumberRange(int, 0, 2**64 - 1)  # the test case schema's seed range
 CAMPAIGN_SEED = NumberRange(int, 0, 2**63 - 1)  # kept in the journal's SQLite INTEGER column
-PROCESSES = NumberRange(int, 1, 256)
+PROCESSES = NumberRange(int, 1, MAX_PROCESSES)
 RERUNS = NumberRange(int, 0, 100)
 REPEATS = NumberRange(int, 1, 100)
 DOMAIN_ID = NumberRange(int, 0, 232)  # ROS 2's valid domain ids
 LISTEN_SECONDS = NumberRange(float, 0, 3600, "s", above_low=True)
-WINDOW_SECONDS = NumberRange(float, 0, DAY_S, "s", above_low=True)
+WINDOW_SECONDS = NumberRange(float, 0, MAX_WINDOW_S, "s", above_low=True)
 RUN_SECONDS = NumberRange(float, 0, 7 * DAY_S, "s", above_low=True)
 THRESHOLD_M = NumberRange(float, 0, 1000, "m")
 MAX_BUDGET_S = 30 * DAY_S

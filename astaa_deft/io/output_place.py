@@ -277,3 +277,26 @@ def _no_temp_dir(exc: OSError) -> OutputError:
 def _under(path: Path, folder: Path) -> bool:
     path, folder = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
     return path == folder or folder in path.parents
+
+
+def subdir_inside(root: Path, *names: str, option: str) -> Path:
+    """``root/names[0]/names[1]/…``, each folder created if missing, none of them a link (OutputError then).
+
+    For folders a command derives inside its own output folder (a campaign's ``verify/<run>/``): a link planted
+    at one of these names is refused, never followed, so nothing is written outside ``root``. Each name is one
+    path component (no '/', not '.' or '..'): the caller checked it (``model/data_names.py``).
+    """
+    here = root
+    for name in names:
+        assert name and "/" not in name and "\0" not in name and name not in (".", ".."), name
+        here = here / name
+        if here.is_symlink():
+            raise link_refusal(here, option)
+        try:
+            here.mkdir(exist_ok=True)
+        except FileExistsError:
+            raise OutputError(Problem(str(here), None, None, "a file is in the way where a folder is needed",
+                                      f"move it away, or give another folder with {option}")) from None
+        if here.is_symlink() or not here.is_dir():  # raced in after the check
+            raise link_refusal(here, option)
+    return here

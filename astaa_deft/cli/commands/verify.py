@@ -29,6 +29,7 @@ def add_parser(subparsers: SubParsers) -> None:
     ver = subparsers.add_parser("verify", help="re-check a campaign's buckets against the stack as it is now: "
                                                "fixed, still failing, changed or flaky")
     ver.add_argument("campaign", type=Path, help="a campaign directory (astaa-deft fuzz -o DIR)")
+    add_spec_options(ver)
     ver.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help="override a spec param of every run (as in proxy)")
     bounded(ver, "--runs", REPEATS, default=3, help="runs of each test case, and as many unmutated twins (default 3)")
@@ -45,12 +46,25 @@ def add_parser(subparsers: SubParsers) -> None:
     ver.set_defaults(func=run)
 
 
+def add_spec_options(parser: argparse.ArgumentParser) -> None:
+    """``--spec`` / ``--trust-journal-spec``: what a command that re-runs a campaign's findings runs."""
+    trust = parser.add_mutually_exclusive_group()
+    trust.add_argument("--spec", type=Path, metavar="FILE",
+                       help="the stack's SUT spec (your own copy): what the live runs and module tests run; "
+                            "without it the spec the campaign's journal names is used only with "
+                            "--trust-journal-spec")
+    trust.add_argument("--trust-journal-spec", action="store_true",
+                       help="run the spec the journal names (a campaign folder is data: without --spec, the "
+                            "command refuses and lists what that spec would run)")
+
+
 def run(args: argparse.Namespace) -> int:
     """The parsed `verify` arguments as VerifyOptions, to :func:`verify` or :func:`bisect`."""
     from astaa_deft.model.errors import InputError, Problem
     from astaa_deft.orchestration.verify.workflow import VerifyOptions
 
-    options = VerifyOptions(campaign=args.campaign, params=parse_params(args.param), runs=args.runs, label=args.label,
+    options = VerifyOptions(campaign=args.campaign, spec=args.spec, trust_journal_spec=args.trust_journal_spec,
+                            params=parse_params(args.param), runs=args.runs, label=args.label,
                             buckets=tuple(args.bucket), dictionaries=tuple(args.dictionary), workers=args.workers)
     if args.bisect is None:
         if args.build is not None:

@@ -53,18 +53,23 @@ def what_spec_runs(spec: Spec) -> tuple[WouldRun, ...]:
     return tuple(out)
 
 
-def untrusted_spec_refusal(spec: Spec, source: str, *, command: str, why: str) -> InputError:
-    """The InputError a ``command`` raises instead of running what the spec stored in ``source`` (a log) names.
+def untrusted_spec_refusal(spec: Spec, source: str, *, command: str, why: str, flag: str = TRUST_FLAG,
+                           holder: str = "log", stored_as: str = "spec.yaml") -> InputError:
+    """The InputError a ``command`` raises instead of running what the spec stored in ``source`` names.
 
-    ``why``: what the command would run it for ("module replays and whole-system
+    ``source`` is a log (the spec it stores) or a campaign journal (the spec it
+    names: ``holder`` "journal", ``flag`` ``--trust-journal-spec``). ``why``:
+    what the command would run it for ("module replays and whole-system
     re-runs"). The first problem says what was refused and the two ways on;
     one more problem per item of :func:`what_spec_runs`, so the user reads
-    exactly what ``--trust-log-spec`` would let run.
+    exactly what ``flag`` would let run.
     """
     head = Problem(source, None, None,
-                   f"{command} would run programs named only by the spec stored in this log ({why}), and a log "
-                   f"is data: nothing it names runs unless you say so",
-                   f"pass --spec FILE (your own copy of the SUT spec), or, if you trust whoever recorded this log "
-                   f"to run what is listed below on this machine, {TRUST_FLAG}")
-    items = [Problem(f"{source}:spec.yaml", None, None, f"would run {item}") for item in what_spec_runs(spec)]
+                   f"{command} would run programs named only by the spec {'stored in' if holder == 'log' else 'that'}"
+                   f" this {holder}{'' if holder == 'log' else ' names'} ({why}), and a {holder} is data: nothing it "
+                   f"names runs unless you say so",
+                   f"pass --spec FILE (your own copy of the SUT spec), or, if you trust whoever "
+                   f"{'recorded' if holder == 'log' else 'wrote'} this {holder} "
+                   f"to run what is listed below on this machine, {flag}")
+    items = [Problem(f"{source}:{stored_as}", None, None, f"would run {item}") for item in what_spec_runs(spec)]
     return InputError([head, *items])

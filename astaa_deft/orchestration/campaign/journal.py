@@ -24,7 +24,8 @@ from astaa_deft.orchestration.campaign.model import (
     FailureKey, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.journal_rows import (
-    blame_row, bucket_row, case_row, check_columns, meta_of, minimisation_row, module_tests_row, note_row,
+    FIX, MAX_BUCKETS, blame_row, bucket_row, case_row, check_columns, meta_of, minimisation_row, module_tests_row,
+    note_row,
 )
 from astaa_deft.orchestration.campaign.payload import testcase_text
 from astaa_deft.orchestration.campaign.rows import (
@@ -241,11 +242,20 @@ class Journal:
         self._write("UPDATE buckets SET merged_into=? WHERE bucket=?", (into, bucket))
 
     def bucket(self, name: str) -> Bucket:
-        return next(b for b in self.buckets() if b.bucket == name)
+        row = self.db.execute("SELECT * FROM buckets WHERE bucket=?", (name,)).fetchone()
+        if row is None:
+            raise KeyError(f"bucket {name} is not in the journal")  # one the campaign filed itself: a bug
+        return self._bucket(row)
 
     def buckets(self, include_merged: bool = True) -> list[Bucket]:
         """Every bucket in the order they were opened (``include_merged`` False: those not merged into another).
-        InputError for a bucket kind this version does not know (a journal of a newer version)."""
+        InputError for a bucket kind this version does not know (a journal of a newer version), or more
+        buckets than one campaign files (``MAX_BUCKETS``: a damaged journal, refused at once, not read)."""
+        count = int(self.db.execute("SELECT COUNT(*) FROM buckets").fetchone()[0])
+        if count > MAX_BUCKETS:
+            raise InputError(Problem(str(self.path), None, None,
+                                     f"the journal holds {count:,} buckets (a campaign files at most "
+                                     f"{MAX_BUCKETS:,}): it is damaged, or not a campaign journal", FIX))
         out = [self._bucket(r) for r in self.db.execute("SELECT * FROM buckets ORDER BY created_at")]
         return [b for b in out if include_merged or b.merged_into is None]
 

@@ -23,8 +23,10 @@ import sqlite3
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
-from astaa_deft.io.statefile import MAX_INT, StateReader, load_json
+from astaa_deft.io.statefile import MAX_INT, MAX_NAME, StateReader, load_json
+from astaa_deft.model.data_names import DATA_NAME_RULE, is_data_name
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.limits import MAX_PROCESSES, MAX_WINDOW_S
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.vocabulary import TextEnum
 from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseOutcome, CaseStatus, Finding
@@ -38,6 +40,9 @@ MAX_JSON_CELL = 16 << 20  # characters of one JSON cell (a case outcome)
 CORE_TABLES = ("meta", "cases", "buckets")  # in every journal since the first
 MAX_SECONDS = 1e11  # an epoch time or a duration in seconds (year 5138): beyond, the cell is damaged
 MAX_VERDICT = 100  # characters of a verdict (a CRASH class name)
+MAX_LABEL = 10_000  # characters of a stack revision (verify --label, git describe): the writer checks it too
+MAX_PARAM = 10_000  # characters of a param's value: the writer checks it too
+MAX_BUCKETS = 10_000  # buckets one journal may hold: a real campaign files tens; beyond, the journal is damaged
 
 Read = Callable[[StateReader], Any]
 
@@ -63,9 +68,21 @@ def _text(optional: bool = False, max_chars: int = MAX_CELL) -> Read:
                   lambda v: (type(v) is str and len(v) <= max_chars) or (optional and v is None))
 
 
-def _integer(optional: bool = False, low: int = 0) -> Read:
-    return _quick(lambda r: r.integer(low, optional=optional),
-                  lambda v: (type(v) is int and low <= v <= MAX_INT) or (optional and v is None))
+def _name(optional: bool = False) -> Read:
+    """A bucket or case id: it becomes a file name (``verify``'s runs, ``export``'s cases) and part of generated
+    Python, so it must be a name the tool writes (model/data_names.py), never repaired."""
+    def read(r: StateReader) -> str | None:
+        if optional and r.value is None:
+            return None
+        if not is_data_name(r.value):
+            r.fail(f"is {str(r.value)[:60]!r}: a name that becomes a file name must be {DATA_NAME_RULE}")
+        return str(r.value)
+    return _quick(read, lambda v: is_data_name(v) or (optional and v is None))
+
+
+def _integer(optional: bool = False, low: int = 0, high: int = MAX_INT) -> Read:
+    return _quick(lambda r: r.integer(low, high, optional=optional),
+                  lambda v: (type(v) is int and low <= v <= high) or (optional and v is None))
 
 
 def _signed(optional: bool = False) -> Read:
@@ -102,7 +119,7 @@ def _json(read: Read) -> Read:
 
 
 def _params(r: StateReader) -> dict[str, str]:
-    return r.map(lambda v: v.string(10_000), max_items=10_000)
+    return r.map(lambda v: v.string(MAX_PARAM), max_items=10_000)
 
 
 def _params_cell(r: StateReader) -> dict[str, str]:
@@ -113,7 +130,7 @@ def _params_cell(r: StateReader) -> dict[str, str]:
         except (ValueError, RecursionError):
             value = None
         if type(value) is dict and len(value) <= 10_000 and all(
-                type(v) is str and len(v) <= 10_000 for v in value.values()):
+                type(v) is str and len(v) <= MAX_PARAM and len(k) <= MAX_NAME for k, v in value.items()):
             return value
     return _json(_params)(r)
 
@@ -199,40 +216,40 @@ def _outcome(r: StateReader) -> CaseOutcome:
 
 
 CASE_COLUMNS: dict[str, Read] = {
-    "case_id": _text(max_chars=1000), "kind": _enum(CaseKind), "number": _integer(), "seed": _signed(),
+    "case_id": _name(), "kind": _enum(CaseKind), "number": _integer(), "seed": _signed(),
     "params": _params_cell, "testcase_xml": _text(True, 64 << 20), "strategy": _text(max_chars=1000),
-    "parent": _text(True), "status": _enum(CaseStatus), "verdict": _text(True, MAX_VERDICT),
+    "parent": _name(True), "status": _enum(CaseStatus), "verdict": _text(True, MAX_VERDICT),
     "summary": _text(True),
-    "signature": _text(True), "failure_key": _text(True), "bucket": _text(True), "outcome": _outcome_text,
+    "signature": _text(True), "failure_key": _text(True), "bucket": _name(True), "outcome": _outcome_text,
     "planned_at": _number(True), "started_at": _number(True), "finished_at": _number(True),
     "seconds": _number(True), "log_path": _text(True), "worker": _text(True), "cpu": _number(True),
     "load": _number(True), "at_once": _integer(True),
 }
 BUCKET_COLUMNS: dict[str, Read] = {
-    "bucket": _text(max_chars=1000), "signature": _text(), "verdict": _text(max_chars=MAX_VERDICT),
+    "bucket": _name(), "signature": _text(), "verdict": _text(max_chars=MAX_VERDICT),
     "invariant": _text(max_chars=1000),
-    "module": _text(True), "family": _text(), "first_case": _text(max_chars=1000), "without_mutation": _flag(),
-    "cases": _integer(), "reruns": _integer(), "rerun_failures": _integer(), "merged_into": _text(True),
+    "module": _text(True, 1000), "family": _text(), "first_case": _name(), "without_mutation": _flag(),
+    "cases": _integer(), "reruns": _integer(), "rerun_failures": _integer(), "merged_into": _name(True),
     "created_at": _number(), "created_after_cases": _integer(), "kind": _enum(BucketKind), "controls": _integer(),
     "control_failures": _integer(),
 }
 MINIMISATION_COLUMNS: dict[str, Read] = {
-    "bucket": _text(max_chars=1000), "status": _text(), "exit_code": _signed(True),
+    "bucket": _name(), "status": _text(), "exit_code": _signed(True),
     "minimal_xml": _text(True, 64 << 20), "culprit": _text(True), "out_dir": _text(True), "tests_dir": _text(True),
     "seconds": _number(True), "detail": _text(True), "started_at": _number(True), "finished_at": _number(True),
 }
 MODULE_TESTS_COLUMNS: dict[str, Read] = {
-    "bucket": _text(max_chars=1000), "tests_dir": _text(), "fails_on_defect": _flag(True), "detail": _text(),
+    "bucket": _name(), "tests_dir": _text(), "fails_on_defect": _flag(True), "detail": _text(),
 }
 NOTE_COLUMNS: dict[str, Read] = {"time": _number(), "topic": _text(), "text": _text()}
 
 BLAME_COLUMNS: dict[str, Read] = {
-    "bucket": _text(max_chars=1000), "module": _text(True, 1000), "output": _text(True), "how": _text(),
+    "bucket": _name(), "module": _text(True, 1000), "output": _text(True), "how": _text(),
     "chain": _text(), "detail": _text(), "twins": _integer(), "identity": _text(True), "replay": _text(True),
 }
 
 VERIFICATION_COLUMNS: dict[str, Read] = {
-    "id": _integer(), "bucket": _text(max_chars=1000), "revision": _text(max_chars=10_000),
+    "id": _integer(), "bucket": _name(), "revision": _text(max_chars=MAX_LABEL),
     "status": _text(max_chars=100), "failing": _integer(), "runs": _integer(), "other": _integer(),
     "unobserved": _integer(), "twin_failures": _integer(), "twins": _integer(), "module_tests": _flag(True),
     "detail": _text(), "params": _params_cell, "at": _number(),
@@ -343,9 +360,9 @@ META_KEYS: dict[str, Read] = {
     "spec": _text(True), "seed": _signed(True), "strategy": _text(True),
     "params": lambda r: None if r.value is None else r.map(lambda v: v.each(lambda i: i.string(10_000), 100_000),
                                                            10_000),
-    "horizon": lambda r: r.number(0.0, optional=True), "cases": _integer(True),
+    "horizon": lambda r: r.number(0.0, MAX_WINDOW_S, optional=True), "cases": _integer(True),
     "budget": lambda r: r.number(0.0, optional=True), "calibrated": lambda r: r.flag(optional=True),
-    "workers": _integer(True), "timing": _timing,
+    "workers": _integer(True, 1, MAX_PROCESSES), "timing": _timing,
     "overloaded_runs": lambda r: r.each(lambda i: i.string(1000), 10_000_000),
 }
 

@@ -20,11 +20,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from astaa_deft.engine.bus import process_launch
+from astaa_deft.io.output_place import subdir_inside
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.orchestration.verify.model import FAILING_STATUSES, VerifyStatus
 from astaa_deft.orchestration.verify.revision import describe, git
 from astaa_deft.orchestration.verify.workflow import (
-    CampaignFindings, VerifyOptions, check_params, targets, verify_targets, VERIFY_DIR, _slug,
+    CampaignFindings, VerifyOptions, check_options, check_params, targets, verify_targets, VERIFY_DIR, _slug,
 )
 
 BUILD_TIMEOUT = 3600.0
@@ -89,7 +90,9 @@ def bisect_bucket(options: VerifyOptions, good: str, bad: str, build: str | None
     """Bisect ``options.buckets[0]`` over GOOD..BAD (module doc). InputError: no ``source:`` in the spec, a
     checkout with changes, revisions git does not know or in the wrong order, a build or a run that fails."""
     [bucket] = options.buckets
-    first_look = CampaignFindings.open(options.campaign, options.workers)
+    check_options(options)
+    first_look = CampaignFindings.open(options.campaign, spec=options.spec,
+                                       trust_journal_spec=options.trust_journal_spec, workers=options.workers)
     try:
         checkout = first_look.spec.source
         check_params(first_look.spec, options.params)
@@ -151,10 +154,13 @@ def _build(command: str, checkout: Path, revision: str) -> None:
 
 def _verify_one(options: VerifyOptions, revision: str) -> VerifyStatus:
     """One bisect step: verify the bucket against the checkout as it is (its spec read again), journaled."""
-    campaign = CampaignFindings.open(options.campaign, options.workers)
+    campaign = CampaignFindings.open(options.campaign, spec=options.spec,
+                                     trust_journal_spec=options.trust_journal_spec, workers=options.workers)
     try:
         chosen, _ = targets(campaign, options.buckets, options.params)
-        out_dir = options.campaign / VERIFY_DIR / f"bisect-{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}"
+        out_dir = subdir_inside(options.campaign, VERIFY_DIR,
+                                f"bisect-{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}",
+                                option="the campaign folder")
         checks = verify_targets(campaign, chosen, options, revision, out_dir=out_dir, say=lambda text: None)
     finally:
         campaign.journal.close()

@@ -12,21 +12,19 @@ revision. Runs go to ``DIR/verify/<revision>-<time>/``.
 
 from __future__ import annotations
 
-import json
 import re
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from astaa_deft.analysis.deft.export import MANIFEST
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.engine.spec.params import check_param_values
-from astaa_deft.io.output_place import Place, ready_dir, writing
+from astaa_deft.io.output_place import Place, ready_dir, subdir_inside, writing
 from astaa_deft.model.errors import InputError, Problem
+from astaa_deft.model.limits import MAX_PROCESSES
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_HORIZON, DEFAULT_SETTLE, default_workers
@@ -39,6 +37,7 @@ from astaa_deft.orchestration.campaign.module_tests import is_crash_bucket, run_
 from astaa_deft.orchestration.campaign.payload import CasePayload, read_testcase
 from astaa_deft.orchestration.campaign.rows import Bucket
 from astaa_deft.orchestration.verify import records
+from astaa_deft.orchestration.verify.campaign_files import copy_module_suite, tests_dir_inside
 from astaa_deft.orchestration.verify.model import (
     FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
 )
@@ -49,9 +48,16 @@ VERIFY_DIR = "verify"
 EXIT_NOT_OBSERVED = 3
 
 
+TRUST_JOURNAL_SPEC = "--trust-journal-spec"
+MAX_LABEL_CHARS = 200  # a revision label (--label, git describe): one line the report shows
+MAX_PARAM_CHARS = 10_000  # a --param value: what the journal's reader takes back (journal_rows.MAX_PARAM)
+
+
 @dataclass(frozen=True, kw_only=True)
 class VerifyOptions:
     campaign: Path
+    spec: Path | None = None  # the stack's spec: the user's file (None: the one the journal names, if trusted)
+    trust_journal_spec: bool = False  # run what the spec the journal names runs (listed when refused)
     params: dict[str, str] = field(default_factory=dict)  # overrides of each case's params
     runs: int = DEFAULT_RUNS  # re-runs of each test case, and as many unmutated twins
     label: str | None = None  # the stack's revision (default: git describe of the spec's source folder)
@@ -85,11 +91,12 @@ class VerifyReport:
 
     @property
     def exit_code(self) -> int:
-        """0 every bucket fixed; 1 one still fails (any way, or flaky); 3 none fails but a run was not observed."""
+        """0 every bucket verified is fixed; 1 one still fails (any way, or flaky); 3 none fails but a run was not
+        observed, or no bucket was verified at all (nothing was seen to be fixed)."""
         statuses = {c.status for c in self.checks}
         if statuses & FAILING_STATUSES:
             return 1
-        if VerifyStatus.NOT_OBSERVED in statuses:
+        if VerifyStatus.NOT_OBSERVED in statuses or not self.checks:
             return EXIT_NOT_OBSERVED
         return 0
 
@@ -106,28 +113,43 @@ class CampaignFindings:
     workers: int
 
     @classmethod
-    def open(cls, directory: Path, workers: int | None = None) -> CampaignFindings:
-        """The campaign in ``directory``; InputError when there is none, or its spec is gone or bad."""
+    def open(cls, directory: Path, *, spec: Path | None, trust_journal_spec: bool = False,
+             workers: int | None = None, command: str = "verify") -> CampaignFindings:
+        """The campaign in ``directory``, run with ``spec`` (the user's), or — only with ``trust_journal_spec``
+        — the spec its journal names. InputError when there is no campaign, the spec is gone or bad, or the
+        journal's spec would run programs nobody vouched for (the refusal lists them)."""
         journal = open_existing(directory)
-        meta = journal.meta()
-        if meta.spec is None:
-            journal.close()
-            raise InputError(Problem(str(journal.path), None, None, "the journal names no spec",
-                                     "verify a campaign that ran (astaa-deft fuzz --spec … -o DIR)"))
-        spec_path = Path(meta.spec)
         try:
-            spec = load_spec(spec_path)
-        except InputError:
+            meta = journal.meta()
+            if spec is not None:
+                spec_path, loaded = spec, load_spec(spec)
+            else:
+                spec_path, loaded = _journal_spec(journal, meta.spec, trust_journal_spec, command)
+            return cls(journal, spec_path, loaded, _known(journal), meta.horizon or DEFAULT_HORIZON,
+                       workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)))
+        except BaseException:
             journal.close()
             raise
-        return cls(journal, spec_path, spec, _known(journal), meta.horizon or DEFAULT_HORIZON,
-                   workers or meta.workers or _ran_at_once(journal) or default_workers(len(spec.modules)))
+
+
+def _journal_spec(journal: Journal, named: str | None, trusted: bool, command: str) -> tuple[Path, Spec]:
+    """The spec the journal names, loaded; refused unless ``trusted`` when it would run anything."""
+    from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
+
+    if named is None:
+        raise InputError(Problem(str(journal.path), None, None, "the journal names no spec",
+                                 "give the stack's spec with --spec sut.yaml"))
+    spec = load_spec(Path(named))
+    if not trusted and what_spec_runs(spec):
+        raise untrusted_spec_refusal(spec, str(journal.path), command=command, why="live runs and module tests",
+                                     flag=TRUST_JOURNAL_SPEC, holder="journal", stored_as=named[:200])
+    return Path(named), spec
 
 
 def _ran_at_once(journal: Journal) -> int | None:
     """The most runs at once the campaign's cases ended at (a campaign given --workers stores no calibration)."""
     counts = [r.at_once for r in journal.cases() if r.at_once]
-    return max(counts) if counts else None
+    return min(max(counts), MAX_PROCESSES) if counts else None
 
 
 def _known(journal: Journal) -> dict[str, KnownFinding]:
@@ -173,10 +195,16 @@ def targets(campaign: CampaignFindings, names: tuple[str, ...],
         if not xml or first is None:
             skipped.append(f"{bucket.bucket}: the journal holds no test case of it")
             continue
-        tests = (m.tests_dir if m is not None else None) or (checked[bucket.bucket].tests_dir
-                                                             if bucket.bucket in checked else None)
-        chosen.append(Target(bucket, xml, {**first.params, **params}, minimal,
-                             Path(tests) if tests and Path(tests).is_dir() else None))
+        check_params(campaign.spec, first.params, f"{journal.path}: cases[{first.case_id}].params")
+        if m is not None and m.tests_dir:
+            tests = tests_dir_inside(journal.path.parent, m.tests_dir, journal=journal.path,
+                                     field=f"minimisations[{bucket.bucket}].tests_dir")
+        elif bucket.bucket in checked:
+            tests = tests_dir_inside(journal.path.parent, checked[bucket.bucket].tests_dir, journal=journal.path,
+                                     field=f"module_tests[{bucket.bucket}].tests_dir")
+        else:
+            tests = None
+        chosen.append(Target(bucket, xml, {**first.params, **params}, minimal, tests))
     return chosen, skipped
 
 
@@ -186,28 +214,53 @@ def verify_campaign(options: VerifyOptions, say: Callable[[str], None] = print) 
     InputError: no campaign there, its spec is gone, a bucket or ``--param`` it does not have, no revision
     to be had from ``source:``; OutputError when the campaign folder cannot take the runs or the journal rows.
     """
-    campaign = CampaignFindings.open(options.campaign, options.workers)
+    check_options(options)
+    campaign = CampaignFindings.open(options.campaign, spec=options.spec,
+                                     trust_journal_spec=options.trust_journal_spec, workers=options.workers)
     try:
         check_params(campaign.spec, options.params)
-        revision = options.label or stack_revision(campaign.spec)
+        revision = check_label(options.label or stack_revision(campaign.spec),
+                               "--label" if options.label else "git describe")
         chosen, skipped = targets(campaign, options.buckets, options.params)
         place = Place(options.campaign, "the campaign folder")
         ready_dir(place, temp=True)
-        out_dir = options.campaign / VERIFY_DIR / f"{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}"
         with writing(place):
+            out_dir = subdir_inside(options.campaign, VERIFY_DIR, f"{time.strftime('%Y%m%d-%H%M%S')}-{_slug(revision)}",
+                                    option="the campaign folder")
             checks = verify_targets(campaign, chosen, options, revision, out_dir=out_dir, say=say)
         return VerifyReport(revision, checks, skipped, out_dir)
     finally:
         campaign.journal.close()
 
 
-def check_params(spec: Spec, params: dict[str, str]) -> None:
-    """InputError for a ``--param`` the spec does not declare, or a value outside its declared choices."""
+def check_options(options: VerifyOptions) -> None:
+    """InputError for an option whose value the journal could not take back (checked before any work):
+    a ``--param`` value or a ``--label`` longer than the journal's reader reads, a label of many lines."""
+    for key, value in options.params.items():
+        if len(value) > MAX_PARAM_CHARS:
+            raise InputError(Problem("--param", None, None, f"the value of {key[:60]} is {len(value):,} characters "
+                                     f"long (at most {MAX_PARAM_CHARS:,})", "give a shorter value"))
+    if options.label is not None:
+        check_label(options.label, "--label")
+
+
+def check_label(label: str, where: str) -> str:
+    """``label`` when it is one printable line of at most MAX_LABEL_CHARS, else InputError naming ``where``."""
+    if not label or len(label) > MAX_LABEL_CHARS or not label.isprintable():
+        raise InputError(Problem(where, None, None, f"the revision label {label[:60]!r} is not one line of 1 to "
+                                 f"{MAX_LABEL_CHARS} printable characters", "give a short label with --label"))
+    return label
+
+
+def check_params(spec: Spec, params: dict[str, str], where: str = "--param") -> None:
+    """InputError for a param (of ``--param``, or of a journal row: ``where``) the spec does not declare, or a
+    value outside its declared choices."""
     unknown = sorted(set(params) - set(spec.params))
     if unknown:
-        raise InputError(Problem("--param", None, None, f"the spec declares no param {', '.join(unknown)}",
+        shown = ", ".join(name[:60] for name in unknown[:5])
+        raise InputError(Problem(where, None, None, f"the spec declares no param {shown}",
                                  f"give one of: {', '.join(sorted(spec.params)) or '(the spec has no params)'}"))
-    check_param_values(spec, {k: [v] for k, v in params.items()}, "--param")
+    check_param_values(spec, {k: [v] for k, v in params.items()}, where)
 
 
 def stack_revision(spec: Spec) -> str:
@@ -283,20 +336,10 @@ def _module_tests(campaign: CampaignFindings, target: Target, out_dir: Path,
     if target.tests_dir is None:
         return None, ""
     suite = out_dir / target.bucket.bucket / "tests"
-    shutil.copytree(target.tests_dir, suite)
-    if params:
-        with_params(suite, params)
+    copy_module_suite(target.tests_dir, suite, campaign.spec, params=params)
     bucket = target.bucket
     verdict = run_module_tests(suite, crash=is_crash_bucket(bucket.verdict, bucket.invariant, campaign.spec))
     return verdict.fails_on_defect, verdict.detail
-
-
-def with_params(suite: Path, params: dict[str, str]) -> None:
-    """Override params in a copied module test suite's manifest (its planner is built with them)."""
-    manifest = suite / MANIFEST
-    body = json.loads(manifest.read_text())
-    body["params"] = {**(body.get("params") or {}), **params}
-    manifest.write_text(json.dumps(body, indent=1))
 
 
 def _slug(text: str) -> str:
