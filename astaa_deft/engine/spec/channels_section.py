@@ -20,7 +20,20 @@ from astaa_deft.model.errors import did_you_mean
 from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 from astaa_deft.model.sut import Channel, MessageType, Module, Ros2Section
 
-KEY_RE = re.compile(r"^[^*$?#\s]+\Z")  # a concrete Zenoh key: no wildcards, no DSL
+KEY_RE = re.compile(r"^[^*$?#\s\x00-\x1f\x7f]+\Z")  # a concrete Zenoh key: no wildcards, no DSL, no control
+MAX_KEY_CHARS = 1000  # a Zenoh key the spec declares: far above real ones (a namespace and a topic)
+KEY_FIX = "use '/'-separated chunks without wildcards (*, **), '$', '?', '#', spaces or control characters"
+
+
+def concrete_key_problem(key: str) -> str | None:
+    """Why ``key`` is not a concrete Zenoh key a spec may declare (None: it is one)."""
+    if not key:
+        return "is empty"
+    if len(key) > MAX_KEY_CHARS:
+        return f"is {len(key):,} characters long (at most {MAX_KEY_CHARS:,})"
+    if not KEY_RE.match(key) or key.startswith("/") or key.endswith("/") or "//" in key:
+        return f"{key[:80]!r} is not a concrete Zenoh key"
+    return None
 CHANNEL_KEYS = ("name", "key", "topic", "producer", "consumers", "type", "encoding", "time", "pair_by")
 NUMBER_KINDS = ("float32", "float64", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64",
                 "time")
@@ -104,11 +117,11 @@ class _ChannelsReader:
             self.keys[key] = name
         if "key" in v and self.reader.expect(v["key"], (str,), "'key'", "a Zenoh key"):
             key = v["key"].value
+            problem = concrete_key_problem(key)
             if not key:
                 src.at(v["key"], f"channel '{name}' has an empty key", "give a Zenoh key, e.g. 'demo/data'")
-            elif not KEY_RE.match(key) or key.startswith("/") or key.endswith("/") or "//" in key:
-                src.at(v["key"], f"key {key!r} is not a concrete Zenoh key",
-                       "use '/'-separated chunks without wildcards (*, **), '$', '?', '#' or spaces")
+            elif problem is not None:
+                src.at(v["key"], f"key {problem}", KEY_FIX)
             elif key in self.keys:
                 src.at(v["key"], f"key '{key}' is already used by channel '{self.keys[key]}'",
                        "give each channel its own key")

@@ -12,7 +12,7 @@ reported as an undeclared key.
 
 from __future__ import annotations
 
-from astaa_deft.engine.spec.channels_section import KEY_RE
+from astaa_deft.engine.spec.channels_section import KEY_FIX, concrete_key_problem
 from astaa_deft.engine.spec.reader import SpecReader
 from astaa_deft.io.yamlsource import Node
 from astaa_deft.model.sut import LivelinessToken, Module
@@ -32,10 +32,12 @@ def read_liveliness_section(reader: SpecReader, node: Node | None, modules: tupl
         if not reader.keys(item, TOKEN_KEYS, ("key", "producer"), "a liveliness token") or not \
                 ("key" in v and "producer" in v):  # a missing one is reported by keys()
             continue
-        key = v["key"].value if reader.expect(v["key"], (str,), "'key'", "a Zenoh key") else ""
-        if key and not KEY_RE.match(key):
-            reader.src.at(v["key"], f"key {key!r} is not a concrete Zenoh key",
-                          "use '/'-separated chunks without wildcards (*, **), '$', '?', '#' or spaces")
+        key = v["key"].value if reader.expect(v["key"], (str,), "'key'", "a Zenoh key") else None
+        problem = concrete_key_problem(key) if key is not None else None
+        if problem is not None:
+            reader.src.at(v["key"], f"liveliness key {problem}", KEY_FIX)
+        if key is None or problem is not None:
+            key = ""
         producer = v["producer"].value if reader.expect(v["producer"], (str,), "'producer'", "a module name") else ""
         if producer:
             reader.module_ref(v["producer"], producer, names)

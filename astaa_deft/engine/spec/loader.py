@@ -71,7 +71,7 @@ def _build(reader: SpecReader, path: Path) -> Spec:
     module_names = [m.name for m in modules]
     invariants = build_invariants(src, v.get("invariants"), types, channels, modules=module_names)
     planner = build_planner(src, v.get("planner"), types, channels=channels, modules=list(modules))
-    replay = build_replay_section(src, v.get("replay"), channels, list(modules))
+    replay = build_replay_section(src, v.get("replay"), channels, list(modules), types=types)
     run = build_run_section(src, v.get("run"), types, channels, modules=module_names)
     decictor = read_decictor_section(src, v.get("decictor"), tuple(c.name for c in channels), reader.base_dir)
     liveliness = read_liveliness_section(reader, v.get("liveliness"), modules)

@@ -155,6 +155,10 @@ def _ready(reader: SpecReader, node: Node | None) -> Readiness:
     log = None
     if "log" in v and reader.expect(v["log"], (str,), "'ready.log'", "a regular expression"):
         log = v["log"].value
+        if not log:
+            reader.src.at(v["log"], "'ready.log' is empty: it matches any line, so the module would count as ready "
+                          "at its first output", "give a pattern of the line the module prints when ready, e.g. "
+                          "'ready: {log: \"listening\"}'")
         try:
             compile_user_pattern(log)
         except PatternError as exc:

@@ -101,23 +101,54 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames=FrameMode.PER_OUTPUT,
                         exceptions=StepExceptions.UNRESOLVED, hang_after=0.0, threshold=threshold, lookback_ms=lookback,
                         skew_ms=skew, trajectory=layout, collision=collision, where="planner",
-                        provenance=read_provenance(src, v.get("provenance"), "planner.provenance"))
+                        provenance=read_provenance(src, v.get("provenance"), "planner.provenance",
+                                                   output_type=_declared(types, by_name.get(output)), types=types))
 
 
-def read_provenance(src: Source, node: Node | None, what: str) -> str | None:
-    """The ``provenance:`` field path (where the output names the inputs it used), or None."""
+MAX_FIELD_PATH_CHARS = 1000  # a field path a spec names: far above real ones
+
+
+def read_provenance(src: Source, node: Node | None, what: str, *,
+                    output_type: MessageType | None = None, types: Mapping[str, MessageType] | None = None
+                    ) -> str | None:
+    """The ``provenance:`` field path (where the output names the inputs it used), or None. With the output's
+    declared type (``output_type``, its field types in ``types``), a path naming no field of it is a problem."""
     if node is None:
         return None
     if not isinstance(node.value, str) or not node.value:
         src.at(node, f"'{what}' must be a field path of the output, not {describe_value(node.value)}",
                "e.g. provenance: debug.inputs (a mapping {input channel: its header.seq or header.stamp})")
         return None
+    if len(node.value) > MAX_FIELD_PATH_CHARS:
+        src.at(node, f"'{what}' is {len(node.value):,} characters long (at most {MAX_FIELD_PATH_CHARS:,})",
+               "e.g. provenance: debug.inputs")
+        return None
     try:
-        FieldPath.parse(node.value)
+        path = FieldPath.parse(node.value)
     except FieldPathError as exc:
         src.at(node, f"'{what}' is not a field path: {exc}", "e.g. provenance: debug.inputs")
         return None
+    missing = missing_field(path, output_type, types or {})
+    if missing is not None:
+        src.at(node, f"'{what}' names {node.value!r}, but {missing}", "name a field of the output's type")
+        return None
     return node.value
+
+
+def _declared(types: Mapping[str, MessageType], channel: Channel | None) -> MessageType | None:
+    """The channel's message type when the spec's ``types:`` declares it (None: not declared there)."""
+    return types.get(channel.type) if channel is not None else None
+
+
+def missing_field(path: FieldPath, message: MessageType | None, types: Mapping[str, MessageType]) -> str | None:
+    """Why ``path`` names no field of ``message`` (None: it does, or its type is not declared to check)."""
+    if message is None:
+        return None
+    try:
+        type_at(types, message.name, path)
+    except FieldPathError as exc:
+        return exc.reason or str(exc)
+    return None
 
 
 def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracle | None:

@@ -28,7 +28,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.errors import did_you_mean
-from astaa_deft.model.sut import Channel, Module
+from astaa_deft.model.sut import Channel, MessageType, Module
 from astaa_deft.engine.spec.planner import read_provenance, read_runner, read_setting
 from astaa_deft.engine.spec.replay_module import EXCEPTIONS, FRAME_MODES, FrameMode, ReplayModule, StepExceptions
 from astaa_deft.io.yamlsource import Node, Source, describe_value
@@ -44,7 +44,8 @@ REQUIRED = ("module", "inputs", "trigger", "outputs")
 
 
 def build_replay_section(src: Source, node: Node | None, channels: Sequence[Channel],
-                         modules: Sequence[Module]) -> tuple[ReplayModule, ...]:
+                         modules: Sequence[Module], *, types: Mapping[str, MessageType] | None = None
+                         ) -> tuple[ReplayModule, ...]:
     """The entries of ``replay.modules`` (problems reported on ``src`` with line, column and a fix)."""
     if node is None or node.value is None:
         return ()
@@ -66,7 +67,7 @@ def build_replay_section(src: Source, node: Node | None, channels: Sequence[Chan
     out: list[ReplayModule] = []
     seen: set[tuple[str, str]] = set()
     for n, item in enumerate(entries.value):
-        entry = _entry(src, item, f"replay.modules[{n}]", by_name={c.name: c for c in channels},
+        entry = _entry(src, item, f"replay.modules[{n}]", by_name={c.name: c for c in channels}, types=types or {},
                        module_names=[m.name for m in modules])
         if entry is None:
             continue
@@ -78,7 +79,7 @@ def build_replay_section(src: Source, node: Node | None, channels: Sequence[Chan
     return tuple(out)
 
 
-def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel],
+def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel], types: Mapping[str, MessageType],
            module_names: list[str]) -> ReplayModule | None:
     if not node.is_map:
         src.at(node, f"'{where}' must be a mapping", "e.g. {module: control, inputs: [...], trigger: ..., "
@@ -146,7 +147,9 @@ def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel
             src.at(n, f"'{where}.ignore' must be a list of output field paths", "e.g. [header.stamp]")
     return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames, exceptions,
                         hang_after, threshold, lookback, skew, ignore, where=where,
-                        provenance=read_provenance(src, v.get("provenance"), f"{where}.provenance"))
+                        provenance=read_provenance(src, v.get("provenance"), f"{where}.provenance",
+                                                   output_type=types.get(by_name[output].type)
+                                                   if output in by_name else None, types=types))
 
 
 def _text(src: Source, node: Node, what: str) -> str:
