@@ -88,7 +88,7 @@ def test_kill_9_then_resume_loses_no_finished_case(tmp_path: Path):
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-    done = fuzz("-o", str(out), "--resume", "--horizon", "3")
+    done = fuzz("--spec", str(demo_spec_path()), "-o", str(out), "--resume", "--horizon", "3")
     assert done.returncode == 0, done.stdout + done.stderr
     after = rows(out, "SELECT case_id, verdict, finished_at FROM cases WHERE kind='mutated'")
     assert len(after) == 4 and all(r[1] == "Pass" for r in after)

@@ -64,7 +64,10 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
                     help="do not minimise the buckets, nor write their module tests")
     bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
             help="seconds one bucket's minimisation may take (it holds a worker slot)")
-    fz.add_argument("--resume", action="store_true", help="continue the campaign in -o")
+    fz.add_argument("--resume", action="store_true", help="continue the campaign in -o (with --spec: your spec)")
+    fz.add_argument("--trust-journal-spec", action="store_true",
+                    help="with --resume and no --spec: run the spec the campaign's journal names (a campaign folder "
+                         "is data: without this the command refuses and lists what that spec would run)")
     fz.add_argument("--cluster", type=cluster,
                     help=f"tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes) [K {PROCESSES}]")
     fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit")
@@ -93,7 +96,8 @@ def run_fuzz(args: argparse.Namespace) -> int:
                             params=fuzz.parse_params(args.params), cluster=args.cluster, horizon=args.horizon,
                             baseline_runs=args.baseline, reruns=args.reruns, minimise=not args.no_minimise,
                             settle=args.settle, minimise_timeout=args.minimise_timeout)
-    return fuzz.run(config, args.resume)
+    return fuzz.run(config, args.resume, spec_given=args.spec is not None,
+                    trust_journal_spec=args.trust_journal_spec)
 
 
 def add_report_parser(subparsers: SubParsers) -> None:

@@ -97,17 +97,17 @@ def _bucket_line(standing: Standing, m: MinimisationRow | None, t: ModuleTestsRo
             f"{' ' + m.culprit if m and m.culprit else ''}{checked}")
 
 
-def run(config: CampaignConfig, resume: bool) -> int:
+def run(config: CampaignConfig, resume: bool, *, spec_given: bool = True, trust_journal_spec: bool = False) -> int:
     """``fuzz``: run (or with ``resume`` continue) the campaign ``config`` describes; the exit code (0 no
     bucket, 1 buckets, 130 interrupted by Ctrl-C or SIGTERM: the summary and the line to resume). InputError
     for bad input or a SUT that does not start; OutputError when ``config.out`` cannot take the campaign."""
     place = Place(config.out, "-o")
     ready_dir(place, temp=True)  # before the journal and the baseline runs
     with writing(place), stop_as_interrupt():  # SIGTERM (timeout, a CI cancel) stops it as Ctrl-C does
-        return _run(config, resume)
+        return _run(config, resume, spec_given=spec_given, trust_journal_spec=trust_journal_spec)
 
 
-def _run(config: CampaignConfig, resume: bool) -> int:
+def _run(config: CampaignConfig, resume: bool, *, spec_given: bool, trust_journal_spec: bool) -> int:
     exists = (config.out / FILE_NAME).is_file()
     if exists and not resume:
         raise InputError(Problem(str(config.out), None, None, "a campaign is already here",
@@ -122,7 +122,17 @@ def _run(config: CampaignConfig, resume: bool) -> int:
         param_grid(config.params, load_spec(config.spec_path))
     journal = Journal(config.out)
     if resume:
-        config = config.resuming(journal.meta())
+        meta = journal.meta()
+        if not spec_given:  # the spec the journal names runs only when the user vouches for it
+            from astaa_deft.orchestration.campaign.journal_spec import journal_spec
+
+            try:
+                journal_spec(journal.path, meta.spec, trusted=trust_journal_spec, command="fuzz --resume",
+                             why="the campaign's runs")
+            except BaseException:
+                journal.close()
+                raise
+        config = config.resuming(meta, keep_spec=spec_given)
     progress = Progress(journal, config.cases)
     lines = None if progress.live is not None else PlainLines("fuzz")  # not a terminal: the shared plain lines
 

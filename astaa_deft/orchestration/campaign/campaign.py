@@ -90,12 +90,13 @@ class CampaignConfig:
     minimise_timeout: float = DEFAULT_MINIMISE_TIMEOUT
     report: bool = True
 
-    def resuming(self, meta: CampaignMeta) -> CampaignConfig:
-        """This configuration continuing the campaign ``meta`` describes: its spec, seed, strategy, params and
-        horizon as stored (a horizon derived from the stack is derived again, from the same clean runs), its case
-        count unless this one gives one."""
+    def resuming(self, meta: CampaignMeta, *, keep_spec: bool = False) -> CampaignConfig:
+        """This configuration continuing the campaign ``meta`` describes: its spec (``keep_spec``: this one's,
+        the user's), seed, strategy, params and horizon as stored (a horizon derived from the stack is derived
+        again, from the same clean runs), its case count unless this one gives one."""
         horizon = self.horizon if meta.horizon_derived else _stored(meta.horizon, self.horizon)
-        return replace(self, spec_path=Path(meta.spec) if meta.spec is not None else self.spec_path,
+        spec_path = self.spec_path if keep_spec or meta.spec is None else Path(meta.spec)
+        return replace(self, spec_path=spec_path,
                        seed=_stored(meta.seed, self.seed), strategy=_stored(meta.strategy, self.strategy),
                        params=_stored(meta.params, self.params), horizon=horizon,
                        cases=self.cases if self.cases is not None else meta.cases)

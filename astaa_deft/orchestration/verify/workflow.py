@@ -29,6 +29,7 @@ from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_HORIZON, DEFAULT_SETTLE, default_workers
 from astaa_deft.orchestration.campaign.journal import Journal, open_existing
+from astaa_deft.orchestration.campaign.journal_spec import journal_spec
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
 from astaa_deft.orchestration.campaign.model import (
     BASELINE, CONTROL, MUTATED, RERUN, CaseOutcome, CaseStatus, PlannedCase,
@@ -48,7 +49,6 @@ VERIFY_DIR = "verify"
 EXIT_NOT_OBSERVED = 3
 
 
-TRUST_JOURNAL_SPEC = "--trust-journal-spec"
 MAX_LABEL_CHARS = 200  # a revision label (--label, git describe): one line the report shows
 MAX_PARAM_CHARS = 10_000  # a --param value: what the journal's reader takes back (journal_rows.MAX_PARAM)
 
@@ -124,26 +124,13 @@ class CampaignFindings:
             if spec is not None:
                 spec_path, loaded = spec, load_spec(spec)
             else:
-                spec_path, loaded = _journal_spec(journal, meta.spec, trust_journal_spec, command)
+                spec_path, loaded = journal_spec(journal.path, meta.spec, trusted=trust_journal_spec,
+                                                 command=command, why="live runs and module tests")
             return cls(journal, spec_path, loaded, _known(journal), meta.horizon or DEFAULT_HORIZON,
                        workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)))
         except BaseException:
             journal.close()
             raise
-
-
-def _journal_spec(journal: Journal, named: str | None, trusted: bool, command: str) -> tuple[Path, Spec]:
-    """The spec the journal names, loaded; refused unless ``trusted`` when it would run anything."""
-    from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
-
-    if named is None:
-        raise InputError(Problem(str(journal.path), None, None, "the journal names no spec",
-                                 "give the stack's spec with --spec sut.yaml"))
-    spec = load_spec(Path(named))
-    if not trusted and what_spec_runs(spec):
-        raise untrusted_spec_refusal(spec, str(journal.path), command=command, why="live runs and module tests",
-                                     flag=TRUST_JOURNAL_SPEC, holder="journal", stored_as=named[:200])
-    return Path(named), spec
 
 
 def _ran_at_once(journal: Journal) -> int | None:
