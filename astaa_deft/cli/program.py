@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from astaa_deft import __version__
 from astaa_deft.cli import campaign_commands
+from astaa_deft.cli.parser import Parser
 from astaa_deft.cli.commands import (
     check,
     demo,
     discover,
+    examples,
     export,
     extract,
     generate,
@@ -33,15 +35,26 @@ from astaa_deft.model.errors import AstaaDeftError
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
 
+EPILOG = """\
+first steps:
+  astaa-deft demo                       the whole pipeline on the bundled driving stack (about 2 min)
+  astaa-deft examples my-first-specs    copy the bundled spec, test cases and dictionary to a folder
+  astaa-deft COMMAND --help             each command's options, defaults and an example
+
+exit codes: 0 ok, 1 a finding, 2 usage or input error, 3 a run not fully observed,
+4 the output cannot be written, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)"""
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line: each command's ``func`` default is the ``run(args) -> int`` to call."""
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="astaa-deft",
         description="Test robot software on its own Zenoh bus: record, replay, intercept.",
+        epilog=EPILOG,
     )
     p.add_argument("--version", action="version", version=f"astaa-deft {__version__}")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    # Typed as the command modules declare it: argparse builds every subparser with the parent's class (Parser).
+    sub = cast("SubParsers", p.add_subparsers(dest="command", metavar="COMMAND"))
     sub.required = True
 
     spec = _actions(sub, "spec", "work with SUT specs")
@@ -59,12 +72,14 @@ def build_parser() -> argparse.ArgumentParser:
     verify.add_parser(sub)
     export.add_parser(sub)
     demo.add_parser(sub)
+    examples.add_parser(sub)
     return p
 
 
 def _actions(sub: SubParsers, command: str, help: str) -> SubParsers:
     """A command that only groups actions (`spec check`, `log info`): its subparsers, one required."""
-    actions = sub.add_parser(command, help=help).add_subparsers(dest=f"{command}_command", metavar="ACTION")
+    group = sub.add_parser(command, help=help, epilog=f"example:\n  astaa-deft {command} ACTION --help")
+    actions = group.add_subparsers(dest=f"{command}_command", metavar="ACTION")
     actions.required = True
     return actions
 

@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from astaa_deft.model.records import RunMode, Verdict
-from astaa_deft.demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
+from astaa_deft.demo.bundled import (  # noqa: F401
+    DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_scenario_names, demo_spec_path)
 from astaa_deft.demo.status import StatusWatch
 from astaa_deft.io.log import layout
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -38,16 +39,22 @@ DEFAULT_TIME_LIMIT = 40.0
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `demo` command and its `demo run` action."""
     demo = subparsers.add_parser("demo", help="the bundled driving stack through the whole tool: record, DeFT "
-                                              "tests, live interception, minimisation")
+                                              "tests, live interception, minimisation, a short campaign",
+                                epilog="examples:\n  astaa-deft demo\n  astaa-deft demo --scenario cut_in --out "
+                                       "demo-cut-in\n"
+                                       "  astaa-deft demo run --scenario cut_in --no-defects\n\n"
+                                       f"bundled scenarios: {', '.join(demo_scenario_names())}")
     demo.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
     demo.add_argument("--out", type=Path, default=Path("astaa-deft-demo"), help="where everything is written")
     demo.set_defaults(func=run)
     demo_sub = demo.add_subparsers(dest="demo_command", metavar="ACTION")
-    demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy")
+    demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy", epilog="example:\n"
+                                   "  astaa-deft demo run --scenario cut_in --record cut_in.mcap")
     demo_run.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
     bounded(demo_run, "--duration", RUN_SECONDS, help="stop after S seconds (default: the scenario's time limit)")
-    demo_run.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off")
-    demo_run.add_argument("--passive", action="store_true", help="observe only, no star")
+    demo_run.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off "
+                                                                    "(default: on)")
+    demo_run.add_argument("--passive", action="store_true", help="observe only, no star (default: the star proxy)")
     demo_run.add_argument("--record", type=Path,
                           help="where to write the log (default: astaa-deft-demo/SCENARIO.mcap)")
     demo_run.set_defaults(func=run_one)
