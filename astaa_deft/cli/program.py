@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, cast
 
 from astaa_deft import __version__
 from astaa_deft.cli import campaign_commands
+from astaa_deft.cli.commands.console import forget_stop, interrupted_exit_code, last_stop, stop_as_interrupt
 from astaa_deft.cli.parser import Parser
 from astaa_deft.cli.commands import (
     check,
@@ -88,14 +89,18 @@ def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` (default: ``sys.argv[1:]``), run the command and return its exit code.
 
     Exit codes: 0 ok, 1 a finding, 2 usage or input error (one line per problem on stderr, no traceback),
-    3 a run not fully observed, 4 the output cannot be written, 130 interrupted. argparse's own usage errors
+    3 a run not fully observed, 4 the output cannot be written, 130 interrupted (Ctrl-C), 143 terminated
+    (SIGTERM: it ends every command as Ctrl-C does). argparse's own usage errors
     and ``--help`` raise SystemExit as usual. An internal error (no exit code) propagates with its traceback.
     """
     args = build_parser().parse_args(argv)
     ignore_file_size_signal()  # past `ulimit -f` a write fails with EFBIG, reported, instead of killing the tool
+    forget_stop()
     try:
-        code: int = args.func(args)
-        return code
+        # SIGTERM ends every command as Ctrl-C does (its children stopped, what it wrote finished), not outright.
+        with stop_as_interrupt():
+            code: int = args.func(args)
+        return interrupted_exit_code() if code == 130 else code
     except AstaaDeftError as exc:
         if exc.exit_code is None:  # an internal error escaping is a bug: keep its traceback
             raise
@@ -103,5 +108,5 @@ def main(argv: list[str] | None = None) -> int:
             print(f"astaa-deft: error: {line}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("astaa-deft: interrupted", file=sys.stderr)
-        return 130
+        print(f"astaa-deft: {'terminated' if last_stop() == 'SIGTERM' else 'interrupted'}", file=sys.stderr)
+        return interrupted_exit_code()
