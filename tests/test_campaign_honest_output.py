@@ -114,3 +114,35 @@ def test_a_campaign_of_unconfirmed_buckets_finds_no_bug(tmp_path: Path):
         assert top is not None and top.bucket.bucket == "B001"  # named, with its status
     finally:
         journal.close()
+
+
+def test_a_bucket_where_the_fault_alone_breaks_the_invariant_is_listed_apart_and_never_a_confirmed_bug(tmp_path):
+    """The demo's case: an acceleration held at its declared maximum pushes the simulator (a plant) over the speed
+    limit; blame finds no module under test that departed from its twins, so the fault did it alone."""
+    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
+    from astaa_deft.orchestration.campaign.rows import BlameRow
+    from astaa_deft.orchestration.campaign.standing import FAULT_ALONE
+
+    out = tmp_path / "campaign"
+    journal = Journal(out)
+    try:
+        journal.set_meta(spec="/x/demo_av.yaml", seed=1, strategy="random", params={}, horizon=6.0, minimise=False)
+        speeding = Finding("speed_limit", "Silent", None, "ego", "12.4 m/s over 11.1", "critical")
+        _bucket(journal, "B001", speeding, reruns=1, failures=1)
+        _bucket(journal, "B002", CRASH, reruns=1, failures=1)
+        journal.blamed(BlameRow("B001", None, "ego", MUTATED_VALUE, "command → sim → ego → speed_limit",
+                                "ego departed first", 1, None))
+        ranked = standings(journal)
+        assert [(s.bucket.bucket, s.status) for s in ranked] == [("B002", CONFIRMED), ("B001", FAULT_ALONE)]
+        assert "the fault alone breaks the invariant; no module under test involved" in ranked[1].why
+        line = headline(ranked)
+        assert line.startswith("1 confirmed bug (1 high); 1 where the fault alone breaks the invariant"), line
+        assert "critical" not in line  # the critical finding is the fault's, not the stack's
+        top = most_severe(ranked)
+        assert top is not None and top.bucket.bucket == "B002"
+    finally:
+        journal.close()
+    text = html.unescape(write_report(out).read_text())
+    assert "1 confirmed bug (1 high)" in text
+    assert "not minimised: minimisation was off for this campaign" in text
+    assert text.count("not minimised</span>") == 0  # every "not minimised" says why
