@@ -81,13 +81,13 @@ def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool, *,
     """(status, why) of a bucket from the campaign's kind for it, its rate, whether its minimal test case was
     confirmed live and whether its blame is the mutated value itself (``fault_alone``)."""
     twins = f"; unmutated twins {bucket.control_failures}/{bucket.controls} failed" if bucket.controls else ""
-    status, why = _status(bucket, failures, runs, minimised, twins)
+    status, why = _status(bucket, failures=failures, runs=runs, minimised=minimised, twins=twins)
     if status == CONFIRMED and fault_alone:
-        return FAULT_ALONE, f"{FAULT_ALONE_WHY} ({why})"
+        return FAULT_ALONE, f"{FAULT_ALONE_WHY}; {why}"
     return status, why
 
 
-def _status(bucket: Bucket, failures: int, runs: int, minimised: bool, twins: str) -> tuple[BucketStatus, str]:
+def _status(bucket: Bucket, *, failures: int, runs: int, minimised: bool, twins: str) -> tuple[BucketStatus, str]:
     if bucket.without_mutation or bucket.kind == BucketKind.BASELINE:
         return WITHOUT_MUTATION, f"{failures}/{runs} clean runs failed this way"
     if bucket.kind == BucketKind.FLAKY:
