@@ -134,7 +134,9 @@ def summarise(outcome: RunResult, watch: StatusWatch) -> None:
 
 def run_scenario(scenario: str, *, duration: float | None, defects: bool, passive: bool, record: Path | None,
                  command_line: list[str]) -> int:
-    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well, 3 not fully observed."""
+    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well, 3 not fully observed,
+    130 (Ctrl-C) or 143 (SIGTERM) when stopped before the scenario's end."""
+    from astaa_deft.cli.commands.console import interrupted_exit_code, last_stop
     from astaa_deft.engine.session.summary import format_info
     from astaa_deft.io.log.reader import read_log
 
@@ -151,6 +153,8 @@ def run_scenario(scenario: str, *, duration: float | None, defects: bool, passiv
     summarise(outcome, watch)
     say("")
     say(format_info(read_log(record)))
+    if last_stop() is not None:  # stopped before the scenario's end: its summary above, the log finished
+        return interrupted_exit_code()
     if not outcome.complete or not outcome.observed:
         return EXIT_NOT_OBSERVED
     ok = watch.goal and watch.collision is None and not outcome.crashes
