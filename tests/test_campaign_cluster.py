@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import sqlite3
 import subprocess
 import sys
@@ -122,3 +123,29 @@ def test_cases_run_on_workers_that_do_not_sample_their_stacks():
             assert not any(client.run(_profiling).values())
     finally:
         cluster.close()
+
+
+def test_a_campaign_on_a_cluster_runs_as_many_cases_at_once_as_it_has_workers(tmp_path: Path):
+    """No --workers: the runs at once are the cluster's worker count (one case a worker), not a local guess."""
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None)
+    try:
+        out = tmp_path / "campaign"
+        done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", "--spec", str(ECHO), "-o", str(out),
+                               "--cases", "1", "--seed", "3", "--horizon", "2", "--baseline", "1", "--no-minimise",
+                               "--cluster", cluster.scheduler_address], capture_output=True, text=True, timeout=240)
+    finally:
+        cluster.close()
+    assert done.returncode in (0, 1), done.stdout + done.stderr
+    assert f"1 worker(s) on {cluster.scheduler_address}" in done.stderr, done.stderr  # the start line
+
+
+def test_an_unreachable_scheduler_is_named_with_the_fix(tmp_path: Path):
+    with socket.socket() as s:  # a free loopback port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "fuzz", "--spec", str(ECHO), "-o", str(tmp_path / "c"),
+                           "--cases", "1", "--cluster", f"tcp://127.0.0.1:{port}"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert f"no Dask scheduler answers at tcp://127.0.0.1:{port}" in done.stderr and "Traceback" not in done.stderr

@@ -1,4 +1,4 @@
-"""Honest campaign output (issue 24, item 7): confirmed bugs apart, ranked by severity, the most severe named.
+"""Honest campaign output: confirmed bugs apart, ranked by severity, the most severe named.
 
 Journals are real SQLite files written the way a campaign writes them; the
 verdict is the monitors' own function over real violation records.
@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
+
+import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
@@ -114,3 +116,69 @@ def test_a_campaign_of_unconfirmed_buckets_finds_no_bug(tmp_path: Path):
         assert top is not None and top.bucket.bucket == "B001"  # named, with its status
     finally:
         journal.close()
+
+
+def test_a_bucket_where_the_fault_alone_breaks_the_invariant_is_listed_apart_and_never_a_confirmed_bug(tmp_path):
+    """The demo's case: an acceleration held at its declared maximum pushes the simulator (a plant) over the speed
+    limit; blame finds no module under test that departed from its twins, so the fault did it alone."""
+    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
+    from astaa_deft.orchestration.campaign.rows import BlameRow
+    from astaa_deft.orchestration.campaign.standing import FAULT_ALONE
+
+    out = tmp_path / "campaign"
+    journal = Journal(out)
+    try:
+        journal.set_meta(spec="/x/demo_av.yaml", seed=1, strategy="random", params={}, horizon=6.0, minimise=False)
+        speeding = Finding("speed_limit", "Silent", None, "ego", "12.4 m/s over 11.1", "critical")
+        _bucket(journal, "B001", speeding, reruns=1, failures=1)
+        _bucket(journal, "B002", CRASH, reruns=1, failures=1)
+        journal.blamed(BlameRow("B001", None, "ego", MUTATED_VALUE, "command → sim → ego → speed_limit",
+                                "ego departed first", 1, None))
+        ranked = standings(journal)
+        assert [(s.bucket.bucket, s.status) for s in ranked] == [("B002", CONFIRMED), ("B001", FAULT_ALONE)]
+        assert "the fault alone breaks the invariant; no module under test involved" in ranked[1].why
+        line = headline(ranked)
+        assert line.startswith("1 confirmed bug (1 high); 1 where the fault alone breaks the invariant"), line
+        assert "critical" not in line  # the critical finding is the fault's, not the stack's
+        top = most_severe(ranked)
+        assert top is not None and top.bucket.bucket == "B002"
+    finally:
+        journal.close()
+    text = html.unescape(write_report(out).read_text())
+    assert "1 confirmed bug (1 high)" in text
+    assert "not minimised: minimisation was off for this campaign" in text
+    assert text.count("not minimised</span>") == 0  # every "not minimised" says why
+
+
+@pytest.mark.slow
+def test_the_demos_headline_counts_no_bucket_where_the_fault_alone_breaks_the_invariant(tmp_path: Path):
+    """The demo's own campaign step, as `astaa-deft demo` runs it: whatever its runs found, the headline's
+    confirmed bugs are the reproduced buckets whose blame names a module (or none), never the mutated value."""
+    import subprocess
+    import sys
+
+    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
+    from astaa_deft.orchestration.campaign.journal import open_existing
+
+    out = tmp_path / "campaign"
+    code = ("import sys; from pathlib import Path; from astaa_deft.demo.bundled import demo_spec_path; "
+            "from astaa_deft.orchestration.campaign.demo_step import campaign_step; "
+            f"campaign_step(demo_spec_path(), Path({str(out)!r}))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    [line] = [x for x in done.stdout.splitlines() if " runs in " in x and "bucket(s)" in x]
+    journal = open_existing(out)
+    try:
+        ranked = standings(journal)
+        blames = journal.blames()
+    finally:
+        journal.close()
+    alone = [s for s in ranked if (b := blames.get(s.bucket.bucket)) is not None and b.how == MUTATED_VALUE
+             and s.failures]
+    counted = [s for s in ranked if s.status == CONFIRMED]
+    assert not {s.bucket.bucket for s in alone} & {s.bucket.bucket for s in counted}
+    bugs = f"{len(counted)} confirmed bug{'s' if len(counted) != 1 else ''}" if counted else "no confirmed bug"
+    assert f"bucket(s): {bugs}" in line, line
+    if alone:
+        assert "where the fault alone breaks the invariant" in line, line
+    print(line)

@@ -23,6 +23,7 @@ COMMANDS = [
     (["minimize", "run.mcap", "-o", "d"], "minimise"),
     (["demo"], "demo"),
     (["demo", "run"], "demo"),
+    (["examples", "d"], "examples"),
 ]
 
 
@@ -36,7 +37,7 @@ def test_every_command_of_the_help_is_declared():
     parser = cli.build_parser()
     top_help = parser.format_help()
     for command in ("spec", "proxy", "generate", "policy", "check", "log", "extract", "minimise", "fuzz", "report",
-                    "demo"):
+                    "demo", "examples"):
         assert f"\n    {command} " in top_help, command
 
 

@@ -36,22 +36,39 @@ def _strategy_names() -> tuple[str, ...]:
     return STRATEGIES.names()
 
 
+FUZZ_EXAMPLES = """\
+examples:
+  astaa-deft fuzz --spec specs/demo_av.yaml -o campaign/ --budget 10m
+  astaa-deft fuzz --spec sut.yaml -o campaign/ --resume   # after Ctrl-C or a crash
+  astaa-deft fuzz -o campaign/ --status
+  astaa-deft fuzz --spec sut.yaml -o campaign/ --cases 200 --cluster tcp://127.0.0.1:8786"""
+
+
 def add_fuzz_parser(subparsers: SubParsers) -> None:
     """Declare the `fuzz` command."""
     fz = subparsers.add_parser("fuzz", help="a campaign: generated test cases, each a fresh run; failures bucketed, "
-                                            "re-run for their rate, minimised, reported")
-    fz.add_argument("--spec", type=Path, help="the SUT spec (YAML)")
+                                            "re-run for their rate, minimised, reported",
+                             epilog=FUZZ_EXAMPLES)
+    fz.add_argument("--spec", type=Path,
+                    help="the SUT spec (YAML; default with --resume: none — the campaign's only with "
+                         "--trust-journal-spec)")
     fz.add_argument("-o", "--out", type=Path, required=True, help="the campaign directory (journal, logs, report)")
-    bounded(fz, "--cases", CASES, help="generated cases to run")
+    bounded(fz, "--cases", CASES, help="generated cases to run (default: as many as --budget allows)")
     fz.add_argument("--budget", type=budget,
-                    help=f"or a time budget: 90s, 30m, 2h [at most {MAX_BUDGET_S / DAY_S:g} days]")
-    bounded(fz, "--workers", PROCESSES, help="cases at once (default: from the cores and the spec's modules)")
+                    help=f"or a time budget: 90s, 30m, 2h [at most {MAX_BUDGET_S / DAY_S:g} days] (default: none; "
+                         f"give --cases, --budget or both)")
+    bounded(fz, "--workers", PROCESSES, help="cases at once (default: measured from the cores and one run's "
+                                             "cost; with --cluster, the "
+                                                "cluster's worker count)")
     bounded(fz, "--seed", CAMPAIGN_SEED, default=0, help="the campaign's seed (default 0)")
     fz.add_argument("--strategy", default="random", choices=NamesOf(_strategy_names), metavar="STRATEGY",
                     help="how cases are drawn, one of: %(choices)s (default random: ASTAA's weighted generation; "
                          "decictor looks for non-optimal decisions: docs/decictor.md)")
-    fz.add_argument("--dictionary", type=Path, action="append", default=[])
-    fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2", help="spread cases over these values")
+    fz.add_argument("--dictionary", type=Path, action="append", default=[],
+                    help="an exceptional-value dictionary on top of the default one (repeatable; default: the "
+                         "bundled one only)")
+    fz.add_argument("--params", nargs="+", default=[], metavar="KEY=V1,V2",
+                    help="spread cases over these values (default: the spec's params as declared)")
     bounded(fz, "--horizon", WINDOW_SECONDS, default=None,
             help="seconds a run lasts at most (default: from the stack — clean runs go to the scenario's end,"
                  " capped by the spec's run: time_limit, and cases at most 1.25 × the longest)")
@@ -61,16 +78,19 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
     bounded(fz, "--reruns", RERUNS, default=2,
             help="re-runs of a new failure and as many unmutated twins, before it is filed as a bug")
     fz.add_argument("--no-minimise", action="store_true",
-                    help="do not minimise the buckets, nor write their module tests")
+                    help="do not minimise the buckets, nor write their module tests (default: minimise)")
     bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
             help="seconds one bucket's minimisation may take (it holds a worker slot)")
-    fz.add_argument("--resume", action="store_true", help="continue the campaign in -o (with --spec: your spec)")
+    fz.add_argument("--resume", action="store_true", help="continue the campaign in -o, with --spec: your spec "
+                                                          "(default: a new campaign; -o must be empty)")
     fz.add_argument("--trust-journal-spec", action="store_true",
-                    help="with --resume and no --spec: run the spec the campaign's journal names (a campaign folder "
-                         "is data: without this the command refuses and lists what that spec would run)")
+                    help="with --resume and no --spec: run the spec the campaign's journal names (default: refuse "
+                         "and list what that spec would run; a campaign folder is data)")
     fz.add_argument("--cluster", type=cluster,
-                    help=f"tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes) [K {PROCESSES}]")
-    fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit")
+                    help=f"tcp://HOST:8786 (a Dask scheduler) or local:K (K local worker processes) [K {PROCESSES}]"
+                         " (default: no cluster, cases in local processes)")
+    fz.add_argument("--status", action="store_true", help="print the campaign's state from its journal and exit "
+                                                          "(default: run the campaign)")
     fz.set_defaults(func=run_fuzz)
 
 
@@ -102,8 +122,9 @@ def run_fuzz(args: argparse.Namespace) -> int:
 
 def add_report_parser(subparsers: SubParsers) -> None:
     """Declare the `report` command."""
-    rep = subparsers.add_parser("report", help="regenerate a campaign's report.html")
-    rep.add_argument("campaign", type=Path)
+    rep = subparsers.add_parser("report", help="regenerate a campaign's report.html from its journal",
+                                epilog="example:\n  astaa-deft report campaign/ && xdg-open campaign/report.html")
+    rep.add_argument("campaign", type=Path, help="a campaign directory (astaa-deft fuzz -o DIR)")
     rep.set_defaults(func=run_report)
 
 

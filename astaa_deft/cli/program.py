@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from astaa_deft import __version__
 from astaa_deft.cli import campaign_commands
+from astaa_deft.cli.commands.console import forget_stop, interrupted_exit_code, last_stop, stop_as_interrupt
+from astaa_deft.cli.parser import Parser
 from astaa_deft.cli.commands import (
     check,
     demo,
     discover,
+    examples,
     export,
     extract,
     generate,
@@ -33,15 +36,26 @@ from astaa_deft.model.errors import AstaaDeftError
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
 
+EPILOG = """\
+first steps:
+  astaa-deft demo                       the whole pipeline on the bundled driving stack (about 2 min)
+  astaa-deft examples my-first-specs    copy the bundled spec, test cases and dictionary to a folder
+  astaa-deft COMMAND --help             each command's options, defaults and an example
+
+exit codes: 0 ok, 1 a finding, 2 usage or input error, 3 a run not fully observed,
+4 the output cannot be written, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)"""
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line: each command's ``func`` default is the ``run(args) -> int`` to call."""
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="astaa-deft",
         description="Test robot software on its own Zenoh bus: record, replay, intercept.",
+        epilog=EPILOG,
     )
     p.add_argument("--version", action="version", version=f"astaa-deft {__version__}")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    # Typed as the command modules declare it: argparse builds every subparser with the parent's class (Parser).
+    sub = cast("SubParsers", p.add_subparsers(dest="command", metavar="COMMAND"))
     sub.required = True
 
     spec = _actions(sub, "spec", "work with SUT specs")
@@ -59,12 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
     verify.add_parser(sub)
     export.add_parser(sub)
     demo.add_parser(sub)
+    examples.add_parser(sub)
     return p
 
 
 def _actions(sub: SubParsers, command: str, help: str) -> SubParsers:
     """A command that only groups actions (`spec check`, `log info`): its subparsers, one required."""
-    actions = sub.add_parser(command, help=help).add_subparsers(dest=f"{command}_command", metavar="ACTION")
+    group = sub.add_parser(command, help=help, epilog=f"example:\n  astaa-deft {command} ACTION --help")
+    actions = group.add_subparsers(dest=f"{command}_command", metavar="ACTION")
     actions.required = True
     return actions
 
@@ -73,14 +89,18 @@ def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` (default: ``sys.argv[1:]``), run the command and return its exit code.
 
     Exit codes: 0 ok, 1 a finding, 2 usage or input error (one line per problem on stderr, no traceback),
-    3 a run not fully observed, 4 the output cannot be written, 130 interrupted. argparse's own usage errors
+    3 a run not fully observed, 4 the output cannot be written, 130 interrupted (Ctrl-C), 143 terminated
+    (SIGTERM: it ends every command as Ctrl-C does). argparse's own usage errors
     and ``--help`` raise SystemExit as usual. An internal error (no exit code) propagates with its traceback.
     """
     args = build_parser().parse_args(argv)
     ignore_file_size_signal()  # past `ulimit -f` a write fails with EFBIG, reported, instead of killing the tool
+    forget_stop()
     try:
-        code: int = args.func(args)
-        return code
+        # SIGTERM ends every command as Ctrl-C does (its children stopped, what it wrote finished), not outright.
+        with stop_as_interrupt():
+            code: int = args.func(args)
+        return interrupted_exit_code() if code == 130 else code
     except AstaaDeftError as exc:
         if exc.exit_code is None:  # an internal error escaping is a bug: keep its traceback
             raise
@@ -88,5 +108,5 @@ def main(argv: list[str] | None = None) -> int:
             print(f"astaa-deft: error: {line}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("astaa-deft: interrupted", file=sys.stderr)
-        return 130
+        print(f"astaa-deft: {'terminated' if last_stop() == 'SIGTERM' else 'interrupted'}", file=sys.stderr)
+        return interrupted_exit_code()

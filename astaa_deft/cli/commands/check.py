@@ -37,10 +37,12 @@ EXIT_NOT_OBSERVED = 3  # as `proxy`: the run was not observed to its end, no Pas
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `check` command."""
     chk = subparsers.add_parser("check", help="evaluate the spec's invariants over a recorded log (exit 1 on a "
-                                              "finding)")
+                                              "finding)",
+                                epilog="examples:\n  astaa-deft check run.mcap\n"
+                                       "  astaa-deft check run.mcap --spec specs/demo_av.yaml --json")
     chk.add_argument("log", type=Path, help="the MCAP test log")
     chk.add_argument("--spec", type=Path, help="the SUT spec (default: the one stored in the log)")
-    chk.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    chk.add_argument("--json", action="store_true", help="print the result as one JSON object (default: text)")
     chk.set_defaults(func=run)
 
 

@@ -29,9 +29,10 @@ class StopSignal:
         return self
 
     def _handle(self, signum: int, _frame: FrameType | None) -> None:
-        # Only a plain assignment here: a handler that takes a lock (Event.set) can
+        # Only plain assignments here: a handler that takes a lock (Event.set) can
         # deadlock against the main thread it interrupted.
         self.received = signal.Signals(signum).name
+        _noted[:] = [self.received]
 
     def requested(self) -> bool:
         """A stop signal arrived since entering."""
@@ -42,18 +43,44 @@ class StopSignal:
             signal.signal(sig, old)
 
 
+# The stop signal this process received last, noted by every handler here: a command made of steps (the demo)
+# asks after each step whether to go on, whichever step's handler took the signal; `main` picks 130 or 143.
+_noted: list[str] = []
+
+
+def last_stop() -> str | None:
+    """The name of the stop signal (SIGINT, SIGTERM) received since :func:`forget_stop`, or None."""
+    return _noted[-1] if _noted else None
+
+
+def forget_stop() -> None:
+    """Start a new command: no stop signal received yet."""
+    _noted.clear()
+
+
+def interrupted_exit_code() -> int:
+    """143 after a SIGTERM (128 + 15, as a shell reports a process it terminated), else 130 (Ctrl-C)."""
+    return 128 + signal.SIGTERM if last_stop() == signal.SIGTERM.name else 130
+
+
 @contextlib.contextmanager
 def stop_as_interrupt() -> Iterator[None]:
-    """SIGTERM raises KeyboardInterrupt, as Ctrl-C does, while this holds: a workflow that ends early with
-    what it has done on a KeyboardInterrupt does so under ``timeout`` or a CI job's cancel too."""
-    def interrupt(_signum: int, _frame: FrameType | None) -> None:
+    """SIGTERM raises KeyboardInterrupt, as Ctrl-C does, while this holds, and both are noted (:func:`last_stop`):
+    a workflow that ends early with what it has done on a KeyboardInterrupt does so under ``timeout`` or a CI
+    job's cancel too. Off the main thread (where no handler can be installed) it does nothing."""
+    def interrupt(signum: int, _frame: FrameType | None) -> None:
+        _noted[:] = [signal.Signals(signum).name]
         raise KeyboardInterrupt
 
-    old = signal.signal(signal.SIGTERM, interrupt)
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 def parse_params(items: Iterable[str]) -> dict[str, str]:

@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from astaa_deft.model.records import RunMode, Verdict
-from astaa_deft.demo.bundled import DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_spec_path  # noqa: F401
+from astaa_deft.demo.bundled import (  # noqa: F401
+    DEMO_POLICY, demo_noise_policies, demo_policy_path, demo_scenario_names, demo_spec_path)
 from astaa_deft.demo.status import StatusWatch
 from astaa_deft.io.log import layout
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -38,16 +39,22 @@ DEFAULT_TIME_LIMIT = 40.0
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `demo` command and its `demo run` action."""
     demo = subparsers.add_parser("demo", help="the bundled driving stack through the whole tool: record, DeFT "
-                                              "tests, live interception, minimisation")
+                                              "tests, live interception, minimisation, a short campaign",
+                                epilog="examples:\n  astaa-deft demo\n  astaa-deft demo --scenario cut_in --out "
+                                       "demo-cut-in\n"
+                                       "  astaa-deft demo run --scenario cut_in --no-defects\n\n"
+                                       f"bundled scenarios: {', '.join(demo_scenario_names())}")
     demo.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
     demo.add_argument("--out", type=Path, default=Path("astaa-deft-demo"), help="where everything is written")
     demo.set_defaults(func=run)
     demo_sub = demo.add_subparsers(dest="demo_command", metavar="ACTION")
-    demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy")
+    demo_run = demo_sub.add_parser("run", help="run one demo scenario through the proxy", epilog="example:\n"
+                                   "  astaa-deft demo run --scenario cut_in --record cut_in.mcap")
     demo_run.add_argument("--scenario", default="lane_follow", help="a bundled scenario name or a scenario YAML path")
     bounded(demo_run, "--duration", RUN_SECONDS, help="stop after S seconds (default: the scenario's time limit)")
-    demo_run.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off")
-    demo_run.add_argument("--passive", action="store_true", help="observe only, no star")
+    demo_run.add_argument("--no-defects", action="store_true", help="switch the demo's seeded defects off "
+                                                                    "(default: on)")
+    demo_run.add_argument("--passive", action="store_true", help="observe only, no star (default: the star proxy)")
     demo_run.add_argument("--record", type=Path,
                           help="where to write the log (default: astaa-deft-demo/SCENARIO.mcap)")
     demo_run.set_defaults(func=run_one)
@@ -127,7 +134,9 @@ def summarise(outcome: RunResult, watch: StatusWatch) -> None:
 
 def run_scenario(scenario: str, *, duration: float | None, defects: bool, passive: bool, record: Path | None,
                  command_line: list[str]) -> int:
-    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well, 3 not fully observed."""
+    """`demo run`: one scenario, recorded and summarised; exit 1 if it did not end well, 3 not fully observed,
+    130 (Ctrl-C) or 143 (SIGTERM) when stopped before the scenario's end."""
+    from astaa_deft.cli.commands.console import interrupted_exit_code, last_stop
     from astaa_deft.engine.session.summary import format_info
     from astaa_deft.io.log.reader import read_log
 
@@ -144,32 +153,74 @@ def run_scenario(scenario: str, *, duration: float | None, defects: bool, passiv
     summarise(outcome, watch)
     say("")
     say(format_info(read_log(record)))
+    if last_stop() is not None:  # stopped before the scenario's end: its summary above, the log finished
+        return interrupted_exit_code()
     if not outcome.complete or not outcome.observed:
         return EXIT_NOT_OBSERVED
     ok = watch.goal and watch.collision is None and not outcome.crashes
     return 0 if ok else 1
 
 
+# What the demo writes in its folder; a new demo there replaces them (one campaign journal, never two runs' mixed).
+DEMO_OUTPUTS = ("clean.mcap", "planner-tests", "intercepted.mcap", "minimised", "campaign")
+
+
 def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
-    """`demo`: record, extract DeFT tests and run them, intercept live, minimise. 0 if every step did its job."""
+    """`demo`: record, extract DeFT tests and run them, intercept live, minimise, fuzz. 0 if every step did its
+    job, 1 if one did not, 130 (Ctrl-C) or 143 (SIGTERM) when stopped: the step under way ends as its command
+    does on a stop, and no later step starts."""
     place = Place(out_dir.resolve(), "--out")
     out_dir = ready_dir(place, temp=True)
     with writing(place):
+        _start_fresh(out_dir)
         return _run_all(scenario, out_dir, command_line)
+
+
+def _start_fresh(out_dir: Path) -> None:
+    """Remove what an earlier demo wrote in ``out_dir`` (only :data:`DEMO_OUTPUTS`), saying so."""
+    import shutil
+
+    earlier = [name for name in DEMO_OUTPUTS if (out_dir / name).exists()]
+    if not earlier:
+        return
+    say(f"starting afresh: the earlier demo's {', '.join(earlier)} in {out_dir} are replaced")
+    for name in earlier:
+        path = out_dir / name
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+
+
+def _stopped(step: str, out_dir: Path) -> int | None:
+    """The exit code when a stop signal arrived during ``step`` (saying so and what is on disk), else None."""
+    from astaa_deft.cli.commands.console import interrupted_exit_code, last_stop
+
+    if last_stop() is None:
+        return None
+    written = [name for name in DEMO_OUTPUTS if (out_dir / name).exists()]
+    say("")
+    say(f"demo stopped by {last_stop()} during {step}; the later steps did not run"
+        + (f"; written so far in {out_dir}: {', '.join(written)}" if written else ""))
+    return interrupted_exit_code()
 
 
 def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     from astaa_deft.engine.bus import process_launch
     from astaa_deft.analysis.deft.workflow import ExtractOptions
+    from astaa_deft.cli.commands.console import forget_stop, stop_as_interrupt
     from astaa_deft.cli.commands.extract import extract
 
     spec_path = demo_spec_path()
     problems: list[str] = []
+    forget_stop()
 
     say(f"== 1/5 record: the demo stack drives '{scenario}' through the star proxy ==")
     clean_log = out_dir / "clean.mcap"
     outcome, watch = drive(DriveOptions(scenario, clean_log, command_line=command_line))
     summarise(outcome, watch)
+    if (code := _stopped("step 1 (record)", out_dir)) is not None:
+        return code
     if not watch.goal or not outcome.passed:
         problems.append("the clean run did not reach its goal with a Pass verdict")
 
@@ -177,9 +228,15 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say("== 2/5 DeFT: deterministic planner tests from that record ==")
     tests_dir = out_dir / "planner-tests"
     extract(clean_log, spec_path, tests_dir, ExtractOptions(ground_truth="debug.inputs"))
+    if (code := _stopped("step 2 (DeFT extraction)", out_dir)) is not None:
+        return code
     say(f"$ pytest {tests_dir.relative_to(Path.cwd()) if tests_dir.is_relative_to(Path.cwd()) else tests_dir}")
-    result = process_launch.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests_dir)],
-                                timeout=None, cwd=str(out_dir))
+    try:
+        with stop_as_interrupt():  # the pytest child in its own process group: stopped by the launcher
+            result = process_launch.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                                         str(tests_dir)], timeout=None, cwd=str(out_dir))
+    except KeyboardInterrupt:
+        return _stopped("step 2 (the module tests' pytest run)", out_dir) or 130
     say(result.stdout.strip().splitlines()[-1] if result.stdout.strip() else result.stderr.strip())
     if result.returncode != 0:
         problems.append("the extracted planner tests did not pass")
@@ -192,6 +249,8 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     outcome, watch = drive(DriveOptions(scenario, attack_log, command_line=command_line, policy=policy,
                                         duration=20.0))
     summarise(outcome, watch)
+    if (code := _stopped("step 3 (live interception)", out_dir)) is not None:
+        return code
     if outcome.verdict is None or outcome.verdict.klass == Verdict.PASS:
         problems.append("the interception did not make any invariant break")
     elif not outcome.complete or not outcome.observed:
@@ -199,14 +258,25 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
     say("")
     say("== 4/5 minimise: which mutations cause that failure? ==")
-    if minimise_step(attack_log, spec_path, out_dir / "minimised") != 0:
+    try:
+        with stop_as_interrupt():
+            minimised = minimise_step(attack_log, spec_path, out_dir / "minimised")
+    except KeyboardInterrupt:
+        minimised = 130
+    if (code := _stopped("step 4 (minimise)", out_dir)) is not None:
+        return code
+    if minimised != 0:
         problems.append("minimisation did not reproduce the failure")
 
     say("")
     say("== 5/5 fuzz: a short campaign finds defects on its own ==")
     from astaa_deft.orchestration.campaign.demo_step import campaign_step
 
-    if campaign_step(spec_path, out_dir / "campaign", say) == 0:
+    with stop_as_interrupt():  # SIGTERM stops the campaign as Ctrl-C does: its journal and report stay readable
+        found = campaign_step(spec_path, out_dir / "campaign", say)
+    if (code := _stopped("step 5 (fuzz)", out_dir)) is not None:
+        return code
+    if found == 0:
         problems.append("the campaign found no failure")
 
     say("")

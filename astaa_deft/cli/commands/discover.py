@@ -19,14 +19,16 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare `spec discover` under the `spec` command's actions."""
-    disc = subparsers.add_parser("discover", help="write a spec skeleton from a running ROS 2 system (rmw_zenoh)")
+    disc = subparsers.add_parser("discover", help="write a spec skeleton from a running ROS 2 system (rmw_zenoh)",
+                                 epilog="example:\n  astaa-deft spec discover --connect tcp/127.0.0.1:7447 -o sut.yaml")
     disc.add_argument("--connect", action="append", required=True, metavar="ENDPOINT",
                       help="the running system's Zenoh router, e.g. tcp/127.0.0.1:7447")
     bounded(disc, "--seconds", LISTEN_SECONDS, default=3.0, help="how long to listen (default 3)")
     disc.add_argument("-o", "--out", type=Path, required=True, help="the spec file to write")
     disc.add_argument("--name", default="discovered", help="the spec's name")
     bounded(disc, "--domain", DOMAIN_ID, help="ROS_DOMAIN_ID to keep (default: the first one seen)")
-    disc.add_argument("--all-topics", action="store_true", help="keep /rosout and /parameter_events too")
+    disc.add_argument("--all-topics", action="store_true", help="keep /rosout and /parameter_events too "
+                                                                "(default: left out)")
     disc.set_defaults(func=run)
 
 

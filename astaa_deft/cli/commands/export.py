@@ -22,7 +22,9 @@ if TYPE_CHECKING:
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `export` command."""
     exp = subparsers.add_parser("export", help="a campaign's confirmed bugs as a pytest regression suite "
-                                               "(module tests and live tests) for the stack's own CI")
+                                               "(module tests and live tests) for the stack's own CI",
+                                 epilog="examples:\n  astaa-deft export campaign/ --spec sut.yaml -o regress/\n"
+                                        "  pytest regress/ -m module")
     exp.add_argument("campaign", type=Path, help="a campaign directory (astaa-deft fuzz -o DIR)")
     exp.add_argument("-o", "--out", type=Path, required=True, help="the suite's folder (e.g. regress/)")
     add_spec_options(exp)

@@ -21,20 +21,25 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `extract` command."""
-    ext = subparsers.add_parser("extract", help="DeFT: turn a recorded run into deterministic planner module tests")
+    ext = subparsers.add_parser("extract", help="DeFT: turn a recorded run into deterministic planner module tests",
+                                 epilog="examples:\n  astaa-deft extract run.mcap --spec specs/demo_av.yaml -o "
+                                        "planner-tests/\n"
+                                        "  pytest planner-tests/")
     ext.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy")
-    ext.add_argument("--spec", type=Path, required=True)
+    ext.add_argument("--spec", type=Path, required=True, help="the SUT spec (YAML) the log was recorded with")
     ext.add_argument("-o", "--out", type=Path, required=True, help="directory for the module tests")
     bounded(ext, "--threshold", THRESHOLD_M, help="accept a frame within this distance, m (default: the spec's)")
     ext.add_argument("--process", action="store_true",
-                     help="replay with the planner's own process in lock-step (needs planner.replay.command)")
+                     help="replay with the planner's own process in lock-step (needs planner.replay.command; "
+                          "default: the replay factory in this process)")
     ext.add_argument("--ground-truth", metavar="FIELD",
-                     help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs)")
+                     help="evaluation only: the output field naming the inputs' header.seq (e.g. debug.inputs; "
+                          "default: none)")
     bounded(ext, "--jobs", PROCESSES, metavar="N",
             help="candidate frames tried at once, in forked processes (default: the idle cores)")
     ext.add_argument("--module", help="a module of the spec's replay: section (default: the planner)")
     ext.add_argument("--resume", action="store_true",
-                     help="continue an interrupted extraction into the same -o directory")
+                     help="continue an interrupted extraction into the same -o directory (default: start afresh)")
     ext.set_defaults(func=run)
 
 

@@ -18,14 +18,22 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `generate` command."""
-    gen = subparsers.add_parser("generate", help="write ASTAA test cases drawn from a spec and the dictionary")
-    gen.add_argument("--spec", type=Path, required=True)
+    gen = subparsers.add_parser("generate", help="write ASTAA test cases drawn from a spec and the dictionary",
+                                 epilog="example:\n  astaa-deft generate --spec specs/demo_av.yaml --count 20 "
+                                        "--seed 1 -o cases/\n"
+                                        "  astaa-deft proxy --spec specs/demo_av.yaml --policy cases/tc-000001.xml "
+                                        "--record run.mcap")
+    gen.add_argument("--spec", type=Path, required=True, help="the SUT spec (YAML) whose channels and fields "
+                                                                  "the cases target")
     bounded(gen, "--count", CASES, required=True, help="test cases to write")
     bounded(gen, "--seed", SEED, required=True, help="the seed of the draw (the same seed, the same cases)")
-    gen.add_argument("-o", "--out", type=Path, required=True)
+    gen.add_argument("-o", "--out", type=Path, required=True, help="the directory the test case files go to")
     bounded(gen, "--duration", WINDOW_SECONDS, default=30.0, help="windows fall inside this many seconds")
-    gen.add_argument("--include-brittle", action="store_true", help="also target timestamps, sequence numbers…")
-    gen.add_argument("--dictionary", type=Path, action="append", default=[])
+    gen.add_argument("--include-brittle", action="store_true", help="also target timestamps, sequence numbers… "
+                     "(default: the spec's brittle fields are left alone)")
+    gen.add_argument("--dictionary", type=Path, action="append", default=[],
+                     help="an exceptional-value dictionary on top of the default one (repeatable; default: "
+                          "the bundled one only)")
     gen.add_argument("--family", action="append", default=None, metavar="NAME",
                      help="draw only these fault families (repeat the option; default: every family but the "
                           "campaign's message faults; docs/policies.md lists them)")

@@ -17,8 +17,9 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare `log info` under the `log` command's actions."""
-    info = subparsers.add_parser("info", help="channels, counts, rates, events of a log")
-    info.add_argument("file", type=Path)
+    info = subparsers.add_parser("info", help="channels, counts, rates, events of a log",
+                                 epilog="example:\n  astaa-deft log info astaa-deft-demo/intercepted.mcap")
+    info.add_argument("file", type=Path, help="an MCAP test log (a truncated one is read as far as it goes)")
     info.set_defaults(func=run)
 
 

@@ -27,24 +27,28 @@ def add_parser(subparsers: SubParsers) -> None:
     """Declare the `minimise` command (alias `minimize`)."""
     mini = subparsers.add_parser("minimise", aliases=["minimize"],
                                  help="delta-debug a failing intercepted run down to the mutations, frames and "
-                                      "fields that cause it")
+                                      "fields that cause it",
+                                 epilog="example:\n  astaa-deft minimise astaa-deft-demo/intercepted.mcap "
+                                        "--spec specs/demo_av.yaml -o minimised/")
     mini.add_argument("log", type=Path, help="a log recorded by astaa-deft proxy --policy …")
     trust = mini.add_mutually_exclusive_group()
-    trust.add_argument("--spec", type=Path, help="the SUT spec (the one stored in the log runs only with "
-                                                 "--trust-log-spec)")
+    trust.add_argument("--spec", type=Path, help="the SUT spec (default: none; the one stored in the log "
+                                                 "runs only with --trust-log-spec)")
     trust.add_argument("--trust-log-spec", action="store_true",
                        help="run the module commands and replay factories the spec stored in the log names "
-                            "(without it, minimise lists them and stops: a log is data)")
+                            "(default: off — minimise lists them and stops: a log is data)")
     mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation)")
     mini.add_argument("-o", "--out", type=Path, required=True, help="directory for the minimised test case and tests")
     bounded(mini, "--repeats", REPEATS, default=1, help="whole-SUT re-runs per test when no replay applies")
     bounded(mini, "--parallel", PROCESSES, default=2, help="tests run at once where the replay allows")
-    mini.add_argument("--live-only", action="store_true", help="always re-run the whole SUT (no module replay)")
+    mini.add_argument("--live-only", action="store_true", help="always re-run the whole SUT (default: a module "
+                                                               "replay where the spec allows)")
     bounded(mini, "--confirm", RERUNS, default=3, help="live re-runs of the final result, to report its rate")
-    bounded(mini, "--max-tests", CASES, help="stop after this many tests and keep the smallest failure")
+    bounded(mini, "--max-tests", CASES, help="stop after this many tests and keep the smallest failure "
+                                             "(default: no limit)")
     mini.add_argument("--no-live-fallback", action="store_true",
                       help="when the planner replay does not reproduce the failure, stop (exit 1) "
-                           "instead of re-running the SUT")
+                           "instead of re-running the SUT (default: fall back to live runs)")
     bounded(mini, "--jobs", PROCESSES, default=1,
             help="whole-system runs at once (live tests, confirmations), each an isolated session")
     mini.set_defaults(func=run)

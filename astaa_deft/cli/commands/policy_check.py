@@ -19,10 +19,14 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare `policy check` under the `policy` command's actions."""
-    pc = subparsers.add_parser("check", help="validate test case files (or directories of them)")
-    pc.add_argument("files", type=Path, nargs="+")
-    pc.add_argument("--spec", type=Path, help="also check channels, fields and values against this spec")
-    pc.add_argument("--dictionary", type=Path, action="append", default=[])
+    pc = subparsers.add_parser("check", help="validate test case files (or directories of them)",
+                               epilog="example:\n  astaa-deft policy check policies/examples/demo_*.xml --spec "
+                                      "specs/demo_av.yaml")
+    pc.add_argument("files", type=Path, nargs="+", help="test case XML files or directories of them")
+    pc.add_argument("--spec", type=Path, help="also check channels, fields and values against this spec "
+                                              "(default: the XSD only)")
+    pc.add_argument("--dictionary", type=Path, action="append", default=[],
+                    help="a dictionary whose value names the test cases use (repeatable; default: the bundled one)")
     pc.set_defaults(func=run)
 
 

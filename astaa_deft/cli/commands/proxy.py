@@ -33,22 +33,30 @@ EXIT_NOT_OBSERVED = 3  # the tool lost its recorder or bus router: no verdict ca
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `proxy` command."""
-    proxy = subparsers.add_parser("proxy", help="run the SUT through the proxy and record the bus")
+    proxy = subparsers.add_parser("proxy", help="run the SUT through the proxy and record the bus", epilog=(
+        "examples:\n  astaa-deft proxy --spec specs/demo_av.yaml --record run.mcap --duration 30\n"
+        "  astaa-deft proxy --spec specs/demo_av.yaml --policy policies/examples/demo_nan_speed_limit.xml "
+        "--record attacked.mcap\n  astaa-deft proxy --spec sut.yaml --no-launch --passive --record run.mcap"))
     proxy.add_argument("--spec", type=Path, required=True, help="the SUT spec (YAML)")
-    proxy.add_argument("--record", type=Path, help="write the MCAP test log here")
+    proxy.add_argument("--record", type=Path, help="write the MCAP test log here (default: no log)")
     proxy.add_argument("--passive", action="store_true",
-                       help="observe only (no man in the middle): adds nothing to the SUT's message path")
+                       help="observe only (no man in the middle): adds nothing to the SUT's message path "
+                            "(default: the star proxy)")
     bounded(proxy, "--duration", RUN_SECONDS, help="stop after S seconds (default: until Ctrl-C)")
     proxy.add_argument("--launch", action=argparse.BooleanOptionalAction, default=True,
                        help="start the spec's modules (default) or attach to a running SUT (--no-launch)")
     proxy.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                       help="override a spec param used in module commands")
-    proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here")
-    proxy.add_argument("--stop-on-violation", action="store_true", help="end the run at the first broken invariant")
+                       help="override a spec param used in module commands (repeatable; default: the spec's values)")
+    proxy.add_argument("--run-dir", type=Path, help="keep module logs and Zenoh configs here (default: a "
+                                                    "temporary folder)")
+    proxy.add_argument("--stop-on-violation", action="store_true", help="end the run at the first broken "
+                                                                        "invariant (default: run on)")
     proxy.add_argument("--policy", type=Path,
-                       help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages")
+                       help="an ASTAA test case (XML): rewrite, drop, delay or inject live messages "
+                            "(default: none, messages pass unchanged)")
     proxy.add_argument("--dictionary", type=Path, action="append", default=[],
-                       help="an exceptional-value dictionary on top of the default one (repeatable)")
+                       help="an exceptional-value dictionary on top of the default one (repeatable; "
+                            "default: the bundled one only)")
     proxy.set_defaults(func=run)
 
 

@@ -23,10 +23,12 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: SubParsers) -> None:
     """Declare `spec check` under the `spec` command's actions."""
-    check = subparsers.add_parser("check", help="validate a SUT spec")
-    check.add_argument("file", type=Path)
+    check = subparsers.add_parser("check", help="validate a SUT spec", epilog=(
+        "example:\n  astaa-deft spec check specs/demo_av.yaml --param scenario=cut_in"))
+    check.add_argument("file", type=Path, help="the SUT spec (YAML)")
     check.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                       help="also check a param value (against the param's declared choices)")
+                       help="also check a param value (against the param's declared choices; repeatable; "
+                            "default: none)")
     check.set_defaults(func=run)
 
 

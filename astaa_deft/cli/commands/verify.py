@@ -27,22 +27,28 @@ if TYPE_CHECKING:
 def add_parser(subparsers: SubParsers) -> None:
     """Declare the `verify` command."""
     ver = subparsers.add_parser("verify", help="re-check a campaign's buckets against the stack as it is now: "
-                                               "fixed, still failing, changed or flaky")
+                                               "fixed, still failing, changed or flaky",
+                                 epilog="examples:\n  astaa-deft verify campaign/ --spec sut.yaml\n"
+                                        "  astaa-deft verify campaign/ --spec sut.yaml --bucket B003 --label fixed\n"
+                                        "  astaa-deft verify campaign/ --spec sut.yaml --bucket B003 "
+                                        "--bisect v1.0..HEAD --build 'pip install -q .'")
     ver.add_argument("campaign", type=Path, help="a campaign directory (astaa-deft fuzz -o DIR)")
     add_spec_options(ver)
     ver.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                     help="override a spec param of every run (as in proxy)")
+                     help="override a spec param of every run (as in proxy; default: the campaign's)")
     bounded(ver, "--runs", REPEATS, default=3, help="runs of each test case, and as many unmutated twins (default 3)")
     ver.add_argument("--label", help="the stack's revision (default: git describe of the spec's source: folder)")
-    ver.add_argument("--bucket", action="append", default=[], metavar="B003", help="check only this bucket")
+    ver.add_argument("--bucket", action="append", default=[], metavar="B003",
+                     help="check only this bucket (repeatable; default: every bucket)")
     ver.add_argument("--dictionary", type=Path, action="append", default=[],
-                     help="the campaign's extra dictionaries (its test cases may name their values)")
+                     help="the campaign's extra dictionaries (its test cases may name their values; "
+                          "default: the bundled one only)")
     bounded(ver, "--workers", PROCESSES, help="runs at once (default: the campaign's)")
     ver.add_argument("--bisect", metavar="GOOD..BAD",
                      help="the first revision between these where the bucket starts or stops failing "
-                          "(git revisions of the spec's source: checkout; needs --bucket)")
+                          "(git revisions of the spec's source: checkout; needs --bucket; default: no bisection)")
     ver.add_argument("--build", metavar="CMD", help="with --bisect: a shell command run in the checkout after "
-                                                   "each checkout (e.g. 'pip install -q .')")
+                                                   "each checkout (e.g. 'pip install -q .'; default: none)")
     ver.set_defaults(func=run)
 
 
@@ -50,12 +56,12 @@ def add_spec_options(parser: argparse.ArgumentParser) -> None:
     """``--spec`` / ``--trust-journal-spec``: what a command that re-runs a campaign's findings runs."""
     trust = parser.add_mutually_exclusive_group()
     trust.add_argument("--spec", type=Path, metavar="FILE",
-                       help="the stack's SUT spec (your own copy): what the live runs and module tests run; "
-                            "without it the spec the campaign's journal names is used only with "
-                            "--trust-journal-spec")
+                       help="the stack's SUT spec (your own copy): what the live runs and module tests run "
+                            "(default: none — the spec the campaign's journal names is used only with "
+                            "--trust-journal-spec)")
     trust.add_argument("--trust-journal-spec", action="store_true",
-                       help="run the spec the journal names (a campaign folder is data: without --spec, the "
-                            "command refuses and lists what that spec would run)")
+                       help="run the spec the journal names (default: without --spec, refuse and list what that "
+                            "spec would run; a campaign folder is data)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -137,6 +137,12 @@ def clean_horizon(spec: Spec, given: float | None) -> float:
     return run.time_limit if run.time_limit is not None else CLEAN_RUN_CAP
 
 
+def _cluster_workers(address: str) -> int | None:
+    from astaa_deft.orchestration.campaign.executors import cluster_workers  # imports dask: cluster campaigns only
+
+    return cluster_workers(address)
+
+
 def default_workers(module_count: int, cores: int | None = None) -> int:
     cores = cores or os.cpu_count() or 1
     per_run = HELPER_CORES + CORES_PER_MODULE * module_count
@@ -179,7 +185,9 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
         self.cores = os.cpu_count() or 1
         # Runs at once: the user's, else measured in the baseline (calibrate); this estimate until then.
         self.calibrated = config.workers is None and config.cluster is None
-        self.workers = config.workers or default_workers(len(self.spec.modules))
+        # On a cluster, by default as many runs at once as it has workers (each runs one case at a time).
+        self.workers = (config.workers or (_cluster_workers(config.cluster) if config.cluster else None)
+                        or default_workers(len(self.spec.modules)))
         self.started = time.monotonic()
         self.timing = Timing(None, self.clean_horizon)
         self.known: dict[str, KnownFinding] = {}  # invariants the unmutated SUT breaks (judged after each run)
@@ -202,7 +210,7 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
         self.journal.set_meta(spec=str(self.config.spec_path.resolve()), seed=self.config.seed,
                               strategy=self.config.strategy, params=self.config.params, horizon=self.config.horizon,
                               horizon_derived=self.config.horizon is None, cases=self.config.cases,
-                              budget=self.config.budget)
+                              budget=self.config.budget, minimise=self.config.minimise)
         requeued = self.journal.requeue_running()
         if requeued:
             self.say(f"resume: {requeued} case(s) that were in flight run again")

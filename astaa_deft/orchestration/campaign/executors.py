@@ -23,6 +23,7 @@ from astaa_deft.engine.bus.process_launch import start
 from astaa_deft.engine.bus.processes import python_module, stop_process, tail
 from astaa_deft.io import pipe_messages
 from astaa_deft.io.pipe_messages import FrameError, bytes_reader
+from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
 from astaa_deft.orchestration.campaign.model import CaseOutcome
 from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
@@ -196,6 +197,28 @@ class LocalPool:
 def _key(payload: CasePayload) -> tuple[str, ...]:
     """What a case process preloads: the spec and the dictionaries."""
     return (payload.spec, *payload.dictionaries)
+
+
+CLUSTER_CONNECT_SECONDS = 10.0  # a scheduler that does not answer within this is unreachable
+
+
+def cluster_workers(address: str) -> int | None:
+    """How many workers the cluster at ``address`` has: K for ``local:K``, else the running scheduler's count
+    (None: ``local:`` without K, or a scheduler with no worker yet). InputError when the scheduler cannot be
+    reached, naming it."""
+    kind, _, count = address.partition(":")
+    if kind == "local":
+        return int(count) if count else None
+    from dask.distributed import Client
+
+    try:
+        with Client(address, timeout=CLUSTER_CONNECT_SECONDS) as client:
+            return len(client.scheduler_info().get("workers", {})) or None
+    except (OSError, TimeoutError) as exc:
+        raise InputError(Problem("--cluster", None, None, f"no Dask scheduler answers at {address} ({exc})",
+                                 "start one (dask scheduler --host 127.0.0.1 --dashboard-address 127.0.0.1:0, "
+                                 "then dask worker ADDRESS --host 127.0.0.1 --dashboard-address 127.0.0.1:0) "
+                                 "or give local:K")) from None
 
 
 class DaskPool:

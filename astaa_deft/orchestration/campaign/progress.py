@@ -8,6 +8,7 @@ import time
 from dataclasses import dataclass
 from typing import TextIO
 
+from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import MUTATED
 
@@ -57,8 +58,12 @@ def snapshot(journal: Journal, planned: int | None, elapsed: float, at_once: int
     failures = journal.db.execute("SELECT COUNT(*) FROM cases WHERE kind=? AND verdict NOT IN ('Pass', '?')",
                                   (MUTATED,)).fetchone()[0]
     live = journal.buckets(include_merged=False)
-    return Snapshot(done, planned, failures, len(live), running, elapsed, sum(1 for b in live if b.is_bug),
-                    at_once, os.getloadavg()[0], os.cpu_count())
+    # A bucket the fault alone causes (blamed on the mutated value itself) is no bug of the stack (standing.py).
+    blames = journal.blames()
+    alone = {name for name, blame in blames.items() if blame.how == MUTATED_VALUE}
+    bugs = sum(1 for b in live if b.is_bug and b.bucket not in alone)
+    return Snapshot(done, planned, failures, len(live), running, elapsed, bugs, at_once, os.getloadavg()[0],
+                    os.cpu_count())
 
 
 class Progress:

@@ -89,7 +89,7 @@ seen at</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>\
 <td class='family'>{% if b.without_mutation %}<span class='muted'>without mutation</span>\
 {% else %}{% for part in row.family %}<div>{{ part }}</div>{% endfor %}{% endif %}</td>\
 <td class='culprit'>{% if row.culprit is not none %}{{ row.culprit }}\
-{% else %}<span class='muted'>not minimised</span>{% endif %}</td>\
+{% else %}<span class='muted'>not minimised: {{ row.not_minimised }}</span>{% endif %}</td>\
 <td>{{ b.cases }}</td><td>{{ row.rate }}</td><td>\
 {% for link in row.links %}{% if not loop.first %}<br>{% endif %}\
 {% if link.what == 'log' %}<a href='{{ link.href }}'>failing log</a> \
@@ -106,8 +106,10 @@ seen at</th><th>mutation family</th><th>culprit (minimised)</th><th>cases</th>\
 <summary>{{ 'minimal test case' if row.minimal else 'first failing test case (not minimised)' }} (XML)</summary>\
 <pre>{{ row.xml }}</pre></details></td></tr>
 {% endif %}{% endfor %}</table><p class='muted'>status: confirmed — a re-run failed the same way, or the minimal \
-test case failed live; unconfirmed — no re-run reproduced it (not counted as a bug); flaky — the campaign's run \
-without mutation failed too; without mutation — clean runs fail this way. Ranked by status, severity, rate. \
+test case failed live; fault alone — reproduced, but the fault alone breaks the invariant through a plant (the \
+simulator carries the mutated value on) and no module under test is involved (not counted as a bug); \
+unconfirmed — no re-run reproduced it (not counted as a bug); flaky — the campaign's run without mutation failed \
+too; without mutation — clean runs fail this way. Ranked by status, severity, rate. \
 rate: re-runs of a bucket's first failure that failed the same way (for a bucket without mutation: clean runs \
 that failed this way). cases: generated cases filed in the bucket.</p>
 {% endif %}{% if blames %}<h2>Blame</h2><table><tr><th>bucket</th><th>module to blame</th><th>chain</th>\
@@ -271,6 +273,7 @@ class _BucketRow:
     colour: str
     family: list[str]  # one part a line
     culprit: str | None  # None: not minimised
+    not_minimised: str  # why it was not, when culprit is None
     rate: str
     links: list[_Link]
     xml: str
@@ -282,17 +285,32 @@ def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
     """The buckets table's rows (ranked, merged ones last); none: the page says there was no failure."""
     minimised = journal.minimisations()
     checked = journal.module_tests()
+    minimising = journal.meta().minimise
     rows = []
     for b in buckets:
         fails, runs = journal.rate(b)
-        rows.append(_bucket_rows(b, standing=by_bucket.get(b.bucket), first=journal.case(b.first_case),
+        standing = by_bucket.get(b.bucket)
+        rows.append(_bucket_rows(b, standing=standing, first=journal.case(b.first_case),
                                  m=minimised.get(b.bucket), checked=checked.get(b.bucket),
-                                 rate=f"{fails}/{runs}" if runs else "-", out=out))
+                                 rate=f"{fails}/{runs}" if runs else "-", out=out,
+                                 not_minimised=not_minimised_why(b, standing, minimising)))
     return rows
 
 
+def not_minimised_why(bucket: Bucket, standing: Standing | None, minimising: bool | None) -> str:
+    """Why a bucket has no minimisation: the campaign's setting, the bucket's standing, or the campaign's end."""
+    if bucket.merged_into:
+        return f"merged into {bucket.merged_into}"
+    if minimising is False:
+        return "minimisation was off for this campaign (fuzz --no-minimise; the demo's short campaign)"
+    if not bucket.is_bug:
+        status = standing.status if standing is not None else bucket.kind
+        return f"only reproduced buckets are minimised, and this one is {status}"
+    return "the campaign ended before its turn (astaa-deft fuzz --resume minimises it)"
+
+
 def _bucket_rows(b: Bucket, *, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
-                 checked: ModuleTestsRow | None, rate: str, out: Path) -> _BucketRow:
+                 checked: ModuleTestsRow | None, rate: str, out: Path, not_minimised: str) -> _BucketRow:
     """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
     minimal_xml = m.minimal_xml if m is not None else None
     xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
@@ -300,7 +318,7 @@ def _bucket_rows(b: Bucket, *, standing: Standing | None, first: CaseRow | None,
         bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
         colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
         family=[] if b.without_mutation else str(b.family).split("+"),
-        culprit=(m.culprit or m.status) if m is not None else None,
+        culprit=(m.culprit or m.status) if m is not None else None, not_minimised=not_minimised,
         rate=rate, links=_links(first, m, checked, out), xml=str(xml), minimal=bool(minimal_xml))
 
 
@@ -423,8 +441,13 @@ def _plots(journal: Journal, done: list[CaseRow], buckets: list[Bucket]) -> list
             best = min(margin, series[-1][1]) if series else margin
             series.append((n, best))
     fig, ax = plt.subplots(figsize=(5, 3.2))
+    last = len(ordered)
     for (strategy, inv), series in sorted(closest.items()):
-        ax.step([p[0] for p in series], [p[1] for p in series], where="post", label=f"{inv} ({strategy})")
+        # Held to the last case finished, with a mark per case: a series of one case still draws its line.
+        xs_, ys_ = [p[0] for p in series], [p[1] for p in series]
+        if xs_[-1] < last:
+            xs_, ys_ = [*xs_, last], [*ys_, ys_[-1]]
+        ax.step(xs_, ys_, where="post", marker="o", markersize=2.5, label=f"{inv} ({strategy})")
     if closest:
         ax.legend(fontsize=6)
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -436,7 +459,8 @@ def _plots(journal: Journal, done: list[CaseRow], buckets: list[Bucket]) -> list
     fig, ax = plt.subplots(figsize=(5, 3.2))
     ax.hist([r.seconds for r in done if r.seconds is not None] or [0], bins=20, color="tab:green")
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("seconds per case")
+    ax.set_xlabel("seconds per case (wall time of one run)")
+    ax.set_ylabel("cases")
     ax.set_title("Time per case")
     out.append(("Time per case", _png(fig, plt)))
     return out

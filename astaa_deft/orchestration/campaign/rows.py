@@ -175,6 +175,7 @@ class CampaignMeta:
     workers: int | None = None  # the runs at once calibration chose
     timing: Timing | None = None
     overloaded_runs: tuple[str, ...] = ()  # baseline runs of a batch whose timing drifted
+    minimise: bool | None = None  # the campaign minimises its confirmed buckets (None: a journal that did not say)
 
     @classmethod
     def from_json(cls, values: JsonObject) -> CampaignMeta:

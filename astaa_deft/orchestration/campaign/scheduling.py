@@ -37,7 +37,11 @@ class Scheduling(CampaignParts):
         from astaa_deft.orchestration.campaign.executors import DaskPool, LocalPool
 
         if self.config.cluster:
-            return DaskPool(self.config.cluster, self.workers)
+            pool = DaskPool(self.config.cluster, self.workers)
+            if self.config.workers is None and pool.workers != self.workers:  # workers joined or left since
+                self.say(f"runs at once: {pool.workers}, the cluster's workers now")
+                self.workers = pool.workers
+            return pool
         # Threads for as many runs as calibration may pick; the campaign keeps self.workers of them busy.
         return LocalPool(self.workers if not self.calibrated else self._most_workers())
 

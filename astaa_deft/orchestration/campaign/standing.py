@@ -7,8 +7,12 @@ failing live). A bucket whose re-runs reproduced it 0 times is
 *unconfirmed*, never counted as a bug; one whose unmutated twin failed too
 or that did not reproduce (*flaky*: the SUT's own flakiness or the
 environment), one failing in clean runs (*without mutation*) and one whose
-re-runs and twins are still running (*confirming*) are shown apart. Buckets rank by status, then severity (the
-invariant's: critical first), then rate; the headline counts confirmed bugs
+re-runs and twins are still running (*confirming*) are shown apart. So is a
+reproduced bucket whose blame is the mutated value itself (*fault alone*:
+the fault breaks the invariant through a plant, no module under test
+mishandled anything — ``blame.py``): the fault is doing what it says, which is
+no bug of the stack, so the headline never counts it among the confirmed bugs.
+Buckets rank by status, then severity (the invariant's: critical first), then rate; the headline counts confirmed bugs
 by severity and names the most severe. Pure logic over journal rows.
 """
 
@@ -18,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from astaa_deft.engine.monitor.violation import SEVERITIES
+from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
 from astaa_deft.orchestration.campaign.journal import Bucket, Journal
 from astaa_deft.model.vocabulary import TextEnum
 from astaa_deft.orchestration.campaign.model import BucketKind
@@ -29,6 +34,7 @@ class BucketStatus(TextEnum):
     """Where a bucket stands, in rank order (confirmed first)."""
 
     CONFIRMED = "confirmed"
+    FAULT_ALONE = "fault alone"
     PENDING = "confirming"
     UNCONFIRMED = "unconfirmed"
     FLAKY = "flaky"
@@ -36,6 +42,8 @@ class BucketStatus(TextEnum):
 
 
 CONFIRMED = BucketStatus.CONFIRMED
+FAULT_ALONE = BucketStatus.FAULT_ALONE
+FAULT_ALONE_WHY = "the fault alone breaks the invariant; no module under test involved"
 UNCONFIRMED = BucketStatus.UNCONFIRMED
 FLAKY = BucketStatus.FLAKY
 WITHOUT_MUTATION = BucketStatus.WITHOUT_MUTATION
@@ -68,10 +76,18 @@ class Standing:
                 f"{' (seen at ' + b.module + ')' if b.module else ''} — {self.status} ({self.why})")
 
 
-def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool) -> tuple[BucketStatus, str]:
-    """(status, why) of a bucket from the campaign's kind for it, its rate and whether its minimal test case was
-    confirmed live."""
+def bucket_status(bucket: Bucket, failures: int, runs: int, minimised: bool, *,
+                  fault_alone: bool = False) -> tuple[BucketStatus, str]:
+    """(status, why) of a bucket from the campaign's kind for it, its rate, whether its minimal test case was
+    confirmed live and whether its blame is the mutated value itself (``fault_alone``)."""
     twins = f"; unmutated twins {bucket.control_failures}/{bucket.controls} failed" if bucket.controls else ""
+    status, why = _status(bucket, failures=failures, runs=runs, minimised=minimised, twins=twins)
+    if status == CONFIRMED and fault_alone:
+        return FAULT_ALONE, f"{FAULT_ALONE_WHY}; {why}"
+    return status, why
+
+
+def _status(bucket: Bucket, *, failures: int, runs: int, minimised: bool, twins: str) -> tuple[BucketStatus, str]:
     if bucket.without_mutation or bucket.kind == BucketKind.BASELINE:
         return WITHOUT_MUTATION, f"{failures}/{runs} clean runs failed this way"
     if bucket.kind == BucketKind.FLAKY:
@@ -99,11 +115,14 @@ def rank(standings: Sequence[Standing]) -> list[Standing]:
 def standings(journal: Journal) -> list[Standing]:
     """Every bucket not merged into another, ranked (:func:`rank`)."""
     minimised = journal.minimisations()
+    blames = journal.blames()
     out = []
     for bucket in journal.buckets(include_merged=False):
         failures, runs = journal.rate(bucket)
         row = minimised.get(bucket.bucket)
-        status, why = bucket_status(bucket, failures, runs, row is not None and row.exit_code == 0)
+        blame = blames.get(bucket.bucket)
+        status, why = bucket_status(bucket, failures, runs, row is not None and row.exit_code == 0,
+                                    fault_alone=blame is not None and blame.how == MUTATED_VALUE)
         out.append(Standing(bucket, status, why, _severity(journal.case(bucket.first_case)), failures, runs))
     return rank(out)
 
@@ -118,7 +137,8 @@ def _severity(row: CaseRow | None) -> str:
 
 
 def headline(ranked: Sequence[Standing]) -> str:
-    """E.g. "2 confirmed bugs (1 critical, 1 high); 3 unconfirmed; 1 flaky; 1 failing without mutation"."""
+    """E.g. "2 confirmed bugs (1 critical, 1 high); 1 where the fault alone breaks the invariant (no module under
+    test involved: not counted as bugs); 3 unconfirmed; 1 flaky; 1 failing without mutation"."""
     confirmed = [s for s in ranked if s.status == CONFIRMED]
     if confirmed:
         by_severity = [(sev, sum(1 for s in confirmed if s.severity == sev)) for sev in (*reversed(SEVERITIES), "?")]
@@ -133,6 +153,9 @@ def headline(ranked: Sequence[Standing]) -> str:
     for status, n in others.items():
         if status == UNCONFIRMED:
             parts.append(f"{n} unconfirmed (no re-run reproduced {'it' if n == 1 else 'them'}: not counted as bugs)")
+        elif status == FAULT_ALONE:
+            parts.append(f"{n} where the fault alone breaks the invariant (no module under test involved: "
+                         f"not counted as {'a bug' if n == 1 else 'bugs'})")
         elif status == WITHOUT_MUTATION:
             parts.append(f"{n} failing without mutation")
         else:

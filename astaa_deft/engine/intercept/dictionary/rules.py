@@ -206,7 +206,7 @@ def _sibling_arrays(site: FieldSite, ctx: ValueContext) -> list[list]:
 
 # ---------------------------------------------------------------- semantic rules: plausible but wrong
 #
-# Well-typed values a real upstream module produces by mistake (issue 33): a declared bound hit exactly,
+# Well-typed values a real upstream module produces by mistake: a declared bound hit exactly,
 # a sign flipped, an angle off by a turn, a unit mixed up, an array in another order. The semantic fault
 # families of ``astaa_deft.engine.intercept.faults`` draw them; they are ordinary dictionary entries too.
 
