@@ -1,6 +1,7 @@
 """``astaa-deft export DIR -o regress/``: a campaign's findings as a pytest suite for the stack's own CI.
 
-For every confirmed bucket (kind bug, not merged): its minimal test case
+For every confirmed bucket (kind bug, not merged, not one where the fault
+alone breaks the invariant through a plant): its minimal test case
 (or its first failing one) under ``cases/``, one live test in
 ``test_live.py`` named ``test_<bucket>_<culprit>`` (marked ``live``), and
 its DeFT module tests under ``module/<bucket>_<culprit>/`` (their oracle
@@ -30,7 +31,9 @@ from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import OutputError, Place, ready_dir, subdir_inside, write_atomic, writing
 from astaa_deft.model.data_names import python_name
 from astaa_deft.model.errors import Problem
+from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_SETTLE, culprit_family
+from astaa_deft.orchestration.campaign.standing import FAULT_ALONE_WHY
 from astaa_deft.orchestration.verify.regress import MANIFEST, MARKERS
 from astaa_deft.orchestration.verify.campaign_files import copy_module_suite, has_oracles
 from astaa_deft.orchestration.verify.workflow import CampaignFindings, targets
@@ -109,6 +112,7 @@ def export_suite(campaign_dir: Path, out: Path, *, spec: Path | None = None,
         exported: list[ExportedBucket] = []
         buckets: dict[str, dict[str, object]] = {}
         minimised = campaign.journal.minimisations()
+        blames = campaign.journal.blames()
         taken: set[str] = set()
         with writing(place):
             for name in earlier:
@@ -122,6 +126,10 @@ def export_suite(campaign_dir: Path, out: Path, *, spec: Path | None = None,
                 bucket = target.bucket
                 if not bucket.is_bug:
                     skipped.append(f"{bucket.bucket}: {bucket.kind}, not a confirmed bug")
+                    continue
+                blame = blames.get(bucket.bucket)
+                if blame is not None and blame.how == MUTATED_VALUE:  # no module under test to test for it
+                    skipped.append(f"{bucket.bucket}: {FAULT_ALONE_WHY}, not a bug of the stack")
                     continue
                 m = minimised.get(bucket.bucket)
                 name = _test_name(bucket.bucket, culprit_family(m.culprit) if m and m.culprit else bucket.family,
