@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+import ompl  # noqa: F401  -- in the test extra; the stack's planner needs it (a venv without it fails, not skips)
 
 from astaa_deft.cli.commands.console import PLAIN_PERIOD_S, PlainLines
 from astaa_deft.analysis.deft.checkpoint import STATE
@@ -59,7 +60,6 @@ def test_plain_progress_repeats_the_latest_state_while_nothing_changes():
 
 
 # -- partial results, a stop, and going on ------------------------------------------------------------
-ompl = pytest.importorskip("ompl", reason="OMPL (pip install ompl, in the test extra) is not importable here")
 
 
 @pytest.fixture(scope="module")

@@ -131,10 +131,9 @@ def test_kill_9_of_proxy_keeps_the_log_readable(tmp_path):
                  if k == "test/data"}
     contents = read_log(log)  # must not raise
     recorded = {json.loads(m.data)["header"]["seq"] for m in contents.on("test/data")}
-    recovered = len(delivered & recorded) / len(delivered)
-    print(f"kill -9 of the proxy: {len(delivered)} delivered, {recovered:.2%} of them in the log")
+    print(f"kill -9 of the proxy: {len(delivered)} delivered, {len(delivered & recorded)} of them in the log")
     assert len(delivered) >= 1500
-    assert recovered >= 0.99
+    assert sorted(delivered - recorded) == []  # every message the consumer received is in the log
 
 
 def test_unwritable_log_path_is_one_clear_error(tmp_path):
