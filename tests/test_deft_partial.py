@@ -69,6 +69,7 @@ def heavy_log(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_an_extraction_stopped_by_timeout_leaves_the_decided_tests_and_a_summary(heavy_log, tmp_path):
     out = tmp_path / "tests"
     # `timeout` passes its stop on to the command as it does when its time is up (SIGTERM). The stop comes
@@ -107,6 +108,7 @@ def light_log(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_resume_goes_on_after_the_outputs_decided_before(light_log, tmp_path):
     out = tmp_path / "tests"
     stop_after = 6
