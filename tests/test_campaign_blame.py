@@ -102,6 +102,7 @@ class Fixed(Strategy):
 
 
 @pytest.mark.slow  # ~22 s: seven real runs of the pipe stack
+@pytest.mark.promise
 def test_a_nan_in_x_and_in_y_are_one_bucket_blamed_on_the_relay_with_the_chain_journalled(tmp_path: Path):
     out = tmp_path / "c"
     journal = Journal(out)
@@ -127,6 +128,7 @@ def test_a_nan_in_x_and_in_y_are_one_bucket_blamed_on_the_relay_with_the_chain_j
 
 
 @pytest.mark.slow  # ~2-3 min: demo runs, then a minimisation
+@pytest.mark.promise
 def test_on_the_demo_the_planner_is_blamed_and_its_replay_confirms_it(tmp_path: Path):
     # Seeded defect 1: an infinite routing speed limit makes the planner plan over the limit (planned_speed).
     from astaa_deft.demo.bundled import demo_spec_path

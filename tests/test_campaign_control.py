@@ -190,6 +190,7 @@ def test_the_baseline_runs_every_param_value_and_calibrates_the_runs_at_once(tmp
 
 
 @pytest.mark.slow  # a live minimisation beside eight cases: ~90 s on a loaded machine
+@pytest.mark.promise
 def test_a_confirmed_bucket_is_minimised_while_the_hunt_goes_on(tmp_path: Path):
     # The worker crashes on a NaN 'aux' value: a bug the case's mutation causes (its twin passes). Two runs at
     # once: the minimisation takes one slot as soon as the bucket is confirmed, cases go on in the other.
@@ -209,6 +210,7 @@ def test_a_confirmed_bucket_is_minimised_while_the_hunt_goes_on(tmp_path: Path):
 
 
 @pytest.mark.slow  # a live minimisation and eight cases one at a time: ~2 min
+@pytest.mark.promise
 def test_a_minimisation_holding_the_only_slot_pauses_the_hunt_and_does_not_end_it(tmp_path: Path):
     # One run at once (a heavy stack): the confirmed bucket's minimisation takes the only slot. The campaign
     # waited for nothing then and ended "done" with most of its cases never run.

@@ -70,6 +70,7 @@ def test_by_default_the_baseline_ends_with_the_scenario_and_the_horizon_derives_
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_a_40_s_scenario_is_run_to_its_end_by_default_baselines(tmp_path: Path):
     journal = fuzz(tmp_path / "c", 400)  # 400 status messages at 10 Hz: 40 s
     try:

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import ompl  # noqa: F401  -- in the test extra; the stack's planner needs it (a venv without it fails, not skips)
 
 from astaa_deft.orchestration.campaign.module_tests import (
     add_failure_frame, is_crash_bucket, judge_pytest, run_module_tests,
@@ -50,7 +51,6 @@ def test_crash_buckets_are_exits_and_the_monitors_of_exceptions():
 
 @pytest.mark.slow  # ~1-2 min: a live run, then DeFT's candidate search over every planner output
 def test_a_planner_that_raised_in_a_cycle_fails_its_module_tests_on_that_cycle(tmp_path):
-    pytest.importorskip("ompl", reason="OMPL (pip install ompl, in the test extra) is not importable here")
     log = tmp_path / "nan_heading.mcap"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"PYTHONPATH": str(Path.cwd())}
     res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "proxy", "--spec", str(SPEC), "--policy",

@@ -37,6 +37,7 @@ def test_a_spec_without_lanes_stops_the_strategy_with_a_clear_error():
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp_path: Path):
     spec = load_spec(SPEC_PATH)
     strategy = DecictorStrategy(spec, load_dictionary(), 0, 15.0)

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+import ompl  # noqa: F401  -- in the test extra; the stack's planner needs it (a venv without it fails, not skips)
 
 from astaa_deft.cli.commands.console import PLAIN_PERIOD_S, PlainLines
 from astaa_deft.analysis.deft.checkpoint import STATE
@@ -59,7 +60,6 @@ def test_plain_progress_repeats_the_latest_state_while_nothing_changes():
 
 
 # -- partial results, a stop, and going on ------------------------------------------------------------
-ompl = pytest.importorskip("ompl", reason="OMPL (pip install ompl, in the test extra) is not importable here")
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +69,7 @@ def heavy_log(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_an_extraction_stopped_by_timeout_leaves_the_decided_tests_and_a_summary(heavy_log, tmp_path):
     out = tmp_path / "tests"
     # `timeout` passes its stop on to the command as it does when its time is up (SIGTERM). The stop comes
@@ -107,6 +108,7 @@ def light_log(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_resume_goes_on_after_the_outputs_decided_before(light_log, tmp_path):
     out = tmp_path / "tests"
     stop_after = 6

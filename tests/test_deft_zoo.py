@@ -1,14 +1,12 @@
-"""DeFT on the zoo of module behaviours (issue 31; tests/zoo): the generator, its floor, extraction held to both.
+"""DeFT on the zoo of module behaviours (tests/zoo): the generator, its floor, extraction held to both.
 
 The generator's own checks run on their own (no bus). A short form of the
 zoo (``zoo.SHORT``: three members, 2 s of bus time each) runs in the
 default run, the whole zoo behind ``-m slow``; for each member, one real run
 on the bus, then: the plain-replay floor is computed; extraction at θ = 0
 reproduces at least what the floor does; the extracted suite passes every
-test on the very run it came from (issue 31's acceptance). Where current
-extraction does not meet that yet the assertion is marked xfail (not strict)
-naming issue 31: it is expected to pass once the frame space, suites with
-state and provenance land.
+test on the very run it came from. Every member is held to both: none is
+expected to fail.
 """
 
 from __future__ import annotations
@@ -29,20 +27,11 @@ from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.engine.spec.loader import load_spec
 
-ISSUE = "issue 31: extraction does not yet cover this behaviour (absent inputs, arrival order, cycle start, " \
-        "suites carrying state)"
-# Members whose check failed before issue 31's extraction (main: drop_cycle_none, each_several, mpc,
-# newest_none_slow1hz, oldest_several_late, timer_counters_late, timer_cycle, timer_several, timer_warm_absent;
-# suites: mpc, timer_warm_absent). With issue 31's extraction every member reaches its floor and its suite
-# passes on its own run (bench_deft_zoo.py --pairs 3): none is expected to fail.
-XFAIL_THETA: set[str] = set()
-XFAIL_SUITE: set[str] = set()
-
 
 # -- the generator ----------------------------------------------------------------------------------
 
 
-def test_the_catalogue_covers_every_value_of_every_axis_with_issue_31s_two_stacks():
+def test_the_catalogue_covers_every_value_of_every_axis_with_both_stacks():
     assert len(MEMBERS) >= 24 and len({m.name for m in MEMBERS}) == len(MEMBERS)
     for axis, values in AXES.items():
         assert {getattr(m, axis) for m in MEMBERS} == set(values), axis
@@ -176,19 +165,15 @@ def check_floor(run: ZooRun) -> None:
     assert run.extracted.outputs == floor.outputs  # extraction and floor count the same recorded outputs
 
 
-def check_theta0(run: ZooRun, request: pytest.FixtureRequest) -> None:
+def check_theta0(run: ZooRun) -> None:
     """Every output the floor reproduces, extraction reproduces too (so θ = 0 ≥ the floor): a cut that loses
-    one the plain replay gets is a bug (issue 31)."""
-    if run.member.name in XFAIL_THETA:
-        request.applymarker(pytest.mark.xfail(strict=False, reason=ISSUE))
+    one the plain replay gets is a bug."""
     assert run.extracted.exact >= run.floor.count and run.lost == 0, (
         f"{run.member.name}: θ = 0 {run.extracted.exact}, floor {run.floor.count} ({run.floor.way}), "
         f"lost {run.lost} of {run.floor.outputs}")
 
 
-def check_suite(run: ZooRun, request: pytest.FixtureRequest) -> None:
-    if run.member.name in XFAIL_SUITE:
-        request.applymarker(pytest.mark.xfail(strict=False, reason=ISSUE))
+def check_suite(run: ZooRun) -> None:
     assert run.suite.tests == run.extracted.tests
     assert run.suite.all_pass, f"{run.member.name}: {run.suite.output}"
 
@@ -202,12 +187,12 @@ def test_the_plain_replay_floor_is_computed(short_run):
     check_floor(short_run)
 
 
-def test_extraction_at_theta_0_reproduces_at_least_the_floor(short_run, request):
-    check_theta0(short_run, request)
+def test_extraction_at_theta_0_reproduces_at_least_the_floor(short_run):
+    check_theta0(short_run)
 
 
-def test_the_extracted_suite_passes_on_the_run_it_came_from(short_run, request):
-    check_suite(short_run, request)
+def test_the_extracted_suite_passes_on_the_run_it_came_from(short_run):
+    check_suite(short_run)
 
 
 # -- the whole zoo (-m slow) ------------------------------------------------------------------------
@@ -224,10 +209,10 @@ def test_whole_zoo_floor_is_computed(zoo_member_run):
 
 
 @pytest.mark.slow
-def test_whole_zoo_extraction_at_theta_0_reproduces_at_least_the_floor(zoo_member_run, request):
-    check_theta0(zoo_member_run, request)
+def test_whole_zoo_extraction_at_theta_0_reproduces_at_least_the_floor(zoo_member_run):
+    check_theta0(zoo_member_run)
 
 
 @pytest.mark.slow
-def test_whole_zoo_suite_passes_on_the_run_it_came_from(zoo_member_run, request):
-    check_suite(zoo_member_run, request)
+def test_whole_zoo_suite_passes_on_the_run_it_came_from(zoo_member_run):
+    check_suite(zoo_member_run)

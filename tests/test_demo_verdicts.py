@@ -20,8 +20,8 @@ from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.spec.loader import load_spec
 
 REPEATS = int(os.environ.get("ASTAA_DEFT_REPEATS", "1"))
-CLEAN = ["lane_follow", *(pytest.param(name, marks=pytest.mark.slow) for name in ("static_obstacle", "cut_in",
-                                                                                 "red_light"))]
+CLEAN = ["lane_follow", *(pytest.param(name, marks=[pytest.mark.slow, pytest.mark.promise])
+                          for name in ("static_obstacle", "cut_in", "red_light"))]
 
 DEFECTS = [
     # (example test case, CRASH class, the invariant that must catch it)

@@ -152,7 +152,10 @@ def test_kill_9_of_the_tool_leaves_nothing_running_and_a_finished_log(tool_run):
     assert "Traceback" not in recorder_log and "BrokenPipeError" not in recorder_log, recorder_log
     contents = read_log(run.log)
     assert contents.finished and not contents.damage
-    assert len(logged_seqs(run.log)) >= 300
+    delivered = {json.loads(p)["header"]["seq"] for k, p, _ in received(run.run_dir / "listener.out")
+                 if k == "test/data"}
+    assert len(delivered) >= 300
+    assert sorted(delivered - logged_seqs(run.log)) == []  # every message the listener got is in the log
     assert not alive(recorder)
     # Nothing in it claims a verdict: the tool that would have given one is gone; the recorder says so,
     # and a check of the log gives its findings but withholds a Pass.

@@ -472,7 +472,7 @@ def test_a_replay_arg_the_factory_does_not_take_is_one_clear_error(tmp_path):
 
 def test_hypothesis_specs_never_traceback(tmp_path):
     """Structured YAML drawn by hypothesis in place of spec sections: each is loaded or refused with exit 2."""
-    hypothesis = pytest.importorskip("hypothesis")
+    import hypothesis
     import yaml
     from hypothesis import strategies as st
 

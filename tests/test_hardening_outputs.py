@@ -1,10 +1,12 @@
-"""Output-side faults for every command that writes (issue 23, items 3 and 8), through the real CLI.
+"""Output-side faults for every command that writes, through the real CLI.
 
 Each command is run as its own `python -m astaa_deft.cli` process against an
 output place that cannot take its output: a regular file where a folder is
 wanted (or a folder under a regular file), a read-only file system (a
-read-only bind mount: the tests run as root, so permissions alone would not
-refuse), a folder under /proc, and a file size limit of 0 (RLIMIT_FSIZE set
+read-only bind mount in a mount namespace of the command's own — root's, or
+an unprivileged user's mapped to root in a user namespace of its own: no
+mount privilege needed, nothing left mounted, and root ignores permission
+bits, not a read-only mount), a folder under /proc, and a file size limit of 0 (RLIMIT_FSIZE set
 in the child, as `ulimit -f 0`: the tool must answer EFBIG, not die of
 SIGXFSZ). Asserted for each: exit 4 (`output_place.EXIT_CANNOT_WRITE`), one
 `astaa-deft: error:` line naming the path, no traceback — and, where the
@@ -42,18 +44,39 @@ TINY_SPEC = textwrap.dedent("""\
     """)
 
 
-def cli(*args: str, cwd: Path, fsize: int | None = None, env: dict[str, str] | None = None
-        ) -> subprocess.CompletedProcess:
-    """One `python -m astaa_deft.cli` process; ``fsize``: its RLIMIT_FSIZE in bytes (as `ulimit -f`)."""
+# A mount namespace of its own: root's, or (without mount privilege) in a user namespace mapping the user to root.
+UNSHARE = ["unshare", "--mount"] if os.geteuid() == 0 else ["unshare", "--user", "--map-root-user", "--mount"]
+# In that namespace, each folder given before `--` becomes a read-only bind mount of itself; then the command.
+READ_ONLY_THEN = ('while [ "$1" != -- ]; do mount --bind "$1" "$1" && mount -o remount,bind,ro "$1" || exit 97; '
+                  'shift; done; shift; exec "$@"')
+
+
+def private_mounts_unavailable() -> str:
+    """Why no command here can get a mount namespace with a read-only bind mount ('' when one can)."""
+    probe = subprocess.run([*UNSHARE, "sh", "-c", READ_ONLY_THEN, "sh", "/tmp", "--", "true"], capture_output=True,
+                           text=True, timeout=30)
+    return "" if probe.returncode == 0 else f"{' '.join(UNSHARE)}: {probe.stderr.strip() or probe.returncode}"
+
+
+def cli(*args: str, cwd: Path, fsize: int | None = None, env: dict[str, str] | None = None,
+        read_only: tuple[Path, ...] = ()) -> subprocess.CompletedProcess:
+    """One `python -m astaa_deft.cli` process; ``fsize``: its RLIMIT_FSIZE in bytes (as `ulimit -f`);
+    ``env``: its whole environment (default: this one's); ``read_only``: folders it sees as read-only bind
+    mounts, in a mount namespace of its own."""
 
     def limits() -> None:
         if fsize is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
 
-    full_env = dict(os.environ, **(env or {}))
+    full_env = dict(os.environ if env is None else env)
     full_env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(SUT), str(ROOT), full_env.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", "astaa_deft.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, env=full_env, preexec_fn=limits, timeout=TIMEOUT_S)
+    command = [sys.executable, "-m", "astaa_deft.cli", *args]
+    if read_only:
+        command = [*UNSHARE, "sh", "-c", READ_ONLY_THEN, "sh", *map(str, read_only), "--", *command]
+    res = subprocess.run(command, capture_output=True, text=True, cwd=cwd, env=full_env, preexec_fn=limits,
+                         timeout=TIMEOUT_S)
+    assert res.returncode != 97, f"the read-only bind mount was not made: {res.stderr}"
+    return res
 
 
 @pytest.fixture(scope="module")
@@ -129,24 +152,20 @@ def test_a_place_under_proc(command, inputs, tmp_path):
 
 @pytest.fixture
 def read_only(tmp_path) -> Path:
-    """A folder on a read-only bind mount of itself (root ignores permission bits, not a read-only mount)."""
+    """A folder the command sees read-only (``cli(..., read_only=(folder,))``), with a folder inside it."""
+    unavailable = private_mounts_unavailable()
+    if unavailable:  # a kernel or container without mount namespaces for this user: the check cannot be made here
+        pytest.skip(f"no private mount namespace here ({unavailable})")
     folder = tmp_path / "ro"
     (folder / "inside").mkdir(parents=True)
-    mounted = subprocess.run(["mount", "--bind", str(folder), str(folder)], capture_output=True, text=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"no bind mounts here: {mounted.stderr.strip()}")
-    try:
-        subprocess.run(["mount", "-o", "remount,bind,ro", str(folder)], check=True, capture_output=True)
-        yield folder
-    finally:
-        subprocess.run(["umount", str(folder)], check=True, capture_output=True)
+    return folder
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_a_read_only_file_system(command, inputs, tmp_path, read_only):
     kind, argv = COMMANDS[command]
     place = read_only / "inside" / ("out" if kind == "dir" else "out.file")
-    res = cli(*argv(inputs, place), cwd=tmp_path)
+    res = cli(*argv(inputs, place), cwd=tmp_path, read_only=(read_only,))
     assert_refused(res, place)
     assert "read-only" in res.stderr
 
@@ -164,12 +183,9 @@ def test_a_file_size_limit_of_zero_is_efbig_not_sigxfsz(command, inputs, tmp_pat
 def test_report_in_a_read_only_campaign_folder(inputs, tmp_path, read_only):
     import shutil
 
-    subprocess.run(["umount", str(read_only)], check=True)
     campaign = read_only / "inside" / "campaign"
     shutil.copytree(inputs["campaign"], campaign)
-    subprocess.run(["mount", "--bind", str(read_only), str(read_only)], check=True)
-    subprocess.run(["mount", "-o", "remount,bind,ro", str(read_only)], check=True)
-    res = cli("report", str(campaign), cwd=tmp_path)
+    res = cli("report", str(campaign), cwd=tmp_path, read_only=(read_only,))
     assert_refused(res, campaign)
 
 
@@ -196,18 +212,14 @@ def test_the_output_is_checked_before_the_log_is_read(command, inputs, tmp_path)
 def test_no_usable_temporary_directory_is_one_clear_error(inputs, tmp_path):
     """minimise needs a temporary directory. In a mount namespace of its own, every candidate tempfile tries
     (/tmp, /var/tmp, the current folder) is read-only while the output folder is fine: one clear error, exit 4."""
+    unavailable = private_mounts_unavailable()
+    if unavailable:  # a kernel or container without mount namespaces for this user: the check cannot be made here
+        pytest.skip(f"no private mount namespace here ({unavailable})")
     out = Path("/dev/shm") / f"astaa-deft-test-{os.getpid()}-{tmp_path.name}"
-    script = ("mount --bind /tmp /tmp && mount -o remount,bind,ro /tmp && "
-              "mount --bind /var/tmp /var/tmp && mount -o remount,bind,ro /var/tmp && cd /proc && "
-              'exec "$0" -m astaa_deft.cli minimise "$1" --spec "$2" -o "$3"')
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(SUT), str(ROOT)]))
-    env.pop("TMPDIR", None)
+    env = {k: v for k, v in os.environ.items() if k != "TMPDIR"}
     try:
-        res = subprocess.run(["unshare", "-m", "sh", "-c", script, sys.executable, str(inputs["toy_log"]),
-                              str(inputs["toy_spec"]), str(out)], capture_output=True, text=True, env=env,
-                             timeout=TIMEOUT_S)
-        if "unshare failed" in res.stderr or "mount:" in res.stderr:
-            pytest.skip(f"no private mount namespace here: {res.stderr.strip()}")
+        res = cli("minimise", str(inputs["toy_log"]), "--spec", str(inputs["toy_spec"]), "-o", str(out),
+                  cwd=Path("/proc"), env=env, read_only=(Path("/tmp"), Path("/var/tmp")))
         assert res.returncode == EXIT_CANNOT_WRITE, res.stdout + res.stderr
         assert "Traceback" not in res.stderr
         assert "no usable temporary directory" in res.stderr and "TMPDIR" in res.stderr

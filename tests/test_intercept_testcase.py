@@ -4,6 +4,8 @@ without reading local files or opening sockets."""
 
 from __future__ import annotations
 
+import json
+import math
 import re
 import socket
 from pathlib import Path
@@ -13,6 +15,7 @@ from lxml import etree
 
 from astaa_deft.cli.commands import policy_check
 from astaa_deft.model.errors import InputError
+from astaa_deft.engine.intercept import Interceptor, load_dictionary
 from astaa_deft.engine.intercept.actions import ACTIONS
 from astaa_deft.engine.intercept.actions.corrupt import Corrupt
 from astaa_deft.engine.intercept.actions.delay import Delay
@@ -172,14 +175,20 @@ def test_external_entities_never_read_files_nor_connect(secret_file, listener):
 
 
 def test_the_parser_itself_is_hardened(secret_file, listener):
-    """Even without the pre-check, lxml expands nothing, reads nothing, fetches nothing."""
+    """Even without the pre-check, lxml expands nothing, reads nothing, fetches nothing: each hostile document
+    parses with its entity left a bare reference (no DTD loaded) and its XIncludes left unprocessed elements."""
     port = listener.getsockname()[1]
     for what, document in _hostile_documents(secret_file, port).items():
-        try:
-            root = etree.fromstring(document.encode(), hardened_parser())
-        except etree.XMLSyntaxError:
-            continue  # refusing is fine too
-        assert SECRET not in etree.tostring(root, encoding="unicode"), what
+        root = etree.fromstring(document.encode(), hardened_parser())
+        text = etree.tostring(root, encoding="unicode")
+        assert SECRET not in text, what
+        assert root.getroottree().docinfo.externalDTD is None, what
+        if what == "xinclude":
+            includes = root.findall("{http://www.w3.org/2001/XInclude}include")
+            assert [i.get("href") for i in includes] == [f"http://127.0.0.1:{port}/x", secret_file.as_uri()]
+        else:
+            [reference] = root.find("description")
+            assert (reference.tag, reference.text) == (etree.Entity, "&x;"), what  # not resolved, not replaced
     _assert_no_connection(listener)
 
 
@@ -187,13 +196,10 @@ def test_billion_laughs_is_refused_quickly():
     laughs = (BAD / "billion_laughs.xml").read_bytes()
     with pytest.raises(InputError):
         parse_testcase(laughs, "laughs")
-    # And the hardened parser alone does not expand it either.
+    # And the hardened parser alone refuses to expand it too (libxml2's amplification limit).
     body = laughs.replace(b"<testcase", b"<!-- -->\n<testcase")
-    try:
-        root = etree.fromstring(body, hardened_parser())
-        assert len(etree.tostring(root)) < 10_000
-    except etree.XMLSyntaxError:
-        pass
+    with pytest.raises(etree.XMLSyntaxError, match="amplification"):
+        etree.fromstring(body, hardened_parser())
 
 
 def test_doctype_slipping_past_the_text_check_is_still_refused():
@@ -296,9 +302,18 @@ def test_values_and_names_are_only_checked_against_a_spec_when_given():
 @pytest.mark.parametrize("value", ["nan", "-inf", "1e16", "-0.0", "json:\"fast\"", "json:null", "str:dict:x",
                                    "dict:float.pi", "dict:string.long_A"])
 def test_accepted_values_for_a_float_field(value):
+    """Each form is accepted, kept as written, and sets what it says on a real message."""
     xml = _testcase(f'<policy id="p"><channel>data</channel><set><field path="value" value=\'{value}\'/></set>'
                     f"</policy>")
-    parse_testcase(xml.encode(), "v.xml", ECHO)
+    testcase = parse_testcase(xml.encode(), "v.xml", ECHO)
+    assert testcase.policies[0].action.fields == (Assignment(path="value", value=value),)
+    [delivery] = Interceptor(testcase, ECHO, load_dictionary()).on_message(
+        "data", ("listener",), json.dumps({"header": {"seq": 1, "stamp": 0.5}, "value": 2.0}).encode(), 0.1)
+    got = json.loads(delivery.payload)["value"]
+    expected = {"nan": math.nan, "-inf": -math.inf, "1e16": 1e16, "-0.0": -0.0, 'json:"fast"': "fast",
+                "json:null": None, "str:dict:x": "dict:x", "dict:float.pi": math.pi,
+                "dict:string.long_A": "A" * 8192}[value]
+    assert json.dumps(got) == json.dumps(expected) and type(got) is type(expected), (value, got)
 
 
 @pytest.mark.parametrize("prefix,spec", [("echo_", ROOT / "tests" / "sut" / "echo.yaml"),
@@ -363,7 +378,16 @@ def test_an_index_beyond_the_arrays_max_length_is_refused(path, says):
 
 @pytest.mark.parametrize("path", ["points[199].v", "points[-200].v", "points[-1].v", "points[0].v", "points[*].v"])
 def test_indices_within_max_length_are_accepted(path):
-    parse_testcase(_set_on_trajectory(path), "idx.xml", DEMO)
+    """Accepted, and on a full trajectory (200 points, its max_length) they set the point they name."""
+    testcase = parse_testcase(_set_on_trajectory(path), "idx.xml", DEMO)
+    points = [{"t": i / 10, "x": float(i), "y": 0.0, "heading": 0.0, "v": 5.0, "a": 0.0} for i in range(200)]
+    message = {"header": {"seq": 1, "stamp": 0.5}, "points": points, "decision": {"lane": 0}, "debug": {}}
+    [delivery] = Interceptor(testcase, DEMO, load_dictionary()).on_message(
+        "trajectory", ("control",), json.dumps(message).encode(), 0.1)
+    speeds = [p["v"] for p in json.loads(delivery.payload)["points"]]
+    index = path[len("points["):path.index("]")]
+    named = set(range(200)) if index == "*" else {int(index) % 200}
+    assert speeds == [1.5 if i in named else 5.0 for i in range(200)], path
 
 
 def test_a_float_literal_that_overflows_is_refused_but_inf_on_purpose_is_not():

@@ -113,16 +113,17 @@ def test_single_item_and_no_items():
 def test_tests_per_single_culprit_among_100():
     """One culprit among 100: about 2 tests per halving plus the 2 start-up checks.
 
-    Measured: 9..15 tests over all 100 positions (mean 11.9);
-    the bound 40 leaves room for changes to chunk order.
+    Measured: 9..15 tests over all 100 positions (mean 11.9). ddmin is deterministic, so the bound is the
+    measured figure: a change that costs even one more test on some position shows here.
     """
     runs = [ddmin(list(range(100)), fails_if_any({c})).tests_run for c in range(100)]
     print(f"\none culprit in 100: min {min(runs)}, mean {statistics.mean(runs):.1f}, max {max(runs)} tests")
-    assert max(runs) <= 40
+    assert max(runs) <= 15 and sum(runs) <= 1190  # mean 11.9
 
 
 def test_tests_for_two_culprits_among_100():
-    """Two culprits (interacting mutations) in 100: measured at most about 50 tests."""
+    """Two culprits (interacting mutations) in 100, 50 seeded pairs: measured mean 39.24, at most 50 tests
+    (deterministic: the bound is the measured figure)."""
     rng = random.Random(1)
     runs = []
     for _ in range(50):
@@ -131,7 +132,7 @@ def test_tests_for_two_culprits_among_100():
         assert result.minimal == sorted(pair)
         runs.append(result.tests_run)
     print(f"\ntwo culprits in 100: mean {statistics.mean(runs):.1f}, max {max(runs)} tests")
-    assert max(runs) <= 80
+    assert max(runs) <= 50 and sum(runs) <= 1962  # mean 39.24
 
 
 # --- caching -----------------------------------------------------------------------

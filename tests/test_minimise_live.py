@@ -29,6 +29,7 @@ CULPRITS = {  # defect → (its policy, the field it sets, the invariant that br
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 @pytest.mark.parametrize("defect", sorted(CULPRITS))
 def test_live_minimisation_finds_the_culprit_and_it_fails_again_live(defect, tmp_path):
     policy, field, invariant = CULPRITS[defect]
@@ -68,6 +69,7 @@ def test_control_defects_minimise_on_the_module_replay(defect, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_live_tests_run_in_parallel_isolated_sessions(tmp_path):
     """--jobs 2: two whole-system runs at a time, each its own session; the same culprit is found."""
     policy, field, invariant = ANCHORED[4]

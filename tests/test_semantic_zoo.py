@@ -20,9 +20,21 @@ from proxy_helpers import run_proxy
 from zoo_helpers import DICTIONARY, SEMANTIC, ZOO_SPEC, ZOO_SPEC_PATH, reached
 
 SECONDS = "2.5"  # the source's scenario; every window opens in its first 1.2 s (counted from its first message)
-# What the consumer's traceback says for each family's defect (tests/sut/zoo_consumer.py).
-SAYS = {"boundary": "IndexError", "angle": "angle defect", "units": "units defect", "arrays": "arrays defect",
-        "type": "Error", "siblings": "siblings defect", "stale": "ZeroDivisionError"}
+# Each family's seeded defect in tests/sut/zoo_consumer.py: the consumer's check that raises it (the
+# traceback's innermost frame) and what the exception line begins with (the type defect raises KeyError on a
+# removed field, TypeError on a mistyped one).
+RAISES = {"boundary": ("speed", ("IndexError",)), "angle": ("heading", ("ValueError: angle defect",)),
+          "units": ("gap", ("ValueError: units defect",)), "arrays": ("path", ("ValueError: arrays defect",)),
+          "type": ("battery", ("KeyError: 'battery'", "TypeError")),
+          "siblings": ("lateral", ("ValueError: siblings defect",)), "stale": ("odometer", ("ZeroDivisionError",))}
+
+
+def raised(consumer_log: str) -> tuple[str, str]:
+    """The innermost frame's function and the exception line of the consumer's (last) traceback."""
+    tail = consumer_log[consumer_log.rindex("Traceback"):].splitlines()
+    frames = [line.rsplit(" in ", 1)[-1] for line in tail if line.startswith('  File "')]
+    exception = next(line for line in reversed(tail) if line and not line.startswith(" "))
+    return frames[-1], exception
 
 
 def family_case(name: str) -> TestCase:
@@ -55,7 +67,10 @@ def test_each_family_s_case_reaches_its_defect_on_the_live_stack(tmp_path, name)
     testcase = family_case(name)
     res, consumer_log = run(tmp_path, testcase, "1")
     verdict = next((line for line in res.stdout.splitlines() if line.startswith("verdict:")), res.stdout + res.stderr)
-    assert "Traceback" in consumer_log and SAYS[name] in consumer_log, (testcase.description, consumer_log, verdict)
+    assert "Traceback" in consumer_log, (testcase.description, consumer_log, verdict)
+    check, exception = raised(consumer_log)
+    where, begins = RAISES[name]
+    assert check == where and exception.startswith(begins), (testcase.description, consumer_log, verdict)
     assert not verdict.startswith("verdict: Pass"), verdict
 
 

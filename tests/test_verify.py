@@ -197,6 +197,7 @@ def test_bisect_search_finds_every_change_in_log2_n_plus_one_verifies(n: int):
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_export_writes_a_suite_that_fails_while_the_bug_is_there_and_passes_once_fixed(steady_campaign: Path,
                                                                                        tmp_path: Path):
     regress = tmp_path / "regress"
@@ -227,6 +228,7 @@ def git(repo: Path, *args: str) -> str:
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_bisect_finds_the_revision_that_fixed_a_seeded_defect_in_log2_n_plus_one_verifies(tmp_path: Path):
     # A git repository of the steady stack (its spec names it as 'source: .'): revision 0 crashes on a NaN,
     # revision FIX guards it, the others change nothing that matters.

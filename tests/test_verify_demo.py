@@ -43,6 +43,7 @@ def split_spec(tmp_path: Path) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.promise
 def test_verify_and_export_on_the_demo_with_its_seeded_defects(tmp_path: Path):
     spec = split_spec(tmp_path)
     out = tmp_path / "campaign"

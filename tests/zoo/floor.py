@@ -22,11 +22,15 @@ own fresh instance, and the floor is the best of them:
 
 An output counts as reproduced when the answer paired with it equals it
 field for field (the spec's ``ignore`` fields aside: ``debug``, the
-evaluation record) — bit for bit, as at θ = 0.
+evaluation record) — bit for bit, as at θ = 0. The floor judges that by a
+plain equality of the two as canonical JSON (sorted keys; NaN as ``NaN``),
+not by the comparator extraction is judged by: a fault in that comparator
+cannot lift extraction and its floor together.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +38,6 @@ from typing import Any
 
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import make_planner
-from astaa_deft.analysis.deft.validator import compare_messages
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
@@ -69,6 +72,17 @@ class _Played:
     inputs: list[tuple[int, str, Any]]  # (log time, channel, decoded), log order
     outputs: list[LoggedMessage]
     expected: list[Any]  # decoded outputs (None: does not decode)
+
+
+def same_output(answer: Any, recorded: Any, ignore: tuple[str, ...] | list[str]) -> bool:
+    """``answer`` equals ``recorded`` bit for bit, the top-level ``ignore`` fields aside (the zoo's: ``debug``)."""
+    assert all("." not in name and "[" not in name for name in ignore), ignore  # the zoo ignores whole fields
+
+    def canonical(message: Any) -> str:
+        kept = {k: v for k, v in message.items() if k not in ignore} if isinstance(message, dict) else message
+        return json.dumps(kept, sort_keys=True)
+
+    return canonical(answer) == canonical(recorded)
 
 
 def plain_replay(stack: Stack, log_path: Path, ways: tuple[str, ...] | None = None) -> Floor:
@@ -108,7 +122,7 @@ def plain_replay(stack: Stack, log_path: Path, ways: tuple[str, ...] | None = No
         finally:
             planner.close()
         reproduced = tuple(answer is not None and want is not None
-                           and compare_messages(answer, want, entry.ignore).distance == 0.0
+                           and same_output(answer, want, entry.ignore)
                            for answer, want in zip(answers + [None] * (len(expected) - len(answers)), expected,
                                                    strict=True))
         results.append((sum(reproduced), -(time.perf_counter() - t1), way, reproduced, steps))
