@@ -230,8 +230,8 @@ def test_a_field_the_node_adds_is_named_with_the_ignore_line_that_makes_the_run_
     assert re.search(r"reproduce: (\d+) of \1 output\(s\) not within θ = 0", res.stdout), res.stdout
     assert re.search(r"header\.frame_id +only in the recorded output .* in every output .*'base_link'", res.stdout), \
         res.stdout
-    assert f"add to replay.modules[0] of {stack.spec_path}, then extract again:  ignore: [debug, header.frame_id]" \
-        in res.stdout, res.stdout
+    assert f"in replay.modules[0] of {stack.spec_path}, replace its ignore: with (then extract again):  " \
+        "ignore: [debug, header.frame_id]" in res.stdout, res.stdout
     stored = json.loads((tmp_path / "first" / "deft.json").read_text())["diagnosis"]
     assert stored["ignore"] == ["debug", "header.frame_id"] and stored["fields"][0]["how"] == "recorded only"
     assert stored["reproduced_with_line"] > 0

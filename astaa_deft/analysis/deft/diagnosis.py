@@ -112,7 +112,8 @@ class Diagnosis:
             out.append(f"  'ignore: {entry}' names no field of the recorded outputs{' (' + hint + ')' if hint else ''}")
         if self.ignore_line is not None:
             place = f"{self.where} of {spec_path}" if self.where else spec_path
-            out.append(f"add to {place}, then extract again:  {self.ignore_line}")
+            verb = "replace its ignore: with" if self.spec_ignore else "write"
+            out.append(f"in {place}, {verb} (then extract again):  {self.ignore_line}")
             out.append(f"  (with it, the frames kept match {self.reproduced_with_line} of the {self.not_reproduced} "
                        f"output(s) not reproduced now)")
         for path in self.maybe:
