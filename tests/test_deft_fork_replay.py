@@ -86,6 +86,38 @@ def test_factory_nowhere_is_one_clear_error(tmp_path):
     assert "spec's directory" in str(caught.value) and "PYTHONPATH" in str(caught.value)
 
 
+def spin(seconds: float) -> None:
+    end = time.process_time() + seconds
+    while time.process_time() < end:
+        pass
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="idle time is read from /proc/stat")
+def test_a_forked_process_counts_the_cpu_time_of_the_line_it_was_forked_from_as_its_own():
+    # The forked search asks for the idle cores in the replay's runner, a grandchild of the process that took
+    # the first sample: the CPU time that line of processes spent since (reading the log, stepping cheap
+    # outputs) is ours, about to wait for the candidates, not another's load.
+    start = cpu_sample()
+    assert start is not None
+    spin(0.2)
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:
+        grandchild = os.fork()
+        if grandchild == 0:
+            spin(0.2)
+            now = cpu_sample()
+            os.write(write, repr(now.own_seconds - start.own_seconds if now else -1.0).encode())
+            os._exit(0)
+        os.waitpid(grandchild, 0)
+        os._exit(0)
+    os.waitpid(child, 0)
+    own = float(os.read(read, 100).decode())
+    os.close(read)
+    os.close(write)
+    assert 0.4 <= own < 0.4 + 0.3, own  # both spins (and a little of the forks), nothing of the others' load
+
+
 @pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="idle time is read from /proc/stat")
 def test_idle_cores_counts_a_core_kept_busy_now_as_busy():
     # The candidates' parallelism follows the cores idle right now, not the minute's load average (which

@@ -77,6 +77,8 @@ BAD_ENTRIES = [  # (what, old, new, message, fix)
     ("zero hang", "hang_after: 0.5", "hang_after: 0", "must be a finite number > 0", ""),
     ("bad factory", "factory: astaa_deft.demo.control:ReplayControl", "factory: not a factory",
      "is not 'package.module:Name'", ""),
+    ("bad ignore path", "hang_after: 0.5 ", "ignore: [header..stamp]\n      hang_after: 0.5 ",
+     "'replay.modules[0].ignore' entry 'header..stamp' is no output field path", "a whole struct (header)"),
     ("missing factory", "factory: astaa_deft.demo.control:ReplayControl", "factory: nowhere_at_all.mod:Thing",
      "neither on the Python path nor in the spec's directory", ""),
 ]

@@ -12,15 +12,19 @@ expected to fail.
 from __future__ import annotations
 
 import copy
+import json
 import math
 import os
 import pickle
+import re
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
-from zoo import AXES, MEMBERS, MPC, SHORT, SLOW_PLANNER, Floor, Member, record, write_member
+from zoo import AXES, MEMBERS, MPC, NODE_FRAME_ID, SHORT, SLOW_PLANNER, Floor, Member, record, short, write_member
 from zoo.judge import Extracted, SuiteRun, extract, lost, plain_replay, run_suite
 from zoo.runtime.zoo_module import Step
 from astaa_deft.analysis.deft.planner_section import replay_module_of
@@ -193,6 +197,34 @@ def test_extraction_at_theta_0_reproduces_at_least_the_floor(short_run):
 
 def test_the_extracted_suite_passes_on_the_run_it_came_from(short_run):
     check_suite(short_run)
+
+
+def test_a_field_the_node_adds_is_named_with_the_ignore_line_that_makes_the_run_reproduce(tmp_path):
+    """A node that adds header.frame_id to every output, a field its step does not return: at θ = 0 nothing
+    reproduces, whatever the frames (a plain replay neither). `astaa-deft extract` names the field, how it
+    differs and the ignore: line to add, also in the suite's manifest; with that line in the spec, the same
+    log reproduces at least what a plain replay then does."""
+    member = short(NODE_FRAME_ID, 1.0)
+    stack = write_member(member, tmp_path / member.name)
+    log = record(stack)
+    assert plain_replay(stack, log).count == 0
+    res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "extract", str(log), "--spec", str(stack.spec_path),
+                          "--module", "module", "--threshold", "0", "-o", str(tmp_path / "first")],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode in (0, 1), res.stderr[-2000:]
+    assert re.search(r"reproduce: (\d+) of \1 output\(s\) not within θ = 0", res.stdout), res.stdout
+    assert re.search(r"header\.frame_id +only in the recorded output .* in every output .*'base_link'", res.stdout), \
+        res.stdout
+    assert f"in replay.modules[0] of {stack.spec_path}, replace its ignore: with (then extract again):  " \
+        "ignore: [debug, header.frame_id]" in res.stdout, res.stdout
+    stored = json.loads((tmp_path / "first" / "deft.json").read_text())["diagnosis"]
+    assert stored["ignore"] == ["debug", "header.frame_id"] and stored["fields"][0]["how"] == "recorded only"
+    assert stored["reproduced_with_line"] > 0
+    fixed = write_member(member, stack.directory, replay_extra={"ignore": stored["ignore"]})
+    floor = plain_replay(fixed, log)
+    extracted = extract(fixed, log, tmp_path / "second")
+    assert floor.count > 0 and extracted.exact >= floor.count and lost(floor, extracted, fixed, log) == 0
+    assert extracted.report.diagnosis is None or extracted.report.diagnosis.ignore == ()
 
 
 # -- the whole zoo (-m slow) ------------------------------------------------------------------------

@@ -16,9 +16,10 @@ See tests/zoo/README.md.
 from zoo.floor import Floor, output_key, plain_replay
 from zoo.generate import MODULE, Stack, write_member
 from zoo.member import AXES, INPUTS, OUTPUT, Member
-from zoo.members import MEMBERS, MPC, SHORT, SLOW_PLANNER, by_name, short
+from zoo.members import MEMBERS, MPC, NODE_FRAME_ID, SHORT, SLOW_PLANNER, by_name, short
 from zoo.record import record
 from zoo.truth import frame_truth
 
-__all__ = ["AXES", "Floor", "INPUTS", "MEMBERS", "MODULE", "MPC", "Member", "OUTPUT", "SHORT", "SLOW_PLANNER",
+__all__ = ["AXES", "Floor", "INPUTS", "MEMBERS", "MODULE", "MPC", "Member", "NODE_FRAME_ID", "OUTPUT", "SHORT",
+           "SLOW_PLANNER",
            "Stack", "by_name", "frame_truth", "output_key", "plain_replay", "record", "short", "write_member"]

@@ -72,6 +72,9 @@ class Member:
     frames: str | None = None  # the spec's frames mode (None: per_trigger for 'each' with one output a cycle)
     note: str = ""  # what the member stands for (the two of issue 31 say so)
     defect: str = "none"  # a seeded defect (DEFECTS), for campaigns that must find it
+    # The module's process adds header.frame_id = this to every output it publishes, as a node stamps its
+    # frame; the step (the replay factory) does not return it. "" : no such field.
+    frame_id: str = ""
 
     def __post_init__(self) -> None:
         for axis, values in AXES.items():

@@ -64,6 +64,12 @@ MEMBERS: tuple[Member, ...] = (
            numerics="noisy_fork", cost_ms=(80.0, 200.0)),
 )
 
+# Beside the catalogue (not a frame behaviour): a node that adds header.frame_id to every output, a field its
+# step does not return. A spec that does not ignore it reproduces nothing, whatever the frames; the extraction
+# must say so and name the ignore: line to add.
+NODE_FRAME_ID = Member("node_frame_id", trigger="each", frames="per_output", frame_id="base_link",
+                       note="the node adds header.frame_id to every output; its step does not return it")
+
 SHORT_SECONDS = 2.0
 
 

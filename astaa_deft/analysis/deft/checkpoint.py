@@ -48,8 +48,14 @@ def _decided_json(outcome: Decided) -> JsonObject:
     if frame is None or outcome.choice is None:
         return {"output": outcome.output_index, "skipped": outcome.skipped or "skipped"}
     return {"output": outcome.output_index, "choice": dict(outcome.choice), "trigger_time_ns": frame.trigger_time,
-            "frame_time_ns": frame.frame_time, "comparison": asdict(frame.comparison), "accepted": frame.accepted,
-            "candidates_tried": frame.candidates_tried, "exact": frame.exact}
+            "frame_time_ns": frame.frame_time, "comparison": _comparison_json(frame.comparison),
+            "accepted": frame.accepted, "candidates_tried": frame.candidates_tried, "exact": frame.exact}
+
+
+def _comparison_json(comparison: Comparison) -> JsonObject:
+    """A frame's comparison as the state keeps it: its numbers (a resumed frame is judged again, so the fields
+    that differed are not kept)."""
+    return {key: value for key, value in asdict(comparison).items() if key not in ("fields", "fields_left_out")}
 
 
 @dataclass(frozen=True)

@@ -142,7 +142,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     (an in-process planner on a system that can fork), the candidates of an
     output are tried in forked processes, up to ``jobs`` at a time, from the
     very same planner state (see fork_replay; a callable ``jobs`` is asked
-    only then: a per-trigger module steps every frame here); otherwise — or while this
+    only when a search could first run two at once); otherwise — or while this
     process runs other Python threads, which a fork must not copy in the
     middle of their work — from deep copies of the planner, one after another.
     ``on_output(outputs done, outputs in all, outcome)`` gets each output
@@ -161,7 +161,6 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
     if jobs is not None and planner.can_snapshot and fork_is_safe(native_threads_ok=True):
         # The search runs in forked copies; here, beside it, the fresh ``planner`` runs the suite: it steps
         # every frame as it is decided and compares the accepted ones, as `pytest DIR` will.
-        workers = jobs() if callable(jobs) else jobs
         follower = SuiteRun(planner, cfg, {name: get_codec(spec.channel(name).encoding)
                                            for name in list(cfg.inputs) + [cfg.output]})
 
@@ -173,7 +172,7 @@ def extract(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             # A module made here, in the replay process: its steps in this process, in order, are the suite's
             # (a fork of the caller's module is not: a module may answer otherwise in a forked process).
             return _extract(log, spec, fresh() if fresh is not None else planner, lambda *message: send(message),
-                            search=ForkedSearch(workers, send), cfg=cfg, resume=resume, made_here=fresh is not None)
+                            search=ForkedSearch(jobs, send), cfg=cfg, resume=resume, made_here=fresh is not None)
 
         result: Extraction = run_supervised(body, on_message=on_message, idle=follower.step_one)
         follower.finish(result)
@@ -445,10 +444,9 @@ def log_start(log: LogContents) -> int:
     return min((m.log_time for key in log.channels for m in log.on(key)), default=0)
 
 
-def _recorded_cycle_s(outputs: list[LoggedMessage], index: int) -> float:
+def _recorded_cycle_s(recorded: _Recorded, index: int) -> float:
     """The time the recorded planner took for this output: the gap since its previous one (or the median)."""
-    gaps = sorted(b.log_time - a.log_time for a, b in pairwise(outputs))
-    median = gaps[len(gaps) // 2] * 1e-9 if gaps else 0.0
+    outputs, median = recorded.outputs, recorded.median_output_gap_s
     if index == 0:
         return median
     return max(median, (outputs[index].log_time - outputs[index - 1].log_time) * 1e-9)
@@ -478,6 +476,12 @@ class _Recorded:
                    streams={name: Stream(name, [m.log_time for m in msgs]) for name, msgs in messages.items()},
                    codecs={name: get_codec(spec.channel(name).encoding) for name in list(cfg.inputs) + [cfg.output]},
                    index_of={name: {id(msg): i for i, msg in enumerate(msgs)} for name, msgs in messages.items()})
+
+    @functools.cached_property
+    def median_output_gap_s(self) -> float:
+        """The median time between two recorded outputs (0 for fewer than two): computed once, not per output."""
+        gaps = sorted(b.log_time - a.log_time for a, b in pairwise(self.outputs))
+        return gaps[len(gaps) // 2] * 1e-9 if gaps else 0.0
 
     def declared(self, cfg: ReplayModule, output_message: Any, previous: Mapping[str, int], until: int
                  ) -> Candidate | None:
@@ -742,7 +746,7 @@ def _decide_forked(run: _Run, out_index: int, options: list[Candidate], expected
     """Search the options in forked copies with their time limits; keep the best and learn from it."""
     cfg, result, outputs = run.cfg, run.result, run.recorded.outputs
     output, skew = outputs[out_index], int(cfg.skew_ms * 1e6)
-    full_limit = candidate_limit(_recorded_cycle_s(outputs, out_index))
+    full_limit = candidate_limit(_recorded_cycle_s(run.recorded, out_index))
     limit = run.memory.budget.neighbour_limit(full_limit) if expensive else run.memory.budget.limit(window, full_limit)
     searched = _search_forked(run, options, expected, limit_s=limit, full_limit_s=full_limit, cheap=not expensive,
                               until_ns=output.log_time + skew)

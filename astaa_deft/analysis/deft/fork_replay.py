@@ -181,13 +181,20 @@ class Tried:
 class ForkedSearch:
     """Inside the runner: try candidates in forked children; the winner carries on as the runner."""
 
-    def __init__(self, jobs: int, send_to_caller: Callable[[Any], None]) -> None:
-        self.jobs = max(1, jobs)
+    def __init__(self, jobs: int | Callable[[], int], send_to_caller: Callable[[Any], None]) -> None:
+        self._jobs = jobs  # a callable is asked once, when two candidates could first run at once
         self.send_to_caller = send_to_caller
         self.timeouts = 0  # candidates stopped by a time limit
         self.cut = 0  # of those, stopped by a tight limit (see search's retry_limit_s)
         self.retried = 0  # cut candidates run again under the full limit (no other was accepted)
         self.retried_kept = 0  # searches whose kept candidate was one of those
+
+    @property
+    def jobs(self) -> int:
+        """Candidates run at once (at least one)."""
+        if callable(self._jobs):
+            self._jobs = self._jobs()
+        return max(1, self._jobs)
 
     def _counters(self) -> dict[str, int]:
         return {"timeouts": self.timeouts, "cut": self.cut, "retried": self.retried,
@@ -225,7 +232,7 @@ class ForkedSearch:
         while True:
             timeouts_before = self.timeouts
             while winner is None and (queue or running):
-                while queue and len(running) < self.jobs:
+                while queue and (not running or len(running) < self.jobs):
                     index = queue.pop(0)
                     child = self._spawn(index, run, running, done)
                     if child is None:  # in the child: it won, and carries on as the runner
@@ -515,6 +522,9 @@ def _supervise(body: Callable[[Callable[[Any], None]], Any], write_fd: int) -> N
             os.waitpid(-1, 0)
         except ChildProcessError:
             os._exit(0)
+
+
+CALLER_POLL_S = 0.01  # how often the caller looks for the runner's messages while it has nothing else to do
 
 
 def run_supervised(body: Callable[[Callable[[M], None]], R], on_message: Callable[[M], None],

@@ -16,13 +16,37 @@ single point error. Edge cases are decided here, once:
 from __future__ import annotations
 
 import math
+import re
+from functools import lru_cache
 from itertools import pairwise
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 Point = tuple[float, float, float]  # x, y, t (absolute seconds)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FieldDifference:
+    """How one field of a module's output differs between the replayed and the recorded message.
+
+    Array elements count as one field (``path`` writes each index ``[*]``):
+    what a spec's ``ignore:`` names to skip them all. Kept on the comparison
+    so that an extraction can say why outputs do not reproduce (diagnosis.py).
+    """
+
+    path: str  # the leaf's path, each array index written [*]
+    side: str  # "both"; "recorded": only in the recorded output; "replayed": only in the replayed one
+    leaves: int  # leaves under ``path`` that differ (array elements)
+    delta: float | None  # both sides numeric and finite: replayed − recorded of the first leaf; else None
+    uniform: bool  # every leaf that differs, differs by ``delta``
+    squared: float  # Σ of those leaves' squared differences (∞: not numeric, or on one side only)
+    recorded: str  # the first differing leaf's recorded value, shortened ("" when only replayed)
+    replayed: str  # its replayed value, shortened ("" when only recorded)
+
+
+MAX_FIELD_DIFFERENCES = 24  # fields described per comparison (a message's other differing fields are counted)
 
 
 @dataclass(frozen=True)
@@ -31,6 +55,10 @@ class Comparison:
     max_error: float  # largest single point error, m
     points: int  # how many points were compared
     how: str  # "interpolated", "first point", "index", "both empty", "one empty"
+    # A module compared field by field: the fields that differ (at most MAX_FIELD_DIFFERENCES), and how many
+    # other differing fields are not described.
+    fields: tuple[FieldDifference, ...] = ()
+    fields_left_out: int = 0
 
     def within(self, threshold: float) -> bool:
         return self.distance <= threshold
@@ -92,12 +120,18 @@ def _errors(d: np.ndarray, how: str) -> Comparison:
 
 
 def flatten(message: object, ignore: Sequence[str] = ()) -> dict[str, object]:
-    """Leaf path → value of a decoded message (``a.b[2].c``), without the ``ignore`` paths and what lies below them."""
+    """Leaf path → value of a decoded message (``a.b[2].c``), without the ``ignore`` paths and what lies below them.
+
+    An ``ignore`` path names a leaf, a whole struct (``header``: every field
+    in it) or an array (``points``: every element); ``[*]`` stands for every
+    index (``objects[*].header.frame_id``).
+    """
     out: dict[str, object] = {}
+    plain, wild = _ignore_rules(tuple(ignore))
 
     def walk(value: object, path: str) -> None:
-        if path and any(path == skip or path.startswith(skip + ".") or path.startswith(skip + "[")
-                        for skip in ignore):
+        if path and (any(path == skip or path.startswith(skip + ".") or path.startswith(skip + "[")
+                         for skip in plain) or (wild is not None and wild.match(path))):
             return
         if isinstance(value, dict):
             for key in sorted(value):
@@ -111,6 +145,14 @@ def flatten(message: object, ignore: Sequence[str] = ()) -> dict[str, object]:
             out[path] = value
     walk(message, "")
     return out
+
+
+@lru_cache(maxsize=256)
+def _ignore_rules(ignore: tuple[str, ...]) -> tuple[tuple[str, ...], re.Pattern[str] | None]:
+    """The ``ignore`` paths without ``[*]``, and one pattern matching any path at or below one with ``[*]``."""
+    plain = tuple(skip for skip in ignore if "[*]" not in skip)
+    wild = [re.escape(skip).replace(re.escape("[*]"), r"\[[0-9]+\]") for skip in ignore if "[*]" in skip]
+    return plain, re.compile(f"(?:{'|'.join(wild)})(?:$|[.\\[])") if wild else None
 
 
 def _leaf_error(a: object, b: object) -> float:
@@ -136,13 +178,71 @@ def compare_messages(replayed: object, recorded: object, ignore: Sequence[str] =
         return Comparison(math.inf, math.inf, 0, "one empty")
     a, b = flatten(replayed, ignore), flatten(recorded, ignore)
     if a.keys() != b.keys():
-        return Comparison(math.inf, math.inf, len(b), "fields differ")
+        return Comparison(math.inf, math.inf, len(b), "fields differ", *field_differences(a, b))
     errors = [_leaf_error(a[k], b[k]) for k in b]
     if not errors:
         return Comparison(0.0, 0.0, 0, "fields")
     worst = max(errors)
+    if worst == 0.0:
+        return Comparison(0.0, 0.0, len(errors), "fields")
     distance = math.inf if math.isinf(worst) else math.sqrt(sum(e * e for e in errors))
-    return Comparison(distance, worst, len(errors), "fields")
+    return Comparison(distance, worst, len(errors), "fields", *field_differences(a, b, errors))
+
+
+def field_differences(replayed: Mapping[str, object], recorded: Mapping[str, object],
+                      errors: Sequence[float] | None = None) -> tuple[tuple[FieldDifference, ...], int]:
+    """The fields that differ between two flattened messages (array elements together): those only replayed,
+    then the others in the recorded message's order (at most MAX_FIELD_DIFFERENCES of them, how many more).
+
+    ``errors``: each recorded leaf's error (``_leaf_error``), when known.
+    """
+    groups: dict[str, list[tuple[str, object, object, float]]] = {}
+    for key in replayed:  # first: a step that raised answers one field of its own, never cut off
+        if key not in recorded:
+            groups.setdefault(wildcard_path(key), []).append(("replayed", None, replayed[key], math.inf))
+    for i, key in enumerate(recorded):
+        if key not in replayed:
+            groups.setdefault(wildcard_path(key), []).append(("recorded", recorded[key], None, math.inf))
+            continue
+        error = errors[i] if errors is not None else _leaf_error(replayed[key], recorded[key])
+        if error > 0.0:
+            groups.setdefault(wildcard_path(key), []).append(("both", recorded[key], replayed[key], error))
+    out = []
+    for path, leaves in list(groups.items())[:MAX_FIELD_DIFFERENCES]:
+        sides = {side for side, *_ in leaves}
+        side, first_recorded, first_replayed, _ = leaves[0]
+        deltas = [_delta(rep, rec) for kind, rec, rep, _ in leaves]
+        out.append(FieldDifference(
+            path=path, side=side if len(sides) == 1 else "both", leaves=len(leaves), delta=deltas[0],
+            uniform=deltas[0] is not None and all(d == deltas[0] for d in deltas),
+            squared=math.fsum(e * e for *_, e in leaves) if all(math.isfinite(e) for *_, e in leaves) else math.inf,
+            recorded="" if side == "replayed" else _shown(first_recorded),
+            replayed="" if side == "recorded" else _shown(first_replayed)))
+    return tuple(out), max(0, len(groups) - MAX_FIELD_DIFFERENCES)
+
+
+_INDEX = re.compile(r"\[[0-9]+\]")
+
+
+@lru_cache(maxsize=4096)
+def wildcard_path(path: str) -> str:
+    """``a[3].b[0]`` → ``a[*].b[*]``: every element of an array is one field."""
+    return _INDEX.sub("[*]", path)
+
+
+def _delta(replayed: object, recorded: object) -> float | None:
+    """replayed − recorded for two finite numbers (not booleans), else None."""
+    numeric = (int, float)
+    if (isinstance(replayed, numeric) and isinstance(recorded, numeric) and not isinstance(replayed, bool)
+            and not isinstance(recorded, bool) and math.isfinite(replayed) and math.isfinite(recorded)):
+        return float(replayed) - float(recorded)
+    return None
+
+
+def _shown(value: object, width: int = 40) -> str:
+    """A leaf's value for a report: its repr, cut to ``width`` characters."""
+    text = repr(value)
+    return text if len(text) <= width else text[:width - 1] + "…"
 
 
 def differing_fields(replayed: object, recorded: object, ignore: Sequence[str] = (), limit: int = 6

@@ -21,6 +21,7 @@ from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.deft.checkpoint import Checkpoint, LogShape, identity, read_state
+from astaa_deft.analysis.deft.diagnosis import Diagnosis, diagnose
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
 from astaa_deft.analysis.deft.idle_cores import cpu_sample, idle_cores
 from astaa_deft.analysis.deft.extract import (
@@ -58,6 +59,8 @@ class ExtractReport:
     # Module tests that failed when the written suite ran once on its own run (an extraction defect); the
     # suite keeps their frames for the state they build, without asserting them.
     suite_failures: list[SuiteFailure] = field(default_factory=list)
+    # Why outputs do not reproduce (the fields that differ, how, the ignore: line to add); None: they all do.
+    diagnosis: Diagnosis | None = None
 
 
 @dataclass(frozen=True)
@@ -145,10 +148,66 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
             uncheck_frames(out_dir, {f.index for f in failing})
         if oracles:
             add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
+        diagnosis = diagnosis_of(ex, spec, entry)
+        if diagnosis is not None and manifest is not None:
+            store_diagnosis(out_dir, diagnosis)
         checkpoint.finished()
     exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
     return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, entry,
-                         ground_truth=exact, resumed=len(before), suite_failures=failing)
+                         ground_truth=exact, resumed=len(before), suite_failures=failing, diagnosis=diagnosis)
+
+
+DIAGNOSIS_SAMPLES = 8  # recorded outputs read to tell whether each ignore: entry names a field
+
+
+def diagnosis_of(extraction: Extraction, spec: Spec, entry: ReplayModule) -> Diagnosis | None:
+    """Why the extraction's outputs do not reproduce at the module's θ (diagnosis.py); None when they all do."""
+    from astaa_deft.io.codecs import get_codec
+    from astaa_deft.io.codecs.base import DecodeError
+
+    if all(f.comparison.within(entry.threshold) for f in extraction.frames):
+        return None
+    codec = get_codec(spec.channel(entry.output).encoding)
+    samples: list[object] = []
+    for frame in extraction.frames:
+        if frame.output is not None and len(samples) < DIAGNOSIS_SAMPLES:
+            try:
+                samples.append(codec.decode(frame.output.data))
+            except DecodeError:
+                continue
+    return diagnose([f.comparison for f in extraction.frames], threshold=entry.threshold, ignore=entry.ignore,
+                    where=entry.where, brittle=_brittle_in(spec, entry.output), recorded=samples)
+
+
+def _brittle_in(spec: Spec, channel: str) -> Callable[[str], bool]:
+    """Whether the spec declares a field of ``channel``'s messages brittle (``brittle:``, e.g. Header.stamp);
+    False for a field its declared type lacks."""
+    from astaa_deft.model.errors import AstaaDeftError
+    from astaa_deft.model.fields import is_brittle
+
+    type_name = spec.channel(channel).type
+
+    def brittle(path: str) -> bool:
+        if not spec.brittle or type_name not in spec.types:
+            return False
+        try:
+            return is_brittle(spec.types, type_name, path, spec.brittle)
+        except (AstaaDeftError, KeyError, ValueError):  # a field the declared type does not have
+            return False
+
+    return brittle
+
+
+def store_diagnosis(out_dir: Path, diagnosis: Diagnosis) -> None:
+    """Keep the diagnosis in the suite's manifest (``diagnosis``): why its other frames are no tests."""
+    import json
+
+    from astaa_deft.io.output_place import write_atomic
+
+    path = out_dir / MANIFEST
+    manifest = json.loads(path.read_text())
+    manifest["diagnosis"] = diagnosis.as_json()
+    write_atomic(path, json.dumps(manifest, indent=1, default=str) + "\n")
 
 
 def _module_named(module: str | None, spec: Spec, spec_path: Path) -> str | None:

@@ -110,6 +110,9 @@ def extract(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOpti
     note = near_miss_note(report.extraction, unit)
     if note:
         say(note)
+    if report.diagnosis is not None:
+        for line in report.diagnosis.lines(str(spec_path)):
+            say(line)
     if report.suite_failures:
         shown = ", ".join(f"frame {f.index} ({f.detail})" for f in report.suite_failures[:5])
         more = f" and {len(report.suite_failures) - 5} more" if len(report.suite_failures) > 5 else ""

@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.errors import did_you_mean
+from astaa_deft.model.fields import FieldPath, FieldPathError
 from astaa_deft.model.sut import Channel, MessageType, Module
 from astaa_deft.engine.spec.planner import read_provenance, read_runner, read_setting
 from astaa_deft.engine.spec.replay_module import EXCEPTIONS, FRAME_MODES, FrameMode, ReplayModule, StepExceptions
@@ -143,6 +144,8 @@ def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel
         n = v["ignore"]
         if n.is_list and all(isinstance(i.value, str) and i.value for i in n.value):
             ignore = tuple(i.value for i in n.value)
+            for item in n.value:
+                _check_ignored_path(src, item, where)
         else:
             src.at(n, f"'{where}.ignore' must be a list of output field paths", "e.g. [header.stamp]")
     return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames, exceptions,
@@ -150,6 +153,15 @@ def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel
                         provenance=read_provenance(src, v.get("provenance"), f"{where}.provenance",
                                                    output_type=types.get(by_name[output].type)
                                                    if output in by_name else None, types=types))
+
+
+def _check_ignored_path(src: Source, node: Node, where: str) -> None:
+    """An ``ignore:`` entry is a field path (a leaf, a whole struct, an array; ``[*]``: every element)."""
+    try:
+        FieldPath.parse(node.value)
+    except FieldPathError as exc:
+        src.at(node, f"'{where}.ignore' entry '{node.value}' is no output field path: {exc.reason}",
+               "e.g. header.stamp, a whole struct (header) or a field of every element (points[*].t)")
 
 
 def _text(src: Source, node: Node, what: str) -> str:

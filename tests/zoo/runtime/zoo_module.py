@@ -223,6 +223,8 @@ def main() -> int:
         try:
             message = step.step(frame)
             while message is not None:
+                if member.get("frame_id"):  # the node's own field, added to what the step returns
+                    message = {**message, "header": {**message["header"], "frame_id": member["frame_id"]}}
                 pub.put(json.dumps(message))
                 message = step.step(frame) if step.pending else None
         except Exception:  # a step that raises kills the module, as a node dies of an uncaught exception
