@@ -27,7 +27,7 @@ if __name__ == "__main__":
 from zoo import MODULE, by_name, short, write_member
 from zoo.judge import extract
 
-from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, read_times, trigger_candidates
+from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, read_times, trigger_candidates
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log.reader import read_log
@@ -63,10 +63,11 @@ def candidate_lines(log_path: Path, spec_path: Path) -> Iterator[str]:
             previous_ns = outputs[index - 1].log_time if index else None
             read_at = read_times(streams, cfg.trigger, previous, output_ns=output.log_time,
                                  previous_output_ns=previous_ns, step_ns=step_ns)
-            found = candidates(streams, cfg.trigger, output.log_time + skew, previous, lookback,
-                               None if previous_ns is None else previous_ns + skew, read_at, index == 0,
-                               skew_ns=skew,
-                               earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, index - 4):index - 1])])
+            found = candidates(OutputContext(
+                streams=streams, trigger=cfg.trigger, output_ns=output.log_time + skew, previous=previous,
+                lookback_ns=lookback, previous_output_ns=None if previous_ns is None else previous_ns + skew,
+                read_at=read_at, module_started_in_log=index == 0, skew_ns=skew,
+                earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, index - 4):index - 1])]))
             yield f"output {index} step {step_ns}: {len(found)}"
             yield from map(_candidate_line, found)
             if found:

@@ -27,8 +27,8 @@ from astaa_deft.analysis.deft.fork_replay import (
     Following, ForkedSearch, Shadow, candidate_limit, cpu_limit, drop, hand_over, in_two_forks, next_word,
     run_supervised, shadow, tell,
 )
-from astaa_deft.analysis.deft.frames import Candidate, Stream, candidates, read_times, \
-    frame_at, plain_walk, trigger_candidates
+from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, frame_at, plain_walk, \
+    read_times, trigger_candidates
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, SearchMemory
 from astaa_deft.analysis.deft.planner_section import planner_of, replay_module_of
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, compare_outputs, trajectory_points, within_limit
@@ -697,10 +697,12 @@ def _generic_candidates(run: _Run, out_index: int) -> list[Candidate]:
     read_at = read_times(recorded.streams, cfg.trigger, run.previous, output_ns=output.log_time,
                          previous_output_ns=outputs[out_index - 1].log_time if out_index else None,
                          step_ns=None if run.last_step_s is None else int(run.last_step_s * 1e9))
-    return candidates(recorded.streams, cfg.trigger, output.log_time + skew, run.previous,
-                      int(cfg.lookback_ms * 1e6), outputs[out_index - 1].log_time + skew if out_index else None,
-                      read_at, recorded.module_started_in_log, skew_ns=skew,
-                      earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
+    return candidates(OutputContext(
+        streams=recorded.streams, trigger=cfg.trigger, output_ns=output.log_time + skew, previous=run.previous,
+        lookback_ns=int(cfg.lookback_ms * 1e6),
+        previous_output_ns=outputs[out_index - 1].log_time + skew if out_index else None, read_at=read_at,
+        module_started_in_log=recorded.module_started_in_log, skew_ns=skew,
+        earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])]))
 
 
 def _put_first(run: _Run, out_index: int, options: list[Candidate], expected: _Expected, *,
@@ -1078,7 +1080,7 @@ def _step_first_here(run: Callable[[int], Any], accepted: Callable[[Any], bool],
 
 
 def _walk(run: _Run, start: Candidate, expected: _Expected, until_ns: int) -> _Outcome:
-    """The plain walk (frames.WALK) stepped: each trigger after the previous frame's at its own time until the
+    """The plain walk (frames.walk) stepped: each trigger after the previous frame's at its own time until the
     module answers; that answer judged, the frames stepped carried in the outcome."""
     cfg, recorded = run.cfg, run.recorded
     times = recorded.streams[cfg.trigger].times

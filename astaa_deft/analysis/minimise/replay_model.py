@@ -42,7 +42,8 @@ from dataclasses import replace
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
-from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
+from astaa_deft.analysis.deft.frames import OutputContext, Stream, candidates, frame_at, newest_at_or_before, \
+    trigger_frame
 from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
 from astaa_deft.analysis.deft.run_metadata import RunMetadata
 from astaa_deft.analysis.deft.replay import ReplayPlanner, make_planner, within_limit
@@ -254,7 +255,8 @@ class ReplayModel:
             choice = frame_at(streams, trigger, t_index, t_t, previous)
             frame_time = t_t
             if choice is None:  # the trigger time does not work: the candidate search decides
-                options = candidates(streams, trigger, output.log_time, previous, self.lookback_ns)
+                options = candidates(OutputContext(streams=streams, trigger=trigger, output_ns=output.log_time,
+                                                   previous=previous, lookback_ns=self.lookback_ns))
                 if not options:
                     out.append(None)
                     continue
