@@ -18,7 +18,8 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
+from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, extract, search_note
+from astaa_deft.analysis.deft.extract.speculation import step_in_turn
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
 from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, read_times
 from astaa_deft.analysis.deft.frames.read_at import AT_OUTPUT, AT_PREVIOUS, AT_START
@@ -453,7 +454,7 @@ def test_candidates_in_turn_carry_on_from_the_kept_ones_state_and_hand_long_sear
                 state.append((output, index))
                 return "right" if index == right else "wrong"
 
-            kept, in_vain = _step_in_turn(3, run, lambda r: r == "right", speculation, in_turn=True)
+            kept, in_vain = step_in_turn(3, run, lambda r: r == "right", speculation, in_turn=True)
             if kept is None:
                 speculation.let_go()
                 order = [i for i in range(3) if i not in in_vain] + sorted(in_vain)

@@ -115,14 +115,14 @@ def test_a_burst_of_outputs_answers_the_last_triggers_before_it():
     # answered with nothing (its answer was logged after the next trigger) and the pairing slipped.
     from types import SimpleNamespace
 
-    from astaa_deft.analysis.deft.extract import _answered_in_turn
+    from astaa_deft.analysis.deft.extract.per_trigger import answered_in_turn
 
     triggers = [0, 20 * MS, 40 * MS, 60 * MS, 80 * MS]
     burst = [SimpleNamespace(log_time=t) for t in (62 * MS, 62 * MS + 300_000, 62 * MS + 500_000, 81 * MS)]
-    assert [_answered_in_turn(triggers, i, burst, 0) for i in range(4)] == [False, True, True, True]
+    assert [answered_in_turn(triggers, i, burst, 0) for i in range(4)] == [False, True, True, True]
     # One output a period: a trigger whose answer comes after the next trigger got none (as before).
     steady = [SimpleNamespace(log_time=t) for t in (45 * MS, 65 * MS)]
-    assert [_answered_in_turn(triggers, i, steady, 0) for i in range(3)] == [False, False, True]
+    assert [answered_in_turn(triggers, i, steady, 0) for i in range(3)] == [False, False, True]
 
 
 # -- the frame rules' extension point ----------------------------------------------------------------------------
