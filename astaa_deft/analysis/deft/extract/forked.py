@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 from astaa_deft.analysis.deft.extract.judging import NEAR_MISS_M, Expected, Judged, as_logged, decoded, judged, text_of
 from astaa_deft.analysis.deft.extract.recorded import recorded_cycle_s
 from astaa_deft.analysis.deft.extract.run import Run
-from astaa_deft.analysis.deft.extract.speculation import step_first_here, step_in_turn
+from astaa_deft.analysis.deft.extract.speculation import Speculation, step_first_here, step_in_turn
 from astaa_deft.analysis.deft.fork_replay import (
     candidate_limit,
     in_two_forks,
@@ -157,16 +157,9 @@ def _search_forked(run: Run, options: Sequence[Candidate], expected: Expected, *
             not speculation.expect_exact and 0.0 < cmp.distance <= NEAR_MISS_M)
 
     t1 = time.perf_counter()
-    kept: tuple[int, Outcome | None] | None
-    in_vain: dict[int, Outcome | None]
-    if cheap or len(options) == 1:
-        kept, in_vain = step_in_turn(len(options), run_candidate,
-                                     lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
-                                     speculation, in_turn=cheap and len(options) > 1)
-    else:
-        kept, in_vain = step_first_here(
-            run_candidate, lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
-            speculation, limit_s)
+    kept, in_vain = _step_here(len(options), run_candidate,
+                               lambda outcome: accepted(outcome) or (outcome is not None and settles(outcome)),
+                               speculation, cheap=cheap, limit_s=limit_s)
     # The forked search tries those not tried in turn first (they were wrong, but may be the closest).
     others = [i for i in range(len(options)) if i not in in_vain]
     known = all(outcome is not None for outcome in in_vain.values())
@@ -196,6 +189,17 @@ def _search_forked(run: Run, options: Sequence[Candidate], expected: Expected, *
         cand = Candidate(run.recorded.streams[cfg.trigger].times[walked[-1][cfg.trigger]], walked[-1],
                          cand.patterns, tuple(walked[:-1]))
     return cand, Judged(cmp, exact, tries), step_s
+
+
+def _step_here(count: int, run: Callable[[int], Outcome | None], keeps: Callable[[Outcome | None], bool],
+               speculation: Speculation, *, cheap: bool, limit_s: float
+               ) -> tuple[tuple[int, Outcome | None] | None, dict[int, Outcome | None]]:
+    """An output's candidates stepped in this process before any fork: a ``cheap`` output's (or a lone
+    candidate) in turn (:func:`step_in_turn`), an expensive output's first one under ``limit_s`` of CPU time
+    (:func:`step_first_here`). (candidate and outcome kept, or None; candidates tried in vain.)"""
+    if cheap or count == 1:
+        return step_in_turn(count, run, keeps, speculation, in_turn=cheap and count > 1)
+    return step_first_here(run, keeps, speculation, limit_s)
 
 
 def _forked_near(outcome: Outcome) -> bool:
