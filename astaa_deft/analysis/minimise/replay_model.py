@@ -52,6 +52,8 @@ from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage, read_log
 from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
+from astaa_deft.engine.monitor.base import ReplayJudges
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
@@ -138,11 +140,12 @@ def _why_not(spec: Spec, cfg: ReplayModule, invariant_name: str, failure_module:
     invariant = next((i for i in spec.invariants if i.name == invariant_name), None)
     if invariant is None:
         return f"'{invariant_name}' is not an invariant of the spec"
-    if invariant.kind == "process" and crash_shown and not is_planner:
+    judges = invariant_class(invariant.kind).replay_judges
+    if judges is ReplayJudges.PROCESS and crash_shown and not is_planner:
         # The module's exception is its process's abnormal exit: judged by this very invariant.
         return None if failure_module == cfg.module else f"'{invariant_name}' broke for another module"
-    timing_replayed = cfg.per_trigger and invariant.kind == "deadline"
-    if invariant.kind in ("process", "deadline") and not timing_replayed:
+    timing_replayed = cfg.per_trigger and judges is ReplayJudges.TIMING
+    if judges is not ReplayJudges.VALUES and not timing_replayed:
         return f"'{invariant_name}' is a {invariant.kind} invariant: timing and processes are not replayed"
     channels = MonitorSet(replace(spec, invariants=(invariant,)), 0).channels()
     if channels != {cfg.output}:
