@@ -61,7 +61,7 @@ class ExtractReport:
     suite_failures: list[SuiteFailure] = field(default_factory=list)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ExtractOptions:
     """How an extraction searches and replays (the `extract` command's options past the log, spec and output)."""
 
