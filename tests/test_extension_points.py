@@ -210,7 +210,8 @@ def test_what_a_new_kind_may_be_judged_by_is_its_traits_not_its_name(extensions)
     # A timing invariant: a replay of one module's outputs does not judge it (the spec here replays nothing).
     assert replay_entry_for(spec, "quiet")[0] is None
     # A timing violation after its module's crash is the crash's consequence: only the exit counts.
-    late = Violation("quiet", "silence", "high", 2_000, "data", None, None, "late", Verdict.RESTART, "talker")
+    late = Violation(invariant="quiet", invariant_kind="silence", severity="high", time_ns=2_000, channel="data",
+                     seq=None, message=None, detail="late", crash=Verdict.RESTART, module="talker")
     crashed = ProcessExit("talker", 1, 1, None, 1_000, False)
     assert run_verdict([late], [crashed], ["talker", "listener"]).klass is Verdict.ABORT
     assert is_crash_bucket("Silent", "quiet", spec)  # its crash_kind trait

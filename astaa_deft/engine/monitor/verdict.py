@@ -80,10 +80,10 @@ def _unreported_exits(mid_run: Sequence[ProcessExit], violations: Sequence[Viola
         if (e.module, e.time_ns) in reported:
             continue
         clean = e.returncode == 0 and not e.signal
-        out.append(Violation(IMPLICIT, "process", "high", e.time_ns, None, None,
-                             {"returncode": e.returncode, "signal": e.signal},
-                             f"{e.as_finding()} during the run", Verdict.HINDERING if clean else Verdict.ABORT,
-                             e.module))
+        out.append(Violation(invariant=IMPLICIT, invariant_kind="process", severity="high", time_ns=e.time_ns,
+                             channel=None, seq=None, message={"returncode": e.returncode, "signal": e.signal},
+                             detail=f"{e.as_finding()} during the run",
+                             crash=Verdict.HINDERING if clean else Verdict.ABORT, module=e.module))
     return out
 
 
