@@ -27,6 +27,9 @@ if __name__ == "__main__":
 from zoo import MODULE, by_name, short, write_member
 from zoo.judge import extract
 
+from astaa_deft.analysis.deft.extract import extract as extract_frames
+from astaa_deft.analysis.deft.replay import make_planner
+from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, read_times, trigger_candidates
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.engine.spec.loader import load_spec
@@ -38,6 +41,9 @@ PINS = Path(__file__).resolve().parent / "data" / "extraction_pins"
 EXTRACTED = ("each_warm", "mpc", "timer_several")
 FRAMES_ONLY = ("drop_cycle_none", "oldest_latched")
 MEMBERS = EXTRACTED + FRAMES_ONLY
+# The bundled demo's planner on a recorded lane_follow run (its spec ships with the tool: nothing to write).
+DEMO = "demo_lane_follow"
+DEMO_PARAMS = {"scenario": "lane_follow", "defects": "off"}
 STEP_NS = (None, 80_000_000)  # read_times without a measured step, and with a step no instant one
 
 
@@ -46,11 +52,12 @@ def _candidate_line(cand: Candidate) -> str:
                        [sorted(s.items()) for s in cand.silent], cand.walk])
 
 
-def candidate_lines(log_path: Path, spec_path: Path) -> Iterator[str]:
+def candidate_lines(log_path: Path, spec_path: Path, module: str | None = MODULE) -> Iterator[str]:
     """Every candidate the frame rules propose for every output of the log, as extraction asks for them: the
-    previous frame the first candidate of the output before, each rule's inputs from the log alone."""
+    previous frame the first candidate of the output before, each rule's inputs from the log alone
+    (``module``: the replayed module, None: the planner)."""
     spec = load_spec(spec_path)
-    cfg = replay_module_of(spec, MODULE)
+    cfg = replay_module_of(spec, module)
     log = read_log(log_path)
     timed = {name: sorted(log.on(spec.channel(name).key), key=lambda m: m.log_time)
              for name in [*cfg.inputs, cfg.output]}
@@ -115,6 +122,35 @@ def pins_now(name: str, directory: Path) -> dict[str, object]:
     return out
 
 
+def demo_pins_now(directory: Path) -> dict[str, object]:
+    """The demo's pins as the code now makes them from its committed log: the planner's candidates, and the
+    frames an in-process extraction keeps (candidates stepped from deep copies, one after another: the
+    forked search may keep either of two candidates that both settle an output, whichever reports first) —
+    each frame's inputs, trigger and judgement. Not its frame time: a frame read at the cycle's start is
+    timed by the step the replay measured (``read_at``), which varies from run to run."""
+    log = directory / "demo.mcap"
+    log.write_bytes((PINS / DEMO / "run.mcap").read_bytes())
+    spec = load_spec(demo_spec_path())
+    extraction = extract_frames(read_log(log), spec, make_planner(spec, DEMO_PARAMS))
+    kept = [json.dumps([f.index, f.trigger_time, sorted((k, m.log_time) for k, m in f.inputs.items()),
+                        f.comparison.distance, f.exact, f.accepted]) for f in extraction.frames]
+    return {"candidates": digest(candidate_lines(log, demo_spec_path(), None)), "frames": digest(iter(kept)),
+            "exact": extraction.accepted_at(0.0), "tests": len(kept)}
+
+
+def record_lane_follow(path: Path) -> Path:
+    """One passive recording of the demo's lane_follow scenario (as tests/test_deft_demo.py makes its own)."""
+    from astaa_deft.cli.commands.demo import StatusWatch
+    from astaa_deft.cli.commands.proxy import run_bus
+    from astaa_deft.engine.session import RunOptions
+
+    watch = StatusWatch()
+    outcome = run_bus(load_spec(demo_spec_path()), RunOptions(mode="passive", record=path, params=DEMO_PARAMS), 40.0,
+                      on_start=lambda r: r.subscribe("status", watch.on_sample), verbose=False)
+    assert watch.goal, outcome.end_reason
+    return path
+
+
 def committed() -> dict[str, dict[str, object]]:
     return json.loads((PINS / "pins.json").read_text())
 
@@ -134,7 +170,11 @@ if __name__ == "__main__":
                 stack = write_member(short(by_name(name)), Path(tmp) / "rec" / name)
                 (PINS / name).mkdir(parents=True, exist_ok=True)
                 (PINS / name / "run.mcap").write_bytes(record(stack).read_bytes())
+        if args.record:
+            (PINS / DEMO).mkdir(parents=True, exist_ok=True)
+            (PINS / DEMO / "run.mcap").write_bytes(record_lane_follow(Path(tmp) / "demo-rec.mcap").read_bytes())
         pins = {name: pins_now(name, Path(tmp)) for name in MEMBERS}
+        pins[DEMO] = demo_pins_now(Path(tmp))
     if args.write:
         (PINS / "pins.json").write_text(json.dumps(pins, indent=1, sort_keys=True) + "\n")
     print(json.dumps(pins, indent=1, sort_keys=True))
