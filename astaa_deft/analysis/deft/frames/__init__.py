@@ -30,6 +30,8 @@ over sorted arrays: a frame costs microseconds.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from astaa_deft.analysis.deft.frames.context import FIRST_OUTPUT_TRIGGERS, OutputContext
 from astaa_deft.analysis.deft.frames.per_trigger import trigger_candidates, trigger_frame
 from astaa_deft.analysis.deft.frames.read_at import frame_read_at, read_times
@@ -48,17 +50,19 @@ def candidates(ctx: OutputContext) -> list[Candidate]:
         return []
     found = [c for c in (frame_read_at(ctx.streams, ctx.trigger, t, ctx.previous, rule=way) for t, way in ctx.read_at)
              if c is not None]
-    for index, ways in placed_triggers(ctx).items():
+    rules = ordered()
+    for index, ways in placed_triggers(ctx, rules).items():
         found += frames_of_trigger(ctx.streams, ctx.trigger, index, ctx.output_ns, previous=ctx.previous,
                                    lookback_ns=ctx.lookback_ns, ways=ways)
-    found += [c for rule in ordered() if rule.frame is not None and (c := rule.frame(ctx)) is not None]
+    found += [c for rule in rules if rule.frame is not None and (c := rule.frame(ctx)) is not None]
     return merged(found)
 
 
-def placed_triggers(ctx: OutputContext) -> dict[int, set[str]]:
-    """The triggers the rules place, in their order, each with the ways that name it."""
+def placed_triggers(ctx: OutputContext, rules: Sequence[FrameRule] | None = None) -> dict[int, set[str]]:
+    """The triggers the rules place (default: every registered rule), in their order, each with the ways that
+    name it."""
     placed: dict[int, set[str]] = {}
-    for rule in ordered():
+    for rule in ordered() if rules is None else rules:
         for index, way in rule.triggers(ctx) if rule.triggers is not None else ():
             ways = placed.setdefault(index, set())
             if way is not None:
