@@ -176,8 +176,10 @@ def test_a_slow_module_that_ended_a_cycle_with_a_trigger_waiting_read_its_next_i
 
 def test_an_expensive_outputs_tries_are_not_all_one_triggers():
     # Eight frames of one trigger (other inputs' offsets) ranked first left the next trigger's likeliest out.
-    same = [Candidate(0, {"a": 7, "b": k}, frozenset({(CYCLE_END, (("b", k),))})) for k in range(10)]
-    other = [Candidate(0, {"a": 6, "b": k}, frozenset({(CYCLE_END, (("b", k),))})) for k in range(6)]
+    same = [Candidate(frame_time=0, choice={"a": 7, "b": k},
+                      patterns=frozenset({(CYCLE_END, (("b", k),))})) for k in range(10)]
+    other = [Candidate(frame_time=0, choice={"a": 6, "b": k},
+                       patterns=frozenset({(CYCLE_END, (("b", k),))})) for k in range(6)]
     options, capped = SearchMemory().order(same + other, expensive=True, first=False, trigger="a")
     assert capped and len(options) == EXPENSIVE_TRIES
     assert sum(c.choice["a"] == 7 for c in options) == PER_TRIGGER

@@ -186,8 +186,9 @@ def _search_forked(run: Run, options: Sequence[Candidate], expected: Expected, *
     tries = index + 1 if cmp.within(cfg.threshold) or 0.0 < cmp.distance <= NEAR_MISS_M else len(options)
     cand = options[index]
     if walked:  # the plain walk: the frames it stepped, the last answering
-        cand = Candidate(run.recorded.streams[cfg.trigger].times[walked[-1][cfg.trigger]], walked[-1],
-                         cand.patterns, tuple(walked[:-1]))
+        cand = Candidate(frame_time=run.recorded.streams[cfg.trigger].times[walked[-1][cfg.trigger]],
+                         choice=walked[-1],
+                         patterns=cand.patterns, silent=tuple(walked[:-1]))
     return cand, Judged(cmp, exact, tries), step_s
 
 

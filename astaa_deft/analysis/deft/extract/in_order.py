@@ -156,7 +156,8 @@ def _put_first(run: Run, out_index: int, options: list[Candidate], expected: Exp
         # An output right after the previous one (within the skew): most likely the next message of the same
         # cycle (a module publishing several a cycle answers it whatever the frame). The previous frame again,
         # first: a frame with a newer trigger would take that trigger from the cycle that answers it.
-        again = Candidate(outputs[out_index - 1].log_time, dict(run.previous), frozenset({(AGAIN, ())}))
+        again = Candidate(frame_time=outputs[out_index - 1].log_time, choice=dict(run.previous),
+                          patterns=frozenset({(AGAIN, ())}))
         options = [again] + [c for c in options if dict(c.choice) != run.previous]
     declared = recorded.declared(cfg, expected.message, run.previous, output.log_time + skew)
     if declared is not None:  # the module said which inputs it used: that frame first, checked by replay

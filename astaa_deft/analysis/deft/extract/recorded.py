@@ -92,8 +92,8 @@ class Recorded:
             if found is None:
                 return None
             choice[name] = found
-        return Candidate(self.streams[cfg.trigger].times[choice[cfg.trigger]], choice,
-                         frozenset({(DECLARED, ())}))
+        return Candidate(frame_time=self.streams[cfg.trigger].times[choice[cfg.trigger]], choice=choice,
+                         patterns=frozenset({(DECLARED, ())}))
 
     def fresh(self, name: str, idx: int) -> DecodedMessage | None:
         """Message ``idx`` of input ``name`` decoded anew (None if it does not decode): what a module steps on

@@ -65,7 +65,8 @@ def frame_read_at(streams: Mapping[str, Stream], trigger: str, t: int, previous:
     at_trigger = frame_at(streams, trigger, index, streams[trigger].times[index], previous, absent=True)
     if choice is None or at_trigger is None:
         return None
-    return Candidate(t, choice, frozenset({(rule, ()), (rule, offsets(streams, trigger, choice, at_trigger))}))
+    return Candidate(frame_time=t, choice=choice,
+                     patterns=frozenset({(rule, ()), (rule, offsets(streams, trigger, choice, at_trigger))}))
 
 
 for _order, _way in enumerate((AT_OUTPUT, AT_START, AT_PREVIOUS)):

@@ -25,7 +25,7 @@ class Stream:
 Pattern = tuple[str, tuple[tuple[str, int], ...]]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Candidate:
     frame_time: int
     choice: Mapping[str, int]  # channel → index into its stream (trigger included)
@@ -105,7 +105,8 @@ def frames_of_trigger(streams: Mapping[str, Stream], trigger: str, t_index: int,
     for t_f in [t_t] + sorted(later) + sorted(earlier, reverse=True):
         choice = frame_at(streams, trigger, t_index, t_f, previous, absent=True)
         assert choice is not None
-        out.append(Candidate(t_f, choice, frozenset((way, offsets(streams, trigger, choice, at_trigger))
+        out.append(Candidate(frame_time=t_f, choice=choice,
+                             patterns=frozenset((way, offsets(streams, trigger, choice, at_trigger))
                                                     for way in ways)))
     return out
 
@@ -121,5 +122,6 @@ def merged(found: Sequence[Candidate]) -> list[Candidate]:
             out.append(cand)
         else:  # the same frame reached another way: it carries both ways
             first = out[seen[key]]
-            out[seen[key]] = Candidate(first.frame_time, first.choice, first.patterns | cand.patterns)
+            out[seen[key]] = Candidate(frame_time=first.frame_time, choice=first.choice,
+                                       patterns=first.patterns | cand.patterns)
     return out

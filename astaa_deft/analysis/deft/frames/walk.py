@@ -24,7 +24,8 @@ def plain_walk(streams: Mapping[str, Stream], trigger: str, previous: Mapping[st
     choice = frame_at(streams, trigger, first, streams[trigger].times[first], previous, absent=True)
     if choice is None:
         return None
-    return Candidate(streams[trigger].times[first], choice, frozenset({(WALK, ())}), walk=True)
+    return Candidate(frame_time=streams[trigger].times[first], choice=choice, patterns=frozenset({(WALK, ())}),
+                     walk=True)
 
 
 register(FrameRule(name=WALK, order=0))

@@ -16,7 +16,7 @@ AS_LOGGED = "as logged"
 def frame(ctx: OutputContext) -> Candidate | None:
     t_t = ctx.trigger_times[ctx.newest]
     choice = frame_at(ctx.streams, ctx.trigger, ctx.newest, t_t, {}, absent=True)
-    return None if choice is None else Candidate(t_t, choice, frozenset({(AS_LOGGED, ())}))
+    return None if choice is None else Candidate(frame_time=t_t, choice=choice, patterns=frozenset({(AS_LOGGED, ())}))
 
 
 register(FrameRule(name=AS_LOGGED, order=100, frame=frame))
