@@ -57,7 +57,8 @@ def extract_in_order(log: LogContents, spec: Spec, planner: ReplayPlanner, progr
     suite's own run until a fork takes over).
     """
     recorded = Recorded.read(log, spec, cfg)
-    run = Run(planner, cfg, recorded, search, progress, Extraction(outputs=len(recorded.outputs)),
+    run = Run(planner=planner, cfg=cfg, recorded=recorded, search=search, progress=progress,
+              result=Extraction(outputs=len(recorded.outputs)),
               born=os.getpid() if made_here and search is not None else None)
     for out_index in range(len(recorded.outputs)):
         _extract_output(run, out_index, resume[out_index] if out_index < len(resume) else None)

@@ -34,7 +34,7 @@ class _TriggerModule:
     usable: Mapping[str, list[tuple[LoggedMessage, Any]]]  # channel → (message, decoded), log order
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _TriggerAnswer:
     """One candidate frame of a trigger as stepped (in the end: the one kept)."""
 
@@ -113,7 +113,7 @@ def extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             comparison=kept.comparison, accepted=kept.error is None and within,
             candidates_tried=kept.tries if within else len(options),
             exact=kept.error is None and same_fields(kept.replayed, expected if answered else None)))
-        progress(done, len(triggers), Decided(done - 1, result.frames[-1], kept.choice))
+        progress(done, len(triggers), Decided(output_index=done - 1, frame=result.frames[-1], choice=kept.choice))
         if kept.error is not None:
             result.skipped.append((len(result.frames) - 1, f"the module stopped answering: {kept.error}"))
             break
@@ -167,10 +167,12 @@ def _answer_trigger(module: _TriggerModule, options: Sequence[dict[str, int]], *
             cmp = compare_outputs(cfg, replayed, expected)
         result.validation_seconds += time.perf_counter() - t3
         if error is None and cmp.within(cfg.threshold):
-            return _TriggerAnswer(cmp, choice, replayed, error, None, tries)
+            return _TriggerAnswer(comparison=cmp, choice=choice, replayed=replayed, error=error, state=None,
+                                  tries=tries)
         if best is None or cmp.distance < best.comparison.distance:
             state = planner.snapshot() if start_state is not None else None
-            best = _TriggerAnswer(cmp, choice, replayed, error, state, tries)
+            best = _TriggerAnswer(comparison=cmp, choice=choice, replayed=replayed, error=error, state=state,
+                                  tries=tries)
     assert best is not None
     return best
 

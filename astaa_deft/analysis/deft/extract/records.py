@@ -15,7 +15,7 @@ from astaa_deft.analysis.deft.validator import Comparison
 from astaa_deft.io.log.reader import LoggedMessage
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ExtractedFrame:
     index: int  # 0-based, in output order
     output: LoggedMessage | None  # None: the module answered this frame with nothing (per-trigger frames)
@@ -31,7 +31,7 @@ class ExtractedFrame:
 InOrder = tuple[int, Comparison | None, bool]  # (frame index, its comparison or None: no output, exact)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Decided:
     """One output as the extraction decided it, passed on as soon as it is (partial results, ``--resume``).
 
@@ -59,7 +59,7 @@ class Decided:
 OnOutput = Callable[[int, int, Decided], None]  # (outputs done, outputs in all, the one just decided)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Extraction:
     frames: list[ExtractedFrame] = field(default_factory=list)
     skipped: list[tuple[int, str]] = field(default_factory=list)  # (output index, why)

@@ -19,7 +19,7 @@ from astaa_deft.analysis.deft.validator import Comparison
 from astaa_deft.engine.spec.replay_section import ReplayModule
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Run:
     """The state the steps of one extraction (:func:`extract_in_order`) share, in the process that carries it on."""
 
@@ -52,9 +52,9 @@ class Run:
             index_of = self.recorded.index_of
             in_order = self.in_order(len(before) + 1) if frame is not None else None
             self.progress(out_index + 1, len(self.recorded.outputs), Decided(
-                out_index, frame, None if frame is None else {
-                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped, before,
-                in_order, self.born is None))
+                output_index=out_index, frame=frame, choice=None if frame is None else {
+                    name: index_of[name][id(msg)] for name, msg in frame.inputs.items()}, skipped=skipped,
+                before=before, in_order=in_order, beside=self.born is None))
 
     def keep(self, out_index: int, cand: Candidate, judged: Judged) -> None:
         """Record ``cand`` as the frame of output ``out_index`` and report it."""
