@@ -159,3 +159,8 @@ def test_a_rule_registered_on_the_registry_places_its_trigger_and_is_gone_once_t
     finally:
         FRAME_RULES.unregister("second newest")
     assert candidates(ctx) == before and "second newest" not in likely_ways()
+
+
+def test_the_ways_a_module_follows_are_the_likely_rules_and_a_between_trigger_is_not_one():
+    assert likely_ways() == {"newest", "busy", "cycle end", "oldest", "first", "first heard", "after", "after 2",
+                             "after 3", "after 4", "at output", "at cycle start", "at previous output"}
