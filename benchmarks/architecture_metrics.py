@@ -1,6 +1,6 @@
-"""The architecture's figures (issue 26's acceptance), measured on the package as it is.
+"""The architecture's figures, measured on the package as it is; ``--check`` keeps them from rising.
 
-    python benchmarks/architecture_metrics.py [--list]
+    python benchmarks/architecture_metrics.py [--list] [--check | --write-baseline]
 
 Prints: functions over 80 lines; functions with 8+ parameters and those of
 them not keyword-only past the fourth; lines with ``.get("`` outside the
@@ -23,13 +23,24 @@ orchestration tier outside the journal and the case payload (where a test
 case is stored or handed to a worker); and the import-linter contracts of
 ``pyproject.toml`` checked again with type-only imports (``if
 TYPE_CHECKING:``) counted, as broken contracts and the imports that break
-them. Asserts nothing: the figures go in the notes.
+them. Also: modules over 700 lines, and comparisons of an invariant kind's
+name as a string outside the kinds themselves (``engine/monitor/kinds/``):
+a string constant naming a registered kind compared with a ``kind`` or
+``invariant_kind`` attribute, or a set of such names bound to a ``*KIND*``
+name — what a kind can be judged on belongs to the kind.
+
+``--check`` compares the figures named in ``architecture_baseline.json``
+(beside this script) and exits 1 naming each that rose above its committed
+value (CI runs it); ``--write-baseline`` records the current figures there,
+for a change that brings one down. Otherwise asserts nothing: the figures go
+in the notes.
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import json
 import os
 import re
 import subprocess
@@ -43,6 +54,41 @@ PACKAGE = Path(__file__).resolve().parent.parent / "astaa_deft"
 EXTERNAL = ("demo/", "engine/spec/", "io/yamlsource.py", "io/codecs/", "engine/monitor/spec_reader.py",
             "engine/monitor/invariants.py", "engine/intercept/testcase/", "engine/intercept/dictionary/")
 PUBLIC_SEAMS = ("engine/session/", "orchestration/campaign/", "analysis/minimise/")
+BASELINE = Path(__file__).resolve().parent / "architecture_baseline.json"
+KINDS_PACKAGE = "engine/monitor/kinds/"
+LONG_MODULE = 700  # lines
+
+
+def _kind_names(package: Path) -> frozenset[str]:
+    """The registered invariant kinds: one module each under ``engine/monitor/kinds/`` (its file name)."""
+    return frozenset(p.stem for p in (package / KINDS_PACKAGE).glob("*.py") if not p.stem.startswith("_"))
+
+
+def _names_kind(node: ast.AST, kinds: frozenset[str]) -> bool:
+    """A string constant naming a kind, or a literal collection holding one."""
+    return any(isinstance(n, ast.Constant) and isinstance(n.value, str) and n.value in kinds for n in ast.walk(node))
+
+
+def _reads_kind(node: ast.AST) -> bool:
+    return isinstance(node, ast.Attribute) and node.attr in ("kind", "invariant_kind")
+
+
+def _kind_string_checks(tree: ast.Module, kinds: frozenset[str]) -> list[int]:
+    """Lines comparing an invariant kind by its name (``x.kind == "deadline"``, ``v.invariant_kind in (…)``) or
+    binding a set of kind names to a ``*KIND*`` name."""
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            operands = [node.left, *node.comparators]
+            if any(_reads_kind(o) for o in operands) and any(_names_kind(o, kinds) for o in operands
+                                                              if not _reads_kind(o)):
+                lines.append(node.lineno)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            if node.value is not None and any(isinstance(t, ast.Name) and "KIND" in t.id for t in targets) and \
+                    _names_kind(node.value, kinds):
+                lines.append(node.lineno)
+    return lines
 
 
 def _params(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> tuple[int, int]:
@@ -163,8 +209,14 @@ def main() -> None:
     parser.add_argument("--list", action="store_true", help="name every place, not only the counts")
     parser.add_argument("--package", type=Path, default=PACKAGE,
                         help="the astaa_deft folder to measure (default: this checkout's), e.g. another worktree's")
+    parser.add_argument("--check", action="store_true",
+                        help=f"exit 1 if a figure rose above {BASELINE.name}")
+    parser.add_argument("--write-baseline", action="store_true", help=f"record the figures in {BASELINE.name}")
     args = parser.parse_args()
     PACKAGE = args.package.resolve()
+    kinds = _kind_names(PACKAGE)
+    long_modules: list[str] = []
+    kind_strings: list[str] = []
     package_anys, positional_over_four, positional_records, long_classes, xml_calls = [], [], [], [], []
     long_functions, many_params, positional_past_four, gets, anys = [], [], [], [], []
     in_decoders: list[str] = []
@@ -173,6 +225,11 @@ def main() -> None:
         text = path.read_text()
         tree = ast.parse(text)
         if not rel.startswith("demo/"):
+            lines = text.count("\n")
+            if lines > LONG_MODULE:
+                long_modules.append(f"{rel} ({lines} lines)")
+            if not rel.startswith(KINDS_PACKAGE):
+                kind_strings.extend(f"{rel}:{line}" for line in _kind_string_checks(tree, kinds))
             for node in ast.walk(tree):
                 if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                     where = f"{rel}:{node.lineno} {node.name}"
@@ -212,24 +269,39 @@ def main() -> None:
         if rel.startswith(PUBLIC_SEAMS):
             anys.extend(_public_anys(rel, tree))
     layer_breaks = _contracts_with_type_checking(PACKAGE)
-    for title, items in (("functions over 80 lines", long_functions),
-                         ("functions with 8+ parameters", many_params),
-                         ("  of them positional past the fourth", positional_past_four),
-                         ('lines with .get(" outside external-format decoders', gets),
-                         ("  of them in a record type's own decoder (from_json, from_*, decode)", in_decoders),
-                         ("Any in public signatures of session, campaign, minimiser", anys),
-                         ("Any in public signatures, package-wide (demo excepted)", package_anys),
-                         ("functions with more than 4 positional parameters", positional_over_four),
-                         ("dataclasses with more than 4 positional fields", positional_records),
-                         ("classes over 300 lines", long_classes),
-                         ("parse_testcase/to_xml calls in orchestration outside journal and payload", xml_calls),
-                         ("layer contracts broken with TYPE_CHECKING imports counted",
-                          [b for b in layer_breaks if b.startswith("contract")]),
-                         ("  the imports that break them", [b for b in layer_breaks if not b.startswith("contract")])):
+    figures = (("modules over 700 lines", long_modules),
+               ("functions over 80 lines", long_functions),
+               ("functions with 8+ parameters", many_params),
+               ("  of them positional past the fourth", positional_past_four),
+               ('lines with .get(" outside external-format decoders', gets),
+               ("  of them in a record type's own decoder (from_json, from_*, decode)", in_decoders),
+               ("Any in public signatures of session, campaign, minimiser", anys),
+               ("Any in public signatures, package-wide (demo excepted)", package_anys),
+               ("functions with more than 4 positional parameters", positional_over_four),
+               ("dataclasses with more than 4 positional fields", positional_records),
+               ("classes over 300 lines", long_classes),
+               ("parse_testcase/to_xml calls in orchestration outside journal and payload", xml_calls),
+               ("layer contracts broken with TYPE_CHECKING imports counted",
+                [b for b in layer_breaks if b.startswith("contract")]),
+               ("  the imports that break them", [b for b in layer_breaks if not b.startswith("contract")]),
+               ("invariant kinds compared by name outside the kinds", kind_strings))
+    for title, items in figures:
         print(f"{title}: {len(items)}")
         if args.list:
             for item in items:
                 print(f"    {item}")
+    counts = {title.strip(): len(items) for title, items in figures}
+    if args.write_baseline:
+        BASELINE.write_text(json.dumps(counts, indent=2) + "\n")
+        print(f"wrote {BASELINE}")
+    if args.check:
+        baseline = json.loads(BASELINE.read_text())
+        risen = [f"{title}: {counts[title]} > {limit}" for title, limit in baseline.items()
+                 if counts.get(title, 0) > limit]
+        for line in risen:
+            print(f"rose above {BASELINE.name}: {line}", file=sys.stderr)
+        if risen:
+            sys.exit(1)
 
 
 if __name__ == "__main__":

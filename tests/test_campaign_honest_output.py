@@ -40,8 +40,10 @@ def replace_severity(finding: Finding) -> Finding:
 
 
 def test_the_verdict_line_names_the_most_severe_finding_and_still_says_which_came_first():
-    clearance = Violation("clearance", "collision", "medium", 1_000, "ego", 1, None, "overlaps by 0.1 m", "Silent")
-    contact = Violation("no_collision", "collision", "critical", 2_000, "ego", 2, None, "overlaps by 0.05 m", "Silent")
+    clearance = Violation(invariant="clearance", invariant_kind="collision", severity="medium", time_ns=1_000,
+                          channel="ego", seq=1, message=None, detail="overlaps by 0.1 m", crash="Silent")
+    contact = Violation(invariant="no_collision", invariant_kind="collision", severity="critical", time_ns=2_000,
+                        channel="ego", seq=2, message=None, detail="overlaps by 0.05 m", crash="Silent")
     verdict = run_verdict([clearance, contact], [], ["planning", "simulator"])
     assert verdict.klass == "Silent"
     assert verdict.summary.startswith("Silent: no_collision: overlaps by 0.05 m (2 findings)")

@@ -18,16 +18,22 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, _step_in_turn, extract, search_note
+from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, extract, search_note
+from astaa_deft.analysis.deft.extract.speculation import step_in_turn
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.analysis.deft.frames import (
-    AFTER, AS_LOGGED, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, CYCLE_END, FIRST, NEWEST, OLDEST, Candidate,
-    Stream, candidates, read_times,
-)
+from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, read_times
+from astaa_deft.analysis.deft.frames.read_at import AT_OUTPUT, AT_PREVIOUS, AT_START
+from astaa_deft.analysis.deft.frames.rules.after import AFTER
+from astaa_deft.analysis.deft.frames.rules.as_logged import AS_LOGGED
+from astaa_deft.analysis.deft.frames.rules.busy import BUSY
+from astaa_deft.analysis.deft.frames.rules.cycle_end import CYCLE_END
+from astaa_deft.analysis.deft.frames.rules.first import FIRST
+from astaa_deft.analysis.deft.frames.rules.newest import NEWEST
+from astaa_deft.analysis.deft.frames.rules.oldest import OLDEST
 from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.analysis.deft.search_policy import (
-    EXPENSIVE_TRIES, LIKELY_RULES, PER_TRIGGER, SearchMemory, StepBudget, WinningPatterns, first_cycle_first,
-    nearest_first,
+    EXPENSIVE_TRIES, PER_TRIGGER, SearchMemory, StepBudget, WinningPatterns, first_cycle_first,
+    likely_ways, nearest_first,
 )
 from astaa_deft.io.log.reader import read_log
 
@@ -42,8 +48,8 @@ def test_candidates_say_how_they_were_derived():
     # Triggers at 0, 100, 200 ms; the previous frame used trigger 0; the previous output came at 150 ms.
     streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS]),
                "ego": Stream("ego", [k * 50 * MS for k in range(6)])}
-    found = candidates(streams, "obstacles", 240 * MS, previous={"obstacles": 0, "ego": 0}, lookback_ns=0,
-                       previous_output_ns=150 * MS)
+    found = candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=240 * MS,
+                                     previous={"obstacles": 0, "ego": 0}, lookback_ns=0, previous_output_ns=150 * MS))
     first = found[0]  # the newest trigger with the ego pose at its own time
     assert first.choice == {"obstacles": 2, "ego": 4}
     # … and the first trigger logged after the previous output (a module that drops triggers while busy), and
@@ -67,8 +73,9 @@ def test_a_trigger_logged_as_the_previous_output_was_is_not_the_one_its_cycle_en
     b = Stream("b", [k * 50 * MS for k in range(6)])
     skew = 5 * MS
     for logged in (150 * MS + 50_000, 146 * MS):  # the previous output: just after trigger 3, or 4 ms before it
-        found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=100 * MS,
-                           previous_output_ns=logged + skew, skew_ns=skew)
+        found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=240 * MS,
+                                         previous={"a": 1, "b": 1}, lookback_ns=100 * MS,
+                                         previous_output_ns=logged + skew, skew_ns=skew))
         end = [c for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)]
         assert {c.choice["a"] for c in end} == {2}
         by_trigger = {c.choice["a"]: c for c in reversed(found) if c.choice["b"] == c.choice["a"]}
@@ -76,7 +83,7 @@ def test_a_trigger_logged_as_the_previous_output_was_is_not_the_one_its_cycle_en
         assert not any(rule == BUSY for rule, _ in by_trigger[3].patterns)
         # In the generic order the cycle's end comes right after the newest trigger.
         assert [c.choice["a"] for c in found if c.choice["b"] == c.choice["a"]][:3] == [4, 2, 3]
-    assert CYCLE_END in LIKELY_RULES
+    assert CYCLE_END in likely_ways()
 
 
 def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_let_in():
@@ -87,12 +94,14 @@ def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_l
     triggers = Stream("a", [k * 50 * MS for k in range(10)])
     b = Stream("b", [k * 100 * MS for k in range(5)])
     skew = 5 * MS
-    found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
-                       previous_output_ns=301 * MS + skew, skew_ns=skew)
+    found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=460 * MS,
+                                     previous={"a": 2, "b": 1}, lookback_ns=0, previous_output_ns=301 * MS + skew,
+                                     skew_ns=skew))
     after = [c for c in found if any(rule == AFTER for rule, _ in c.patterns)]
     assert {c.choice["a"] for c in after} == {7}  # trigger 7 at 350 ms: the first after 301 ms
-    found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
-                       previous_output_ns=300_500_000 + skew, skew_ns=skew)
+    found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=460 * MS,
+                                     previous={"a": 2, "b": 1}, lookback_ns=0, previous_output_ns=300_500_000 + skew,
+                                     skew_ns=skew))
     # Trigger 6 logged at 300 ms, half a millisecond before the output: the module may have had it after, or
     # have had it while still busy and dropped it — then trigger 7, the first logged after the output, is the
     # answer: both are "after". (Before: 6 alone; on drop_latched the right frame, 7, was then not among an
@@ -100,11 +109,11 @@ def test_after_names_the_first_trigger_the_idle_module_got_and_the_one_a_queue_l
     assert {c.choice["a"] for c in found if any(rule == AFTER for rule, _ in c.patterns)} == {6, 7}
     # The oldest of a queue two deep: the trigger that found room when the cycle of the output three back
     # started (the output before it was logged), "after 3".
-    found = candidates({"a": triggers, "b": b}, "a", 460 * MS, previous={"a": 2, "b": 1}, lookback_ns=0,
-                       previous_output_ns=420 * MS + skew, skew_ns=skew,
-                       earlier_outputs_ns=[360 * MS, 170 * MS])
+    found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=460 * MS,
+                                     previous={"a": 2, "b": 1}, lookback_ns=0, previous_output_ns=420 * MS + skew,
+                                     skew_ns=skew, earlier_outputs_ns=[360 * MS, 170 * MS]))
     assert {c.choice["a"] for c in found if any(rule == f"{AFTER} 3" for rule, _ in c.patterns)} == {4}
-    assert f"{AFTER} 3" in LIKELY_RULES
+    assert f"{AFTER} 3" in likely_ways()
 
 
 def test_the_newest_trigger_before_the_output_itself_is_newest_too():
@@ -115,8 +124,9 @@ def test_the_newest_trigger_before_the_output_itself_is_newest_too():
     b = Stream("b", [k * 50 * MS + 10 * MS for k in range(6)])
     skew = 5 * MS
     output = 250 * MS - 200_000  # trigger 5 logged 0.2 ms after the output
-    found = candidates({"a": triggers, "b": b}, "a", output + skew, previous={"a": 1, "b": 1}, lookback_ns=0,
-                       previous_output_ns=120 * MS + skew, skew_ns=skew)
+    found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=output + skew,
+                                     previous={"a": 1, "b": 1}, lookback_ns=0, previous_output_ns=120 * MS + skew,
+                                     skew_ns=skew))
     newest = {c.choice["a"] for c in found if any(rule == NEWEST for rule, _ in c.patterns)}
     assert newest == {4, 5}
     # Its frame as the module latched it when the trigger came (b 3, logged at 160 ms) is among them.
@@ -130,12 +140,12 @@ def test_a_trigger_logged_just_before_the_previous_output_leaves_the_one_before_
     # (3 → 13 of 13 outputs at θ = 0 on one log).
     triggers = Stream("a", [k * 50 * MS for k in range(6)])
     b = Stream("b", [k * 50 * MS + 10 * MS for k in range(6)])
-    found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=0,
-                       previous_output_ns=151_200_000)
+    found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=240 * MS,
+                                     previous={"a": 1, "b": 1}, lookback_ns=0, previous_output_ns=151_200_000))
     assert {c.choice["a"] for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)} == {2, 3}
     # A trigger logged 10 ms before the output: the end's alone.
-    found = candidates({"a": triggers, "b": b}, "a", 240 * MS, previous={"a": 1, "b": 1}, lookback_ns=0,
-                       previous_output_ns=160 * MS)
+    found = candidates(OutputContext(streams={"a": triggers, "b": b}, trigger="a", output_ns=240 * MS,
+                                     previous={"a": 1, "b": 1}, lookback_ns=0, previous_output_ns=160 * MS))
     assert {c.choice["a"] for c in found if any(rule == CYCLE_END for rule, _ in c.patterns)} == {3}
 
 
@@ -166,8 +176,10 @@ def test_a_slow_module_that_ended_a_cycle_with_a_trigger_waiting_read_its_next_i
 
 def test_an_expensive_outputs_tries_are_not_all_one_triggers():
     # Eight frames of one trigger (other inputs' offsets) ranked first left the next trigger's likeliest out.
-    same = [Candidate(0, {"a": 7, "b": k}, frozenset({(CYCLE_END, (("b", k),))})) for k in range(10)]
-    other = [Candidate(0, {"a": 6, "b": k}, frozenset({(CYCLE_END, (("b", k),))})) for k in range(6)]
+    same = [Candidate(frame_time=0, choice={"a": 7, "b": k},
+                      patterns=frozenset({(CYCLE_END, (("b", k),))})) for k in range(10)]
+    other = [Candidate(frame_time=0, choice={"a": 6, "b": k},
+                       patterns=frozenset({(CYCLE_END, (("b", k),))})) for k in range(6)]
     options, capped = SearchMemory().order(same + other, expensive=True, first=False, trigger="a")
     assert capped and len(options) == EXPENSIVE_TRIES
     assert sum(c.choice["a"] == 7 for c in options) == PER_TRIGGER
@@ -182,8 +194,8 @@ def test_the_way_that_won_for_earlier_outputs_is_tried_first():
     # the oldest unanswered trigger had its wrong newest-trigger frame tried first on every busy cycle.
     streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS]),
                "ego": Stream("ego", [k * 50 * MS for k in range(6)])}
-    found = candidates(streams, "obstacles", 240 * MS, previous={"obstacles": 0, "ego": 0}, lookback_ns=0,
-                       previous_output_ns=150 * MS)
+    found = candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=240 * MS,
+                                     previous={"obstacles": 0, "ego": 0}, lookback_ns=0, previous_output_ns=150 * MS))
     winning = WinningPatterns()
     assert winning.rank(found) == found  # nothing learned yet: the generic order
     oldest_at_trigger = next(c for c in found if c.choice == {"obstacles": 1, "ego": 2})
@@ -198,7 +210,8 @@ def test_a_first_output_tries_first_the_first_trigger_the_planner_could_plan_fro
     # ~0.3 s) answered the first trigger it could plan from in every run measured: 3-5 wrong searches first.
     streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS, 300 * MS]),
                "ego": Stream("ego", [50 * MS, 150 * MS, 250 * MS])}
-    found = candidates(streams, "obstacles", 320 * MS, previous={}, lookback_ns=100 * MS)
+    found = candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=320 * MS, previous={},
+                                     lookback_ns=100 * MS))
     assert found[0].choice["obstacles"] == 3  # the generic order (a process replay tries only that one)
     ordered = first_cycle_first(found)
     assert ordered[0].choice == {"obstacles": 1, "ego": 0}  # trigger 0 came before any ego pose
@@ -207,7 +220,8 @@ def test_a_first_output_tries_first_the_first_trigger_the_planner_could_plan_fro
     # A log that starts after the planner's first triggers (the window does not reach back): no such guess.
     later = {"obstacles": Stream("obstacles", [k * 100 * MS for k in range(20)]),
              "ego": Stream("ego", [k * 50 * MS for k in range(40)])}
-    found = candidates(later, "obstacles", 1920 * MS, previous={}, lookback_ns=0)
+    found = candidates(OutputContext(streams=later, trigger="obstacles", output_ns=1920 * MS, previous={},
+                                     lookback_ns=0))
     assert first_cycle_first(found) == found
 
 
@@ -245,8 +259,9 @@ def _slow_planner_candidates():
     streams = {"obstacles": Stream("obstacles", [k * 100 * MS for k in range(30)]),
                "ego": Stream("ego", [k * 50 * MS + 5 * MS for k in range(60)])}
     # (The previous output 20 ms after trigger 15: a trigger logged as an output was is the next cycle's, AFTER.)
-    return candidates(streams, "obstacles", 2900 * MS, previous={"obstacles": 5, "ego": 10}, lookback_ns=160 * MS,
-                      previous_output_ns=1520 * MS)
+    return candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=2900 * MS,
+                                    previous={"obstacles": 5, "ego": 10}, lookback_ns=160 * MS,
+                                    previous_output_ns=1520 * MS))
 
 
 def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
@@ -260,7 +275,7 @@ def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
     def spread(c):
         return min(max((abs(o) for _, o in offsets), default=0) for _, offsets in c.patterns)
 
-    likely = [c for c in ordered if any(rule in LIKELY_RULES for rule, _ in c.patterns)]  # newest, busy, after …
+    likely = [c for c in ordered if any(rule in likely_ways() for rule, _ in c.patterns)]  # newest, busy, after …
     head = ordered[:len(likely)]
     assert head == likely  # the newest, busy and oldest triggers' frames before those of triggers between
     assert [spread(c) for c in head] == sorted(spread(c) for c in head)  # nearest their trigger's time first
@@ -441,7 +456,7 @@ def test_candidates_in_turn_carry_on_from_the_kept_ones_state_and_hand_long_sear
                 state.append((output, index))
                 return "right" if index == right else "wrong"
 
-            kept, in_vain = _step_in_turn(3, run, lambda r: r == "right", speculation, in_turn=True)
+            kept, in_vain = step_in_turn(3, run, lambda r: r == "right", speculation, in_turn=True)
             if kept is None:
                 speculation.let_go()
                 order = [i for i in range(3) if i not in in_vain] + sorted(in_vain)

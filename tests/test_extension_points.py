@@ -66,7 +66,7 @@ FILES = {
         from dataclasses import dataclass
         from typing import ClassVar
 
-        from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor
+        from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, ReplayJudges
         from astaa_deft.engine.monitor.kinds import Kind
 
         KEYS = ("channel", "max_messages")
@@ -76,8 +76,16 @@ FILES = {
         @dataclass(frozen=True, kw_only=True)
         class SilenceInvariant(Invariant):
             kind: ClassVar[str] = "silence"
+            replay_judges: ClassVar[ReplayJudges] = ReplayJudges.TIMING  # a module's lateness, as a deadline's
+            crash_kind: ClassVar[bool] = True  # (a throwaway kind claiming the trait, to see it read)
             channel: str
             max_messages: int = 0
+
+            def margin_source(self):
+                return (self.channel, "text")
+
+            def margin_of(self, value):
+                return 0.5 if isinstance(value, str) else None
 
 
         def parse(reader, node, common):
@@ -189,6 +197,27 @@ def test_a_spec_reads_the_new_codec_and_monitor_kind_and_the_monitor_set_runs_it
     assert codec.decode(codec.encode({"text": "hi"})) == {"text": "HI"}
     monitors = MonitorSet(spec, 0)
     assert [v.invariant for v in monitors.on_message("data", 5, {"text": "HI"}, 1)] == ["quiet"]
+
+
+def test_what_a_new_kind_may_be_judged_by_is_its_traits_not_its_name(extensions):
+    from astaa_deft.analysis.minimise.replay_model import replay_entry_for
+    from astaa_deft.engine.monitor.verdict import run_verdict
+    from astaa_deft.model.records import ProcessExit, Verdict, Violation
+    from astaa_deft.orchestration.campaign.module_tests import is_crash_bucket
+    from astaa_deft.orchestration.campaign.runner import MarginWatch
+
+    spec = load_spec_text(SPEC % {"encoding": "json", "kind": "silence"}, "throwaway.yaml")
+    # A timing invariant: a replay of one module's outputs does not judge it (the spec here replays nothing).
+    assert replay_entry_for(spec, "quiet")[0] is None
+    # A timing violation after its module's crash is the crash's consequence: only the exit counts.
+    late = Violation(invariant="quiet", invariant_kind="silence", severity="high", time_ns=2_000, channel="data",
+                     seq=None, message=None, detail="late", crash=Verdict.RESTART, module="talker")
+    crashed = ProcessExit("talker", 1, 1, None, 1_000, False)
+    assert run_verdict([late], [crashed], ["talker", "listener"]).klass is Verdict.ABORT
+    assert is_crash_bucket("Silent", "quiet", spec)  # its crash_kind trait
+    # Its margin hook: the campaign's margin watch measures it on its channel and field.
+    watch = MarginWatch(spec)
+    assert [(inv.name, source) for inv, source in watch.watched] == [("quiet", ("data", "text"))]
 
 
 def test_the_spec_reader_lists_what_is_registered(extensions):

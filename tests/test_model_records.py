@@ -57,7 +57,8 @@ def test_a_damaged_process_exit_in_a_log_is_kept_as_an_unknown_event_not_dropped
 
 
 def test_a_violation_has_one_type_and_one_form():
-    v = Violation("speed", "bound", "high", 6, "status", 7, {"v": 1}, "too fast", Verdict.HINDERING, "talker")
+    v = Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6, channel="status", seq=7,
+                  message={"v": 1}, detail="too fast", crash=Verdict.HINDERING, module="talker")
     assert Violation.from_json(v.to_json()) == v
     assert list(rec.encode(v)) == ["kind", "time_ns", "invariant", "invariant_kind", "severity", "crash", "detail",
                                    "module", "channel", "seq", "message"]  # the log's order, as before
@@ -118,11 +119,13 @@ WRITTEN_BEFORE = [
     (ProcessExit("talker", 42, 3, None, 5, False, "Traceback ..."),
      '{"kind": "process_exit", "time_ns": 5, "module": "talker", "pid": 42, "returncode": 3, "signal": null, '
      '"during_shutdown": false, "abnormal": true, "stderr_tail": "Traceback ..."}'),
-    (Violation("speed", "bound", "high", 6, "status", 7, {"v": 1}, "too fast", Verdict.HINDERING, None),
+    (Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6, channel="status", seq=7,
+               message={"v": 1}, detail="too fast", crash=Verdict.HINDERING, module=None),
      '{"kind": "violation", "time_ns": 6, "invariant": "speed", "invariant_kind": "bound", "severity": "high", '
      '"crash": "Hindering", "detail": "too fast", "module": null, "channel": "status", "seq": 7, "message": {"v": 1}}'),
-    (rec.RunVerdict(Verdict.HINDERING, Violation("speed", "bound", "high", 6, None, None, None, "too fast",
-                                                 Verdict.HINDERING), "1 violation", ("a reason",), time_ns=7),
+    (rec.RunVerdict(Verdict.HINDERING, Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6,
+                                                 channel=None, seq=None, message=None, detail="too fast",
+                                                 crash=Verdict.HINDERING), "1 violation", ("a reason",), time_ns=7),
      '{"kind": "verdict", "time_ns": 7, "class": "Hindering", "first": {"time_ns": 6, "invariant": "speed", '
      '"invariant_kind": "bound", "severity": "high", "crash": "Hindering", "detail": "too fast", "module": null, '
      '"channel": null, "seq": null, "message": null}, "summary": "1 violation", "reasons": ["a reason"]}'),

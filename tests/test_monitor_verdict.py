@@ -32,7 +32,8 @@ MODULES = ("sim", "planning", "control")
 
 
 def violation(invariant="inv", kind="bound", crash="Silent", at=1.0, module="control") -> Violation:
-    return Violation(invariant, kind, "high", ns(at), "command", 3, None, "broke", crash, module)
+    return Violation(invariant=invariant, invariant_kind=kind, severity="high", time_ns=ns(at), channel="command",
+                     seq=3, message=None, detail="broke", crash=crash, module=module)
 
 
 def exit_event(module, at, returncode=1, signal=None, during_shutdown=False) -> ProcessExit:

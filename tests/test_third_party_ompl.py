@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 import ompl  # noqa: F401  -- in the test extra; the stack's planner needs it (a venv without it fails, not skips)
 
-from astaa_deft.analysis.deft.frames import Stream, candidates
+from astaa_deft.analysis.deft.frames import OutputContext, Stream, candidates
 from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
@@ -61,7 +61,8 @@ def test_a_first_output_may_answer_a_trigger_older_than_the_newest():
     # (0.28 s, three trigger periods) answered the first trigger, and its output was never reproduced.
     streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS]),
                "ego": Stream("ego", [0, 50 * MS, 100 * MS, 150 * MS, 200 * MS])}
-    found = candidates(streams, "obstacles", 280 * MS, previous={}, lookback_ns=100 * MS)
+    found = candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=280 * MS, previous={},
+                                     lookback_ns=100 * MS))
     assert found[0].choice["obstacles"] == 2  # the most likely still first
     assert {"obstacles": 0, "ego": 0} in [dict(c.choice) for c in found]
 
@@ -72,8 +73,8 @@ def test_a_busy_planner_is_expected_on_the_trigger_newest_when_it_finished_its_p
     # then — up to 16 wrong frames, each a search of its own, were tried first.
     streams = {"obstacles": Stream("obstacles", [0, 100 * MS, 200 * MS, 300 * MS, 400 * MS]),
                "ego": Stream("ego", [k * 50 * MS for k in range(9)])}
-    found = candidates(streams, "obstacles", 420 * MS, previous={"obstacles": 0, "ego": 0}, lookback_ns=0,
-                       previous_output_ns=250 * MS)
+    found = candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=420 * MS,
+                                     previous={"obstacles": 0, "ego": 0}, lookback_ns=0, previous_output_ns=250 * MS))
     triggers = list(dict.fromkeys(c.choice["obstacles"] for c in found))
     # Newest, busy (newest at the previous output), the first after it (a module dropping triggers while busy,
     # issue 31), then the oldest unused.

@@ -280,7 +280,7 @@ class ProcessExit:
 # ---------------------------------------------------------------- violations
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Violation:
     """A broken invariant: when, where (channel and message, or module), and what the CRASH class points at."""
 

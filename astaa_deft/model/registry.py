@@ -1,6 +1,6 @@
 """One shape for every extension point: a named registry that each extension's own file joins.
 
-Actions, monitor kinds, strategies, codecs and fault families are each a
+Actions, monitor kinds, strategies, codecs, fault families and DeFT's frame rules are each a
 ``Registry``: an extension is one module that calls ``REGISTRY.register(name,
 value)`` (or decorates its class with ``@REGISTRY.register_class``) at import
 time. A registry made with a ``package`` imports every module of that package

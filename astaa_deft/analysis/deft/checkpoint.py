@@ -75,7 +75,8 @@ def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Dec
     item.obj()
     item.get("output").whole(position, position)  # in order from the first
     if item.has("skipped"):
-        return Decided(position, None, None, item.get("skipped").string(MAX_SKIPPED_TEXT))
+        return Decided(output_index=position, frame=None, choice=None,
+                       skipped=item.get("skipped").string(MAX_SKIPPED_TEXT))
     choice = item.get("choice")
     picks: dict[str, int] = {}
     for name, index in choice.entries(max_items=1000):
@@ -96,7 +97,7 @@ def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Dec
                               how=comparison.get("how").string(100)),
         accepted=bool(item.get("accepted").flag()), candidates_tried=item.get("candidates_tried").whole(),
         exact=bool(item.get("exact").flag()))
-    return Decided(position, frame, picks)
+    return Decided(output_index=position, frame=frame, choice=picks)
 
 
 def read_state(out_dir: Path, expected: Mapping[str, JsonValue], shape: LogShape | None = None) -> list[Decided]:

@@ -38,7 +38,7 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any, NoReturn, TypeVar
+from typing import Any, Generic, NoReturn, TypeVar, cast
 
 from astaa_deft.engine.bus.process_launch import guarded_fork
 from astaa_deft.io.pipe_messages import BULK_LIMIT, FrameError, decode_pickle, encode_pickle, fd_reader, read_frame, \
@@ -48,6 +48,7 @@ from astaa_deft.model.errors import InputError, Problem
 PR_SET_CHILD_SUBREAPER = 36
 M = TypeVar("M")  # a runner's progress message
 R = TypeVar("R")  # what a runner finally returns
+S = TypeVar("S")  # what one candidate's (or copy's) run returns
 MIN_LIMIT_S = 2.0
 LIMIT_FACTOR = 10.0  # a candidate may take this many recorded cycles before it is stopped
 
@@ -124,11 +125,11 @@ def _receive(fd: int, *, what: str) -> object:
     return decode_pickle(*got, source=what)
 
 
-def in_two_forks(run: Callable[[], Any], timeout_s: float) -> tuple[Any, Any] | None:
+def in_two_forks(run: Callable[[], S], timeout_s: float) -> tuple[S, S] | None:
     """``run()`` in two forked copies of this process (each from the same memory, bit for bit), their
     results; None when a copy died or ran past ``timeout_s`` (wall). Measures whether a module's step is
     bit-stable across copies of its state: two copies stepped on the same frame must answer the same."""
-    results: list[Any] = []
+    results: list[S | None] = []
     children: list[tuple[int, int]] = []
     for _ in range(2):
         read_end, write_end = os.pipe()
@@ -150,16 +151,18 @@ def in_two_forks(run: Callable[[], Any], timeout_s: float) -> tuple[Any, Any] | 
         result = None
         if ready:
             with contextlib.suppress(EOFError, FrameError):
-                result = _receive(read_end, what="a copy's result pipe")
+                # A forked copy of this very process ran ``run``: what it sent back is an S.
+                result = cast(S, _receive(read_end, what="a copy's result pipe"))
         else:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         os.close(read_end)
         reap_later(pid)
         results.append(result)
-    if any(r is None for r in results):
+    first, second = results
+    if first is None or second is None:
         return None
-    return results[0], results[1]
+    return first, second
 
 
 _Running = tuple[int, int, int, float]
@@ -167,21 +170,25 @@ _Running = tuple[int, int, int, float]
 
 
 @dataclass
-class Tried:
+class Tried(Generic[S]):
     """What a candidate's child reported: its comparison and whether the output equals the recording."""
 
     index: int
-    result: Any  # whatever judge() returned, or None if the child died or ran out of time
+    result: S | None  # whatever the candidate's run returned, or None if the child died or ran out of time
     timed_out: bool = False
     # The child that reported, while it waits for the verdict (None: it died or ran out of time).
     pid: int | None = None
     go_fd: int | None = None  # the pipe its verdict goes down: b"1" carry on as the runner, b"0" exit
 
 
-class ForkedSearch:
-    """Inside the runner: try candidates in forked children; the winner carries on as the runner."""
+class ForkedSearch(Generic[M]):
+    """Inside the runner: try candidates in forked children; the winner carries on as the runner.
 
-    def __init__(self, jobs: int | Callable[[], int], send_to_caller: Callable[[Any], None]) -> None:
+    ``send_to_caller`` passes the runner's progress messages (M) on to the
+    caller of :func:`run_supervised`, whichever process is the runner.
+    """
+
+    def __init__(self, jobs: int | Callable[[], int], send_to_caller: Callable[[M], None]) -> None:
         self._jobs = jobs  # a callable is asked once, when two candidates could first run at once
         self.send_to_caller = send_to_caller
         self.timeouts = 0  # candidates stopped by a time limit
@@ -200,10 +207,10 @@ class ForkedSearch:
         return {"timeouts": self.timeouts, "cut": self.cut, "retried": self.retried,
                 "retried_kept": self.retried_kept}
 
-    def search(self, count: int, run: Callable[[int], Any], *, accepted: Callable[[Any], bool],
-               closeness: Callable[[Any], float], limit_s: float,
-               settles: Callable[[Any], bool] = lambda result: False,
-               retry_limit_s: float | None = None, rival: float = math.inf) -> Tried | None:
+    def search(self, count: int, run: Callable[[int], S | None], *, accepted: Callable[[S], bool],
+               closeness: Callable[[S], float], limit_s: float,
+               settles: Callable[[S], bool] = lambda result: False,
+               retry_limit_s: float | None = None, rival: float = math.inf) -> Tried[S] | None:
         """Try candidates 0..count-1; return (in the surviving process) the one kept, or None.
 
         ``run(i)`` steps the planner on candidate i and returns a picklable
@@ -225,7 +232,7 @@ class ForkedSearch:
         it, none is kept (None: the caller steps the rival again instead).
         """
         running: dict[int, _Running] = {}
-        done: dict[int, Tried] = {}
+        done: dict[int, Tried[S]] = {}
         queue = list(range(count))
         limit, retrying = limit_s, False
         winner: int | None = None
@@ -239,8 +246,8 @@ class ForkedSearch:
                         return self._won
                     running[index] = child
                 self._collect(running, done, limit)
-                winner = next((i for i in sorted(done) if done[i].result is not None
-                               and settles(done[i].result)), None)
+                winner = next((i for i in sorted(done) if (result := done[i].result) is not None
+                               and settles(result)), None)
                 if winner is None:
                     winner = self._decide(done, count, accepted, closeness=closeness)
             if retrying or retry_limit_s is None or retry_limit_s <= limit_s:
@@ -255,7 +262,9 @@ class ForkedSearch:
             self.retried += len(cut)
         if winner is None:
             winner = self._decide(done, count, accepted, closeness=closeness, final=True)
-            if winner is not None and not accepted(done[winner].result) and closeness(done[winner].result) > rival:
+            kept = done[winner].result if winner is not None else None
+            assert winner is None or kept is not None  # _decide keeps only a candidate that reported
+            if kept is not None and not accepted(kept) and closeness(kept) > rival:
                 winner = None  # the rival outside this search is closer
         if retrying and winner is not None and winner in cut:
             self.retried_kept += 1
@@ -307,7 +316,7 @@ class ForkedSearch:
                 if isinstance(counters, dict):
                     self.__dict__.update(counters)
             os.close(go_r)
-            self._won = Tried(index, result)
+            self._won: Tried[Any] = Tried(index, result)  # in the child that won: its candidate, as tried
             return None
         os.close(result_w)
         os.close(go_r)
@@ -426,7 +435,7 @@ def tell(copy: Shadow, word: object) -> None:
     _send(copy.word_fd, word)
 
 
-def next_word(following: Following, *, at_end: Any = None) -> Any:
+def next_word(following: Following, *, at_end: object = None) -> object:
     """In the copy: the runner's next word; when there is none (dropped, or the runner ended or died) the copy
     exits — or, given ``at_end``, returns that (a checkpoint copy takes over from a runner that died)."""
     try:

@@ -11,6 +11,8 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
+from astaa_deft.engine.monitor.base import ReplayJudges
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.replay_section import ReplayModule
 
@@ -54,7 +56,8 @@ def check_invariant_oracle(suite: Suite, entry: OracleEntry) -> str | None:
             if found or invariant is None:
                 return (f"frame {frame['index']}: module '{cfg.module}' crashes: {result.error}"
                         + (f" (invariant '{invariant.name}': {found[0].detail})" if found and invariant else ""))
-        if result.stopped == "hang" and invariant is not None and invariant.kind == "deadline":
+        if result.stopped == "hang" and invariant is not None and (
+                invariant_class(invariant.kind).replay_judges is ReplayJudges.TIMING):
             # The module never answers again: the silence the deadline watches for, whatever the history.
             return (f"frame {frame['index']}: module '{cfg.module}' hangs (invariant '{invariant.name}'): "
                     f"{result.error}")

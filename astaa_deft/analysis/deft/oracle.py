@@ -23,6 +23,7 @@ from astaa_deft.analysis.deft.extract import Extraction
 if TYPE_CHECKING:
     from astaa_deft.analysis.deft.oracle_entry import OracleEntry
     from astaa_deft.analysis.deft.suite import Suite
+from astaa_deft.analysis.deft.oracle_entry import COLLISION, INVARIANT
 from astaa_deft.analysis.deft.planner_section import planner_of
 from astaa_deft.analysis.deft.replay import trajectory_points
 
@@ -82,13 +83,13 @@ def oracle_entries(extraction: Extraction, spec: Spec, collision_times_ns: Seque
             continue
         hit = first_collision(plan, obstacles, oracle)
         if hit is not None:
-            entries.append({"kind": "collision", "frame": f.index, "recorded": hit})
+            entries.append({"kind": COLLISION, "frame": f.index, "recorded": hit})
     return entries
 
 
 def check_oracle(suite: Suite, entry: OracleEntry) -> str | None:
     """Run by the pytest plugin: the reason the test fails, or None."""
-    if entry.kind == "invariant":  # written by `astaa-deft minimise`
+    if entry.kind == INVARIANT:  # written by `astaa-deft minimise`
         from astaa_deft.analysis.deft.invariant_oracle import check_invariant_oracle
 
         return check_invariant_oracle(suite, entry)

@@ -16,6 +16,8 @@ from typing import TypeVar
 from astaa_deft.model.json import JsonObject, JsonValue
 
 T = TypeVar("T")
+# The two kinds of oracle entry (``OracleEntry.kind``).
+COLLISION, INVARIANT = "collision", "invariant"
 _KINDS: dict[type, str] = {str: "a string", int: "an integer", dict: "an object"}
 
 
@@ -23,7 +25,7 @@ _KINDS: dict[type, str] = {str: "a string", int: "an integer", dict: "an object"
 class OracleEntry:
     """One ``oracles`` entry of a manifest, typed; read with :meth:`from_json`."""
 
-    kind: str  # "collision" | "invariant"
+    kind: str  # COLLISION | INVARIANT
     frame: int | None  # the frame index it judges (None: an entry without one)
     invariant: str | None = None  # kind "invariant": the invariant's name
     start_ns: int = 0  # kind "invariant": the run's start, the clock the invariant is judged on

@@ -26,9 +26,7 @@ from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, TypeVar
 
-from astaa_deft.analysis.deft.frames import (
-    AFTER_RULES, AT_OUTPUT, AT_PREVIOUS, AT_START, BUSY, CYCLE_END, FIRST, FIRST_HEARD, NEWEST, OLDEST, Candidate,
-)
+from astaa_deft.analysis.deft.frames import Candidate, first_output_ways, ways_where
 
 
 class HasPatterns(Protocol):
@@ -95,15 +93,18 @@ def first_cycle_first(candidates: Sequence[Candidate]) -> list[Candidate]:
         return [c for c in candidates
                 if any(r == rule and all(offset == 0 for _, offset in offsets) for r, offsets in c.patterns)]
 
-    # The first trigger every input had been heard by, then the very first one (some input absent then).
-    first = at_own_time(FIRST)
-    first += [c for c in at_own_time(FIRST_HEARD) if c not in first]
+    # The rules a first output tries first, by rank: the first trigger every input had been heard by, then the
+    # very first one (some input absent then).
+    first: list[Candidate] = []
+    for way in first_output_ways():
+        first += [c for c in at_own_time(way) if c not in first]
     return first + [c for c in candidates if c not in first]
 
 
-# Trigger rules a planner follows (not merely "between"), and the times a module reads its inputs at.
-LIKELY_RULES = frozenset({NEWEST, BUSY, CYCLE_END, OLDEST, FIRST, FIRST_HEARD, AT_OUTPUT, AT_START, AT_PREVIOUS}) | (
-    AFTER_RULES)
+def likely_ways() -> frozenset[str]:
+    """The ways of the frame rules a module follows (``FrameRule.likely``: not merely a trigger between), and of
+    the times a module reads its inputs at."""
+    return ways_where(lambda rule: rule.likely)
 
 
 def nearest_first(candidates: Sequence[Candidate]) -> list[Candidate]:
@@ -117,8 +118,10 @@ def nearest_first(candidates: Sequence[Candidate]) -> list[Candidate]:
     output, where every wrong frame tried costs a planner step, the frames
     near each likely trigger's own time come before the far frames of any.
     """
+    likely = likely_ways()
+
     def likelihood(candidate: Candidate) -> tuple[int, int]:
-        return min(((rule not in LIKELY_RULES, max((abs(offset) for _, offset in offsets), default=0))
+        return min(((rule not in likely, max((abs(offset) for _, offset in offsets), default=0))
                     for rule, offsets in candidate.patterns), default=(1, 0))
 
     return sorted(candidates, key=likelihood)  # sorted() is stable

@@ -17,6 +17,7 @@ from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, read_log
+from astaa_deft.engine.monitor.kinds.collision import CollisionInvariant
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.model.sut import Spec
@@ -63,7 +64,7 @@ class ExtractReport:
     diagnosis: Diagnosis | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ExtractOptions:
     """How an extraction searches and replays (the `extract` command's options past the log, spec and output)."""
 
@@ -129,7 +130,7 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     finally:
         planner.close()
     accepted = [f for f in ex.frames if f.accepted]
-    collisions = [v.time_ns for v in log.records(rec.Violation) if v.invariant_kind == "collision"]
+    collisions = [v.time_ns for v in log.records(rec.Violation) if v.invariant_kind == CollisionInvariant.kind]
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
     failing: list[SuiteFailure] = []

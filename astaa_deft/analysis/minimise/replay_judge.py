@@ -15,6 +15,8 @@ from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang
 from astaa_deft.analysis.minimise.ddmin import Outcome, TestResult
 from astaa_deft.analysis.minimise.replay_records import Frame, ReplayAnswer
 from astaa_deft.engine.monitor import MonitorSet, format_violation
+from astaa_deft.engine.monitor.base import ReplayJudges
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.model.json import DecodedMessage
 
 if TYPE_CHECKING:
@@ -93,7 +95,9 @@ class ReplayJudge:
             try:
                 message = self.model.step(planner, last)
             except StepHang as exc:
-                if any(i.kind == "deadline" for i in self.model.judged.invariants):
+                # A module that never answers again: the silence a timing invariant watches for.
+                if any(invariant_class(i.kind).replay_judges is ReplayJudges.TIMING
+                       for i in self.model.judged.invariants):
                     return ReplayAnswer(TestResult(Outcome.FAIL, f"module '{self.model.cfg.module}' hangs on trigger "
                                                                  f"{last.output}: {exc}"), last.output)
                 return ReplayAnswer(TestResult(Outcome.PASS))

@@ -42,7 +42,8 @@ from dataclasses import replace
 
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
-from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
+from astaa_deft.analysis.deft.frames import OutputContext, Stream, candidates, frame_at, newest_at_or_before, \
+    trigger_frame
 from astaa_deft.analysis.deft.planner_section import replay_module_of, replay_modules
 from astaa_deft.analysis.deft.run_metadata import RunMetadata
 from astaa_deft.analysis.deft.replay import ReplayPlanner, make_planner, within_limit
@@ -51,6 +52,8 @@ from astaa_deft.io.log import layout
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage, read_log
 from astaa_deft.engine.monitor import MonitorSet, with_typed_invariants
+from astaa_deft.engine.monitor.base import ReplayJudges
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.spec.stored import spec_from_log
 from astaa_deft.engine.spec.executes import untrusted_spec_refusal, what_spec_runs
@@ -137,11 +140,12 @@ def _why_not(spec: Spec, cfg: ReplayModule, invariant_name: str, failure_module:
     invariant = next((i for i in spec.invariants if i.name == invariant_name), None)
     if invariant is None:
         return f"'{invariant_name}' is not an invariant of the spec"
-    if invariant.kind == "process" and crash_shown and not is_planner:
+    judges = invariant_class(invariant.kind).replay_judges
+    if judges is ReplayJudges.PROCESS and crash_shown and not is_planner:
         # The module's exception is its process's abnormal exit: judged by this very invariant.
         return None if failure_module == cfg.module else f"'{invariant_name}' broke for another module"
-    timing_replayed = cfg.per_trigger and invariant.kind == "deadline"
-    if invariant.kind in ("process", "deadline") and not timing_replayed:
+    timing_replayed = cfg.per_trigger and judges is ReplayJudges.TIMING
+    if judges is not ReplayJudges.VALUES and not timing_replayed:
         return f"'{invariant_name}' is a {invariant.kind} invariant: timing and processes are not replayed"
     channels = MonitorSet(replace(spec, invariants=(invariant,)), 0).channels()
     if channels != {cfg.output}:
@@ -254,7 +258,8 @@ class ReplayModel:
             choice = frame_at(streams, trigger, t_index, t_t, previous)
             frame_time = t_t
             if choice is None:  # the trigger time does not work: the candidate search decides
-                options = candidates(streams, trigger, output.log_time, previous, self.lookback_ns)
+                options = candidates(OutputContext(streams=streams, trigger=trigger, output_ns=output.log_time,
+                                                   previous=previous, lookback_ns=self.lookback_ns))
                 if not options:
                     out.append(None)
                     continue

@@ -30,6 +30,8 @@ from astaa_deft.model.vocabulary import TextEnum
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.log.reader import LogContents
 from astaa_deft.engine.monitor import check_log, with_typed_invariants
+from astaa_deft.engine.monitor.base import ReplayJudges
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
@@ -98,7 +100,7 @@ def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> TesterChoice
     if entry.where == "planner":
         return TesterChoice(TesterKind.REPLAY, f"'{failure.invariant}' reads only the planner's output: planner replay",
                             entry)
-    if failure.invariant == IMPLICIT or failure.kind == "process":
+    if failure.invariant == IMPLICIT or invariant_class(failure.kind).replay_judges is ReplayJudges.PROCESS:
         return TesterChoice(TesterKind.REPLAY, (f"module '{entry.module}' crashed, and its replay shows crashes: "
                                             f"module replay ({entry.where})"), entry)
     return TesterChoice(TesterKind.REPLAY, (f"'{failure.invariant}' reads only module '{entry.module}''s output "

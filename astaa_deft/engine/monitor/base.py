@@ -16,26 +16,63 @@ from dataclasses import dataclass
 from typing import ClassVar
 from collections.abc import Hashable, Iterable
 
+from astaa_deft.model.fields import FieldPath
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.records import ProcessExit, Verdict
+from astaa_deft.model.vocabulary import TextEnum
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.monitor.violation import Violation, message_copy
 
 NO_VIOLATIONS: list[Violation] = []  # returned (never mutated) on the hot path to avoid allocating
 
 
+class ReplayJudges(TextEnum):
+    """What a replay of one module can judge of an invariant (its kind's trait, :attr:`Invariant.replay_judges`).
+
+    ``values``: the module's outputs, any replay of it (if the invariant reads
+    nothing else). ``timing``: a module's silence or lateness — only a replay
+    stepping every trigger (per-trigger frames) judges it, where the module
+    hanging is the silence; after the module crashed, a silence is the
+    crash's consequence. ``process``: a process's exit — only a replay that
+    shows the module's crash (``exceptions: crash``) judges it.
+    """
+
+    VALUES = "values"
+    TIMING = "timing"
+    PROCESS = "process"
+
+
 @dataclass(frozen=True, kw_only=True)
 class Invariant:
-    """What every invariant declares; kinds add their own fields."""
+    """What every invariant declares; kinds add their own fields.
+
+    A kind's traits (class attributes) say what may judge it, so the
+    minimiser, DeFT and the campaign ask the kind, never its name:
+    ``replay_judges`` (:class:`ReplayJudges`), ``crash_kind`` (it watches a
+    module dying or raising), and the margin hook (:meth:`margin_source`,
+    :meth:`margin_of`: how close a run came to breaking it, which the guided
+    strategy steers by).
+    """
 
     kind: ClassVar[str] = "?"
     default_crash: ClassVar[Verdict] = Verdict.SILENT  # the CRASH class a violation of this kind points at
+    replay_judges: ClassVar[ReplayJudges] = ReplayJudges.VALUES
+    crash_kind: ClassVar[bool] = False  # a module dying or raising (an abnormal exit, its log, its exceptions)
 
     name: str
     severity: str = "high"
     crash: Verdict | None = None  # overrides default_crash (e.g. Hindering for a status channel that lies)
     description: str = ""
     line: int | None = None  # where the spec declares it
+
+    def margin_source(self) -> tuple[str, FieldPath] | None:
+        """(channel, field path) whose values :meth:`margin_of` measures, or None: no margin (the default)."""
+        return None
+
+    def margin_of(self, value: object) -> float | None:
+        """How far one value of :meth:`margin_source` is from breaking this invariant, normalised (0: broken or
+        not finite); None: not a value it bounds."""
+        return None
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from astaa_deft.model.json import JsonValue
+from astaa_deft.engine.monitor.base import ReplayJudges
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.violation import SEVERITIES, Violation
 from astaa_deft.model.records import CRASH_SCALE, ProcessExit, RunVerdict, Verdict
 
@@ -56,7 +58,8 @@ def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit],
         classes[Verdict.CATASTROPHIC].append("every module exited during the run")
     for v in sorted(findings, key=_most_severe_first):  # stable: in time order within a severity
         klass = Verdict.named(v.crash) or Verdict.SILENT  # an unknown class counts as Silent
-        if klass is Verdict.RESTART and v.invariant_kind == "deadline" and _exited_before(v, first_exit_ns):
+        if klass is Verdict.RESTART and invariant_class(v.invariant_kind).replay_judges is ReplayJudges.TIMING and (
+                _exited_before(v, first_exit_ns)):
             continue  # silence after a crash is the crash's consequence, not a hang
         classes[klass].append(f"{v.invariant}: {v.detail}")
     klass = next(c for c in CRASH_SCALE if classes[c] or c is Verdict.PASS)
@@ -70,16 +73,17 @@ def _most_severe_first(v: Violation) -> int:
 
 def _unreported_exits(mid_run: Sequence[ProcessExit], violations: Sequence[Violation]) -> list[Violation]:
     """Findings for mid-run exits that no process invariant reported."""
-    reported = {(v.module, v.time_ns) for v in violations if v.invariant_kind == "process"}
+    reported = {(v.module, v.time_ns) for v in violations
+                if invariant_class(v.invariant_kind).replay_judges is ReplayJudges.PROCESS}
     out = []
     for e in mid_run:
         if (e.module, e.time_ns) in reported:
             continue
         clean = e.returncode == 0 and not e.signal
-        out.append(Violation(IMPLICIT, "process", "high", e.time_ns, None, None,
-                             {"returncode": e.returncode, "signal": e.signal},
-                             f"{e.as_finding()} during the run", Verdict.HINDERING if clean else Verdict.ABORT,
-                             e.module))
+        out.append(Violation(invariant=IMPLICIT, invariant_kind="process", severity="high", time_ns=e.time_ns,
+                             channel=None, seq=None, message={"returncode": e.returncode, "signal": e.signal},
+                             detail=f"{e.as_finding()} during the run",
+                             crash=Verdict.HINDERING if clean else Verdict.ABORT, module=e.module))
     return out
 
 

@@ -89,8 +89,9 @@ class Judge(RunPart):
         """A module alive but silent at its start: a hang as far as the CRASH scale goes (no Pass)."""
         if self.monitors is None:
             return
-        found = Violation("(module start)", "ready", "high", time.time_ns(), None, None, None,
-                          f"module '{exc.module}' not ready: {exc.detail}", Verdict.RESTART, exc.module)
+        found = Violation(invariant="(module start)", invariant_kind="ready", severity="high", time_ns=time.time_ns(),
+                          channel=None, seq=None, message=None, detail=f"module '{exc.module}' not ready: {exc.detail}",
+                          crash=Verdict.RESTART, module=exc.module)
         self.monitors.set.violations.append(found)  # the verdict is the monitors' own: they must count it
         self._violated(found)
 

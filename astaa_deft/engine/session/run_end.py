@@ -61,9 +61,10 @@ class RunEnd:
         """The end as a finding (None when it is a pass)."""
         if self.outcome.passed:
             return None
-        return Violation(f"{RUN_END_KIND}:{self.outcome.name}", RUN_END_KIND, self.outcome.severity, self.time_ns,
-                         self.channel, None, self.message, self.detail, self.outcome.crash or Verdict.SILENT,
-                         self.module)
+        return Violation(invariant=f"{RUN_END_KIND}:{self.outcome.name}", invariant_kind=RUN_END_KIND,
+                         severity=self.outcome.severity, time_ns=self.time_ns, channel=self.channel, seq=None,
+                         message=self.message, detail=self.detail, crash=self.outcome.crash or Verdict.SILENT,
+                         module=self.module)
 
 
 class RunEndWatch:

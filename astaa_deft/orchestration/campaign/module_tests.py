@@ -32,11 +32,11 @@ from astaa_deft.analysis.deft.validator import Comparison
 from astaa_deft.analysis.deft.workflow import ExtractReport, run_params
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage, read_log
+from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.model.replay_module import ReplayModule
 from astaa_deft.model.sut import Spec
 
-CRASH_KINDS = frozenset({"process", "log", "exceptions"})  # monitors of a module dying or raising
 _RAISED = re.compile(r"the (?:planner|module) raised (.+)")
 
 
@@ -51,7 +51,7 @@ def is_crash_bucket(verdict: str, invariant: str, spec: Spec) -> bool:
     if verdict in (Verdict.ABORT, Verdict.CATASTROPHIC) or invariant == IMPLICIT:
         return True
     watched = next((i for i in spec.invariants if i.name == invariant), None)
-    return watched is not None and watched.kind in CRASH_KINDS
+    return watched is not None and invariant_class(watched.kind).crash_kind
 
 
 def replayable(spec: Spec, module: str | None) -> bool:

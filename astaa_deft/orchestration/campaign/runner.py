@@ -22,6 +22,7 @@ import zenoh
 
 from astaa_deft.model.records import RunMode, Verdict, Violation
 from astaa_deft.model import fields
+from astaa_deft.model.fields import FieldPath
 from astaa_deft.engine.bus.processes import ChildProcess
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import Codec
@@ -30,7 +31,7 @@ from astaa_deft.engine.intercept.dictionary import Dictionary, load_dictionary
 from astaa_deft.engine.intercept.engine import Interceptor
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.io.log import layout
-from astaa_deft.engine.monitor.kinds.bound import BoundInvariant
+from astaa_deft.engine.monitor.base import Invariant
 from astaa_deft.engine.monitor import MonitorSet
 from astaa_deft.engine.monitor.error_signature import signature_of_output, violation_signature
 from astaa_deft.engine.monitor.verdict import IMPLICIT
@@ -284,46 +285,42 @@ class SettleWatch:
 
 
 class MarginWatch:
-    """How close each bound invariant came to breaking: the smallest distance of its field to min/max.
+    """How close each invariant with a margin came to breaking: the smallest margin of its values in the run.
 
-    Normalised by the bound's range when it has both ends (so invariants
-    compare), 0 when a value is non-finite or out of bounds; every invariant
-    that broke gets 0. The guided strategy steers by these numbers.
+    An invariant kind says whether it has one (``Invariant.margin_source``:
+    the channel and field it watches; a bound with a min or a max) and
+    measures it (``Invariant.margin_of``: normalised so invariants compare, 0
+    when a value is non-finite or out of bounds); every invariant that broke
+    gets 0. The guided strategy steers by these numbers.
     """
 
     def __init__(self, spec: Spec):
-        self.bounds = [inv for inv in spec.invariants if isinstance(inv, BoundInvariant)
-                       and (inv.minimum is not None or inv.maximum is not None)]
+        self.watched = [(inv, source) for inv in spec.invariants
+                        if isinstance(inv, Invariant) and (source := inv.margin_source()) is not None]
         self.spec = spec
         self.closest: dict[str, float] = {}
         self._lock = threading.Lock()
 
     def attach(self, bus: RunView) -> None:
-        for inv in self.bounds:
-            codec = get_codec(self.spec.channel(inv.channel).encoding)
-            def seen(sample: zenoh.Sample, inv: BoundInvariant = inv, codec: Codec = codec) -> None:
-                self._seen(inv, codec, sample)
+        for inv, (channel, path) in self.watched:
+            codec = get_codec(self.spec.channel(channel).encoding)
+            def seen(sample: zenoh.Sample, inv: Invariant = inv, path: FieldPath = path, codec: Codec = codec) -> None:
+                self._seen(inv, path, codec, sample)
 
             try:
-                bus.subscribe(inv.channel, seen)
+                bus.subscribe(channel, seen)
             except KeyError:  # not observable in this mode
                 continue
 
-    def _seen(self, inv: BoundInvariant, codec: Codec, sample: zenoh.Sample) -> None:
+    def _seen(self, inv: Invariant, path: FieldPath, codec: Codec, sample: zenoh.Sample) -> None:
         try:
-            values = [v for _, v in fields.get(codec.decode(sample.payload.to_bytes()), inv.field)]
+            values = [v for _, v in fields.get(codec.decode(sample.payload.to_bytes()), path)]
         except Exception:  # noqa: BLE001 - a payload the monitors will report; not ours to judge
             return
-        span = (inv.maximum - inv.minimum) if inv.minimum is not None and inv.maximum is not None else 1.0
         for value in values:
-            if not isinstance(value, (int, float)) or isinstance(value, bool):
+            margin = inv.margin_of(value)
+            if margin is None:
                 continue
-            if not math.isfinite(value):
-                margin = 0.0
-            else:
-                ends = [value - inv.minimum if inv.minimum is not None else math.inf,
-                        inv.maximum - value if inv.maximum is not None else math.inf]
-                margin = max(0.0, min(ends)) / (span or 1.0)
             with self._lock:
                 if margin < self.closest.get(inv.name, math.inf):
                     self.closest[inv.name] = margin

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from astaa_deft.engine.monitor.base import Invariant
 from astaa_deft.model.registry import Registry
 
 
@@ -26,14 +27,22 @@ class Kind:
     required: tuple[str, ...]
     parse: Callable
     monitor: Callable
-    invariant_type: type
+    invariant_type: type[Invariant]
 
     @classmethod
-    def register(cls, invariant_type: type, keys: tuple[str, ...], required: tuple[str, ...], *,
+    def register(cls, invariant_type: type[Invariant], keys: tuple[str, ...], required: tuple[str, ...], *,
                  parse: Callable, monitor: Callable) -> Kind:
         """Register the kind whose invariants are ``invariant_type`` (its ``kind`` is the name)."""
-        name: str = invariant_type.kind  # type: ignore[attr-defined]  # every Invariant declares its kind
+        name = invariant_type.kind
         return KINDS.register(name, cls(name, keys, required, parse, monitor, invariant_type))
 
 
 KINDS: Registry[Kind] = Registry("monitor kind", __name__)
+
+
+def invariant_class(kind: str) -> type[Invariant]:
+    """The invariant class of the kind named ``kind`` (a spec entry's ``kind``, a violation record's
+    ``invariant_kind``): its traits say what can judge it. A name no kind registers gets the base
+    :class:`Invariant`, every trait at its default."""
+    entry = KINDS.get(kind)
+    return entry.invariant_type if entry is not None else Invariant

@@ -42,6 +42,22 @@ class BoundInvariant(Invariant):
     non_empty: bool = False
     enum_values: tuple[object, ...] | None = None  # in_enum: the declared values
 
+    def margin_source(self) -> tuple[str, FieldPath] | None:
+        """The bounded field, when the bound has an end (min or max)."""
+        return (self.channel, self.field) if self.minimum is not None or self.maximum is not None else None
+
+    def margin_of(self, value: object) -> float | None:
+        """The value's distance to the nearer end, normalised by the range when the bound has both ends (so
+        invariants compare); 0 when it is not finite or out of bounds; None for a value that is no number."""
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            return None
+        if not math.isfinite(value):
+            return 0.0
+        span = (self.maximum - self.minimum) if self.minimum is not None and self.maximum is not None else 1.0
+        ends = [value - self.minimum if self.minimum is not None else math.inf,
+                self.maximum - value if self.maximum is not None else math.inf]
+        return max(0.0, min(ends)) / (span or 1.0)
+
 
 def parse(reader: InvariantReader, node: Node, common: dict) -> BoundInvariant | None:
     v = node.value

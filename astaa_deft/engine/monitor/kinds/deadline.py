@@ -21,7 +21,7 @@ from typing import ClassVar
 
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.yamlsource import Node
-from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
+from astaa_deft.engine.monitor.base import ReplayJudges, NO_VIOLATIONS, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.spec_reader import InvariantReader
 from astaa_deft.engine.monitor.violation import Violation
 from astaa_deft.engine.monitor.kinds import Kind
@@ -35,6 +35,7 @@ AFTER = ("first", "start")
 @dataclass(frozen=True, kw_only=True)
 class DeadlineInvariant(Invariant):
     kind: ClassVar[str] = "deadline"
+    replay_judges: ClassVar[ReplayJudges] = ReplayJudges.TIMING
     default_crash: ClassVar[Verdict] = Verdict.RESTART  # a module that stops talking hangs (CRASH: needs a restart)
 
     channels: tuple[str, ...]  # the watched channels: one, or every channel a module produces

@@ -55,6 +55,7 @@ BUILT_IN = "|".join((
 @dataclass(frozen=True, kw_only=True)
 class ExceptionsInvariant(LogInvariant):
     kind: ClassVar[str] = "exceptions"
+    crash_kind: ClassVar[bool] = True
     default_crash: ClassVar[Verdict] = Verdict.SILENT
 
     def what_matched(self) -> str:

@@ -37,6 +37,7 @@ REQUIRED = ("pattern",)
 @dataclass(frozen=True, kw_only=True)
 class LogInvariant(Invariant):
     kind: ClassVar[str] = "log"
+    crash_kind: ClassVar[bool] = True
     default_crash: ClassVar[Verdict] = Verdict.SILENT
 
     modules: tuple[str, ...]

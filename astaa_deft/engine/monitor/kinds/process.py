@@ -24,7 +24,7 @@ from typing import ClassVar
 from astaa_deft.model.records import ProcessExit, Verdict
 from astaa_deft.model.fields import FieldPath, FieldPathError, type_at
 from astaa_deft.io.yamlsource import Node
-from astaa_deft.engine.monitor.base import NO_VIOLATIONS, Invariant, Monitor, MonitorContext
+from astaa_deft.engine.monitor.base import ReplayJudges, NO_VIOLATIONS, Invariant, Monitor, MonitorContext
 from astaa_deft.engine.monitor.error_signature import signature_of_output
 from astaa_deft.engine.monitor.expression import RUNTIME_ERRORS, follow
 from astaa_deft.engine.monitor.paths import is_number
@@ -39,6 +39,8 @@ REQUIRED = ()
 @dataclass(frozen=True, kw_only=True)
 class ProcessInvariant(Invariant):
     kind: ClassVar[str] = "process"
+    replay_judges: ClassVar[ReplayJudges] = ReplayJudges.PROCESS
+    crash_kind: ClassVar[bool] = True
     default_crash: ClassVar[Verdict] = Verdict.ABORT
 
     modules: tuple[str, ...]
