@@ -75,12 +75,21 @@ class _Played:
 
 
 def same_output(answer: Any, recorded: Any, ignore: tuple[str, ...] | list[str]) -> bool:
-    """``answer`` equals ``recorded`` bit for bit, the top-level ``ignore`` fields aside (the zoo's: ``debug``)."""
-    assert all("." not in name and "[" not in name for name in ignore), ignore  # the zoo ignores whole fields
+    """``answer`` equals ``recorded`` bit for bit, the ``ignore`` fields aside (the zoo's: ``debug``; a spec's
+    ``ignore:`` may name a nested field, ``header.frame_id``)."""
+    assert all("[" not in name for name in ignore), ignore  # the zoo ignores fields of structs, no array elements
+
+    def without(message: Any, path: list[str]) -> Any:
+        if not isinstance(message, dict) or path[0] not in message:
+            return message
+        if len(path) == 1:
+            return {k: v for k, v in message.items() if k != path[0]}
+        return {**message, path[0]: without(message[path[0]], path[1:])}
 
     def canonical(message: Any) -> str:
-        kept = {k: v for k, v in message.items() if k not in ignore} if isinstance(message, dict) else message
-        return json.dumps(kept, sort_keys=True)
+        for name in ignore:
+            message = without(message, name.split("."))
+        return json.dumps(message, sort_keys=True)
 
     return canonical(answer) == canonical(recorded)
 
