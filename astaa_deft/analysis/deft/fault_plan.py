@@ -55,7 +55,7 @@ def plan_faults(*, module: str, inputs: Sequence[str], times: Mapping[str, Seque
                 index = rng.choice(spots)
                 held = rng.random() < HOLD_SHARE
                 fault = StreamFault(channel=channel, kind=FaultKind.HOLD if held else FaultKind.SET, index=index,
-                                    path=str(target.path), value=value, value_ref=entry.ref,  # type: ignore[arg-type]
+                                    path=str(target.path), value=value, value_ref=entry.ref,
                                     count=rng.randint(*HOLD_MESSAGES) if held else 1)
                 by_round.setdefault(_round_of(value_class(entry)), []).append(fault)
         message_faults = []

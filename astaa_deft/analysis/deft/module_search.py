@@ -347,7 +347,7 @@ class ModuleBench:
     def _raised(self, monitors: MonitorSet, exc: Exception, k: int, frame: Frame, steps: int) -> ModuleVerdict:
         lines = "".join(traceback.format_exception(exc)).splitlines()
         signature = signature_of_output(lines)
-        error = signature.text if signature is not None else type(exc).__name__
+        error = signature.text() if signature is not None else type(exc).__name__
         what = f"module '{self.entry.module}' raised {type(exc).__name__}: {str(exc)[:200]} on frame {k}"
         if self.entry.exceptions == StepExceptions.CRASH:
             found = monitors.on_process_exit(self.entry.module, 1, None, self.output_time(k, frame),

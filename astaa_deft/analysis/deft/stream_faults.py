@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 from astaa_deft.analysis.deft.frames import Stream, candidates, frame_at, newest_at_or_before, trigger_frame
 from astaa_deft.model.fields import FieldPath, FieldPathError, set_field
-from astaa_deft.model.json import DecodedMessage, FieldValue, JsonObject
+from astaa_deft.model.json import DecodedMessage, FieldValue, JsonObject, JsonValue
 from astaa_deft.model.vocabulary import TextEnum
 
 DUPLICATE_GAP_NS = 1_000_000  # a copy arrives this long after the real message (the engine sends it next)
@@ -91,7 +91,7 @@ class StreamFault:
                    value_ref=None if ref is None else str(ref), count=count, delay_ms=float(delay))
 
 
-def _tagged(value: FieldValue) -> FieldValue:
+def _tagged(value: FieldValue) -> JsonValue:
     from astaa_deft.model.tagged import to_tagged
 
     return to_tagged(value)

@@ -45,6 +45,7 @@ from astaa_deft.orchestration.campaign.judging import Judging, shows_failure
 from astaa_deft.orchestration.campaign.minimisation_slots import (
     REPLAY_TESTS_SUFFIX, TESTS_DIR, MinimisationSlots, culprit_family, merge_same_culprits,
 )
+from astaa_deft.orchestration.campaign.module_level import STRATEGY as MODULE_LEVEL, ModuleLevel
 from astaa_deft.orchestration.campaign.scheduling import Scheduling
 
 __all__ = [  # the campaign's own names, and those of its parts that its callers import from here
@@ -89,6 +90,8 @@ class CampaignConfig:
     minimise_max_tests: int = 30
     minimise_timeout: float = DEFAULT_MINIMISE_TIMEOUT
     report: bool = True
+    module_level: bool = True  # search at module level first where the spec can replay a module (module_level.py)
+    module_level_seconds: float | None = None  # its time box (None: a share of the budget)
 
     def resuming(self, meta: CampaignMeta) -> CampaignConfig:
         """This configuration continuing the campaign ``meta`` describes: its spec, seed, strategy, params and
@@ -153,7 +156,7 @@ def param_grid(params: dict[str, list[str]], spec: Spec | None = None) -> list[d
     return [dict(zip(keys, values, strict=False)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
 
 
-class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
+class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
     """A fuzz campaign: baseline, generated cases, buckets, rates, minimisation — one part per concern
     (``parts.py``), the hunt's loop here."""
 
@@ -215,6 +218,7 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
         stopped = StopReason.DONE
         try:
             self._baseline(pool)
+            self._module_level()
             stopped = self._main(pool)
         except KeyboardInterrupt:
             stopped = StopReason.INTERRUPTED
@@ -254,7 +258,8 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
             if bucket.kind == CONFIRMING and not self.journal.unfinished(bucket.bucket):
                 self._decide(bucket.bucket)
         queue = [self._planned(row) for kind in (MUTATED, RERUN, CONTROL) for row in self.journal.pending(kind)]
-        number = self.journal.max_number(MUTATED)
+        # the strategy's own cases (a module-level finding's live case is numbered apart)
+        number = max((r.number for r in rows if r.strategy != MODULE_LEVEL), default=0)
         stopped = StopReason.DONE
         while True:
             self._watch_load()
