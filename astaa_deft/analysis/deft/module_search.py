@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
 from astaa_deft.analysis.deft.stream_faults import (
     FaultKind, FaultNotApplicable, FieldReads, Frame, Received, StreamFault, apply_fault, first_changed, frame_key,
-    leaf_paths, output_frames, perturb_field, recorded_streams, trigger_frames,
+    frame_origins, leaf_paths, output_frames, perturb_field, recorded_streams, trigger_frames,
 )
 from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
 from astaa_deft.engine.monitor.error_signature import signature_of_output
@@ -397,7 +397,7 @@ _NO_FAULT = StreamFault(channel="", kind=FaultKind.DROP, index=0)  # a placehold
 def _changes_output(bench: ModuleBench, streams: Mapping[str, Sequence[Received]], first: int, end: int,
                     baseline: Sequence[str]) -> bool:
     frames = bench.frames_of(streams)
-    if [frame_key(f) for f in frames[first:end]] != bench.keys[first:end]:
+    if [frame_origins(f) for f in frames[first:end]] != [frame_origins(f) for f in bench.frames[first:end]]:
         return True  # the frames themselves moved (a field the frame rule reads, e.g. a stamp)
     planner = bench.restore(first) if bench.frames else bench.fresh()
     try:

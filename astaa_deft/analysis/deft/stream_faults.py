@@ -60,9 +60,10 @@ class StreamFault:
     @property
     def family(self) -> str:
         """The fault's field family (bucket identity): the field folded to the object holding it, indices
-        folded, action and value left out — ``localization:.{…}``; a message fault ``localization:*:drop``."""
+        folded, action and value left out — ``localization:.{…}``; every message fault ``localization:(message)``,
+        as the live root-cause identity folds them."""
         if self.kind in MESSAGE_KINDS or self.path is None:
-            return f"{self.channel}:*:{self.kind}"
+            return f"{self.channel}:(message)"
         return f"{self.channel}:{field_family(self.path)}"
 
     def describe(self) -> str:
@@ -232,6 +233,13 @@ def frame_key(frame: Frame | None) -> tuple[tuple[str, tuple[int, int, bool]], .
     if frame is None:
         return None
     return tuple(sorted((name, r.key) for name, r in frame.items()))
+
+
+def frame_origins(frame: Frame | None) -> tuple[tuple[str, int, int, int], ...] | None:
+    """Which recorded messages a frame holds, and when they arrived (not whether a field of them changed)."""
+    if frame is None:
+        return None
+    return tuple(sorted((name, r.origin, r.copy, r.time_ns) for name, r in frame.items()))
 
 
 def first_changed(baseline: Sequence[Frame | None], faulted: Sequence[Frame | None]) -> int | None:

@@ -510,7 +510,7 @@ def live_figures(journal: Journal) -> LevelFigures:
     live_buckets = [b for b in buckets if b.first_case in own]
     starts = [r.planned_at for r in journal.cases() if r.planned_at]
     origin = min(starts) if starts else None
-    firsts = [r.finished_at for r in rows if r.bucket and r.finished_at]
+    firsts = [r.finished_at for r in rows if r.finished_at and any(b.first_case == r.case_id for b in live_buckets)]
     first = min(firsts) - origin if firsts and origin is not None else None
     return LevelFigures(level="live", cases=len(rows), core_seconds=cpu, findings=len(live_buckets),
                         confirmed=sum(1 for b in live_buckets if b.is_bug), first_find=first)

@@ -21,7 +21,7 @@ from astaa_deft.analysis.deft.module_search import ModuleVerdict
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import write_atomic
 
-TEST_FILE = "test_module_level.py"
+TEST_PREFIX = "test_module_level_"  # + the finding's name: one module name per test file
 CHECK_TIMEOUT = 900.0
 
 _TEMPLATE = '''"""DeFT module test of a module-level finding: module {module!r} replayed on its frames from a clean
@@ -58,18 +58,19 @@ def test_module_handles_the_fault():
 def write_test(folder: Path, *, spec_path: Path, log_path: Path, verdict: ModuleVerdict) -> Path:
     """Write the finding's test file into ``folder``; its path."""
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / TEST_FILE
+    path = folder / f"{TEST_PREFIX}{folder.name}.py"
     write_atomic(path, _TEMPLATE.format(module=verdict.module, spec=str(spec_path), log=str(log_path),
                                         fault=json.dumps(verdict.fault.to_json()), signature=verdict.signature))
     return path
 
 
-_RESULT = re.compile(r"^(PASSED|FAILED|ERROR) (\S+?)/" + re.escape(TEST_FILE) + r"::")
+_RESULT = re.compile(r"^(PASSED|FAILED|ERROR) (?:\S+/)?" + re.escape(TEST_PREFIX) + r"(\w+)\.py::")
 
 
 def check_tests(tests_dir: Path, timeout: float = CHECK_TIMEOUT) -> dict[str, bool]:
     """Run every finding's test once (one pytest): finding name → its test fails (as it should), for each
     test that ran."""
+    tests_dir = tests_dir.resolve()  # pytest runs from inside it
     try:
         done = process_launch.run([sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider",
                                    "--rootdir", str(tests_dir), str(tests_dir)], timeout=timeout, cwd=str(tests_dir))
@@ -79,5 +80,5 @@ def check_tests(tests_dir: Path, timeout: float = CHECK_TIMEOUT) -> dict[str, bo
     for line in (done.stdout + done.stderr).splitlines():
         match = _RESULT.match(line.strip())
         if match:
-            found[Path(match.group(2)).name] = match.group(1) == "FAILED"
+            found[match.group(2)] = match.group(1) == "FAILED"
     return found
