@@ -5,6 +5,7 @@ real campaign on tests/sut/modlevel.yaml whose module-level findings are confirm
 from __future__ import annotations
 
 import math
+import re
 import sqlite3
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from astaa_deft.analysis.deft.module_search import FindingKind, ModuleBench
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.stream_faults import (
     FaultKind, FaultNotApplicable, FieldReads, StreamFault, apply_fault, field_family, fields_nothing_reads,
-    recorded_streams, trigger_frames,
+    recorded_streams, smaller_faults, trigger_frames,
 )
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.dictionary import load_dictionary
@@ -70,6 +71,14 @@ def test_set_and_hold_rewrite_only_their_messages():
         apply_fault(base, StreamFault(channel="a", kind=FaultKind.SET, index=1, path="nope", value=1.0))
 
 
+def test_a_held_value_and_a_delay_shrink_to_their_smallest_forms():
+    held = StreamFault(channel="a", kind=FaultKind.HOLD, index=2, path="v", value=1.0, count=12)
+    assert [(f.kind, f.count) for f in smaller_faults(held)] == [(FaultKind.SET, 1), (FaultKind.HOLD, 3),
+                                                                  (FaultKind.HOLD, 6)]
+    late = StreamFault(channel="a", kind=FaultKind.DELAY, index=2, delay_ms=200.0)
+    assert smaller_faults(late) == [] and smaller_faults(StreamFault(channel="a", kind=FaultKind.DROP, index=2)) == []
+
+
 def test_field_families_fold_fields_to_their_object_and_message_faults_to_the_channel():
     assert field_family("pose.x") == "pose.{…}"
     assert field_family("points[3].v") == "points[].{…}"
@@ -115,11 +124,11 @@ def test_the_fault_plan_is_deterministic_and_covers_message_faults_on_every_inpu
 
 
 def test_a_spec_without_an_in_process_replay_has_no_module_to_search(tmp_path):
-    text = SPEC.read_text().replace('      factory: "modlevel_ctrl:Ctrl"\n', '      command: ["true"]\n')
+    text = re.sub(r'      factory: "[^"]*"\n', '      command: ["true"]\n', SPEC.read_text())
     spec_path = tmp_path / "modlevel.yaml"
     spec_path.write_text(text)
     entries, skipped = replayed_entries(load_spec(spec_path))
-    assert entries == [] and "no in-process replay" in skipped[0]
+    assert entries == [] and len(skipped) == 2 and all("no in-process replay" in why for why in skipped)
 
 
 # -- a real module replayed from a real run ---------------------------------------------------------------
@@ -144,7 +153,7 @@ def test_a_replayed_module_fails_under_faults_like_the_live_stack(recorded):
     assert nan.kind == FindingKind.INVARIANT and nan.invariant == "finite_u" and nan.frame == middle
     late = bench.run(StreamFault(channel="state", kind=FaultKind.REORDER, index=middle))
     assert late.kind == FindingKind.CRASH and late.error == "ValueError in modlevel_ctrl.py:step"
-    assert late.invariant == "ctrl_alive"  # the process invariant judges the crash, as live
+    assert late.invariant == "modules_alive"  # the process invariant judges the crash, as live
     debug = bench.run(StreamFault(channel="state", kind=FaultKind.SET, index=middle, path="debug.score", value=1e300))
     assert not debug.failed and debug.applicable
     reads = bench.field_reads()
@@ -178,15 +187,19 @@ def _campaign(tmp_path: Path, **kw) -> Path:
 def test_a_campaign_confirms_its_module_level_findings_live(tmp_path):
     out = _campaign(tmp_path)
     state = read_state(out)
-    assert state is not None and state.modules == ("ctrl",) and state.cases > 0
-    signatures = {f.verdict.signature: f for f in state.findings}
-    assert set(signatures) == {"invariant finite_u", "crash ValueError in modlevel_ctrl.py:step"}
+    assert state is not None and state.modules == ("ctrl", "watch") and state.cases > 0
+    found = {(f.verdict.module, f.verdict.signature) for f in state.findings}
+    assert found == {("ctrl", "invariant finite_u"), ("ctrl", "crash ValueError in modlevel_ctrl.py:step"),
+                     ("watch", "crash OverflowError in modlevel_watch.py:step")}  # one bucket each, its module's
     assert all(f.tests_fail for f in state.findings)  # each DeFT module test fails on its defect
-    assert set(state.unread) == {("state", "debug.note"), ("state", "debug.score")}
+    assert {("state", "debug.note"), ("state", "debug.score")} <= set(state.unread)
     journal = Journal(out)
     lines = status_lines(out, journal)
     journal.close()
-    assert sum("confirmed live" in line for line in lines) == 2, lines
+    assert sum("confirmed live" in line for line in lines) == 3, lines
+    blames = {row.bucket: row for row in Journal(out).blames().values()}
+    assert {b.module for b in blames.values()} == {"ctrl", "watch"}
+    assert all(b.replay and "module level" in b.replay for b in blames.values())
     assert lines[0].startswith("module level:") and lines[1].startswith("live:")
     db = sqlite3.connect(out / "journal.sqlite")
     live = [xml for (xml,) in db.execute("SELECT testcase_xml FROM cases WHERE kind='mutated' AND strategy='random'")]

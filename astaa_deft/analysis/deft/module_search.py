@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
 from astaa_deft.analysis.deft.stream_faults import (
     FaultKind, FaultNotApplicable, FieldReads, Frame, Received, StreamFault, apply_fault, first_changed, frame_key,
-    frame_origins, leaf_paths, output_frames, perturb_field, recorded_streams, trigger_frames,
+    frame_origins, leaf_paths, output_frames, perturb_field, recorded_streams, smaller_faults, trigger_frames,
 )
 from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
 from astaa_deft.engine.monitor.error_signature import signature_of_output
@@ -357,6 +357,15 @@ class ModuleBench:
                                  invariant=invariant, error=error, frame=k, steps=steps, detail=what)
         return ModuleVerdict(module=self.entry.module, fault=_NO_FAULT, kind=FindingKind.EXCEPTION, error=error,
                              frame=k, steps=steps, detail=what)
+
+    def minimised(self, verdict: ModuleVerdict) -> ModuleVerdict:
+        """The smallest form of a failing verdict's fault that fails the same way (same bucket): a held value
+        on one message, or on fewer (:func:`~.stream_faults.smaller_faults`); the verdict itself else."""
+        for smaller in smaller_faults(verdict.fault):
+            again = self.run(smaller)
+            if again.failed and again.bucket_key == verdict.bucket_key:
+                return again
+        return verdict
 
     # -- which fields it reads ------------------------------------------------------------------------------
     def field_reads(self, *, first_frame: int = 0, budget_s: float | None = None) -> FieldReads:

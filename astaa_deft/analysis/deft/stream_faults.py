@@ -186,6 +186,17 @@ def apply_fault(streams: Streams, fault: StreamFault) -> dict[str, list[Received
     return out
 
 
+def smaller_faults(fault: StreamFault) -> list[StreamFault]:
+    """Smaller forms of ``fault``, smallest first: a hold on one message (a set), then on fewer messages. A
+    set or a message fault is one message already: none (a shorter delay is not smaller: it only moves the
+    message nearer the edge where its overtaking depends on the live run's jitter)."""
+    if fault.kind == FaultKind.HOLD:
+        counts = sorted({1, *(fault.count // 2 ** k for k in range(1, 5))} - {0, fault.count})
+        return [replace(fault, kind=FaultKind.SET, count=1) if count == 1 else replace(fault, count=count)
+                for count in counts]
+    return []
+
+
 Frame = dict[str, Received]  # input channel → the message the module reads in that frame
 
 

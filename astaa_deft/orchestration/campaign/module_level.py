@@ -57,6 +57,7 @@ from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.journal import Journal
 from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus, PlannedCase
 from astaa_deft.orchestration.campaign.parts import CampaignParts
+from astaa_deft.orchestration.campaign.rows import CaseRow
 
 DIR_NAME = "module_level"
 STATE_FILE = "state.json"
@@ -389,6 +390,24 @@ class ModuleLevel(CampaignParts):
         failing = check_tests(self.config.out / DIR_NAME / "tests")
         return _with(state, findings=tuple(
             _with_finding(f, tests_fail=failing.get(f.name)) for f in written))
+
+    def _module_level_blame(self, bucket: str, case: CaseRow) -> tuple[str, str] | None:
+        if case.strategy != STRATEGY:
+            return None
+        state = read_state(self.config.out)
+        finding = next((f for f in state.findings if f.case_id == case.case_id), None) if state else None
+        if finding is None:
+            return None
+        v = finding.verdict
+        how = (f"module level {finding.name}: a replay of {v.module} alone on its frames from a clean run fails"
+               f" under {v.fault.describe()} ({v.signature})")
+        if finding.tests:
+            fails = finding.tests_fail
+            self.journal.module_tests_checked(
+                bucket, str(self.config.out / finding.tests), fails,
+                "the module-level replay fails under the fault" if fails else
+                "its check did not fail" if fails is False else "its check did not run")
+        return v.module, how
 
     def _leave_out(self, unread: Sequence[tuple[str, str]], *, announce: bool) -> None:
         if not unread:

@@ -84,12 +84,16 @@ def run(job: dict) -> int:
             first = _first_live_frame(bench, int(job["window"][0]))
             reads = bench.field_reads(first_frame=first, budget_s=max(1.0, (deadline - time.time()) / 3))
             Path(job["reads"]).write_text(json.dumps(reads.to_json()) + "\n", encoding="utf-8")
+        first_of: set[tuple[str, str, str]] = set()  # buckets this worker found: their first fault minimised
         for number, fault in enumerate(faults):
             if number % parts != part:
                 continue
             if time.time() >= deadline:
                 break
             verdict = bench.run(fault)
+            if verdict.failed and verdict.bucket_key not in first_of:
+                first_of.add(verdict.bucket_key)
+                verdict = bench.minimised(verdict)
             if verdict.applicable:
                 write({"n": number, "verdict": verdict.to_json()})
         write({"done": True})
