@@ -36,8 +36,9 @@ from dataclasses import dataclass, replace
 
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
 from astaa_deft.analysis.deft.stream_faults import (
-    FaultKind, FaultNotApplicable, FieldReads, Frame, Received, StreamFault, apply_fault, first_changed, frame_key,
-    frame_origins, leaf_paths, output_frames, perturb_field, recorded_streams, smaller_faults, trigger_frames,
+    PERTURBATIONS, FaultKind, FaultNotApplicable, FieldReads, Frame, Received, StreamFault, apply_fault,
+    first_changed, frame_key, frame_origins, leaf_paths, output_frames, perturb_field, recorded_streams,
+    smaller_faults, trigger_frames,
 )
 from astaa_deft.engine.monitor import MonitorSet, format_violation, with_typed_invariants
 from astaa_deft.engine.monitor.error_signature import signature_of_output
@@ -53,7 +54,7 @@ from astaa_deft.model.vocabulary import TextEnum
 SNAPSHOT_EVERY = 1  # frames between pickled baseline states (a restore then replays at most this many - 1)
 MAX_SNAPSHOTS = 2000
 SILENT_AFTER = 5  # answers the baseline gave after the fault where the replay gave none: the module went silent
-PROBE_FRAMES = 400  # frames a field-read probe replays (the first ones from the live part)
+PROBE_FRAMES = 1500  # frames a field-read probe replays (from the run's first: start-up reads count)
 
 
 class FindingKind(TextEnum):
@@ -388,10 +389,10 @@ class ModuleBench:
             if budget_s is not None and time.perf_counter() - started > budget_s:
                 notes.append(f"stopped after {len(read) + len(unread)} of {len(probed)} fields: the time box")
                 break
-            streams = perturb_field(self.streams, channel, path)
-            if streams is None:
+            probes = [s for way in range(PERTURBATIONS) if (s := perturb_field(self.streams, channel, path, way))]
+            if not probes:
                 continue
-            if _changes_output(self, streams, first_frame, end, baseline):
+            if any(_changes_output(self, streams, first_frame, end, baseline) for streams in probes):
                 read.append((channel, path))
             else:
                 unread.append((channel, path))

@@ -285,30 +285,35 @@ def _leaves(value: object, prefix: str, found: dict[str, None]) -> None:
         found.setdefault(prefix, None)
 
 
-def perturbed(value: object) -> FieldValue | None:
-    """A value a module reading this field would notice (None: the field's value is not one to perturb)."""
+PERTURBATIONS = 2  # a field is probed up and down: a module may read it on one side of a threshold only
+
+
+def perturbed(value: object, way: int = 0) -> FieldValue | None:
+    """A value a module reading this field would notice, the ``way``-th of :data:`PERTURBATIONS` (0: up, 1:
+    down); None: nothing to perturb that way."""
     if isinstance(value, bool):
-        return not value
+        return not value if way == 0 else None
     if isinstance(value, int):
-        return value + 7 + abs(value) // 2
+        return value + 7 + abs(value) // 2 if way == 0 else value // 2 - 3
     if isinstance(value, float):
         if not math.isfinite(value):
-            return 0.5
-        return value + 1.25 + abs(value) * 0.37
+            return 0.5 if way == 0 else None
+        return value + 1.25 + abs(value) * 0.37 if way == 0 else value * 0.5 - 1.25
     if isinstance(value, str):
-        return value + "~" if value else "~"
+        return value + "~" if way == 0 else ("" if value else None)
     return None
 
 
-def perturb_field(streams: Streams, channel: str, path: str) -> dict[str, list[Received]] | None:
-    """The streams with ``channel``'s field ``path`` perturbed in every message (None: no message has it)."""
+def perturb_field(streams: Streams, channel: str, path: str, way: int = 0) -> dict[str, list[Received]] | None:
+    """The streams with ``channel``'s field ``path`` perturbed the ``way``-th way in every message (None: no
+    message has it)."""
     out = {name: list(stream) for name, stream in streams.items()}
     touched = False
     for i, received in enumerate(out[channel]):
         message = copy.deepcopy(received.message)
         changed = False
         for concrete, old in _concrete(message, path):
-            new = perturbed(old)
+            new = perturbed(old, way)
             if new is not None and set_field(message, concrete, new):
                 changed = True
         if changed:

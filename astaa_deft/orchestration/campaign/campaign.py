@@ -258,6 +258,11 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
             if bucket.kind == CONFIRMING and not self.journal.unfinished(bucket.bucket):
                 self._decide(bucket.bucket)
         queue = [self._planned(row) for kind in (MUTATED, RERUN, CONTROL) for row in self.journal.pending(kind)]
+        # A module-level finding's live case takes every other turn with the strategy's new cases: the findings
+        # are confirmed early, and the live search goes on meanwhile (its cases find what no replay can).
+        confirmations = [case for case in queue if case.strategy == MODULE_LEVEL]
+        queue = [case for case in queue if case.strategy != MODULE_LEVEL]
+        confirm_turn = True
         # the strategy's own cases (a module-level finding's live case is numbered apart)
         number = max((r.number for r in rows if r.strategy != MODULE_LEVEL), default=0)
         stopped = StopReason.DONE
@@ -273,9 +278,15 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
                 if self._budget_over():
                     stopped, hunt_over = StopReason.BUDGET, True
                     break
-                if self.config.cases is not None and number >= self.config.cases:
+                cases_done = self.config.cases is not None and number >= self.config.cases
+                if confirmations and (confirm_turn or cases_done):
+                    confirm_turn = False
+                    self._submit(pool, confirmations.pop(0))
+                    continue
+                if cases_done:
                     hunt_over = True
                     break
+                confirm_turn = True
                 number += 1
                 case = self._plan_mutated(number)
                 self._submit(pool, case)

@@ -26,7 +26,6 @@ import time
 import traceback
 from pathlib import Path
 
-from astaa_deft.analysis.deft.module_search import ModuleBench
 from astaa_deft.model.errors import AstaaDeftError
 
 
@@ -46,6 +45,7 @@ def _targets_by_channel(spec: object, dictionaries: list[str]) -> dict:
 
 def run(job: dict) -> int:
     from astaa_deft.analysis.deft.fault_plan import plan_faults
+    from astaa_deft.analysis.deft.module_search import ModuleBench
     from astaa_deft.analysis.deft.planner_section import replay_module_of
     from astaa_deft.analysis.deft.workflow import run_params
     from astaa_deft.engine.spec.loader import load_spec
@@ -80,9 +80,8 @@ def run(job: dict) -> int:
                          "judged": [i.name for i in bench.judged.invariants]}})
         deadline = float(job["deadline"])
         part, parts = int(job["part"]), int(job["parts"])
-        if part == 0 and job.get("reads"):
-            first = _first_live_frame(bench, int(job["window"][0]))
-            reads = bench.field_reads(first_frame=first, budget_s=max(1.0, (deadline - time.time()) / 3))
+        if part == 0 and job.get("reads"):  # from the first frame: a field read once, at start-up, is read
+            reads = bench.field_reads(first_frame=0, budget_s=max(1.0, (deadline - time.time()) / 3))
             Path(job["reads"]).write_text(json.dumps(reads.to_json()) + "\n", encoding="utf-8")
         first_of: set[tuple[str, str, str]] = set()  # buckets this worker found: their first fault minimised
         for number, fault in enumerate(faults):
@@ -97,15 +96,6 @@ def run(job: dict) -> int:
             if verdict.applicable:
                 write({"n": number, "verdict": verdict.to_json()})
         write({"done": True})
-    return 0
-
-
-def _first_live_frame(bench: ModuleBench, live_start_ns: int) -> int:
-    """The first frame at or after the live part's start (the module's start-up frames say little)."""
-    trigger = bench.entry.trigger
-    for k, frame in enumerate(bench.frames):
-        if frame is not None and trigger in frame and frame[trigger].time_ns >= live_start_ns:
-            return k
     return 0
 
 
