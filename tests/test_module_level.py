@@ -24,6 +24,7 @@ from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.report import render
 from astaa_deft.orchestration.campaign.module_level import read_state, replayed_entries, status_lines
 
 SPEC = Path(__file__).parent / "sut" / "modlevel.yaml"
@@ -195,7 +196,9 @@ def test_a_campaign_confirms_its_module_level_findings_live(tmp_path):
     assert {("state", "debug.note"), ("state", "debug.score")} <= set(state.unread)
     journal = Journal(out)
     lines = status_lines(out, journal)
+    page = render(journal, out)
     journal.close()
+    assert "<h2>Module level</h2>" in page and "M001" in page
     assert sum("confirmed live" in line for line in lines) == 3, lines
     blames = {row.bucket: row for row in Journal(out).blames().values()}
     assert {b.module for b in blames.values()} == {"ctrl", "watch"}
