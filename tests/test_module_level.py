@@ -175,7 +175,7 @@ def test_the_defect_off_nothing_fails(recorded):
 def _campaign(tmp_path: Path, **kw) -> Path:
     out = tmp_path / "campaign"
     config = CampaignConfig(spec_path=SPEC, out=out, cases=1, params={"seconds": ["3"]}, reruns=1, minimise=False,
-                            module_level_seconds=10.0, report=False, **kw)
+                            module_level_seconds=10.0, report=False, **{"module_level": True, **kw})
     out.mkdir()
     journal = Journal(out)
     try:

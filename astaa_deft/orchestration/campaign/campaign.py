@@ -90,7 +90,9 @@ class CampaignConfig:
     minimise_max_tests: int = 30
     minimise_timeout: float = DEFAULT_MINIMISE_TIMEOUT
     report: bool = True
-    module_level: bool = True  # search at module level first where the spec can replay a module (module_level.py)
+    # Search at module level first where the spec can replay a module (module_level.py): `fuzz` turns it on
+    # unless --no-module-level; a library caller asks for it.
+    module_level: bool = False
     module_level_seconds: float | None = None  # its time box (None: a share of the budget)
 
     def resuming(self, meta: CampaignMeta) -> CampaignConfig:

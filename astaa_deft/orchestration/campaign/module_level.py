@@ -226,6 +226,9 @@ class ModuleLevel(CampaignParts):
             return
         if not self.config.module_level:
             return
+        if self.strategy.exports_own_findings:  # its own search and export (decictor): every case of it live
+            self.say(f"module level: --strategy {self.config.strategy} runs its own search live")
+            return
         entries, skipped = replayed_entries(self.spec)
         if not entries:
             self.say("module level: no module of the spec can be replayed in process (the planner or a replay:"
