@@ -4,6 +4,7 @@ real campaign on tests/sut/modlevel.yaml whose module-level findings are confirm
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import sqlite3
@@ -213,3 +214,20 @@ def test_a_campaign_confirms_its_module_level_findings_live(tmp_path):
 def test_without_module_level_the_campaign_runs_live_as_before(tmp_path):
     out = _campaign(tmp_path, module_level=False)
     assert read_state(out) is None and not (out / "module_level").exists()
+
+
+def test_a_damaged_state_file_is_one_input_error_naming_it(tmp_path):
+    from astaa_deft.model.errors import InputError
+    from astaa_deft.orchestration.campaign.module_level import ModuleLevelState, state_path
+
+    path = state_path(tmp_path)
+    path.parent.mkdir()
+    path.write_text('{"findings": [{"name": "M001"}]}')  # a finding without its verdict
+    with pytest.raises(InputError, match="state.json"):
+        read_state(tmp_path)
+    path.write_text("not json")
+    with pytest.raises(InputError, match="state.json"):
+        read_state(tmp_path)
+    state = ModuleLevelState(modules=("ctrl",), cases=3, unread=(("state", "debug.note"),))
+    path.write_text(json.dumps(state.to_json()))
+    assert read_state(tmp_path) == state

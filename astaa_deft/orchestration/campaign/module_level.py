@@ -239,10 +239,13 @@ class ModuleLevel(CampaignParts):
             self.say("module level: no clean baseline run left a log to replay from: every case runs live")
             return
         log_path, params = clean
+        from astaa_deft.analysis.deft.idle_cores import idle_cores
+
         seconds = self._module_level_seconds()
+        cores = idle_cores()  # the live pool waits meanwhile: what is idle now is the search's
         self.say(f"module level: replaying {', '.join(e.module for e in entries)} on their frames from"
-                 f" {log_path.name} ({seconds:.0f} s, {self.cores} core(s))")
-        state = self._search(entries, skipped, log_path, seconds)
+                 f" {log_path.name} ({seconds:.0f} s, {cores} idle core(s) of {self.cores})")
+        state = self._search(entries, skipped, log_path, seconds, cores)
         unread = fields_nothing_reads({c.name: tuple(c.consumers) for c in self.spec.channels}, state.reads)
         state = _with(state, unread=tuple(unread))
         state = self._confirm(state, log_path, params)
@@ -284,11 +287,12 @@ class ModuleLevel(CampaignParts):
         end = start + int(self.timing.live * 1e9)
         return start, end, first
 
-    def _search(self, entries: Sequence, skipped: list[str], log_path: Path, seconds: float) -> ModuleLevelState:
+    def _search(self, entries: Sequence, skipped: list[str], log_path: Path, seconds: float,
+                cores: int) -> ModuleLevelState:
         folder = self.config.out / DIR_NAME
         folder.mkdir(parents=True, exist_ok=True)
         start, end, _first = self._window(log_path)
-        per_module = max(1, self.cores // len(entries))
+        per_module = max(1, cores // len(entries))  # every module at least one worker
         deadline = time.time() + seconds
         workers = []
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
