@@ -117,13 +117,15 @@ class ModuleLevelState:
     reads: tuple[FieldReads, ...] = ()
     unread: tuple[tuple[str, str], ...] = ()  # fields live generation leaves out
     per_module: Mapping[str, int] = field(default_factory=dict)  # faults replayed per module
+    started_after: float = 0.0  # s from the campaign's first planned case to the search's start
 
     def to_json(self) -> JsonObject:
         return {"version": 1, "modules": list(self.modules), "skipped": list(self.skipped), "log": self.log,
                 "cases": self.cases, "core_seconds": round(self.core_seconds, 3),
                 "wall_seconds": round(self.wall_seconds, 3), "failing": self.failing,
                 "findings": [f.to_json() for f in self.findings], "reads": [r.to_json() for r in self.reads],
-                "unread": [list(p) for p in self.unread], "per_module": dict(self.per_module)}
+                "unread": [list(p) for p in self.unread], "per_module": dict(self.per_module),
+                "started_after": round(self.started_after, 3)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, object]) -> ModuleLevelState:
@@ -148,7 +150,7 @@ class ModuleLevelState:
                    unread=tuple((str(p[0]), str(p[1])) for p in unread if isinstance(p, list) and len(p) == 2)
                    if isinstance(unread, list) else (),
                    per_module={str(k): int(v) for k, v in per_module.items() if isinstance(v, int)}
-                   if isinstance(per_module, dict) else {})
+                   if isinstance(per_module, dict) else {}, started_after=number("started_after"))
 
 
 def state_path(out: Path) -> Path:
@@ -245,7 +247,9 @@ class ModuleLevel(CampaignParts):
         cores = idle_cores()  # the live pool waits meanwhile: what is idle now is the search's
         self.say(f"module level: replaying {', '.join(e.module for e in entries)} on their frames from"
                  f" {log_path.name} ({seconds:.0f} s, {cores} idle core(s) of {self.cores})")
-        state = self._search(entries, skipped, log_path, seconds, cores)
+        planned = [r.planned_at for r in self.journal.cases() if r.planned_at]
+        began = time.time() - min(planned) if planned else 0.0
+        state = _with(self._search(entries, skipped, log_path, seconds, cores), started_after=began)
         unread = fields_nothing_reads({c.name: tuple(c.consumers) for c in self.spec.channels}, state.reads)
         state = _with(state, unread=tuple(unread))
         state = self._confirm(state, log_path, params)
@@ -486,7 +490,7 @@ class LevelFigures:
     core_seconds: float
     findings: int
     confirmed: int
-    first_find: float | None  # s
+    first_find: float | None  # s from the campaign's start
 
     @property
     def per_core_hour(self) -> float | None:
@@ -494,7 +498,8 @@ class LevelFigures:
 
     def line(self) -> str:
         rate = f"{self.per_core_hour:,.0f} cases per core-hour" if self.per_core_hour is not None else "rate unknown"
-        first = f"first find after {self.first_find:.1f} s" if self.first_find is not None else "no find"
+        first = (f"first find {self.first_find:.1f} s into the campaign" if self.first_find is not None
+                 else "no find")
         return (f"{self.level}: {self.cases} case(s), {rate}, {self.findings} finding(s),"
                 f" {self.confirmed} confirmed, {first}")
 
@@ -524,7 +529,7 @@ def level_figures(state: ModuleLevelState, journal: Journal) -> tuple[LevelFigur
                           findings=len(state.findings),
                           confirmed=sum(1 for f in state.findings
                                         if finding_standing(f, journal).startswith("confirmed")),
-                          first_find=min((f.found_after for f in state.findings), default=None))
+                          first_find=min((state.started_after + f.found_after for f in state.findings), default=None))
     return module, live_figures(journal)
 
 
