@@ -144,8 +144,12 @@ def judged_invariants(spec: Spec, entry: ReplayModule) -> Spec:
 class ModuleBench:
     """One module of one clean run, ready to replay any fault (module doc)."""
 
-    def __init__(self, spec: Spec, entry: ReplayModule, log: LogContents, params: Mapping[str, str]) -> None:
+    def __init__(self, spec: Spec, entry: ReplayModule, log: LogContents, params: Mapping[str, str], *,
+                 settle_s: float | None = None) -> None:
+        """``settle_s``: a fault is judged until this long after the last frame it changed (as a live case ends
+        ``--settle`` s after its last mutation could act); None: to the run's end."""
         self.spec, self.entry = spec, entry
+        self.settle_ns = None if settle_s is None else int(settle_s * 1e9)
         self.params = {**spec.params, **params}
         recorded: dict[str, list[tuple[int, DecodedMessage]]] = {}
         for name in entry.inputs:
@@ -278,8 +282,24 @@ class ModuleBench:
         k0 = first_changed(self.frames, frames)
         if k0 is None:
             return replace(verdict, detail="the fault changes no frame", seconds=time.perf_counter() - started)
-        found = self._replay(frames, k0)
+        found = self._replay(self._settled(frames), k0)
         return replace(found, module=self.entry.module, fault=fault, seconds=time.perf_counter() - started)
+
+    def _settled(self, frames: list[Frame | None]) -> list[Frame | None]:
+        """The frames judged: up to ``settle_s`` after the last one the fault changed (all of them without)."""
+        if self.settle_ns is None:
+            return frames
+        changed = [k for k, frame in enumerate(frames) if k >= len(self.keys) or frame_key(frame) != self.keys[k]]
+        if not changed or changed[-1] >= len(self.frames):
+            return frames  # the frames shifted to the end (a trigger dropped or doubled): judged to the end
+        until = self.output_time(changed[-1], frames[changed[-1]]) + self.settle_ns
+        kept = [k for k in range(len(frames)) if k <= changed[-1] or self._time_of(k, frames[k]) <= until]
+        return frames[:kept[-1] + 1]
+
+    def _time_of(self, k: int, frame: Frame | None) -> int:
+        if frame is None and self.entry.per_trigger:
+            return 0
+        return self.output_time(k, frame)
 
     def _replay(self, frames: Sequence[Frame | None], k0: int) -> ModuleVerdict:
         monitors = MonitorSet(self.judged, self.start_ns)
@@ -330,7 +350,9 @@ class ModuleBench:
         finally:
             if planner is not None:
                 planner.close()
-        found = [v for v in monitors.finish(self.end_ns) if v.invariant not in self.known]
+        cut = len(frames) < len(self.frames) and frames  # judged up to its settle time: the run ends there
+        end_ns = self._time_of(len(frames) - 1, frames[-1]) if cut else self.end_ns
+        found = [v for v in monitors.finish(end_ns) if v.invariant not in self.known]
         if found:
             return self._violated(found, None, steps)
         if self.entry.per_trigger and answered == 0 and answered_base >= SILENT_AFTER:

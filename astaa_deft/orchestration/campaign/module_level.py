@@ -181,10 +181,13 @@ def read_state(out: Path) -> ModuleLevelState | None:
 
 def replayed_entries(spec: Spec) -> tuple[list, list[str]]:
     """The modules of the user's spec that run alone in process (the planner, ``replay:`` entries with a
-    factory), one entry per module; and why the others are not replayed."""
+    factory), one entry per module, the plant never; and why the others are not replayed."""
     entries, skipped, seen = [], [], set()
     for entry in replay_modules(spec):
         if entry.module in seen:
+            continue
+        if spec.is_plant(entry.module):  # it applies what it is sent: never the module to blame
+            skipped.append(f"{entry.module}: the plant (plant: true): not searched at module level")
             continue
         if not entry.factory:
             skipped.append(f"{entry.module}: no in-process replay ('{entry.where}.factory'): fuzzed live only")
@@ -307,6 +310,7 @@ class ModuleLevel(CampaignParts):
                 job = {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
                        "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
                        "seed": self.config.seed, "window": [start, end], "part": part, "parts": per_module,
+                       "settle": self.config.settle,
                        "deadline": deadline, "results": str(folder / f"{name}.jsonl"),
                        "reads": str(folder / f"{entry.module}-reads.json") if part == 0 else None}
                 (folder / f"{name}.jsonl").unlink(missing_ok=True)

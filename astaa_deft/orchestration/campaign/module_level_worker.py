@@ -62,7 +62,9 @@ def run(job: dict) -> int:
             entry = replay_module_of(spec, job["module"])
             log = read_log(Path(job["log"]))
             started = time.perf_counter()
-            bench = ModuleBench(spec, entry, log, run_params(log, spec))
+            settle = job.get("settle")
+            bench = ModuleBench(spec, entry, log, run_params(log, spec),
+                                settle_s=float(settle) if settle is not None else None)
             setup_seconds = time.perf_counter() - started
             times = {name: [r.time_ns for r in stream] for name, stream in bench.streams.items()}
             faults = plan_faults(module=entry.module, inputs=entry.inputs, times=times,
