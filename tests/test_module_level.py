@@ -231,3 +231,32 @@ def test_a_damaged_state_file_is_one_input_error_naming_it(tmp_path):
     state = ModuleLevelState(modules=("ctrl",), cases=3, unread=(("state", "debug.note"),))
     path.write_text(json.dumps(state.to_json()))
     assert read_state(tmp_path) == state
+
+
+@pytest.fixture(scope="module")
+def demo_recorded(tmp_path_factory):
+    from astaa_deft.cli.commands.demo import demo_spec_path
+    from astaa_deft.cli.commands.proxy import run_bus
+    from astaa_deft.engine.session import RunOptions
+
+    spec = load_spec(demo_spec_path())
+    path = tmp_path_factory.mktemp("demo") / "clean.mcap"
+    run_bus(spec, RunOptions(mode="passive", record=path, params={}), 40.0, verbose=False)
+    return spec, read_log(path)
+
+
+def test_the_demo_controls_seeded_defects_at_module_level_and_nothing_with_them_off(demo_recorded):
+    spec, log = demo_recorded
+    entry = replay_module_of(spec, "control")
+    on = ModuleBench(spec, entry, log, {}, settle_s=3.0)
+    off = ModuleBench(spec, entry, log, {"defects": "off"}, settle_s=3.0)
+    middle = len(on.streams["localization"]) // 2
+    faults = [StreamFault(channel="localization", kind=FaultKind.REORDER, index=middle),  # seeded defect 4
+              StreamFault(channel="localization", kind=FaultKind.SET, index=middle, path="heading",
+                          value=-1.7976931348623157e308),  # seeded defect 2: a hang
+              StreamFault(channel="localization", kind=FaultKind.DROP, index=middle)]
+    found = [on.run(f) for f in faults]
+    assert [v.kind for v in found] == [FindingKind.INVARIANT, FindingKind.HANG, None], [v.detail for v in found]
+    assert found[0].invariant == "finite_command"
+    # defects off: no finding, and the settle cut leaves no false deadline (control_alive) at the cut
+    assert [off.run(f).kind for f in faults] == [None, None, None]
