@@ -197,6 +197,7 @@ class ModuleBench:
         finally:
             planner.close()
         self.baseline_seconds = time.perf_counter() - started
+        self.known: set[str] = set()
         self.known = self._baseline_violations()  # invariants the unmutated replay breaks: not a fault's finding
 
     # -- replay ---------------------------------------------------------------------------------------------
@@ -256,16 +257,16 @@ class ModuleBench:
         for k, frame in enumerate(self.frames):
             if frame is None and self.entry.per_trigger:
                 continue
-            found += self._feed(monitors, k, frame, self.outputs[k])
+            found += self._feed(monitors, k, frame, output=self.outputs[k])
         found += monitors.finish(self.end_ns)
         return {v.invariant for v in found}
 
-    def _feed(self, monitors: MonitorSet, k: int, frame: Frame | None, output: DecodedMessage | None) -> list:
+    def _feed(self, monitors: MonitorSet, k: int, frame: Frame | None, *, output: DecodedMessage | None) -> list:
         time_ns = self.output_time(k, frame)
         found = list(monitors.on_tick(time_ns))
         if output is not None or not self.entry.per_trigger:
             found += monitors.on_message(self.entry.output, time_ns, output, k + 1)
-        return [v for v in found if v.invariant not in getattr(self, "known", set())]
+        return [v for v in found if v.invariant not in self.known]
 
     # -- one fault ------------------------------------------------------------------------------------------
     def run(self, fault: StreamFault) -> ModuleVerdict:
@@ -305,7 +306,7 @@ class ModuleBench:
         monitors = MonitorSet(self.judged, self.start_ns)
         nothing = ModuleVerdict(module=self.entry.module, fault=_NO_FAULT)
         for k in range(min(k0, len(self.frames))):  # the monitors' state before the fault: the baseline's
-            self._feed(monitors, k, self.frames[k], self.outputs[k])
+            self._feed(monitors, k, self.frames[k], output=self.outputs[k])
         planner: ReplayPlanner | None = self.restore(min(k0, len(self.frames) - 1)) if self.frames else self.fresh()
         steps = 0
         answered_base = answered = 0
@@ -321,13 +322,13 @@ class ModuleBench:
                     if not unchanged:  # changed again after converging: back to replaying
                         planner = self.restore(k)
                     else:
-                        found = self._feed(monitors, k, frame, output)
+                        found = self._feed(monitors, k, frame, output=output)
                         if found:
                             return self._violated(found, k, steps)
                         continue
                 if frame is None:
                     if not self.entry.per_trigger:
-                        self._feed(monitors, k, frame, None)
+                        self._feed(monitors, k, frame, output=None)
                     continue
                 steps += 1
                 try:
@@ -336,7 +337,7 @@ class ModuleBench:
                     return replace(nothing, kind=FindingKind.HANG, frame=k, steps=steps,
                                    detail=f"module '{self.entry.module}' hangs on frame {k}: {exc}")
                 except Exception as exc:
-                    return self._raised(monitors, exc, k, frame, steps)
+                    return self._raised(monitors, exc, k=k, frame=frame, steps=steps)
                 base = self.outputs[k] if k < len(self.outputs) else None
                 answered_base += base is not None
                 answered += output is not None
@@ -344,7 +345,7 @@ class ModuleBench:
                     return replace(nothing, kind=FindingKind.SILENT, frame=k, steps=steps,
                                    detail=f"module '{self.entry.module}' gave no output on frame {k}, where the run "
                                           f"recorded one")
-                found = self._feed(monitors, k, frame, output)
+                found = self._feed(monitors, k, frame, output=output)
                 if found:
                     return self._violated(found, k, steps)
         finally:
@@ -367,7 +368,7 @@ class ModuleBench:
                              invariant=first.invariant, frame=k, steps=steps,
                              detail=format_violation(first, self.start_ns))
 
-    def _raised(self, monitors: MonitorSet, exc: Exception, k: int, frame: Frame, steps: int) -> ModuleVerdict:
+    def _raised(self, monitors: MonitorSet, exc: Exception, *, k: int, frame: Frame, steps: int) -> ModuleVerdict:
         lines = "".join(traceback.format_exception(exc)).splitlines()
         signature = signature_of_output(lines)
         error = signature.text() if signature is not None else type(exc).__name__
@@ -414,7 +415,7 @@ class ModuleBench:
             probes = [s for way in range(PERTURBATIONS) if (s := perturb_field(self.streams, channel, path, way))]
             if not probes:
                 continue
-            if any(_changes_output(self, streams, first_frame, end, baseline) for streams in probes):
+            if any(_changes_output(self, streams, first=first_frame, end=end, baseline=baseline) for streams in probes):
                 read.append((channel, path))
             else:
                 unread.append((channel, path))
@@ -426,7 +427,7 @@ class ModuleBench:
 _NO_FAULT = StreamFault(channel="", kind=FaultKind.DROP, index=0)  # a placeholder: run() puts the fault in
 
 
-def _changes_output(bench: ModuleBench, streams: Mapping[str, Sequence[Received]], first: int, end: int,
+def _changes_output(bench: ModuleBench, streams: Mapping[str, Sequence[Received]], *, first: int, end: int,
                     baseline: Sequence[str]) -> bool:
     frames = bench.frames_of(streams)
     if [frame_origins(f) for f in frames[first:end]] != [frame_origins(f) for f in bench.frames[first:end]]:

@@ -252,7 +252,7 @@ class ModuleLevel(CampaignParts):
                  f" {log_path.name} ({seconds:.0f} s, {cores} idle core(s) of {self.cores})")
         planned = [r.planned_at for r in self.journal.cases() if r.planned_at]
         began = time.time() - min(planned) if planned else 0.0
-        state = _with(self._search(entries, skipped, log_path, seconds, cores), started_after=began)
+        state = _with(self._search(entries, skipped, log_path, seconds=seconds, cores=cores), started_after=began)
         unread = fields_nothing_reads({c.name: tuple(c.consumers) for c in self.spec.channels}, state.reads)
         state = _with(state, unread=tuple(unread))
         state = self._confirm(state, log_path, params)
@@ -294,7 +294,7 @@ class ModuleLevel(CampaignParts):
         end = start + int(self.timing.live * 1e9)
         return start, end, first
 
-    def _search(self, entries: Sequence, skipped: list[str], log_path: Path, seconds: float,
+    def _search(self, entries: Sequence, skipped: list[str], log_path: Path, *, seconds: float,
                 cores: int) -> ModuleLevelState:
         folder = self.config.out / DIR_NAME
         folder.mkdir(parents=True, exist_ok=True)
@@ -333,9 +333,10 @@ class ModuleLevel(CampaignParts):
         wall = time.monotonic() - started
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-        return self._collect(entries, skipped, folder, log_path, per_module, cpu or wall * len(workers), wall)
+        return self._collect(entries, skipped, folder=folder, log_path=log_path, per_module=per_module,
+                             cpu=cpu or wall * len(workers), wall=wall)
 
-    def _collect(self, entries: Sequence, skipped: list[str], folder: Path, log_path: Path, per_module: int,
+    def _collect(self, entries: Sequence, skipped: list[str], *, folder: Path, log_path: Path, per_module: int,
                  cpu: float, wall: float) -> ModuleLevelState:
         verdicts: list[tuple[int, ModuleVerdict]] = []
         modules, reads, counts = [], [], {}

@@ -62,7 +62,7 @@ def run(job: dict) -> int:
             entry = replay_module_of(spec, job["module"])
             log = read_log(Path(job["log"]))
             started = time.perf_counter()
-            settle = job.get("settle")
+            settle = job["settle"]
             bench = ModuleBench(spec, entry, log, run_params(log, spec),
                                 settle_s=float(settle) if settle is not None else None)
             setup_seconds = time.perf_counter() - started
@@ -82,7 +82,7 @@ def run(job: dict) -> int:
                          "judged": [i.name for i in bench.judged.invariants]}})
         deadline = float(job["deadline"])
         part, parts = int(job["part"]), int(job["parts"])
-        if part == 0 and job.get("reads"):  # from the first frame: a field read once, at start-up, is read
+        if part == 0 and job["reads"]:  # from the first frame: a field read once, at start-up, is read
             reads = bench.field_reads(first_frame=0, budget_s=max(1.0, (deadline - time.time()) / 3))
             Path(job["reads"]).write_text(json.dumps(reads.to_json()) + "\n", encoding="utf-8")
         first_of: set[tuple[str, str, str]] = set()  # buckets this worker found: their first fault minimised
