@@ -69,7 +69,8 @@ MIN_SECONDS = 10.0
 MAX_CONFIRMATIONS = 24  # live cases planned for findings (one per bucket, the first found first)
 WORKER_GRACE = 30.0  # s past the deadline before a worker is stopped (a step in native code, the field probes)
 MAX_STATE_BYTES = 64 << 20
-LEAD_SECONDS = 0.02  # a live window opens this long before the message the fault hit arrived
+LEAD_SECONDS = 0.02
+LIVE_SHARE = 0.8  # a live window opens this long before the message the fault hit arrived
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -291,7 +292,9 @@ class ModuleLevel(CampaignParts):
             first = min(times) if times else None
         bus = [m.log_time for m in log.messages if not m.topic.startswith("/astaa/")]
         start = first if first is not None else (min(bus) if bus else 0)
-        end = start + int(self.timing.live * 1e9)
+        # as live windows open (the first 80 % of the live part): a fault late in it may come after a live run's
+        # scenario has ended, its case then mutating nothing
+        end = start + int(LIVE_SHARE * self.timing.live * 1e9)
         return start, end, first
 
     def _search(self, entries: Sequence, skipped: list[str], log_path: Path, *, seconds: float,
@@ -408,10 +411,13 @@ class ModuleLevel(CampaignParts):
             _with_finding(f, tests_fail=failing.get(f.name)) for f in written))
 
     def _module_level_blame(self, bucket: str, case: CaseRow) -> tuple[str, str] | None:
-        if case.strategy != STRATEGY:
-            return None
         state = read_state(self.config.out)
-        finding = next((f for f in state.findings if f.case_id == case.case_id), None) if state else None
+        if state is None:
+            return None
+        # the bucket's first case, or a module-level case filed in it already (the live search found it too)
+        filed = {case.case_id} | {r.case_id for r in self.journal.cases(MUTATED)
+                                  if r.bucket == bucket and r.strategy == STRATEGY}
+        finding = next((f for f in state.findings if f.case_id in filed), None)
         if finding is None:
             return None
         v = finding.verdict
