@@ -307,15 +307,15 @@ class ModuleLevel(CampaignParts):
         workers = []
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         started = time.monotonic()
-        for entry in entries:
+        for number, entry in enumerate(entries):
             for part in range(per_module):
-                name = f"{entry.module}-{part}"
+                name = _worker_name(number, part)  # the folder's own names: never a module name from the spec
                 job = {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
                        "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
                        "seed": self.config.seed, "window": [start, end], "part": part, "parts": per_module,
                        "settle": self.config.settle,
                        "deadline": deadline, "results": str(folder / f"{name}.jsonl"),
-                       "reads": str(folder / f"{entry.module}-reads.json") if part == 0 else None}
+                       "reads": str(folder / f"m{number}-reads.json") if part == 0 else None}
                 (folder / f"{name}.jsonl").unlink(missing_ok=True)
                 job_path = folder / f"{name}.job.json"
                 job_path.write_text(json.dumps(job), encoding="utf-8")
@@ -344,11 +344,11 @@ class ModuleLevel(CampaignParts):
         verdicts: list[tuple[int, ModuleVerdict]] = []
         modules, reads, counts = [], [], {}
         skipped = list(skipped)
-        for entry in entries:
+        for number, entry in enumerate(entries):
             ok = False
             counts[entry.module] = 0
             for part in range(per_module):
-                for line in _lines(folder / f"{entry.module}-{part}.jsonl"):
+                for line in _lines(folder / f"{_worker_name(number, part)}.jsonl"):
                     if "error" in line:
                         skipped.append(f"{entry.module}: its replay could not start: {str(line['error'])[:300]}")
                     elif "setup" in line:
@@ -358,7 +358,7 @@ class ModuleLevel(CampaignParts):
                         counts[entry.module] += 1
             if ok:
                 modules.append(entry.module)
-            reads_file = folder / f"{entry.module}-reads.json"
+            reads_file = folder / f"m{number}-reads.json"
             if reads_file.is_file():
                 reads.append(FieldReads.from_json(json.loads(reads_file.read_text(encoding="utf-8"))))
         findings = bucket_findings([v for _n, v in verdicts])
@@ -441,6 +441,10 @@ class ModuleLevel(CampaignParts):
                     f" ({left} generation target(s)): {shown}")
             self.journal.note("module-level", line)
             self.say(f"module level: {line}")
+
+
+def _worker_name(module_number: int, part: int) -> str:
+    return f"m{module_number}-{part}"
 
 
 def _lines(path: Path) -> list[dict]:

@@ -24,8 +24,8 @@ from astaa_deft.io.output_place import write_atomic
 TEST_PREFIX = "test_module_level_"  # + the finding's name: one module name per test file
 CHECK_TIMEOUT = 900.0
 
-_TEMPLATE = '''"""DeFT module test of a module-level finding: module {module!r} replayed on its frames from a clean
-run under one fault. It fails while the module fails under the fault, and passes once the module handles it."""
+_TEMPLATE = '''"""DeFT module test of a module-level finding: the module (MODULE) replayed on its frames from a
+clean run under one fault. It fails while the module fails under the fault, and passes once the module handles it."""
 
 import json
 from pathlib import Path
