@@ -232,6 +232,8 @@ class ModuleLevel(CampaignParts):
             return
         if not self.config.module_level:
             return
+        if any(r.strategy != STRATEGY for r in self.journal.cases(MUTATED)):  # resumed: the hunt began without it
+            return
         if self.strategy.exports_own_findings:  # its own search and export (decictor): every case of it live
             self.say(f"module level: --strategy {self.config.strategy} runs its own search live")
             return
