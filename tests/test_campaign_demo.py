@@ -34,7 +34,8 @@ def rows(out: Path, sql: str) -> list[tuple]:
 def test_campaign_finds_buckets_reruns_and_reports(tmp_path: Path):
     out = tmp_path / "campaign"
     done = fuzz("--spec", str(demo_spec_path()), "-o", str(out), "--cases", "2", "--seed", FINDING_SEED,
-                "--horizon", "6", "--workers", "3", "--baseline", "1", "--reruns", "1", "--no-minimise")
+                "--horizon", "6", "--workers", "3", "--baseline", "1", "--reruns", "1", "--no-minimise",
+                "--no-module-level")  # the live cases alone (tests/test_module_level.py: the module level)
     assert done.returncode == 1, done.stdout + done.stderr  # a finding
     cases = dict(rows(out, "SELECT case_id, status FROM cases"))
     # the failing case re-run once and its unmutated twin (same params, no test case) once
@@ -68,7 +69,7 @@ def test_campaign_finds_buckets_reruns_and_reports(tmp_path: Path):
 def test_kill_9_then_resume_loses_no_finished_case(tmp_path: Path):
     out = tmp_path / "campaign"
     args = ["--spec", str(demo_spec_path()), "-o", str(out), "--cases", "4", "--seed", "5", "--horizon", "3",
-            "--workers", "2", "--baseline", "1", "--no-minimise", "--params", "defects=off"]
+            "--workers", "2", "--baseline", "1", "--no-minimise", "--params", "defects=off", "--no-module-level"]
     proc = subprocess.Popen([sys.executable, "-m", "astaa_deft.cli", "fuzz", *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     finished_before: list[tuple] = []

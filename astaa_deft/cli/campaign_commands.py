@@ -79,6 +79,12 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
             help="re-runs of a new failure and as many unmutated twins, before it is filed as a bug")
     fz.add_argument("--no-minimise", action="store_true",
                     help="do not minimise the buckets, nor write their module tests (default: minimise)")
+    fz.add_argument("--no-module-level", action="store_true",
+                    help="run every case live: no module-level search (replays of the spec's replayable modules"
+                         " under generated faults, each finding confirmed live) before the live hunt (default: "
+                         "the search runs when the spec can replay a module)")
+    bounded(fz, "--module-level-seconds", WINDOW_SECONDS, default=None,
+            help="seconds the module-level search may take (default: a quarter of --budget, else 120)")
     bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
             help="seconds one bucket's minimisation may take (it holds a worker slot)")
     fz.add_argument("--resume", action="store_true", help="continue the campaign in -o, with --spec: your spec "
@@ -115,7 +121,9 @@ def run_fuzz(args: argparse.Namespace) -> int:
                             seed=args.seed, strategy=args.strategy, dictionaries=args.dictionary,
                             params=fuzz.parse_params(args.params), cluster=args.cluster, horizon=args.horizon,
                             baseline_runs=args.baseline, reruns=args.reruns, minimise=not args.no_minimise,
-                            settle=args.settle, minimise_timeout=args.minimise_timeout)
+                            settle=args.settle, minimise_timeout=args.minimise_timeout,
+                            module_level=not args.no_module_level,
+                            module_level_seconds=args.module_level_seconds)
     return fuzz.run(config, args.resume, spec_given=args.spec is not None,
                     trust_journal_spec=args.trust_journal_spec)
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped, StopReason
 from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_existing
 from astaa_deft.orchestration.campaign.progress import Progress, snapshot
+from astaa_deft.orchestration.campaign.module_level import status_lines as module_level_status
 from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsRow
 from astaa_deft.orchestration.campaign.standing import Standing, headline, most_severe, standings
 from astaa_deft.orchestration.verify.history import histories
@@ -81,6 +82,8 @@ def status(out: Path) -> int:
             + (f" — confirmed: {blame.replay}" if blame.replay else ""))
     for note in journal.notes("concurrency"):
         say(f"  {note.text}")
+    for line in module_level_status(out, journal):
+        say(f"  {line}")
     journal.close()
     return 0
 

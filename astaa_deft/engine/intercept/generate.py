@@ -104,6 +104,36 @@ class FaultTargets:
         return [family for family in by_rank() if family.semantic and family.name in self.by_family]
 
 
+def without_fields(targets: FaultTargets, fields: Collection[tuple[str, str]]) -> tuple[FaultTargets, int]:
+    """``targets`` without the (channel, field path) in ``fields`` (array indices compared folded: ``points[*].x``
+    is ``points[].x``), and how many targets went. A channel left without a target leaves the family; the
+    message faults keep every channel (they change no field). Nothing is left out when no exceptional-value
+    target would remain (a campaign needs something to mutate)."""
+    import re
+
+    def folded(path: str) -> str:
+        return re.sub(r"\[[^\]]*\]", "[*]", path)
+
+    gone = {(channel, folded(path)) for channel, path in fields}
+    left = 0
+    kept: dict[str, Targets] = {}
+    for name, by_channel in targets.by_family.items():
+        if FAMILIES[name].campaign_only:
+            kept[name] = by_channel
+            continue
+        family: Targets = {}
+        for channel, found in by_channel.items():
+            stays = [t for t in found if (channel, folded(str(t.path))) not in gone]
+            left += len(found) - len(stays)
+            if stays:
+                family[channel] = stays
+        if family:
+            kept[name] = family
+    if "single" in targets.by_family and "single" not in kept:
+        return targets, 0
+    return FaultTargets(kept), left
+
+
 def generate(spec: Spec, dictionary: Dictionary, count: int, seed: int, *, duration: float = 30.0,
              include_brittle: bool = False, families: Collection[str] | None = None) -> list[TestCase]:
     """``count`` test cases in a list (see :func:`iter_testcases`)."""

@@ -45,6 +45,7 @@ from astaa_deft.orchestration.campaign.judging import Judging, shows_failure
 from astaa_deft.orchestration.campaign.minimisation_slots import (
     REPLAY_TESTS_SUFFIX, TESTS_DIR, MinimisationSlots, culprit_family, merge_same_culprits,
 )
+from astaa_deft.orchestration.campaign.module_level import STRATEGY as MODULE_LEVEL, ModuleLevel
 from astaa_deft.orchestration.campaign.scheduling import Scheduling
 
 __all__ = [  # the campaign's own names, and those of its parts that its callers import from here
@@ -89,6 +90,10 @@ class CampaignConfig:
     minimise_max_tests: int = 30
     minimise_timeout: float = DEFAULT_MINIMISE_TIMEOUT
     report: bool = True
+    # Search at module level first where the spec can replay a module (module_level.py): `fuzz` turns it on
+    # unless --no-module-level; a library caller asks for it.
+    module_level: bool = False
+    module_level_seconds: float | None = None  # its time box (None: a share of the budget)
 
     def resuming(self, meta: CampaignMeta, *, keep_spec: bool = False) -> CampaignConfig:
         """This configuration continuing the campaign ``meta`` describes: its spec (``keep_spec``: this one's,
@@ -160,7 +165,7 @@ def param_grid(params: dict[str, list[str]], spec: Spec | None = None) -> list[d
     return [dict(zip(keys, values, strict=False)) for values in itertools.product(*(params[k] for k in keys))] or [{}]
 
 
-class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
+class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
     """A fuzz campaign: baseline, generated cases, buckets, rates, minimisation — one part per concern
     (``parts.py``), the hunt's loop here."""
 
@@ -224,6 +229,7 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
         stopped = StopReason.DONE
         try:
             self._baseline(pool)
+            self._module_level()
             stopped = self._main(pool)
         except KeyboardInterrupt:
             stopped = StopReason.INTERRUPTED
@@ -263,7 +269,13 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
             if bucket.kind == CONFIRMING and not self.journal.unfinished(bucket.bucket):
                 self._decide(bucket.bucket)
         queue = [self._planned(row) for kind in (MUTATED, RERUN, CONTROL) for row in self.journal.pending(kind)]
-        number = self.journal.max_number(MUTATED)
+        # A module-level finding's live case takes every other turn with the strategy's new cases: the findings
+        # are confirmed early, and the live search goes on meanwhile (its cases find what no replay can).
+        confirmations = [case for case in queue if case.strategy == MODULE_LEVEL]
+        queue = [case for case in queue if case.strategy != MODULE_LEVEL]
+        confirm_turn = True
+        # the strategy's own cases (a module-level finding's live case is numbered apart)
+        number = max((r.number for r in rows if r.strategy != MODULE_LEVEL), default=0)
         stopped = StopReason.DONE
         while True:
             self._watch_load()
@@ -277,9 +289,15 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots):
                 if self._budget_over():
                     stopped, hunt_over = StopReason.BUDGET, True
                     break
-                if self.config.cases is not None and number >= self.config.cases:
+                cases_done = self.config.cases is not None and number >= self.config.cases
+                if confirmations and (confirm_turn or cases_done):
+                    confirm_turn = False
+                    self._submit(pool, confirmations.pop(0))
+                    continue
+                if cases_done:
                     hunt_over = True
                     break
+                confirm_turn = True
                 number += 1
                 case = self._plan_mutated(number)
                 self._submit(pool, case)

@@ -179,11 +179,14 @@ class Judging(CampaignParts):
         except BlameUnavailable as exc:
             self.journal.note("blame", f"{bucket.bucket}: no blame: {exc}")
             return
+        replayed = self._module_level_blame(bucket.bucket, first)  # a module-level finding's live case
+        if replayed is not None:  # the module whose replay failed is to blame (never a plant, never the value)
+            found = replace(found, module=replayed[0], how=found.how if found.module == replayed[0] else "replay")
         identity = (None if found.root_cause is None else
                     f"{found.root_cause}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
                     f"{sig.field_family(bucket.family)}")
         self.journal.blamed(BlameRow(bucket.bucket, found.module, found.output, found.how, found.chain, found.detail,
-                                     found.twins, identity))
+                                     found.twins, identity, replay=replayed[1] if replayed else None))
         self.say(f"  {bucket.bucket} blame: {found.root_cause or '?'} ({found.chain}; {found.detail})")
         if identity is None:
             return

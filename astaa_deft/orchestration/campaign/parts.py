@@ -116,6 +116,11 @@ class CampaignParts(ABC):
         """Baseline: a clean run that failed after the baseline becomes a known finding."""
 
     @abstractmethod
+    def _module_level_blame(self, bucket: str, case: CaseRow) -> tuple[str, str] | None:
+        """ModuleLevel: for the live case of a module-level finding, (the module whose replay failed, how);
+        its DeFT module test journalled for ``bucket``. None for any other case."""
+
+    @abstractmethod
     def _bucket(self, signature: BucketSignature, outcome: CaseOutcome, case_id: str, kind: BucketKind) -> str:
         """Judging: the bucket of a signature (a new one opened)."""
 

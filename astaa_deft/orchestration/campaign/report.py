@@ -33,6 +33,7 @@ import jinja2
 from astaa_deft.model.records import Verdict
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX
+from astaa_deft.orchestration.campaign.module_level import status_lines as module_level_status
 from astaa_deft.orchestration.campaign.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus
 from astaa_deft.orchestration.campaign.rows import Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow
@@ -128,6 +129,10 @@ runs failed its way (k/N); changed — they fail another way; flaky — its unmu
 <td>{{ v.revision }}</td><td>{{ v.stability }}</td><td>{{ v.history }}</td>\
 <td>{% for c in v.checks %}{% if not loop.first %}<br>{% endif %}{{ c }}{% endfor %}</td></tr>
 {% endfor %}</table>
+{% endif %}{% if module_level %}<h2>Module level</h2><p class='muted'>Generated faults replayed against each \
+module the spec can replay, on its frames from a clean run; each finding's fault run live beside unmutated \
+twins (module-level only: its live case did not fail).</p><ul>{% for line in module_level %}<li>{{ line }}\
+</li>{% endfor %}</ul>
 {% endif %}<h2>Plots</h2><div class='plots'>
 {% for title, png in plots %}<img alt='{{ title }}' title='{{ title }}' src='data:image/png;base64,{{ png }}'>
 {% endfor %}</div></body></html>
@@ -205,6 +210,7 @@ def render(journal: Journal, out: Path) -> str:
         buckets=_bucket_table(journal, out, buckets, by_bucket),
         blames=_blames(journal),
         verification=_verification(journal),
+        module_level=module_level_status(out, journal),
         plots=_plots(journal, cases.done, buckets))
 
 

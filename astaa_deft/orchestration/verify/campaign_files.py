@@ -37,7 +37,8 @@ _FIX = "re-run the campaign (astaa-deft fuzz), or verify the buckets without mod
 
 
 def tests_dir_inside(campaign: Path, text: str | None, *, journal: Path, field: str) -> Path | None:
-    """The module tests folder a journal row names, resolved; None when the row names none or it is gone.
+    """The DeFT suite folder a journal row names, resolved; None when the row names none, it is gone, or it
+    holds no DeFT suite (a module-level finding's generated test: code, never copied or run from a campaign).
 
     InputError when it resolves outside ``campaign`` (through ``..``, an absolute path or a link): module tests
     are copied and run only from inside the campaign folder.
@@ -51,7 +52,7 @@ def tests_dir_inside(campaign: Path, text: str | None, *, journal: Path, field: 
         raise InputError(Problem(str(journal), None, None,
                                  f"{field} names {text[:200]!r}, outside the campaign folder {root}: module tests "
                                  f"are copied and run only from inside the campaign", _FIX))
-    return real if real.is_dir() else None
+    return real if real.is_dir() and (real / MANIFEST).is_file() and not (real / MANIFEST).is_symlink() else None
 
 
 def _open_regular(path: Path) -> BinaryIO:

@@ -8,7 +8,7 @@ calls every hook on every strategy (no probing for optional methods).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -67,6 +67,11 @@ class Strategy(ABC):
     def resume(self, planned: Sequence[PlannedCase]) -> None:  # noqa: B027 (optional hook)
         """On resume: the generated cases the campaign had planned already, in order (before their outcomes
         reach :meth:`observe`). Default: ignored."""
+
+    def leave_out(self, fields: Collection[tuple[str, str]]) -> int:
+        """Before the first :meth:`propose`: leave these (channel, field path) out of generation (fields no
+        module reads, as the module-level search measured); the generation targets left out. Default: none."""
+        return 0
 
     def judge(self, case_id: str, testcase: TestCase | None, outcome: CaseOutcome, learn: bool = True) -> CaseOutcome:
         """The outcome of a generated case or its re-run as this strategy's oracle sees it (``learn``: a

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import replace
 
 from astaa_deft.engine.intercept import generate as gen
@@ -55,6 +55,11 @@ class GuidedStrategy(Strategy):
         self.corpus: list[tuple[str, TestCase]] = []  # (case id, test case), newest last
         self.closeness: dict[str, float] = {}  # corpus case → the smallest margin it reached
         self.fresh_planned = 0  # schedule cases proposed so far (the next one is fresh_planned + 1)
+
+    def leave_out(self, fields: Collection[tuple[str, str]]) -> int:
+        left = self.fresh.leave_out(fields)
+        self.targets = {(t.channel.name, str(t.path)): t for ts in self.fresh.by_channel.values() for t in ts}
+        return left
 
     def calibrate(self, timing: Timing) -> None:
         self.fresh.calibrate(timing)

@@ -23,6 +23,7 @@ timing only — the same cases locally and on a cluster, in any order.
 from __future__ import annotations
 
 import random
+from collections.abc import Collection
 
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.dictionary import Dictionary
@@ -49,6 +50,14 @@ class RandomStrategy(Strategy):
     def calibrate(self, timing: Timing) -> None:
         """Windows from now on count from ``timing.anchor`` and fall inside ``timing.live`` seconds."""
         self.timing = timing
+
+    def leave_out(self, fields: Collection[tuple[str, str]]) -> int:
+        """Fields no module reads leave every family's targets (a channel left with none leaves the family)."""
+        self.targets, left = gen.without_fields(self.targets, fields)
+        self.by_channel = self.targets.by_family["single"]
+        self.stamps = self.targets.by_family.get("stamp", {})
+        self._rounds.clear()
+        return left
 
     @property
     def round_length(self) -> int:
