@@ -29,6 +29,7 @@ from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.orchestration.campaign.baseline import learned_shutdown_delays
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_HORIZON, DEFAULT_SETTLE, default_workers
 from astaa_deft.orchestration.campaign.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
@@ -104,6 +105,7 @@ class CampaignFindings:
     known: dict[str, KnownFinding]
     horizon: float
     workers: int
+    shutdown_delays: dict[str, float] = field(default_factory=dict)  # learned from the baseline, as the campaign did
 
     @classmethod
     def open(cls, directory: Path, workers: int | None = None) -> CampaignFindings:
@@ -121,13 +123,21 @@ class CampaignFindings:
             journal.close()
             raise
         return cls(journal, spec_path, spec, _known(journal), meta.horizon or DEFAULT_HORIZON,
-                   workers or meta.workers or _ran_at_once(journal) or default_workers(len(spec.modules)))
+                   workers or meta.workers or _ran_at_once(journal) or default_workers(len(spec.modules)),
+                   learned_shutdown_delays(_baseline_runs(journal)))
 
 
 def _ran_at_once(journal: Journal) -> int | None:
     """The most runs at once the campaign's cases ended at (a campaign given --workers stores no calibration)."""
     counts = [r.at_once for r in journal.cases() if r.at_once]
     return max(counts) if counts else None
+
+
+def _baseline_runs(journal: Journal) -> list[CaseOutcome]:
+    """The campaign's finished baseline runs (those of an overloaded batch apart): what it learned from."""
+    overloaded = set(journal.meta().overloaded_runs)
+    return [o for r in journal.cases(BASELINE) if r.status == CaseStatus.DONE and r.case_id not in overloaded
+            and (o := r.outcome()) is not None]
 
 
 def _known(journal: Journal) -> dict[str, KnownFinding]:
@@ -245,7 +255,8 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
                     payload = CasePayload(str(campaign.spec_path.resolve()), case,
                                           str((out_dir / target.bucket.bucket / case_id).resolve()), campaign.horizon,
                                           tuple(str(p.resolve()) for p in options.dictionaries),
-                                          settle=options.settle if rerun else None, known=tuple(sorted(campaign.known)))
+                                          settle=options.settle if rerun else None, known=tuple(sorted(campaign.known)),
+                                          shutdown_delays=dict(campaign.shutdown_delays))
                     payloads[case_id] = (target, rerun)
                     pool.submit(case_id, payload.to_json())
         outcomes: dict[str, CaseOutcome] = {}
