@@ -203,6 +203,7 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
     from astaa_deft.analysis.deft.validator import Comparison
     from astaa_deft.engine.bus import process_launch
 
+    out_dir = out_dir.resolve()  # pytest runs from inside the suite (its own pytest.ini): a relative path breaks
     manifest = json.loads((out_dir / MANIFEST).read_text())
     threshold = float(manifest["threshold"])
     frames = {f.index: f for f in extraction.frames} if extraction is not None else {}
@@ -213,7 +214,7 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
         ran: dict[str, Any]
         try:
             done = process_launch.run(argv, timeout=SUITE_CHECK_TIMEOUT_S, cwd=str(out_dir), env=env)
-            ran = json.loads(results_path.read_text()).get(str(out_dir.resolve()), {}) if results_path.is_file() \
+            ran = json.loads(results_path.read_text()).get(str(out_dir), {}) if results_path.is_file() \
                 else {"error": (done.stdout + done.stderr).strip()[-300:] or f"pytest exit {done.returncode}"}
         except subprocess.TimeoutExpired:
             ran = {"error": f"pytest did not finish the suite in {SUITE_CHECK_TIMEOUT_S:.0f} s"}
