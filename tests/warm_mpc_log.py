@@ -34,6 +34,9 @@ def write_mpc_log(directory: Path, seconds: float = 4.0, *, provenance: bool = F
         text = text.replace("      frames: per_output\n", "      frames: per_output\n      provenance: used\n")
     spec_path = directory / "warm_mpc.yaml"
     spec_path.write_text(text)
+    # The factory beside the spec, as a user's stack has it: its suite then runs under plain pytest (the
+    # extraction checks it so, in a process of its own, without this test's sys.path).
+    (directory / "warm_mpc.py").write_text((SUT_DIR / "warm_mpc.py").read_text())
     spec = load_spec(spec_path)
     rng = random.Random(seed)
     t0 = 1_000_000_000

@@ -49,6 +49,9 @@ class ModuleExitEnd:
     exit_codes: Mapping[int, Outcome] = field(default_factory=lambda: {0: PASS_OUTCOME})
     other: Outcome = CRASHED
     reason: str = ""
+    # Seconds the module may take from its last message to its exit (writing results, closing its sessions):
+    # as the spec gives it (None: learned from clean runs, else the session's default shutdown grace).
+    shutdown_delay: float | None = None
 
     def outcome(self, returncode: int, signal: str | None) -> Outcome:
         if signal:

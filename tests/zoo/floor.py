@@ -96,9 +96,16 @@ def same_output(answer: Any, recorded: Any, ignore: tuple[str, ...] | list[str])
 
 def plain_replay(stack: Stack, log_path: Path, ways: tuple[str, ...] | None = None) -> Floor:
     """The floor of ``stack``'s run in ``log_path``: the best of the plain ways (all that apply, or ``ways``)."""
+    return plain_floor(stack.spec_path, MODULE, log_path, ways=ways)
+
+
+def plain_floor(spec_path: Path, module: str | None, log_path: Path, *, params: dict[str, str] | None = None,
+                ways: tuple[str, ...] | None = None) -> Floor:
+    """The floor of any replayable module's run (``module`` in the spec's ``replay:`` section, None: its first)
+    in ``log_path``, its factory made with the run's ``params``: the best of the plain ways that apply."""
     t0 = time.perf_counter()
-    spec = load_spec(stack.spec_path)
-    entry = replay_module_of(spec, MODULE)
+    spec = load_spec(spec_path)
+    entry = replay_module_of(spec, module)
     log = read_log(log_path)
     codecs = {name: get_codec(spec.channel(name).encoding) for name in (*entry.inputs, entry.output)}
     inputs: list[tuple[int, str, Any]] = []
@@ -125,7 +132,7 @@ def plain_replay(stack: Stack, log_path: Path, ways: tuple[str, ...] | None = No
     results = []
     for way in ways:
         t1 = time.perf_counter()
-        planner = make_planner(spec, {}, entry=entry)
+        planner = make_planner(spec, dict(params or {}), entry=entry)
         try:
             answers, steps = _WAYS[way](planner, entry.trigger, played)
         finally:

@@ -4,10 +4,17 @@ Registered through the `pytest11` entry point, so any environment with
 astaa-deft installed runs extracted module tests with plain pytest. One test
 per frame, in order; a failure shows where the replayed trajectory left the
 recorded one.
+
+With ``ASTAA_DEFT_SUITE_RESULTS`` set to a file, the run also writes there
+every frame's result (the frames stepped for their state too) when it ends:
+how extraction checks a suite it wrote — pytest's own run of it, in a
+process of its own, so the tool never says a suite passes that pytest fails.
 """
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,10 +31,34 @@ if TYPE_CHECKING:
     from astaa_deft.analysis.deft.suite import FrameResult, Suite
 
 
+RESULTS_ENV = "ASTAA_DEFT_SUITE_RESULTS"  # a file: every frame's result of this run, written at its end
+_collected: list[Suite] = []  # the suites this run collected (for RESULTS_ENV)
+
+
 def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> DeftSuiteFile | None:
     if file_path.name == MANIFEST:
         return DeftSuiteFile.from_parent(parent, path=file_path)
     return None
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """With RESULTS_ENV set: each collected suite's frame results as this run replayed them (replayed now if no
+    test of it ran: every frame is stepped for its state only)."""
+    target = os.environ.get(RESULTS_ENV)
+    if not target or not _collected:
+        return
+    suites: dict[str, dict[str, object]] = {}
+    for suite in _collected:
+        try:
+            results = suite.results()
+        except Exception as exc:  # noqa: BLE001 - a suite that cannot run at all: every frame fails
+            suites[str(suite.directory.resolve())] = {"error": f"{type(exc).__name__}: {exc}"}
+            continue
+        suites[str(suite.directory.resolve())] = {"frames": [
+            {"index": r.index, "passes": r.error is None and r.comparison.within(suite.threshold),
+             "distance": r.comparison.distance, "max_error": r.comparison.max_error, "points": r.comparison.points,
+             "how": r.comparison.how, "error": r.error, "stopped": r.stopped} for r in results]}
+    Path(target).write_text(json.dumps(suites, default=repr), encoding="utf-8")
 
 
 class DeftSuiteFile(pytest.File):
@@ -35,6 +66,8 @@ class DeftSuiteFile(pytest.File):
         from astaa_deft.analysis.deft.suite import Suite
 
         suite = Suite(self.path.parent)
+        if os.environ.get(RESULTS_ENV):  # kept for the run's end only when asked (a suite holds its replay)
+            _collected.append(suite)
         oracles = list(enumerate(suite.oracles))
         # Oracle tests with a snapshot of the state before their frame run first: one step each, so a
         # suite that reproduces a failure fails at once (pytest -x) instead of after the whole replay.

@@ -333,27 +333,49 @@ class StepHang(AstaaDeftError):
 T = TypeVar("T")
 
 
-def within_limit(call: Callable[[], T], seconds: float) -> T:
-    """``call()``, interrupted by StepHang after ``seconds`` (0: no limit).
+HANG_WALL_FACTOR = 10.0  # a step that uses no CPU (blocked) is a hang after this many times its CPU limit
 
-    A SIGALRM timer interrupts Python code that never returns (a loop that
-    cannot end), in the main thread of a POSIX process; elsewhere, or inside
-    native code that never returns to the interpreter, the call is not
-    limited here (the replay pool's per-test timeout still stops it).
+
+def within_limit(call: Callable[[], T], seconds: float) -> T:
+    """``call()``, interrupted by StepHang once it has used ``seconds`` of CPU time (0: no limit), or has
+    waited ``HANG_WALL_FACTOR`` times that long without using it (a step blocked on something that never comes).
+
+    CPU time, not wall time: on a loaded machine a step waits for a core, and a
+    limit on wall time would call a step that merely waited a hang — the
+    module "answers nothing more" and every later frame is lost, a result that
+    depends on the load (a replay's results must not). A SIGPROF timer (the
+    process's CPU time) interrupts Python code that never returns, a SIGALRM
+    timer one that blocks, in the main thread of a POSIX process; elsewhere, or
+    inside native code that never returns to the interpreter, the call is not
+    limited here (the replay pool's per-test timeout still stops it). A wall
+    timer set before (pytest-timeout's) is set again afterwards, less the time
+    the step took.
     """
     if seconds <= 0 or not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
         return call()
+    blocked_after = seconds * HANG_WALL_FACTOR
 
-    def expired(signum: int, frame: FrameType | None) -> NoReturn:
-        raise StepHang(f"the step did not return within {seconds:g} s")
+    def used_up(signum: int, frame: FrameType | None) -> NoReturn:
+        raise StepHang(f"the step did not return within {seconds:g} s of CPU time")
 
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    def waited(signum: int, frame: FrameType | None) -> NoReturn:
+        raise StepHang(f"the step did not return within {blocked_after:g} s, blocked")
+
+    previous_prof = signal.signal(signal.SIGPROF, used_up)
+    previous_alarm = signal.signal(signal.SIGALRM, waited)
+    started = time.monotonic()
+    outer_delay, outer_interval = signal.setitimer(signal.ITIMER_REAL, blocked_after)
+    signal.setitimer(signal.ITIMER_PROF, seconds)
     try:
         return call()
     finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
         signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+        signal.signal(signal.SIGPROF, previous_prof)
+        signal.signal(signal.SIGALRM, previous_alarm)
+        if outer_delay > 0:  # the caller's own wall timer runs on where it was
+            signal.setitimer(signal.ITIMER_REAL, max(outer_delay - (time.monotonic() - started), 1e-6),
+                             outer_interval)
 
 
 def _getter(path: str) -> Callable[[Any], Any]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
@@ -138,13 +139,19 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
         # Every frame kept is stepped by the suite (those not accepted for their state only): the test of
         # an output runs after the frames before it, as the extraction stepped them.
         manifest = export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
-        if ex.suite_failures is None and ex.frames:  # not run beside the search: run the written suite now
+        # The search's own run of the suite (in order, or beside it) found these; its tests no longer assert
+        searched = [SuiteFailure(index, detail) for index, detail in ex.suite_failures or ()]
+        if searched:
+            uncheck_frames(out_dir, {f.index for f in searched})
+        failing = []
+        if ex.frames:  # the last word: the written suite run as pytest runs it, in a process of its own
             failing, confirmed = check_suite(out_dir, ex)
             if confirmed:  # its own run reproduces frames the search's copies did not: they are tests
                 export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
                 accepted = [f for f in ex.frames if f.accepted]
-        else:
-            failing = [SuiteFailure(index, detail) for index, detail in ex.suite_failures or ()]
+        confirmed_now = {f.index for f in ex.frames if f.accepted}
+        failing = sorted({f.index: f for f in [*(f for f in searched if f.index not in confirmed_now), *failing]}
+                         .values(), key=lambda f: f.index)
         if failing:  # an extraction defect: the suite says so, and those tests no longer assert
             uncheck_frames(out_dir, {f.index for f in failing})
         if oracles:
@@ -230,33 +237,69 @@ class SuiteFailure:
     detail: str  # the distance or the error
 
 
+SUITE_CHECK_TIMEOUT_S = 3600.0  # a suite of a long run of an expensive module: bounded, never forever
+
+
 def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[list[SuiteFailure], int]:
-    """Run the written suite once, as ``pytest DIR`` would (a fresh module, every frame in order): (the tests
-    that fail — a suite must pass on the run it came from —, frames confirmed).
+    """Run the written suite once as the user will, ``pytest DIR`` in a process of its own (a fresh module, every
+    frame in order): (the tests that fail — a suite must pass on the run it came from —, frames confirmed).
+
+    In a process of its own, not this one: a module's answers may depend on its process (the
+    extraction's forked runner, its own heap and globals — a planner's native search state seeded
+    or laid out by what ran there before), so only pytest's own run says what pytest will say.
 
     With ``extraction``, that run has the last word on its frames: one kept
     but not accepted (the search stepped it on a copy of the state) that the
     fresh module reproduces within θ becomes accepted — a test that passes
     (counted in ``extraction.confirmed_unforked`` and the second number).
     """
-    from astaa_deft.analysis.deft.suite import Suite
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
 
-    suite = Suite(out_dir)
+    from astaa_deft.analysis.deft.pytest_plugin import RESULTS_ENV
+    from astaa_deft.analysis.deft.validator import Comparison
+    from astaa_deft.engine.bus import process_launch
+
+    out_dir = out_dir.resolve()  # pytest runs from inside the suite (its own pytest.ini): a relative path breaks
+    manifest = json.loads((out_dir / MANIFEST).read_text())
+    threshold = float(manifest["threshold"])
     frames = {f.index: f for f in extraction.frames} if extraction is not None else {}
+    with tempfile.TemporaryDirectory(prefix="astaa-deft-suite-check-") as scratch:
+        results_path = Path(scratch) / "results.json"
+        env = {**os.environ, RESULTS_ENV: str(results_path)}
+        argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:randomly", str(out_dir)]
+        ran: dict[str, Any]
+        try:
+            done = process_launch.run(argv, timeout=SUITE_CHECK_TIMEOUT_S, cwd=str(out_dir), env=env)
+            ran = json.loads(results_path.read_text()).get(str(out_dir), {}) if results_path.is_file() \
+                else {"error": (done.stdout + done.stderr).strip()[-300:] or f"pytest exit {done.returncode}"}
+        except subprocess.TimeoutExpired:
+            ran = {"error": f"pytest did not finish the suite in {SUITE_CHECK_TIMEOUT_S:.0f} s"}
+    if "frames" not in ran:  # it did not run at all: none of its tests can be said to pass
+        why = f"pytest could not run the suite: {ran.get('error')}"
+        return [SuiteFailure(int(e["index"]), why) for e in manifest["frames"] if e.get("check", True)], 0
+    results: dict[int, dict[str, Any]] = {int(r["index"]): r for r in ran["frames"]}
     out = []
     confirmed = 0
-    for entry, result in zip(suite.frames, suite.results(), strict=True):
-        passes = result.error is None and result.comparison.within(suite.threshold)
+    for entry in manifest["frames"]:
+        result = results.get(int(entry["index"]))
+        if result is None:
+            continue
         if not entry.get("check", True):
             frame = frames.get(int(entry["index"]))
-            if passes and frame is not None and frame.output is not None and not result.stopped:
-                frame.comparison, frame.accepted = result.comparison, True
-                frame.exact = result.comparison.distance == 0.0
+            if result["passes"] and frame is not None and frame.output is not None and not result["stopped"]:
+                frame.comparison = Comparison(float(result["distance"]), float(result["max_error"]),
+                                              int(result["points"]), str(result["how"]))
+                frame.accepted = True
+                frame.exact = frame.comparison.distance == 0.0
                 confirmed += 1
             continue
-        if not passes:
-            out.append(SuiteFailure(int(entry["index"]), result.error
-                                    or f"distance {result.comparison.distance:.3g} (θ = {suite.threshold:g})"))
+        if not result["passes"]:
+            out.append(SuiteFailure(int(entry["index"]), result["error"]
+                                    or f"distance {float(result['distance']):.3g} (θ = {threshold:g})"))
     if extraction is not None:
         extraction.confirmed_unforked += confirmed
     return out, confirmed

@@ -52,7 +52,7 @@ def run_session(spec: Spec, options: RunOptions, *,
     """
     run = BusRun(spec, options, on_event=on_event)
     view = RunView(run)
-    ends = RunEndWatch(spec)
+    ends = RunEndWatch(spec, options.shutdown_delays)
     time_limit = min((t for t in (options.time_limit, ends.time_limit) if t is not None), default=None)
     t0 = time.monotonic()
     with run:
@@ -85,7 +85,7 @@ def run_session(spec: Spec, options: RunOptions, *,
         mutations=run.mutations, log=options.record,
         complete=options.record is None or (recorder is not None and recorder.finished),
         observed=verdict is not None and not run.lost, unjudged=unjudged,
-        policies=tuple(run.transport.policies) if run.transport is not None else ())
+        policies=tuple(run.transport.policies) if run.transport is not None else (), shutdowns=ends.shutdowns())
 
 
 def _why_end(run: BusRun, view: RunView, ends: RunEndWatch, *, t0: float, time_limit: float | None,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -34,6 +35,9 @@ class RunOptions:
     time_limit: float | None = None  # seconds; None: no limit from the caller
     # A recorder started ahead of the run (bus_run.warm_recorder), taken by this run if still alive.
     warm_recorder: ChildProcess | None = None
+    # A module whose exit ends the run -> seconds its exit may come after its last message, as the caller learned
+    # from clean runs (a campaign's baseline); the spec's own ``shutdown_delay`` wins (session/run_end.py).
+    shutdown_delays: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # "star" or "passive" as text too; ValueError for anything else
@@ -58,6 +62,9 @@ class RunResult:
     policies: tuple[PolicyApplicationsRecord, ...] = ()  # what each policy of the test case did (with a reason
     # for each that touched nothing)
     unjudged: str = ""  # why the monitors did not judge every message ("": they did); a Pass is then withheld
+    # Per module whose exit ended the run: seconds from its last message on the bus to its exit (what a caller
+    # learns a module's shutdown delay from).
+    shutdowns: dict[str, float] = field(default_factory=dict)
 
     @property
     def crashes(self) -> tuple[ProcessExit, ...]:

@@ -9,12 +9,16 @@ gives it).
 
 The end is dated when it happened, not when the tool noticed it: a channel
 condition at its message's bus time; a module's exit at the module's last
-message on the bus when that came within ``SHUTDOWN_GRACE_NS`` before its
-exit (a process takes a moment to close its sessions and exit, and the
-modules it drove fall silent from its last message on), else at its exit as
-waitpid saw it. Until the end is known the online monitors judge no further
-than :meth:`RunEndWatch.judged_until` — a time the end cannot come before —
-so nothing of the shutdown is judged online that ``check`` would not judge.
+message on the bus when the exit came within its shutdown delay after it (a
+process takes a moment to write its results, close its sessions and exit,
+and the modules it drove fall silent from its last message on), else at its
+exit as waitpid saw it (it fell silent long before: that silence is part of
+the run). A module's shutdown delay is the spec's ``shutdown_delay``, else
+the one the caller learned from clean runs (``RunOptions.shutdown_delays``,
+a campaign's baseline), else ``SHUTDOWN_GRACE_NS``. Until the end is known
+the online monitors judge no further than :meth:`RunEndWatch.judged_until` —
+a time the end cannot come before — so nothing of the shutdown is judged
+online that ``check`` would not judge.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from typing import TYPE_CHECKING
@@ -41,7 +45,8 @@ if TYPE_CHECKING:
     from astaa_deft.model.records import ProcessExit
     from astaa_deft.engine.session.view import RunView
 
-SHUTDOWN_GRACE_NS = 1_000_000_000  # a module's exit this soon after its last message ends the run at that message
+SHUTDOWN_GRACE_NS = 1_000_000_000  # an exit this soon after the module's last message: its end is that message
+# (unless the spec or the clean runs give the module its own shutdown delay)
 NOTICE_SLACK_NS = 500_000_000  # how late the tool may learn of an exit (a loaded machine, its watcher thread)
 
 
@@ -70,12 +75,16 @@ class RunEnd:
 class RunEndWatch:
     """The spec's ``run:`` end conditions over one run; the first that holds is ``ended`` (set once, any thread)."""
 
-    def __init__(self, spec: Spec):
+    def __init__(self, spec: Spec, learned: Mapping[str, float] | None = None):
+        """``learned``: an ending module -> the seconds its exit may come after its last message, as clean runs
+        showed (the spec's own ``shutdown_delay`` wins)."""
         self.spec = spec
         self.section: RunSection = spec.run if spec.run is not None else RunSection()
         self.ended: RunEnd | None = None
         self._lock = threading.Lock()
         self._ending = {end.module for end in self.section.module_exits}
+        self._grace_ns = {end.module: shutdown_grace_ns(end.shutdown_delay, (learned or {}).get(end.module))
+                          for end in self.section.module_exits}
         self._last_ns: dict[str, int] = {}  # an ending module -> its last message's bus time
         self._exits: Callable[[], Sequence[ProcessExit]] = tuple
 
@@ -109,19 +118,32 @@ class RunEndWatch:
             if at > self._last_ns.get(module, 0):
                 self._last_ns[module] = at
 
+    def grace_ns(self, module: str) -> int:
+        """The ending module's shutdown delay in ns (the spec's, the learned one, else the default)."""
+        return self._grace_ns.get(module, SHUTDOWN_GRACE_NS)
+
     def exit_time(self, exit_: ProcessExit) -> int:
-        """When an ending module's exit ended the run: its last message, if within the grace before its exit."""
+        """When an ending module's exit ended the run: its last message, if its exit came within its shutdown
+        delay after it; else the exit itself."""
         last = self._last_ns.get(exit_.module)
-        if last is None:
+        if last is None or exit_.time_ns - last > self.grace_ns(exit_.module):
             return exit_.time_ns
-        return min(exit_.time_ns, max(last, exit_.time_ns - SHUTDOWN_GRACE_NS))
+        return min(last, exit_.time_ns)
+
+    def shutdowns(self) -> dict[str, float]:
+        """Per ending module that exited after a message: seconds from its last message to its exit."""
+        with self._lock:
+            last = dict(self._last_ns)
+        return {e.module: round(max(0, e.time_ns - last[e.module]) / 1e9, 3) for e in self._exits()
+                if e.module in self._ending and e.module in last}
 
     def judged_until(self, now_ns: int) -> int:
         """The latest time the online monitors may judge now: the end, once known, cannot come before it.
 
         An ending module still running ends the run, at the earliest, at its
-        last message or ``SHUTDOWN_GRACE_NS`` before its exit (which is no
-        earlier than now, less the time the tool takes to learn of it).
+        last message while its shutdown delay after it has not run out; after
+        that at its exit, which is no earlier than now less the time the tool
+        takes to learn of it.
         """
         if self.ended is not None:
             return self.ended.time_ns
@@ -133,8 +155,8 @@ class RunEndWatch:
         with self._lock:
             last = dict(self._last_ns)
         unnoticed = now_ns - NOTICE_SLACK_NS  # an exit not noticed yet happened after this
-        return min(max(last[module], unnoticed - SHUTDOWN_GRACE_NS) if module in last else unnoticed
-                   for module in self._ending)
+        return min(last[module] if module in last and unnoticed - last[module] <= self.grace_ns(module)
+                   else unnoticed for module in self._ending)
 
     def _seen(self, ends: list[ChannelEnd], codec: Codec, sample: zenoh.Sample) -> None:
         if self.ended is not None:
@@ -171,3 +193,9 @@ class RunEndWatch:
         with self._lock:
             if self.ended is None:
                 self.ended = end
+
+
+def shutdown_grace_ns(given: float | None, learned: float | None) -> int:
+    """A module's shutdown delay in ns: the spec's (``given``), else the learned one, else the default."""
+    seconds = given if given is not None else learned
+    return SHUTDOWN_GRACE_NS if seconds is None else int(seconds * 1e9)

@@ -9,6 +9,7 @@
             - {code: 1, outcome: collision, crash: Silent, severity: critical}
             - {code: 2, outcome: goal_not_reached}     # crash Silent, severity high unless given
             # - {code: other, outcome: crashed, crash: Abort}   (codes not listed: the default)
+          shutdown_delay: 3                # optional: seconds its exit may come after its last message
         - {channel: status, expr: "done", reason: done}   # … or when a channel's latest message says so
         - {channel: status, expr: "collision", reason: collision, crash: Silent, severity: critical}
 
@@ -32,11 +33,12 @@ from astaa_deft.model.run_section import (
 )
 
 KEYS = ("time_limit", "end_when")
-MODULE_KEYS = ("module", "exit_codes", "reason")
+MODULE_KEYS = ("module", "exit_codes", "reason", "shutdown_delay")
 CHANNEL_KEYS = ("channel", "expr", "reason", "crash", "severity")
 CODE_KEYS = ("code", "outcome", "crash", "severity")
 DEFAULT_FAILURE_CRASH = Verdict.SILENT  # a named outcome the module reports: the SUT noticed nothing else
 MAX_TIME_LIMIT = 7 * 24 * 3600.0
+MAX_SHUTDOWN_DELAY = 3600.0  # an exit an hour after the last message is no shutdown but a hang
 
 
 def build_run_section(src: Source, node: Node | None, types: Mapping[str, MessageType],
@@ -79,12 +81,13 @@ def _condition(reader: InvariantReader, item: Node, module_exits: list, channel_
         module = reader.module(v["module"])
         codes, other = _exit_codes(reader, v.get("exit_codes"))
         reason = _reason(reader, v.get("reason")) if "reason" in v else ""
+        delay, delay_ok = _shutdown_delay(reader, v.get("shutdown_delay"))
         if module is not None and any(m.module == module for m in module_exits):
             reader.problem(v["module"], f"module '{module}' is named twice under 'run: end_when'",
                            "keep one condition per module")
             return
-        if module is not None and codes is not None and reason is not None:
-            module_exits.append(ModuleExitEnd(module, codes, other, reason))
+        if module is not None and codes is not None and reason is not None and delay_ok:
+            module_exits.append(ModuleExitEnd(module, codes, other, reason, shutdown_delay=delay))
         return
     if not reader.keys(item, CHANNEL_KEYS, ("channel", "expr", "reason"), "an 'end_when' channel condition"):
         return
@@ -96,6 +99,14 @@ def _condition(reader: InvariantReader, item: Node, module_exits: list, channel_
     expr = reader.expression(v["expr"], channel.type, "'expr'")
     if expr is not None and reason is not None and outcome is not None:
         channel_ends.append(ChannelEnd(channel.name, expr, reason, outcome))
+
+
+def _shutdown_delay(reader: InvariantReader, node: Node | None) -> tuple[float | None, bool]:
+    """The module's ``shutdown_delay`` in seconds (None: not given) and whether it was read without a problem."""
+    if node is None:
+        return None, True
+    delay = reader.number(node, "'shutdown_delay'", positive=True, maximum=MAX_SHUTDOWN_DELAY)
+    return delay, delay is not None
 
 
 def _reason(reader: InvariantReader, node: Node) -> str | None:

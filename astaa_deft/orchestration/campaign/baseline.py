@@ -1,14 +1,18 @@
 """The campaign's baseline: clean runs of every param value, and what they say about the unmutated SUT.
 
 Where the SUT stands without mutation: the horizon a case may run (derived from the clean runs), when
-the stack is live (the strategy's timing), and the invariants it breaks by itself (known baseline
-findings, filed into baseline-finding buckets and learnt again from every clean run that fails later).
+the stack is live (the strategy's timing), how long a module whose exit ends the run takes from its last
+message to its exit (its shutdown delay, with headroom: the end of every later run is dated by it), and
+the invariants it breaks by itself (known baseline findings, filed into baseline-finding buckets and
+learnt again from every clean run that fails later).
 A part of :class:`~.campaign.Campaign` (its state: :class:`~.parts.CampaignParts`).
 """
 
 from __future__ import annotations
 
+from astaa_deft.engine.session.run_end import SHUTDOWN_GRACE_NS
 from astaa_deft.model.errors import AstaaDeftError
+from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.payload import CasePool
 from astaa_deft.orchestration.campaign.rows import CaseRow
@@ -41,6 +45,34 @@ def live_timing(clean: list[CaseOutcome], horizon: float) -> Timing:
     lives = [o.seconds - o.first_seen[anchor] for o in clean if anchor in o.first_seen]
     live = max(LIVE_STEP, min(horizon, LIVE_STEP * int(min(lives) / LIVE_STEP)))
     return Timing(anchor, live)
+
+
+SHUTDOWN_HEADROOM = 2.0  # a learned shutdown delay: the longest a clean run took × this …
+SHUTDOWN_SLACK = 0.5  # … + this many seconds (a loaded machine stretches a module's exit: a sleep, Zenoh's close)
+# The baseline's own runs date their end with this delay (nothing is learned yet): an exit up to this long after
+# the module's last message is its shutdown; one later ends the run at the exit (a silence the run judges), and
+# no learned delay exceeds it, so the baseline and every later run date their ends alike.
+LEARNING_SHUTDOWN_DELAY = 10.0
+
+
+def learning_shutdown_delays(spec: Spec) -> dict[str, float]:
+    """The shutdown delay of each module whose exit ends the run, for the baseline's runs (they learn it)."""
+    section = spec.run
+    return {end.module: LEARNING_SHUTDOWN_DELAY for end in section.module_exits} if section is not None else {}
+
+
+def learned_shutdown_delays(clean: list[CaseOutcome]) -> dict[str, float]:
+    """Per module whose exit ends the run: the seconds its exit may come after its last message — the longest
+    the clean runs showed (within LEARNING_SHUTDOWN_DELAY: a longer one was a silence), with headroom, at least
+    the session's default grace and at most LEARNING_SHUTDOWN_DELAY."""
+    seen: dict[str, float] = {}
+    for outcome in clean:
+        for module, seconds in outcome.shutdowns.items():
+            if seconds <= LEARNING_SHUTDOWN_DELAY:
+                seen[module] = max(seen.get(module, 0.0), seconds)
+    default = SHUTDOWN_GRACE_NS / 1e9
+    return {module: round(min(LEARNING_SHUTDOWN_DELAY, max(default, longest * SHUTDOWN_HEADROOM + SHUTDOWN_SLACK)), 1)
+            for module, longest in sorted(seen.items())}
 
 
 def derived_horizon(clean: list[CaseOutcome], cap: float) -> float:
@@ -78,6 +110,7 @@ class Baseline(CampaignParts):
                  if o is not None and o.status == CaseStatus.DONE and r.case_id not in overloaded_runs]
         self._derive_horizon(clean)
         self._calibrate(clean)
+        self._learn_shutdown_delays(clean)
         self._file_baseline(rows, outcomes, overloaded_runs)
         self._solo = self._solo_runs()
         for row, outcome in zip(rows, outcomes, strict=False):
@@ -101,6 +134,16 @@ class Baseline(CampaignParts):
         self.journal.note("horizon", f"cases run at most {self.horizon:g} s: {why}; clean runs at most"
                                      f" {self.clean_horizon:g} s")
         self.say(f"baseline: cases run at most {self.horizon:g} s ({why})")
+
+    def _learn_shutdown_delays(self, clean: list[CaseOutcome]) -> None:
+        """Every later run dates its end by each ending module's shutdown delay as the clean runs showed it
+        (recomputed on resume from the same journal rows: the same delays)."""
+        self.shutdown_delays = learned_shutdown_delays(clean)
+        for module, seconds in self.shutdown_delays.items():
+            longest = max(seconds for o in clean for m, seconds in o.shutdowns.items()
+                          if m == module and seconds <= LEARNING_SHUTDOWN_DELAY)
+            self.say(f"baseline: '{module}' exits up to {longest:.2f} s after its last message: a run's end is"
+                     f" dated at that message when its exit comes within {seconds:g} s of it")
 
     def _file_baseline(self, rows: list[CaseRow], outcomes: list[CaseOutcome | None],
                        overloaded_runs: set[str]) -> None:

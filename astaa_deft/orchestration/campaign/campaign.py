@@ -196,6 +196,7 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
         self.started = time.monotonic()
         self.timing = Timing(None, self.clean_horizon)
         self.known: dict[str, KnownFinding] = {}  # invariants the unmutated SUT breaks (judged after each run)
+        self.shutdown_delays: dict[str, float] = {}  # learned in the baseline (its clean runs use the default)
         self._clean: list[CaseOutcome] = []  # every finished clean run (baseline, twins, cases that mutated nothing)
         self._solo: dict[str, CaseOutcome] = {}  # params → a run alone: the timing reference
         self._last_change = time.monotonic()  # when the runs at once last changed (the load average lags)

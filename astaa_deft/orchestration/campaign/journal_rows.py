@@ -201,6 +201,7 @@ _OUTCOME: dict[str, Read] = {
     "cpu": lambda r: r.real(0.0, MAX_SECONDS), "cpu_waited": lambda r: r.real(0.0, MAX_SECONDS),
     "wall": lambda r: r.real(0.0, MAX_SECONDS), "rss_mb": lambda r: r.real(0.0, MAX_SECONDS),
     "timing": lambda r: r.map(_channel_rate, 100_000), "violating": lambda r: r.map(lambda v: v.whole(), 100_000),
+    "shutdowns": lambda r: r.map(lambda v: v.real(0.0, MAX_SECONDS), 10_000),
 }
 
 

@@ -168,6 +168,9 @@ class CaseOutcome:
     timing: dict[str, ChannelRate] = field(default_factory=dict)
     # Per invariant: messages (or samples) that broke it — a known baseline finding is judged by these too.
     violating: dict[str, int] = field(default_factory=dict)
+    # Clean runs: per module whose exit ended the run, seconds from its last message to its exit (the baseline
+    # learns each one's shutdown delay from these).
+    shutdowns: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> JsonObject:
         """Its JSON form (the journal's ``outcome`` column, and the pipes from the case workers)."""

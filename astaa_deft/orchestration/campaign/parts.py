@@ -53,6 +53,7 @@ class CampaignParts(ABC):
     started: float
     timing: Timing
     known: dict[str, KnownFinding]
+    shutdown_delays: dict[str, float]  # an ending module -> the seconds its exit may come after its last message
     _clean: list[CaseOutcome]
     _solo: dict[str, CaseOutcome]
     _last_change: float

@@ -70,6 +70,12 @@ def _number(value: JsonValue) -> float:
     return float(value)
 
 
+def _delays(value: JsonValue) -> dict[str, float]:
+    if not isinstance(value, dict):
+        raise ValueError(f"a module -> seconds object, not {value!r}")
+    return {str(module): _number(seconds) for module, seconds in value.items()}
+
+
 @dataclass(frozen=True)
 class CasePayload:
     """Everything a worker needs to run ``case``, nothing it must look up (paths absolute)."""
@@ -81,6 +87,8 @@ class CasePayload:
     dictionaries: tuple[str, ...]  # dictionary files beside the bundled one
     settle: float | None  # a mutated run ends this long after its last mutation could act (None: never)
     known: tuple[str, ...]  # known baseline findings: a mutated run does not end at these
+    # An ending module -> the seconds its exit may come after its last message, learned from the baseline
+    shutdown_delays: dict[str, float] = field(default_factory=dict)
     # Read back (from_json): the case's test case as text, checked by testcase() against the worker's spec.
     received_text: str | None = field(default=None, compare=False)
 
@@ -95,11 +103,13 @@ class CasePayload:
         """The payload's JSON form (what the pools pass on to the workers)."""
         return {"spec": self.spec, "case": case_json(self.case, self.received_text), "run_dir": self.run_dir,
                 "horizon": self.horizon, "dictionaries": [path for path in self.dictionaries],
-                "settle": self.settle, "known": [name for name in self.known]}
+                "settle": self.settle, "known": [name for name in self.known],
+                "shutdown_delays": dict(self.shutdown_delays)}
 
     @classmethod
     def from_json(cls, data: JsonObject) -> CasePayload:
-        """The payload :meth:`to_json` wrote; ``dictionaries``, ``settle`` and ``known`` may be left out.
+        """The payload :meth:`to_json` wrote; ``dictionaries``, ``settle``, ``known`` and ``shutdown_delays`` may
+        be left out.
 
         Raises ``KeyError``, ``ValueError`` or ``TypeError`` for a form it did not write.
         """
@@ -110,7 +120,7 @@ class CasePayload:
         return cls(spec=str(data["spec"]), case=planned, run_dir=str(data["run_dir"]),
                    horizon=_number(data["horizon"]), dictionaries=_strings(data.get("dictionaries", [])),
                    settle=None if settle is None else _number(settle), known=_strings(data.get("known", [])),
-                   received_text=text)
+                   shutdown_delays=_delays(data.get("shutdown_delays", {})), received_text=text)
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ Nothing else in the campaign package touches the bus.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 import threading
 import time
 from dataclasses import replace
@@ -58,7 +59,8 @@ def isolated(spec: Spec) -> Spec:
 
 def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *, horizon: float,
              dictionary: Dictionary | None = None, settle: float | None = None,
-             warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset()) -> CaseOutcome:
+             warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset(),
+             shutdown_delays: Mapping[str, float] | None = None) -> CaseOutcome:
     """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
 
     A mutated run ends at its first broken invariant, except those in
@@ -71,6 +73,9 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     acted) — what the SUT does with a bad message shows within seconds, and
     a run's remaining minutes would be spent for nothing.
     ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
+    ``shutdown_delays``: per module whose exit ends the run, the seconds its exit may come after its last
+    message (learned from the baseline; the run's end is dated at that message when it does). A clean run's
+    outcome carries what its own ending module took (``shutdowns``), the baseline learns from those.
     Every outcome carries the run's CPU seconds and wall seconds (:mod:`.cost`).
     Never raises for a run that does not start or is not observed to its end: the outcome says "error".
     """
@@ -79,7 +84,8 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
     options = replace(_run_options(spec, testcase, params, run_dir, dictionary=dictionary,
-                                   warm_recorder=warm_recorder), time_limit=horizon)
+                                   warm_recorder=warm_recorder), time_limit=horizon,
+                      shutdown_delays=dict(shutdown_delays or {}))
     watches = _Watches(spec, testcase, settle, known)
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
@@ -106,7 +112,7 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
                        first_seen=timing.seconds() if timing is not None else {},
                        cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
                        timing=timing.channels_timing() if timing is not None else {},
-                       violating=watches.violating())
+                       violating=watches.violating(), shutdowns=result.shutdowns if testcase is None else {})
 
 
 def _run_options(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *,

@@ -12,6 +12,7 @@ import os
 import time
 from pathlib import Path
 
+from astaa_deft.orchestration.campaign.baseline import learning_shutdown_delays
 from astaa_deft.orchestration.campaign.calibration import (
     CEILING_LOAD_DROP, DRIFT_TOLERANCE, RunShare, drift, fewer_after_drift, overloaded, raised, run_share,
     workers_for,
@@ -133,7 +134,9 @@ class Scheduling(CampaignParts):
         payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
                               horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
                               settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
-                              known=tuple(sorted(self.known)))
+                              known=tuple(sorted(self.known)),
+                              shutdown_delays=learning_shutdown_delays(self.spec) if case.kind == BASELINE
+                              else dict(self.shutdown_delays))
         self.journal.started(case.case_id)
         self._running_cases.add(case.case_id)
         pool.submit(case.case_id, payload.to_json())

@@ -83,7 +83,7 @@ def execute(payload: CasePayload, preloaded: Preloaded | None = None,
         return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems)))
     return run_case(spec, testcase, case.params, Path(payload.run_dir), horizon=payload.horizon,
                     dictionary=dictionary, settle=payload.settle, warm_recorder=warm_recorder,
-                    known=frozenset(payload.known))
+                    known=frozenset(payload.known), shutdown_delays=payload.shutdown_delays)
 
 
 def stop_worker_profiler() -> bool:

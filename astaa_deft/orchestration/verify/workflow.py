@@ -27,6 +27,7 @@ from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.limits import MAX_PROCESSES
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
+from astaa_deft.orchestration.campaign.baseline import learned_shutdown_delays
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_HORIZON, DEFAULT_SETTLE, default_workers
 from astaa_deft.orchestration.campaign.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.journal_spec import journal_spec
@@ -111,6 +112,7 @@ class CampaignFindings:
     known: dict[str, KnownFinding]
     horizon: float
     workers: int
+    shutdown_delays: dict[str, float] = field(default_factory=dict)  # learned from the baseline, as the campaign did
 
     @classmethod
     def open(cls, directory: Path, *, spec: Path | None, trust_journal_spec: bool = False,
@@ -127,7 +129,8 @@ class CampaignFindings:
                 spec_path, loaded = journal_spec(journal.path, meta.spec, trusted=trust_journal_spec,
                                                  command=command, why="live runs and module tests")
             return cls(journal, spec_path, loaded, _known(journal), meta.horizon or DEFAULT_HORIZON,
-                       workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)))
+                       workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)),
+                       learned_shutdown_delays(_baseline_runs(journal)))
         except BaseException:
             journal.close()
             raise
@@ -137,6 +140,13 @@ def _ran_at_once(journal: Journal) -> int | None:
     """The most runs at once the campaign's cases ended at (a campaign given --workers stores no calibration)."""
     counts = [r.at_once for r in journal.cases() if r.at_once]
     return min(max(counts), MAX_PROCESSES) if counts else None
+
+
+def _baseline_runs(journal: Journal) -> list[CaseOutcome]:
+    """The campaign's finished baseline runs (those of an overloaded batch apart): what it learned from."""
+    overloaded = set(journal.meta().overloaded_runs)
+    return [o for r in journal.cases(BASELINE) if r.status == CaseStatus.DONE and r.case_id not in overloaded
+            and (o := r.outcome()) is not None]
 
 
 def _known(journal: Journal) -> dict[str, KnownFinding]:
@@ -285,7 +295,8 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
                     payload = CasePayload(str(campaign.spec_path.resolve()), case,
                                           str((out_dir / target.bucket.bucket / case_id).resolve()), campaign.horizon,
                                           tuple(str(p.resolve()) for p in options.dictionaries),
-                                          settle=options.settle if rerun else None, known=tuple(sorted(campaign.known)))
+                                          settle=options.settle if rerun else None, known=tuple(sorted(campaign.known)),
+                                          shutdown_delays=dict(campaign.shutdown_delays))
                     payloads[case_id] = (target, rerun)
                     pool.submit(case_id, payload.to_json())
         outcomes: dict[str, CaseOutcome] = {}
