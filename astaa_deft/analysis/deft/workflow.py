@@ -27,7 +27,7 @@ from astaa_deft.analysis.deft.diagnosis import Diagnosis, diagnose
 from astaa_deft.analysis.deft.export import MANIFEST, export_suite
 from astaa_deft.analysis.deft.idle_cores import cpu_sample, idle_cores
 from astaa_deft.analysis.deft.extract import (
-    Decided, Extraction, OnOutput, channel_messages, extract, ground_truth_rate,
+    Decided, ExtractedFrame, Extraction, OnOutput, channel_messages, extract, ground_truth_rate,
 )
 from astaa_deft.analysis.deft.oracle import oracle_entries
 from astaa_deft.analysis.deft.planner_section import replay_module_of
@@ -134,35 +134,45 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     collisions = [v.time_ns for v in log.records(rec.Violation) if v.invariant_kind == CollisionInvariant.kind]
     kept = {f.index for f in accepted}
     oracles = [o for o in oracle_entries(ex, spec, collisions) if o["frame"] in kept] if module is None else []
-    failing: list[SuiteFailure] = []
     with writing(place):
-        # Every frame kept is stepped by the suite (those not accepted for their state only): the test of
-        # an output runs after the frames before it, as the extraction stepped them.
-        manifest = export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
-        # The search's own run of the suite (in order, or beside it) found these; its tests no longer assert
-        searched = [SuiteFailure(index, detail) for index, detail in ex.suite_failures or ()]
-        if searched:
-            uncheck_frames(out_dir, {f.index for f in searched})
-        failing = []
-        if ex.frames:  # the last word: the written suite run as pytest runs it, in a process of its own
-            failing, confirmed = check_suite(out_dir, ex)
-            if confirmed:  # its own run reproduces frames the search's copies did not: they are tests
-                export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
-                accepted = [f for f in ex.frames if f.accepted]
-        confirmed_now = {f.index for f in ex.frames if f.accepted}
-        failing = sorted({f.index: f for f in [*(f for f in searched if f.index not in confirmed_now), *failing]}
-                         .values(), key=lambda f: f.index)
-        if failing:  # an extraction defect: the suite says so, and those tests no longer assert
-            uncheck_frames(out_dir, {f.index for f in failing})
-        if oracles:
-            add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
-        diagnosis = diagnosis_of(ex, spec, entry)
-        if diagnosis is not None and manifest is not None:
-            store_diagnosis(out_dir, diagnosis)
+        manifest, accepted, failing, diagnosis = _write_checked_suite(ex, spec, params, out_dir, oracles=oracles,
+                                                                      entry=entry)
         checkpoint.finished()
     exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
     return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, entry,
                          ground_truth=exact, resumed=len(before), suite_failures=failing, diagnosis=diagnosis)
+
+
+def _write_checked_suite(ex: Extraction, spec: Spec, params: dict[str, str], out_dir: Path, *,
+                         oracles: list[dict[str, object]], entry: ReplayModule
+                         ) -> tuple[Path | None, list[ExtractedFrame], list[SuiteFailure], Diagnosis | None]:
+    """Write the suite, have pytest's own run of it the last word, and store why outputs did not reproduce:
+    (manifest, accepted frames, frames whose tests no longer assert, diagnosis)."""
+    # Every frame kept is stepped by the suite (those not accepted for their state only): the test of
+    # an output runs after the frames before it, as the extraction stepped them.
+    manifest = export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
+    accepted = [f for f in ex.frames if f.accepted]
+    # The search's own run of the suite (in order, or beside it) found these; its tests no longer assert
+    searched = [SuiteFailure(index, detail) for index, detail in ex.suite_failures or ()]
+    if searched:
+        uncheck_frames(out_dir, {f.index for f in searched})
+    failing: list[SuiteFailure] = []
+    if ex.frames:  # the last word: the written suite run as pytest runs it, in a process of its own
+        failing, confirmed = check_suite(out_dir, ex)
+        if confirmed:  # its own run reproduces frames the search's copies did not: they are tests
+            export_suite(ex.frames, spec, params, out_dir, oracles=oracles, entry=entry)
+            accepted = [f for f in ex.frames if f.accepted]
+    confirmed_now = {f.index for f in ex.frames if f.accepted}
+    failing = sorted({f.index: f for f in [*(f for f in searched if f.index not in confirmed_now), *failing]}
+                     .values(), key=lambda f: f.index)
+    if failing:  # an extraction defect: the suite says so, and those tests no longer assert
+        uncheck_frames(out_dir, {f.index for f in failing})
+    if oracles:
+        add_oracle_snapshots(out_dir)  # the oracle tests then fail first, in one step each (TTRF)
+    diagnosis = diagnosis_of(ex, spec, entry)
+    if diagnosis is not None and manifest is not None:
+        store_diagnosis(out_dir, diagnosis)
+    return manifest, accepted, failing, diagnosis
 
 
 DIAGNOSIS_SAMPLES = 8  # recorded outputs read to tell whether each ignore: entry names a field
