@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 from astaa_deft.analysis.deft.frames import (
     OutputContext, Stream, candidates, frame_at, newest_at_or_before, trigger_frame,
 )
+from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.fields import FieldPath, FieldPathError, set_field
 from astaa_deft.model.json import DecodedMessage, FieldValue, JsonObject, JsonValue
 from astaa_deft.model.vocabulary import TextEnum
@@ -144,8 +145,8 @@ def recorded_streams(messages: Mapping[str, Sequence[tuple[int, DecodedMessage]]
             for name, msgs in messages.items()}
 
 
-class FaultNotApplicable(ValueError):
-    """The fault does not fit these streams (no such message, no such field)."""
+class FaultNotApplicable(AstaaDeftError, ValueError):
+    """The fault does not fit these streams (no such message, no such field): the search skips it (internal)."""
 
 
 def apply_fault(streams: Streams, fault: StreamFault) -> dict[str, list[Received]]:
