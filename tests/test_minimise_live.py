@@ -28,8 +28,10 @@ CULPRITS = {  # defect → (its policy, the field it sets, the invariant that br
 }
 
 
+# Not in the promise subset CI runs: its premise (at least 100 mutations of noise in a 7 s recording) does not
+# hold on a loaded machine — the culprit's window is timed from the first message, not from control's first
+# command (docs/promises.md). `-m slow` runs it.
 @pytest.mark.slow
-@pytest.mark.promise
 @pytest.mark.parametrize("defect", sorted(CULPRITS))
 def test_live_minimisation_finds_the_culprit_and_it_fails_again_live(defect, tmp_path):
     policy, field, invariant = CULPRITS[defect]

@@ -58,24 +58,24 @@ def test_verify_and_export_on_the_demo_with_its_seeded_defects(tmp_path: Path):
     assert set(by_module) == {"control", "planning"}, (bugs, ran)
     off = ("--param", "defects=off", "--param", "control_defects=off")
 
-    fixed = verify(str(out), *off, "--runs", "1", "--label", "all-off", spec=demo_spec_path())
+    fixed = verify(str(out), *off, "--runs", "1", "--label", "all-off", spec=spec)
     assert fixed.returncode == 0, fixed.stdout + fixed.stderr
     assert f"{len(bugs)}/{len(bugs)} bucket(s) fixed" in fixed.stdout, fixed.stdout
 
-    failing = verify(str(out), "--runs", "1", "--label", "all-on", spec=demo_spec_path())
+    failing = verify(str(out), "--runs", "1", "--label", "all-on", spec=spec)
     assert failing.returncode == 1, failing.stdout + failing.stderr
     for name in bugs:
         assert f"{name} still failing: 1/1" in failing.stdout, failing.stdout
 
     one = verify(str(out), "--param", "control_defects=off", "--runs", "1", "--label", "control-fixed",
-                 spec=demo_spec_path())
+                 spec=spec)
     assert one.returncode == 1, one.stdout + one.stderr
     assert f"{by_module['control']} fixed: 0/1" in one.stdout, one.stdout
     assert f"{by_module['planning']} still failing: 1/1" in one.stdout, one.stdout
 
     regress = tmp_path / "regress"
     done = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "export", str(out), "-o", str(regress),
-                           "--spec", str(demo_spec_path())], capture_output=True, text=True, timeout=120)
+                           "--spec", str(spec)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
 
     def pytest_regress(*args: str) -> subprocess.CompletedProcess:
