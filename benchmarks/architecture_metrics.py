@@ -12,7 +12,7 @@ decoder (``from_json``, ``from_*``, ``decode``: the one place a form read
 from a file or a pipe becomes the type); ``Any`` in the public signatures of
 the session, the campaign and the minimiser.
 
-Package-wide (issue 35; everything outside the bundled demo): ``Any`` in
+Package-wide (everything outside the bundled demo): ``Any`` in
 public signatures (module-level functions and classes whose name does not
 start with ``_``, their public methods and ``__init__``, and class
 attributes annotated with ``Any``); functions taking more than four

@@ -1,5 +1,5 @@
 """Runs at once follow the machine: a campaign started beside other CPU load raises its concurrency once the load
-ends (issue 33).
+ends.
 
     python benchmarks/bench_campaign_rise.py [--quick] [--budget S] [--burners N] [--keep DIR]
 

@@ -1,4 +1,4 @@
-"""DeFT on the zoo of module behaviours (issue 31): every member against its plain-replay floor.
+"""DeFT on the zoo of module behaviours: every member against its plain-replay floor.
 
     python benchmarks/bench_deft_zoo.py [--members mpc,each_warm] [--quick] [--pairs 3] [--jobs N]
                                         [--seconds S] [--mode passive|star] [--keep DIR] [--json FILE]
@@ -19,7 +19,7 @@ factory), one recorded run, then:
 - ÷ plain: the extraction's wall time over the plain replay's (reading the log
   included in both), the median of ``--pairs`` interleaved pairs.
 
-Acceptance (issue 31): θ = 0 ≥ floor, suite 100 %, ÷ plain ≤ 2× for members
+Acceptance: θ = 0 ≥ floor, suite 100 %, ÷ plain ≤ 2× for members
 of ≥ 50 ms a cycle. ``--quick``: the short zoo (three members, 2 s of bus
 time each) and one pair. Prints figures; asserts nothing.
 """

@@ -24,7 +24,7 @@ had no replay (whole-system re-runs: 16 tests, 78–98 s, 4.9–6.1 s a test; 94
     3       replay   58 → 1      68 → 1    104 → 1  yes         10     2      0.4    0.04  2/3
     4       replay  182 → 1     206 → 1    102 → 2  yes         19     2      0.7    0.04  1/3
 
-Quiet machine (load < 1), wave 2's last session, --jobs 1: 17, 17, 10 and 10 s whole; the
+Quiet machine (load < 1), --jobs 1: 17, 17, 10 and 10 s whole; the
 minimisation itself 0.7, 3.6, 0.1 and 0.1 s (15, 11, 10, 20 tests); every culprit found, 3/3 confirmed.
 "seconds" is the three stages (s/test: per test). With startup and the three confirmation runs: 23, 34,
 25 and 28 s; with --jobs 2 (confirmations two at a time): 19, 22, 17 and 17 s. Each culprit was stacked

@@ -1,4 +1,4 @@
-"""A catastrophic pattern in a spec never hangs the tool (issue 30): the three acceptance figures, measured once.
+"""A catastrophic pattern in a spec never hangs the tool: the three acceptance figures, measured once.
 
     python benchmarks/bench_redos.py [--duration 8]
 
