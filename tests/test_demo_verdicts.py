@@ -18,6 +18,7 @@ from astaa_deft.cli.commands.demo import DriveOptions, demo_policy_path, demo_sp
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.spec.loader import load_spec
+from stack_timing import unexplained
 
 REPEATS = int(os.environ.get("ASTAA_DEFT_REPEATS", "1"))
 CLEAN = ["lane_follow", *(pytest.param(name, marks=[pytest.mark.slow, pytest.mark.promise])
@@ -39,14 +40,20 @@ def agree_offline(log_path):
 
 @pytest.mark.parametrize("repeat", range(REPEATS))
 @pytest.mark.parametrize("scenario", CLEAN)
-def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
+def test_clean_runs_have_no_violation_their_own_timing_does_not_show(tmp_path, scenario, repeat):
+    """A clean run: the goal, no contact, and no violation but a deadline its module really missed — by its own
+    publish stamps (a loaded machine can make a module late; the monitor is right to say so) — so on a run
+    whose modules kept their deadlines, no violation and Pass. Offline judges the same log the same."""
     log = tmp_path / "run.mcap"
     outcome, watch = drive(DriveOptions(scenario, defects=False, passive=False, record=log, command_line=[]))
     assert watch.goal and watch.collision is None
-    assert outcome.violations == (), [v.invariant for v in outcome.violations]
-    assert outcome.verdict.klass == "Pass"
+    contents, spec = read_log(log), load_spec(demo_spec_path())
+    assert unexplained(outcome.violations, contents, spec) == []
+    if not outcome.violations:
+        assert outcome.verdict.klass == "Pass"
     offline = agree_offline(log)
-    assert offline.verdict.klass == "Pass" and offline.violations == []
+    assert offline.verdict.klass == outcome.verdict.klass
+    assert [(v.invariant, v.seq) for v in offline.violations] == [(v.invariant, v.seq) for v in outcome.violations]
 
 
 @pytest.mark.parametrize("policy,klass,invariants", DEFECTS, ids=[d[0][5:-4] for d in DEFECTS])

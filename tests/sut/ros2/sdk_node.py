@@ -41,6 +41,8 @@ ap.add_argument("--count", type=int, default=40)
 ap.add_argument("--rate", type=float, default=50.0)
 ap.add_argument("--start-delay", type=float, default=1.0)
 ap.add_argument("--node", default=None)
+ap.add_argument("--expect", type=int, default=0,
+                help="listener: exit once this many messages arrived, decoded and raw (0: run until stopped)")
 args = ap.parse_args()
 
 stop = threading.Event()
@@ -154,9 +156,19 @@ elif args.role == "client":
 else:
     raw = open(args.out + ".raw", "w", buffering=1)  # noqa: SIM115
 
+    arrived = {"decoded": 0, "raw": 0}
+    counting = threading.Lock()
+
+    def count(kind):
+        with counting:
+            arrived[kind] += 1
+            if args.expect and min(arrived.values()) >= args.expect:
+                stop.set()  # the run's end: every expected message has arrived
+
     def on_message(msg):
         out.write(json.dumps({"linear": [msg.linear.x, msg.linear.y, msg.linear.z],
                               "angular": [msg.angular.x, msg.angular.y, msg.angular.z]}) + "\n")
+        count("decoded")
 
     subscriber = ROS2Subscriber(topic=args.topic, msg_type=TWIST, callback=on_message,
                                 node_name=args.node or "base", router_ip=router_ip, router_port=router_port)
@@ -164,6 +176,7 @@ else:
     def on_raw(sample):
         attachment = sample.attachment.to_bytes() if sample.attachment is not None else b""
         raw.write(json.dumps({"payload": sample.payload.to_bytes().hex(), "attachment": attachment.hex()}) + "\n")
+        count("raw")
 
     raw_sub = subscriber.session_mgr.session.declare_subscriber(subscriber.keyexpr, on_raw)
     print(f"listener: subscribed to {subscriber.keyexpr}", flush=True)
