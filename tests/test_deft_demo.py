@@ -17,6 +17,7 @@ from astaa_deft.analysis.deft.replay import make_planner
 from astaa_deft.model.errors import InputError
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.spec.loader import load_spec, load_spec_text
+from zoo.floor import output_key, plain_floor
 
 PARAMS = {"scenario": "lane_follow", "defects": "off"}
 
@@ -35,15 +36,24 @@ def recorded(tmp_path_factory):
     return spec, path
 
 
-def test_in_process_replay_reproduces_every_output(recorded):
+def test_in_process_replay_reproduces_at_least_what_a_plain_replay_of_its_recording_does(recorded):
+    """Every output a plain replay of this very recording reproduces, DeFT reproduces too (the floor, as in the
+    zoo). On a quiet machine that is every output (pinned on a committed recording:
+    test_deft_extraction_pinned.py); a loaded machine's planner starts its cycles late, and how many of its
+    frames the candidates then hold is the recording's doing."""
     spec, path = recorded
     ex = extract(read_log(path), spec, make_planner(spec, PARAMS))
     assert ex.outputs > 50 and not ex.skipped
     rate = ex.accepted_at(0.0) / ex.outputs
     exact, checked = ground_truth_rate(ex, spec, "debug.inputs")
-    print(f"reproduced at θ=0: {rate:.1%}; exact inputs {exact}/{checked}; "
-          f"reconstruction {ex.reconstruction_seconds / len(ex.frames) * 1e3:.3f} ms/frame")
-    assert ex.accepted_at(0.0) == ex.outputs  # every output, exactly
+    floor = plain_floor(demo_spec_path(), None, path, params=PARAMS)
+    print(f"reproduced at θ=0: {rate:.1%}; a plain replay: {floor.count} of {floor.outputs}; exact inputs "
+          f"{exact}/{checked}; reconstruction {ex.reconstruction_seconds / len(ex.frames) * 1e3:.3f} ms/frame")
+    kept = {output_key(f.output) for f in ex.frames if f.comparison.distance <= 0.0 and f.output is not None}
+    outputs = sorted(read_log(path).on(spec.channel("trajectory").key), key=lambda m: m.log_time)
+    lost = [n for n, (m, plain) in enumerate(zip(outputs, floor.reproduced, strict=True))
+            if plain and output_key(m) not in kept]
+    assert lost == [] and ex.accepted_at(0.0) >= floor.count
     # The exact-input rate vs the planner's own record is an evaluation figure (benchmarks/):
     # latched inputs re-sent with identical content make a "wrong" seq harmless for the output.
 
