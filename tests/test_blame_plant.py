@@ -13,15 +13,8 @@ import pytest
 
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.model.errors import InputError
-from astaa_deft.orchestration.campaign.blame import (
-    MUTATED_VALUE,
-    THE_MUTATED_VALUE,
-    Blame,
-    RunSeries,
-    blame,
-    root_cause_of,
-)
-from astaa_deft.orchestration.campaign.rows import BlameRow
+from astaa_deft.orchestration.campaign.blame import Blame, RunSeries, blame
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE, THE_MUTATED_VALUE, BlameRow, root_cause_of
 
 from blame_series import series
 
@@ -166,7 +159,7 @@ def test_a_plant_that_is_not_true_or_false_is_one_clear_error(tmp_path: Path, va
 def test_a_bucket_blamed_on_the_mutated_value_gets_no_module_tests_and_an_unknown_blame_falls_back(tmp_path: Path):
     from astaa_deft.demo.bundled import demo_spec_path
     from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-    from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+    from astaa_deft.orchestration.journal.journal import Bucket, Journal
 
     def bucket(name: str, module: str) -> Bucket:
         return Bucket(name, "sig", "Silent", "speed_limit", module, "command:acceleration:set", "c-000001", False, 1,

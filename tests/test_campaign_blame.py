@@ -10,8 +10,8 @@ import pytest
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.blame import RunSeries, bin_features, blame, departures, features
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome
 from astaa_deft.orchestration.campaign.signature import field_family
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy

@@ -19,7 +19,7 @@ import pytest
 from dask.distributed import Client, LocalCluster
 
 from astaa_deft.orchestration.campaign.executors import DaskPool
-from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
 from astaa_deft.orchestration.campaign.payload import case_json
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.orchestration.campaign.strategies.base import Timing

@@ -17,8 +17,8 @@ import pytest
 from astaa_deft.orchestration.campaign import known as known_mod
 from astaa_deft.orchestration.campaign.calibration import run_share, workers_for
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome, ChannelRate, Finding
 from astaa_deft.orchestration.campaign.runner import run_case
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import pytest
 
-from astaa_deft.orchestration.campaign.model import MUTATED, CaseOutcome, PlannedCase
+from astaa_deft.orchestration.journal.model import MUTATED, CaseOutcome, PlannedCase
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.demo.bundled import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary

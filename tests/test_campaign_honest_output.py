@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
-from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.journal.model import (
     MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.report import write_report
@@ -123,8 +123,8 @@ def test_a_campaign_of_unconfirmed_buckets_finds_no_bug(tmp_path: Path):
 def test_a_bucket_where_the_fault_alone_breaks_the_invariant_is_listed_apart_and_never_a_confirmed_bug(tmp_path):
     """The demo's case: an acceleration held at its declared maximum pushes the simulator (a plant) over the speed
     limit; blame finds no module under test that departed from its twins, so the fault did it alone."""
-    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-    from astaa_deft.orchestration.campaign.rows import BlameRow
+    from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+    from astaa_deft.orchestration.journal.rows import BlameRow
     from astaa_deft.orchestration.campaign.standing import FAULT_ALONE
 
     out = tmp_path / "campaign"
@@ -159,8 +159,8 @@ def test_the_demos_headline_counts_no_bucket_where_the_fault_alone_breaks_the_in
     import subprocess
     import sys
 
-    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-    from astaa_deft.orchestration.campaign.journal import open_existing
+    from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+    from astaa_deft.orchestration.journal.journal import open_existing
 
     out = tmp_path / "campaign"
     code = ("import sys; from pathlib import Path; from astaa_deft.demo.bundled import demo_spec_path; "

@@ -14,8 +14,8 @@ from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.campaign import (
     CLEAN_RUN_CAP, DEFAULT_HORIZON, HORIZON_SLACK, Campaign, CampaignConfig, clean_horizon, derived_horizon,
 )
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 SUT = Path(__file__).parent / "sut"
 SCENARIO = SUT / "scenario.yaml"
@@ -40,7 +40,7 @@ def test_clean_runs_are_bounded_by_the_specs_run_section_and_cases_by_the_clean_
 
 
 def test_a_resumed_campaign_derives_its_horizon_again_and_keeps_a_given_one():
-    from astaa_deft.orchestration.campaign.rows import CampaignMeta
+    from astaa_deft.orchestration.journal.rows import CampaignMeta
 
     config = CampaignConfig(spec_path=SCENARIO, out=Path("c"))
     assert config.resuming(CampaignMeta(horizon=14.5, horizon_derived=True)).horizon is None

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign.executors import LocalPool
-from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
 from astaa_deft.orchestration.campaign.payload import case_json
 
 ECHO = Path(__file__).parent / "sut" / "echo.yaml"

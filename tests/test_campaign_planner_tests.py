@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX, Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
 from astaa_deft.orchestration.campaign.runner import run_case
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary

@@ -10,8 +10,8 @@ import pytest
 from astaa_deft.model.errors import InputError
 
 from astaa_deft.engine.intercept.testcase import parse_testcase
-from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.journal.model import (
     BASELINE, MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.report import write_report

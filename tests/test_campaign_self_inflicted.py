@@ -21,7 +21,7 @@ import ompl  # noqa: F401  -- in the test extra; the stack's planner needs it (a
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.originals import broken_on_originals
 from astaa_deft.engine.session.check import check_recorded_run
 from astaa_deft.engine.spec.loader import load_spec

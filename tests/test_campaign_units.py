@@ -13,8 +13,8 @@ import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.campaign import default_workers, param_grid
-from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.journal.model import (
     MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
@@ -328,7 +328,7 @@ CREATE TABLE minimisations (
 
 
 def test_a_journal_of_the_first_version_reads_as_typed_rows(tmp_path: Path):
-    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseStatus
+    from astaa_deft.orchestration.journal.model import BucketKind, CaseKind, CaseStatus
     from astaa_deft.orchestration.campaign.report import write_report
 
     db = sqlite3.connect(tmp_path / "journal.sqlite")
@@ -386,7 +386,7 @@ def test_every_strategy_declares_the_campaigns_hooks_and_the_defaults_change_not
 def test_vocabularies_and_signatures_keep_their_text_forms():
     import json
 
-    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind
+    from astaa_deft.orchestration.journal.model import BucketKind, CaseKind
     from astaa_deft.orchestration.campaign.payload import case_json
     from astaa_deft.orchestration.campaign.standing import BucketStatus
 

@@ -61,7 +61,7 @@ def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_ful
     from astaa_deft.engine.bus.processes import python_module
     from astaa_deft.io import pipe_messages
     from astaa_deft.io.pipe_messages import bytes_reader
-    from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
     from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage, case_json
 
     case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
@@ -105,7 +105,7 @@ def test_no_recorder_is_forked_from_a_process_with_other_threads():
 
 
 def _echo_payload(tmp_path: Path, name: str) -> dict:
-    from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
     from astaa_deft.orchestration.campaign.payload import case_json
 
     case = PlannedCase(name, BASELINE, 1, 0, PARAMS, None)

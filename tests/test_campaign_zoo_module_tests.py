@@ -130,7 +130,7 @@ def test_the_fuzz_command_on_a_slow_channel_member_every_bucket_gets_failing_mod
                            "--no-module-level"],  # the live buckets' suites (the module level's: test_module_level)
                           capture_output=True, text=True, timeout=900, env=env)
     assert done.returncode in (0, 1), done.stdout[-3000:] + done.stderr[-3000:]
-    from astaa_deft.orchestration.campaign.journal import open_existing
+    from astaa_deft.orchestration.journal.journal import open_existing
 
     journal = open_existing(out)
     try:

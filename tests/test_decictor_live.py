@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.journal import Journal, NewBucket
-from astaa_deft.orchestration.campaign.model import MUTATED, BucketSignature, FailureKey, PlannedCase
+from astaa_deft.orchestration.journal.journal import Journal, NewBucket
+from astaa_deft.orchestration.journal.model import MUTATED, BucketSignature, FailureKey, PlannedCase
 from astaa_deft.orchestration.campaign.runner import run_case
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_testcase
 from astaa_deft.cli.commands.demo import demo_spec_path

@@ -15,7 +15,7 @@ import pytest
 from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.monitor.error_signature import ErrorSignature, signature_of_output
 from astaa_deft.orchestration.campaign.campaign import shows_failure
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.signature import failure_key, same_failure
 
 from monitor_helpers import HandMadeLog, load

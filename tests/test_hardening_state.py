@@ -168,10 +168,10 @@ invariants:
 def make_journal(work: Path) -> Path:
     from test_campaign_report import _case, _signature
 
-    from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-    from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, Finding, Timing
-    from astaa_deft.orchestration.campaign.rows import BlameRow
-    from astaa_deft.orchestration.verify.records import TABLE as VERIFICATIONS_TABLE
+    from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+    from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, Finding, Timing
+    from astaa_deft.orchestration.journal.rows import BlameRow
+    from astaa_deft.orchestration.journal.verifications import TABLE as VERIFICATIONS_TABLE
 
     spec = work / "fuzz.yaml"
     spec.write_text(FUZZ_SPEC)

@@ -28,7 +28,7 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.orchestration.campaign.baseline import (
     LEARNING_SHUTDOWN_DELAY, learned_shutdown_delays, learning_shutdown_delays,
 )
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 TICKS = Path(__file__).parent / "sut" / "ticks.yaml"
 LOAD = "while True: pass"  # one core kept busy

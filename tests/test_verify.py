@@ -16,18 +16,18 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.journal import Journal, open_existing
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.orchestration.verify.bisect import search
 from astaa_deft.orchestration.campaign.report import write_report
-from astaa_deft.orchestration.verify import records
-from astaa_deft.orchestration.verify.history import fixed_buckets, history
-from astaa_deft.orchestration.verify.model import (
+from astaa_deft.orchestration.journal import verifications
+from astaa_deft.orchestration.journal.history import fixed_buckets, history
+from astaa_deft.orchestration.journal.checks import (
     BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
 )
-from astaa_deft.orchestration.verify.records import VerificationRow, verifications
+from astaa_deft.orchestration.journal.verifications import VerificationRow, verifications
 
 SUT = Path(__file__).parent / "sut"
 STEADY = SUT / "steady.yaml"
@@ -115,7 +115,7 @@ def test_a_resumed_campaign_reopens_a_bucket_verified_fixed_when_a_case_fails_it
         steady_campaign: Path):
     journal = open_existing(steady_campaign)
     try:  # as `verify --label v4` records it, without its runs
-        records.record(journal, BucketCheck("B001", "v4", VerifyStatus.FIXED, Tally(1), Tally(1), None, "", {},
+        verifications.record(journal, BucketCheck("B001", "v4", VerifyStatus.FIXED, Tally(1), Tally(1), None, "", {},
                                             False))
         assert fixed_buckets(verifications(journal)) == {"B001"}
     finally:

@@ -8,13 +8,13 @@ import time
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped, StopReason
-from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_existing
+from astaa_deft.orchestration.journal.journal import FILE_NAME, Journal, open_existing
 from astaa_deft.orchestration.campaign.progress import Progress, snapshot
 from astaa_deft.orchestration.campaign.module_level import status_lines as module_level_status
-from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsRow
+from astaa_deft.orchestration.journal.rows import MinimisationRow, ModuleTestsRow
 from astaa_deft.orchestration.campaign.standing import Standing, headline, most_severe, standings
-from astaa_deft.orchestration.verify.history import histories
-from astaa_deft.orchestration.verify.records import verifications
+from astaa_deft.orchestration.journal.history import histories
+from astaa_deft.orchestration.journal.verifications import verifications
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.cli.commands.console import PlainLines, say, stop_as_interrupt

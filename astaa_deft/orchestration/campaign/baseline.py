@@ -15,9 +15,9 @@ from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.payload import CasePool
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.rows import CaseRow
 from astaa_deft.orchestration.campaign.known import known_findings
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, BASELINE_FINDING, CONTROL, MUTATED, BucketSignature, CaseOutcome, CaseStatus, PlannedCase, Timing,
 )
 from astaa_deft.orchestration.campaign.parts import CampaignParts

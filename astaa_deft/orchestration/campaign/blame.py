@@ -51,14 +51,13 @@ from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE, root_cause_of
 
 BIN_SECONDS = 0.5
 NOISE_FACTOR = 2.0  # a number departs beyond this many times the largest spread seen without the mutation
 SCALE_SHARE = 0.05  # … and beyond this share of its scale
 MAX_STRING = 32  # longer strings are not compared (ids, free text)
 COUNT = "#count"
-MUTATED_VALUE = "mutated value"  # Blame.how: a plant carried the mutated value on; no module under test is to blame
-THE_MUTATED_VALUE = "the mutated value itself"  # what such a blame names as the root cause
 
 Features = dict[str, float]
 Series = dict[str, dict[int, Features]]  # channel → bin → features
@@ -109,14 +108,6 @@ class Blame:
     def root_cause(self) -> str | None:
         """The root cause it names (:func:`root_cause_of`)."""
         return root_cause_of(self.module, self.how)
-
-
-def root_cause_of(module: str | None, how: str) -> str | None:
-    """The root cause a blame names, as bucket identity and the user see it: the module to blame, "the mutated
-    value itself" when a plant carried the value on, None when nothing says."""
-    if module is not None:
-        return module
-    return THE_MUTATED_VALUE if how == MUTATED_VALUE else None
 
 
 RANK = {"non-finite": 0, "silent": 1, "value": 2}

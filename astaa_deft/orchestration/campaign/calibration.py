@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 CORE_HEADROOM = 0.75  # share of the cores the runs may use: the campaign, the OS and jitter need the rest
 MEMORY_HEADROOM = 0.5  # share of the available memory the runs may use

@@ -28,16 +28,16 @@ from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.params import check_grid, check_param_values, spread_choices
 from astaa_deft.engine.spec.loader import load_spec
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.payload import CasePool
-from astaa_deft.orchestration.campaign.rows import CampaignMeta
+from astaa_deft.orchestration.journal.rows import CampaignMeta
 from astaa_deft.orchestration.campaign.known import KnownFinding
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     CONFIRMING, CONTROL, MUTATED, RERUN, CaseOutcome, PlannedCase, TextEnum, Timing,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES, Strategy
-from astaa_deft.orchestration.verify import records as verification
-from astaa_deft.orchestration.verify.history import fixed_buckets
+from astaa_deft.orchestration.journal import verifications as verification
+from astaa_deft.orchestration.journal.history import fixed_buckets
 from astaa_deft.orchestration.campaign.baseline import (
     HORIZON_SLACK, CampaignStopped, Baseline, derived_horizon, live_timing,
 )

@@ -25,7 +25,7 @@ from astaa_deft.io import pipe_messages
 from astaa_deft.io.pipe_messages import FrameError, bytes_reader
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
 from astaa_deft.orchestration.campaign.zygote import Zygote, stop_group
 

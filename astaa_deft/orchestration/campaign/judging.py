@@ -13,16 +13,16 @@ from pathlib import Path
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.blame import BlameUnavailable, blame_logs
-from astaa_deft.orchestration.campaign.journal import Bucket
-from astaa_deft.orchestration.campaign.rows import BlameRow, CaseRow, NewBucket
+from astaa_deft.orchestration.journal.journal import Bucket
+from astaa_deft.orchestration.journal.rows import BlameRow, CaseRow, NewBucket
 from astaa_deft.orchestration.campaign.known import judged
 from astaa_deft.orchestration.campaign.minimiser import Minimised
 from astaa_deft.orchestration.campaign.minimiser import summary as minimised_summary
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, BucketKind, BucketSignature,
     CaseOutcome, CaseStatus, FailureKey, PlannedCase,
 )
-from astaa_deft.orchestration.verify import records as verification
+from astaa_deft.orchestration.journal import verifications as verification
 from astaa_deft.orchestration.campaign.parts import CampaignParts
 
 

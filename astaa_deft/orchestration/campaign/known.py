@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from astaa_deft.model.json import JsonObject
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 EARLIER_SECONDS = 1.0  # a violation this much earlier than every clean run's (and …)
 EARLIER_SHARE = 0.25  # … this share of the clean runs' earliest time) is earlier, not jitter

@@ -13,9 +13,9 @@ from dataclasses import replace
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign import signature as sig
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.rows import Minimisation
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.rows import Minimisation
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
     TestsVerdict, is_crash_bucket, replayable, run_module_tests,

@@ -54,10 +54,10 @@ from astaa_deft.io.log.reader import read_log
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus, PlannedCase
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, CaseStatus, PlannedCase
 from astaa_deft.orchestration.campaign.parts import CampaignParts
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.rows import CaseRow
 
 DIR_NAME = "module_level"
 STATE_FILE = "state.json"

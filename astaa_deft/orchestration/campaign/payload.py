@@ -24,12 +24,7 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseKind, CaseOutcome, PlannedCase
-
-
-def testcase_text(testcase: TestCase | None) -> str | None:
-    """A test case's stored form (the journal's column, the payload's key); None for a clean run."""
-    return testcase.to_xml().decode() if testcase is not None else None
+from astaa_deft.orchestration.journal.model import CaseKind, CaseOutcome, PlannedCase, testcase_text
 
 
 def read_testcase(text: str | None, name: str, spec: Spec | None = None,

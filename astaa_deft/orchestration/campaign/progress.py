@@ -8,9 +8,9 @@ import time
 from dataclasses import dataclass
 from typing import TextIO
 
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import MUTATED
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import MUTATED
 
 PLAIN_EVERY_SECONDS = 10.0
 

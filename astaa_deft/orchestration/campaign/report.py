@@ -34,9 +34,9 @@ from astaa_deft.model.records import Verdict
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX
 from astaa_deft.orchestration.campaign.module_level import status_lines as module_level_status
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
-from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus
-from astaa_deft.orchestration.campaign.rows import Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow
+from astaa_deft.orchestration.journal.journal import Journal, open_existing
+from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, CaseStatus
+from astaa_deft.orchestration.journal.rows import Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow
 from astaa_deft.orchestration.campaign.standing import CONFIRMED, Standing, headline, most_severe, standings
 
 if TYPE_CHECKING:  # matplotlib is imported when the plots are drawn, not with the module
@@ -228,8 +228,8 @@ class _VerifiedRow:
 
 def _verification(journal: Journal) -> list[_VerifiedRow]:
     """Each verified bucket's latest check and history (``astaa-deft verify``); none: the section is left out."""
-    from astaa_deft.orchestration.verify.history import histories
-    from astaa_deft.orchestration.verify.records import verifications
+    from astaa_deft.orchestration.journal.history import histories
+    from astaa_deft.orchestration.journal.verifications import verifications
 
     rows = verifications(journal)
     out = []

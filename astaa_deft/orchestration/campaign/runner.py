@@ -39,8 +39,8 @@ from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.session import RunOptions, RunResult, RunView, run_session
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
-from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
-from astaa_deft.orchestration.campaign.payload import testcase_text
+from astaa_deft.orchestration.journal.model import CaseOutcome, ChannelRate, Finding
+from astaa_deft.orchestration.journal.model import testcase_text
 
 POLL_SECONDS = 0.05
 LOG_NAME = "run.mcap"

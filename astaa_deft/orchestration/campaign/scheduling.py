@@ -19,8 +19,8 @@ from astaa_deft.orchestration.campaign.calibration import (
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
 from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
-from astaa_deft.orchestration.campaign.rows import CaseRow
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.rows import CaseRow
+from astaa_deft.orchestration.journal.model import (
     BASELINE, CONTROL, MUTATED, RERUN, CaseOutcome, CaseStatus, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.parts import CampaignParts

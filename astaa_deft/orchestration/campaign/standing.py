@@ -22,11 +22,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from astaa_deft.engine.monitor.violation import SEVERITIES
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
 from astaa_deft.model.vocabulary import TextEnum
-from astaa_deft.orchestration.campaign.model import BucketKind
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.model import BucketKind
+from astaa_deft.orchestration.journal.rows import CaseRow
 from astaa_deft.orchestration.campaign.signature import primary
 
 

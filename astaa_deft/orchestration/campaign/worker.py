@@ -34,7 +34,7 @@ from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.session.bus_run import release_warm_recorder, warm_recorder
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.forked import fork_recorder
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
 from astaa_deft.orchestration.campaign.runner import run_case
 

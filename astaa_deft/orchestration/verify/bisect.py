@@ -22,7 +22,7 @@ from pathlib import Path
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import subdir_inside
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.orchestration.verify.model import FAILING_STATUSES, VerifyStatus
+from astaa_deft.orchestration.journal.checks import FAILING_STATUSES, VerifyStatus
 from astaa_deft.orchestration.verify.revision import describe, git
 from astaa_deft.orchestration.verify.workflow import (
     CampaignFindings, VerifyOptions, check_options, check_params, targets, verify_targets, VERIFY_DIR, _slug,

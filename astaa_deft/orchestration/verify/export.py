@@ -31,7 +31,7 @@ from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import OutputError, Place, ready_dir, subdir_inside, write_atomic, writing
 from astaa_deft.model.data_names import python_name
 from astaa_deft.model.errors import Problem
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_SETTLE, culprit_family
 from astaa_deft.orchestration.campaign.standing import FAULT_ALONE_WHY
 from astaa_deft.orchestration.verify.regress import MANIFEST, MARKERS

@@ -92,7 +92,7 @@ def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
     from astaa_deft.orchestration.campaign import signature as sig
     from astaa_deft.orchestration.campaign.known import from_json as known_from_json, judged
     from astaa_deft.orchestration.campaign.runner import run_case
-    from astaa_deft.orchestration.verify.model import FailureWay
+    from astaa_deft.orchestration.journal.checks import FailureWay
 
     entry = suite.bucket(name)
     spec = load_spec(suite.spec_path())

@@ -5,8 +5,8 @@ failing test case) runs live N times beside N unmutated twins — the same
 spec, params (``--param`` overriding the case's, as in ``proxy``), horizon,
 settle time, known baseline findings and runs at once as the campaign's,
 through the campaign's own case pool — and its module tests run once with
-the same params. ``model.classify`` decides fixed / still failing / changed /
-flaky; each check goes into the journal (``records.py``) with the stack's
+the same params. ``journal.checks.classify`` decides fixed / still failing / changed /
+flaky; each check goes into the journal (``orchestration/journal/verifications.py``) with the stack's
 revision. Runs go to ``DIR/verify/<revision>-<time>/``.
 """
 
@@ -29,18 +29,18 @@ from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.baseline import learned_shutdown_delays
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_HORIZON, DEFAULT_SETTLE, default_workers
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
+from astaa_deft.orchestration.journal.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.journal_spec import journal_spec
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, CONTROL, MUTATED, RERUN, CaseOutcome, CaseStatus, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.module_tests import is_crash_bucket, run_module_tests
 from astaa_deft.orchestration.campaign.payload import CasePayload, read_testcase
-from astaa_deft.orchestration.campaign.rows import Bucket
-from astaa_deft.orchestration.verify import records
+from astaa_deft.orchestration.journal.rows import Bucket
+from astaa_deft.orchestration.journal import verifications
 from astaa_deft.orchestration.verify.campaign_files import copy_module_suite, tests_dir_inside
-from astaa_deft.orchestration.verify.model import (
+from astaa_deft.orchestration.journal.checks import (
     FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
 )
 from astaa_deft.orchestration.verify.revision import describe
@@ -51,7 +51,7 @@ EXIT_NOT_OBSERVED = 3
 
 
 MAX_LABEL_CHARS = 200  # a revision label (--label, git describe): one line the report shows
-MAX_PARAM_CHARS = 10_000  # a --param value: what the journal's reader takes back (journal_rows.MAX_PARAM)
+MAX_PARAM_CHARS = 10_000  # a --param value: what the journal's reader takes back (checked_rows.MAX_PARAM)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -315,7 +315,7 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
         module, detail = _module_tests(campaign, target, out_dir, options.params)
         check = BucketCheck(target.bucket.bucket, revision, classify(rerun_tally, twin_tally), rerun_tally,
                             twin_tally, module, detail, target.params, target.minimal)
-        records.record(campaign.journal, check)
+        verifications.record(campaign.journal, check)
         say(f"  {check.describe()}")
         checks.append(check)
     return checks

@@ -29,8 +29,8 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Policy, TestCase
 from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy
 
 INVARIANT = "path_consistency"

@@ -30,8 +30,8 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.analysis.decictor.search import Scene
 from astaa_deft.engine.intercept.actions.participant import Participant
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.rows import CaseRow, Minimisation
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.rows import CaseRow, Minimisation
 from astaa_deft.orchestration.campaign.payload import read_testcase
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, scene_of
 

@@ -30,7 +30,7 @@ from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Selection, TestCase
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
+from astaa_deft.orchestration.journal.model import CaseOutcome, PlannedCase
 from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy, Timing
 from astaa_deft.orchestration.campaign.strategies.random import RandomStrategy
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from astaa_deft.orchestration.verify.model import FAILING_STATUSES, VerifyStatus
-from astaa_deft.orchestration.verify.records import VerificationRow
+from astaa_deft.orchestration.journal.checks import FAILING_STATUSES, VerifyStatus
+from astaa_deft.orchestration.journal.verifications import VerificationRow
 
 
 @dataclass(frozen=True)

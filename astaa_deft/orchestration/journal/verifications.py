@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 from astaa_deft.io.output_place import OutputError
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.journal_rows import VERIFICATIONS, checked_columns
-from astaa_deft.orchestration.verify.model import BucketCheck, VerifyStatus
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.checked_rows import VERIFICATIONS, checked_columns
+from astaa_deft.orchestration.journal.checks import BucketCheck, VerifyStatus
 
 TABLE = """
 CREATE TABLE IF NOT EXISTS verifications (

@@ -198,3 +198,8 @@ class CaseOutcome:
         klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c is Verdict.PASS)
         return replace(self, verdict=klass if klass is not Verdict.PASS else self.verdict, findings=kept,
                        summary=self.summary + note)
+
+
+def testcase_text(testcase: TestCase | None) -> str | None:
+    """A test case's stored form (the journal's column, the payload's key); None for a clean run."""
+    return testcase.to_xml().decode() if testcase is not None else None

@@ -14,10 +14,22 @@ from typing import Any
 
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.json import JsonObject
-from astaa_deft.orchestration.campaign.blame import root_cause_of
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BUG, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus, PlannedCase, Timing,
 )
+
+# A blame's ``how`` when a plant carried the mutated value on (no module under test is to blame), and the root
+# cause such a blame names. Here, not in ``campaign/blame.py``: the journal's blame rows name it too.
+MUTATED_VALUE = "mutated value"
+THE_MUTATED_VALUE = "the mutated value itself"
+
+
+def root_cause_of(module: str | None, how: str) -> str | None:
+    """The root cause a blame names, as bucket identity and the user see it: the module to blame, "the mutated
+    value itself" when a plant carried the value on, None when nothing says."""
+    if module is not None:
+        return module
+    return THE_MUTATED_VALUE if how == MUTATED_VALUE else None
 
 
 @dataclass(frozen=True)

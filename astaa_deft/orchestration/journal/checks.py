@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from astaa_deft.model.vocabulary import TextEnum
-from astaa_deft.orchestration.campaign.model import NO_MODULE, CaseOutcome
+from astaa_deft.orchestration.journal.model import NO_MODULE, CaseOutcome
 
 
 class VerifyStatus(TextEnum):
