@@ -22,7 +22,7 @@ from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.orchestration.verify.bisect import search
 from astaa_deft.orchestration.campaign.report import write_report
-from astaa_deft.orchestration.journal import verifications
+from astaa_deft.orchestration.journal.verifications import record as record_check
 from astaa_deft.orchestration.journal.history import fixed_buckets, history
 from astaa_deft.orchestration.journal.checks import (
     BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
@@ -115,7 +115,7 @@ def test_a_resumed_campaign_reopens_a_bucket_verified_fixed_when_a_case_fails_it
         steady_campaign: Path):
     journal = open_existing(steady_campaign)
     try:  # as `verify --label v4` records it, without its runs
-        verifications.record(journal, BucketCheck("B001", "v4", VerifyStatus.FIXED, Tally(1), Tally(1), None, "", {},
+        record_check(journal, BucketCheck("B001", "v4", VerifyStatus.FIXED, Tally(1), Tally(1), None, "", {},
                                             False))
         assert fixed_buckets(verifications(journal)) == {"B001"}
     finally:
