@@ -68,7 +68,8 @@ def test_a_resumed_guided_search_goes_on_with_its_schedule(demo):
                           CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.5}))
     resumed = STRATEGIES["guided"](spec, dictionary, 5, 20.0)
     resumed.observe_baseline("b-0001", BASELINE)
-    resumed.resume([PlannedCase(case_id, MUTATED, n, 5, {}, xml, "guided", parent)
+    resumed.resume([PlannedCase(case_id=case_id, kind=MUTATED, number=n, seed=5, params={}, testcase=xml,
+                                strategy="guided", parent=parent)
                     for n, (case_id, xml, parent) in enumerate(planned, start=1)])
     resumed.observe("c-000003", planned[2][1], CaseOutcome("done", "Pass", "", margins={"planned_speed": 0.5}))
     already = {_body(xml) for _, xml, parent in planned if parent is None}

@@ -54,7 +54,8 @@ def test_the_verdict_line_names_the_most_severe_finding_and_still_says_which_cam
 def _bucket(journal: Journal, name: str, finding: Finding, *, reruns: int = 0, failures: int = 0,
             without_mutation: bool = False) -> None:
     case = f"c-{name}"
-    journal.plan(PlannedCase(case, MUTATED, int(name[1:]), 1, {}, None, "random"))
+    journal.plan(PlannedCase(case_id=case, kind=MUTATED, number=int(name[1:]), seed=1, params={}, testcase=None,
+                             strategy="random"))
     signature = BucketSignature(FailureKey(finding.crash, finding.invariant, finding.module or "-"), "ego:x:set")
     journal.finished(case, CaseOutcome("done", finding.crash, "…", [finding]), signature=signature, bucket=name)
     journal.add_bucket(NewBucket(name, signature, finding.crash, finding.invariant, finding.module, case,

@@ -17,7 +17,8 @@ def test_two_concurrent_cases_never_hear_each_other(tmp_path: Path):
     counts = {"a": "30", "b": "70"}
     try:
         for name, count in counts.items():
-            case = PlannedCase(name, BASELINE, 1, 0, {"count": count, "rate": "100"}, None)
+            case = PlannedCase(case_id=name, kind=BASELINE, number=1, seed=0, params={"count": count, "rate": "100"},
+                               testcase=None)
             pool.submit(name, {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / name),
                                "horizon": 3.0, "dictionaries": []})
         outcomes = {}

@@ -22,8 +22,9 @@ XML = '<testcase id="tc-{n}" seed="{n}"><description/><policy id="p"><channel>ro
 
 def _case(journal: Journal, out: Path, case_id: str, kind: str, n: int, verdict: str, reason: str,
           bucket: str | None = None, finding: Finding | None = None) -> None:
-    journal.plan(PlannedCase(case_id, kind, n, 1, {"scenario": "lane_follow"},
-                             None if kind == BASELINE else parse_testcase(XML.format(n=n).encode()), "random"))
+    journal.plan(PlannedCase(case_id=case_id, kind=kind, number=n, seed=1, params={"scenario": "lane_follow"},
+                             testcase=None if kind == BASELINE else parse_testcase(XML.format(n=n).encode()),
+                             strategy="random"))
     journal.started(case_id)
     log = out / "cases" / case_id / "run.mcap"
     outcome = CaseOutcome("done", verdict, f"{verdict}: …", [finding] if finding else [], 3.0, str(log), reason,

@@ -177,7 +177,8 @@ def test_budget_and_default_workers():
 def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
     journal = Journal(tmp_path)
     for n in range(1, 4):
-        journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, TestCase(f"tc-{n}", n, "x", ())))
+        journal.plan(PlannedCase(case_id=f"c-{n}", kind=MUTATED, number=n, seed=1, params={},
+                                 testcase=TestCase(f"tc-{n}", n, "x", ())))
         journal.started(f"c-{n}")
     journal.finished("c-1", CaseOutcome("done", "Pass", "ok"))
     journal.close()
@@ -190,7 +191,7 @@ def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
 
 def test_journal_on_a_read_only_file_is_one_clear_message(tmp_path: Path):
     journal = Journal(tmp_path)
-    journal.plan(PlannedCase("c-1", MUTATED, 1, 1, {}, None))
+    journal.plan(PlannedCase(case_id="c-1", kind=MUTATED, number=1, seed=1, params={}, testcase=None))
     journal.close()
     ro = sqlite3.connect(f"file:{tmp_path / 'journal.sqlite'}?mode=ro", uri=True)
     journal.db = ro
@@ -392,7 +393,8 @@ def test_vocabularies_and_signatures_keep_their_text_forms():
 
     assert (f"{CaseKind.RERUN}", str(BucketKind.BASELINE), f"{BucketStatus.WITHOUT_MUTATION:18}|") == (
         "rerun", "baseline", "without mutation  |")
-    assert json.dumps(case_json(PlannedCase("c-1", MUTATED, 1, 2, {}, None))).startswith(
+    assert json.dumps(case_json(PlannedCase(case_id="c-1", kind=MUTATED, number=1, seed=2, params={},
+                                            testcase=None))).startswith(
         '{"case_id": "c-1", "kind": "mutated"')
     signature = BucketSignature(FailureKey("Silent", "speed_limit", "-"), "routing:speed_limit:set")
     assert signature.text() == "Silent|speed_limit|-|routing:speed_limit:set"
@@ -406,13 +408,14 @@ def test_a_test_case_is_an_object_until_the_payload_or_the_journal_stores_it(dem
 
     spec, dictionary = demo
     testcase = STRATEGIES["random"](spec, dictionary, 7, 20.0).propose(1).testcase
-    case = PlannedCase("c-000001", MUTATED, 1, 7, {}, testcase)
-    payload = CasePayload("spec.yaml", case, "run", 5.0, (), settle=1.0, known=())
+    case = PlannedCase(case_id="c-000001", kind=MUTATED, number=1, seed=7, params={}, testcase=testcase)
+    payload = CasePayload(spec="spec.yaml", case=case, run_dir="run", horizon=5.0, dictionaries=(), settle=1.0,
+                          known=())
     received = CasePayload.from_json(json.loads(json.dumps(payload.to_json())))
     assert received.to_json() == payload.to_json()  # a pool forwards it as it came
     assert received.testcase(spec, dictionary) == testcase == payload.testcase(spec, dictionary)
-    clean = CasePayload.from_json(CasePayload("spec.yaml", replace(case, testcase=None), "run", 5.0, (), None,
-                                              ()).to_json())
+    clean = CasePayload.from_json(CasePayload(spec="spec.yaml", case=replace(case, testcase=None), run_dir="run",
+                                              horizon=5.0, dictionaries=(), settle=None, known=()).to_json())
     assert clean.testcase(spec, dictionary) is None
     journal = Journal(tmp_path)
     journal.plan(case)

@@ -64,7 +64,7 @@ def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_ful
     from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
     from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage, case_json
 
-    case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
+    case = PlannedCase(case_id="a", kind=BASELINE, number=1, seed=0, params=PARAMS, testcase=None)
     payload = {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
     done = subprocess.run([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", str(ECHO)],
                           input=pipe_messages.encode(CaseMessage(CasePayload.from_json(payload))),
@@ -108,7 +108,7 @@ def _echo_payload(tmp_path: Path, name: str) -> dict:
     from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
     from astaa_deft.orchestration.campaign.payload import case_json
 
-    case = PlannedCase(name, BASELINE, 1, 0, PARAMS, None)
+    case = PlannedCase(case_id=name, kind=BASELINE, number=1, seed=0, params=PARAMS, testcase=None)
     return {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / name), "horizon": 3.0,
             "dictionaries": []}
 

@@ -54,7 +54,8 @@ def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp
     assert judged.findings[0].module == "planning" and judged.failed
 
     journal = Journal(tmp_path)
-    journal.plan(PlannedCase("c-000001", MUTATED, 1, 0, {}, testcase, "decictor"))
+    journal.plan(PlannedCase(case_id="c-000001", kind=MUTATED, number=1, seed=0, params={}, testcase=testcase,
+                             strategy="decictor"))
     journal.started("c-000001")
     signature = BucketSignature(FailureKey(judged.verdict, INVARIANT, "planning"), "prediction:*:participant")
     journal.add_bucket(NewBucket("B001", signature, judged.verdict, INVARIANT, "planning", "c-000001", False, 1))

@@ -314,8 +314,8 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
     def _plan_mutated(self, number: int) -> PlannedCase:
         proposal = self.strategy.propose(number)
         params = self.grid[(number - 1) % len(self.grid)]
-        case = PlannedCase(f"c-{number:06d}", MUTATED, number, self.config.seed, params, proposal.testcase,
-                           self.config.strategy, proposal.parent)
+        case = PlannedCase(case_id=f"c-{number:06d}", kind=MUTATED, number=number, seed=self.config.seed, params=params,
+                           testcase=proposal.testcase, strategy=self.config.strategy, parent=proposal.parent)
         self._plan(case)
         return case
 

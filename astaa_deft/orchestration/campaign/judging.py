@@ -131,11 +131,12 @@ class Judging(CampaignParts):
         params = row.params
         for k in range(1, max(self.config.reruns, self._controls()) + 1):
             if k <= self.config.reruns:
-                cases.append(PlannedCase(f"r-{bucket}-{k}", RERUN, row.number, row.seed, params,
-                                         self._testcase(row), row.strategy, parent=bucket))
+                cases.append(PlannedCase(case_id=f"r-{bucket}-{k}", kind=RERUN, number=row.number, seed=row.seed,
+                                         params=params, testcase=self._testcase(row), strategy=row.strategy,
+                                         parent=bucket))
             if k <= self._controls():
-                cases.append(PlannedCase(f"t-{bucket}-{k}", CONTROL, row.number, row.seed, params, None,
-                                         row.strategy, parent=bucket))
+                cases.append(PlannedCase(case_id=f"t-{bucket}-{k}", kind=CONTROL, number=row.number, seed=row.seed,
+                                         params=params, testcase=None, strategy=row.strategy, parent=bucket))
         for case in cases:
             self._plan(case)
         return cases

@@ -391,8 +391,9 @@ class ModuleLevel(CampaignParts):
                            f"({finding.verdict.module}: {finding.verdict.signature})")
             testcase = live_testcase(fault, f"tc-{case_id}", seconds_after_anchor=(times[fault.index] - origin) / 1e9,
                                      anchor=self.timing.anchor, description=description)
-            self._plan(PlannedCase(case_id, MUTATED, CONFIRM_NUMBER_BASE + k + 1, self.config.seed, dict(params),
-                                   testcase, STRATEGY, finding.name))
+            self._plan(PlannedCase(case_id=case_id, kind=MUTATED, number=CONFIRM_NUMBER_BASE + k + 1,
+                                   seed=self.config.seed, params=dict(params), testcase=testcase, strategy=STRATEGY,
+                                   parent=finding.name))
             confirmed.append(_with_finding(finding, case_id=case_id))
         return _with(state, findings=tuple(confirmed))
 

@@ -47,9 +47,9 @@ def _case_of(body: JsonObject) -> tuple[PlannedCase, str | None]:
     params, text, parent = body["params"], body["testcase_xml"], body["parent"]
     if not isinstance(params, dict) or not isinstance(text, (str, type(None))):
         raise ValueError(f"a planned case, not {body!r}")
-    case = PlannedCase(str(body["case_id"]), CaseKind(body["kind"]), int(_number(body["number"])),
-                       int(_number(body["seed"])), {str(k): str(v) for k, v in params.items()}, None,
-                       str(body["strategy"]), None if parent is None else str(parent))
+    case = PlannedCase(case_id=str(body["case_id"]), kind=CaseKind(body["kind"]), number=int(_number(body["number"])),
+                       seed=int(_number(body["seed"])), params={str(k): str(v) for k, v in params.items()},
+                       testcase=None, strategy=str(body["strategy"]), parent=None if parent is None else str(parent))
     return case, text
 
 
@@ -71,7 +71,7 @@ def _delays(value: JsonValue) -> dict[str, float]:
     return {str(module): _number(seconds) for module, seconds in value.items()}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CasePayload:
     """Everything a worker needs to run ``case``, nothing it must look up (paths absolute)."""
 

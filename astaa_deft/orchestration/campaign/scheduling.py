@@ -131,8 +131,9 @@ class Scheduling(CampaignParts):
 
     def _submit(self, pool: CasePool, case: PlannedCase) -> None:
         horizon = self.clean_horizon if case.kind in (BASELINE, CONTROL) else self.horizon
-        payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
-                              horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
+        payload = CasePayload(spec=str(self.config.spec_path.resolve()), case=case,
+                              run_dir=str(self.case_dir(case.case_id)), horizon=horizon,
+                              dictionaries=tuple(str(p.resolve()) for p in self.config.dictionaries),
                               settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
                               known=tuple(sorted(self.known)),
                               shutdown_delays=learning_shutdown_delays(self.spec) if case.kind == BASELINE

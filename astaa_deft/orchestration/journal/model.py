@@ -105,7 +105,7 @@ class Timing:
     live: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlannedCase:
     """One run to make: everything a worker needs, nothing it must look up."""
 

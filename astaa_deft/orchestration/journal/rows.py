@@ -77,8 +77,8 @@ class CaseRow:
     def planned(self, testcase: TestCase | None) -> PlannedCase:
         """The case as it was planned (what a worker runs), with its test case read back from
         :attr:`testcase_xml` (``payload.read_testcase``: the row keeps the stored text)."""
-        return PlannedCase(self.case_id, self.kind, self.number, self.seed, self.params, testcase,
-                           self.strategy, self.parent)
+        return PlannedCase(case_id=self.case_id, kind=self.kind, number=self.number, seed=self.seed, params=self.params,
+                           testcase=testcase, strategy=self.strategy, parent=self.parent)
 
 
 @dataclass(frozen=True)

@@ -289,12 +289,14 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
             for k in range(1, runs + 1):
                 for rerun in (True, False):
                     case_id = f"{'r' if rerun else 't'}-{target.bucket.bucket}-{k}"
-                    case = PlannedCase(case_id, RERUN if rerun else CONTROL, n, 0, target.params,
-                                       testcases[target.bucket.bucket] if rerun else None, "verify",
+                    case = PlannedCase(case_id=case_id, kind=RERUN if rerun else CONTROL, number=n, seed=0,
+                                       params=target.params,
+                                       testcase=testcases[target.bucket.bucket] if rerun else None, strategy="verify",
                                        parent=target.bucket.bucket)
-                    payload = CasePayload(str(campaign.spec_path.resolve()), case,
-                                          str((out_dir / target.bucket.bucket / case_id).resolve()), campaign.horizon,
-                                          tuple(str(p.resolve()) for p in options.dictionaries),
+                    payload = CasePayload(spec=str(campaign.spec_path.resolve()), case=case,
+                                          run_dir=str((out_dir / target.bucket.bucket / case_id).resolve()),
+                                          horizon=campaign.horizon,
+                                          dictionaries=tuple(str(p.resolve()) for p in options.dictionaries),
                                           settle=options.settle if rerun else None, known=tuple(sorted(campaign.known)),
                                           shutdown_delays=dict(campaign.shutdown_delays))
                     payloads[case_id] = (target, rerun)
