@@ -95,7 +95,7 @@ def live_cost(count: int) -> list[float]:
     from astaa_deft.engine.intercept.testcase import parse_testcase
 
     spec = load_spec(SPEC)
-    cone = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)
+    cone = Participant(id=901, kind="cone", x=60.0, y=-3.0, heading=0.0, length=0.5, width=0.5)
     proposed = scene_testcase(Scene((cone,), "add"), "tc-000001", 1, "prediction")
     testcase = parse_testcase(proposed.to_xml(), "tc", spec, load_dictionary())
     seconds = []

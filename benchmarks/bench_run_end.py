@@ -89,7 +89,8 @@ def main() -> None:
                     delays = learning_shutdown_delays(spec) if baseline else learned_shutdown_delays(taught)
                     run = one_run(spec, Path(tmp), f"t{teardown}-{n}", teardown, args.ticks, delays)
                     if baseline:
-                        taught.append(CaseOutcome("done", "Pass", "Pass", shutdowns=run["shutdowns"]))
+                        taught.append(CaseOutcome(status="done", verdict="Pass", summary="Pass",
+                                                  shutdowns=run["shutdowns"]))
                     rows.append({**run, "teardown": teardown, "baseline": baseline,
                                  "delay": delays.get("sim"), "load": os.getloadavg()[0]})
     finally:

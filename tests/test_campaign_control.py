@@ -145,13 +145,18 @@ def test_a_baseline_finding_neither_shrinks_the_live_time_nor_ends_cases(tmp_pat
 
 
 def test_a_known_baseline_finding_counts_only_where_a_case_makes_it_worse():
-    clean = [CaseOutcome("done", "Silent", "", [Finding("data_small", "Silent", "talker", "data", "", at=2.0)],
-                         violating={"data_small": 10})]
+    clean = [CaseOutcome(status="done", verdict="Silent", summary="",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="", at=2.0)],
+        violating={"data_small": 10})]
     known = known_mod.known_findings(clean)
-    same = CaseOutcome("done", "Silent", "s", [Finding("data_small", "Silent", "talker", "data", "", at=2.2)],
-                       violating={"data_small": 8})
-    earlier = CaseOutcome("done", "Silent", "s", [Finding("data_small", "Silent", "talker", "data", "", at=0.4)])
-    oftener = CaseOutcome("done", "Silent", "s", [Finding("data_small", "Silent", "talker", "data", "", at=2.1)] * 2)
+    same = CaseOutcome(status="done", verdict="Silent", summary="s",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="", at=2.2)],
+        violating={"data_small": 8})
+    earlier = CaseOutcome(status="done", verdict="Silent", summary="s",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="", at=0.4)])
+    oftener = CaseOutcome(status="done", verdict="Silent", summary="s",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="",
+                          at=2.1)] * 2)
     assert known_mod.judged(same, known).verdict == "Pass"
     assert known_mod.judged(earlier, known).verdict == "Silent"
     assert known_mod.judged(oftener, known).verdict == "Silent"
@@ -232,7 +237,8 @@ def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
     from astaa_deft.orchestration.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
 
     def timed(gap: float, rate: float) -> CaseOutcome:
-        return CaseOutcome("done", "Pass", "", timing={"plan": ChannelRate(count=40, rate=rate, max_gap=gap)})
+        return CaseOutcome(status="done", verdict="Pass", summary="",
+                           timing={"plan": ChannelRate(count=40, rate=rate, max_gap=gap)})
 
     solo = timed(0.6, 2.0)
     assert not drift(solo, timed(0.7, 1.9)).drifted  # jitter

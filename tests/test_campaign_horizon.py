@@ -22,7 +22,7 @@ SCENARIO = SUT / "scenario.yaml"
 
 
 def done(seconds: float) -> CaseOutcome:
-    return CaseOutcome("done", "Pass", "Pass", seconds=seconds)
+    return CaseOutcome(status="done", verdict="Pass", summary="Pass", seconds=seconds)
 
 
 def test_clean_runs_are_bounded_by_the_specs_run_section_and_cases_by_the_clean_runs():

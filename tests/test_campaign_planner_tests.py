@@ -28,8 +28,9 @@ NAN_LIMIT = b"""<testcase id="nan-limit" seed="1"><description>defect 1</descrip
 
 
 def _bucket(name: str, module: str) -> Bucket:
-    return Bucket(name, "sig", "Silent", "planned_speed", module, "routing:speed_limit:set", "c-000001", False, 1,
-                  0, 0, None, 0.0, 1)
+    return Bucket(bucket=name, signature="sig", verdict="Silent", invariant="planned_speed", module=module,
+                  family="routing:speed_limit:set", first_case="c-000001", without_mutation=False, cases=1, reruns=0,
+                  rerun_failures=0, merged_into=None, created_at=0.0, created_after_cases=1)
 
 
 def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path: Path, monkeypatch):

@@ -22,7 +22,7 @@ from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.engine.spec.loader import load_spec, load_spec_text
 
 SPEC_PATH = demo_spec_path()
-CONE = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)
+CONE = Participant(id=901, kind="cone", x=60.0, y=-3.0, heading=0.0, length=0.5, width=0.5)
 
 
 def test_a_spec_without_lanes_stops_the_strategy_with_a_clear_error():
@@ -58,7 +58,8 @@ def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp
                              strategy="decictor"))
     journal.started("c-000001")
     signature = BucketSignature(FailureKey(judged.verdict, INVARIANT, "planning"), "prediction:*:participant")
-    journal.add_bucket(NewBucket("B001", signature, judged.verdict, INVARIANT, "planning", "c-000001", False, 1))
+    journal.add_bucket(NewBucket(name="B001", signature=signature, verdict=judged.verdict, invariant=INVARIANT,
+                                 module="planning", first_case="c-000001", without_mutation=False, after_cases=1))
     journal.finished("c-000001", judged, signature=signature, bucket="B001")
     said: list[str] = []
     strategy.finish(journal, tmp_path, Path(SPEC_PATH), said.append)

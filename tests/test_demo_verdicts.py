@@ -41,7 +41,7 @@ def agree_offline(log_path):
 @pytest.mark.parametrize("scenario", CLEAN)
 def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
     log = tmp_path / "run.mcap"
-    outcome, watch = drive(DriveOptions(scenario, defects=False, passive=False, record=log, command_line=[]))
+    outcome, watch = drive(DriveOptions(scenario=scenario, defects=False, passive=False, record=log, command_line=[]))
     assert watch.goal and watch.collision is None
     assert outcome.violations == (), [v.invariant for v in outcome.violations]
     assert outcome.verdict.klass == "Pass"
@@ -53,7 +53,7 @@ def test_clean_runs_have_no_violation(tmp_path, scenario, repeat):
 def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass, invariants):
     log = tmp_path / "run.mcap"
     # Ends at the first violation (the verdict is decided then), or after 30 s on a slow machine.
-    outcome, _ = drive(DriveOptions("lane_follow", defects=True, passive=False, record=log, command_line=[],
+    outcome, _ = drive(DriveOptions(scenario="lane_follow", defects=True, passive=False, record=log, command_line=[],
                                     policy=demo_policy_path(policy), duration=30.0, stop_on_violation=True))
     # Each example test case fires once its consumer is driving (anchored to the stack's own messages, not
     # to a time after the launch, which a loaded machine's slow start can precede): the defect is reached.

@@ -181,19 +181,24 @@ def make_journal(work: Path) -> Path:
         journal.set_meta(spec=str(spec), seed=1, strategy="random", params={"scenario": ["a", "b"]}, horizon=2.0,
                          cases=3, budget=60.0, calibrated=True, workers=2, timing=Timing("data", 1.5).__dict__,
                          overloaded_runs=["b-0001"])
-        finding = Finding("value_small", "Silent", "a", "data", "value 20 > 10", "high", 1.2)
+        finding = Finding(invariant="value_small", crash="Silent", module="a", channel="data", detail="value 20 > 10",
+                          severity="high", at=1.2)
         _case(journal, base, "b-0001", BASELINE, 1, "Pass", "goal reached")
         _case(journal, base, "c-000001", MUTATED, 1, "Silent", "violation", "B001", finding)
         _case(journal, base, "c-000002", MUTATED, 2, "Pass", "horizon")
-        journal.add_bucket(NewBucket("B001", _signature("data:value:set"), "Silent", "value_small", "a",
-                                     "c-000001", False, 2))
+        journal.add_bucket(NewBucket(name="B001", signature=_signature("data:value:set"), verdict="Silent",
+                                     invariant="value_small", module="a", first_case="c-000001", without_mutation=False,
+                                     after_cases=2))
         journal.bucket_rerun("B001", True)
-        journal.minimised(Minimisation("B001", "minimised", 0, "<testcase id='m'/>", "data:value = 20",
-                                       str(base / "minimised" / "B001"), str(base / "tests" / "B001"), 3.0, ""))
+        journal.minimised(Minimisation(bucket="B001", status="minimised", exit_code=0, minimal_xml="<testcase id='m'/>",
+                                       culprit="data:value = 20", out_dir=str(base / "minimised" / "B001"),
+                                       tests_dir=str(base / "tests" / "B001"), seconds=3.0, detail=""))
         journal.module_tests_checked("B001", str(base / "tests" / "B001"), True, "1 failed")
         journal.note("workers", "2 at once")
-        journal.blamed(BlameRow("B001", "a", "data", "non-finite", "data:value -> a -> data -> value_small",
-                                "value NaN where the twins had finite values", 2, "a|data|value_small"))
+        journal.blamed(BlameRow(bucket="B001", module="a", output="data", how="non-finite",
+                                chain="data:value -> a -> data -> value_small",
+                                detail="value NaN where the twins had finite values", twins=2,
+                                identity="a|data|value_small"))
         journal.db.executescript(VERIFICATIONS_TABLE)
         journal.db.execute(
             "INSERT INTO verifications (bucket, revision, status, failing, runs, other, unobserved, twin_failures,"

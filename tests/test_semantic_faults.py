@@ -64,7 +64,7 @@ def test_an_unknown_family_is_an_input_error_naming_the_known_ones(tmp_path):
 def rule(name: str, current, kind: str = "float64", **declared):
     entry = next(e for e in DICTIONARY.entries.values() if e.rule == name)
     site = FieldSite(FieldType(kind=kind, **declared))
-    return entry.resolve(ValueContext(site, current, {}, "f", lambda: current))
+    return entry.resolve(ValueContext(site=site, current=current, container={}, key="f", previous=lambda: current))
 
 
 def test_semantic_rules_give_plausible_but_wrong_values():

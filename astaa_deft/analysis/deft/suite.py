@@ -21,7 +21,7 @@ from astaa_deft.analysis.deft.replay import StepHang, compare_outputs, make_plan
 from astaa_deft.analysis.deft.validator import Comparison, Point
 
 
-@dataclass
+@dataclass(kw_only=True)
 class FrameResult:
     index: int
     comparison: Comparison
@@ -87,8 +87,10 @@ class Suite:
                 layout = cfg.trajectory
                 replayed = trajectory_points(replayed_msg, layout) if layout is not None else []
                 expected = trajectory_points(expected_msg, layout) if layout is not None else []
-                results.append(FrameResult(entry["index"], compare_outputs(cfg, replayed_msg, expected_msg),
-                                           replayed, expected, error, replayed_msg, expected_msg, how))
+                results.append(FrameResult(index=entry["index"],
+                                           comparison=compare_outputs(cfg, replayed_msg, expected_msg),
+                                           replayed=replayed, expected=expected, error=error, message=replayed_msg,
+                                           expected_message=expected_msg, stopped=how))
                 if error is not None and stopped is None and cfg.per_trigger:
                     # A crashed or hung module answers nothing more: the later frames are not run.
                     stopped = f"not run: the module stopped answering at frame {entry['index']} ({error})"
@@ -128,8 +130,9 @@ class Suite:
         layout = cfg.trajectory
         replayed = trajectory_points(replayed_msg, layout) if layout is not None else []
         expected = trajectory_points(expected_msg, layout) if layout is not None else []
-        return FrameResult(index, compare_outputs(cfg, replayed_msg, expected_msg), replayed, expected, error,
-                           replayed_msg, expected_msg, how)
+        return FrameResult(index=index, comparison=compare_outputs(cfg, replayed_msg, expected_msg), replayed=replayed,
+                           expected=expected, error=error, message=replayed_msg, expected_message=expected_msg,
+                           stopped=how)
 
     def _messages(self) -> dict[str, _Decoded]:
         if self._by_channel is None:

@@ -46,7 +46,7 @@ def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
     return meta.params
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ExtractReport:
     extraction: Extraction
     spec: Spec  # with the threshold used (the planner's)
@@ -139,8 +139,9 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
                                                                       entry=entry)
         checkpoint.finished()
     exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
-    return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, entry,
-                         ground_truth=exact, resumed=len(before), suite_failures=failing, diagnosis=diagnosis)
+    return ExtractReport(extraction=ex, spec=spec, accepted=len(accepted) - len(failing), oracles=len(oracles),
+                         collision=bool(collisions), manifest=manifest, entry=entry, ground_truth=exact,
+                         resumed=len(before), suite_failures=failing, diagnosis=diagnosis)
 
 
 def _write_checked_suite(ex: Extraction, spec: Spec, params: dict[str, str], out_dir: Path, *,
@@ -301,8 +302,8 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
         if not entry.get("check", True):
             frame = frames.get(int(entry["index"]))
             if result["passes"] and frame is not None and frame.output is not None and not result["stopped"]:
-                frame.comparison = Comparison(float(result["distance"]), float(result["max_error"]),
-                                              int(result["points"]), str(result["how"]))
+                frame.comparison = Comparison(distance=float(result["distance"]), max_error=float(result["max_error"]),
+                                              points=int(result["points"]), how=str(result["how"]))
                 frame.accepted = True
                 frame.exact = frame.comparison.distance == 0.0
                 confirmed += 1
@@ -372,4 +373,5 @@ def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: ReplayModule, resume
                     outputs=checkpoint.total)
     accepted = len(checkpoint.accepted())
     manifest = checkpoint.out_dir / MANIFEST if accepted else None
-    return ExtractReport(ex, spec, accepted, 0, False, manifest, entry, interrupted=True, resumed=resumed)
+    return ExtractReport(extraction=ex, spec=spec, accepted=accepted, oracles=0, collision=False, manifest=manifest,
+                         entry=entry, interrupted=True, resumed=resumed)

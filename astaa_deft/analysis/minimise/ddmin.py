@@ -107,7 +107,7 @@ class OutcomeCache:
         return len(self._results)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class DDResult(Generic[T]):
     """The outcome of one minimisation.
 
@@ -428,7 +428,7 @@ def minimise_groups(
     return GroupResult(minimal, coarse, fine)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ShortenResult(Generic[T]):
     """A contiguous run shortened: ``kept`` (a contiguous slice of the run, tested to FAIL or the whole run the
     caller vouched for), the tests run for it, and every result by slice (start, stop)."""
@@ -500,4 +500,5 @@ def shorten(run: Sequence[T], tester: Tester[T], *, max_tests: int | None = None
     if not complete:  # the shortest slice known to fail
         failing = [(a, b) for (a, b), r in results.items() if r.outcome is Outcome.FAIL]
         start, stop = min(failing, key=lambda s: (s[1] - s[0], s[0]), default=(0, len(run)))
-    return ShortenResult(list(run[start:stop]), tests, complete, results, (start, stop))
+    return ShortenResult(kept=list(run[start:stop]), tests_run=tests, complete=complete, results=results,
+                         span=(start, stop))

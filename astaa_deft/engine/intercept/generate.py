@@ -83,8 +83,9 @@ class FaultTargets:
     def of(cls, spec: Spec, dictionary: Dictionary, include_brittle: bool = False,
            families: Collection[str] | None = None) -> FaultTargets:
         """InputError if the spec offers no field to mutate (for the exceptional-value families)."""
-        sources = Sources(spec, dictionary, include_brittle, targets_to_mutate(spec, dictionary, include_brittle),
-                          stamp_targets_by_channel(spec, dictionary))
+        sources = Sources(spec=spec, dictionary=dictionary, include_brittle=include_brittle,
+                          exceptional=targets_to_mutate(spec, dictionary, include_brittle),
+                          stamps=stamp_targets_by_channel(spec, dictionary))
         found = {family.name: family.targets(sources) for family in by_rank()
                  if families is None or family.name in families}
         return cls({name: targets for name, targets in found.items() if targets})
@@ -270,7 +271,7 @@ def mutation_targets(spec: Spec, dictionary: Dictionary, include_brittle: bool =
             usable, _skipped = dictionary.usable(site, codec,
                                                  [e for e in dictionary.entries_for(site) if e.key not in owned])
             if usable:
-                targets.append(Target(channel, path, site, tuple(usable)))
+                targets.append(Target(channel=channel, path=path, site=site, values=tuple(usable)))
     return targets
 
 

@@ -120,7 +120,7 @@ class StopReason(TextEnum):
     INTERRUPTED = "interrupted"  # Ctrl-C: resume goes on from the journal
 
 
-@dataclass
+@dataclass(kw_only=True)
 class CampaignResult:
     cases_done: int
     failures: int
@@ -251,7 +251,8 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
         done = [r for r in self.journal.cases() if r.finished]
         failures = sum(1 for r in done if r.kind == MUTATED and r.verdict not in (Verdict.PASS, None, "?"))
         live = self.journal.buckets(include_merged=False)
-        return CampaignResult(len(done), failures, len(live), time.monotonic() - self.started, stopped,
+        return CampaignResult(cases_done=len(done), failures=failures, buckets=len(live),
+                              seconds=time.monotonic() - self.started, stopped=stopped,
                               bugs=sum(1 for b in live if b.is_bug))
 
     def _progress(self) -> None:

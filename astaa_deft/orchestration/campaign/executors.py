@@ -121,7 +121,7 @@ class LocalPool:
                                         timeout=payload.horizon + CASE_TIMEOUT_MARGIN)
         except subprocess.TimeoutExpired:
             stop_process(proc, grace=5.0)
-            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+            return CaseOutcome(status="error", verdict="?", summary="the case did not finish", error="timeout")
         finally:
             with self._lock:
                 self._procs.discard(proc)
@@ -134,7 +134,8 @@ class LocalPool:
             log = f"{log}\n{exc}"
             message = None
         if proc.returncode != 0 or message is None:
-            return CaseOutcome("error", "?", "the case process failed", error=log.strip()[-2000:])
+            return CaseOutcome(status="error", verdict="?", summary="the case process failed",
+                               error=log.strip()[-2000:])
         return message.outcome
 
     def _run_forked(self, pid: int, conn: socket.socket, payload: CasePayload) -> CaseOutcome:
@@ -153,16 +154,16 @@ class LocalPool:
             message = pipe_messages.receive(read, (OutcomeMessage,), source="the forked case's socket")
         except TimeoutError:
             stop_group(pid, grace=5.0)
-            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+            return CaseOutcome(status="error", verdict="?", summary="the case did not finish", error="timeout")
         except (OSError, FrameError) as exc:
             stop_group(pid, grace=5.0)
-            return CaseOutcome("error", "?", "the case process failed", error=str(exc))
+            return CaseOutcome(status="error", verdict="?", summary="the case process failed", error=str(exc))
         finally:
             conn.close()
             with self._lock:
                 self._forked.discard(pid)
         if message is None:
-            return CaseOutcome("error", "?", "the case process failed",
+            return CaseOutcome(status="error", verdict="?", summary="the case process failed",
                                error=tail(Path(payload.run_dir) / "case.log").strip()[-2000:])
         return message.outcome
 
@@ -265,7 +266,8 @@ class DaskPool:
             try:
                 result = future.result()
             except Exception as exc:  # noqa: BLE001 - a task that failed on every retry
-                yield case_id, CaseOutcome("error", "?", "the case failed on the cluster", error=str(exc))
+                yield case_id, CaseOutcome(status="error", verdict="?", summary="the case failed on the cluster",
+                                           error=str(exc))
                 continue
             run_dir = Path(payload.run_dir)
             run_dir.mkdir(parents=True, exist_ok=True)

@@ -109,8 +109,8 @@ class Judging(CampaignParts):
         finding = sig.primary(outcome)
         family = signature.family
         invariant = finding.invariant if finding else "?"
-        self.journal.add_bucket(NewBucket(name, signature, outcome.verdict, invariant,
-                                          finding.module if finding else None, case_id,
+        self.journal.add_bucket(NewBucket(name=name, signature=signature, verdict=outcome.verdict, invariant=invariant,
+                                          module=finding.module if finding else None, first_case=case_id,
                                           without_mutation=kind == BASELINE_FINDING,
                                           after_cases=self.journal.finished_count() + 1, kind=kind))
         if kind == BASELINE_FINDING:
@@ -186,8 +186,9 @@ class Judging(CampaignParts):
         identity = (None if found.root_cause is None else
                     f"{found.root_cause}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
                     f"{sig.field_family(bucket.family)}")
-        self.journal.blamed(BlameRow(bucket.bucket, found.module, found.output, found.how, found.chain, found.detail,
-                                     found.twins, identity, replay=replayed[1] if replayed else None))
+        self.journal.blamed(BlameRow(bucket=bucket.bucket, module=found.module, output=found.output, how=found.how,
+                                     chain=found.chain, detail=found.detail, twins=found.twins, identity=identity,
+                                     replay=replayed[1] if replayed else None))
         self.say(f"  {bucket.bucket} blame: {found.root_cause or '?'} ({found.chain}; {found.detail})")
         if identity is None:
             return

@@ -217,8 +217,8 @@ def live_testcase(fault: StreamFault, case_id: str, *, seconds_after_anchor: flo
         action = Reorder()
     start = max(0.0, round(seconds_after_anchor - LEAD_SECONDS, 3))
     window = Window(start, None, anchor, 1 if anchor is not None else None)
-    policy = Policy("p1", action, channels=(fault.channel,), window=window, selection=Selection(limit=limit))
-    return TestCase(case_id, 0, description, (policy,))
+    policy = Policy(id="p1", action=action, channels=(fault.channel,), window=window, selection=Selection(limit=limit))
+    return TestCase(id=case_id, seed=0, description=description, policies=(policy,))
 
 
 class ModuleLevel(CampaignParts):

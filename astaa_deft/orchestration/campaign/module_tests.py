@@ -118,10 +118,9 @@ class _FailureFrameWriter:
                 if before:  # an input not heard from yet (a slow channel) is absent from the frame
                     inputs[name] = before[-1]
         index = max((f.index for f in kept), default=-1) + 1
-        failing = ExtractedFrame(index=index, output=None, trigger_time=trigger.log_time,
-                                 frame_time=trigger.log_time, inputs=inputs,
-                                 comparison=Comparison(math.inf, math.inf, 0, "failed cycle"), accepted=True,
-                                 candidates_tried=0, exact=False)
+        failing = ExtractedFrame(index=index, output=None, trigger_time=trigger.log_time, frame_time=trigger.log_time,
+            inputs=inputs, comparison=Comparison(distance=math.inf, max_error=math.inf, points=0, how="failed cycle"),
+            accepted=True, candidates_tried=0, exact=False)
         frames = sorted([*kept, failing], key=lambda f: f.trigger_time)
         export_suite(frames, self.spec, self.params, self.tests_dir, oracles=self.oracles, entry=entry)
         from astaa_deft.analysis.deft.suite import Suite

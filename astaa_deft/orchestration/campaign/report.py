@@ -170,7 +170,7 @@ def _rel(path: object, out: Path) -> str | None:
         return str(path)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _Cases:
     """The journal's cases as the report counts them."""
 
@@ -184,8 +184,10 @@ class _Cases:
     def of(cls, rows: list[CaseRow]) -> _Cases:
         done = [r for r in rows if r.finished]
         mutated = [r for r in done if r.kind == MUTATED]
-        return cls(done, mutated, [r for r in mutated if r.verdict not in (Verdict.PASS, "?", None)],
-                   [r for r in done if r.status == CaseStatus.ERROR], len([r for r in done if r.kind == BASELINE]))
+        return cls(done=done, mutated=mutated,
+                   failing=[r for r in mutated if r.verdict not in (Verdict.PASS, "?", None)],
+                   errors=[r for r in done if r.status == CaseStatus.ERROR],
+                   clean=len([r for r in done if r.kind == BASELINE]))
 
 
 def render(journal: Journal, out: Path) -> str:
@@ -214,7 +216,7 @@ def render(journal: Journal, out: Path) -> str:
         plots=_plots(journal, cases.done, buckets))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _VerifiedRow:
     """A bucket's row of the verification table: where it stands now, its history, every check."""
 
@@ -237,8 +239,9 @@ def _verification(journal: Journal) -> list[_VerifiedRow]:
         latest = seen.latest
         if latest is None:
             continue
-        out.append(_VerifiedRow(name, str(latest.status), latest.revision, latest.stability, seen.describe(),
-                                [f"{r.revision}: {r.status} ({r.stability})" for r in rows if r.bucket == name]))
+        out.append(_VerifiedRow(bucket=name, status=str(latest.status), revision=latest.revision,
+                                stability=latest.stability, history=seen.describe(),
+                                checks=[f"{r.revision}: {r.status} ({r.stability})" for r in rows if r.bucket == name]))
     return out
 
 
@@ -269,7 +272,7 @@ class _Link:
     tests: ModuleTestsRow | None = None  # for "tests": whether they fail on the defect
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _BucketRow:
     """A bucket's row of the buckets table, and its test case's XML (minimal, or the first failing one)."""
 
@@ -347,7 +350,7 @@ def _blames(journal: Journal) -> list[_BlameRow]:
     return rows
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _BlameRow:
     """A confirmed bucket's row of the blame table."""
 

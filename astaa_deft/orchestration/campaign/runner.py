@@ -92,27 +92,27 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
         result = run_session(isolated(spec), options, on_start=watches.on_start, stop_when=watches.stop_when)
     except InputError as exc:
         cost.stop()
-        return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems),
-                           cpu=cost.cpu, wall=cost.wall)
+        return CaseOutcome(status="error", verdict="?", summary="the run did not start",
+                           error="; ".join(str(p) for p in exc.problems), cpu=cost.cpu, wall=cost.wall)
     cost.stop()
     reason = {"time limit": "horizon", SETTLED: "settled", VIOLATION: "violation"}.get(result.end_reason,
                                                                                       result.end_reason)
     if result.verdict is None or not result.observed or not result.complete:  # not fully observed: no Pass
-        return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
-                           log_path=str(log_path), reason=reason,
-                           error="no verdict" if result.verdict is None else "the log was not finished",
-                           cpu=cost.cpu, wall=cost.wall)
+        return CaseOutcome(status="error", verdict="?", summary="the run was not observed to its end",
+                           seconds=result.seconds, log_path=str(log_path), reason=reason,
+                           error="no verdict" if result.verdict is None else "the log was not finished", cpu=cost.cpu,
+                           wall=cost.wall)
     if result.unjudged and result.verdict.klass == Verdict.PASS:  # messages no monitor could read: no Pass
-        return CaseOutcome("error", "?", "not every message was judged", seconds=result.seconds,
+        return CaseOutcome(status="error", verdict="?", summary="not every message was judged", seconds=result.seconds,
                            log_path=str(log_path), reason=reason, error=result.unjudged, cpu=cost.cpu, wall=cost.wall)
     timing = watches.timing
-    return CaseOutcome("done", result.verdict.klass, result.verdict.summary, watches.findings(result),
-                       result.seconds, str(log_path), reason, result.mutations,
-                       margins=watches.margins.margins(result.violations),
-                       first_seen=timing.seconds() if timing is not None else {},
-                       cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
-                       timing=timing.channels_timing() if timing is not None else {},
-                       violating=watches.violating(), shutdowns=result.shutdowns if testcase is None else {})
+    return CaseOutcome(status="done", verdict=result.verdict.klass, summary=result.verdict.summary,
+                       findings=watches.findings(result), seconds=result.seconds, log_path=str(log_path), reason=reason,
+                       mutations=result.mutations, margins=watches.margins.margins(result.violations),
+                       first_seen=timing.seconds() if timing is not None else {}, cpu=cost.cpu,
+                       cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
+                       timing=timing.channels_timing() if timing is not None else {}, violating=watches.violating(),
+                       shutdowns=result.shutdowns if testcase is None else {})
 
 
 def _run_options(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *,
@@ -166,13 +166,15 @@ class _Watches:
 
     def findings(self, result: RunResult) -> list[Finding]:
         """The run's violations, and each crashed module no violation names (an implicit Abort)."""
-        found = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail, at=self._at(v.time_ns),
-                         severity=v.severity, signature=violation_signature(v)) for v in result.violations]
+        found = [Finding(invariant=v.invariant, crash=v.crash, module=v.module, channel=v.channel, detail=v.detail,
+                         at=self._at(v.time_ns), severity=v.severity,
+                         signature=violation_signature(v)) for v in result.violations]
         for exit_ in result.crashes:
             if not any(f.module == exit_.module for f in found):
                 said = signature_of_output(exit_.stderr_tail.splitlines(), exit_.signal)
-                found.append(Finding(IMPLICIT, Verdict.ABORT, exit_.module, None, exit_.describe(),
-                                     at=self._at(exit_.time_ns), signature=said.text() if said else ""))
+                found.append(Finding(invariant=IMPLICIT, crash=Verdict.ABORT, module=exit_.module, channel=None,
+                                     detail=exit_.describe(), at=self._at(exit_.time_ns),
+                                     signature=said.text() if said else ""))
         return found
 
     def violating(self) -> dict[str, int]:

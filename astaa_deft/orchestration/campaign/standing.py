@@ -51,7 +51,7 @@ PENDING = BucketStatus.PENDING
 STATUS_ORDER = tuple(BucketStatus)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Standing:
     """A bucket with its status, the evidence behind it, its severity and its rate."""
 
@@ -123,7 +123,8 @@ def standings(journal: Journal) -> list[Standing]:
         blame = blames.get(bucket.bucket)
         status, why = bucket_status(bucket, failures, runs, row is not None and row.exit_code == 0,
                                     fault_alone=blame is not None and blame.how == MUTATED_VALUE)
-        out.append(Standing(bucket, status, why, _severity(journal.case(bucket.first_case)), failures, runs))
+        out.append(Standing(bucket=bucket, status=status, why=why, severity=_severity(journal.case(bucket.first_case)),
+                            failures=failures, runs=runs))
     return rank(out)
 
 

@@ -80,7 +80,7 @@ def execute(payload: CasePayload, preloaded: Preloaded | None = None,
             dictionary = load_dictionary([Path(p) for p in payload.dictionaries])
         testcase = payload.testcase(spec, dictionary)
     except InputError as exc:
-        return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems)))
+        return CaseOutcome(status="error", verdict="?", summary="bad input", error="; ".join(map(str, exc.problems)))
     return run_case(spec, testcase, case.params, Path(payload.run_dir), horizon=payload.horizon,
                     dictionary=dictionary, settle=payload.settle, warm_recorder=warm_recorder,
                     known=frozenset(payload.known), shutdown_delays=payload.shutdown_delays)

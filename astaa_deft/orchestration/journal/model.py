@@ -119,7 +119,7 @@ class PlannedCase:
     parent: str | None = None  # guided: the corpus case this one mutates
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Finding:
     """One failure seen in a run: an invariant that broke or a module that died."""
 
@@ -142,7 +142,7 @@ class ChannelRate:
     max_gap: float
 
 
-@dataclass
+@dataclass(kw_only=True)
 class CaseOutcome:
     """What one run of a case gave (JSON-able: it crosses process and machine boundaries)."""
 

@@ -32,7 +32,7 @@ def root_cause_of(module: str | None, how: str) -> str | None:
     return THE_MUTATED_VALUE if how == MUTATED_VALUE else None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CaseRow:
     """One case of the journal: what was planned, where it is, and what its run gave (once finished)."""
 
@@ -81,7 +81,7 @@ class CaseRow:
                            testcase=testcase, strategy=self.strategy, parent=self.parent)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class NewBucket:
     """A bucket as the campaign opens it, on the failure of ``first_case`` (after ``after_cases`` cases)."""
 
@@ -96,7 +96,7 @@ class NewBucket:
     kind: BucketKind = BUG
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Bucket:
     """A bucket as the journal holds it: its failure, its counts, and what the campaign made of it."""
 
@@ -128,7 +128,7 @@ class Bucket:
         return self.kind == BUG
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Minimisation:
     """What minimising a bucket gave (``status``: "minimised", "not reproduced", "error", "running", or a
     strategy's own, e.g. decictor's "module tests (fail)")."""
@@ -144,7 +144,7 @@ class Minimisation:
     detail: str | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MinimisationRow(Minimisation):
     """A minimisation as the journal holds it: with when it started and ended."""
 
@@ -171,7 +171,7 @@ class NoteRow:
     text: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CampaignMeta:
     """The campaign's settings and calibration as the journal keeps them (None: not stored yet)."""
 
@@ -198,7 +198,7 @@ class CampaignMeta:
         return cls(**known, timing=Timing(**timing) if timing else None, overloaded_runs=tuple(runs or ()))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BlameRow:
     """A confirmed bucket's module to blame (``blame.Blame``) and its root-cause identity (None: none)."""
 

@@ -68,7 +68,7 @@ class VerifyOptions:
     settle: float = DEFAULT_SETTLE
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Target:
     """A bucket to verify: what runs, with which params, and its module tests."""
 
@@ -102,7 +102,7 @@ class VerifyReport:
         return 0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CampaignFindings:
     """What verify reads of a campaign: its journal, spec, known baseline findings and settings."""
 
@@ -128,9 +128,10 @@ class CampaignFindings:
             else:
                 spec_path, loaded = journal_spec(journal.path, meta.spec, trusted=trust_journal_spec,
                                                  command=command, why="live runs and module tests")
-            return cls(journal, spec_path, loaded, _known(journal), meta.horizon or DEFAULT_HORIZON,
-                       workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)),
-                       learned_shutdown_delays(_baseline_runs(journal)))
+            return cls(journal=journal, spec_path=spec_path, spec=loaded, known=_known(journal),
+                       horizon=meta.horizon or DEFAULT_HORIZON,
+                       workers=workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)),
+                       shutdown_delays=learned_shutdown_delays(_baseline_runs(journal)))
         except BaseException:
             journal.close()
             raise
@@ -201,7 +202,8 @@ def targets(campaign: CampaignFindings, names: tuple[str, ...],
                                      field=f"module_tests[{bucket.bucket}].tests_dir")
         else:
             tests = None
-        chosen.append(Target(bucket, xml, {**first.params, **params}, minimal, tests))
+        chosen.append(Target(bucket=bucket, testcase_xml=xml, params={**first.params, **params}, minimal=minimal,
+                             tests_dir=tests))
     return chosen, skipped
 
 
@@ -315,8 +317,9 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
         background = frozenset().union(*(failure_keys(o) for o in twins))
         rerun_tally, twin_tally = Tally.of(reruns, target.way, background), Tally.of(twins, target.way)
         module, detail = _module_tests(campaign, target, out_dir, options.params)
-        check = BucketCheck(target.bucket.bucket, revision, classify(rerun_tally, twin_tally), rerun_tally,
-                            twin_tally, module, detail, target.params, target.minimal)
+        check = BucketCheck(bucket=target.bucket.bucket, revision=revision, status=classify(rerun_tally, twin_tally),
+                            reruns=rerun_tally, twins=twin_tally, module_tests=module, module_detail=detail,
+                            params=target.params, minimal=target.minimal)
         verifications.record(campaign.journal, check)
         say(f"  {check.describe()}")
         checks.append(check)
