@@ -88,7 +88,7 @@ def search_once(mode: str, seed: int, scenarios: int, defects: bool, first_only:
 
 def live_cost(count: int) -> list[float]:
     """Seconds per scenario through the proxy (real processes), one scenario at a time, as fuzz runs them."""
-    from astaa_deft.orchestration.campaign.runner import run_case
+    from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
     from astaa_deft.orchestration.campaign.strategies.decictor import scene_testcase
     from astaa_deft.analysis.decictor.search import Scene
     from astaa_deft.engine.intercept.dictionary import load_dictionary
@@ -102,7 +102,7 @@ def live_cost(count: int) -> list[float]:
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(count):
             started = time.perf_counter()
-            outcome = run_case(spec, testcase, {}, Path(tmp) / f"c{k}", horizon=LIVE_HORIZON)
+            outcome = run_case(spec, testcase, {}, Path(tmp) / f"c{k}", limits=CaseLimits(horizon=LIVE_HORIZON))
             seconds.append(time.perf_counter() - started)
             print(f"  live scenario {k + 1}: {seconds[-1]:.1f} s ({outcome.status}, {outcome.verdict}, "
                   f"{outcome.summary[:80]})", flush=True)

@@ -19,7 +19,7 @@ from astaa_deft.orchestration.campaign.calibration import run_share, workers_for
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.journal.model import CaseOutcome, ChannelRate, Finding
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.engine.spec.loader import load_spec
@@ -166,7 +166,7 @@ def test_calibration_picks_fewer_runs_at_once_for_a_module_that_burns_a_core(tmp
     spec = load_spec(STEADY)
     shares = {}
     for burn in ("0", "1"):
-        outcome = run_case(spec, None, {"burn": burn}, tmp_path / f"burn{burn}", horizon=3.0)
+        outcome = run_case(spec, None, {"burn": burn}, tmp_path / f"burn{burn}", limits=CaseLimits(horizon=3.0))
         assert outcome.status == "done" and outcome.cpu > 0 and outcome.rss_mb > 0, outcome
         shares[burn] = run_share([outcome])
     assert shares["1"] is not None and shares["0"] is not None

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX, Campaign, CampaignConfig
 from astaa_deft.orchestration.journal.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.intercept.testcase import parse_testcase
@@ -37,8 +37,8 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
     spec = load_spec(demo_spec_path())
     dictionary = load_dictionary()
     testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
-    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case", horizon=8.0,
-                       dictionary=dictionary)
+    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case",
+                       limits=CaseLimits(horizon=8.0), dictionary=dictionary)
     assert outcome.status == "done" and outcome.mutations > 0, outcome
     assert any(f.invariant == "planned_speed" for f in outcome.findings), outcome  # the overspeed plan was seen
     monkeypatch.chdir(tmp_path)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.io.log import layout
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.session.bus_run import warm_recorder
@@ -21,9 +21,9 @@ PARAMS = {"count": "40", "rate": "100"}
 
 def test_a_warm_recorder_records_the_case_as_a_cold_one_does(tmp_path: Path):
     spec = load_spec(ECHO)
-    cold = run_case(spec, None, PARAMS, tmp_path / "cold", horizon=3.0)
+    cold = run_case(spec, None, PARAMS, tmp_path / "cold", limits=CaseLimits(horizon=3.0))
     recorder = warm_recorder([ECHO])
-    warm = run_case(spec, None, PARAMS, tmp_path / "warm", horizon=3.0, warm_recorder=recorder)
+    warm = run_case(spec, None, PARAMS, tmp_path / "warm", limits=CaseLimits(horizon=3.0), warm_recorder=recorder)
     assert cold.status == warm.status == "done", (cold, warm)
     assert recorder.wait(timeout=10) == 0  # the warm process was the case's recorder, and it finished cleanly
     logs = {name: read_log(tmp_path / name / "run.mcap") for name in ("cold", "warm")}
@@ -40,7 +40,8 @@ def test_a_dead_warm_recorder_is_replaced_by_a_fresh_one(tmp_path: Path):
     recorder = warm_recorder([ECHO])
     recorder.kill()
     recorder.wait(timeout=10)
-    outcome = run_case(load_spec(ECHO), None, PARAMS, tmp_path / "case", horizon=3.0, warm_recorder=recorder)
+    outcome = run_case(load_spec(ECHO), None, PARAMS, tmp_path / "case", limits=CaseLimits(horizon=3.0),
+                       warm_recorder=recorder)
     assert outcome.status == "done", outcome
     assert len(read_log(tmp_path / "case" / "run.mcap").on("test/data")) == 40
 

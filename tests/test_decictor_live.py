@@ -10,7 +10,7 @@ import pytest
 
 from astaa_deft.orchestration.journal.journal import Journal, NewBucket
 from astaa_deft.orchestration.journal.model import MUTATED, BucketSignature, FailureKey, PlannedCase
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, DecictorStrategy, scene_testcase
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.analysis.decictor.module_test import check_suite
@@ -41,14 +41,14 @@ def test_a_spec_without_lanes_stops_the_strategy_with_a_clear_error():
 def test_the_cone_case_runs_live_is_judged_and_becomes_a_failing_module_test(tmp_path: Path):
     spec = load_spec(SPEC_PATH)
     strategy = DecictorStrategy(spec, load_dictionary(), 0, 15.0)
-    seed = run_case(spec, None, {}, tmp_path / "cases" / "b-0001", horizon=15.0)
+    seed = run_case(spec, None, {}, tmp_path / "cases" / "b-0001", limits=CaseLimits(horizon=15.0))
     assert seed.status == "done", seed
     strategy.observe_baseline("b-0001", seed)
     assert strategy.search is not None, strategy.why_no_seed
 
     proposed = scene_testcase(Scene((CONE,), "add"), "tc-000001", 1, "prediction")
     testcase = parse_testcase(proposed.to_xml(), "tc", spec, load_dictionary())
-    mutated = run_case(spec, testcase, {}, tmp_path / "cases" / "c-000001", horizon=15.0)
+    mutated = run_case(spec, testcase, {}, tmp_path / "cases" / "c-000001", limits=CaseLimits(horizon=15.0))
     judged = strategy.judge("c-000001", testcase, mutated)
     assert judged.findings and judged.findings[0].invariant == INVARIANT, judged.summary
     assert judged.findings[0].module == "planning" and judged.failed

@@ -36,7 +36,7 @@ from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.failure import Failure
-from astaa_deft.analysis.minimise.ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin, shorten
+from astaa_deft.analysis.minimise.ddmin import DDOptions, DDResult, Outcome, OutcomeCache, TestResult, ddmin, shorten
 from astaa_deft.analysis.minimise.holds import Run, flatten, held_runs, same_fields
 from astaa_deft.analysis.minimise.live_tester import LiveTester
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation, run_start_ns
@@ -175,8 +175,8 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
     # Stage 1: mutations (a held fault one item), then the holds shortened.
     runs = held_runs(relevant)
     say(f"stage 1: {len(relevant)} mutations reaching {who}" + _runs_note(runs))
-    first = ddmin(runs, lambda subset: tester(Job.of({n: None for n in flatten(subset)})), parallel=parallel,
-                  max_tests=max_tests, progress=_stage_progress(say, "mutations"))
+    first = ddmin(runs, lambda subset: tester(Job.of({n: None for n in flatten(subset)})),
+                  DDOptions(parallel=parallel, max_tests=max_tests, progress=_stage_progress(say, "mutations")))
     report = StageReport.of("mutations", "mutations", len(model.mlog.mutations), first,
                             note=f"{len(relevant)} reached {who}{_runs_note(runs)}")
     report.after = len(flatten(first.minimal))
@@ -207,8 +207,9 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
                                       tests_run=1, cache_hits=0, seconds=time.monotonic() - started,
                                       note="the failing frame alone fails"))
     else:
-        second = ddmin(preceding, lambda subset: tester(Job.of(kept, [*subset, failing])), parallel=parallel,
-                       check_full=False, max_tests=max_tests, progress=_stage_progress(say, "frames"))
+        options = DDOptions(parallel=parallel, check_full=False, max_tests=max_tests,
+                            progress=_stage_progress(say, "frames"))
+        second = ddmin(preceding, lambda subset: tester(Job.of(kept, [*subset, failing])), options)
         scaffolding = list(second.minimal)
         report = StageReport.of("scaffolding", "frames", len(preceding) + 1, second, extra_tests=1)
         report.after += 1  # the failing frame
@@ -242,8 +243,9 @@ def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Fa
     def test_runs(subset: Sequence[Run]) -> TestResult:
         return tester([(by_number[n], None) for n in flatten(subset)])
 
-    first = ddmin(runs, test_runs, cache=cache, max_tests=max_tests, progress=_stage_progress(say, "mutations"),
-                  parallel=jobs)
+    first = ddmin(runs, test_runs,
+                  DDOptions(parallel=jobs, max_tests=max_tests, progress=_stage_progress(say, "mutations")),
+                  cache=cache)
     report = StageReport.of("mutations", "mutations", len(mutations), first, extra_tests=1,
                             note="the full-set reproduction check included" + _runs_note(runs))
     report.after = len(flatten(first.minimal))
@@ -348,8 +350,9 @@ def _minimise_fields(runs: Sequence[Run], by_number: Mapping[int, Mutation],
 
     say(f"stage 3: {len(items)} field changes in {len(reducible)} mutation(s)")
     before = out_fields(kept, by_number)
-    result = ddmin(items, lambda subset: test(selection(subset)), parallel=parallel, check_full=False,
-                   max_tests=max_tests, progress=_stage_progress(say, "fields"))
+    options = DDOptions(parallel=parallel, check_full=False, max_tests=max_tests,
+                        progress=_stage_progress(say, "fields"))
+    result = ddmin(items, lambda subset: test(selection(subset)), options)
     final = selection(result.minimal)
     report = StageReport.of("fields", "fields", before, result)
     report.after = out_fields(final, by_number)

@@ -299,10 +299,16 @@ def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
     for b in buckets:
         fails, runs = journal.rate(b)
         standing = by_bucket.get(b.bucket)
-        rows.append(_bucket_rows(b, standing=standing, first=journal.case(b.first_case),
-                                 m=minimised.get(b.bucket), checked=checked.get(b.bucket),
-                                 rate=f"{fails}/{runs}" if runs else "-", out=out,
-                                 not_minimised=not_minimised_why(b, standing, minimising)))
+        first, m = journal.case(b.first_case), minimised.get(b.bucket)
+        minimal_xml = m.minimal_xml if m is not None else None  # else the first failing test case's XML, if any
+        xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
+        rows.append(_BucketRow(
+            bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
+            colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
+            family=[] if b.without_mutation else str(b.family).split("+"),
+            culprit=(m.culprit or m.status) if m is not None else None,
+            not_minimised=not_minimised_why(b, standing, minimising), rate=f"{fails}/{runs}" if runs else "-",
+            links=_links(first, m, checked.get(b.bucket), out), xml=str(xml), minimal=bool(minimal_xml)))
     return rows
 
 
@@ -316,19 +322,6 @@ def not_minimised_why(bucket: Bucket, standing: Standing | None, minimising: boo
         status = standing.status if standing is not None else bucket.kind
         return f"only reproduced buckets are minimised, and this one is {status}"
     return "the campaign ended before its turn (astaa-deft fuzz --resume minimises it)"
-
-
-def _bucket_rows(b: Bucket, *, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
-                 checked: ModuleTestsRow | None, rate: str, out: Path, not_minimised: str) -> _BucketRow:
-    """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
-    minimal_xml = m.minimal_xml if m is not None else None
-    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
-    return _BucketRow(
-        bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
-        colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
-        family=[] if b.without_mutation else str(b.family).split("+"),
-        culprit=(m.culprit or m.status) if m is not None else None, not_minimised=not_minimised,
-        rate=rate, links=_links(first, m, checked, out), xml=str(xml), minimal=bool(minimal_xml))
 
 
 def _blames(journal: Journal) -> list[_BlameRow]:

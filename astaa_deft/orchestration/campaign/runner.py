@@ -16,7 +16,7 @@ import math
 from collections.abc import Mapping
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import zenoh
@@ -57,25 +57,38 @@ def isolated(spec: Spec) -> Spec:
     return replace(spec, zenoh=replace(spec.zenoh, endpoints=tuple(endpoints)))
 
 
-def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *, horizon: float,
-             dictionary: Dictionary | None = None, settle: float | None = None,
-             warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset(),
-             shutdown_delays: Mapping[str, float] | None = None) -> CaseOutcome:
-    """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
+@dataclass(frozen=True, kw_only=True)
+class CaseLimits:
+    """When a case's run ends.
 
-    A mutated run ends at its first broken invariant, except those in
-    ``known`` (known baseline findings: the campaign judges them after the
-    run); a clean run (``testcase`` None) never ends at a violation: it runs
-    to the scenario's end, so it measures how long the SUT is live, and its
+    ``horizon``: seconds at most. ``known``: known baseline findings — a
+    mutated run ends at its first broken invariant except these (the
+    campaign judges them after the run). ``settle``: a mutated run ends this
+    many seconds after its test case can mutate no more (its last window
+    closed or its last one-message policy acted) — what the SUT does with a
+    bad message shows within seconds, and a run's remaining minutes would be
+    spent for nothing; None: it does not. ``shutdown_delays``: per module
+    whose exit ends the run, the seconds its exit may come after its last
+    message (learned from the baseline; the run's end is dated at that
+    message when it does).
+    """
+
+    horizon: float
+    settle: float | None = None
+    known: frozenset[str] = frozenset()
+    shutdown_delays: Mapping[str, float] | None = None
+
+
+def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *, limits: CaseLimits,
+             dictionary: Dictionary | None = None, warm_recorder: ChildProcess | None = None) -> CaseOutcome:
+    """One fresh run of the SUT with ``testcase`` (None: clean), ending as ``limits`` say.
+
+    A clean run (``testcase`` None) never ends at a violation: it runs to
+    the scenario's end, so it measures how long the SUT is live, and its
     channels' timing (rates, longest gaps), and its memory.
-    ``settle``: a mutated run ends this many seconds after its test case can
-    mutate no more (its last window closed or its last one-message policy
-    acted) — what the SUT does with a bad message shows within seconds, and
-    a run's remaining minutes would be spent for nothing.
     ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
-    ``shutdown_delays``: per module whose exit ends the run, the seconds its exit may come after its last
-    message (learned from the baseline; the run's end is dated at that message when it does). A clean run's
-    outcome carries what its own ending module took (``shutdowns``), the baseline learns from those.
+    A clean run's outcome carries what its own ending module took (``shutdowns``), the baseline learns from
+    those.
     Every outcome carries the run's CPU seconds and wall seconds (:mod:`.cost`).
     Never raises for a run that does not start or is not observed to its end: the outcome says "error".
     """
@@ -84,9 +97,9 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
     options = replace(_run_options(spec, testcase, params, run_dir, dictionary=dictionary,
-                                   warm_recorder=warm_recorder), time_limit=horizon,
-                      shutdown_delays=dict(shutdown_delays or {}))
-    watches = _Watches(spec, testcase, settle, known)
+                                   warm_recorder=warm_recorder), time_limit=limits.horizon,
+                      shutdown_delays=dict(limits.shutdown_delays or {}))
+    watches = _Watches(spec, testcase, limits.settle, limits.known)
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
         result = run_session(isolated(spec), options, on_start=watches.on_start, stop_when=watches.stop_when)

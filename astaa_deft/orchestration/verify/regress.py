@@ -91,15 +91,15 @@ def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
     from astaa_deft.engine.spec.loader import load_spec
     from astaa_deft.orchestration.campaign import signature as sig
     from astaa_deft.orchestration.campaign.known import from_json as known_from_json, judged
-    from astaa_deft.orchestration.campaign.runner import run_case
+    from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
     from astaa_deft.orchestration.journal.checks import FailureWay
 
     entry = suite.bucket(name)
     spec = load_spec(suite.spec_path())
     testcase = load_testcase(suite.directory / entry.testcase)
     known = known_from_json(suite.known())
-    outcome = run_case(spec, testcase, suite.params_of(name), run_dir,
-                       horizon=suite.setting("horizon"), settle=suite.setting("settle"), known=frozenset(known))
+    limits = CaseLimits(horizon=suite.setting("horizon"), settle=suite.setting("settle"), known=frozenset(known))
+    outcome = run_case(spec, testcase, suite.params_of(name), run_dir, limits=limits)
     if outcome.status != "done":
         raise AssertionError(f"{name}: the run was not observed to its end ({outcome.summary}: {outcome.error})"
                              f" — no verdict; log in {run_dir}")
