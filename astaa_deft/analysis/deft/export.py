@@ -97,6 +97,12 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
     return path
 
 
+def is_checked(frame: Mapping[str, object]) -> bool:
+    """Whether a manifest's frame entry is a test (``"check": false``: stepped for its state only; a manifest
+    written before frames could be unchecked has no key, and every frame is a test)."""
+    return bool(frame.get("check", True))
+
+
 def _json_default(value: object) -> str:
     if isinstance(value, float):
         return repr(value)

@@ -24,7 +24,7 @@ from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.deft.checkpoint import Checkpoint, LogShape, identity, read_state
 from astaa_deft.analysis.deft.diagnosis import Diagnosis, diagnose
-from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.export import MANIFEST, export_suite, is_checked
 from astaa_deft.analysis.deft.idle_cores import cpu_sample, idle_cores
 from astaa_deft.analysis.deft.extract import (
     Decided, ExtractedFrame, Extraction, OnOutput, channel_messages, extract, ground_truth_rate,
@@ -291,7 +291,7 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
             ran = {"error": f"pytest did not finish the suite in {SUITE_CHECK_TIMEOUT_S:.0f} s"}
     if "frames" not in ran:  # it did not run at all: none of its tests can be said to pass
         why = f"pytest could not run the suite: {ran.get('error')}"
-        return [SuiteFailure(int(e["index"]), why) for e in manifest["frames"] if e.get("check", True)], 0
+        return [SuiteFailure(int(e["index"]), why) for e in manifest["frames"] if is_checked(e)], 0
     results: dict[int, dict[str, Any]] = {int(r["index"]): r for r in ran["frames"]}
     out = []
     confirmed = 0
@@ -299,7 +299,7 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
         result = results.get(int(entry["index"]))
         if result is None:
             continue
-        if not entry.get("check", True):
+        if not is_checked(entry):
             frame = frames.get(int(entry["index"]))
             if result["passes"] and frame is not None and frame.output is not None and not result["stopped"]:
                 frame.comparison = Comparison(distance=float(result["distance"]), max_error=float(result["max_error"]),
