@@ -440,3 +440,20 @@ def test_a_test_case_is_an_object_until_the_payload_or_the_journal_stores_it(dem
     (row,) = journal.pending(MUTATED)
     assert parse_testcase(row.testcase_xml.encode(), "journal", spec, dictionary) == testcase
     journal.close()
+
+
+def test_a_campaign_runs_the_spec_its_command_loaded_without_reading_the_file_again(tmp_path: Path):
+    from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
+
+    spec = load_spec(demo_spec_path())
+    gone = tmp_path / "moved-away.yaml"  # the command loaded and checked it; the file need not be read again
+    journal = Journal(tmp_path / "c")
+    try:
+        campaign = Campaign(CampaignConfig(spec_path=gone, out=tmp_path / "c", cases=1, workers=1), journal,
+                            say=lambda line: None, spec=spec)
+        assert campaign.spec is spec
+        with pytest.raises(InputError):  # without it, the campaign loads the spec itself
+            Campaign(CampaignConfig(spec_path=gone, out=tmp_path / "c", cases=1, workers=1), journal,
+                     say=lambda line: None)
+    finally:
+        journal.close()

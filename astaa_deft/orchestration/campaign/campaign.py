@@ -170,12 +170,14 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
     (``parts.py``), the hunt's loop here."""
 
     def __init__(self, config: CampaignConfig, journal: Journal,
-                 on_progress: Callable[[Campaign], None] = lambda c: None, say: Callable[[str], None] = print):
+                 on_progress: Callable[[Campaign], None] = lambda c: None, say: Callable[[str], None] = print, *,
+                 spec: Spec | None = None):
+        """``spec``: the spec at ``config.spec_path`` as the caller loaded and checked it (None: loaded here)."""
         self.config = config
         self.journal = journal
         self.on_progress = on_progress
         self.say = say
-        self.spec = load_spec(config.spec_path)
+        self.spec = spec if spec is not None else load_spec(config.spec_path)
         self.dictionary = load_dictionary(config.dictionaries)
         if config.strategy not in STRATEGIES:
             raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
