@@ -4,8 +4,8 @@
     python benchmarks/bench_decictor.py --first --off-seeds 2    # the quick form: each search stops at its first find
     python benchmarks/bench_decictor.py --live 0 --live-cost 16.6   # reuse a measured live cost (no live runs)
 
-A search's budget is wall-clock time on this machine, as the issue's
-acceptance says ("within a 15-minute budget"): ``--budget-minutes`` divided
+A search's budget is wall-clock time on this machine, as the promise
+says ("within a 15-minute budget"): ``--budget-minutes`` divided
 by the live cost of one scenario (``--live N`` runs N scenarios through the
 proxy with real processes, as ``fuzz`` runs them one at a time; or
 ``--live-cost S`` gives it) is the number of scenarios a search may run.

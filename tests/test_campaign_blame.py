@@ -1,4 +1,4 @@
-"""Blame and root-cause dedupe (issue 33): the first module whose output departed from its unmutated twins' is to
+"""Blame and root-cause dedupe: the first module whose output departed from its unmutated twins' is to
 blame, and buckets of one root cause (same module, wrong output, failure, field family) are one bucket."""
 
 from __future__ import annotations

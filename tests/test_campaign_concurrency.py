@@ -1,4 +1,4 @@
-"""Concurrency that follows the machine (issue 33): more runs at once when the other load falls (pure decision;
+"""Concurrency that follows the machine: more runs at once when the other load falls (pure decision;
 the live behaviour with a real CPU-load process: benchmarks/bench_campaign_rise.py)."""
 
 from __future__ import annotations

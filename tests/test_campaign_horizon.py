@@ -1,4 +1,4 @@
-"""A horizon from the stack (issue 33): clean runs go to the scenario's end the spec's run: section declares
+"""A horizon from the stack: clean runs go to the scenario's end the spec's run: section declares
 (capped by its time_limit), and the cases' horizon derives from them. Real runs of tests/sut/scenario.yaml."""
 
 from __future__ import annotations
@@ -94,7 +94,7 @@ goal: {x: 490, lane: 0}
 
 @pytest.mark.slow
 def test_decictor_starts_with_defaults_on_a_stack_whose_scenario_outlasts_the_old_20_s_horizon(tmp_path: Path):
-    # Issue 33: with a fixed 20 s horizon the clean baseline never reached the goal of a longer scenario, and
+    # With a fixed 20 s horizon the clean baseline never reached the goal of a longer scenario, and
     # `--strategy decictor` stopped at once ("baseline did not reach its goal cleanly — check --horizon").
     from astaa_deft.demo.bundled import demo_spec_path
 

@@ -1,4 +1,4 @@
-"""Self-inflicted findings of a campaign case, judged on the producers' originals (issue 24, item 4).
+"""Self-inflicted findings of a campaign case, judged on the producers' originals.
 
 A collision invariant reads two channels (the ego and the obstacles). A case
 that rewrites the obstacles can make the monitors see a collision that

@@ -1,4 +1,4 @@
-"""Findings that say which error (issue 32): an error's type and innermost frame, read from a module's output,
+"""Findings that say which error: an error's type and innermost frame, read from a module's output,
 and a campaign that tells a mutated case's error from its unmutated twin's.
 
 The reports are the runtimes' own formats; the campaign runs a real SUT

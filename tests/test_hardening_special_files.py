@@ -1,4 +1,4 @@
-"""Special files given where a command reads a file (issue 23, item 8): a FIFO with no writer, /dev/zero.
+"""Special files given where a command reads a file: a FIFO with no writer, /dev/zero.
 
 Every command that reads a spec, a test case, a dictionary, a log or a
 campaign journal is run as its own `python -m astaa_deft.cli` process with

@@ -1,4 +1,4 @@
-"""Generated tampered state files (issue 30, items 2, 3 and 8): checkpoints and journals are input like any other.
+"""Generated tampered state files: checkpoints and journals are input like any other.
 
 Two families, each drawn by a seeded generator from a real state file the tool wrote:
 
@@ -356,7 +356,7 @@ def test_tampered_state_full(family, tmp_path):
     assert not problems_in(results), "\n\n".join(problems_in(results)[:5])
 
 
-# -- the cases the issue named, one by one ---------------------------------------------------------
+# -- tampered journals and checkpoints, one case each ----------------------------------------------------
 CHECKPOINT_NAMED = {
     "a choice key ../../x": lambda s: s["decided"][0]["choice"].update({"../../x": 0}),
     "an index of 10^30": lambda s: s["decided"][0]["choice"].update({"pose": 10**30}),

@@ -198,7 +198,7 @@ BAD_USER_FILES = {
     "string: [1, 2]\n": (1, "must be a mapping"),
     "int:\n  x: {remove: yes please}\n": (2, "'remove' takes true"),
     "- a\n- b\n": (1, "a dictionary is a mapping of groups"),
-    # the int group takes whole numbers only (issue 23)
+    # the int group takes whole numbers only
     'int:\n  x: "nan"\n': (2, "the int group takes whole numbers, not str 'nan'"),
     'int:\n  x: "1e999"\n': (2, "the int group takes whole numbers, not str '1e999'"),
     'int:\n  x: ".inf"\n': (2, "the int group takes whole numbers, not str '.inf'"),

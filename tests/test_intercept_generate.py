@@ -199,7 +199,7 @@ def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
 
 
 def test_cases_are_drawn_one_at_a_time_not_as_a_whole_list():
-    """A trillion asked for (issue 23) is no longer a list built before anything is written: each case is
+    """A trillion asked for is no longer a list built before anything is written: each case is
     drawn when reached, the same case as a short run draws at that number."""
     cases = iter_testcases(SPEC, DICTIONARY, 10**12, seed=42)
     first = [next(cases) for _ in range(3)]

@@ -352,7 +352,7 @@ def test_the_documented_example_is_valid():
     assert [p.id for p in testcase.policies] == ["nan-speed", "stale-copies", "lossy"]
 
 
-# ---------------------------------------------------------------- indices and non-finite values (issue 23, item 5)
+# ---------------------------------------------------------------- indices and non-finite values
 
 DEMO = load_spec(ROOT / "astaa_deft" / "data" / "specs" / "demo_av.yaml")  # trajectory: points max_length 200
 

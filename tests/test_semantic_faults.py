@@ -1,4 +1,4 @@
-"""The semantic fault families (issue 33): one registered module each, their rules and actions, valid
+"""The semantic fault families: one registered module each, their rules and actions, valid
 cases for any spec, the earlier families' draws unchanged, and on the semantic zoo (tests/sut/
 semantic_zoo.yaml, driven through a real Interceptor without processes) each family reaching its own
 seeded defect and no other family reaching it."""

@@ -99,7 +99,7 @@ def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
 
 
 def test_a_relative_run_dir_still_hands_modules_a_config_they_can_open(tmp_path, monkeypatch):
-    """Issue 16, found item 8: a relative --run-dir with a module 'cwd' gave the module a relative
+    """A relative --run-dir with a module 'cwd' gave the module a relative
     ZENOH_CONFIG path that did not exist from its own directory, and it crashed."""
     import sys
     import textwrap
