@@ -30,7 +30,7 @@ from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, 
 from astaa_deft.orchestration.campaign.zygote import Zygote, stop_group
 
 if TYPE_CHECKING:
-    from dask.distributed import Future as DaskFuture
+    from dask.distributed import Client as DaskClient, Future as DaskFuture
 
 CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
 
@@ -214,12 +214,17 @@ def cluster_workers(address: str) -> int | None:
 
     try:
         with Client(address, timeout=CLUSTER_CONNECT_SECONDS) as client:
-            return len(client.scheduler_info().get("workers", {})) or None
+            return _workers_of(client) or None
     except (OSError, TimeoutError) as exc:
         raise InputError(Problem("--cluster", None, None, f"no Dask scheduler answers at {address} ({exc})",
                                  "start one (dask scheduler --host 127.0.0.1 --dashboard-address 127.0.0.1:0, "
                                  "then dask worker ADDRESS --host 127.0.0.1 --dashboard-address 127.0.0.1:0) "
                                  "or give local:K")) from None
+
+
+def _workers_of(client: DaskClient) -> int:
+    """The workers a Dask scheduler has now."""
+    return len(client.scheduler_info().get("workers", {}))
 
 
 class DaskPool:
@@ -239,7 +244,7 @@ class DaskPool:
             self.client = Client(self.cluster)
         else:
             self.client = Client(address)
-        self.workers = max(1, len(self.client.scheduler_info().get("workers", {})) or workers)
+        self.workers = max(1, _workers_of(self.client) or workers)
         self.futures: dict[DaskFuture, tuple[str, CasePayload]] = {}
 
     def submit(self, case_id: str, payload: JsonObject) -> None:

@@ -37,6 +37,13 @@ class RegressBucket:
     module: str | None  # the module its finding named (None: none)
     params: dict[str, str]  # the campaign's params it failed with
 
+    @classmethod
+    def from_manifest(cls, entry: StateReader) -> RegressBucket:
+        """The bucket from its entry in regress.json (InputError naming the field when one is damaged)."""
+        return cls(entry.get("testcase").string(), entry.get("invariant").string(),
+                   entry.get("module").text(optional=True),
+                   entry.get("params").map(lambda value: value.string()))
+
 
 @dataclass(frozen=True)
 class RegressSuite:
@@ -66,10 +73,7 @@ class RegressSuite:
 
     def bucket(self, name: str) -> RegressBucket:
         """Bucket ``name`` as the manifest lists it (InputError if it does not, or a field is damaged)."""
-        entry = self._read().get("buckets").obj().get(name).obj()
-        return RegressBucket(entry.get("testcase").string(), entry.get("invariant").string(),
-                             entry.get("module").text(optional=True),
-                             entry.get("params").map(lambda value: value.string()))
+        return RegressBucket.from_manifest(self._read().get("buckets").obj().get(name).obj())
 
     def setting(self, name: str) -> float:
         """A number the campaign ran with (``horizon``, ``settle``: seconds)."""
