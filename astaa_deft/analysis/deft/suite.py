@@ -14,7 +14,7 @@ from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.engine.spec.loader import load_spec_text
-from astaa_deft.analysis.deft.export import FRAMES, MANIFEST
+from astaa_deft.analysis.deft.export import FRAMES, MANIFEST, oracles_of
 from astaa_deft.analysis.deft.oracle_entry import OracleEntry
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import StepHang, compare_outputs, make_planner, trajectory_points, within_limit
@@ -46,7 +46,7 @@ class Suite:
         # The replayed module: the planner unless the manifest names another (astaa-deft extract --module).
         self.entry: ReplayModule = replay_module_of(self.spec, self.manifest.get("module"),
                                                     self.manifest.get("output"))
-        self.oracles = [OracleEntry.from_json(o) for o in self.manifest.get("oracles") or []]
+        self.oracles = [OracleEntry.from_json(o) for o in oracles_of(self.manifest)]
         self._results: list[FrameResult] | None = None
         self._by_channel: dict[str, _Decoded] | None = None
 

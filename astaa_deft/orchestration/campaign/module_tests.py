@@ -26,7 +26,7 @@ from pathlib import Path
 
 from astaa_deft.model.records import Verdict
 from astaa_deft.engine.bus import process_launch
-from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.export import MANIFEST, export_suite, oracles_of
 from astaa_deft.analysis.deft.extract import ExtractedFrame
 from astaa_deft.analysis.deft.validator import Comparison
 from astaa_deft.analysis.deft.workflow import ExtractReport, run_params
@@ -106,7 +106,7 @@ class _FailureFrameWriter:
 
     def __init__(self, tests_dir: Path, log: LogContents, spec: Spec, entry: ReplayModule) -> None:
         self.tests_dir, self.log, self.spec, self.entry = tests_dir, log, spec, entry
-        self.oracles = json.loads((tests_dir / MANIFEST).read_text()).get("oracles", [])
+        self.oracles = oracles_of(json.loads((tests_dir / MANIFEST).read_text()))
         self.params = run_params(log, spec)
 
     def __call__(self, trigger: LoggedMessage, kept: list[ExtractedFrame]) -> bool:
