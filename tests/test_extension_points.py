@@ -146,8 +146,8 @@ FILES = {
                 self.channel = spec.channels[0].name
 
             def propose(self, number):
-                policy = Policy("p", Delay(1.0), channels=(self.channel,))
-                return Proposal(TestCase(f"tc-{number:06d}", 0, "idle", (policy,)))
+                policy = Policy(id="p", action=Delay(1.0), channels=(self.channel,))
+                return Proposal(TestCase(id=f"tc-{number:06d}", seed=0, description="idle", policies=(policy,)))
     ''',
 }
 
