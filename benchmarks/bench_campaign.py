@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
 from astaa_deft.demo.bundled import demo_spec_path
 
 HORIZON = 20.0  # seconds a case runs at most (the spec's run: section and --settle end it sooner)

@@ -38,7 +38,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
 from astaa_deft.orchestration.campaign.standing import CONFIRMED, standings
 from astaa_deft.cli.commands.fuzz import parse_budget
 

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_campaign_module_tests.py [--cases 12] [--members mpc_crash,...] [--keep DIR]
 
-Issue 31's acceptance line: "in a campaign, every confirmed bucket whose
+What it checks: "in a campaign, every confirmed bucket whose
 failing module the spec can replay gets module tests that fail on its defect
 (zoo members with seeded defects, inputs on slow channels included)". Each
 member (tests/zoo) is run as a stack with a default campaign (the random

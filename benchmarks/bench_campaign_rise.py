@@ -26,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from astaa_deft.orchestration.campaign.journal import Journal  # noqa: E402
+from astaa_deft.orchestration.journal.journal import Journal  # noqa: E402
 
 
 def main() -> int:

@@ -16,7 +16,7 @@ import statistics
 import time
 from typing import Sequence
 
-from astaa_deft.analysis.minimise import Outcome, TestResult, ddmin
+from astaa_deft.analysis.minimise import DDOptions, Outcome, TestResult, ddmin
 
 
 def conjunction(culprits: set[int], delay: float = 0.0):
@@ -54,7 +54,7 @@ def parallel_speedup(quick: bool) -> None:
     base = None
     for parallel in (1, 2, 4, 8):
         started = time.monotonic()
-        result = ddmin(list(range(n)), conjunction(culprits, delay), parallel=parallel)
+        result = ddmin(list(range(n)), conjunction(culprits, delay), DDOptions(parallel=parallel))
         seconds = time.monotonic() - started
         base = base or seconds
         print(

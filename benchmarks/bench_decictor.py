@@ -4,8 +4,8 @@
     python benchmarks/bench_decictor.py --first --off-seeds 2    # the quick form: each search stops at its first find
     python benchmarks/bench_decictor.py --live 0 --live-cost 16.6   # reuse a measured live cost (no live runs)
 
-A search's budget is wall-clock time on this machine, as the issue's
-acceptance says ("within a 15-minute budget"): ``--budget-minutes`` divided
+A search's budget is wall-clock time on this machine, as the promise
+says ("within a 15-minute budget"): ``--budget-minutes`` divided
 by the live cost of one scenario (``--live N`` runs N scenarios through the
 proxy with real processes, as ``fuzz`` runs them one at a time; or
 ``--live-cost S`` gives it) is the number of scenarios a search may run.
@@ -88,21 +88,21 @@ def search_once(mode: str, seed: int, scenarios: int, defects: bool, first_only:
 
 def live_cost(count: int) -> list[float]:
     """Seconds per scenario through the proxy (real processes), one scenario at a time, as fuzz runs them."""
-    from astaa_deft.orchestration.campaign.runner import run_case
+    from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
     from astaa_deft.orchestration.campaign.strategies.decictor import scene_testcase
     from astaa_deft.analysis.decictor.search import Scene
     from astaa_deft.engine.intercept.dictionary import load_dictionary
     from astaa_deft.engine.intercept.testcase import parse_testcase
 
     spec = load_spec(SPEC)
-    cone = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)
+    cone = Participant(id=901, kind="cone", x=60.0, y=-3.0, heading=0.0, length=0.5, width=0.5)
     proposed = scene_testcase(Scene((cone,), "add"), "tc-000001", 1, "prediction")
     testcase = parse_testcase(proposed.to_xml(), "tc", spec, load_dictionary())
     seconds = []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(count):
             started = time.perf_counter()
-            outcome = run_case(spec, testcase, {}, Path(tmp) / f"c{k}", horizon=LIVE_HORIZON)
+            outcome = run_case(spec, testcase, {}, Path(tmp) / f"c{k}", limits=CaseLimits(horizon=LIVE_HORIZON))
             seconds.append(time.perf_counter() - started)
             print(f"  live scenario {k + 1}: {seconds[-1]:.1f} s ({outcome.status}, {outcome.verdict}, "
                   f"{outcome.summary[:80]})", flush=True)

@@ -35,7 +35,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--keep", type=Path, default=None, help="the campaign directory (default: a temporary one)")
     args = ap.parse_args()
-    from astaa_deft.orchestration.campaign.journal import open_existing
+    from astaa_deft.orchestration.journal.journal import open_existing
     from astaa_deft.orchestration.campaign.module_level import finding_standing, level_figures, read_state
 
     with tempfile.TemporaryDirectory(prefix="bench-module-") as tmp:

@@ -38,7 +38,7 @@ from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.orchestration.campaign.baseline import learned_shutdown_delays, learning_shutdown_delays
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 TICKS = Path(__file__).resolve().parent.parent / "tests" / "sut" / "ticks.yaml"
 MAX_GAP_NS = 200_000_000  # the spec's control_gap
@@ -89,7 +89,8 @@ def main() -> None:
                     delays = learning_shutdown_delays(spec) if baseline else learned_shutdown_delays(taught)
                     run = one_run(spec, Path(tmp), f"t{teardown}-{n}", teardown, args.ticks, delays)
                     if baseline:
-                        taught.append(CaseOutcome("done", "Pass", "Pass", shutdowns=run["shutdowns"]))
+                        taught.append(CaseOutcome(status="done", verdict="Pass", summary="Pass",
+                                                  shutdowns=run["shutdowns"]))
                     rows.append({**run, "teardown": teardown, "baseline": baseline,
                                  "delay": delays.get("sim"), "load": os.getloadavg()[0]})
     finally:

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_semantic_zoo.py [--budget 20m] [--seed 1] [--defects 1|0] [--keep DIR]
 
-Issue 33's acceptance: the zoo holds one seeded defect per semantic fault
+What it measures: the zoo holds one seeded defect per semantic fault
 family (boundary, angle, units, arrays, type, siblings, stale), each
 reachable only by its family (tests/test_semantic_faults.py checks that
 offline, tests/test_semantic_zoo.py live). This runs ``astaa-deft fuzz``

@@ -6,7 +6,7 @@
 reuse=0: a full RRT* search each cycle, 2-3 trigger periods), for the DeFT
 figures on an expensive planner (``--heavy --gaps 0``: just those).
 
-Issue 16's measures, in one run, on an OMPL RRT* planner (native state,
+Measured in one run, on an OMPL RRT* planner (native state,
 ~0.2 s planning cycles, ~1.4 s searches when blocked) and our simulator:
 
 - each run goes through the star, recorded; ``--gaps`` lists the runs: 0 a

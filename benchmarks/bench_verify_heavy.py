@@ -26,8 +26,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_campaign_heavy import run_fuzz  # noqa: E402
 
-from astaa_deft.orchestration.campaign.journal import open_existing  # noqa: E402
-from astaa_deft.orchestration.verify.records import verifications  # noqa: E402
+from astaa_deft.orchestration.journal.journal import open_existing  # noqa: E402
+from astaa_deft.orchestration.journal.verifications import verifications  # noqa: E402
 
 
 def verify(campaign: Path, defects: str, runs: int) -> tuple[float, int, str]:

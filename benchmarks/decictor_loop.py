@@ -31,8 +31,8 @@ def observe_closed_loop(scenario: str, participants: tuple[Participant, ...], ma
         return message
 
     result = run_closed_loop(scenario, defects=defects, rewrite=rewrite)
-    states = tuple(EgoState(f["localization"]["header"]["stamp"], f["localization"]["x"], f["localization"]["y"],
-                            f["localization"]["heading"], f["localization"]["speed"],
-                            f["localization"]["acceleration"]) for f in result.frames)
+    states = tuple(EgoState(t=f["localization"]["header"]["stamp"], x=f["localization"]["x"], y=f["localization"]["y"],
+                            heading=f["localization"]["heading"], speed=f["localization"]["speed"],
+                            acceleration=f["localization"]["acceleration"]) for f in result.frames)
     return RunObservation(EgoPath(states), bool(result.status.get("goal_reached")),
                           bool(result.status.get("collision")))

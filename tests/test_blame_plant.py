@@ -13,15 +13,8 @@ import pytest
 
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.model.errors import InputError
-from astaa_deft.orchestration.campaign.blame import (
-    MUTATED_VALUE,
-    THE_MUTATED_VALUE,
-    Blame,
-    RunSeries,
-    blame,
-    root_cause_of,
-)
-from astaa_deft.orchestration.campaign.rows import BlameRow
+from astaa_deft.orchestration.campaign.blame import Blame, RunSeries, blame
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE, THE_MUTATED_VALUE, BlameRow, root_cause_of
 
 from blame_series import series
 
@@ -131,10 +124,12 @@ def test_with_no_departure_a_finding_naming_the_plant_blames_the_value_it_was_fe
 
 
 def test_a_stored_blame_row_names_the_same_root_cause_old_rows_included():
-    plant = Blame(None, "pose", MUTATED_VALUE, "c", "d", 2)
-    row = BlameRow("B001", plant.module, plant.output, plant.how, plant.chain, plant.detail, plant.twins, None)
+    plant = Blame(module=None, output="pose", how=MUTATED_VALUE, chain="c", detail="d", twins=2)
+    row = BlameRow(bucket="B001", module=plant.module, output=plant.output, how=plant.how, chain=plant.chain,
+                   detail=plant.detail, twins=plant.twins, identity=None)
     assert row.root_cause == plant.root_cause == THE_MUTATED_VALUE
-    old = BlameRow("B002", "planning", "trajectory", "value", "c", "d", 2, "planning|trajectory:value|x|y")
+    old = BlameRow(bucket="B002", module="planning", output="trajectory", how="value", chain="c", detail="d", twins=2,
+                   identity="planning|trajectory:value|x|y")
     assert old.root_cause == "planning" and root_cause_of(None, "none") is None
 
 
@@ -166,17 +161,20 @@ def test_a_plant_that_is_not_true_or_false_is_one_clear_error(tmp_path: Path, va
 def test_a_bucket_blamed_on_the_mutated_value_gets_no_module_tests_and_an_unknown_blame_falls_back(tmp_path: Path):
     from astaa_deft.demo.bundled import demo_spec_path
     from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-    from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+    from astaa_deft.orchestration.journal.journal import Bucket, Journal
 
     def bucket(name: str, module: str) -> Bucket:
-        return Bucket(name, "sig", "Silent", "speed_limit", module, "command:acceleration:set", "c-000001", False, 1,
-                      0, 0, None, 0.0, 1)
+        return Bucket(bucket=name, signature="sig", verdict="Silent", invariant="speed_limit", module=module,
+                      family="command:acceleration:set", first_case="c-000001", without_mutation=False, cases=1,
+                      reruns=0, rerun_failures=0, merged_into=None, created_at=0.0, created_after_cases=1)
 
     journal = Journal(tmp_path / "c")
     try:
         campaign = Campaign(CampaignConfig(spec_path=demo_spec_path(), out=tmp_path / "c"), journal, say=print)
-        journal.blamed(BlameRow("B001", None, "localization", MUTATED_VALUE, "c", "d", 2, "x"))
-        journal.blamed(BlameRow("B002", None, None, "none", "c", "d", 2, None))
+        journal.blamed(BlameRow(bucket="B001", module=None, output="localization", how=MUTATED_VALUE, chain="c",
+                                detail="d", twins=2, identity="x"))
+        journal.blamed(BlameRow(bucket="B002", module=None, output=None, how="none", chain="c", detail="d", twins=2,
+                                identity=None))
         # No module under test mishandled the value: not even the finding's module (a reaction) gets tests.
         assert campaign._module_to_replay(bucket("B001", "planning")) is None
         assert campaign._module_to_replay(bucket("B002", "planning")) == "planning"  # blame unknown: the finding's

@@ -1,4 +1,4 @@
-"""Blame and root-cause dedupe (issue 33): the first module whose output departed from its unmutated twins' is to
+"""Blame and root-cause dedupe: the first module whose output departed from its unmutated twins' is to
 blame, and buckets of one root cause (same module, wrong output, failure, field family) are one bucket."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.blame import RunSeries, bin_features, blame, departures, features
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome
 from astaa_deft.orchestration.campaign.signature import field_family
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy

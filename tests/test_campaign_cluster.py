@@ -19,7 +19,7 @@ import pytest
 from dask.distributed import Client, LocalCluster
 
 from astaa_deft.orchestration.campaign.executors import DaskPool
-from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
 from astaa_deft.orchestration.campaign.payload import case_json
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
 from astaa_deft.orchestration.campaign.strategies.base import Timing
@@ -64,7 +64,7 @@ def test_a_killed_workers_cases_are_requeued(tmp_path: Path):
     try:
         pool = DaskPool(cluster.scheduler_address, 2)
         for n in range(1, 5):
-            case = PlannedCase(f"b-{n}", BASELINE, n, 0, {"count": "20"}, None)
+            case = PlannedCase(case_id=f"b-{n}", kind=BASELINE, number=n, seed=0, params={"count": "20"}, testcase=None)
             pool.submit(case.case_id, {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / str(n)),
                                        "horizon": 2.0, "dictionaries": []})
         with Client(cluster.scheduler_address) as client:

@@ -17,9 +17,9 @@ import pytest
 from astaa_deft.orchestration.campaign import known as known_mod
 from astaa_deft.orchestration.campaign.calibration import run_share, workers_for
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome, ChannelRate, Finding
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.engine.spec.loader import load_spec
@@ -145,13 +145,18 @@ def test_a_baseline_finding_neither_shrinks_the_live_time_nor_ends_cases(tmp_pat
 
 
 def test_a_known_baseline_finding_counts_only_where_a_case_makes_it_worse():
-    clean = [CaseOutcome("done", "Silent", "", [Finding("data_small", "Silent", "talker", "data", "", at=2.0)],
-                         violating={"data_small": 10})]
+    clean = [CaseOutcome(status="done", verdict="Silent", summary="",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="", at=2.0)],
+        violating={"data_small": 10})]
     known = known_mod.known_findings(clean)
-    same = CaseOutcome("done", "Silent", "s", [Finding("data_small", "Silent", "talker", "data", "", at=2.2)],
-                       violating={"data_small": 8})
-    earlier = CaseOutcome("done", "Silent", "s", [Finding("data_small", "Silent", "talker", "data", "", at=0.4)])
-    oftener = CaseOutcome("done", "Silent", "s", [Finding("data_small", "Silent", "talker", "data", "", at=2.1)] * 2)
+    same = CaseOutcome(status="done", verdict="Silent", summary="s",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="", at=2.2)],
+        violating={"data_small": 8})
+    earlier = CaseOutcome(status="done", verdict="Silent", summary="s",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="", at=0.4)])
+    oftener = CaseOutcome(status="done", verdict="Silent", summary="s",
+        findings=[Finding(invariant="data_small", crash="Silent", module="talker", channel="data", detail="",
+                          at=2.1)] * 2)
     assert known_mod.judged(same, known).verdict == "Pass"
     assert known_mod.judged(earlier, known).verdict == "Silent"
     assert known_mod.judged(oftener, known).verdict == "Silent"
@@ -161,7 +166,7 @@ def test_calibration_picks_fewer_runs_at_once_for_a_module_that_burns_a_core(tmp
     spec = load_spec(STEADY)
     shares = {}
     for burn in ("0", "1"):
-        outcome = run_case(spec, None, {"burn": burn}, tmp_path / f"burn{burn}", horizon=3.0)
+        outcome = run_case(spec, None, {"burn": burn}, tmp_path / f"burn{burn}", limits=CaseLimits(horizon=3.0))
         assert outcome.status == "done" and outcome.cpu > 0 and outcome.rss_mb > 0, outcome
         shares[burn] = run_share([outcome])
     assert shares["1"] is not None and shares["0"] is not None
@@ -232,7 +237,8 @@ def test_timing_drift_at_concurrency_means_fewer_runs_at_once():
     from astaa_deft.orchestration.campaign.calibration import RunShare, drift, fewer_after_drift, overloaded
 
     def timed(gap: float, rate: float) -> CaseOutcome:
-        return CaseOutcome("done", "Pass", "", timing={"plan": ChannelRate(count=40, rate=rate, max_gap=gap)})
+        return CaseOutcome(status="done", verdict="Pass", summary="",
+                           timing={"plan": ChannelRate(count=40, rate=rate, max_gap=gap)})
 
     solo = timed(0.6, 2.0)
     assert not drift(solo, timed(0.7, 1.9)).drifted  # jitter

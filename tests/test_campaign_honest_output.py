@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
-from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.journal.model import (
     MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.report import write_report
@@ -22,21 +22,26 @@ from astaa_deft.orchestration.campaign.standing import (CONFIRMED, UNCONFIRMED, 
 from astaa_deft.engine.monitor.verdict import run_verdict
 from astaa_deft.engine.monitor.violation import Violation
 
-CLEARANCE = Finding("clearance", "Silent", None, "ego", "overlaps by 0.1 m with a 0.3 m margin", "medium")
-COLLISION = Finding("no_collision", "Silent", None, "ego", "overlaps obstacle 2 by 0.05 m", "critical")
-CRASH = Finding("(module exit)", "Abort", "planning", None, "killed by SIGABRT", "high")
+CLEARANCE = Finding(invariant="clearance", crash="Silent", module=None, channel="ego",
+                    detail="overlaps by 0.1 m with a 0.3 m margin", severity="medium")
+COLLISION = Finding(invariant="no_collision", crash="Silent", module=None, channel="ego",
+                    detail="overlaps obstacle 2 by 0.05 m", severity="critical")
+CRASH = Finding(invariant="(module exit)", crash="Abort", module="planning", channel=None, detail="killed by SIGABRT",
+                severity="high")
 
 
 def test_a_run_is_filed_under_its_most_severe_finding_not_its_first():
-    outcome = CaseOutcome("done", "Silent", "…", [CLEARANCE, COLLISION])
+    outcome = CaseOutcome(status="done", verdict="Silent", summary="…", findings=[CLEARANCE, COLLISION])
     assert sig.primary(outcome) == COLLISION
     assert sig.failure_key(outcome).text() == "Silent|no_collision|-"
     # same severity: the worse CRASH class, then the earlier
-    assert sig.primary(CaseOutcome("done", "Abort", "…", [CLEARANCE, CRASH, replace_severity(CRASH)])) == CRASH
+    assert sig.primary(CaseOutcome(status="done", verdict="Abort", summary="…",
+                                   findings=[CLEARANCE, CRASH, replace_severity(CRASH)])) == CRASH
 
 
 def replace_severity(finding: Finding) -> Finding:
-    return Finding(finding.invariant + "2", "Silent", finding.module, finding.channel, finding.detail, "high")
+    return Finding(invariant=finding.invariant + "2", crash="Silent", module=finding.module, channel=finding.channel,
+                   detail=finding.detail, severity="high")
 
 
 def test_the_verdict_line_names_the_most_severe_finding_and_still_says_which_came_first():
@@ -54,11 +59,14 @@ def test_the_verdict_line_names_the_most_severe_finding_and_still_says_which_cam
 def _bucket(journal: Journal, name: str, finding: Finding, *, reruns: int = 0, failures: int = 0,
             without_mutation: bool = False) -> None:
     case = f"c-{name}"
-    journal.plan(PlannedCase(case, MUTATED, int(name[1:]), 1, {}, None, "random"))
+    journal.plan(PlannedCase(case_id=case, kind=MUTATED, number=int(name[1:]), seed=1, params={}, testcase=None,
+                             strategy="random"))
     signature = BucketSignature(FailureKey(finding.crash, finding.invariant, finding.module or "-"), "ego:x:set")
-    journal.finished(case, CaseOutcome("done", finding.crash, "…", [finding]), signature=signature, bucket=name)
-    journal.add_bucket(NewBucket(name, signature, finding.crash, finding.invariant, finding.module, case,
-                                 without_mutation, 1))
+    journal.finished(case, CaseOutcome(status="done", verdict=finding.crash, summary="…", findings=[finding]),
+                     signature=signature, bucket=name)
+    journal.add_bucket(NewBucket(name=name, signature=signature, verdict=finding.crash, invariant=finding.invariant,
+                                 module=finding.module, first_case=case, without_mutation=without_mutation,
+                                 after_cases=1))
     for k in range(reruns):
         journal.bucket_rerun(name, k < failures)
 
@@ -69,21 +77,29 @@ def test_buckets_rank_confirmed_first_by_severity_then_rate_and_unconfirmed_ones
     try:
         journal.set_meta(spec="/x/ompl_stack.yaml", seed=1, strategy="random", params={}, horizon=20.0)
         _bucket(journal, "B001", CLEARANCE, reruns=2, failures=2)  # first found, least severe
-        _bucket(journal, "B002", Finding("plans_flow", "Restart", "planning", "plan", "silent 5 s", "high"),
-                reruns=2, failures=0)  # load: never came back
+        _bucket(journal, "B002",
+            Finding(invariant="plans_flow", crash="Restart", module="planning", channel="plan", detail="silent 5 s",
+                    severity="high"),
+            reruns=2, failures=0)  # load: never came back
         _bucket(journal, "B003", CRASH, reruns=2, failures=1)
         _bucket(journal, "B004", COLLISION, reruns=2, failures=2)
-        _bucket(journal, "B005", Finding("plans_flow", "Restart", "planning", "plan", "silent", "high"),
-                without_mutation=True)
-        _bucket(journal, "B006", Finding("planner_errors", "Silent", "planning", None, "Traceback", "high"),
-                reruns=2, failures=2)
+        _bucket(journal, "B005",
+            Finding(invariant="plans_flow", crash="Restart", module="planning", channel="plan", detail="silent",
+                    severity="high"),
+            without_mutation=True)
+        _bucket(journal, "B006",
+            Finding(invariant="planner_errors", crash="Silent", module="planning", channel=None, detail="Traceback",
+                    severity="high"),
+            reruns=2, failures=2)
         journal.module_tests_checked("B003", str(out / "tests" / "B003-replay"), True,
                                      "the planner's replay raises CollisionCheckerFault")
         journal.module_tests_checked("B006", str(out / "tests" / "B006-replay"), False, "they pass on the defect")
-        journal.minimised(Minimisation("B003", "minimised", 0, None, "obstacles:obstacles[].length = -1", None,
-                                       str(out / "tests" / "B003-replay"), 30.0, ""))
-        journal.minimised(Minimisation("B006", "minimised", 0, None, "ego:heading = nan", None,
-                                       str(out / "tests" / "B006-replay"), 30.0, ""))
+        journal.minimised(Minimisation(bucket="B003", status="minimised", exit_code=0, minimal_xml=None,
+                                       culprit="obstacles:obstacles[].length = -1", out_dir=None,
+                                       tests_dir=str(out / "tests" / "B003-replay"), seconds=30.0, detail=""))
+        journal.minimised(Minimisation(bucket="B006", status="minimised", exit_code=0, minimal_xml=None,
+                                       culprit="ego:heading = nan", out_dir=None,
+                                       tests_dir=str(out / "tests" / "B006-replay"), seconds=30.0, detail=""))
         ranked = standings(journal)
         assert [(s.bucket.bucket, s.status, s.severity) for s in ranked] == [
             ("B004", CONFIRMED, "critical"), ("B006", CONFIRMED, "high"), ("B003", CONFIRMED, "high"),
@@ -123,19 +139,21 @@ def test_a_campaign_of_unconfirmed_buckets_finds_no_bug(tmp_path: Path):
 def test_a_bucket_where_the_fault_alone_breaks_the_invariant_is_listed_apart_and_never_a_confirmed_bug(tmp_path):
     """The demo's case: an acceleration held at its declared maximum pushes the simulator (a plant) over the speed
     limit; blame finds no module under test that departed from its twins, so the fault did it alone."""
-    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-    from astaa_deft.orchestration.campaign.rows import BlameRow
+    from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+    from astaa_deft.orchestration.journal.rows import BlameRow
     from astaa_deft.orchestration.campaign.standing import FAULT_ALONE
 
     out = tmp_path / "campaign"
     journal = Journal(out)
     try:
         journal.set_meta(spec="/x/demo_av.yaml", seed=1, strategy="random", params={}, horizon=6.0, minimise=False)
-        speeding = Finding("speed_limit", "Silent", None, "ego", "12.4 m/s over 11.1", "critical")
+        speeding = Finding(invariant="speed_limit", crash="Silent", module=None, channel="ego",
+                           detail="12.4 m/s over 11.1", severity="critical")
         _bucket(journal, "B001", speeding, reruns=1, failures=1)
         _bucket(journal, "B002", CRASH, reruns=1, failures=1)
-        journal.blamed(BlameRow("B001", None, "ego", MUTATED_VALUE, "command → sim → ego → speed_limit",
-                                "ego departed first", 1, None))
+        journal.blamed(BlameRow(bucket="B001", module=None, output="ego", how=MUTATED_VALUE,
+                                chain="command → sim → ego → speed_limit", detail="ego departed first", twins=1,
+                                identity=None))
         ranked = standings(journal)
         assert [(s.bucket.bucket, s.status) for s in ranked] == [("B002", CONFIRMED), ("B001", FAULT_ALONE)]
         assert "the fault alone breaks the invariant; no module under test involved" in ranked[1].why
@@ -159,8 +177,8 @@ def test_the_demos_headline_counts_no_bucket_where_the_fault_alone_breaks_the_in
     import subprocess
     import sys
 
-    from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-    from astaa_deft.orchestration.campaign.journal import open_existing
+    from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+    from astaa_deft.orchestration.journal.journal import open_existing
 
     out = tmp_path / "campaign"
     code = ("import sys; from pathlib import Path; from astaa_deft.demo.bundled import demo_spec_path; "

@@ -1,4 +1,4 @@
-"""A horizon from the stack (issue 33): clean runs go to the scenario's end the spec's run: section declares
+"""A horizon from the stack: clean runs go to the scenario's end the spec's run: section declares
 (capped by its time_limit), and the cases' horizon derives from them. Real runs of tests/sut/scenario.yaml."""
 
 from __future__ import annotations
@@ -14,15 +14,15 @@ from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.campaign import (
     CLEAN_RUN_CAP, DEFAULT_HORIZON, HORIZON_SLACK, Campaign, CampaignConfig, clean_horizon, derived_horizon,
 )
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 SUT = Path(__file__).parent / "sut"
 SCENARIO = SUT / "scenario.yaml"
 
 
 def done(seconds: float) -> CaseOutcome:
-    return CaseOutcome("done", "Pass", "Pass", seconds=seconds)
+    return CaseOutcome(status="done", verdict="Pass", summary="Pass", seconds=seconds)
 
 
 def test_clean_runs_are_bounded_by_the_specs_run_section_and_cases_by_the_clean_runs():
@@ -40,7 +40,7 @@ def test_clean_runs_are_bounded_by_the_specs_run_section_and_cases_by_the_clean_
 
 
 def test_a_resumed_campaign_derives_its_horizon_again_and_keeps_a_given_one():
-    from astaa_deft.orchestration.campaign.rows import CampaignMeta
+    from astaa_deft.orchestration.journal.rows import CampaignMeta
 
     config = CampaignConfig(spec_path=SCENARIO, out=Path("c"))
     assert config.resuming(CampaignMeta(horizon=14.5, horizon_derived=True)).horizon is None
@@ -94,7 +94,7 @@ goal: {x: 490, lane: 0}
 
 @pytest.mark.slow
 def test_decictor_starts_with_defaults_on_a_stack_whose_scenario_outlasts_the_old_20_s_horizon(tmp_path: Path):
-    # Issue 33: with a fixed 20 s horizon the clean baseline never reached the goal of a longer scenario, and
+    # With a fixed 20 s horizon the clean baseline never reached the goal of a longer scenario, and
     # `--strategy decictor` stopped at once ("baseline did not reach its goal cleanly — check --horizon").
     from astaa_deft.demo.bundled import demo_spec_path
 

@@ -1,4 +1,4 @@
-"""A bucket's module tests must fail on its defect, and the campaign says whether they do (issue 24, item 7).
+"""A bucket's module tests must fail on its defect, and the campaign says whether they do.
 
 A planner that raises in a cycle answers nothing then, so DeFT's frames of
 that run (one per recorded output) all replay fine and the suite passed. A

@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX, Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.intercept.testcase import parse_testcase
@@ -28,16 +28,17 @@ NAN_LIMIT = b"""<testcase id="nan-limit" seed="1"><description>defect 1</descrip
 
 
 def _bucket(name: str, module: str) -> Bucket:
-    return Bucket(name, "sig", "Silent", "planned_speed", module, "routing:speed_limit:set", "c-000001", False, 1,
-                  0, 0, None, 0.0, 1)
+    return Bucket(bucket=name, signature="sig", verdict="Silent", invariant="planned_speed", module=module,
+                  family="routing:speed_limit:set", first_case="c-000001", without_mutation=False, cases=1, reruns=0,
+                  rerun_failures=0, merged_into=None, created_at=0.0, created_after_cases=1)
 
 
 def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path: Path, monkeypatch):
     spec = load_spec(demo_spec_path())
     dictionary = load_dictionary()
     testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
-    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case", horizon=8.0,
-                       dictionary=dictionary)
+    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case",
+                       limits=CaseLimits(horizon=8.0), dictionary=dictionary)
     assert outcome.status == "done" and outcome.mutations > 0, outcome
     assert any(f.invariant == "planned_speed" for f in outcome.findings), outcome  # the overspeed plan was seen
     monkeypatch.chdir(tmp_path)

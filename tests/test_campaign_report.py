@@ -10,8 +10,8 @@ import pytest
 from astaa_deft.model.errors import InputError
 
 from astaa_deft.engine.intercept.testcase import parse_testcase
-from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.journal.model import (
     BASELINE, MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.report import write_report
@@ -22,11 +22,13 @@ XML = '<testcase id="tc-{n}" seed="{n}"><description/><policy id="p"><channel>ro
 
 def _case(journal: Journal, out: Path, case_id: str, kind: str, n: int, verdict: str, reason: str,
           bucket: str | None = None, finding: Finding | None = None) -> None:
-    journal.plan(PlannedCase(case_id, kind, n, 1, {"scenario": "lane_follow"},
-                             None if kind == BASELINE else parse_testcase(XML.format(n=n).encode()), "random"))
+    journal.plan(PlannedCase(case_id=case_id, kind=kind, number=n, seed=1, params={"scenario": "lane_follow"},
+                             testcase=None if kind == BASELINE else parse_testcase(XML.format(n=n).encode()),
+                             strategy="random"))
     journal.started(case_id)
     log = out / "cases" / case_id / "run.mcap"
-    outcome = CaseOutcome("done", verdict, f"{verdict}: …", [finding] if finding else [], 3.0, str(log), reason,
+    outcome = CaseOutcome(status="done", verdict=verdict, summary=f"{verdict}: …",
+                          findings=[finding] if finding else [], seconds=3.0, log_path=str(log), reason=reason,
                           margins={"planned_speed": 0.2 / n})
     journal.finished(case_id, outcome, signature=_signature("sig") if bucket else None, bucket=bucket)
 
@@ -40,25 +42,33 @@ def test_report_shows_buckets_culprits_tests_merges_and_how_runs_ended(tmp_path:
     journal = Journal(out)
     try:
         journal.set_meta(spec="/x/demo_av.yaml", seed=1, strategy="random", params={}, horizon=8.0)
-        speed = Finding("planned_speed", "Silent", "planning", "trajectory", "v 20 > 15")
+        speed = Finding(invariant="planned_speed", crash="Silent", module="planning", channel="trajectory",
+                        detail="v 20 > 15")
         _case(journal, out, "b-0001", BASELINE, 1, "Pass", "goal reached")
         _case(journal, out, "c-000001", MUTATED, 1, "Silent", "violation", "B001", speed)
         _case(journal, out, "c-000002", MUTATED, 2, "Silent", "violation", "B002", speed)
         _case(journal, out, "c-000003", MUTATED, 3, "Pass", "goal reached")
         _case(journal, out, "b-0002", BASELINE, 2, "Restart", "violation", "B003",
-              Finding("control_alive", "Restart", "control", "command", "silent"))
-        journal.add_bucket(NewBucket("B001", _signature("routing:speed_limit:set+routing:x:set"), "Silent",
-                                     "planned_speed", "planning", "c-000001", False, 2))
-        journal.add_bucket(NewBucket("B002", _signature("routing:speed_limit:set"), "Silent", "speed_limit",
-                                     "planning", "c-000002", False, 3))
-        journal.add_bucket(NewBucket("B003", _signature("(no mutation)"), "Restart", "control_alive", "control",
-                                     "b-0002", True, 5))
-        journal.minimised(Minimisation("B001", "minimised", 0, "<testcase id='minimal-1'/>",
-                                       "routing:speed_limit = dict:float.nan", str(out / "minimised" / "B001"),
-                                       str(out / "tests" / "B001"), 12.0, ""))
-        journal.minimised(Minimisation("B002", "minimised", 0, "<testcase id='minimal-2'/>",
-                                       "routing:speed_limit = dict:float.nan", str(out / "minimised" / "B002"),
-                                       str(out / "tests" / "B002-replay"), 12.0, ""))
+              Finding(invariant="control_alive", crash="Restart", module="control", channel="command", detail="silent"))
+        journal.add_bucket(NewBucket(name="B001", signature=_signature("routing:speed_limit:set+routing:x:set"),
+                                     verdict="Silent", invariant="planned_speed", module="planning",
+                                     first_case="c-000001", without_mutation=False, after_cases=2))
+        journal.add_bucket(NewBucket(name="B002", signature=_signature("routing:speed_limit:set"), verdict="Silent",
+                                     invariant="speed_limit", module="planning", first_case="c-000002",
+                                     without_mutation=False, after_cases=3))
+        journal.add_bucket(NewBucket(name="B003", signature=_signature("(no mutation)"), verdict="Restart",
+                                     invariant="control_alive", module="control", first_case="b-0002",
+                                     without_mutation=True, after_cases=5))
+        journal.minimised(Minimisation(bucket="B001", status="minimised", exit_code=0,
+                                       minimal_xml="<testcase id='minimal-1'/>",
+                                       culprit="routing:speed_limit = dict:float.nan",
+                                       out_dir=str(out / "minimised" / "B001"), tests_dir=str(out / "tests" / "B001"),
+                                       seconds=12.0, detail=""))
+        journal.minimised(Minimisation(bucket="B002", status="minimised", exit_code=0,
+                                       minimal_xml="<testcase id='minimal-2'/>",
+                                       culprit="routing:speed_limit = dict:float.nan",
+                                       out_dir=str(out / "minimised" / "B002"),
+                                       tests_dir=str(out / "tests" / "B002-replay"), seconds=12.0, detail=""))
         journal.merge_bucket("B002", "B001")
     finally:
         journal.close()
@@ -95,10 +105,13 @@ def test_every_cell_is_escaped_whatever_its_declared_type(tmp_path: Path):
     journal = Journal(out)
     try:
         journal.set_meta(spec=f"/x/{EVIL}.yaml", seed=1, strategy=EVIL, params={EVIL: [EVIL]}, horizon=8.0)
-        speed = Finding("planned_speed", "Silent", "planning", "trajectory", "v 20 > 15")
+        speed = Finding(invariant="planned_speed", crash="Silent", module="planning", channel="trajectory",
+                        detail="v 20 > 15")
         _case(journal, out, "c-000001", MUTATED, 1, "Silent", EVIL, "B001", speed)
-        journal.add_bucket(NewBucket("B001", _signature(f"{EVIL}+x"), "Silent", EVIL, EVIL, "c-000001", False, 2))
-        journal.minimised(Minimisation("B001", EVIL, 0, EVIL, EVIL, str(out / EVIL), str(out / EVIL), 1.0, EVIL))
+        journal.add_bucket(NewBucket(name="B001", signature=_signature(f"{EVIL}+x"), verdict="Silent", invariant=EVIL,
+                                     module=EVIL, first_case="c-000001", without_mutation=False, after_cases=2))
+        journal.minimised(Minimisation(bucket="B001", status=EVIL, exit_code=0, minimal_xml=EVIL, culprit=EVIL,
+                                       out_dir=str(out / EVIL), tests_dir=str(out / EVIL), seconds=1.0, detail=EVIL))
         journal.module_tests_checked("B001", EVIL, None, EVIL)
     finally:
         journal.close()

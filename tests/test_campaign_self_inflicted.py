@@ -1,4 +1,4 @@
-"""Self-inflicted findings of a campaign case, judged on the producers' originals (issue 24, item 4).
+"""Self-inflicted findings of a campaign case, judged on the producers' originals.
 
 A collision invariant reads two channels (the ego and the obstacles). A case
 that rewrites the obstacles can make the monitors see a collision that
@@ -21,7 +21,7 @@ import ompl  # noqa: F401  -- in the test extra; the stack's planner needs it (a
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.originals import broken_on_originals
 from astaa_deft.engine.session.check import check_recorded_run
 from astaa_deft.engine.spec.loader import load_spec
@@ -59,9 +59,10 @@ def record(tmp: Path, name: str, xml: str, *params: str) -> Path:
 def outcome_of(log: Path) -> CaseOutcome:
     """The case's outcome as a campaign worker files it: the run's findings, its log."""
     checked = check_recorded_run(log, SPEC)
-    findings = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail) for v in checked.result.violations]
-    return CaseOutcome("done", checked.result.verdict.klass, checked.result.verdict.summary, findings,
-                       log_path=str(log))
+    findings = [Finding(invariant=v.invariant, crash=v.crash, module=v.module, channel=v.channel,
+                        detail=v.detail) for v in checked.result.violations]
+    return CaseOutcome(status="done", verdict=checked.result.verdict.klass, summary=checked.result.verdict.summary,
+                       findings=findings, log_path=str(log))
 
 
 @pytest.fixture(scope="module")
@@ -83,9 +84,11 @@ def test_a_collision_only_with_a_rewritten_obstacle_is_self_inflicted_whichever_
     assert "not counted: clearance, no_collision (broke on the rewritten messages only" in judged.summary
     # Online, the same collision is often reported on the ego's message (the other channel it reads): before,
     # the rule looked at that one channel and counted it.
-    on_ego = [Finding("no_collision", "Silent", None, "ego", "ego footprint overlaps obstacle 1")]
-    judged = sig.without_self_inflicted(CaseOutcome("done", "Silent", "Silent: no_collision", on_ego,
-                                                    log_path=str(blown)), case(BLOWN_UP), spec)
+    on_ego = [Finding(invariant="no_collision", crash="Silent", module=None, channel="ego",
+                      detail="ego footprint overlaps obstacle 1")]
+    judged = sig.without_self_inflicted(
+        CaseOutcome(status="done", verdict="Silent", summary="Silent: no_collision", findings=on_ego,
+                    log_path=str(blown)), case(BLOWN_UP), spec)
     assert not judged.failed and judged.verdict == "Pass"
 
 
@@ -102,7 +105,8 @@ def test_a_collision_that_exists_in_the_producers_originals_counts(logs):
 def test_without_a_readable_log_a_finding_on_a_rewritten_channel_does_not_count(tmp_path, logs):
     spec = load_spec(SPEC)
     assert broken_on_originals(tmp_path / "missing.mcap", spec, {"no_collision"}, {"obstacles"}) is None
-    lost = CaseOutcome("done", "Silent", "Silent: no_collision",
-                       [Finding("no_collision", "Silent", None, "ego", "overlap")], log_path=str(tmp_path / "x.mcap"))
+    lost = CaseOutcome(status="done", verdict="Silent", summary="Silent: no_collision",
+        findings=[Finding(invariant="no_collision", crash="Silent", module=None, channel="ego", detail="overlap")],
+        log_path=str(tmp_path / "x.mcap"))
     judged = sig.without_self_inflicted(lost, case(NARROWER), spec)
     assert not judged.failed and "not judged on the originals" in judged.summary

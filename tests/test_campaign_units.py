@@ -13,8 +13,8 @@ import pytest
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.campaign import default_workers, param_grid
-from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+from astaa_deft.orchestration.journal.model import (
     MUTATED, BucketSignature, CaseOutcome, FailureKey, Finding, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES
@@ -82,16 +82,16 @@ def test_random_strategy_covers_every_channel_and_field_first_with_values_class_
 def test_value_classes_come_from_the_values_not_their_names():
     from astaa_deft.engine.intercept.dictionary.model import Entry
 
-    assert gen.value_class(Entry("float", "x", float("nan"))) == "non_finite"
-    assert gen.value_class(Entry("float", "x", -float("inf"))) == "non_finite"
-    assert gen.value_class(Entry("float", "x", 1e16)) == "extreme"
-    assert gen.value_class(Entry("int", "x", 2**63 - 1)) == "extreme"
-    assert gen.value_class(Entry("array", "x", [])) == "empty"
-    assert gen.value_class(Entry("array", "x", None)) == "null"
-    assert gen.value_class(Entry("float", "x", -0.0)) == "zero"
-    assert gen.value_class(Entry("float", "x", 5e-324)) == "tiny"
-    assert gen.value_class(Entry("float", "x", rule="above_max")) == "bound"
-    assert gen.value_class(Entry("int", "x", rule="width_overflow")) == "extreme"
+    assert gen.value_class(Entry(group="float", name="x", value=float("nan"))) == "non_finite"
+    assert gen.value_class(Entry(group="float", name="x", value=-float("inf"))) == "non_finite"
+    assert gen.value_class(Entry(group="float", name="x", value=1e16)) == "extreme"
+    assert gen.value_class(Entry(group="int", name="x", value=2**63 - 1)) == "extreme"
+    assert gen.value_class(Entry(group="array", name="x", value=[])) == "empty"
+    assert gen.value_class(Entry(group="array", name="x", value=None)) == "null"
+    assert gen.value_class(Entry(group="float", name="x", value=-0.0)) == "zero"
+    assert gen.value_class(Entry(group="float", name="x", value=5e-324)) == "tiny"
+    assert gen.value_class(Entry(group="float", name="x", rule="above_max")) == "bound"
+    assert gen.value_class(Entry(group="int", name="x", rule="width_overflow")) == "extreme"
 
 
 def test_calibrated_windows_count_from_the_anchor_and_fall_inside_the_live_run(demo):
@@ -112,11 +112,14 @@ def test_live_timing_takes_the_channel_that_came_last_and_the_shortest_live_run(
     from astaa_deft.orchestration.campaign.campaign import live_timing
     from astaa_deft.orchestration.campaign.strategies.base import Timing
 
-    clean = [CaseOutcome("done", "Pass", "", seconds=12.3, first_seen={"a": 0.1, "b": 1.5, "c": 1.6}),
-             CaseOutcome("done", "Pass", "", seconds=13.0, first_seen={"a": 0.2, "b": 1.4, "c": 2.1})]
+    clean = [CaseOutcome(status="done", verdict="Pass", summary="", seconds=12.3,
+                         first_seen={"a": 0.1, "b": 1.5, "c": 1.6}),
+             CaseOutcome(status="done", verdict="Pass", summary="", seconds=13.0,
+                         first_seen={"a": 0.2, "b": 1.4, "c": 2.1})]
     assert live_timing(clean, 20.0) == Timing("c", 10.5)  # 12.3 - 1.6 = 10.7, rounded down to 0.5 s
     assert live_timing(clean, 8.0) == Timing("c", 8.0)
-    assert live_timing([CaseOutcome("done", "Pass", "", seconds=5.0)], 20.0) == Timing(None, 20.0)
+    assert live_timing([CaseOutcome(status="done", verdict="Pass", summary="", seconds=5.0)],
+                       20.0) == Timing(None, 20.0)
 
 
 def test_guided_strategy_mutates_its_corpus_deterministically(demo):
@@ -125,7 +128,8 @@ def test_guided_strategy_mutates_its_corpus_deterministically(demo):
     def run() -> list[tuple[str | None, str]]:
         guided = STRATEGIES["guided"](spec, dictionary, 3, 20.0)
         first = guided.propose(1)
-        guided.observe("c-1", first.testcase, CaseOutcome("done", "Pass", "", margins={"speed_limit": 2.0}))
+        guided.observe("c-1", first.testcase,
+                       CaseOutcome(status="done", verdict="Pass", summary="", margins={"speed_limit": 2.0}))
         return [(p.parent, p.testcase.to_xml().decode()) for p in (guided.propose(n) for n in range(2, 12))]
 
     a, b = run(), run()
@@ -140,15 +144,16 @@ def test_guided_corpus_keeps_only_cases_that_came_closer(demo):
     spec, dictionary = demo
     guided = STRATEGIES["guided"](spec, dictionary, 3, 20.0)
     xml = guided.propose(1).testcase
-    guided.observe("a", xml, CaseOutcome("done", "Pass", "", margins={"i": 2.0}))
-    guided.observe("b", xml, CaseOutcome("done", "Pass", "", margins={"i": 3.0}))
-    guided.observe("c", xml, CaseOutcome("done", "Pass", "", margins={"i": 1.0}))
+    guided.observe("a", xml, CaseOutcome(status="done", verdict="Pass", summary="", margins={"i": 2.0}))
+    guided.observe("b", xml, CaseOutcome(status="done", verdict="Pass", summary="", margins={"i": 3.0}))
+    guided.observe("c", xml, CaseOutcome(status="done", verdict="Pass", summary="", margins={"i": 1.0}))
     assert [case for case, _ in guided.corpus] == ["a", "c"]
 
 
 def test_signature_separates_mutation_families_and_folds_indices(demo):
     spec, dictionary = demo
-    outcome = CaseOutcome("done", "Silent", "", [Finding("speed_limit", "Silent", None, "status", "")])
+    outcome = CaseOutcome(status="done", verdict="Silent", summary="",
+        findings=[Finding(invariant="speed_limit", crash="Silent", module=None, channel="status", detail="")])
     one = parse_testcase(STRATEGIES["random"](spec, dictionary, 25, 8.0).propose(1).testcase.to_xml())
     assert sig.mutation_family(one) == "trajectory:points:set"
     assert sig.signature(outcome, None).text().endswith(sig.NO_MUTATION)
@@ -177,9 +182,10 @@ def test_budget_and_default_workers():
 def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
     journal = Journal(tmp_path)
     for n in range(1, 4):
-        journal.plan(PlannedCase(f"c-{n}", MUTATED, n, 1, {}, TestCase(f"tc-{n}", n, "x", ())))
+        journal.plan(PlannedCase(case_id=f"c-{n}", kind=MUTATED, number=n, seed=1, params={},
+                                 testcase=TestCase(id=f"tc-{n}", seed=n, description="x", policies=())))
         journal.started(f"c-{n}")
-    journal.finished("c-1", CaseOutcome("done", "Pass", "ok"))
+    journal.finished("c-1", CaseOutcome(status="done", verdict="Pass", summary="ok"))
     journal.close()
     again = Journal(tmp_path)
     assert again.requeue_running() == 2
@@ -190,7 +196,7 @@ def test_journal_requeues_only_cases_in_flight(tmp_path: Path):
 
 def test_journal_on_a_read_only_file_is_one_clear_message(tmp_path: Path):
     journal = Journal(tmp_path)
-    journal.plan(PlannedCase("c-1", MUTATED, 1, 1, {}, None))
+    journal.plan(PlannedCase(case_id="c-1", kind=MUTATED, number=1, seed=1, params={}, testcase=None))
     journal.close()
     ro = sqlite3.connect(f"file:{tmp_path / 'journal.sqlite'}?mode=ro", uri=True)
     journal.db = ro
@@ -250,26 +256,34 @@ def test_buckets_whose_minimised_culprits_coincide_are_merged_into_the_first(tmp
                                                            ("finite_plan", 1, culprit), ("control_alive", 0, "x")],
                                                           start=1):
             name = f"B00{n}"
-            journal.add_bucket(NewBucket(name, _signature("Silent", invariant, "planning", "fam"), "Silent", invariant,
-                                         "planning", f"c-{n}", False, n))
-            journal.minimised(Minimisation(name, "minimised" if exit_code == 0 else "not reproduced", exit_code,
-                                           "<xml/>", found, None, None, 1.0, ""))
+            journal.add_bucket(NewBucket(name=name, signature=_signature("Silent", invariant, "planning", "fam"),
+                                         verdict="Silent", invariant=invariant, module="planning", first_case=f"c-{n}",
+                                         without_mutation=False, after_cases=n))
+            journal.minimised(Minimisation(bucket=name, status="minimised" if exit_code == 0 else "not reproduced",
+                                           exit_code=exit_code, minimal_xml="<xml/>", culprit=found, out_dir=None,
+                                           tests_dir=None, seconds=1.0, detail=""))
         # the same field with another value (and another array index) is the same culprit
-        journal.add_bucket(NewBucket("B005", _signature("Silent", "planned_speed", "planning", "fam2"), "Silent",
-                                     "planned_speed", "planning", "c-5", False, 5))
-        journal.minimised(Minimisation("B005", "minimised", 0, "<xml/>", "routing:speed_limit = dict:float.inf", None,
-                                       None, 1.0, ""))
-        journal.add_bucket(NewBucket("B006", _signature("Abort", "modules_alive", "control", "f"), "Abort",
-                                     "modules_alive", "control", "c-6", False, 6))
-        journal.minimised(Minimisation("B006", "minimised", 0, "<xml/>", "trajectory:points[2].v = dict:float.nan",
-                                       None, None, 1.0, ""))
+        journal.add_bucket(NewBucket(name="B005", signature=_signature("Silent", "planned_speed", "planning", "fam2"),
+                                     verdict="Silent", invariant="planned_speed", module="planning", first_case="c-5",
+                                     without_mutation=False, after_cases=5))
+        journal.minimised(Minimisation(bucket="B005", status="minimised", exit_code=0, minimal_xml="<xml/>",
+                                       culprit="routing:speed_limit = dict:float.inf", out_dir=None, tests_dir=None,
+                                       seconds=1.0, detail=""))
+        journal.add_bucket(NewBucket(name="B006", signature=_signature("Abort", "modules_alive", "control", "f"),
+                                     verdict="Abort", invariant="modules_alive", module="control", first_case="c-6",
+                                     without_mutation=False, after_cases=6))
+        journal.minimised(Minimisation(bucket="B006", status="minimised", exit_code=0, minimal_xml="<xml/>",
+                                       culprit="trajectory:points[2].v = dict:float.nan", out_dir=None, tests_dir=None,
+                                       seconds=1.0, detail=""))
         # message faults on one channel breaking the same invariant in the same module: one bug
         for name, fault, invariant in (("B007", "reorder", "finite_command"), ("B008", "delay", "finite_command"),
                                        ("B009", "drop", "control_alive")):
-            journal.add_bucket(NewBucket(name, _signature("Silent", invariant, "control", fault), "Silent", invariant,
-                                         "control", f"c-{name}", False, 7))
-            journal.minimised(Minimisation(name, "minimised", 0, "<xml/>", f"localization:{fault}", None, None, 1.0,
-                                           ""))
+            journal.add_bucket(NewBucket(name=name, signature=_signature("Silent", invariant, "control", fault),
+                                         verdict="Silent", invariant=invariant, module="control",
+                                         first_case=f"c-{name}", without_mutation=False, after_cases=7))
+            journal.minimised(Minimisation(bucket=name, status="minimised", exit_code=0, minimal_xml="<xml/>",
+                                           culprit=f"localization:{fault}", out_dir=None, tests_dir=None, seconds=1.0,
+                                           detail=""))
         assert merge_same_culprits(journal) == [("B002", "B001"), ("B005", "B001"), ("B008", "B007")]
         assert {b.bucket: b.merged_into for b in journal.buckets()} == {
             "B001": None, "B002": "B001", "B003": None, "B004": None, "B005": "B001", "B006": None, "B007": None,
@@ -288,18 +302,22 @@ def test_a_finding_on_the_channel_the_case_itself_mutates_is_not_a_failure(demo)
     xml = parse_testcase(b'<testcase id="t" seed="1"><description>x</description><policy id="p">'
                          b'<channel>command</channel><set><field path="acceleration" value="dict:float.nan"/></set>'
                          b'</policy></testcase>')
-    own = Finding("finite_command", "Silent", "control", "command", "acceleration nan")
-    crash = Finding("modules_alive", "Abort", "simulator", None, "exit 1")
-    only_own = CaseOutcome("done", "Silent", "Silent: finite_command", [own], margins={"finite_command": 0.0,
-                                                                                   "finite_plan": 0.3})
+    own = Finding(invariant="finite_command", crash="Silent", module="control", channel="command",
+                  detail="acceleration nan")
+    crash = Finding(invariant="modules_alive", crash="Abort", module="simulator", channel=None, detail="exit 1")
+    only_own = CaseOutcome(status="done", verdict="Silent", summary="Silent: finite_command", findings=[own],
+                           margins={"finite_command": 0.0,
+"finite_plan": 0.3})
     judged = sig.without_self_inflicted(only_own, xml, spec)
     assert not judged.failed and judged.verdict == "Pass" and "finite_command" in judged.summary
     assert judged.margins == {"finite_plan": 0.3}  # guided search: the mutation did not come closer by itself
-    both = sig.without_self_inflicted(CaseOutcome("done", "Abort", "Abort: …", [own, crash]), xml, spec)
+    both = sig.without_self_inflicted(
+        CaseOutcome(status="done", verdict="Abort", summary="Abort: …", findings=[own, crash]), xml, spec)
     assert both.failed and both.verdict == "Abort" and sig.primary(both) == crash
     # another channel's invariant, or a clean run, is judged as the monitors said
-    other = CaseOutcome("done", "Silent", "Silent: finite_plan", [Finding("finite_plan", "Silent", "planning",
-                                                                          "trajectory", "v nan")])
+    other = CaseOutcome(status="done", verdict="Silent", summary="Silent: finite_plan",
+                        findings=[Finding(invariant="finite_plan", crash="Silent", module="planning",
+          channel="trajectory", detail="v nan")])
     assert sig.without_self_inflicted(other, xml, spec).failed
     assert sig.without_self_inflicted(only_own, None, spec) is only_own
 
@@ -328,7 +346,7 @@ CREATE TABLE minimisations (
 
 
 def test_a_journal_of_the_first_version_reads_as_typed_rows(tmp_path: Path):
-    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseStatus
+    from astaa_deft.orchestration.journal.model import BucketKind, CaseKind, CaseStatus
     from astaa_deft.orchestration.campaign.report import write_report
 
     db = sqlite3.connect(tmp_path / "journal.sqlite")
@@ -374,25 +392,27 @@ def test_every_strategy_declares_the_campaigns_hooks_and_the_defaults_change_not
             self.seed = seed
 
         def propose(self, number: int) -> Proposal:
-            return Proposal(TestCase(f"tc-{number}", self.seed, "", ()))
+            return Proposal(TestCase(id=f"tc-{number}", seed=self.seed, description="", policies=()))
 
     strategy = Minimal(None, None, 3, 20.0)
-    outcome = CaseOutcome("done", "Silent", "Silent: …")
-    assert strategy.judge("c-1", TestCase("tc-1", 3, "", ()), outcome) is outcome  # the monitors' verdict stands
+    outcome = CaseOutcome(status="done", verdict="Silent", summary="Silent: …")
+    assert strategy.judge("c-1", TestCase(id="tc-1", seed=3, description="", policies=()),
+                          outcome) is outcome  # the monitors' verdict stands
     assert not strategy.exports_own_findings  # the campaign minimises its buckets
-    assert strategy.propose(1).testcase == TestCase("tc-1", 3, "", ())
+    assert strategy.propose(1).testcase == TestCase(id="tc-1", seed=3, description="", policies=())
 
 
 def test_vocabularies_and_signatures_keep_their_text_forms():
     import json
 
-    from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind
+    from astaa_deft.orchestration.journal.model import BucketKind, CaseKind
     from astaa_deft.orchestration.campaign.payload import case_json
     from astaa_deft.orchestration.campaign.standing import BucketStatus
 
     assert (f"{CaseKind.RERUN}", str(BucketKind.BASELINE), f"{BucketStatus.WITHOUT_MUTATION:18}|") == (
         "rerun", "baseline", "without mutation  |")
-    assert json.dumps(case_json(PlannedCase("c-1", MUTATED, 1, 2, {}, None))).startswith(
+    assert json.dumps(case_json(PlannedCase(case_id="c-1", kind=MUTATED, number=1, seed=2, params={},
+                                            testcase=None))).startswith(
         '{"case_id": "c-1", "kind": "mutated"')
     signature = BucketSignature(FailureKey("Silent", "speed_limit", "-"), "routing:speed_limit:set")
     assert signature.text() == "Silent|speed_limit|-|routing:speed_limit:set"
@@ -406,16 +426,34 @@ def test_a_test_case_is_an_object_until_the_payload_or_the_journal_stores_it(dem
 
     spec, dictionary = demo
     testcase = STRATEGIES["random"](spec, dictionary, 7, 20.0).propose(1).testcase
-    case = PlannedCase("c-000001", MUTATED, 1, 7, {}, testcase)
-    payload = CasePayload("spec.yaml", case, "run", 5.0, (), settle=1.0, known=())
+    case = PlannedCase(case_id="c-000001", kind=MUTATED, number=1, seed=7, params={}, testcase=testcase)
+    payload = CasePayload(spec="spec.yaml", case=case, run_dir="run", horizon=5.0, dictionaries=(), settle=1.0,
+                          known=())
     received = CasePayload.from_json(json.loads(json.dumps(payload.to_json())))
     assert received.to_json() == payload.to_json()  # a pool forwards it as it came
     assert received.testcase(spec, dictionary) == testcase == payload.testcase(spec, dictionary)
-    clean = CasePayload.from_json(CasePayload("spec.yaml", replace(case, testcase=None), "run", 5.0, (), None,
-                                              ()).to_json())
+    clean = CasePayload.from_json(CasePayload(spec="spec.yaml", case=replace(case, testcase=None), run_dir="run",
+                                              horizon=5.0, dictionaries=(), settle=None, known=()).to_json())
     assert clean.testcase(spec, dictionary) is None
     journal = Journal(tmp_path)
     journal.plan(case)
     (row,) = journal.pending(MUTATED)
     assert parse_testcase(row.testcase_xml.encode(), "journal", spec, dictionary) == testcase
     journal.close()
+
+
+def test_a_campaign_runs_the_spec_its_command_loaded_without_reading_the_file_again(tmp_path: Path):
+    from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
+
+    spec = load_spec(demo_spec_path())
+    gone = tmp_path / "moved-away.yaml"  # the command loaded and checked it; the file need not be read again
+    journal = Journal(tmp_path / "c")
+    try:
+        campaign = Campaign(CampaignConfig(spec_path=gone, out=tmp_path / "c", cases=1, workers=1), journal,
+                            say=lambda line: None, spec=spec)
+        assert campaign.spec is spec
+        with pytest.raises(InputError):  # without it, the campaign loads the spec itself
+            Campaign(CampaignConfig(spec_path=gone, out=tmp_path / "c", cases=1, workers=1), journal,
+                     say=lambda line: None)
+    finally:
+        journal.close()

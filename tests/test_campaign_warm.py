@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 from astaa_deft.io.log import layout
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.session.bus_run import warm_recorder
@@ -21,9 +21,9 @@ PARAMS = {"count": "40", "rate": "100"}
 
 def test_a_warm_recorder_records_the_case_as_a_cold_one_does(tmp_path: Path):
     spec = load_spec(ECHO)
-    cold = run_case(spec, None, PARAMS, tmp_path / "cold", horizon=3.0)
+    cold = run_case(spec, None, PARAMS, tmp_path / "cold", limits=CaseLimits(horizon=3.0))
     recorder = warm_recorder([ECHO])
-    warm = run_case(spec, None, PARAMS, tmp_path / "warm", horizon=3.0, warm_recorder=recorder)
+    warm = run_case(spec, None, PARAMS, tmp_path / "warm", limits=CaseLimits(horizon=3.0), warm_recorder=recorder)
     assert cold.status == warm.status == "done", (cold, warm)
     assert recorder.wait(timeout=10) == 0  # the warm process was the case's recorder, and it finished cleanly
     logs = {name: read_log(tmp_path / name / "run.mcap") for name in ("cold", "warm")}
@@ -40,7 +40,8 @@ def test_a_dead_warm_recorder_is_replaced_by_a_fresh_one(tmp_path: Path):
     recorder = warm_recorder([ECHO])
     recorder.kill()
     recorder.wait(timeout=10)
-    outcome = run_case(load_spec(ECHO), None, PARAMS, tmp_path / "case", horizon=3.0, warm_recorder=recorder)
+    outcome = run_case(load_spec(ECHO), None, PARAMS, tmp_path / "case", limits=CaseLimits(horizon=3.0),
+                       warm_recorder=recorder)
     assert outcome.status == "done", outcome
     assert len(read_log(tmp_path / "case" / "run.mcap").on("test/data")) == 40
 
@@ -61,10 +62,10 @@ def test_a_case_whose_recorder_is_forked_from_its_warm_worker_is_recorded_in_ful
     from astaa_deft.engine.bus.processes import python_module
     from astaa_deft.io import pipe_messages
     from astaa_deft.io.pipe_messages import bytes_reader
-    from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
     from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage, case_json
 
-    case = PlannedCase("a", BASELINE, 1, 0, PARAMS, None)
+    case = PlannedCase(case_id="a", kind=BASELINE, number=1, seed=0, params=PARAMS, testcase=None)
     payload = {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / "a"), "horizon": 3.0}
     done = subprocess.run([*python_module("astaa_deft.orchestration.campaign.worker"), "--warm", str(ECHO)],
                           input=pipe_messages.encode(CaseMessage(CasePayload.from_json(payload))),
@@ -105,10 +106,10 @@ def test_no_recorder_is_forked_from_a_process_with_other_threads():
 
 
 def _echo_payload(tmp_path: Path, name: str) -> dict:
-    from astaa_deft.orchestration.campaign.model import BASELINE, PlannedCase
+    from astaa_deft.orchestration.journal.model import BASELINE, PlannedCase
     from astaa_deft.orchestration.campaign.payload import case_json
 
-    case = PlannedCase(name, BASELINE, 1, 0, PARAMS, None)
+    case = PlannedCase(case_id=name, kind=BASELINE, number=1, seed=0, params=PARAMS, testcase=None)
     return {"spec": str(ECHO), "case": case_json(case), "run_dir": str(tmp_path / name), "horizon": 3.0,
             "dictionaries": []}
 

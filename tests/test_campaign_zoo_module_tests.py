@@ -1,5 +1,5 @@
 """In a campaign, every confirmed bucket whose failing module the spec can replay gets module tests that fail on
-its defect (issue 31) — zoo members with seeded defects, inputs on slow channels included.
+its defect — zoo members with seeded defects, inputs on slow channels included.
 
 A real campaign (baseline, cases in worker processes on Zenoh, re-runs and
 unmutated twins, the journal in SQLite, minimisation in a child process, the
@@ -103,7 +103,7 @@ def test_a_state_defect_reached_through_a_slow_channel_gets_module_tests_that_fa
 
 @pytest.mark.slow  # ~3 min: four campaigns, two with the random strategy
 @pytest.mark.parametrize(("name", "member", "says"), [
-    # Issue 31's MPC rebuilt (15 Hz, newest trigger when idle, warm start, its 1 Hz input c absent at first).
+    # The stranger's MPC rebuilt (15 Hz, newest trigger when idle, warm start, its 1 Hz input c absent at first).
     ("mpc_crash", dataclasses.replace(MPC, defect="crash_on_nan", seconds=3.0), "NaN in input"),
     ("mpc_state", dataclasses.replace(MPC, defect="nan_state", seconds=3.0), STATE_SAYS),
     # Every trigger answered (per_trigger): the minimiser replays the module and writes the failing tests.
@@ -130,7 +130,7 @@ def test_the_fuzz_command_on_a_slow_channel_member_every_bucket_gets_failing_mod
                            "--no-module-level"],  # the live buckets' suites (the module level's: test_module_level)
                           capture_output=True, text=True, timeout=900, env=env)
     assert done.returncode in (0, 1), done.stdout[-3000:] + done.stderr[-3000:]
-    from astaa_deft.orchestration.campaign.journal import open_existing
+    from astaa_deft.orchestration.journal.journal import open_existing
 
     journal = open_existing(out)
     try:

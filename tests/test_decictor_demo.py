@@ -21,7 +21,7 @@ from decictor_loop import observe_closed_loop  # noqa: E402 - the benchmarks' cl
 SPEC = load_spec(Path(__file__).resolve().parent.parent / "specs" / "demo_av.yaml")
 MAPPING = read_mappings(SPEC)["prediction"]
 GRID = LaneGrid(straight_lanes(2, 3.5, 300.0))
-CONE = Participant(901, "cone", 60.0, -3.0, 0.0, 0.5, 0.5)
+CONE = Participant(id=901, kind="cone", x=60.0, y=-3.0, heading=0.0, length=0.5, width=0.5)
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +49,7 @@ def test_a_cone_on_the_shoulder_is_a_non_optimal_decision_only_with_the_defect(s
 
 def test_a_cone_on_the_seed_path_is_refused(seed):
     with pytest.raises(PlacementError, match="enters the forbidden region"):
-        check_placement(Participant(902, "cone", 60.0, -1.5, 0.0, 0.5, 0.5),
+        check_placement(Participant(id=902, kind="cone", x=60.0, y=-1.5, heading=0.0, length=0.5, width=0.5),
                         ForbiddenRegion(seed.ego, clearance=SPEC.decictor.clearance))
 
 
@@ -57,8 +57,8 @@ def test_a_turned_cone_or_a_barrier_on_the_shoulder_closes_the_lane_too(seed):
     # Regression: the defect widened a cone along its own width axis, so a cone turned ~1 rad (as the
     # search places them: any heading) widened along the road and changed nothing; the search sat on
     # such cones for whole budgets. Furniture on the shoulder now widens across the road, however turned.
-    for participant in (Participant(901, "cone", 60.0, -3.0, 1.0, 0.5, 0.5),
-                        Participant(901, "barrier", 60.0, -3.6, 2.0, 0.6, 2.0)):
+    for participant in (Participant(id=901, kind="cone", x=60.0, y=-3.0, heading=1.0, length=0.5, width=0.5),
+                        Participant(id=901, kind="barrier", x=60.0, y=-3.6, heading=2.0, length=0.6, width=2.0)):
         mutated = observe_closed_loop("lane_follow", (participant,), MAPPING, defects=True)
         verdict = judge(seed, mutated, (participant,), GRID)
         assert verdict.non_optimal, (participant, verdict.reason)
@@ -67,7 +67,7 @@ def test_a_turned_cone_or_a_barrier_on_the_shoulder_closes_the_lane_too(seed):
 def test_furniture_further_out_slows_the_ego_less_a_gradient_the_search_climbs(seed):
     fitness = []
     for y in (-4.2, -5.2):
-        cone = Participant(901, "cone", 70.0, y, 0.0, 0.5, 0.5)
+        cone = Participant(id=901, kind="cone", x=70.0, y=y, heading=0.0, length=0.5, width=0.5)
         verdict = judge(seed, observe_closed_loop("lane_follow", (cone,), MAPPING, defects=True), (cone,), GRID)
         assert not verdict.non_optimal, verdict.reason  # it keeps its lane: only slower beside the cone
         fitness.append(verdict.fitness)

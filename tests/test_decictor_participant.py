@@ -77,8 +77,8 @@ def test_only_messages_inside_the_window_get_the_participant():
 def test_xml_round_trip():
     case = parse_testcase(policy_xml(MOVING).encode(), "tc.xml", SPEC)
     action = case.policies[0].action
-    assert action == Participant(902, "vehicle", 30.0, 3.5, 0.0, 4.6, 1.9, 1.0,
-                                 (Waypoint(3.0, 50.0, 3.5), Waypoint(5.0, 50.0, 7.0)))
+    assert action == Participant(id=902, kind="vehicle", x=30.0, y=3.5, heading=0.0, length=4.6, width=1.9, t=1.0,
+                                 path=(Waypoint(3.0, 50.0, 3.5), Waypoint(5.0, 50.0, 7.0)))
     assert parse_testcase(case.to_xml(), "again.xml", SPEC) == case
 
 
@@ -160,7 +160,7 @@ def test_decictor_search_on_a_wall_clock_stack_proposes_valid_test_cases():
     from astaa_deft.analysis.decictor.search import Search
 
     lanes = straight_lanes(2, 3.5, 300.0)
-    seed = RunObservation(EgoPath(tuple(EgoState(WALL + k * 0.1, 10.0 + k * 1.2, 0.0, 0.0, 12.0)
+    seed = RunObservation(EgoPath(tuple(EgoState(t=WALL + k * 0.1, x=10.0 + k * 1.2, y=0.0, heading=0.0, speed=12.0)
                                         for k in range(101))), True)
     search = Search("decictor", 1, seed, LaneGrid(lanes), area=area_around(seed, lanes),
                     region=ForbiddenRegion(seed.ego, clearance=1.5))

@@ -29,7 +29,7 @@ LANES = straight_lanes(2, 3.5, 300.0)
 
 
 def straight(y: float = 0.0) -> EgoPath:
-    return EgoPath(tuple(EgoState(k * 0.1, 10.0 + k * 1.2, y, 0.0, 12.0) for k in range(101)))
+    return EgoPath(tuple(EgoState(t=k * 0.1, x=10.0 + k * 1.2, y=y, heading=0.0, speed=12.0) for k in range(101)))
 
 
 SEED = RunObservation(straight(), True)
@@ -56,7 +56,7 @@ def test_proposals_are_deterministic_and_feasible(mode):
 def test_selection_keeps_the_best_and_findings_leave_the_pool():
     s = search("decictor")
     scenes = [s.propose(n) for n in range(1, 5)]
-    detour = EgoPath(tuple(EgoState(st.t, st.x, 3.5 if 50 < st.x < 90 else 0.0, 0.0, 12.0)
+    detour = EgoPath(tuple(EgoState(t=st.t, x=st.x, y=3.5 if 50 < st.x < 90 else 0.0, heading=0.0, speed=12.0)
                            for st in straight().states))
     s.observe(scenes[0], RunObservation(straight(0.4), True))  # a little off: the best fitness
     s.observe(scenes[1], RunObservation(detour, True))  # non-optimal: a finding

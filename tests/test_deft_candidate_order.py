@@ -1,4 +1,4 @@
-"""Extraction cost on a real run (issue 16): candidates tried in the order earlier outputs won, wrong ones cut.
+"""Extraction cost on a real run: candidates tried in the order earlier outputs won, wrong ones cut.
 
 Measured on the OMPL stack: ~1 output in 5 needed a candidate other than
 the first (its planner gets the ego pose and the obstacles of one simulator
@@ -265,7 +265,7 @@ def _slow_planner_candidates():
 
 
 def test_an_expensive_output_tries_the_frames_near_its_likely_triggers_first():
-    # Issue 25: a planner of ~0.5-1 s a cycle has hundreds of candidates per output; the generic order tried
+    # A planner of ~0.5-1 s a cycle has hundreds of candidates per output; the generic order tried
     # every later frame of one trigger (each an RRT* search) before the frame at the next trigger's own time.
     found = _slow_planner_candidates()
     assert len(found) > 100

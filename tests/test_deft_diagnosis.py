@@ -70,7 +70,7 @@ def test_a_comparison_names_the_fields_that_differ_and_how():
 
 def test_matching_outputs_carry_no_fields_and_many_differences_are_counted_not_all_described():
     same = {"a": 1.0, "b": [1, 2]}
-    assert compare_messages(same, dict(same)) == Comparison(0.0, 0.0, 3, "fields")
+    assert compare_messages(same, dict(same)) == Comparison(distance=0.0, max_error=0.0, points=3, how="fields")
     wide_replayed = {f"f{i}": float(i) for i in range(MAX_FIELD_DIFFERENCES + 5)}
     wide_recorded = {key: value + 1.0 for key, value in wide_replayed.items()}
     cmp = compare_messages(wide_replayed, wide_recorded)
@@ -154,8 +154,11 @@ def test_rounding_is_a_matter_for_theta_not_for_ignore():
 def test_a_step_that_raised_and_outputs_with_nothing_on_one_side_are_counted_apart():
     recorded = [message(i) for i in range(4)]
     raised = compare_messages({"__replay_error__": "ValueError: bad input"}, recorded[0])
-    found = diagnose([raised, Comparison(math.inf, math.inf, 0, "one empty"), Comparison(0.0, 0.0, 0, "both empty"),
-                      Comparison(0.0, 0.0, 0, "silent"), compare_messages(recorded[3], recorded[3])], threshold=0.0)
+    found = diagnose(
+        [raised, Comparison(distance=math.inf, max_error=math.inf, points=0,
+                            how="one empty"), Comparison(distance=0.0, max_error=0.0, points=0, how="both empty"),
+         Comparison(distance=0.0, max_error=0.0, points=0, how="silent"), compare_messages(recorded[3], recorded[3])],
+        threshold=0.0)
     assert found is not None and (found.judged, found.not_reproduced, found.compared) == (4, 2, 1)
     assert (found.raised, found.raised_example, found.unanswered) == (1, "ValueError: bad input", 1)
     assert found.fields == () and found.ignore == ()
@@ -164,8 +167,10 @@ def test_a_step_that_raised_and_outputs_with_nothing_on_one_side_are_counted_apa
 
 
 def test_trajectories_report_their_distances():
-    found = diagnose([Comparison(0.4, 0.3, 20, "interpolated"), Comparison(0.0, 0.0, 20, "interpolated")],
-                     threshold=0.1)
+    found = diagnose(
+        [Comparison(distance=0.4, max_error=0.3, points=20,
+                    how="interpolated"), Comparison(distance=0.0, max_error=0.0, points=20, how="interpolated")],
+        threshold=0.1)
     assert found is not None and found.trajectory_distances == (0.4,) and found.compared == 0
     assert any("compared as trajectories" in line for line in found.lines())
 

@@ -1,4 +1,4 @@
-"""A candidate that reproduces the recorded output exactly is kept at once (issue 16, measured on the OMPL stack).
+"""A candidate that reproduces the recorded output exactly is kept at once (measured on the OMPL stack).
 
 Before: the search waited for every earlier candidate to report, so a wrong
 frame that made the planner search for seconds (or until its time limit)

@@ -63,7 +63,7 @@ def test_lone_message_is_reused_even_if_logged_after_the_frame_time():
 
 
 def test_an_input_with_no_message_yet_is_left_out_of_the_frame():
-    # A module's first cycles may run before an input's first message (issue 31): the frame lacks it.
+    # A module's first cycles may run before an input's first message: the frame lacks it.
     s = streams(trigger=[100], pose=[150, 160])
     c = candidates(OutputContext(streams=s, trigger="trigger", output_ns=int(120 * MS), previous={}, lookback_ns=0))
     assert [dict(x.choice) for x in c] == [{"trigger": 0}]

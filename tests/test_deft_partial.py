@@ -1,4 +1,4 @@
-"""Long extractions (issue 25): progress where no terminal is, partial results, a stop, --resume.
+"""Long extractions: progress where no terminal is, partial results, a stop, --resume.
 
 Real runs of examples/ompl_stack through the star, recorded to real MCAP
 files; real `astaa-deft extract` subprocesses under `timeout`, and the

@@ -1,4 +1,4 @@
-"""DeFT on a stack it was not tuned on (issue 31): a warm-started controller, rebuilt from the issue.
+"""DeFT on a stack it was not tuned on: a warm-started controller, rebuilt from a description of it.
 
 Its first cycles run before the first message of one input arrived (the
 factory gets a frame without that input), it answers the newest trigger

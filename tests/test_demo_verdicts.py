@@ -45,7 +45,7 @@ def test_clean_runs_have_no_violation_their_own_timing_does_not_show(tmp_path, s
     publish stamps (a loaded machine can make a module late; the monitor is right to say so) — so on a run
     whose modules kept their deadlines, no violation and Pass. Offline judges the same log the same."""
     log = tmp_path / "run.mcap"
-    outcome, watch = drive(DriveOptions(scenario, defects=False, passive=False, record=log, command_line=[]))
+    outcome, watch = drive(DriveOptions(scenario=scenario, defects=False, passive=False, record=log, command_line=[]))
     assert watch.goal and watch.collision is None
     contents, spec = read_log(log), load_spec(demo_spec_path())
     assert unexplained(outcome.violations, contents, spec) == []
@@ -60,7 +60,7 @@ def test_clean_runs_have_no_violation_their_own_timing_does_not_show(tmp_path, s
 def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass, invariants):
     log = tmp_path / "run.mcap"
     # Ends at the first violation (the verdict is decided then), or after 30 s on a slow machine.
-    outcome, _ = drive(DriveOptions("lane_follow", defects=True, passive=False, record=log, command_line=[],
+    outcome, _ = drive(DriveOptions(scenario="lane_follow", defects=True, passive=False, record=log, command_line=[],
                                     policy=demo_policy_path(policy), duration=30.0, stop_on_violation=True))
     # Each example test case fires once its consumer is driving (anchored to the stack's own messages, not
     # to a time after the launch, which a loaded machine's slow start can precede): the defect is reached.

@@ -1,4 +1,4 @@
-"""Findings that say which error (issue 32): an error's type and innermost frame, read from a module's output,
+"""Findings that say which error: an error's type and innermost frame, read from a module's output,
 and a campaign that tells a mutated case's error from its unmutated twin's.
 
 The reports are the runtimes' own formats; the campaign runs a real SUT
@@ -15,7 +15,7 @@ import pytest
 from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.monitor.error_signature import ErrorSignature, signature_of_output
 from astaa_deft.orchestration.campaign.campaign import shows_failure
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
 from astaa_deft.orchestration.campaign.signature import failure_key, same_failure
 
 from monitor_helpers import HandMadeLog, load
@@ -123,7 +123,8 @@ def test_a_crashed_module_s_last_words_name_its_error_even_with_the_traceback_s_
 
 # -- the campaign: buckets, twins ------------------------------------------------------------------
 def _error(signature: str, at: float) -> Finding:
-    return Finding("planner_errors", "Silent", "planning", None, "logged", "high", at=at, signature=signature)
+    return Finding(invariant="planner_errors", crash="Silent", module="planning", channel=None, detail="logged",
+                   severity="high", at=at, signature=signature)
 
 
 def test_a_twin_failing_another_way_or_at_another_phase_is_not_the_same_failure():
@@ -131,13 +132,17 @@ def test_a_twin_failing_another_way_or_at_another_phase_is_not_the_same_failure(
     assert same_failure(_error("KeyError in planner.py:step", 5.6), early)
     assert not same_failure(_error("ValueError in planner.py:finish_route", 5.0), early)  # another error
     assert not same_failure(_error("KeyError in planner.py:step", 21.4), early)  # the same, at another phase
-    mutated = CaseOutcome("done", "Silent", "", [early])
-    twin = CaseOutcome("done", "Silent", "", [_error("ValueError in planner.py:finish_route", 21.4)])
+    mutated = CaseOutcome(status="done", verdict="Silent", summary="", findings=[early])
+    twin = CaseOutcome(status="done", verdict="Silent", summary="",
+                       findings=[_error("ValueError in planner.py:finish_route", 21.4)])
     assert not shows_failure(twin, mutated)
     assert failure_key(mutated).text() == "Silent|planner_errors|planning|KeyError in planner.py:step"
-    unsigned = Finding("speed_limit", "Silent", "planning", "status", "x")  # no error named: as before
-    assert same_failure(unsigned, Finding("speed_limit", "Silent", "planning", "status", "y", at=3.0))
-    assert failure_key(CaseOutcome("done", "Silent", "", [unsigned])).text() == "Silent|speed_limit|planning"
+    unsigned = Finding(invariant="speed_limit", crash="Silent", module="planning", channel="status",
+                       detail="x")  # no error named: as before
+    assert same_failure(unsigned,
+        Finding(invariant="speed_limit", crash="Silent", module="planning", channel="status", detail="y", at=3.0))
+    assert failure_key(CaseOutcome(status="done", verdict="Silent", summary="",
+                                   findings=[unsigned])).text() == "Silent|speed_limit|planning"
 
 
 @pytest.mark.slow  # a live campaign: four runs of a real SUT (~40 s)

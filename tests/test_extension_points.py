@@ -146,8 +146,8 @@ FILES = {
                 self.channel = spec.channels[0].name
 
             def propose(self, number):
-                policy = Policy("p", Delay(1.0), channels=(self.channel,))
-                return Proposal(TestCase(f"tc-{number:06d}", 0, "idle", (policy,)))
+                policy = Policy(id="p", action=Delay(1.0), channels=(self.channel,))
+                return Proposal(TestCase(id=f"tc-{number:06d}", seed=0, description="idle", policies=(policy,)))
     ''',
 }
 
@@ -212,7 +212,7 @@ def test_what_a_new_kind_may_be_judged_by_is_its_traits_not_its_name(extensions)
     # A timing violation after its module's crash is the crash's consequence: only the exit counts.
     late = Violation(invariant="quiet", invariant_kind="silence", severity="high", time_ns=2_000, channel="data",
                      seq=None, message=None, detail="late", crash=Verdict.RESTART, module="talker")
-    crashed = ProcessExit("talker", 1, 1, None, 1_000, False)
+    crashed = ProcessExit(module="talker", pid=1, returncode=1, signal=None, time_ns=1_000, during_shutdown=False)
     assert run_verdict([late], [crashed], ["talker", "listener"]).klass is Verdict.ABORT
     assert is_crash_bucket("Silent", "quiet", spec)  # its crash_kind trait
     # Its margin hook: the campaign's margin watch measures it on its channel and field.

@@ -31,8 +31,9 @@ def family(description: str) -> str:
 
 
 def test_every_family_is_drawn_deterministically_and_every_case_validates(tmp_path):
-    report = gen.generate_to_directory(OMPL_SPEC, 300, 11, tmp_path / "a", duration=20.0)
-    again = gen.generate_to_directory(OMPL_SPEC, 300, 11, tmp_path / "b", duration=20.0)
+    report = gen.generate_to_directory(OMPL_SPEC, tmp_path / "a",
+                                       gen.GenerateOptions(count=300, seed=11, duration=20.0))
+    again = gen.generate_to_directory(OMPL_SPEC, tmp_path / "b", gen.GenerateOptions(count=300, seed=11, duration=20.0))
     assert [p.read_bytes() for p in report.paths] == [p.read_bytes() for p in again.paths]
     # every family but the campaign's message faults: ASTAA's shapes, sustained, stamp and the semantic ones
     assert set(report.shapes) == {"single", "multi_field", "repeated", "sustained", "stamp", "boundary", "angle",

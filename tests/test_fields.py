@@ -19,15 +19,15 @@ FAST = settings(max_examples=100, deadline=None)
 
 
 def struct(ref: str) -> FieldType:
-    return FieldType("struct", ref=ref)
+    return FieldType(kind="struct", ref=ref)
 
 
 def array(items: FieldType, **bounds) -> FieldType:
-    return FieldType("array", items=items, **bounds)
+    return FieldType(kind="array", items=items, **bounds)
 
 
 def scalar(kind: str, **bounds) -> FieldType:
-    return FieldType(kind, **bounds)
+    return FieldType(kind=kind, **bounds)
 
 
 def message_types(**types: dict[str, FieldType]) -> dict[str, MessageType]:
@@ -41,9 +41,9 @@ TYPES = message_types(
     Header={"seq": scalar("uint64"), "stamp": struct("Time"), "frame_id": scalar("string")},
     Point={"x": scalar("float64"), "y": scalar("float64")},
     Obstacle={"header": struct("Header"), "position": struct("Point"), "speed": scalar("float32", minimum=0),
-              "kind": FieldType("enum", values=("car", "pedestrian"))},
+              "kind": FieldType(kind="enum", values=("car", "pedestrian"))},
     Scene={"header": struct("Header"), "obstacles": array(struct("Obstacle"), max_length=64),
-           "grid": array(array(scalar("float64"))), "mode": FieldType("enum", values=("auto", "manual"))},
+           "grid": array(array(scalar("float64"))), "mode": FieldType(kind="enum", values=("auto", "manual"))},
     Tree={"label": scalar("string"), "children": array(struct("Tree"))},
 )
 

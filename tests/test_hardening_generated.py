@@ -1,4 +1,4 @@
-"""Generated bad input through the real CLI entry point (issue 10, "Build"; issue 23, item 8).
+"""Generated bad input through the real CLI entry point.
 
 Four families — spec, policy, dictionary, damaged MCAP — each drawn by a
 seeded generator (and, for specs, by hypothesis) from a valid input; and one

@@ -1,4 +1,4 @@
-"""Input files and numeric options that used to block, exhaust memory or run unbounded (issue 23, items 2 and 4).
+"""Input files and numeric options that used to block, exhaust memory or run unbounded.
 
 Every case runs the real CLI entry point and must end in one clear message
 (the file and the fix, or the option and its range), exit code 2, and no

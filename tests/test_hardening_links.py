@@ -1,4 +1,4 @@
-"""Outputs are never written through a link (issue 30, item 5): one rule, in io/output_place.py, for every writer.
+"""Outputs are never written through a link: one rule, in io/output_place.py, for every writer.
 
 A file written in one go is a new file renamed into place (a link at the target is replaced, never followed);
 a file written as it goes (a log, a module's output) is opened as a new file, and a symbolic link at its path

@@ -87,7 +87,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
         from test_deft_oracle import crafted_log
     finally:
         sys.path.remove(str(Path(__file__).parent))
-    from astaa_deft.orchestration.campaign.journal import Journal
+    from astaa_deft.orchestration.journal.journal import Journal
 
     base = tmp_path_factory.mktemp("inputs")
     spec, log = crafted_log(base)

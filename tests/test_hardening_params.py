@@ -1,4 +1,4 @@
-"""Params a command is given are checked, not silently run (issue 30, item 6), and big choices lists are cheap.
+"""Params a command is given are checked, not silently run, and big choices lists are cheap.
 
 `fuzz --params` with an undeclared name, an empty or repeated value, or a grid past the documented cap is one
 input error naming the fix, before any journal is written; `spec check` of a param with 100,000 choices is

@@ -1,4 +1,4 @@
-"""The smaller findings of issue 30 (item 8): a participant's infinite time, fuzz on SIGTERM, a bad replay
+"""Smaller hardening checks: a participant's infinite time, fuzz on SIGTERM, a bad replay
 factory's message. Real parsing, a real campaign process, a real spec on disk."""
 
 from __future__ import annotations

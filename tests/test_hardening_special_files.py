@@ -1,4 +1,4 @@
-"""Special files given where a command reads a file (issue 23, item 8): a FIFO with no writer, /dev/zero.
+"""Special files given where a command reads a file: a FIFO with no writer, /dev/zero.
 
 Every command that reads a spec, a test case, a dictionary, a log or a
 campaign journal is run as its own `python -m astaa_deft.cli` process with
@@ -36,7 +36,7 @@ MEMORY_LIMIT = 3 << 30  # /dev/zero read whole would take all the memory there i
 def inputs(tmp_path_factory) -> dict[str, Path]:
     base = tmp_path_factory.mktemp("special")
     spec, log = toy_log(base, cycles=10)
-    from astaa_deft.orchestration.campaign.journal import FILE_NAME
+    from astaa_deft.orchestration.journal.journal import FILE_NAME
 
     campaign = base / "campaign"
     campaign.mkdir()

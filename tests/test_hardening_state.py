@@ -1,4 +1,4 @@
-"""Generated tampered state files (issue 30, items 2, 3 and 8): checkpoints and journals are input like any other.
+"""Generated tampered state files: checkpoints and journals are input like any other.
 
 Two families, each drawn by a seeded generator from a real state file the tool wrote:
 
@@ -168,10 +168,10 @@ invariants:
 def make_journal(work: Path) -> Path:
     from test_campaign_report import _case, _signature
 
-    from astaa_deft.orchestration.campaign.journal import Journal, Minimisation, NewBucket
-    from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, Finding, Timing
-    from astaa_deft.orchestration.campaign.rows import BlameRow
-    from astaa_deft.orchestration.verify.records import TABLE as VERIFICATIONS_TABLE
+    from astaa_deft.orchestration.journal.journal import Journal, Minimisation, NewBucket
+    from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, Finding, Timing
+    from astaa_deft.orchestration.journal.rows import BlameRow
+    from astaa_deft.orchestration.journal.verifications import TABLE as VERIFICATIONS_TABLE
 
     spec = work / "fuzz.yaml"
     spec.write_text(FUZZ_SPEC)
@@ -181,19 +181,24 @@ def make_journal(work: Path) -> Path:
         journal.set_meta(spec=str(spec), seed=1, strategy="random", params={"scenario": ["a", "b"]}, horizon=2.0,
                          cases=3, budget=60.0, calibrated=True, workers=2, timing=Timing("data", 1.5).__dict__,
                          overloaded_runs=["b-0001"])
-        finding = Finding("value_small", "Silent", "a", "data", "value 20 > 10", "high", 1.2)
+        finding = Finding(invariant="value_small", crash="Silent", module="a", channel="data", detail="value 20 > 10",
+                          severity="high", at=1.2)
         _case(journal, base, "b-0001", BASELINE, 1, "Pass", "goal reached")
         _case(journal, base, "c-000001", MUTATED, 1, "Silent", "violation", "B001", finding)
         _case(journal, base, "c-000002", MUTATED, 2, "Pass", "horizon")
-        journal.add_bucket(NewBucket("B001", _signature("data:value:set"), "Silent", "value_small", "a",
-                                     "c-000001", False, 2))
+        journal.add_bucket(NewBucket(name="B001", signature=_signature("data:value:set"), verdict="Silent",
+                                     invariant="value_small", module="a", first_case="c-000001", without_mutation=False,
+                                     after_cases=2))
         journal.bucket_rerun("B001", True)
-        journal.minimised(Minimisation("B001", "minimised", 0, "<testcase id='m'/>", "data:value = 20",
-                                       str(base / "minimised" / "B001"), str(base / "tests" / "B001"), 3.0, ""))
+        journal.minimised(Minimisation(bucket="B001", status="minimised", exit_code=0, minimal_xml="<testcase id='m'/>",
+                                       culprit="data:value = 20", out_dir=str(base / "minimised" / "B001"),
+                                       tests_dir=str(base / "tests" / "B001"), seconds=3.0, detail=""))
         journal.module_tests_checked("B001", str(base / "tests" / "B001"), True, "1 failed")
         journal.note("workers", "2 at once")
-        journal.blamed(BlameRow("B001", "a", "data", "non-finite", "data:value -> a -> data -> value_small",
-                                "value NaN where the twins had finite values", 2, "a|data|value_small"))
+        journal.blamed(BlameRow(bucket="B001", module="a", output="data", how="non-finite",
+                                chain="data:value -> a -> data -> value_small",
+                                detail="value NaN where the twins had finite values", twins=2,
+                                identity="a|data|value_small"))
         journal.db.executescript(VERIFICATIONS_TABLE)
         journal.db.execute(
             "INSERT INTO verifications (bucket, revision, status, failing, runs, other, unobserved, twin_failures,"
@@ -351,7 +356,7 @@ def test_tampered_state_full(family, tmp_path):
     assert not problems_in(results), "\n\n".join(problems_in(results)[:5])
 
 
-# -- the cases the issue named, one by one ---------------------------------------------------------
+# -- tampered journals and checkpoints, one case each ----------------------------------------------------
 CHECKPOINT_NAMED = {
     "a choice key ../../x": lambda s: s["decided"][0]["choice"].update({"../../x": 0}),
     "an index of 10^30": lambda s: s["decided"][0]["choice"].update({"pose": 10**30}),

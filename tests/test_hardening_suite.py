@@ -1,4 +1,4 @@
-"""An exported DeFT suite runs the same wherever it is written (issue 10, item 1):
+"""An exported DeFT suite runs the same wherever it is written:
 inside a project whose pytest settings need plugins the user lacks, pytest must
 still take the suite's own configuration."""
 

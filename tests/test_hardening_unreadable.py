@@ -1,4 +1,4 @@
-"""A message a monitor cannot read is never skipped in silence (issue 30, item 7).
+"""A message a monitor cannot read is never skipped in silence.
 
 A localization message nested 100,000 deep does not decode: the collision monitor cannot place the ego for
 it, so `check` of that run withholds its Pass (exit 3, naming the invariant and the count) instead of calling

@@ -1,5 +1,5 @@
 """Hostile YAML as a spec or a dictionary: every case is one exit-2 message naming
-file:line:col — no traceback, no hang, bounded memory (issue 10, items 2, 3, 10)."""
+file:line:col — no traceback, no hang, bounded memory."""
 
 from __future__ import annotations
 
@@ -98,7 +98,7 @@ def test_type_body_not_a_mapping_through_generate(tmp_path, capsys):
     assert "PerceivedObstacle' must map field names" in text
 
 
-# (name, replace this in the demo spec, with this, what the message says) — issue 23, item 5
+# (name, replace this in the demo spec, with this, what the message says)
 SPEC_CHECK_GAPS = [
     ("empty key before more channels", "key: demo/sim/obstacles", "key: ''", "channel 'obstacles' has an empty key"),
     ("huge max_gap", "max_gap: 1.0,", "max_gap: 1.0e+308,", "'max_gap' must be at most 86400, got 1e+308"),
@@ -145,7 +145,7 @@ def test_yaml_syntax_errors_are_placed_by_line_and_column(tmp_path, capsys):
 
 
 def test_a_long_spec_is_read_in_one_pass(tmp_path, capsys):
-    """20,000 channels (issue 23): read without PyYAML's composer (quadratic in a sequence's length)."""
+    """20,000 channels: read without PyYAML's composer (quadratic in a sequence's length)."""
     channels = "".join(f"  - {{name: c{i}, key: big/c{i}, producer: a, consumers: [b], type: S}}\n"
                        for i in range(20_000))
     path = tmp_path / "big.yaml"

@@ -21,7 +21,7 @@ JSON, CBOR = get_codec("json"), get_codec("cbor")
 
 
 def site(kind: str, **declared) -> FieldSite:
-    return FieldSite(FieldType(kind, **declared))
+    return FieldSite(FieldType(kind=kind, **declared))
 
 
 def value(key: str, field: FieldSite, current=None, previous=None, container=None, name="ranges"):
@@ -34,7 +34,8 @@ def value(key: str, field: FieldSite, current=None, previous=None, container=Non
             raise NotApplicable("no previous message")
         return previous
 
-    return entry.resolve(ValueContext(field, current, container or {}, name, previous_value))
+    return entry.resolve(ValueContext(site=field, current=current, container=container or {}, key=name,
+                                      previous=previous_value))
 
 
 # ---------------------------------------------------------------- the default dictionary
@@ -65,14 +66,14 @@ def test_default_has_every_group_and_the_issue_values():
 
 def test_every_entry_of_a_group_gives_a_value_or_a_reason_for_its_types():
     """No entry crashes on a field of its group's types: a value, or NotApplicable with a reason."""
-    point = MessageType("P", {"ranges": FieldType("array", items=FieldType("float32")),
-                              "other": FieldType("array", items=FieldType("float32"))})
+    point = MessageType("P", {"ranges": FieldType(kind="array", items=FieldType(kind="float32")),
+                              "other": FieldType(kind="array", items=FieldType(kind="float32"))})
     fields = {
         "float": [site("float32", minimum=0, maximum=40), site("float64")],
         "int": [site(kind) for kind in INT_RANGES] + [site("int16", minimum=-3, maximum=3)],
         "bool": [site("bool")], "string": [site("string")], "bytes": [site("bytes")], "time": [site("time")],
         "enum": [site("enum", values=("drive", "park")), site("enum", values=(0, 1))],
-        "array": [FieldSite(point.fields["ranges"], point), site("array", items=FieldType("int8"))],
+        "array": [FieldSite(point.fields["ranges"], point), site("array", items=FieldType(kind="int8"))],
     }
     container = {"ranges": [1.0, 2.0], "other": [3.0]}
     current = {"float": 1.0, "int": 5, "bool": True, "string": "s", "bytes": b"b", "time": 10.0, "enum": "drive",
@@ -117,8 +118,8 @@ def test_derive_rules():
 
 
 def test_sibling_length_mismatch_makes_parallel_arrays_disagree():
-    scan = MessageType("Scan", {"ranges": FieldType("array", items=FieldType("float32")),
-                                "intensities": FieldType("array", items=FieldType("float32"))})
+    scan = MessageType("Scan", {"ranges": FieldType(kind="array", items=FieldType(kind="float32")),
+                                "intensities": FieldType(kind="array", items=FieldType(kind="float32"))})
     message = {"ranges": [1.0, 2.0, 3.0], "intensities": [4.0, 5.0, 6.0]}
     field = FieldSite(scan.fields["ranges"], scan)
     mismatched = value("array.sibling_mismatch", field, current=message["ranges"], container=message)
@@ -142,9 +143,9 @@ def test_usable_filters_what_the_codec_cannot_carry():
 
 
 def test_bytes_travel_as_base64_in_json():
-    assert wire_value(b"\x00\xff", FieldType("bytes"), JSON) == "AP8="
-    assert wire_value(b"\x00\xff", FieldType("bytes"), CBOR) == b"\x00\xff"
-    assert wire_value(b"\x00\xff", FieldType("string"), JSON) == b"\x00\xff"
+    assert wire_value(b"\x00\xff", FieldType(kind="bytes"), JSON) == "AP8="
+    assert wire_value(b"\x00\xff", FieldType(kind="bytes"), CBOR) == b"\x00\xff"
+    assert wire_value(b"\x00\xff", FieldType(kind="string"), JSON) == b"\x00\xff"
 
 
 def test_lookup_and_suggestions():
@@ -197,7 +198,7 @@ BAD_USER_FILES = {
     "string: [1, 2]\n": (1, "must be a mapping"),
     "int:\n  x: {remove: yes please}\n": (2, "'remove' takes true"),
     "- a\n- b\n": (1, "a dictionary is a mapping of groups"),
-    # the int group takes whole numbers only (issue 23)
+    # the int group takes whole numbers only
     'int:\n  x: "nan"\n': (2, "the int group takes whole numbers, not str 'nan'"),
     'int:\n  x: "1e999"\n': (2, "the int group takes whole numbers, not str '1e999'"),
     'int:\n  x: ".inf"\n': (2, "the int group takes whole numbers, not str '.inf'"),
@@ -241,7 +242,7 @@ def test_a_set_literal_naming_an_enum_value_yaml_read_as_a_date_is_refused_with_
 
     from astaa_deft.engine.intercept.actions.set import ValueProblem, parse_literal
 
-    enum = FieldType("enum", values=(datetime.date(2024, 1, 1), "idle"))
+    enum = FieldType(kind="enum", values=(datetime.date(2024, 1, 1), "idle"))
     assert parse_literal("idle", enum) == "idle"
     with pytest.raises(ValueProblem, match="YAML date, which no message encoding carries"):
         parse_literal("2024-01-01", enum)

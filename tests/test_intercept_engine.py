@@ -399,10 +399,12 @@ def test_tagging_round_trips(value):
 
 
 def test_a_testcase_built_in_code_with_a_bad_field_is_an_input_error():
-    testcase = TestCase("x", 1, "", (Policy("p", Set((Assignment("nope", "1"),)), channels=("trajectory",)),))
+    testcase = TestCase(id="x", seed=1, description="",
+                        policies=(Policy(id="p", action=Set((Assignment("nope", "1"),)), channels=("trajectory",)),))
     with pytest.raises(InputError, match="Trajectory has no field 'nope'"):
         Interceptor(testcase, SPEC, DICTIONARY)
-    unknown = TestCase("x", 1, "", (Policy("p", Set((Assignment("gear", "park"),)), channels=("nowhere",)),))
+    unknown = TestCase(id="x", seed=1, description="",
+                       policies=(Policy(id="p", action=Set((Assignment("gear", "park"),)), channels=("nowhere",)),))
     with pytest.raises(InputError, match="unknown channel"):
         Interceptor(unknown, SPEC, DICTIONARY)
 

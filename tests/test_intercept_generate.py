@@ -16,7 +16,8 @@ from astaa_deft.engine.intercept import load_dictionary, load_testcase
 from astaa_deft.engine.intercept.dictionary import wire_value
 from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.generate import (
-    generate, generate_to_directory, is_generation_brittle, iter_testcases, mutation_targets, write_testcases,
+    GenerateOptions, generate, generate_to_directory, is_generation_brittle, iter_testcases, mutation_targets,
+    write_testcases,
 )
 from astaa_deft.engine.intercept.testcase import Selection
 from astaa_deft.engine.spec.loader import load_spec, load_spec_text
@@ -174,21 +175,22 @@ def test_a_spec_with_nothing_to_mutate_is_an_input_error():
 
 def test_generate_command_writes_files_and_refuses_to_mix(tmp_path, capsys):
     out = tmp_path / "cases"
-    assert generate_command.generate(SPEC_PATH, 25, 9, out, duration=20.0) == 0
+    assert generate_command.generate(SPEC_PATH, out, GenerateOptions(count=25, seed=9, duration=20.0)) == 0
     files = sorted(out.glob("tc-*.xml"))
     assert len(files) == 25
     assert "wrote 25 test cases" in capsys.readouterr().out
     assert [f.read_bytes() for f in files] == [t.to_xml() for t in generate(SPEC, DICTIONARY, 25, 9, duration=20.0)]
     with pytest.raises(InputError, match="already holds 25 test case"):
-        generate_command.generate(SPEC_PATH, 5, 9, out)
+        generate_command.generate(SPEC_PATH, out, GenerateOptions(count=5, seed=9))
     with pytest.raises(InputError, match="at least 1"):
-        generate_command.generate(SPEC_PATH, 0, 9, tmp_path / "other")
+        generate_command.generate(SPEC_PATH, tmp_path / "other", GenerateOptions(count=0, seed=9))
 
 
 def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
     from astaa_deft.engine.intercept.generate import generate_to_directory
 
-    report = generate_to_directory(load_spec(SPEC_PATH), 6, 4, tmp_path / "cases", duration=10.0)
+    report = generate_to_directory(load_spec(SPEC_PATH), tmp_path / "cases",
+                                   GenerateOptions(count=6, seed=4, duration=10.0))
     assert capsys.readouterr().out == ""
     assert [p.name for p in report.paths] == [f"tc-{n:04d}.xml" for n in range(1, 7)]
     assert sum(report.shapes.values()) == 6
@@ -197,7 +199,7 @@ def test_generation_is_a_library_call_that_prints_nothing(tmp_path, capsys):
 
 
 def test_cases_are_drawn_one_at_a_time_not_as_a_whole_list():
-    """A trillion asked for (issue 23) is no longer a list built before anything is written: each case is
+    """A trillion asked for is no longer a list built before anything is written: each case is
     drawn when reached, the same case as a short run draws at that number."""
     cases = iter_testcases(SPEC, DICTIONARY, 10**12, seed=42)
     first = [next(cases) for _ in range(3)]
@@ -207,7 +209,7 @@ def test_cases_are_drawn_one_at_a_time_not_as_a_whole_list():
 
 
 def test_generate_to_directory_writes_what_generate_draws(tmp_path):
-    report = generate_to_directory(SPEC, 25, 7, tmp_path / "out")
+    report = generate_to_directory(SPEC, tmp_path / "out", GenerateOptions(count=25, seed=7))
     drawn = generate(SPEC, DICTIONARY, 25, seed=7)
     assert report.count == 25 and sum(report.shapes.values()) == 25
     assert [p.read_bytes() for p in report.paths] == [t.to_xml() for t in drawn]

@@ -261,8 +261,8 @@ def test_every_action_loads_into_typed_objects():
     testcase = parse_testcase(EVERY_ACTION.encode(), "all.xml", ECHO)
     assert testcase.id == "t" and testcase.seed == 2**64 - 1 and testcase.description == "d"
     first = testcase.policies[0]
-    assert first == Policy(
-        "set-it", Set((Assignment("value", "dict:float.nan"), Assignment("header.seq", "18446744073709551616"))),
+    assert first == Policy(id="set-it",
+        action=Set((Assignment("value", "dict:float.nan"), Assignment("header.seq", "18446744073709551616"))),
         channels=("data",), consumers=("listener",), window=Window(1.5, 4.0, "data", 3),
         selection=Selection(every=2, probability=0.5, limit=10))
     assert [p.action for p in testcase.policies[1:]] == [
@@ -281,8 +281,8 @@ def test_to_xml_round_trips_and_is_schema_valid():
 
 
 def test_to_xml_writes_defaults_compactly_and_escapes_values():
-    testcase = TestCase("x", 3, 'quotes " and <tags> & more', (
-        Policy("p", Set((Assignment("value", 'json:"<&\'\\">"'),)), channels=("data",)),))
+    testcase = TestCase(id="x", seed=3, description='quotes " and <tags> & more', policies=(
+        Policy(id="p", action=Set((Assignment("value", 'json:"<&\'\\">"'),)), channels=("data",)),))
     written = testcase.to_xml()
     assert b"<window" not in written and b"<select" not in written
     assert parse_testcase(written, "x.xml", ECHO) == testcase
@@ -352,7 +352,7 @@ def test_the_documented_example_is_valid():
     assert [p.id for p in testcase.policies] == ["nan-speed", "stale-copies", "lossy"]
 
 
-# ---------------------------------------------------------------- indices and non-finite values (issue 23, item 5)
+# ---------------------------------------------------------------- indices and non-finite values
 
 DEMO = load_spec(ROOT / "astaa_deft" / "data" / "specs" / "demo_av.yaml")  # trajectory: points max_length 200
 

@@ -21,8 +21,8 @@ from astaa_deft.engine.session.recorder import event_json
 
 
 def _event(old, new, detail=None) -> Mutation:
-    return Mutation("tc", "p1", "set", "data", ("sink", "other"), 7, 1.25,
-                         (FieldChange("a.b[2]", old, new),), detail or {})
+    return Mutation(testcase="tc", policy="p1", action="set", channel="data", consumers=("sink", "other"),
+                    message_index=7, time=1.25, fields=(FieldChange("a.b[2]", old, new),), detail=detail or {})
 
 
 VALUES = [

@@ -19,7 +19,7 @@ from astaa_deft.model.sut import FieldType, MessageType
 
 
 def struct(ref: str) -> FieldType:
-    return FieldType("struct", ref=ref)
+    return FieldType(kind="struct", ref=ref)
 
 
 def message_types(**types: dict[str, FieldType]) -> dict[str, MessageType]:
@@ -28,17 +28,17 @@ def message_types(**types: dict[str, FieldType]) -> dict[str, MessageType]:
 
 # The example types of docs/spec.md, plus a bytes field and bounded ints.
 TYPES = message_types(
-    Header={"seq": FieldType("uint64"), "stamp": FieldType("time")},
-    TrajectoryPoint={"x": FieldType("float64"), "y": FieldType("float64"),
-                     "v": FieldType("float64", minimum=0, maximum=40)},
+    Header={"seq": FieldType(kind="uint64"), "stamp": FieldType(kind="time")},
+    TrajectoryPoint={"x": FieldType(kind="float64"), "y": FieldType(kind="float64"),
+                     "v": FieldType(kind="float64", minimum=0, maximum=40)},
     Trajectory={
         "header": struct("Header"),
-        "points": FieldType("array", items=struct("TrajectoryPoint"), min_length=1, max_length=200),
-        "gear": FieldType("enum", values=("drive", "reverse", "park")),
-        "tags": FieldType("array", items=FieldType("string")),
-        "blob": FieldType("bytes"),
-        "level": FieldType("int8", minimum=-5),
-        "ok": FieldType("bool"),
+        "points": FieldType(kind="array", items=struct("TrajectoryPoint"), min_length=1, max_length=200),
+        "gear": FieldType(kind="enum", values=("drive", "reverse", "park")),
+        "tags": FieldType(kind="array", items=FieldType(kind="string")),
+        "blob": FieldType(kind="bytes"),
+        "level": FieldType(kind="int8", minimum=-5),
+        "ok": FieldType(kind="bool"),
     },
 )
 
@@ -147,9 +147,9 @@ def test_messages_breaking_the_declared_types_do_not_validate(field, value):
 
 def test_recursive_types_use_references():
     types = message_types(
-        Tree={"label": FieldType("string"), "children": FieldType("array", items=struct("Tree"))},
+        Tree={"label": FieldType(kind="string"), "children": FieldType(kind="array", items=struct("Tree"))},
         Graph={"root": struct("Node")},
-        Node={"next": FieldType("array", items=struct("Node")), "id": FieldType("int32")},
+        Node={"next": FieldType(kind="array", items=struct("Node")), "id": FieldType(kind="int32")},
     )
     tree = json_schema(types, "Tree")
     assert tree["properties"]["children"]["items"] == {"$ref": "#"}

@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from astaa_deft.analysis.minimise import (
+    DDOptions,
     FailsWithoutItems,
     NotReproducible,
     Outcome,
@@ -97,14 +98,14 @@ def test_unresolved_never_counts_as_failing():
             return TestResult(Outcome.UNRESOLVED, "system did not start")
         return FAIL if 9 in subset else PASS
 
-    result = ddmin(list(range(30)), tester, check_full=True)
+    result = ddmin(list(range(30)), tester, DDOptions(check_full=True))
     assert result.minimal == [0, 9]
     assert Outcome.UNRESOLVED in {outcome for _, outcome in result.history}
 
 
 def test_single_item_and_no_items():
     assert ddmin([42], lambda s: FAIL if s else PASS).minimal == [42]
-    assert ddmin([], lambda s: PASS, check_full=False).minimal == []
+    assert ddmin([], lambda s: PASS, DDOptions(check_full=False)).minimal == []
 
 
 # --- cost ------------------------------------------------------------------------
@@ -151,7 +152,7 @@ def counting(tester):
 @pytest.mark.parametrize("parallel", [1, 4])
 def test_each_distinct_subset_is_tested_once(parallel):
     tester, calls = counting(fails_if_any({3, 17, 40}))
-    result = ddmin(list(range(64)), tester, parallel=parallel)
+    result = ddmin(list(range(64)), tester, DDOptions(parallel=parallel))
     assert result.minimal == [3, 17, 40]
     assert calls and max(calls.values()) == 1
     assert result.tests_run == sum(calls.values()) == len(result.history) == len(result.results)
@@ -194,7 +195,7 @@ def jittery(tester, seed: int):
 def test_parallel_gives_the_sequential_result(culprits):
     sequential = ddmin(list(range(80)), fails_if_any(*culprits))
     tester, state = jittery(fails_if_any(*culprits), seed=len(culprits))
-    parallel = ddmin(list(range(80)), tester, parallel=4)
+    parallel = ddmin(list(range(80)), tester, DDOptions(parallel=4))
     assert parallel.minimal == sequential.minimal
     assert parallel.tests_run >= sequential.tests_run  # speculative tests only add
     assert 1 < state["peak"] <= 4
@@ -203,7 +204,7 @@ def test_parallel_gives_the_sequential_result(culprits):
 def test_a_callers_executor_is_used_and_left_open():
     with ThreadPoolExecutor(3) as pool:
         tester, state = jittery(fails_if_any({4, 44}), seed=7)
-        result = ddmin(list(range(64)), tester, parallel=3, executor=pool)
+        result = ddmin(list(range(64)), tester, DDOptions(parallel=3), executor=pool)
         assert result.minimal == [4, 44]
         assert pool.submit(lambda: "still open").result() == "still open"
     assert state["peak"] <= 3
@@ -217,7 +218,7 @@ def test_a_tester_bug_propagates(parallel):
         return fails_if_any({3})(subset)
 
     with pytest.raises(RuntimeError, match="tester bug"):
-        ddmin(list(range(100)), tester, parallel=parallel)
+        ddmin(list(range(100)), tester, DDOptions(parallel=parallel))
 
 
 def test_a_tester_must_return_a_test_result():
@@ -248,7 +249,7 @@ def test_fails_without_items():
 
 def test_check_full_off_trusts_the_caller():
     tester, calls = counting(fails_if_any({2}))
-    assert ddmin(list(range(10)), tester, check_full=False).minimal == [2]
+    assert ddmin(list(range(10)), tester, DDOptions(check_full=False)).minimal == [2]
     assert tuple(range(10)) not in calls and () not in calls
 
 
@@ -258,7 +259,7 @@ def test_check_full_off_trusts_the_caller():
 @pytest.mark.parametrize("parallel", [1, 4])
 def test_max_tests_returns_the_best_so_far(parallel):
     tester = fails_if_any({3, 17, 20, 40})
-    result = ddmin(list(range(100)), tester, max_tests=8, parallel=parallel)
+    result = ddmin(list(range(100)), tester, DDOptions(parallel=parallel, max_tests=8))
     assert not result.complete
     assert result.tests_run <= 8
     assert tester(result.minimal).outcome is Outcome.FAIL
@@ -266,7 +267,7 @@ def test_max_tests_returns_the_best_so_far(parallel):
 
 
 def test_max_tests_zero_keeps_the_full_set():
-    result = ddmin(list(range(10)), fails_if_any({3}), max_tests=0, check_full=False)
+    result = ddmin(list(range(10)), fails_if_any({3}), DDOptions(check_full=False, max_tests=0))
     assert (result.minimal, result.complete, result.tests_run) == (list(range(10)), False, 0)
 
 
@@ -289,16 +290,16 @@ def test_a_flaky_testers_failure_rate_reaches_the_result():
 
 def test_progress_messages():
     messages: list[str] = []
-    ddmin(list(range(16)), fails_if_any({6}), progress=messages.append)
+    ddmin(list(range(16)), fails_if_any({6}), DDOptions(progress=messages.append))
     assert messages[0].startswith("16 items in 2 chunks")
     assert messages[-1].startswith("done: 1 items")
 
 
 def test_bad_arguments():
     with pytest.raises(ValueError):
-        ddmin([1], lambda s: FAIL, parallel=0)
+        ddmin([1], lambda s: FAIL, DDOptions(parallel=0))
     with pytest.raises(ValueError):
-        ddmin([1], lambda s: FAIL, max_tests=-1)
+        ddmin([1], lambda s: FAIL, DDOptions(max_tests=-1))
 
 
 # --- groups -------------------------------------------------------------------------------------
@@ -346,5 +347,5 @@ def test_property_result_fails_and_is_one_minimal(problem):
 def test_property_parallel_equals_sequential(problem):
     n, culprits = problem
     sequential = ddmin(list(range(n)), fails_if_any(*culprits))
-    parallel = ddmin(list(range(n)), fails_if_any(*culprits), parallel=3)
+    parallel = ddmin(list(range(n)), fails_if_any(*culprits), DDOptions(parallel=3))
     assert parallel.minimal == sequential.minimal

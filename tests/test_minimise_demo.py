@@ -273,8 +273,8 @@ def test_a_hanging_planner_is_stopped_and_the_test_is_unresolved(runs, tmp_path,
     spec_file.write_text(spec_text)
     monkeypatch.setenv("PYTHONPATH", f"{tmp_path}:{Path(__file__).resolve().parents[1]}")
     culprit = next(m for m in read_mutations(read_log(runs["failing"]), SPEC).mutations if "culprit" in m.policy)
-    with ReplayPool(ReplaySetup(str(runs["failing"]), str(spec_file), "planned_speed"), workers=1,
-                    timeout=3.0) as pool:
+    with ReplayPool(ReplaySetup(log_path=str(runs["failing"]), spec_path=str(spec_file), invariant="planned_speed"),
+                    workers=1, timeout=3.0) as pool:
         started = time.monotonic()
         answer = pool.run(Job.of({culprit.number: None}))
         assert answer.result.outcome.value == "unresolved" and "over 3 s" in answer.result.detail

@@ -82,7 +82,8 @@ def test_live_minimisation_keeps_a_held_fault_held_and_shortens_it_to_what_the_d
                       fields=(FieldChange("v", 1.0, 2.0), FieldChange("x", 0.0, 0.5))) for k in range(20)]
     mutations = sorted(held + noise, key=lambda m: m.number)
     tester = ThirdBadInARow([m.number for m in held])
-    failure = Failure("(module exit)", "process", "planning", None, 3.0, "killed by SIGABRT", "Abort")
+    failure = Failure(invariant="(module exit)", kind="process", module="planning", channel=None, at=3.0,
+                      detail="killed by SIGABRT", crash="Abort")
     result = minimise_live(tester, mutations, failure, FAIL, max_tests=40)  # type: ignore[arg-type]
     kept = sorted(result.kept)
     # The hold's first three messages (the failure at its original time), and a quarter of that back at each

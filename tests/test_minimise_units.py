@@ -63,8 +63,8 @@ def intercepted_log(path: Path, policies: str, count: int = 60) -> dict[str, lis
     cid = writer.bus_channel(SPEC.channel("localization"))
     original_cid = writer.bus_channel(SPEC.channel("localization"), topic=layout.ORIGINAL_PREFIX + LOC_KEY)
     mutations_cid = writer.tool_channel(layout.MUTATIONS_TOPIC)
-    target = InterceptedChannel("localization", get_codec(SPEC.channel("localization").encoding), cid, original_cid,
-                                mutations_cid)
+    target = InterceptedChannel(name="localization", codec=get_codec(SPEC.channel("localization").encoding),
+                                delivered=cid, original=original_cid, mutations=mutations_cid)
     writer.event("run_started", time_ns=START_NS)
     received: dict[str, list[bytes]] = {"planning": [], "control": []}
     held: list = []
@@ -208,7 +208,7 @@ def test_value_text_reads_back_as_the_same_value(value):
     from astaa_deft.model.sut import FieldType
 
     text = value_text(value)
-    back = parse_literal(text, FieldType("float64"))
+    back = parse_literal(text, FieldType(kind="float64"))
     if isinstance(value, float) and math.isnan(value):
         assert math.isnan(back)
     else:
@@ -279,7 +279,8 @@ class ScriptedTester(LiveTester):
     """A live tester whose runs are scripted (no SUT): fail/pass per call, in order."""
 
     def __init__(self, script: list[bool | None], repeats: int = 1):
-        failure = Failure("control_alive", "expression", "control", None, 3.0, "silent", "Silent")
+        failure = Failure(invariant="control_alive", kind="expression", module="control", channel=None, at=3.0,
+                          detail="silent", crash="Silent")
         super().__init__(SPEC, {}, failure, repeats=repeats)
         self.script = list(script)
 
@@ -300,7 +301,8 @@ def test_a_live_test_fails_if_any_of_its_runs_fails_and_reports_the_rate():
 
 def test_reproduction_check_tells_flaky_from_not_reproducible():
     m = mutation(0, (Step("p", "set", {}),), [FieldChange("heading", 0.0, 1e16)])
-    failure = Failure("control_alive", "deadline", "control", "command", 3.0, "silent", "Restart")
+    failure = Failure(invariant="control_alive", kind="deadline", module="control", channel="command", at=3.0,
+                      detail="silent", crash="Restart")
     flaky = ScriptedTester([False, True, False])
     result, per_test = workflow.reproduce(flaky, [m], failure, 1, say=lambda line: None)
     assert result.outcome is Outcome.FAIL and result.failure_rate == pytest.approx(0.5) and per_test == 3
@@ -314,8 +316,8 @@ def test_reproduction_check_tells_flaky_from_not_reproducible():
 
 
 def test_verdicts_and_exit_codes():
-    failure = Failure("x", "bound", None, "c", 1.0, "", "Silent")
-    live = Minimisation("live", failure, [], {})
+    failure = Failure(invariant="x", kind="bound", module=None, channel="c", at=1.0, detail="", crash="Silent")
+    live = Minimisation(tester="live", failure=failure, mutations=[], kept={})
     replay = replace(live, tester="replay")
     assert workflow.verdict(live, Confirmation(runs=3, failures=3, rate=1.0))[1] is True
     text, reproduced = workflow.verdict(live, Confirmation(runs=3, failures=2, rate=2 / 3))
@@ -327,7 +329,7 @@ def test_verdicts_and_exit_codes():
                                                              details=("the run did not start: port in use",)))
     assert reproduced is False and "port in use" in text
     # The command's exit code is the report's: 0 only when the minimal test case stands.
-    report = workflow.MinimiseReport(False, text, {"verdict": text}, complete=False)
+    report = workflow.MinimiseReport(reproduced=False, verdict=text, summary={"verdict": text}, complete=False)
     assert report.text() == f"minimise: {text}"
 
 
@@ -353,7 +355,8 @@ def test_the_confirmation_in_summary_json_has_its_counts_only_when_no_run_was_as
 def test_live_only_chooses_the_live_tester_whatever_the_failure():
     from astaa_deft.analysis.minimise.stages import TesterKind, choose_tester
 
-    failure = Failure("planned_speed", "bound", None, "trajectory", 1.0, "", "Silent")
+    failure = Failure(invariant="planned_speed", kind="bound", module=None, channel="trajectory", at=1.0, detail="",
+                      crash="Silent")
     choice = choose_tester(SPEC, failure, live_only=True)
     assert choice.tester is TesterKind.LIVE and choice.why == "--live-only" and choice.entry is None
     assert json.dumps({"tester": choice.tester.value}) == '{"tester": "live"}'

@@ -27,17 +27,21 @@ def test_a_verdict_reads_and_writes_as_its_class_name():
 
 
 def test_a_process_exit_keeps_its_three_texts():
-    killed = ProcessExit("planning", 41, -9, "SIGKILL", 5, False)
+    killed = ProcessExit(module="planning", pid=41, returncode=-9, signal="SIGKILL", time_ns=5, during_shutdown=False)
     assert killed.describe() == "module 'planning' (pid 41) killed by SIGKILL"
     assert killed.describe(with_pid=False) == "module 'planning' killed by SIGKILL"
     assert killed.as_finding() == "module 'planning' was killed by SIGKILL"
-    assert ProcessExit("control", 7, 3, None, 5, False).as_finding() == "module 'control' exited with code 3"
-    assert killed.abnormal and not ProcessExit("control", 7, 3, None, 5, True).abnormal
-    assert not ProcessExit("control", 7, 0, None, 5, False).abnormal
+    assert ProcessExit(module="control", pid=7, returncode=3, signal=None, time_ns=5,
+                       during_shutdown=False).as_finding() == "module 'control' exited with code 3"
+    assert killed.abnormal and not ProcessExit(module="control", pid=7, returncode=3, signal=None, time_ns=5,
+                                               during_shutdown=True).abnormal
+    assert not ProcessExit(module="control", pid=7, returncode=0, signal=None, time_ns=5,
+                           during_shutdown=False).abnormal
 
 
 def test_a_process_exit_reads_back_from_its_log_form():
-    exit_ = ProcessExit("talker", 42, 3, None, 5, False, "Traceback ...")
+    exit_ = ProcessExit(module="talker", pid=42, returncode=3, signal=None, time_ns=5, during_shutdown=False,
+                        stderr_tail="Traceback ...")
     body = rec.encode(exit_)
     assert list(body) == ["kind", "time_ns", "module", "pid", "returncode", "signal", "during_shutdown", "abnormal",
                           "stderr_tail"]  # the order logs have always had
@@ -72,8 +76,8 @@ def test_a_violation_from_an_odd_log_keeps_the_finding():
 
 
 def test_a_mutation_row_is_the_mutation():
-    m = Mutation("tc", "p1", "set", "data", ("sink",), 7, 1.25,
-                 (FieldChange("a.b[2]", 0.5, float("nan")),), {"skipped": [b"\x00"]})
+    m = Mutation(testcase="tc", policy="p1", action="set", channel="data", consumers=("sink",), message_index=7,
+                 time=1.25, fields=(FieldChange("a.b[2]", 0.5, float("nan")),), detail={"skipped": [b"\x00"]})
     row = m.to_row()
     assert type(row) is tuple and Mutation.from_row(row) == m  # (the same NaN object: equal by identity)
     assert json.dumps(Mutation.row_json(row)) == json.dumps(m.to_json())
@@ -82,7 +86,8 @@ def test_a_mutation_row_is_the_mutation():
 
 
 def test_a_live_mutation_is_logged_in_its_tagged_form():
-    m = Mutation("tc", "p1", "set", "data", ("sink",), 7, 1.25, (FieldChange("v", 1.0, float("inf")),))
+    m = Mutation(testcase="tc", policy="p1", action="set", channel="data", consumers=("sink",), message_index=7,
+                 time=1.25, fields=(FieldChange("v", 1.0, float("inf")),))
     record = rec.MutationRecord.of(m, 99)
     assert record.fields == (TaggedFieldChange("v", 1.0, {"float": "inf"}),) and record.detail == {}
     assert rec.MutationRecord.from_json(m.to_json(), time_ns=99) == record
@@ -110,41 +115,47 @@ def test_json_fields_never_give_a_value_of_the_wrong_type():
 # What the tool wrote before each record type owned its form (captured from the previous encoder): a log written
 # now is byte-identical, so logs written before read as they always did.
 WRITTEN_BEFORE = [
-    (rec.RunStarted(1, "star", "echo", ("astaa-deft", "proxy"), 77),
+    (rec.RunStarted(time_ns=1, mode="star", spec="echo", command_line=("astaa-deft", "proxy"), interceptor_epoch_ns=77),
      '{"kind": "run_started", "time_ns": 1, "mode": "star", "spec": "echo", "command_line": ["astaa-deft", "proxy"], '
      '"interceptor_epoch_ns": 77}'),
     (rec.RunStopping(2), '{"kind": "run_stopping", "time_ns": 2}'),
     (rec.RunStopped(3), '{"kind": "run_stopped", "time_ns": 3}'),
     (RunEnd(4, "time limit"), '{"kind": "run_end", "time_ns": 4, "reason": "time limit"}'),
-    (ProcessExit("talker", 42, 3, None, 5, False, "Traceback ..."),
+    (ProcessExit(module="talker", pid=42, returncode=3, signal=None, time_ns=5, during_shutdown=False,
+                 stderr_tail="Traceback ..."),
      '{"kind": "process_exit", "time_ns": 5, "module": "talker", "pid": 42, "returncode": 3, "signal": null, '
      '"during_shutdown": false, "abnormal": true, "stderr_tail": "Traceback ..."}'),
     (Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6, channel="status", seq=7,
                message={"v": 1}, detail="too fast", crash=Verdict.HINDERING, module=None),
      '{"kind": "violation", "time_ns": 6, "invariant": "speed", "invariant_kind": "bound", "severity": "high", '
      '"crash": "Hindering", "detail": "too fast", "module": null, "channel": "status", "seq": 7, "message": {"v": 1}}'),
-    (rec.RunVerdict(Verdict.HINDERING, Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6,
-                                                 channel=None, seq=None, message=None, detail="too fast",
-                                                 crash=Verdict.HINDERING), "1 violation", ("a reason",), time_ns=7),
+    (rec.RunVerdict(klass=Verdict.HINDERING,
+                    first=Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6,
+                        channel=None, seq=None, message=None, detail="too fast",
+                        crash=Verdict.HINDERING), summary="1 violation", reasons=("a reason",), time_ns=7),
      '{"kind": "verdict", "time_ns": 7, "class": "Hindering", "first": {"time_ns": 6, "invariant": "speed", '
      '"invariant_kind": "bound", "severity": "high", "crash": "Hindering", "detail": "too fast", "module": null, '
      '"channel": null, "seq": null, "message": null}, "summary": "1 violation", "reasons": ["a reason"]}'),
     (rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
      '{"kind": "undeclared_key", "time_ns": 8, "module": "talker", "key": "test/extra", "note": "declare it"}'),
-    (rec.MutationRecord(9, "p1", "set", "data", 12, (TaggedFieldChange("value", 1.0, {"float": "nan"}),), "tc",
-                        ("listener",), 1.5, {"steps": []}, 4, 5),
+    (rec.MutationRecord(time_ns=9, policy="p1", action="set", channel="data", message_index=12,
+                        fields=(TaggedFieldChange("value", 1.0, {"float": "nan"}),), testcase="tc",
+                        consumers=("listener",), time=1.5, detail={"steps": []}, original_sequence=4,
+                        delivered_sequence=5),
      '{"kind": "mutation", "time_ns": 9, "testcase": "tc", "policy": "p1", "action": "set", "channel": "data", '
      '"consumers": ["listener"], "message_index": 12, "time": 1.5, "fields": [{"path": "value", "old": 1.0, '
      '"new": {"float": "nan"}}], "detail": {"steps": []}, "original_sequence": 4, "delivered_sequence": 5}'),
-    (rec.PolicyApplicationsRecord(13, "tc", "p1", "set", 0.5, None, "data#3", 4, 2, 9.5,
-                                  ({"channel": "data", "count": 3, "first_s": 0.1, "last_s": 0.9},), None),
+    (rec.PolicyApplicationsRecord(time_ns=13, testcase="tc", policy="p1", action="set", window_start_s=0.5,
+                                  window_end_s=None, anchor="data#3", in_window=4, touched=2, run_end_s=9.5,
+                                  traffic=({"channel": "data", "count": 3, "first_s": 0.1, "last_s": 0.9},),
+                                  untouched_reason=None),
      '{"kind": "policy_applications", "time_ns": 13, "testcase": "tc", "policy": "p1", "action": "set", '
      '"window_start_s": 0.5, "window_end_s": null, "anchor": "data#3", "in_window": 4, "touched": 2, '
      '"run_end_s": 9.5, "traffic": [{"channel": "data", "count": 3, "first_s": 0.1, "last_s": 0.9}], '
      '"untouched_reason": null}'),
     (rec.ModuleLogLine(10, "talker", "stderr", "ERROR: boom"),
      '{"kind": "module_log", "time_ns": 10, "module": "talker", "stream": "stderr", "line": "ERROR: boom"}'),
-    (rec.FlagRecord(12, "data", 4, "not JSON", 11),
+    (rec.FlagRecord(time_ns=12, channel="data", sequence=4, reason="not JSON", size=11),
      '{"kind": "undecodable", "time_ns": 12, "channel": "data", "sequence": 4, "reason": "not JSON", "size": 11}'),
     (rec.OtherEvent("bus_lost", 11, (("detail", "router gone"),)),
      '{"kind": "bus_lost", "time_ns": 11, "detail": "router gone"}'),
@@ -158,9 +169,9 @@ def test_every_event_is_written_as_before_and_reads_back(record, text):
 
 
 def test_a_mutation_has_one_json_form_live_on_the_pipe_and_in_the_log():
-    m = Mutation("tc", "p1", "set", "data", ("sink",), 7, 1.25,
-                 (FieldChange("a.b[2]", 0.5, float("nan")), FieldChange("s", "x\ud800", b"\x00\x01")),
-                 {"skipped": [b"\x00"], "float": 1})
+    m = Mutation(testcase="tc", policy="p1", action="set", channel="data", consumers=("sink",), message_index=7,
+                 time=1.25, fields=(FieldChange("a.b[2]", 0.5, float("nan")), FieldChange("s", "x\ud800", b"\x00\x01")),
+                 detail={"skipped": [b"\x00"], "float": 1})
     written_before = (
         '{"testcase": "tc", "policy": "p1", "action": "set", "channel": "data", "consumers": ["sink"], '
         '"message_index": 7, "time": 1.25, "fields": [{"path": "a.b[2]", "old": 0.5, "new": {"float": "nan"}}, '

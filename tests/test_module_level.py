@@ -24,7 +24,7 @@ from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.report import render
 from astaa_deft.orchestration.campaign.module_level import read_state, replayed_entries, status_lines
 

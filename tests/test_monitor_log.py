@@ -1,4 +1,4 @@
-"""The ``log`` invariant kind: a module's output lines (issue 16, build 3).
+"""The ``log`` invariant kind: a module's output lines.
 
 A planner that catches an exception, logs it and carries on publishes
 nothing for a cycle; before this kind no monitor could see it.

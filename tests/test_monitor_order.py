@@ -2,7 +2,7 @@
 
 Receive times differ between the tool's subscriber and the recorder's by
 scheduling noise; judged in receive order, the two named different first
-findings for one run (issue 16, found item 10). Both now use the message's
+findings for one run. Both now use the message's
 own Zenoh timestamp (the router stamps it once; the proxy forwards it).
 """
 

@@ -1,4 +1,4 @@
-"""Messages joined on the time the spec declares (issue 32): a tick's ego and vehicles published 20 ms apart.
+"""Messages joined on the time the spec declares: a tick's ego and vehicles published 20 ms apart.
 
 The simulator (tests/sut/tick_sim.py) publishes each tick's ego pose, then
 20 ms later the vehicles, one of which drives 0.1 m ahead of the ego.

@@ -149,7 +149,7 @@ PREV = """
 
 
 def test_prev_at_the_first_sample_is_the_sample_itself_so_a_monotone_signal_holds_there(tmp_path):
-    # issue 32: rtamt alone gives prev x = +inf at the first sample, and this formula failed there
+    # rtamt alone gives prev x = +inf at the first sample, and this formula failed there
     (tmp_path / "rising").mkdir()
     (tmp_path / "falling").mkdir()
     rising = drive(tmp_path / "rising", PREV, speed_at=lambda t: 1.0, light_at=lambda t: "green",

@@ -37,7 +37,8 @@ def violation(invariant="inv", kind="bound", crash="Silent", at=1.0, module="con
 
 
 def exit_event(module, at, returncode=1, signal=None, during_shutdown=False) -> ProcessExit:
-    return ProcessExit(module, 0, returncode, signal, ns(at), during_shutdown)
+    return ProcessExit(module=module, pid=0, returncode=returncode, signal=signal, time_ns=ns(at),
+                       during_shutdown=during_shutdown)
 
 
 @pytest.mark.parametrize("violations, exits, expected", [

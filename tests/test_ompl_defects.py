@@ -1,4 +1,4 @@
-"""The heavy third-party stack's known defects (examples/ompl_stack, `defects=1`; issue 24, item 8).
+"""The heavy third-party stack's known defects (examples/ompl_stack, `defects=1`).
 
 Each seeded defect is reached by a hand-written test case through the star
 (real planner and simulator processes, real Zenoh on loopback, a real MCAP
@@ -145,8 +145,8 @@ def test_defect_3_two_swapped_ego_poses_make_the_node_publish_an_empty_plan(tmp_
 
 @pytest.mark.slow
 def test_defect_1_held_fault_is_minimised_as_a_hold_within_the_campaigns_time_box(tmp_path):
-    """Issue 33: ddmin over single messages broke the hold (the minimal case no longer failed live) or ran out of
-    the campaign's 300 s box; the hold is one item now, shortened at its ends. The stack's default planner cost
+    """ddmin over single messages would break the hold (the minimal case no longer failing live) or run out of
+    the campaign's 300 s box; the hold is one item, shortened at its ends. The stack's default planner cost
     (a search of ~0.05-0.2 s): with the CPU-heavy one on a loaded machine, three planning cycles within one hold
     are chance, and even the full pinned hold reproduces only sometimes."""
     from astaa_deft.orchestration.campaign.campaign import DEFAULT_MINIMISE_TIMEOUT

@@ -22,7 +22,8 @@ from astaa_deft.model.errors import Problem
 
 @pytest.mark.parametrize("encoding", [JSON, CBOR])
 def test_each_replay_message_round_trips_in_either_body_encoding(encoding):
-    messages = [SetupMessage(ReplaySetup("run.mcap", None, "planned_speed", module="planning", trust_log_spec=True)),
+    messages = [SetupMessage(ReplaySetup(log_path="run.mcap", spec_path=None, invariant="planned_speed",
+                                         module="planning", trust_log_spec=True)),
                 JobMessage(Job(((1, (0, 2)), (4, None)), (3, 7))), JobMessage(Job(())),
                 ReadyMessage(0.25), BadInputMessage((Problem("spec.yaml", 3, None, "bad", "fix it"),)),
                 AnswerMessage(ReplayAnswer(TestResult(Outcome.UNRESOLVED, "hung", 0.5), 12))]

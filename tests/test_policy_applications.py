@@ -1,4 +1,4 @@
-"""A policy whose window closed without touching a message is named, with why (issue 16, item 6).
+"""A policy whose window closed without touching a message is named, with why.
 
 Before: a run said only "mutations applied: 0" — not which policy touched
 nothing, nor that the SUT had started after the window closed.

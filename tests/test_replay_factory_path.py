@@ -1,4 +1,4 @@
-"""A replay factory named by a file path relative to the spec (issue 32): ``factory: ../controller.py:MPC``.
+"""A replay factory named by a file path relative to the spec: ``factory: ../controller.py:MPC``.
 
 A module beside the SUT's sources, not beside the spec, needs no shim on
 sys.path; a spec not read from a file (one stored in a log) names no file

@@ -28,7 +28,7 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.orchestration.campaign.baseline import (
     LEARNING_SHUTDOWN_DELAY, learned_shutdown_delays, learning_shutdown_delays,
 )
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 TICKS = Path(__file__).parent / "sut" / "ticks.yaml"
 LOAD = "while True: pass"  # one core kept busy
@@ -119,14 +119,14 @@ def test_a_bad_shutdown_delay_is_one_located_error(value, says):
 
 def test_the_baseline_learns_each_ending_modules_shutdown_delay_with_headroom():
     def clean(**shutdowns):
-        return CaseOutcome("done", "Pass", "Pass", shutdowns=shutdowns)
+        return CaseOutcome(status="done", verdict="Pass", summary="Pass", shutdowns=shutdowns)
     # the longest shutdown × 2 + 0.5 s; never under the default grace; a longer wait than the baseline's own
     # delay was a silence (its run ended at the exit), not a shutdown; and never past that delay
     assert learned_shutdown_delays([clean(sim=0.4), clean(sim=1.54)]) == {"sim": 3.6}
     assert learned_shutdown_delays([clean(sim=0.1)]) == {"sim": SHUTDOWN_GRACE_NS / 1e9}
     assert learned_shutdown_delays([clean(sim=2.0), clean(sim=LEARNING_SHUTDOWN_DELAY + 5)]) == {"sim": 4.5}
     assert learned_shutdown_delays([clean(sim=6.0)]) == {"sim": LEARNING_SHUTDOWN_DELAY}
-    assert learned_shutdown_delays([CaseOutcome("done", "Pass", "Pass")]) == {}
+    assert learned_shutdown_delays([CaseOutcome(status="done", verdict="Pass", summary="Pass")]) == {}
     assert learning_shutdown_delays(load_spec(TICKS)) == {"sim": LEARNING_SHUTDOWN_DELAY}
 
 
@@ -139,7 +139,7 @@ def _campaign_runs(tmp_path: Path, teardown: float, baseline: int, runs: int, pr
         result, log = _run(tmp_path, f"{prefix}{n}", teardown=teardown, delays=delays)
         assert result.end_reason == "scenario over", result.end_reason
         if n < baseline:
-            taught.append(CaseOutcome("done", "Pass", "Pass", shutdowns=result.shutdowns))
+            taught.append(CaseOutcome(status="done", verdict="Pass", summary="Pass", shutdowns=result.shutdowns))
         found += [f"run {n} (teardown {teardown} s, delays {delays}): {d}" for d in _findings_at_the_end(result, log)]
     return found
 

@@ -1,4 +1,4 @@
-"""The semantic fault families (issue 33): one registered module each, their rules and actions, valid
+"""The semantic fault families: one registered module each, their rules and actions, valid
 cases for any spec, the earlier families' draws unchanged, and on the semantic zoo (tests/sut/
 semantic_zoo.yaml, driven through a real Interceptor without processes) each family reaching its own
 seeded defect and no other family reaching it."""
@@ -55,7 +55,8 @@ def test_the_earlier_families_draw_byte_for_byte_what_they_drew_before_the_seman
 
 def test_an_unknown_family_is_an_input_error_naming_the_known_ones(tmp_path):
     with pytest.raises(InputError, match="unknown fault family 'bondary'") as caught:
-        gen.generate_to_directory(ZOO_SPEC, 3, 1, tmp_path / "out", families=["bondary"])
+        gen.generate_to_directory(ZOO_SPEC, tmp_path / "out",
+                                  gen.GenerateOptions(count=3, seed=1, families=["bondary"]))
     assert "boundary" in caught.value.problems[0].fix
 
 
@@ -64,7 +65,7 @@ def test_an_unknown_family_is_an_input_error_naming_the_known_ones(tmp_path):
 def rule(name: str, current, kind: str = "float64", **declared):
     entry = next(e for e in DICTIONARY.entries.values() if e.rule == name)
     site = FieldSite(FieldType(kind=kind, **declared))
-    return entry.resolve(ValueContext(site, current, {}, "f", lambda: current))
+    return entry.resolve(ValueContext(site=site, current=current, container={}, key="f", previous=lambda: current))
 
 
 def test_semantic_rules_give_plausible_but_wrong_values():
@@ -118,7 +119,8 @@ def test_each_family_finds_its_own_fields_on_the_zoo():
 
 @pytest.mark.parametrize("spec", [ZOO_SPEC, OMPL_SPEC], ids=["zoo", "ompl"])
 def test_every_semantic_case_passes_policy_check(tmp_path, spec):
-    report = gen.generate_to_directory(spec, 200, 4, tmp_path / "cases", duration=12.0, families=SEMANTIC)
+    report = gen.generate_to_directory(spec, tmp_path / "cases",
+                                       gen.GenerateOptions(count=200, seed=4, duration=12.0, families=SEMANTIC))
     assert set(report.shapes) == set(SEMANTIC)
     for path in report.paths:
         testcase = load_testcase(path, spec, DICTIONARY)  # the XSD, then channels, fields and values

@@ -76,7 +76,7 @@ def test_each_family_s_case_reaches_its_defect_on_the_live_stack(tmp_path, name)
 
 def test_the_same_cases_with_the_defects_off_leave_the_run_clean(tmp_path):
     policies = tuple(replace(family_case(name).policies[0], id=f"p{k}") for k, name in enumerate(SEMANTIC, 1))
-    testcase = TestCase("zoo-all", 1, "every semantic family's case at once", policies)
+    testcase = TestCase(id="zoo-all", seed=1, description="every semantic family's case at once", policies=policies)
     res, consumer_log = run(tmp_path, testcase, "0")
     assert "verdict: Pass" in res.stdout, res.stdout + res.stderr + consumer_log
     assert "Traceback" not in consumer_log

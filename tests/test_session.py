@@ -17,22 +17,26 @@ from astaa_deft.model.records import Verdict
 from proxy_helpers import ECHO_SPEC
 
 ALL_KINDS = [
-    rec.RunStarted(1, "star", "echo", ("astaa-deft", "proxy")),
+    rec.RunStarted(time_ns=1, mode="star", spec="echo", command_line=("astaa-deft", "proxy")),
     rec.RunStopping(2),
     rec.RunStopped(3),
     rec.RunEnd(4, "time limit"),
-    rec.ProcessExit("talker", 42, 3, None, 5, False, "Traceback ..."),
+    rec.ProcessExit(module="talker", pid=42, returncode=3, signal=None, time_ns=5, during_shutdown=False,
+                    stderr_tail="Traceback ..."),
     rec.Violation(invariant="speed", invariant_kind="bound", severity="high", time_ns=6, channel="status", seq=7,
                   message={"v": 1}, detail="too fast", crash="Hindering", module=None),
-    rec.RunVerdict(Verdict.HINDERING, rec.Violation(invariant="speed", invariant_kind="bound", severity="high",
-                                                    time_ns=6, channel=None, seq=None, message=None,
-                                                    detail="too fast",
-                                                    crash="Hindering"), "1 violation", ("a reason",), time_ns=7),
+    rec.RunVerdict(klass=Verdict.HINDERING,
+                   first=rec.Violation(invariant="speed", invariant_kind="bound", severity="high",
+                           time_ns=6, channel=None, seq=None, message=None,
+                           detail="too fast",
+                           crash="Hindering"), summary="1 violation", reasons=("a reason",), time_ns=7),
     rec.UndeclaredKey(8, "talker", "test/extra", "declare it"),
-    rec.MutationRecord(9, "p1", "set", "data", 12, (rec.TaggedFieldChange("value", 1.0, {"float": "nan"}),), "tc",
-                       ("listener",), 1.5, {"steps": []}, 4, 5),
+    rec.MutationRecord(time_ns=9, policy="p1", action="set", channel="data", message_index=12,
+                       fields=(rec.TaggedFieldChange("value", 1.0, {"float": "nan"}),), testcase="tc",
+                       consumers=("listener",), time=1.5, detail={"steps": []}, original_sequence=4,
+                       delivered_sequence=5),
     rec.ModuleLogLine(10, "talker", "stderr", "ERROR: boom"),
-    rec.FlagRecord(12, "data", 4, "not JSON", 11),
+    rec.FlagRecord(time_ns=12, channel="data", sequence=4, reason="not JSON", size=11),
     rec.OtherEvent("bus_lost", 11, (("detail", "router gone"),)),
 ]
 
@@ -49,7 +53,7 @@ def test_existing_log_events_decode_to_records():
     exit_ = rec.decode(old)
     assert isinstance(exit_, rec.ProcessExit) and exit_.signal == "SIGKILL" and exit_.abnormal
     started = rec.decode({"kind": "run_started", "time_ns": 1, "mode": "star", "spec": "s", "command_line": ["a"]})
-    assert started == rec.RunStarted(1, "star", "s", ("a",))
+    assert started == rec.RunStarted(time_ns=1, mode="star", spec="s", command_line=("a",))
 
 
 def test_a_newer_record_format_is_refused_with_a_clear_message():
@@ -95,7 +99,7 @@ def test_concurrent_sessions_in_one_process_are_isolated(tmp_path):
 
 
 def test_a_relative_run_dir_still_hands_modules_a_config_they_can_open(tmp_path, monkeypatch):
-    """Issue 16, found item 8: a relative --run-dir with a module 'cwd' gave the module a relative
+    """A relative --run-dir with a module 'cwd' gave the module a relative
     ZENOH_CONFIG path that did not exist from its own directory, and it crashed."""
     import sys
     import textwrap

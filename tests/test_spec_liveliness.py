@@ -1,4 +1,4 @@
-"""Liveliness tokens declared in the spec (`liveliness:`, issue 32): wired to their consumers, never reported as
+"""Liveliness tokens declared in the spec (`liveliness:`): wired to their consumers, never reported as
 undeclared keys; a bad declaration is one located error. Live part: real subprocesses, real Zenoh."""
 
 from __future__ import annotations

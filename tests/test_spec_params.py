@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, param_grid
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.model.errors import InputError
 from astaa_deft.engine.spec.params import check_param_values
 from astaa_deft.engine.spec.loader import load_spec, load_spec_text

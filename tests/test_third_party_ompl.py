@@ -1,4 +1,4 @@
-"""A third-party stack no one here wrote the tool for: examples/ompl_stack (issue 16, item 8).
+"""A third-party stack no one here wrote the tool for: examples/ompl_stack.
 
 Our simulator (20 Hz ego, 10 Hz obstacles, its own ground-truth contacts,
 exit codes 0 pass / 1 collision / 2 goal not reached) and a planner on OMPL
@@ -76,8 +76,8 @@ def test_a_busy_planner_is_expected_on_the_trigger_newest_when_it_finished_its_p
     found = candidates(OutputContext(streams=streams, trigger="obstacles", output_ns=420 * MS,
                                      previous={"obstacles": 0, "ego": 0}, lookback_ns=0, previous_output_ns=250 * MS))
     triggers = list(dict.fromkeys(c.choice["obstacles"] for c in found))
-    # Newest, busy (newest at the previous output), the first after it (a module dropping triggers while busy,
-    # issue 31), then the oldest unused.
+    # Newest, busy (newest at the previous output), the first after it (a module dropping triggers while
+    # busy), then the oldest unused.
     assert triggers == [4, 2, 3, 1]
 
 
@@ -168,7 +168,7 @@ def test_a_stopped_car_the_planner_may_avoid_is_judged_as_the_simulator_measured
 
 @pytest.mark.slow  # ~30 s: the planner's long searches delay its shutdown
 def test_a_participant_only_the_planner_sees_blocks_the_road_and_the_verdict_says_what_the_simulator_says(tmp_path):
-    # Issue 16, item 7: a car added with the participant action (the spec's decictor: participants mapping),
+    # A car added with the participant action (the spec's decictor: participants mapping),
     # standing beside the parked car in what the planner perceives: both lanes blocked, the planner searches
     # long and brakes, the ego never gets past — the simulator's outcome is 2 (goal not reached), no contact.
     res, log, truth = drive(tmp_path, "blocked", "--policy", str(STACK / "blocked_road.xml"),

@@ -16,18 +16,18 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.journal import Journal, open_existing
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.orchestration.campaign.strategies.base import Proposal, Strategy
 from astaa_deft.orchestration.verify.bisect import search
 from astaa_deft.orchestration.campaign.report import write_report
-from astaa_deft.orchestration.verify import records
-from astaa_deft.orchestration.verify.history import fixed_buckets, history
-from astaa_deft.orchestration.verify.model import (
+from astaa_deft.orchestration.journal.verifications import record as record_check
+from astaa_deft.orchestration.journal.history import fixed_buckets, history
+from astaa_deft.orchestration.journal.checks import (
     BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
 )
-from astaa_deft.orchestration.verify.records import VerificationRow, verifications
+from astaa_deft.orchestration.journal.verifications import VerificationRow, verifications
 
 SUT = Path(__file__).parent / "sut"
 STEADY = SUT / "steady.yaml"
@@ -115,8 +115,9 @@ def test_a_resumed_campaign_reopens_a_bucket_verified_fixed_when_a_case_fails_it
         steady_campaign: Path):
     journal = open_existing(steady_campaign)
     try:  # as `verify --label v4` records it, without its runs
-        records.record(journal, BucketCheck("B001", "v4", VerifyStatus.FIXED, Tally(1), Tally(1), None, "", {},
-                                            False))
+        record_check(journal,
+            BucketCheck(bucket="B001", revision="v4", status=VerifyStatus.FIXED, reruns=Tally(runs=1),
+                        twins=Tally(runs=1), module_tests=None, module_detail="", params={}, minimal=False))
         assert fixed_buckets(verifications(journal)) == {"B001"}
     finally:
         journal.close()
@@ -149,8 +150,9 @@ def test_export_refuses_a_folder_holding_other_files(steady_campaign: Path, tmp_
 
 
 def outcome(*findings: tuple[str, str | None], status: str = "done") -> CaseOutcome:
-    found = [Finding(inv, "Abort", module, None, "") for inv, module in findings]
-    return CaseOutcome(status, "Abort" if found else ("Pass" if status == "done" else "?"), "s", found)
+    found = [Finding(invariant=inv, crash="Abort", module=module, channel=None, detail="") for inv, module in findings]
+    return CaseOutcome(status=status, verdict="Abort" if found else ("Pass" if status == "done" else "?"), summary="s",
+                       findings=found)
 
 
 def test_classification_fixed_still_failing_changed_flaky_not_observed():
@@ -162,14 +164,15 @@ def test_classification_fixed_still_failing_changed_flaky_not_observed():
     assert classify(Tally.of([other, clean], way), Tally.of([clean, clean], way)) == VerifyStatus.CHANGED
     assert classify(Tally.of([same, same], way), Tally.of([same, clean], way)) == VerifyStatus.FLAKY
     assert classify(Tally.of([clean, lost], way), Tally.of([clean, clean], way)) == VerifyStatus.NOT_OBSERVED
-    assert Tally.of([same, clean, other], way) == Tally(3, 1, 1, 0, "s")
+    assert Tally.of([same, clean, other], way) == Tally(runs=3, same=1, other=1, unobserved=0, other_how="s")
     # another failure the unmutated twins show too (load, the stack's own flakiness) is not a change
     background = failure_keys(other)
     assert classify(Tally.of([other, clean], way, background), Tally.of([other, clean], way)) == VerifyStatus.FIXED
 
 
 def row(revision: str, status: VerifyStatus) -> VerificationRow:
-    return VerificationRow("B001", revision, status, 0, 1, 0, 1, None, "", 0.0)
+    return VerificationRow(bucket="B001", revision=revision, status=status, failing=0, runs=1, twin_failures=0, twins=1,
+                           module_tests=None, detail="", at=0.0)
 
 
 def test_history_found_fixed_reopened():

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from astaa_deft.demo.bundled import demo_spec_path
-from astaa_deft.orchestration.campaign.journal import open_existing
+from astaa_deft.orchestration.journal.journal import open_existing
 from test_verify import run_campaign, verify
 
 # Defect 3 (control crashes on an empty trajectory) and defect 1 (a NaN speed limit: the planner overspeeds), each

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class NumberRange:
     """An argparse ``type``: a finite int or float in [low, high] (``low`` excluded when ``above_low``).
 
@@ -55,17 +55,17 @@ class NumberRange:
         return f"{low} and ≤ {self.high:g}{unit}"
 
 
-CASES = NumberRange(int, 1, 1_000_000)
-SEED = NumberRange(int, 0, 2**64 - 1)  # the test case schema's seed range
-CAMPAIGN_SEED = NumberRange(int, 0, 2**63 - 1)  # kept in the journal's SQLite INTEGER column
-PROCESSES = NumberRange(int, 1, MAX_PROCESSES)
-RERUNS = NumberRange(int, 0, 100)
-REPEATS = NumberRange(int, 1, 100)
-DOMAIN_ID = NumberRange(int, 0, 232)  # ROS 2's valid domain ids
-LISTEN_SECONDS = NumberRange(float, 0, 3600, "s", above_low=True)
-WINDOW_SECONDS = NumberRange(float, 0, MAX_WINDOW_S, "s", above_low=True)
-RUN_SECONDS = NumberRange(float, 0, 7 * DAY_S, "s", above_low=True)
-THRESHOLD_M = NumberRange(float, 0, 1000, "m")
+CASES = NumberRange(kind=int, low=1, high=1_000_000)
+SEED = NumberRange(kind=int, low=0, high=2**64 - 1)  # the test case schema's seed range
+CAMPAIGN_SEED = NumberRange(kind=int, low=0, high=2**63 - 1)  # kept in the journal's SQLite INTEGER column
+PROCESSES = NumberRange(kind=int, low=1, high=MAX_PROCESSES)
+RERUNS = NumberRange(kind=int, low=0, high=100)
+REPEATS = NumberRange(kind=int, low=1, high=100)
+DOMAIN_ID = NumberRange(kind=int, low=0, high=232)  # ROS 2's valid domain ids
+LISTEN_SECONDS = NumberRange(kind=float, low=0, high=3600, unit="s", above_low=True)
+WINDOW_SECONDS = NumberRange(kind=float, low=0, high=MAX_WINDOW_S, unit="s", above_low=True)
+RUN_SECONDS = NumberRange(kind=float, low=0, high=7 * DAY_S, unit="s", above_low=True)
+THRESHOLD_M = NumberRange(kind=float, low=0, high=1000, unit="m")
 MAX_BUDGET_S = 30 * DAY_S
 
 

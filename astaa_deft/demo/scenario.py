@@ -43,7 +43,7 @@ class Trigger:
     gap: float | None = None  # the NPC is ahead of the ego by at most this much (centre x distance)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Maneuver:
     when: Trigger
     lane_change: int | None = None  # target lane
@@ -52,7 +52,7 @@ class Maneuver:
     accel: float = 2.0  # magnitude used to reach it, m/s²
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObjectSpec:
     """A static obstacle or an NPC vehicle at its initial state."""
 
@@ -84,7 +84,7 @@ class TrafficLightSpec:
         return self.cycle[-1][0]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Scenario:
     name: str
     description: str

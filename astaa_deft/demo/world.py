@@ -17,7 +17,7 @@ from astaa_deft.demo.geometry import Box, separation, smoothstep5, wrap_angle
 from astaa_deft.demo.scenario import Maneuver, ObjectSpec, Scenario
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Ego:
     """Kinematic bicycle model on the rear axle; everything published refers to the box centre."""
 

@@ -129,7 +129,7 @@ class Source:
                     kind = "a mapping" if isinstance(event, yaml.MappingStartEvent) else "a list"
                     raise self._refuse(event, f"a key must be a plain word, not {kind}", "write the key as text")
                 value: dict | list = {} if isinstance(event, yaml.MappingStartEvent) else []
-                stack.append(_Open(Node(value, *_place(event)), event.anchor))
+                stack.append(_Open(node=Node(value, *_place(event)), anchor=event.anchor))
             elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
                 done = stack.pop()
                 if done.anchor is not None:
@@ -241,7 +241,7 @@ class Source:
             _constructor.constructed_objects.clear()  # it would keep every node it ever constructed
 
 
-@dataclass
+@dataclass(kw_only=True)
 class _Open:
     """A mapping or list being built: its node, anchor, size in nodes so far and the key awaiting its value."""
 

@@ -16,7 +16,7 @@ class TrajectorySection:
     step: float = 0.1  # s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ParticipantMappingSection:
     """How a participant becomes an element of a channel's array field."""
 
@@ -36,7 +36,7 @@ class LanesSection:
     file: Path | None = None  # resolved against the spec's directory
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EgoSection:
     channel: str
     t: str = "header.stamp"
@@ -57,7 +57,7 @@ class FlagSection:
     field: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DecictorSection:
     participants: tuple[ParticipantMappingSection, ...] = ()
     lanes: LanesSection | None = None

@@ -182,7 +182,7 @@ def mutation_row(source: MutationSource, message_index: int, time: float,
     return source + (message_index, time, changes, {} if detail is None else detail)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Mutation:
     """What one policy (or a stack of policies, names joined by '+') did to one message."""
 
@@ -206,8 +206,9 @@ class Mutation:
     def from_row(cls, row: MutationRow) -> Mutation:
         """The mutation of its compact form."""
         testcase, policy, action, channel, consumers, index, time, changes, detail = row
-        return cls(testcase, policy, action, channel, consumers, index, time,
-                   tuple(FieldChange(path, old, new) for path, old, new in changes), detail)
+        return cls(testcase=testcase, policy=policy, action=action, channel=channel, consumers=consumers,
+                   message_index=index, time=time,
+                   fields=tuple(FieldChange(path, old, new) for path, old, new in changes), detail=detail)
 
     def to_json(self) -> JsonObject:
         """Plain JSON types only; exceptional values are tagged (``model.tagged``)."""
@@ -230,7 +231,7 @@ class Mutation:
 # ---------------------------------------------------------------- process exits
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ProcessExit:
     """A module's process exit: the launcher reports it, the monitors judge it, the log stores it."""
 
@@ -273,8 +274,9 @@ class ProcessExit:
         module, pid, code = obj.optional_text("module"), obj.optional_integer("pid"), obj.optional_integer("returncode")
         if module is None or pid is None or code is None:
             raise _damaged(where, "a process exit without its module, pid or return code")
-        return cls(module, pid, code, obj.optional_text("signal"), obj.integer("time_ns"), obj.flag("during_shutdown"),
-                   obj.text("stderr_tail"))
+        return cls(module=module, pid=pid, returncode=code, signal=obj.optional_text("signal"),
+                   time_ns=obj.integer("time_ns"), during_shutdown=obj.flag("during_shutdown"),
+                   stderr_tail=obj.text("stderr_tail"))
 
 
 # ---------------------------------------------------------------- violations
@@ -363,7 +365,7 @@ class RunEnd:
 # ---------------------------------------------------------------- the run's verdict
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RunVerdict:
     """A run's verdict: its class, its earliest finding, a one-line summary, the reasons for the class.
 
@@ -393,6 +395,6 @@ class RunVerdict:
         first = read.raw("first")
         if first is not None and not isinstance(first, Mapping):
             raise _damaged(where, "a verdict whose first finding is not an object")
-        return cls(Verdict.named(read.text("class", "?")) or Verdict.SILENT,
-                   Violation.from_json({"time_ns": time_ns, **first}, where=where) if first else None,
-                   read.text("summary"), read.texts("reasons"), time_ns)
+        return cls(klass=Verdict.named(read.text("class", "?")) or Verdict.SILENT,
+                   first=Violation.from_json({"time_ns": time_ns, **first}, where=where) if first else None,
+                   summary=read.text("summary"), reasons=read.texts("reasons"), time_ns=time_ns)

@@ -40,7 +40,7 @@ FRAME_MODES = tuple(mode.value for mode in FrameMode)  # the first is the defaul
 EXCEPTIONS = tuple(meaning.value for meaning in StepExceptions)  # the first is the default
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrajectoryLayout:
     points: str = "points"  # field path of the array of points in the output message
     x: str = "x"
@@ -51,7 +51,7 @@ class TrajectoryLayout:
     stamp: str = "header.stamp"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CollisionOracle:
     """A planned pose that, reached at its planned time, overlaps an obstacle as predicted in that frame."""
 
@@ -66,7 +66,7 @@ class CollisionOracle:
     margin: float = 0.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ReplayModule:
     """A module that runs alone on reconstructed frames: what it reads, answers, and how to run it."""
 

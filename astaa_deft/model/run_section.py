@@ -41,7 +41,7 @@ PASS_OUTCOME = Outcome(PASS)
 CRASHED = Outcome("crashed", Verdict.ABORT)  # an exit code the spec does not list, or a kill by a signal
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ModuleExitEnd:
     """The run ends when ``module`` exits; its exit code says how it went."""
 

@@ -29,7 +29,7 @@ INT_RANGES: dict[str, tuple[int, int]] = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FieldType:
     """The declared type of one field.
 
@@ -97,7 +97,7 @@ class Readiness:
     timeout: float = 20.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Module:
     name: str
     command: tuple[str, ...]
@@ -112,7 +112,7 @@ class Module:
     plant: bool = False
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Channel:
     name: str
     key: str
@@ -142,7 +142,7 @@ class Ros2Section:
     messages: Mapping[str, Path] = field(default_factory=dict)  # custom type name -> .msg file
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Spec:
     name: str
     path: Path | None

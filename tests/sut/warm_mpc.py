@@ -1,4 +1,4 @@
-"""A warm-started controller, rebuilt from issue 31's description of a stranger's MPC stack (for DeFT tests).
+"""A warm-started controller, rebuilt from the description of a stranger's MPC stack (for DeFT tests).
 
 Every answer depends on all earlier ones (the previous solution is the warm
 start), and its first cycles run before the first message of its slow input

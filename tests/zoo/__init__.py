@@ -1,4 +1,4 @@
-"""The zoo of module behaviours (issue 31): small modules on the bus, each one combination of behaviours.
+"""The zoo of module behaviours: small modules on the bus, each one combination of behaviours.
 
 DeFT is developed against the whole zoo, not one stack. Importable from the
 tests (``tests/`` is on ``sys.path`` under pytest) and from benchmarks

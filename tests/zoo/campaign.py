@@ -30,8 +30,8 @@ from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.rows import ModuleTestsRow
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.rows import ModuleTestsRow
 from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy
 
 from zoo.generate import Stack

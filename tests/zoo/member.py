@@ -70,7 +70,7 @@ class Member:
     warm: float = 0.5  # state 'warm': x_k = warm·x_{k-1} + (1 − warm)·u_k
     seconds: float = 4.0  # bus time the producer runs (the recorded run)
     frames: str | None = None  # the spec's frames mode (None: per_trigger for 'each' with one output a cycle)
-    note: str = ""  # what the member stands for (the two of issue 31 say so)
+    note: str = ""  # what the member stands for (the two strangers' stacks say so)
     defect: str = "none"  # a seeded defect (DEFECTS), for campaigns that must find it
     # The module's process adds header.frame_id = this to every output it publishes, as a node stamps its
     # frame; the step (the replay factory) does not return it. "" : no such field.

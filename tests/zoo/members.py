@@ -1,4 +1,4 @@
-"""The zoo's catalogue: every value of every axis, the two stacks of issue 31 among them.
+"""The zoo's catalogue: every value of every axis, two strangers' stacks among them.
 
 ``MEMBERS`` is the whole zoo (the benchmark, ``-m slow``); ``SHORT`` a few
 members with a couple of seconds of bus time each (the default test run).
@@ -10,18 +10,18 @@ from dataclasses import replace
 
 from zoo.member import Member
 
-# Issue 31's warm-started MPC controller (CasADi/IPOPT, 15 Hz), rebuilt from its description: it answers the
+# A stranger's warm-started MPC controller (CasADi/IPOPT, 15 Hz), rebuilt from its description: it answers the
 # newest trigger when a solve ends, dropping those that came meanwhile; its step keeps the previous solution as
 # a warm start (every output depends on all earlier ones); its first outputs were computed before the first
 # message of its 1 Hz path channel (c) arrived; forked copies are bit-identical.
 MPC = Member("mpc", trigger="newest_idle", readiness="absent_first", reading="latched", state="warm",
              outputs="one", numerics="stable", cost_ms=(10.0, 45.0), rate_hz=15.0, c_hz=1.0, c_start_s=0.45,
-             seconds=5.0, note="issue 31's warm-started MPC controller (15 Hz, newest trigger when a solve ends)")
-# Issue 31's native planner: 0.5-1.2 s a cycle, the newest message of each input read when a cycle starts (not
+             seconds=5.0, note="a stranger's warm-started MPC controller (15 Hz, newest trigger when a solve ends)")
+# A stranger's native planner: 0.5-1.2 s a cycle, the newest message of each input read when a cycle starts (not
 # when its trigger arrives), its state carried from cycle to cycle, not bit-stable after a fork (1e-15).
 SLOW_PLANNER = Member("slow_planner", trigger="newest_idle", readiness="ready", reading="cycle_start",
                       state="warm", outputs="one", numerics="noisy_fork", cost_ms=(500.0, 1200.0), rate_hz=10.0,
-                      seconds=9.0, note="issue 31's slow native planner (0.5-1.2 s, newest at cycle start)")
+                      seconds=9.0, note="a stranger's slow native planner (0.5-1.2 s, newest at cycle start)")
 
 MEMBERS: tuple[Member, ...] = (
     MPC,

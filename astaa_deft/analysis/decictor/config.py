@@ -38,7 +38,7 @@ from astaa_deft.analysis.decictor.oracle import Lane, straight_lanes
 DOCS = "see docs/decictor.md"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DecictorConfig:
     """What a Decictor search needs from the spec, every part present."""
 
@@ -80,8 +80,8 @@ def read_config(spec: Spec) -> DecictorConfig:
                     "name the boolean field that says the goal was reached")
     clearance = DEFAULT_CLEARANCE if section.clearance is None else section.clearance
     dt = DT if section.dt is None else section.dt
-    return DecictorConfig(next(iter(mappings.values())), section.lanes, section.ego, section.goal,
-                          section.collision, clearance, dt)
+    return DecictorConfig(participants=next(iter(mappings.values())), lanes=section.lanes, ego=section.ego,
+                          goal=section.goal, collision=section.collision, clearance=clearance, dt=dt)
 
 
 def read_lanes_file(path: Path) -> tuple[Lane, ...]:

@@ -42,7 +42,7 @@ class PlacementError(AstaaDeftError, ValueError):
     exit_code = 2  # bad input: the CLI prints it as one line
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Kind:
     name: str
     length: float
@@ -52,10 +52,10 @@ class Kind:
 
 
 KINDS = {
-    "cone": Kind("cone", 0.5, 0.5, 0.0),
-    "barrier": Kind("barrier", 0.6, 2.0, 0.0),
-    "vehicle": Kind("vehicle", 4.6, 1.9, 15.0),
-    "pedestrian": Kind("pedestrian", 0.6, 0.6, 1.5, 1.5),
+    "cone": Kind(name="cone", length=0.5, width=0.5, max_speed=0.0),
+    "barrier": Kind(name="barrier", length=0.6, width=2.0, max_speed=0.0),
+    "vehicle": Kind(name="vehicle", length=4.6, width=1.9, max_speed=15.0),
+    "pedestrian": Kind(name="pedestrian", length=0.6, width=0.6, max_speed=1.5, max_turn_rate=1.5),
 }
 STATIC_KINDS = ("cone", "barrier", "vehicle")
 MOVING_KINDS = ("vehicle", "pedestrian")
@@ -177,8 +177,9 @@ def sample_participant(rng: random.Random, participant_id: int, region: Forbidde
         x, y = rng.uniform(area.x_min, area.x_max), rng.uniform(area.y_min, area.y_max)
         heading = rng.choice((0.0, math.pi)) + rng.gauss(0.0, 0.15) if kind.name == "vehicle" \
             else rng.uniform(-math.pi, math.pi)
-        placed = Participant(participant_id, kind.name, round(x, 2), round(y, 2), round(heading, 3),
-                             kind.length, kind.width, round(rng.uniform(start, start + 0.5 * (end - start)), 1))
+        placed = Participant(id=participant_id, kind=kind.name, x=round(x, 2), y=round(y, 2), heading=round(heading, 3),
+                             length=kind.length, width=kind.width,
+                             t=round(rng.uniform(start, start + 0.5 * (end - start)), 1))
         if region.hit(_box(placed, placed.t)) is not None:
             continue
         if moving:

@@ -61,7 +61,7 @@ def end_points(messages: Sequence[object], layout: TrajectoryLayout | None) -> l
 
 def as_path(points: list[tuple[float, float]]) -> EgoPath:
     # Ordered by station, as a planned path is: the end points of successive plans advance along the road.
-    return EgoPath(tuple(EgoState(float(k), x, y, 0.0) for k, (x, y) in enumerate(points)))
+    return EgoPath(tuple(EgoState(t=float(k), x=x, y=y, heading=0.0) for k, (x, y) in enumerate(points)))
 
 
 def write_consistency_test(suite_dir: Path, seed_plans: list[tuple[float, float]], lanes: tuple[Lane, ...],

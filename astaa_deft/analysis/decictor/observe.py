@@ -75,8 +75,8 @@ def observe(log: LogContents, spec: Spec, config: DecictorConfig) -> LoggedRun:
             continue
         if states and t <= states[-1].t:  # held world (t = 0 repeated) and repeats: keep time increasing
             continue
-        states.append(EgoState(t, x, y, heading, _number(message, ego.speed) or 0.0,
-                               _number(message, ego.acceleration) or 0.0))
+        states.append(EgoState(t=t, x=x, y=y, heading=heading, speed=_number(message, ego.speed) or 0.0,
+                               acceleration=_number(message, ego.acceleration) or 0.0))
     if not states:
         raise ObservationError(f"{log.path}: no usable message on the ego channel '{ego.channel}'")
     flags = {}

@@ -95,7 +95,7 @@ class LaneGrid:
         return {k: set(cell[inside].tolist()) for k, (inside, cell) in enumerate(self.locate_all(points))}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LaneScore:
     lane: str
     jaccard: float
@@ -127,7 +127,8 @@ def consistency(seed: EgoPath, mutated: EgoPath, grid: LaneGrid) -> Consistency:
         occupancy = len(union) / total
         if occupancy < MIN_OCCUPANCY:
             continue
-        scores.append(LaneScore(lane.id, len(both) / len(union), occupancy, len(a[k]), len(b[k])))
+        scores.append(LaneScore(lane=lane.id, jaccard=len(both) / len(union), occupancy=occupancy, seed_cells=len(a[k]),
+                                mutated_cells=len(b[k])))
     if not scores:
         return Consistency((), None, 0.0)
     worst = min(scores, key=lambda s: s.jaccard)
@@ -145,7 +146,7 @@ class RunObservation:
     collision: bool = False  # in the world (the simulator's own objects)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DecisionVerdict:
     non_optimal: bool
     reason: str  # why (or why not)
@@ -175,18 +176,24 @@ def judge(seed: RunObservation, mutated: RunObservation, participants: tuple[Par
     """The hierarchical check: task, then the seed path's availability, then path consistency."""
     distance, mmd = path_distance(seed.ego, mutated.ego), behaviour_mmd(seed.ego, mutated.ego)
     if not mutated.goal_reached:
-        return DecisionVerdict(False, "task failed: the goal was not reached", None, distance, mmd)
+        return DecisionVerdict(non_optimal=False, reason="task failed: the goal was not reached", consistency=None,
+                               path_distance=distance, behaviour_mmd=mmd)
     if mutated.collision:
-        return DecisionVerdict(False, "task failed: a collision in the world", None, distance, mmd)
+        return DecisionVerdict(non_optimal=False, reason="task failed: a collision in the world", consistency=None,
+                               path_distance=distance, behaviour_mmd=mmd)
     hit = touches(mutated.ego, participants)
     if hit is not None:
-        return DecisionVerdict(False, f"task failed: the ego touched {hit}", None, distance, mmd)
+        return DecisionVerdict(non_optimal=False, reason=f"task failed: the ego touched {hit}", consistency=None,
+                               path_distance=distance, behaviour_mmd=mmd)
     blocked = touches(seed.ego, participants)
     if blocked is not None:
-        return DecisionVerdict(False, f"invalid mutation: the seed path touches {blocked}", None, distance, mmd)
+        return DecisionVerdict(non_optimal=False, reason=f"invalid mutation: the seed path touches {blocked}",
+                               consistency=None, path_distance=distance, behaviour_mmd=mmd)
     result = consistency(seed.ego, mutated.ego, grid)
     if result.consistent:
-        return DecisionVerdict(False, f"consistent (1 - Jaccard {result.dissimilarity:.2f} <= {THRESHOLD})",
-                               result, distance, mmd)
-    return DecisionVerdict(True, f"non-optimal decision: lane {result.worst_lane}: 1 - Jaccard "
-                                 f"{result.dissimilarity:.2f} > {THRESHOLD}", result, distance, mmd)
+        return DecisionVerdict(non_optimal=False,
+                               reason=f"consistent (1 - Jaccard {result.dissimilarity:.2f} <= {THRESHOLD})",
+                               consistency=result, path_distance=distance, behaviour_mmd=mmd)
+    return DecisionVerdict(non_optimal=True, reason=f"non-optimal decision: lane {result.worst_lane}: 1 - Jaccard "
+                                 f"{result.dissimilarity:.2f} > {THRESHOLD}", consistency=result,
+                           path_distance=distance, behaviour_mmd=mmd)

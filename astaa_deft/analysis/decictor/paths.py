@@ -26,7 +26,7 @@ FEATURE_WEIGHTS = (1.0, 0.5, 0.5)
 MMD_FACTOR = 10.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EgoState:
     t: float
     x: float
@@ -75,8 +75,9 @@ class EgoPath:
         a, b = states[k - 1], states[k]
         u = 0.0 if b.t == a.t else (t - a.t) / (b.t - a.t)
         dh = math.atan2(math.sin(b.heading - a.heading), math.cos(b.heading - a.heading))
-        return EgoState(t, a.x + u * (b.x - a.x), a.y + u * (b.y - a.y), a.heading + u * dh,
-                        a.speed + u * (b.speed - a.speed), a.acceleration + u * (b.acceleration - a.acceleration))
+        return EgoState(t=t, x=a.x + u * (b.x - a.x), y=a.y + u * (b.y - a.y), heading=a.heading + u * dh,
+                        speed=a.speed + u * (b.speed - a.speed),
+                        acceleration=a.acceleration + u * (b.acceleration - a.acceleration))
 
     def thinned(self, spacing: float) -> tuple[EgoState, ...]:
         """States at least ``spacing`` metres apart (first and last kept): enough for footprints."""

@@ -46,7 +46,7 @@ class Member:
     fitness: float
 
 
-@dataclass
+@dataclass(kw_only=True)
 class SearchStats:
     observed: int = 0
     findings: int = 0

@@ -138,7 +138,7 @@ class Diagnosis:
         }
 
 
-@dataclass
+@dataclass(kw_only=True)
 class _Seen:
     """What the comparisons say about one field."""
 

@@ -16,6 +16,7 @@ from pathlib import Path
 from astaa_deft.io.log.reader import LoggedMessage
 from astaa_deft.io.log.writer import LogWriter
 from astaa_deft.io.output_place import write_atomic
+from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.deft.extract import ExtractedFrame
@@ -95,6 +96,18 @@ def export_suite(frames: Sequence[ExtractedFrame], spec: Spec, params: Mapping[s
     path = out_dir / MANIFEST
     write_atomic(path, json.dumps(manifest, indent=1, default=_json_default) + "\n")
     return path
+
+
+def is_checked(frame: Mapping[str, object]) -> bool:
+    """Whether a manifest's frame entry is a test (``"check": false``: stepped for its state only; a manifest
+    written before frames could be unchecked has no key, and every frame is a test)."""
+    return bool(frame.get("check", True))
+
+
+def oracles_of(manifest: Mapping[str, object]) -> list[JsonObject]:
+    """A manifest's oracle entries as written ([]: a suite without oracles, or one written before them)."""
+    found = manifest.get("oracles")
+    return found if isinstance(found, list) else []
 
 
 def _json_default(value: object) -> str:

@@ -169,7 +169,7 @@ _Running = tuple[int, int, int, float]
 """A candidate's child while it runs: (pid, the fd its result comes on, the fd its verdict goes down, started)."""
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Tried(Generic[S]):
     """What a candidate's child reported: its comparison and whether the output equals the recording."""
 
@@ -316,7 +316,7 @@ class ForkedSearch(Generic[M]):
                 if isinstance(counters, dict):
                     self.__dict__.update(counters)
             os.close(go_r)
-            self._won: Tried[Any] = Tried(index, result)  # in the child that won: its candidate, as tried
+            self._won: Tried[Any] = Tried(index=index, result=result)  # in the child that won: its candidate, as tried
             return None
         os.close(result_w)
         os.close(go_r)
@@ -345,7 +345,7 @@ class ForkedSearch(Generic[M]):
             except (EOFError, FrameError):
                 result = None
             os.close(result_fd)
-            done[index] = Tried(index, result, pid=pid, go_fd=go_fd)
+            done[index] = Tried(index=index, result=result, pid=pid, go_fd=go_fd)
         now = time.monotonic()
         for index, (pid, result_fd, go_fd, started) in list(running.items()):
             wall = now - started
@@ -356,7 +356,7 @@ class ForkedSearch(Generic[M]):
                 os.close(go_fd)
                 del running[index]
                 self.timeouts += 1
-                done[index] = Tried(index, None, timed_out=True)
+                done[index] = Tried(index=index, result=None, timed_out=True)
 
     @staticmethod
     def _decide(done: dict[int, Tried], count: int, accepted: Callable[[Any], bool], *,

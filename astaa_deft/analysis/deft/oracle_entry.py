@@ -21,7 +21,7 @@ COLLISION, INVARIANT = "collision", "invariant"
 _KINDS: dict[type, str] = {str: "a string", int: "an integer", dict: "an object"}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class OracleEntry:
     """One ``oracles`` entry of a manifest, typed; read with :meth:`from_json`."""
 

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from astaa_deft.model.errors import AstaaDeftError
-from astaa_deft.analysis.deft.export import MANIFEST
+from astaa_deft.analysis.deft.export import MANIFEST, is_checked
 
 if TYPE_CHECKING:
     from _pytest._code.code import TerminalRepr, TracebackStyle
@@ -76,7 +76,7 @@ class DeftSuiteFile(pytest.File):
                 yield OracleTest.from_parent(self, name=f"oracle_{oracle.kind}_{n:03d}", suite=suite,
                                              oracle=oracle)
         for position, entry in enumerate(suite.frames):
-            if not entry.get("check", True):
+            if not is_checked(entry):
                 continue  # stepped for the state it builds (not reproduced within θ when extracted)
             yield FrameTest.from_parent(self, name=f"frame_{entry['index']:05d}", suite=suite, position=position)
         for n, oracle in oracles:

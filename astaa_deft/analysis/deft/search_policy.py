@@ -134,7 +134,7 @@ NEIGHBOURS = 5  # the accepted steps of this many outputs before are an expensiv
 NOISE_S = 0.01  # steps shorter than this say more about timer and scheduler noise than about replay speed
 
 
-@dataclass
+@dataclass(kw_only=True)
 class StepBudget:
     """A tight per-candidate time limit from the steps accepted so far in this extraction.
 

@@ -26,7 +26,7 @@ import pickle
 from pathlib import Path
 
 from astaa_deft.io.output_place import write_atomic
-from astaa_deft.analysis.deft.export import MANIFEST
+from astaa_deft.analysis.deft.export import MANIFEST, oracles_of
 from astaa_deft.analysis.deft.oracle_entry import COLLISION, OracleEntry
 from astaa_deft.analysis.deft.suite import Suite
 
@@ -36,7 +36,7 @@ SNAPSHOTS = "snapshots"
 def add_oracle_snapshots(directory: Path) -> int:
     """Snapshot the state before each oracle frame of the suite in ``directory``; how many were kept."""
     suite = Suite(directory)
-    oracles = suite.manifest.get("oracles") or []  # as written: the kept snapshots are added to these
+    oracles = oracles_of(suite.manifest)  # as written: the kept snapshots are added to these
     wanted = {o.frame for o in suite.oracles if o.frame is not None and o.kind == COLLISION}
     if not wanted:
         return 0

@@ -14,14 +14,14 @@ from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.engine.spec.loader import load_spec_text
-from astaa_deft.analysis.deft.export import FRAMES, MANIFEST
+from astaa_deft.analysis.deft.export import FRAMES, MANIFEST, oracles_of
 from astaa_deft.analysis.deft.oracle_entry import OracleEntry
 from astaa_deft.analysis.deft.planner_section import replay_module_of
 from astaa_deft.analysis.deft.replay import StepHang, compare_outputs, make_planner, trajectory_points, within_limit
 from astaa_deft.analysis.deft.validator import Comparison, Point
 
 
-@dataclass
+@dataclass(kw_only=True)
 class FrameResult:
     index: int
     comparison: Comparison
@@ -46,7 +46,7 @@ class Suite:
         # The replayed module: the planner unless the manifest names another (astaa-deft extract --module).
         self.entry: ReplayModule = replay_module_of(self.spec, self.manifest.get("module"),
                                                     self.manifest.get("output"))
-        self.oracles = [OracleEntry.from_json(o) for o in self.manifest.get("oracles") or []]
+        self.oracles = [OracleEntry.from_json(o) for o in oracles_of(self.manifest)]
         self._results: list[FrameResult] | None = None
         self._by_channel: dict[str, _Decoded] | None = None
 
@@ -87,8 +87,10 @@ class Suite:
                 layout = cfg.trajectory
                 replayed = trajectory_points(replayed_msg, layout) if layout is not None else []
                 expected = trajectory_points(expected_msg, layout) if layout is not None else []
-                results.append(FrameResult(entry["index"], compare_outputs(cfg, replayed_msg, expected_msg),
-                                           replayed, expected, error, replayed_msg, expected_msg, how))
+                results.append(FrameResult(index=entry["index"],
+                                           comparison=compare_outputs(cfg, replayed_msg, expected_msg),
+                                           replayed=replayed, expected=expected, error=error, message=replayed_msg,
+                                           expected_message=expected_msg, stopped=how))
                 if error is not None and stopped is None and cfg.per_trigger:
                     # A crashed or hung module answers nothing more: the later frames are not run.
                     stopped = f"not run: the module stopped answering at frame {entry['index']} ({error})"
@@ -128,8 +130,9 @@ class Suite:
         layout = cfg.trajectory
         replayed = trajectory_points(replayed_msg, layout) if layout is not None else []
         expected = trajectory_points(expected_msg, layout) if layout is not None else []
-        return FrameResult(index, compare_outputs(cfg, replayed_msg, expected_msg), replayed, expected, error,
-                           replayed_msg, expected_msg, how)
+        return FrameResult(index=index, comparison=compare_outputs(cfg, replayed_msg, expected_msg), replayed=replayed,
+                           expected=expected, error=error, message=replayed_msg, expected_message=expected_msg,
+                           stopped=how)
 
     def _messages(self) -> dict[str, _Decoded]:
         if self._by_channel is None:

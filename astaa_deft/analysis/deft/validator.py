@@ -49,7 +49,7 @@ class FieldDifference:
 MAX_FIELD_DIFFERENCES = 24  # fields described per comparison (a message's other differing fields are counted)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Comparison:
     distance: float  # lock-step Euclidean distance, m
     max_error: float  # largest single point error, m
@@ -66,14 +66,15 @@ class Comparison:
 
 def compare(replayed: Sequence[Point], recorded: Sequence[Point]) -> Comparison:
     if not replayed and not recorded:
-        return Comparison(0.0, 0.0, 0, "both empty")
+        return Comparison(distance=0.0, max_error=0.0, points=0, how="both empty")
     if not replayed or not recorded:
-        return Comparison(math.inf, math.inf, 0, "one empty")
+        return Comparison(distance=math.inf, max_error=math.inf, points=0, how="one empty")
     rep = np.asarray(replayed, dtype=float)
     rec = np.asarray(recorded, dtype=float)
     if not (np.isfinite(rep).all() and np.isfinite(rec).all()):
         exact = rep.shape == rec.shape and bool(np.array_equal(rep, rec, equal_nan=True))
-        return Comparison(0.0 if exact else math.inf, 0.0 if exact else math.inf, len(rec), "non-finite")
+        return Comparison(distance=0.0 if exact else math.inf, max_error=0.0 if exact else math.inf, points=len(rec),
+                          how="non-finite")
     if len(rep) == 1 or len(rec) == 1:
         return _points(rep[:1], rec[:1], "first point")
     if not np.all(np.diff(rep[:, 2]) > 0):
@@ -98,14 +99,14 @@ def identical(points: Sequence[Point]) -> Comparison:
     a node). tests/test_deft_validator.py holds the two to the same result.
     """
     if not points:
-        return Comparison(0.0, 0.0, 0, "both empty")
+        return Comparison(distance=0.0, max_error=0.0, points=0, how="both empty")
     if not all(math.isfinite(value) for point in points for value in point):
-        return Comparison(0.0, 0.0, len(points), "non-finite")
+        return Comparison(distance=0.0, max_error=0.0, points=len(points), how="non-finite")
     if len(points) == 1:
-        return Comparison(0.0, 0.0, 1, "first point")
+        return Comparison(distance=0.0, max_error=0.0, points=1, how="first point")
     if not all(a[2] < b[2] for a, b in pairwise(points)):
-        return Comparison(0.0, 0.0, len(points), "index")
-    return Comparison(0.0, 0.0, len(points), "interpolated")
+        return Comparison(distance=0.0, max_error=0.0, points=len(points), how="index")
+    return Comparison(distance=0.0, max_error=0.0, points=len(points), how="interpolated")
 
 
 def _points(a: np.ndarray, b: np.ndarray, how: str) -> Comparison:
@@ -113,7 +114,8 @@ def _points(a: np.ndarray, b: np.ndarray, how: str) -> Comparison:
 
 
 def _errors(d: np.ndarray, how: str) -> Comparison:
-    return Comparison(float(math.sqrt(float(np.sum(d * d)))), float(np.max(d)), int(len(d)), how)
+    return Comparison(distance=float(math.sqrt(float(np.sum(d * d)))), max_error=float(np.max(d)), points=int(len(d)),
+                      how=how)
 
 
 # ------------------------------------------------------------ any module's output, field by field
@@ -173,20 +175,24 @@ def compare_messages(replayed: object, recorded: object, ignore: Sequence[str] =
     non-numeric field that differs is no match (∞); NaN matches NaN.
     """
     if replayed is None and recorded is None:
-        return Comparison(0.0, 0.0, 0, "both empty")
+        return Comparison(distance=0.0, max_error=0.0, points=0, how="both empty")
     if replayed is None or recorded is None:
-        return Comparison(math.inf, math.inf, 0, "one empty")
+        return Comparison(distance=math.inf, max_error=math.inf, points=0, how="one empty")
     a, b = flatten(replayed, ignore), flatten(recorded, ignore)
     if a.keys() != b.keys():
-        return Comparison(math.inf, math.inf, len(b), "fields differ", *field_differences(a, b))
+        described, left_out = field_differences(a, b)
+        return Comparison(distance=math.inf, max_error=math.inf, points=len(b), how="fields differ", fields=described,
+                          fields_left_out=left_out)
     errors = [_leaf_error(a[k], b[k]) for k in b]
     if not errors:
-        return Comparison(0.0, 0.0, 0, "fields")
+        return Comparison(distance=0.0, max_error=0.0, points=0, how="fields")
     worst = max(errors)
     if worst == 0.0:
-        return Comparison(0.0, 0.0, len(errors), "fields")
+        return Comparison(distance=0.0, max_error=0.0, points=len(errors), how="fields")
     distance = math.inf if math.isinf(worst) else math.sqrt(sum(e * e for e in errors))
-    return Comparison(distance, worst, len(errors), "fields", *field_differences(a, b, errors))
+    described, left_out = field_differences(a, b, errors)
+    return Comparison(distance=distance, max_error=worst, points=len(errors), how="fields", fields=described,
+                      fields_left_out=left_out)
 
 
 def field_differences(replayed: Mapping[str, object], recorded: Mapping[str, object],

@@ -24,7 +24,7 @@ from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.model.sut import Spec
 from astaa_deft.analysis.deft.checkpoint import Checkpoint, LogShape, identity, read_state
 from astaa_deft.analysis.deft.diagnosis import Diagnosis, diagnose
-from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.export import MANIFEST, export_suite, is_checked
 from astaa_deft.analysis.deft.idle_cores import cpu_sample, idle_cores
 from astaa_deft.analysis.deft.extract import (
     Decided, ExtractedFrame, Extraction, OnOutput, channel_messages, extract, ground_truth_rate,
@@ -46,7 +46,7 @@ def run_params(log: LogContents, spec: Spec) -> dict[str, str]:
     return meta.params
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ExtractReport:
     extraction: Extraction
     spec: Spec  # with the threshold used (the planner's)
@@ -139,8 +139,9 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
                                                                       entry=entry)
         checkpoint.finished()
     exact = ground_truth_rate(ex, spec, options.ground_truth, entry) if options.ground_truth else None
-    return ExtractReport(ex, spec, len(accepted) - len(failing), len(oracles), bool(collisions), manifest, entry,
-                         ground_truth=exact, resumed=len(before), suite_failures=failing, diagnosis=diagnosis)
+    return ExtractReport(extraction=ex, spec=spec, accepted=len(accepted) - len(failing), oracles=len(oracles),
+                         collision=bool(collisions), manifest=manifest, entry=entry, ground_truth=exact,
+                         resumed=len(before), suite_failures=failing, diagnosis=diagnosis)
 
 
 def _write_checked_suite(ex: Extraction, spec: Spec, params: dict[str, str], out_dir: Path, *,
@@ -290,7 +291,7 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
             ran = {"error": f"pytest did not finish the suite in {SUITE_CHECK_TIMEOUT_S:.0f} s"}
     if "frames" not in ran:  # it did not run at all: none of its tests can be said to pass
         why = f"pytest could not run the suite: {ran.get('error')}"
-        return [SuiteFailure(int(e["index"]), why) for e in manifest["frames"] if e.get("check", True)], 0
+        return [SuiteFailure(int(e["index"]), why) for e in manifest["frames"] if is_checked(e)], 0
     results: dict[int, dict[str, Any]] = {int(r["index"]): r for r in ran["frames"]}
     out = []
     confirmed = 0
@@ -298,11 +299,11 @@ def check_suite(out_dir: Path, extraction: Extraction | None = None) -> tuple[li
         result = results.get(int(entry["index"]))
         if result is None:
             continue
-        if not entry.get("check", True):
+        if not is_checked(entry):
             frame = frames.get(int(entry["index"]))
             if result["passes"] and frame is not None and frame.output is not None and not result["stopped"]:
-                frame.comparison = Comparison(float(result["distance"]), float(result["max_error"]),
-                                              int(result["points"]), str(result["how"]))
+                frame.comparison = Comparison(distance=float(result["distance"]), max_error=float(result["max_error"]),
+                                              points=int(result["points"]), how=str(result["how"]))
                 frame.accepted = True
                 frame.exact = frame.comparison.distance == 0.0
                 confirmed += 1
@@ -372,4 +373,5 @@ def _interrupted(checkpoint: Checkpoint, spec: Spec, entry: ReplayModule, resume
                     outputs=checkpoint.total)
     accepted = len(checkpoint.accepted())
     manifest = checkpoint.out_dir / MANIFEST if accepted else None
-    return ExtractReport(ex, spec, accepted, 0, False, manifest, entry, interrupted=True, resumed=resumed)
+    return ExtractReport(extraction=ex, spec=spec, accepted=accepted, oracles=0, collision=False, manifest=manifest,
+                         entry=entry, interrupted=True, resumed=resumed)

@@ -7,6 +7,7 @@ here: it brings the testers, the replay and the live session with it).
 
 from astaa_deft.analysis.minimise.ddmin import (
     Config,
+    DDOptions,
     DDResult,
     FailsWithoutItems,
     GroupResult,
@@ -22,6 +23,7 @@ from astaa_deft.analysis.minimise.ddmin import (
 
 __all__ = [
     "Config",
+    "DDOptions",
     "DDResult",
     "FailsWithoutItems",
     "GroupResult",

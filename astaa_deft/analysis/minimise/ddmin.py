@@ -31,7 +31,7 @@ import enum
 import time
 from collections.abc import Callable, Hashable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ThreadPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Generic, TypeVar
 
 from astaa_deft.model.errors import AstaaDeftError
@@ -107,7 +107,7 @@ class OutcomeCache:
         return len(self._results)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class DDResult(Generic[T]):
     """The outcome of one minimisation.
 
@@ -282,29 +282,37 @@ class _Search(Generic[T]):
             # A speculative test that raised is dropped: no answer depended on it.
 
 
-def ddmin(
-    items: Sequence[T],
-    tester: Tester[T],
-    *,
-    parallel: int = 1,
-    executor: Executor | None = None,
-    cache: OutcomeCache | None = None,
-    check_full: bool = True,
-    max_tests: int | None = None,
-    progress: Callable[[str], None] | None = None,
-) -> DDResult[T]:
-    """Minimise ``items`` to a 1-minimal subset that still makes ``tester`` FAIL.
+@dataclass(frozen=True, kw_only=True)
+class DDOptions:
+    """How :func:`ddmin` searches.
 
-    ``parallel=N`` tests up to N configurations of a round at once, on
-    ``executor`` if given (the caller owns it), else on a thread pool made
-    here; for a deterministic tester ``minimal`` is the same as with N = 1,
-    though speculative tests may raise ``tests_run``. ``check_full`` first
-    tests the full set (must FAIL, else NotReproducible) and the empty set
-    (must not FAIL, else FailsWithoutItems); without it both are assumed, as
-    in the paper. ``max_tests`` bounds ``tests_run`` (the two checks run even
+    ``parallel=N`` tests up to N configurations of a round at once; for a
+    deterministic tester ``minimal`` is the same as with N = 1, though
+    speculative tests may raise ``tests_run``. ``check_full`` first tests
+    the full set (must FAIL, else NotReproducible) and the empty set (must
+    not FAIL, else FailsWithoutItems); without it both are assumed, as in
+    the paper. ``max_tests`` bounds ``tests_run`` (the two checks run even
     past it); once spent, ddmin returns the smallest failing set so far with
-    ``complete=False``. Cache hits cost nothing and do not count.
+    ``complete=False``. ``progress`` hears one line per round.
     """
+
+    parallel: int = 1
+    check_full: bool = True
+    max_tests: int | None = None
+    progress: Callable[[str], None] | None = None
+
+
+def ddmin(items: Sequence[T], tester: Tester[T], options: DDOptions = DDOptions(), *,
+          executor: Executor | None = None, cache: OutcomeCache | None = None) -> DDResult[T]:
+    """Minimise ``items`` to a 1-minimal subset that still makes ``tester`` FAIL, as ``options`` say.
+
+    Parallel tests run on ``executor`` if given (the caller owns it), else
+    on a thread pool made here. ``cache``: outcomes already known (shared
+    between searches over the same items). Cache hits cost nothing and do
+    not count.
+    """
+    parallel, check_full, max_tests, progress = options.parallel, options.check_full, options.max_tests, \
+        options.progress
     if parallel < 1:
         raise ValueError(f"parallel must be at least 1, got {parallel}")
     if max_tests is not None and max_tests < 0:
@@ -379,21 +387,13 @@ class GroupResult(Generic[K, T]):
         return self.groups.complete and self.items is not None and self.items.complete
 
 
-def minimise_groups(
-    groups: Mapping[K, Sequence[T]],
-    tester: Tester[T],
-    *,
-    parallel: int = 1,
-    executor: Executor | None = None,
-    check_full: bool = True,
-    max_tests: int | None = None,
-    progress: Callable[[str], None] | None = None,
-) -> GroupResult[K, T]:
+def minimise_groups(groups: Mapping[K, Sequence[T]], tester: Tester[T], options: DDOptions = DDOptions(), *,
+                    executor: Executor | None = None) -> GroupResult[K, T]:
     """Two-level ddmin: first which groups (e.g. messages) matter, then which items (e.g. fields) of them.
 
     Cheaper than one flat ddmin when whole groups are irrelevant, and the
     answer comes grouped. ``tester`` gets the chosen items flattened in group
-    order. Options are those of :func:`ddmin` (no shared ``cache``: each
+    order. ``options`` are those of :func:`ddmin` (no shared ``cache``: each
     stage has its own index space); ``max_tests`` bounds both stages together.
     """
     keys = list(groups)
@@ -404,31 +404,21 @@ def minimise_groups(
     def test_items(chosen: Sequence[tuple[K, T]]) -> TestResult:
         return tester([x for _, x in chosen])
 
-    coarse = ddmin(
-        keys,
-        test_groups,
-        parallel=parallel,
-        executor=executor,
-        check_full=check_full,
-        max_tests=max_tests,
-        progress=progress,
-    )
+    coarse = ddmin(keys, test_groups, options, executor=executor)
     if not coarse.complete:
         return GroupResult({k: list(groups[k]) for k in coarse.minimal}, coarse, None)
     # The chosen groups together are known to fail (or assumed to, as the full
     # set is without check_full), and the empty set was checked already.
     flat = [(k, x) for k in coarse.minimal for x in groups[k]]
-    left = None if max_tests is None else max(max_tests - coarse.tests_run, 0)
-    fine = ddmin(
-        flat, test_items, parallel=parallel, executor=executor, check_full=False, max_tests=left, progress=progress
-    )
+    left = None if options.max_tests is None else max(options.max_tests - coarse.tests_run, 0)
+    fine = ddmin(flat, test_items, replace(options, check_full=False, max_tests=left), executor=executor)
     minimal: dict[K, list[T]] = {}
     for k, x in fine.minimal:
         minimal.setdefault(k, []).append(x)
     return GroupResult(minimal, coarse, fine)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ShortenResult(Generic[T]):
     """A contiguous run shortened: ``kept`` (a contiguous slice of the run, tested to FAIL or the whole run the
     caller vouched for), the tests run for it, and every result by slice (start, stop)."""
@@ -500,4 +490,5 @@ def shorten(run: Sequence[T], tester: Tester[T], *, max_tests: int | None = None
     if not complete:  # the shortest slice known to fail
         failing = [(a, b) for (a, b), r in results.items() if r.outcome is Outcome.FAIL]
         start, stop = min(failing, key=lambda s: (s[1] - s[0], s[0]), default=(0, len(run)))
-    return ShortenResult(list(run[start:stop]), tests, complete, results, (start, stop))
+    return ShortenResult(kept=list(run[start:stop]), tests_run=tests, complete=complete, results=results,
+                         span=(start, stop))

@@ -83,7 +83,7 @@ class AnchorPin:
     after: float = 0.0  # 0: the mutated channel's first message after that one
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Mutation:
     """One mutated, dropped or extra delivery of an intercepted run: an item to minimise."""
 
@@ -168,7 +168,7 @@ def _short(value: object, limit: int = 40) -> str:
     return text if len(text) <= limit else text[:limit - 1] + "…"
 
 
-@dataclass
+@dataclass(kw_only=True)
 class MutationLog:
     """Every effective mutation of a run, in log order, with the indexes stream building needs."""
 
@@ -292,7 +292,8 @@ def _read_mutations(log: LogContents, spec: Spec, events: list[tuple[LoggedMessa
             skip = delivered_seqs.get(channel.name, set())
             untouched[channel.name] = [m for m in log.on(channel.key) if m.sequence not in skip]
     mutations, siblings = _assign_consumers(mutations, spec)
-    return MutationLog(spec, mutations, start_ns, noop, untouched, siblings, record_times)
+    return MutationLog(spec=spec, mutations=mutations, start_ns=start_ns, noop=noop, untouched=untouched,
+                       sibling_consumers=siblings, record_time_ns=record_times)
 
 
 def _steps(event: rec.MutationRecord) -> tuple[Step, ...]:

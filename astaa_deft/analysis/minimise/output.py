@@ -112,7 +112,7 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
                 seen.add(key)
                 records.append((mutation.delivered_time_ns, topic(mutation.channel), data, key))
         sequences: dict[Hashable, int] = {}
-        writer.record(log_records.RunStarted(model.start_ns, "replay", spec.name))
+        writer.record(log_records.RunStarted(time_ns=model.start_ns, mode="replay", spec=spec.name))
         for time_ns, channel_id, data, what in sorted(records, key=lambda r: r[0]):
             sequences[what] = writer.message(channel_id, time_ns, data)
         events = writer.tool_channel(layout.MUTATIONS_TOPIC)
@@ -129,8 +129,9 @@ def write_replay_log(path: Path, model: ReplayModel, result: Minimisation, polic
             # The module's process would have died of this exception: logged as its exit, as a run logs one.
             frame, error = crashed[0]
             end = max(end, model.output_time(frame) + 1)
-            writer.record(log_records.ProcessExit(cfg.module, 0, 1, None, model.output_time(frame) + 1,
-                                                  False, error))
+            writer.record(log_records.ProcessExit(module=cfg.module, pid=0, returncode=1, signal=None,
+                                                  time_ns=model.output_time(frame) + 1, during_shutdown=False,
+                                                  stderr_tail=error))
         writer.record(log_records.RunStopping(end))
     finally:
         writer.finish()
@@ -150,12 +151,12 @@ def write_module_tests(directory: Path, model: ReplayModel, result: Minimisation
         time_ns = model.output_time(frame)
         output = (LoggedMessage(out_key, time_ns, time_ns, 0, codec.encode(message)) if message is not None
                   else None)
-        extracted.append(ExtractedFrame(
-            index=len(extracted), output=output,
-            trigger_time=frame.trigger_time_ns, frame_time=frame.frame_time_ns,
+        extracted.append(ExtractedFrame(index=len(extracted), output=output, trigger_time=frame.trigger_time_ns,
+            frame_time=frame.frame_time_ns,
             inputs={name: LoggedMessage(spec.channel(name).key, d.time_ns, d.time_ns, 0, d.data)
                     for name, d in frame.inputs},
-            comparison=Comparison(0.0, 0.0, 0, "replayed"), accepted=True, candidates_tried=1, exact=True))
+            comparison=Comparison(distance=0.0, max_error=0.0, points=0, how="replayed"), accepted=True,
+            candidates_tried=1, exact=True))
         if error is not None:
             break
     smoke_entry = replace(cfg, threshold=math.inf)
@@ -184,7 +185,7 @@ def copy_log(source: Path, out_dir: Path) -> Path:
 # ---------------------------------------------------------------- the summary
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Confirmation:
     """The live confirmation runs of the minimal test case (``requested`` 0: none were asked for)."""
 
@@ -203,7 +204,7 @@ class Confirmation:
                 "seconds": round(self.seconds, 3), "details": list(self.details)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MinimiseSummary:
     """What a finished minimisation reports: DIR/summary.json (:meth:`to_json`) and the console (:meth:`text`)."""
 

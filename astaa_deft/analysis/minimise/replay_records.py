@@ -34,7 +34,7 @@ class ReplayAnswer:
     failing_output: int | None = None  # index of the output whose replay broke the invariant
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ReplaySetup:
     """What a worker needs to build its own :class:`ReplayModel` (plain, picklable data)."""
 

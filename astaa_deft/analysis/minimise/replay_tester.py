@@ -44,4 +44,5 @@ class DeftTester:
 
 
 def default_setup(log_path: Path, spec_path: Path | None, invariant: str) -> ReplaySetup:
-    return ReplaySetup(str(log_path), str(spec_path) if spec_path is not None else None, invariant)
+    return ReplaySetup(log_path=str(log_path), spec_path=str(spec_path) if spec_path is not None else None,
+                       invariant=invariant)

@@ -36,7 +36,7 @@ from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.failure import Failure
-from astaa_deft.analysis.minimise.ddmin import DDResult, Outcome, OutcomeCache, TestResult, ddmin, shorten
+from astaa_deft.analysis.minimise.ddmin import DDOptions, DDResult, Outcome, OutcomeCache, TestResult, ddmin, shorten
 from astaa_deft.analysis.minimise.holds import Run, flatten, held_runs, same_fields
 from astaa_deft.analysis.minimise.live_tester import LiveTester
 from astaa_deft.analysis.minimise.mutations import FieldSelection, Mutation, run_start_ns
@@ -71,7 +71,8 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
                                  "no module crashed", "minimise a log whose run failed (astaa-deft check LOG)"))
     first = found[0]
     at_s = ((first.time_ns or start_ns) - start_ns) / 1e9
-    return Failure(first.invariant, first.invariant_kind, first.module, first.channel, at_s, first.detail, first.crash)
+    return Failure(invariant=first.invariant, kind=first.invariant_kind, module=first.module, channel=first.channel,
+                   at=at_s, detail=first.detail, crash=first.crash)
 
 
 class TesterKind(TextEnum):
@@ -107,7 +108,7 @@ def choose_tester(spec: Spec, failure: Failure, live_only: bool) -> TesterChoice
                                         f"'{entry.output}': module replay ({entry.where})"), entry)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class StageReport:
     name: str
     unit: str  # what was minimised: "mutations", "frames", "fields"
@@ -122,11 +123,12 @@ class StageReport:
     @classmethod
     def of(cls, name: str, unit: str, before: int, result: DDResult, *, extra_tests: int = 0,
            note: str = "") -> StageReport:
-        return cls(name, unit, before, len(result.minimal), result.tests_run + extra_tests, result.cache_hits,
-                   result.seconds, result.complete, note)
+        return cls(name=name, unit=unit, before=before, after=len(result.minimal),
+                   tests_run=result.tests_run + extra_tests, cache_hits=result.cache_hits, seconds=result.seconds,
+                   complete=result.complete, note=note)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Minimisation:
     """What survived, and what it cost."""
 
@@ -163,7 +165,7 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
                     *, say: Say = lambda line: None, max_tests: int | None = None) -> Minimisation:
     """The three stages with the planner replay (raises NotReproducible / FailsWithoutItems from stage 1)."""
     relevant = model.streams.relevant
-    out = Minimisation(TesterKind.REPLAY, failure, model.mlog.mutations, {})
+    out = Minimisation(tester=TesterKind.REPLAY, failure=failure, mutations=model.mlog.mutations, kept={})
     ignored = len(model.mlog.mutations) - len(relevant)
     who = "the planner" if model.cfg.where == "planner" else "the module"
     if ignored:
@@ -173,8 +175,8 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
     # Stage 1: mutations (a held fault one item), then the holds shortened.
     runs = held_runs(relevant)
     say(f"stage 1: {len(relevant)} mutations reaching {who}" + _runs_note(runs))
-    first = ddmin(runs, lambda subset: tester(Job.of({n: None for n in flatten(subset)})), parallel=parallel,
-                  max_tests=max_tests, progress=_stage_progress(say, "mutations"))
+    first = ddmin(runs, lambda subset: tester(Job.of({n: None for n in flatten(subset)})),
+                  DDOptions(parallel=parallel, max_tests=max_tests, progress=_stage_progress(say, "mutations")))
     report = StageReport.of("mutations", "mutations", len(model.mlog.mutations), first,
                             note=f"{len(relevant)} reached {who}{_runs_note(runs)}")
     report.after = len(flatten(first.minimal))
@@ -201,11 +203,13 @@ def minimise_replay(tester: DeftTester, model: ReplayModel, failure: Failure, pa
     alone = tester(Job.of(kept, [failing]))
     if alone.outcome is Outcome.FAIL:
         scaffolding: list[int] = []
-        out.stages.append(StageReport("scaffolding", "frames", len(preceding) + 1, 1, 1, 0,
-                                      time.monotonic() - started, note="the failing frame alone fails"))
+        out.stages.append(StageReport(name="scaffolding", unit="frames", before=len(preceding) + 1, after=1,
+                                      tests_run=1, cache_hits=0, seconds=time.monotonic() - started,
+                                      note="the failing frame alone fails"))
     else:
-        second = ddmin(preceding, lambda subset: tester(Job.of(kept, [*subset, failing])), parallel=parallel,
-                       check_full=False, max_tests=max_tests, progress=_stage_progress(say, "frames"))
+        options = DDOptions(parallel=parallel, check_full=False, max_tests=max_tests,
+                            progress=_stage_progress(say, "frames"))
+        second = ddmin(preceding, lambda subset: tester(Job.of(kept, [*subset, failing])), options)
         scaffolding = list(second.minimal)
         report = StageReport.of("scaffolding", "frames", len(preceding) + 1, second, extra_tests=1)
         report.after += 1  # the failing frame
@@ -228,7 +232,7 @@ def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Fa
     ``jobs`` > 1 tests that many subsets of a round at once, each run an isolated session of the SUT
     (its own router port, run directory and log, as a campaign's cases).
     """
-    out = Minimisation(TesterKind.LIVE, failure, list(mutations), {})
+    out = Minimisation(tester=TesterKind.LIVE, failure=failure, mutations=list(mutations), kept={})
     by_number = {m.number: m for m in mutations}
     runs = held_runs(mutations)
     cache = OutcomeCache()
@@ -239,8 +243,9 @@ def minimise_live(tester: LiveTester, mutations: Sequence[Mutation], failure: Fa
     def test_runs(subset: Sequence[Run]) -> TestResult:
         return tester([(by_number[n], None) for n in flatten(subset)])
 
-    first = ddmin(runs, test_runs, cache=cache, max_tests=max_tests, progress=_stage_progress(say, "mutations"),
-                  parallel=jobs)
+    first = ddmin(runs, test_runs,
+                  DDOptions(parallel=jobs, max_tests=max_tests, progress=_stage_progress(say, "mutations")),
+                  cache=cache)
     report = StageReport.of("mutations", "mutations", len(mutations), first, extra_tests=1,
                             note="the full-set reproduction check included" + _runs_note(runs))
     report.after = len(flatten(first.minimal))
@@ -308,8 +313,8 @@ def _shorten_holds(runs: Sequence[Run], test: Callable[[Sequence[Run]], TestResu
             say(f"  [hold] {len(kept[i])} → {len(chosen)} messages ({result.tests_run} tests"
                 + (f", then {pad} back at each end for the runs' timing" if pad else "") + ")")
         kept[i] = chosen
-    out.stages.append(StageReport("hold", "messages", before, sum(len(kept[i]) for i in held), tests, 0,
-                                  time.monotonic() - started, complete,
+    out.stages.append(StageReport(name="hold", unit="messages", before=before, after=sum(len(kept[i]) for i in held),
+                                  tests_run=tests, cache_hits=0, seconds=time.monotonic() - started, complete=complete,
                                   note="held faults shortened at their ends, never thinned inside"))
     return kept, last
 
@@ -328,7 +333,8 @@ def _minimise_fields(runs: Sequence[Run], by_number: Mapping[int, Mutation],
                  if by_number[run[0]].fields_reducible and same_fields(run, dict(by_number))]
     items = [(r, i) for r in reducible for i in range(len(by_number[runs[r][0]].fields))]
     if not items:
-        out.stages.append(StageReport("fields", "fields", out_fields(kept, by_number), out_fields(kept, by_number),
+        out.stages.append(StageReport(name="fields", unit="fields", before=out_fields(kept, by_number),
+                                      after=out_fields(kept, by_number),
                                       note="no surviving mutation sets several fields"))
         return kept, None
 
@@ -344,8 +350,9 @@ def _minimise_fields(runs: Sequence[Run], by_number: Mapping[int, Mutation],
 
     say(f"stage 3: {len(items)} field changes in {len(reducible)} mutation(s)")
     before = out_fields(kept, by_number)
-    result = ddmin(items, lambda subset: test(selection(subset)), parallel=parallel, check_full=False,
-                   max_tests=max_tests, progress=_stage_progress(say, "fields"))
+    options = DDOptions(parallel=parallel, check_full=False, max_tests=max_tests,
+                        progress=_stage_progress(say, "fields"))
+    result = ddmin(items, lambda subset: test(selection(subset)), options)
     final = selection(result.minimal)
     report = StageReport.of("fields", "fields", before, result)
     report.after = out_fields(final, by_number)

@@ -92,7 +92,7 @@ class MinimiseOptions:
                                      "give 0 (no live check) or more"))
 
 
-@dataclass
+@dataclass(kw_only=True)
 class MinimiseReport:
     """What a minimisation found: ``reproduced`` is True when the minimal test case stands (exit code 0)."""
 
@@ -122,7 +122,7 @@ def minimise_log(log_path: Path, out_dir: Path, options: MinimiseOptions = Minim
         return _minimise(log_path, out_dir, options, progress, scratch=Path(scratch))
 
 
-@dataclass
+@dataclass(kw_only=True)
 class _Job:
     """One minimisation as its steps share it: the failing run read, the choices made, what was found."""
 
@@ -215,8 +215,9 @@ def _read_failing_run(log_path: Path, out_dir: Path, options: MinimiseOptions, s
     if anchor is not None:
         say(f"pinned mutations count from the first '{anchor}' message on (the stack is live then)")
     say(f"tester: {choice.tester.value} ({choice.why})")
-    return _Job(log_path, out_dir, options, say, scratch, started, log, spec, spec_path, mlog, failure, choice,
-                {**spec.params, **recorded_params}, original)
+    return _Job(log_path=log_path, out_dir=out_dir, options=options, say=say, scratch=scratch, started=started, log=log,
+                spec=spec, spec_path=spec_path, mlog=mlog, failure=failure, choice=choice,
+                params={**spec.params, **recorded_params}, original=original)
 
 
 def _spec_of(log: LogContents, options: MinimiseOptions, say: Progress, scratch: Path) -> tuple[Spec, Path | None]:
@@ -313,14 +314,14 @@ def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> Min
         files["log"] = copy_log(confirm_log, out_dir)
     text, reproduced = verdict(result, confirmation)
     files["summary"] = out_dir / "summary.json"
-    details = MinimiseSummary(result, log=job.log_path, why=job.choice.why,
+    details = MinimiseSummary(result=result, log=job.log_path, why=job.choice.why,
                               seconds=time.monotonic() - job.started, confirmation=confirmation, verdict=text,
                               files=files, replay_tests=job.replays, replay_hits=job.replay_hits,
                               live_runs=live.runs, live_seconds=live.run_seconds,
                               replayed_module=job.choice.entry.module if job.choice.entry is not None else None)
     body = details.to_json()
     write_summary(out_dir, body)
-    return MinimiseReport(reproduced, text, body, files=files, details=details)
+    return MinimiseReport(reproduced=reproduced, verdict=text, summary=body, files=files, details=details)
 
 
 def _id(original: TestCase | None) -> str:
@@ -437,4 +438,4 @@ def _stopped(out_dir: Path, failure: Failure, started: float, log_path: Path, *,
         body["notes"] = noted
     body["seconds"] = round(time.monotonic() - started, 3)
     write_summary(out_dir, body)
-    return MinimiseReport(False, message, body, complete=False)
+    return MinimiseReport(reproduced=False, verdict=message, summary=body, complete=False)

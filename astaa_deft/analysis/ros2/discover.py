@@ -34,7 +34,7 @@ class DiscoverOptions:
     include_infrastructure: bool = False
 
 
-@dataclass
+@dataclass(kw_only=True)
 class DiscoverReport:
     out: Path
     graph: Graph
@@ -95,4 +95,5 @@ def discover_spec(out: Path, options: DiscoverOptions) -> DiscoverReport:
     load_spec_text(skeleton.text, name=str(out), base_dir=out.parent)  # a bug if this raises
     with writing(place):
         write_atomic(out, skeleton.text)
-    return DiscoverReport(out, graph, skeleton.modules, skeleton.channels, skeleton.notes)
+    return DiscoverReport(out=out, graph=graph, modules=skeleton.modules, channels=skeleton.channels,
+                          notes=skeleton.notes)

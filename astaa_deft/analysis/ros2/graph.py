@@ -13,7 +13,7 @@ from astaa_deft.io.ros2.tokens import ADMIN_SPACE, CLIENT, PUBLISHER, SERVICE, S
 __all__ = ["ADMIN_SPACE", "Entity", "Graph", "Topic", "build_graph", "parse_token"]
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Topic:
     name: str
     dds_type: str
@@ -48,7 +48,7 @@ def build_graph(entities: list[Entity], domain_id: int | None = None) -> Graph:
         if entity.kind in (PUBLISHER, SUBSCRIPTION):
             assert entity.topic is not None and entity.dds_type is not None and entity.type_hash is not None
             topic = topics.setdefault((entity.topic, entity.dds_type),
-                                      Topic(entity.topic, entity.dds_type, entity.type_hash))
+                                      Topic(name=entity.topic, dds_type=entity.dds_type, type_hash=entity.type_hash))
             side = topic.publishers if entity.kind == PUBLISHER else topic.subscribers
             if entity.node_path not in side:
                 side.append(entity.node_path)

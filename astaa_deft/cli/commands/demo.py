@@ -71,7 +71,7 @@ def run_one(args: argparse.Namespace) -> int:
                         record=args.record, command_line=sys.argv)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DriveOptions:
     """One demo drive: the scenario, where its log goes, and how it runs."""
 
@@ -146,7 +146,7 @@ def run_scenario(scenario: str, *, duration: float | None, defects: bool, passiv
     say(f"demo: scenario '{scenario}', defects {'on' if defects else 'off'}, "
         f"{'passive' if passive else 'star'} proxy, log {record}")
     with writing(Place(record, "--record")):
-        outcome, watch = drive(DriveOptions(scenario, record, defects=defects, passive=passive,
+        outcome, watch = drive(DriveOptions(scenario=scenario, record=record, defects=defects, passive=passive,
                                             command_line=command_line, duration=duration))
     say("")
     say("== summary ==")
@@ -217,7 +217,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
 
     say(f"== 1/5 record: the demo stack drives '{scenario}' through the star proxy ==")
     clean_log = out_dir / "clean.mcap"
-    outcome, watch = drive(DriveOptions(scenario, clean_log, command_line=command_line))
+    outcome, watch = drive(DriveOptions(scenario=scenario, record=clean_log, command_line=command_line))
     summarise(outcome, watch)
     if (code := _stopped("step 1 (record)", out_dir)) is not None:
         return code
@@ -246,7 +246,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say(f"== 3/5 ASTAA: the same scenario with live messages rewritten ({policy.name}) ==")
     say(policy.read_text().split("<description>")[1].split("</description>")[0].strip())
     attack_log = out_dir / "intercepted.mcap"
-    outcome, watch = drive(DriveOptions(scenario, attack_log, command_line=command_line, policy=policy,
+    outcome, watch = drive(DriveOptions(scenario=scenario, record=attack_log, command_line=command_line, policy=policy,
                                         duration=20.0))
     summarise(outcome, watch)
     if (code := _stopped("step 3 (live interception)", out_dir)) is not None:

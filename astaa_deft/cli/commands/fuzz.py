@@ -8,13 +8,13 @@ import time
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig, CampaignStopped, StopReason
-from astaa_deft.orchestration.campaign.journal import FILE_NAME, Journal, open_existing
+from astaa_deft.orchestration.journal.journal import FILE_NAME, Journal, open_existing
 from astaa_deft.orchestration.campaign.progress import Progress, snapshot
 from astaa_deft.orchestration.campaign.module_level import status_lines as module_level_status
-from astaa_deft.orchestration.campaign.rows import MinimisationRow, ModuleTestsRow
+from astaa_deft.orchestration.journal.rows import MinimisationRow, ModuleTestsRow
 from astaa_deft.orchestration.campaign.standing import Standing, headline, most_severe, standings
-from astaa_deft.orchestration.verify.history import histories
-from astaa_deft.orchestration.verify.records import verifications
+from astaa_deft.orchestration.journal.history import histories
+from astaa_deft.orchestration.journal.verifications import verifications
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.io.output_place import Place, ready_dir, writing
 from astaa_deft.cli.commands.console import PlainLines, say, stop_as_interrupt
@@ -118,11 +118,14 @@ def _run(config: CampaignConfig, resume: bool, *, spec_given: bool, trust_journa
     if resume and not exists:
         raise InputError(Problem(str(config.out), None, None, "no campaign to resume here",
                                  "drop --resume to start one"))
+    from astaa_deft.engine.spec.loader import load_spec
+
+    spec = None  # loaded once for the command: the campaign takes it as loaded here
     if not resume:  # bad --params (undeclared, outside the choices, a grid past the cap): no journal left behind
-        from astaa_deft.engine.spec.loader import load_spec
         from astaa_deft.orchestration.campaign.campaign import param_grid
 
-        param_grid(config.params, load_spec(config.spec_path))
+        spec = load_spec(config.spec_path)
+        param_grid(config.params, spec)
     journal = Journal(config.out)
     if resume:
         meta = journal.meta()
@@ -130,8 +133,8 @@ def _run(config: CampaignConfig, resume: bool, *, spec_given: bool, trust_journa
             from astaa_deft.orchestration.campaign.journal_spec import journal_spec
 
             try:
-                journal_spec(journal.path, meta.spec, trusted=trust_journal_spec, command="fuzz --resume",
-                             why="the campaign's runs")
+                _, spec = journal_spec(journal.path, meta.spec, trusted=trust_journal_spec, command="fuzz --resume",
+                                       why="the campaign's runs")
             except BaseException:
                 journal.close()
                 raise
@@ -146,7 +149,8 @@ def _run(config: CampaignConfig, resume: bool, *, spec_given: bool, trust_journa
             lines.show(snapshot(journal, config.cases, time.monotonic() - progress.started).line())
 
     try:
-        campaign = Campaign(config, journal, on_progress=on_progress, say=progress.say)
+        campaign = Campaign(config, journal, spec=spec if spec is not None else load_spec(config.spec_path),
+                            on_progress=on_progress, say=progress.say)
         workers = ("runs at once calibrated from the baseline" if campaign.calibrated
                    else f"{campaign.workers} worker(s){' on ' + config.cluster if config.cluster else ''}")
         progress.say(f"astaa-deft fuzz: spec '{campaign.spec.name}', strategy {config.strategy}, seed {config.seed},"

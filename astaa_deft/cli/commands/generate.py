@@ -6,7 +6,6 @@ The work is :func:`astaa_deft.engine.intercept.generate.generate_to_directory`; 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -14,6 +13,7 @@ from astaa_deft.cli.arguments import CASES, SEED, WINDOW_SECONDS, bounded
 
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
+    from astaa_deft.engine.intercept.generate import GenerateOptions
 
 
 def add_parser(subparsers: SubParsers) -> None:
@@ -42,14 +42,15 @@ def add_parser(subparsers: SubParsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The parsed `generate` arguments to :func:`generate`."""
-    return generate(args.spec, args.count, args.seed, args.out, duration=args.duration,
-                    include_brittle=args.include_brittle, dictionaries=args.dictionary, families=args.family)
+    from astaa_deft.engine.intercept.generate import GenerateOptions
+
+    return generate(args.spec, args.out, GenerateOptions(
+        count=args.count, seed=args.seed, duration=args.duration, include_brittle=args.include_brittle,
+        dictionaries=tuple(args.dictionary), families=args.family))
 
 
-def generate(spec_path: Path, count: int, seed: int, out_dir: Path, *, duration: float = 30.0,
-             include_brittle: bool = False, dictionaries: Sequence[Path] = (),
-             families: Sequence[str] | None = None) -> int:
-    """Write ``count`` test cases drawn with ``seed`` into ``out_dir`` and print their shapes: 0.
+def generate(spec_path: Path, out_dir: Path, options: GenerateOptions) -> int:
+    """Write the test cases ``options`` asks for into ``out_dir`` and print their shapes: 0.
 
     Raises InputError for a spec or dictionary that does not load, a bad count or duration, an unknown
     family, or an output directory that holds test cases already; OutputError when ``out_dir`` cannot be
@@ -59,11 +60,10 @@ def generate(spec_path: Path, count: int, seed: int, out_dir: Path, *, duration:
     from astaa_deft.engine.intercept.generate import generate_to_directory
     from astaa_deft.engine.spec.loader import load_spec
 
-    report = generate_to_directory(load_spec(spec_path), count, seed, out_dir, duration=duration,
-                                   include_brittle=include_brittle, dictionaries=dictionaries, families=families)
+    report = generate_to_directory(load_spec(spec_path), out_dir, options)
     shapes = report.shapes
     semantic = ", ".join(f"{shapes[f.name]} {f.name}" for f in FAMILIES.values() if f.semantic and shapes[f.name])
-    print(f"wrote {report.count} test cases to {out_dir} (seed {seed}): {shapes['single']} one field of one "
+    print(f"wrote {report.count} test cases to {out_dir} (seed {options.seed}): {shapes['single']} one field of one "
           f"message, {shapes['multi_field']} several fields of one message, {shapes['repeated']} repeated, "
           f"{shapes['sustained']} sustained, {shapes['stamp']} stamp or sequence faults"
           + (f"; plausible but wrong: {semantic}" if semantic else ""))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from astaa_deft.orchestration.campaign.journal import open_existing
+from astaa_deft.orchestration.journal.journal import open_existing
 from astaa_deft.orchestration.campaign.report import write_report
 from astaa_deft.cli.commands.console import say
 

@@ -20,7 +20,7 @@ from astaa_deft.cli.commands.console import parse_params, say
 
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
-    from astaa_deft.orchestration.verify.model import BucketCheck
+    from astaa_deft.orchestration.journal.checks import BucketCheck
     from astaa_deft.orchestration.verify.workflow import VerifyOptions
 
 

@@ -49,7 +49,7 @@ class ModuleCrashedWhileStarting(InputError):
     exit_code = 1
 
 
-@dataclass
+@dataclass(kw_only=True)
 class RunningModule:
     module: Module
     process: subprocess.Popen
@@ -63,7 +63,7 @@ def output_file(run_dir: Path, module: str) -> Path:
     return run_dir / f"{module}.log"
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Launcher:
     """Launch the spec's modules with the given per-module Zenoh config files."""
 
@@ -136,7 +136,7 @@ class Launcher:
             )) from None
         finally:
             log.close()
-        running = RunningModule(module, process, log_path, time.time_ns())
+        running = RunningModule(module=module, process=process, log_path=log_path, started_ns=time.time_ns())
         self.running[module.name] = running
         self._tell_reaper(str(process.pid))
         # What we started, by id, for whoever has to check or clean up after us.

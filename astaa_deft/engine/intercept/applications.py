@@ -24,7 +24,7 @@ class ChannelTraffic:
     last_s: float | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PolicyApplications:
     testcase: str
     policy: str

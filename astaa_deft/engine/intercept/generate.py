@@ -62,7 +62,7 @@ from astaa_deft.engine.intercept.faults.stamp import (
 from astaa_deft.engine.intercept.testcase import Selection, TestCase
 
 __all__ = ["DELAYS_MS", "MESSAGE_FAULTS", "SEQUENCE_FAULTS", "STAMP_FAULTS", "STAMP_NAMES", "FaultTargets",
-           "GenerateReport", "Probe", "Target", "coverage_round", "fault_testcase", "generate",
+           "GenerateOptions", "GenerateReport", "Probe", "Target", "coverage_round", "fault_testcase", "generate",
            "generate_to_directory", "is_generation_brittle", "iter_testcases", "mutation_targets",
            "probe_testcase", "semantic_probe", "stamp_targets", "stamp_targets_by_channel", "targets_to_mutate",
            "value_class", "weighted_testcase", "write_testcases"]
@@ -83,8 +83,9 @@ class FaultTargets:
     def of(cls, spec: Spec, dictionary: Dictionary, include_brittle: bool = False,
            families: Collection[str] | None = None) -> FaultTargets:
         """InputError if the spec offers no field to mutate (for the exceptional-value families)."""
-        sources = Sources(spec, dictionary, include_brittle, targets_to_mutate(spec, dictionary, include_brittle),
-                          stamp_targets_by_channel(spec, dictionary))
+        sources = Sources(spec=spec, dictionary=dictionary, include_brittle=include_brittle,
+                          exceptional=targets_to_mutate(spec, dictionary, include_brittle),
+                          stamps=stamp_targets_by_channel(spec, dictionary))
         found = {family.name: family.targets(sources) for family in by_rank()
                  if families is None or family.name in families}
         return cls({name: targets for name, targets in found.items() if targets})
@@ -213,16 +214,30 @@ class GenerateReport:
         return [self.directory / f"{_testcase_id(number, width)}.xml" for number in range(1, self.count + 1)]
 
 
-def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, *, duration: float = 30.0,
-                          include_brittle: bool = False, dictionaries: Sequence[Path] = (),
-                          families: Collection[str] | None = None) -> GenerateReport:
-    """Write ``count`` test cases drawn from ``spec`` and the dictionaries into a new or empty ``out_dir``.
+@dataclass(frozen=True, kw_only=True)
+class GenerateOptions:
+    """What ``generate`` draws: how many test cases from which seed, their windows within ``duration`` seconds,
+    on which fields (``include_brittle``: timestamps and sequence numbers too), with which dictionaries on top
+    of the bundled one, of which fault families (None: every family but the campaign's message faults)."""
+
+    count: int
+    seed: int
+    duration: float = 30.0
+    include_brittle: bool = False
+    dictionaries: Sequence[Path] = ()
+    families: Collection[str] | None = None
+
+
+def generate_to_directory(spec: Spec, out_dir: Path, options: GenerateOptions) -> GenerateReport:
+    """Write ``options.count`` test cases drawn from ``spec`` and the dictionaries into a new or empty
+    ``out_dir``.
 
     InputError for a bad count or duration, an unknown family, an output
     directory holding test cases already, or a dictionary that does not load;
     OutputError (checked before drawing) when ``out_dir`` cannot take files,
     or when a write fails.
     """
+    count, seed, duration, families = options.count, options.seed, options.duration, options.families
     if count < 1:
         raise InputError(Problem("--count", None, None, f"{count} test cases", "ask for at least 1"))
     if not duration > 0:
@@ -232,8 +247,8 @@ def generate_to_directory(spec: Spec, count: int, seed: int, out_dir: Path, *, d
     _check_output_directory(out_dir)
     place = Place(out_dir, "-o")
     ready_dir(place)
-    dictionary = load_dictionary(dictionaries)
-    drawn = _drawn(FaultTargets.of(spec, dictionary, include_brittle, families), count, seed, duration)
+    dictionary = load_dictionary(options.dictionaries)
+    drawn = _drawn(FaultTargets.of(spec, dictionary, options.include_brittle, families), count, seed, duration)
     shapes: Counter[str] = Counter()
     with writing(place):
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -270,7 +285,7 @@ def mutation_targets(spec: Spec, dictionary: Dictionary, include_brittle: bool =
             usable, _skipped = dictionary.usable(site, codec,
                                                  [e for e in dictionary.entries_for(site) if e.key not in owned])
             if usable:
-                targets.append(Target(channel, path, site, tuple(usable)))
+                targets.append(Target(channel=channel, path=path, site=site, values=tuple(usable)))
     return targets
 
 

@@ -230,7 +230,7 @@ class _Compiler:
         return path.segments
 
     def _path(self, node: ast.AST, chain: list[tuple[str | int, ast.AST]], depth: int) -> _Part:
-        current = FieldType("struct", ref=self.type_name)
+        current = FieldType(kind="struct", ref=self.type_name)
         walked: list[str | int] = []
         for segment, seg_node in chain:
             if isinstance(segment, str) and segment.startswith("__"):

@@ -82,7 +82,8 @@ class MonitorSet:
     def on_process_exit(self, module: str, returncode: int, signal: str | None, time_ns: int, *,
                         during_shutdown: bool, stderr_tail: str = "") -> list[Violation]:
         # pid 0: monitors judge a module's exit, never its process id (the log keeps the real one).
-        exit_ = ProcessExit(module, 0, returncode, signal, time_ns, during_shutdown, stderr_tail)
+        exit_ = ProcessExit(module=module, pid=0, returncode=returncode, signal=signal, time_ns=time_ns,
+                            during_shutdown=during_shutdown, stderr_tail=stderr_tail)
         with self._lock:
             self.exits.append(exit_)
             return self._collect(self.monitors, lambda m: m.on_process_exit(exit_))

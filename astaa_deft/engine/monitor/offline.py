@@ -34,7 +34,7 @@ from astaa_deft.engine.monitor.violation import RUN_END_KIND, Violation
 
 
 
-@dataclass
+@dataclass(kw_only=True)
 class CheckResult:
     violations: list[Violation]
     verdict: RunVerdict

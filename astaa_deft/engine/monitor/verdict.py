@@ -64,7 +64,8 @@ def run_verdict(violations: Sequence[Violation], exits: Sequence[ProcessExit],
         classes[klass].append(f"{v.invariant}: {v.detail}")
     klass = next(c for c in CRASH_SCALE if classes[c] or c is Verdict.PASS)
     first = findings[0] if findings else None
-    return RunVerdict(klass, first, _summary(klass, first, findings, classes[klass]), tuple(classes[klass]))
+    return RunVerdict(klass=klass, first=first, summary=_summary(klass, first, findings, classes[klass]),
+                      reasons=tuple(classes[klass]))
 
 
 def _most_severe_first(v: Violation) -> int:

@@ -34,7 +34,7 @@ CATCH_UP_LIMIT = 15.0  # at most this long for a recorder that fell behind to re
 RECORDER_CAUGHT_UP = "caught up"  # the recorder's line once the run_stopped event (and all before it) arrived
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class HelperStart:
     """How to start one helper: its name, argv, text for its stdin, and the file its failure is about."""
 
@@ -45,7 +45,7 @@ class HelperStart:
     warm: ChildProcess | None = None  # started ahead and waiting for stdin_text (then args are unused)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class HelperProcess:
     """One started helper: its process, its stdout lines as they come (read by a thread of its own) and its log."""
 
@@ -72,7 +72,7 @@ class HelperProcess:
                 proc.stdin.close()
             except BrokenPipeError:  # it died at once: the ready check says why
                 pass
-        return cls(how.name, proc, log_path)
+        return cls(name=how.name, process=proc, log_path=log_path)
 
     def wait_ready(self, how: HelperStart, spec: Spec) -> None:
         """Wait for its 'ready' line; raises InputError (with its log's tail) if it does not come."""
@@ -143,7 +143,7 @@ class BusRouter(RunPart):
     """The bus's router in passive mode (the tool is then one client among the modules); stopped last."""
 
     def __init__(self, listen: list[str], run_dir: Callable[[], Path], spec: Spec, helpers: Helpers):
-        self._how = HelperStart("bus router", [*python_module("astaa_deft.engine.bus.router"),
+        self._how = HelperStart(name="bus router", args=[*python_module("astaa_deft.engine.bus.router"),
                                                *[a for ep in listen for a in ("--listen", ep)]])
         self._run_dir, self._spec, self._helpers = run_dir, spec, helpers
         self.helper: HelperProcess | None = None
@@ -215,9 +215,10 @@ class Recorder(RunPart):
         spec_text = spec.source_text or (read_input(spec.path, SPEC).decode("utf-8") if spec.path is not None else "")
         if req.warm is not None and req.warm.poll() is None:  # started ahead (imports done): hand it its arguments
             args = ["--log-file", str(self._run_dir() / "recorder.log"), *args]
-            return HelperStart("recorder", args, json.dumps(args) + "\n" + spec_text, req.path, warm=req.warm)
-        return HelperStart("recorder", [*python_module("astaa_deft.engine.session.recorder"), *args], spec_text,
-                           req.path)
+            return HelperStart(name="recorder", args=args, stdin_text=json.dumps(args) + "\n" + spec_text,
+                               error_file=req.path, warm=req.warm)
+        return HelperStart(name="recorder", args=[*python_module("astaa_deft.engine.session.recorder"), *args],
+                           stdin_text=spec_text, error_file=req.path)
 
     def _wait_subscribed(self) -> None:
         """The recorder says 'ready' once it declared its subscribers; the router may learn of them a moment

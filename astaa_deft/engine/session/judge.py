@@ -42,8 +42,9 @@ class Judge(RunPart):
 
     def start(self) -> None:
         opts = self._options
-        started = self._events.emit(rec.RunStarted(time.time_ns(), opts.mode, self._spec.name,
-                                                   tuple(opts.command_line), self._transport.interceptor_epoch_ns))
+        started = self._events.emit(rec.RunStarted(time_ns=time.time_ns(), mode=opts.mode, spec=self._spec.name,
+                                                   command_line=tuple(opts.command_line),
+                                                   interceptor_epoch_ns=self._transport.interceptor_epoch_ns))
         self.monitors = OnlineMonitors(self._spec, started.time_ns, self._violated)
         self.monitor_set = self.monitors.set
         intercepted = self._transport.intercepted

@@ -47,7 +47,7 @@ class Modules(RunPart):
         run_dir = self._place.run_dir
         configs = topology.module_configs(self._spec, self._options.mode, self._place.bus_endpoint)
         files = {name: zc.write_config_file(cfg, run_dir / f"zenoh-{name}.json5") for name, cfg in configs.items()}
-        self.launcher = Launcher(self._spec, run_dir, files, params=self._options.params,
+        self.launcher = Launcher(spec=self._spec, run_dir=run_dir, config_files=files, params=self._options.params,
                                  channel_seen=lambda ch: self._transport.counts().get(ch, 0) > 0,
                                  on_exit=self._exited)
         self.output = ModuleOutputFollower({m.name: output_file(run_dir, m.name) for m in self._spec.modules},

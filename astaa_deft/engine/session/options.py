@@ -44,7 +44,7 @@ class RunOptions:
         object.__setattr__(self, "mode", RunMode(self.mode))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RunResult:
     """One finished run, as a campaign or a command sees it."""
 

@@ -78,7 +78,7 @@ SHUTDOWN_LIMIT_SECONDS = 20.0
 # -- what the subscriber callbacks queue for the writing thread -----------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class InterceptedChannel:
     """Where one intercepted channel's deliveries go in the log."""
 
@@ -222,7 +222,8 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
     for key_expr, channel, cid, original_cid in recorded:
         codec = get_codec(channel.encoding)
         if original_cid is not None:
-            target = InterceptedChannel(channel.name, codec, cid, original_cid, mutations_cid)
+            target = InterceptedChannel(name=channel.name, codec=codec, delivered=cid, original=original_cid,
+                                        mutations=mutations_cid)
 
             def on_intercepted(sample: zenoh.Sample, target: InterceptedChannel = target) -> None:
                 q.put(InterceptedBatch(time.time_ns(), target, sample.payload.to_bytes()))
@@ -379,8 +380,9 @@ def _drain(q: queue.SimpleQueue[QueueItem | _Stop], sink: _Sink) -> None:
                     continue  # undecodable's first answer, without its call
             reason = undecodable(codec, data)
             if reason is not None:
-                writer.record(records.FlagRecord(log_time, name, seq, reason, len(data)),
-                              channel_id=writer.flags_channel)
+                writer.record(
+                    records.FlagRecord(time_ns=log_time, channel=name, sequence=seq, reason=reason, size=len(data)),
+                    channel_id=writer.flags_channel)
         elif type(item) is InterceptedBatch:
             _write_batch(sink, item.channel, item.data, item.log_time)
         elif type(item) is UndeclaredMessage:  # an undeclared key the proxy forwarded
@@ -483,8 +485,10 @@ def _write_batch(sink: _Sink, target: InterceptedChannel, data: bytes, received_
     try:
         rows = topology.unpack_deliveries(data)
     except ValueError as exc:
-        writer.record(records.FlagRecord(received_ns, target.name, None, str(exc), len(data)),
-                      channel_id=writer.flags_channel)
+        writer.record(
+            records.FlagRecord(time_ns=received_ns, channel=target.name, sequence=None, reason=str(exc),
+                               size=len(data)),
+            channel_id=writer.flags_channel)
         return
     json_twins = target.codec.name == "json"
     for row in rows:
@@ -502,8 +506,10 @@ def _write_batch(sink: _Sink, target: InterceptedChannel, data: bytes, received_
             sink.twins.add(target.name, time_ns, payload, time_ns)
         reason = undecodable(target.codec, payload)
         if reason is not None:
-            writer.record(records.FlagRecord(time_ns, target.name, seq, reason, len(payload)),
-                          channel_id=writer.flags_channel)
+            writer.record(
+                records.FlagRecord(time_ns=time_ns, channel=target.name, sequence=seq, reason=reason,
+                                   size=len(payload)),
+                channel_id=writer.flags_channel)
 
 
 def _source_time(sample: zenoh.Sample) -> int | zenoh.Timestamp | None:
@@ -518,8 +524,10 @@ def _write_intercepted(writer: LogWriter, target: InterceptedChannel, attachment
     try:
         wire, original, delivered = topology.read_intercept_record(attachment)
     except ValueError as exc:
-        writer.record(records.FlagRecord(log_time, target.name, None, str(exc), len(attachment)),
-                      channel_id=writer.flags_channel)
+        writer.record(
+            records.FlagRecord(time_ns=log_time, channel=target.name, sequence=None, reason=str(exc),
+                               size=len(attachment)),
+            channel_id=writer.flags_channel)
         return False
     return _write_mutation(writer, target, _Delivery(log_time, data, original, delivered, wire),
                            publish_time=publish_time)

@@ -50,7 +50,7 @@ SHUTDOWN_GRACE_NS = 1_000_000_000  # an exit this soon after the module's last m
 NOTICE_SLACK_NS = 500_000_000  # how late the tool may learn of an exit (a loaded machine, its watcher thread)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RunEnd:
     """The condition that ended a run."""
 
@@ -172,8 +172,8 @@ class RunEndWatch:
             except RUNTIME_ERRORS:
                 continue
             if holds:
-                self._end(RunEnd(end.reason, end.outcome, now, channel=end.channel, message=message_copy(value),
-                                 detail=f"'{end.expr.text}' held on {end.channel}"))
+                self._end(RunEnd(reason=end.reason, outcome=end.outcome, time_ns=now, channel=end.channel,
+                                 message=message_copy(value), detail=f"'{end.expr.text}' held on {end.channel}"))
                 return
 
     def check(self, exits: list[ProcessExit]) -> RunEnd | None:
@@ -183,8 +183,8 @@ class RunEndWatch:
             if end is not None:
                 outcome = end.outcome(exit_.returncode, exit_.signal)
                 how = f"killed by {exit_.signal}" if exit_.signal else f"exit code {exit_.returncode}"
-                self._end(RunEnd(end.describe(), outcome, self.exit_time(exit_), module=exit_.module,
-                                 message={"returncode": exit_.returncode, "signal": exit_.signal},
+                self._end(RunEnd(reason=end.describe(), outcome=outcome, time_ns=self.exit_time(exit_),
+                                 module=exit_.module, message={"returncode": exit_.returncode, "signal": exit_.signal},
                                  detail=f"module '{exit_.module}' ended the run with {how}: {outcome.name}"))
                 break
         return self.ended

@@ -12,7 +12,7 @@ from astaa_deft.io.log.reader import LogContents
 from astaa_deft.engine.monitor.verdict import format_verdict
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TopicStats:
     topic: str
     channel: str
@@ -31,8 +31,8 @@ def topic_stats(log: LogContents) -> list[TopicStats]:
         times = by_topic.get(topic, [])
         span = (times[-1] - times[0]) / 1e9 if len(times) > 1 else 0.0
         rate = (len(times) - 1) / span if span > 0 else 0.0
-        out.append(TopicStats(topic, info.metadata.get("channel", ""), len(times), rate,
-                              times[0] if times else 0, times[-1] if times else 0))
+        out.append(TopicStats(topic=topic, channel=info.metadata.get("channel", ""), count=len(times), rate_hz=rate,
+                              first_ns=times[0] if times else 0, last_ns=times[-1] if times else 0))
     return out
 
 

@@ -42,7 +42,7 @@ NUMBER_KINDS = ("float32", "float64", "int8", "int16", "int32", "int64", "uint8"
 def read_channels_section(reader: SpecReader, node: Node | None, modules: tuple[Module, ...],
                           types: dict[str, MessageType], *, ros2: Ros2Section) -> list[Channel]:
     """The ``channels:`` section (required, non-empty). ``types`` gains the ROS 2 types of CDR channels."""
-    channels = _ChannelsReader(reader, [m.name for m in modules], types, ros2)
+    channels = _ChannelsReader(reader=reader, module_names=[m.name for m in modules], types=types, ros2=ros2)
     out: list[Channel] = []
     for item in reader.list_of_maps(node, "channels", required=True):
         if reader.keys(item, CHANNEL_KEYS, ("name", "producer", "type"), "a channel"):
@@ -50,7 +50,7 @@ def read_channels_section(reader: SpecReader, node: Node | None, modules: tuple[
     return out
 
 
-@dataclass
+@dataclass(kw_only=True)
 class _ChannelsReader:
     """One pass over the channel list: the names and keys seen so far, to report duplicates."""
 
@@ -86,7 +86,8 @@ class _ChannelsReader:
         own_time = self._field(v, "time", type_name, NUMBER_KINDS, want="a number of seconds (or a 'time' field)")
         pair_by = self._field(v, "pair_by", type_name, (*NUMBER_KINDS, "string", "enum", "bool"),
                               want="a number or a string (a tick's sequence number, its time)")
-        return Channel(name, key, producer, tuple(consumers), type_name, encoding, topic, own_time, pair_by)
+        return Channel(name=name, key=key, producer=producer, consumers=tuple(consumers), type=type_name,
+                       encoding=encoding, topic=topic, time=own_time, pair_by=pair_by)
 
     def _field(self, v: dict[str, Node], key: str, type_name: str, kinds: tuple[str, ...], *, want: str) -> str | None:
         """``time:`` or ``pair_by:``: a field path of the channel's type holding one value of ``kinds``."""

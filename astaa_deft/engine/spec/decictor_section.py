@@ -138,7 +138,8 @@ class _Reader:
         trajectory = self.trajectory(v["trajectory"], f"{where}.trajectory") if "trajectory" in v else None
         if channel is None or array is None or fields is None or ("trajectory" in v and trajectory is None):
             return None
-        return ParticipantMappingSection(channel, array, fields, stamp, trajectory)
+        return ParticipantMappingSection(channel=channel, array=array, fields=fields, stamp=stamp,
+                                         trajectory=trajectory)
 
     def trajectory(self, node: Node, where: str) -> TrajectorySection | None:
         if not self.mapping(node, TRAJECTORY_KEYS, where, "{array: trajectory, t: t, x: x, y: y}") \
@@ -200,7 +201,7 @@ class _Reader:
         if channel is None or any(x is None for x in (*names.values(), *sizes.values())):
             return None
         given: dict[str, Any] = {**{k: str(p) for k, p in names.items()}, **sizes}
-        return replace(EgoSection(channel), **given)
+        return replace(EgoSection(channel=channel), **given)
 
     def flag(self, node: Node, key: str) -> FlagSection | None:
         where = f"decictor.{key}"

@@ -98,7 +98,8 @@ def build_planner(src: Source, node: Node | None, types: Mapping[str, MessageTyp
     collision = _oracle(src, v.get("oracle"), inputs)
     # The planner is a module that runs alone like any other, with its extras: frames found per recorded
     # output, outputs compared as trajectories; an exception from step() is not judged (unresolved).
-    return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames=FrameMode.PER_OUTPUT,
+    return ReplayModule(module=module, inputs=tuple(inputs), trigger=trigger, output=output, factory=factory,
+                        factory_args=args, command=command, frames=FrameMode.PER_OUTPUT,
                         exceptions=StepExceptions.UNRESOLVED, hang_after=0.0, threshold=threshold, lookback_ms=lookback,
                         skew_ms=skew, trajectory=layout, collision=collision, where="planner",
                         provenance=read_provenance(src, v.get("provenance"), "planner.provenance",
@@ -187,7 +188,7 @@ def _oracle(src: Source, node: Node | None, inputs: list[str]) -> CollisionOracl
         src.at(obstacles, f"the oracle's obstacle channel '{channel}' is not a planner input",
                "name the input that carries predicted obstacles")
     margin = read_setting(src, c.value.get("margin"), "oracle margin", default=0.0)
-    return CollisionOracle(length, width, channel, margin=margin, **fields)
+    return CollisionOracle(ego_length=length, ego_width=width, channel=channel, margin=margin, **fields)
 
 
 def _trajectory(src: Source, node: Node | None, types: Mapping[str, MessageType],

@@ -148,8 +148,9 @@ def _entry(src: Source, node: Node, where: str, *, by_name: Mapping[str, Channel
                 _check_ignored_path(src, item, where)
         else:
             src.at(n, f"'{where}.ignore' must be a list of output field paths", "e.g. [header.stamp]")
-    return ReplayModule(module, tuple(inputs), trigger, output, factory, args, command, frames, exceptions,
-                        hang_after, threshold, lookback, skew, ignore, where=where,
+    return ReplayModule(module=module, inputs=tuple(inputs), trigger=trigger, output=output, factory=factory,
+                        factory_args=args, command=command, frames=frames, exceptions=exceptions, hang_after=hang_after,
+                        threshold=threshold, lookback_ms=lookback, skew_ms=skew, ignore=ignore, where=where,
                         provenance=read_provenance(src, v.get("provenance"), f"{where}.provenance",
                                                    output_type=types.get(by_name[output].type)
                                                    if output in by_name else None, types=types))

@@ -87,7 +87,8 @@ def _condition(reader: InvariantReader, item: Node, module_exits: list, channel_
                            "keep one condition per module")
             return
         if module is not None and codes is not None and reason is not None and delay_ok:
-            module_exits.append(ModuleExitEnd(module, codes, other, reason, shutdown_delay=delay))
+            module_exits.append(ModuleExitEnd(module=module, exit_codes=codes, other=other, reason=reason,
+                                              shutdown_delay=delay))
         return
     if not reader.keys(item, CHANNEL_KEYS, ("channel", "expr", "reason"), "an 'end_when' channel condition"):
         return

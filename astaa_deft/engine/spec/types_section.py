@@ -53,7 +53,7 @@ def _field_type(reader: SpecReader, node: Node, type_names: list[str], where: st
         return _type_expr(reader, node.value, node, type_names, where=where)
     if not node.is_map:
         reader.src.at(node, f"field '{where}' has no type", "write a type name, 'T[]', {enum: […]} or {array: T}")
-        return FieldType("string")
+        return FieldType(kind="string")
     v = node.value
     forms = [k for k in ("type", "enum", "array") if k in v]
     allowed = ("type", "enum", "array", "min", "max", "min_length", "max_length")
@@ -61,7 +61,7 @@ def _field_type(reader: SpecReader, node: Node, type_names: list[str], where: st
     if len(forms) != 1:
         reader.src.at(node, f"field '{where}' needs exactly one of 'type', 'enum', 'array'",
                     "e.g. {type: float64, min: 0} or {enum: [a, b]} or {array: Point}")
-        return FieldType("string")
+        return FieldType(kind="string")
     minimum = reader.number(v.get("min"), f"'{where}.min'")
     maximum = reader.number(v.get("max"), f"'{where}.max'")
     min_len = _length(reader, v.get("min_length"), where)
@@ -75,42 +75,42 @@ def _field_type(reader: SpecReader, node: Node, type_names: list[str], where: st
         enode = v["enum"]
         if not enode.is_list or not enode.value:
             reader.src.at(enode, f"enum of '{where}' must be a non-empty list", "e.g. {enum: [red, yellow, green]}")
-            return FieldType("string")
+            return FieldType(kind="string")
         values = tuple(e.plain() for e in enode.value)
         if len(set(map(repr, values))) != len(values):
             reader.src.at(enode, f"enum of '{where}' repeats a value", "list each value once")
-        return FieldType("enum", values=values)
+        return FieldType(kind="enum", values=values)
     if form == "array":
         anode = v["array"]
         items = _field_type(reader, anode, type_names, f"{where}[]")
-        return FieldType("array", items=items, min_length=min_len, max_length=max_len)
+        return FieldType(kind="array", items=items, min_length=min_len, max_length=max_len)
     tnode = v["type"]
     if not isinstance(tnode.value, str):
         reader.src.at(tnode, f"'type' of '{where}' must be a type name", "e.g. float64")
-        return FieldType("string")
+        return FieldType(kind="string")
     base = _type_expr(reader, tnode.value, tnode, type_names, where=where)
     if (minimum is not None or maximum is not None) and base.kind not in SCALAR_KINDS[:10] + ("time",):
         reader.src.at(node, f"'min'/'max' on '{where}' need a numeric type, not {base.describe()}", "remove them")
     if base.kind == "array":
-        return FieldType("array", items=base.items, min_length=min_len, max_length=max_len)
+        return FieldType(kind="array", items=base.items, min_length=min_len, max_length=max_len)
     if min_len is not None or max_len is not None:
         reader.src.at(node, f"'min_length'/'max_length' on '{where}' need an array type", "use {array: T, …}")
-    return FieldType(base.kind, ref=base.ref, values=base.values, items=base.items,
+    return FieldType(kind=base.kind, ref=base.ref, values=base.values, items=base.items,
                      minimum=minimum, maximum=maximum)
 
 
 def _type_expr(reader: SpecReader, text: str, node: Node, type_names: list[str], *, where: str) -> FieldType:
     text = text.strip()
     if text.endswith("[]"):
-        return FieldType("array", items=_type_expr(reader, text[:-2], node, type_names, where=where + "[]"))
+        return FieldType(kind="array", items=_type_expr(reader, text[:-2], node, type_names, where=where + "[]"))
     if text in SCALAR_KINDS:
-        return FieldType(text)
+        return FieldType(kind=text)
     if text in type_names:
-        return FieldType("struct", ref=text)
+        return FieldType(kind="struct", ref=text)
     hint = did_you_mean(text, list(SCALAR_KINDS) + type_names) or (
         "use a scalar kind (" + ", ".join(SCALAR_KINDS) + ") or a declared type")
     reader.src.at(node, f"field '{where}' has unknown type '{text}'", hint)
-    return FieldType("string")
+    return FieldType(kind="string")
 
 
 def _length(reader: SpecReader, node: Node | None, where: str) -> int | None:

@@ -44,7 +44,7 @@ class LoggedMessage:
     data: bytes
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ChannelInfo:
     id: int
     topic: str
@@ -53,7 +53,7 @@ class ChannelInfo:
     schema_name: str = ""
 
 
-@dataclass
+@dataclass(kw_only=True)
 class LogContents:
     """Everything in a log, read in one pass."""
 
@@ -128,7 +128,7 @@ def read_log(path: Path | str) -> LogContents:
     """
     path = Path(path)
     stream = open_input(path, LOG)  # a regular file, or InputError; closed by the `with` below
-    out = LogContents(path)
+    out = LogContents(path=path)
     size = path.stat().st_size
     out.size = size
     if size == 0:
@@ -374,8 +374,9 @@ def _take(out: LogContents, record: McapRecord, offset: int = 0) -> None:
     elif isinstance(record, Channel):
         if record.topic not in out.channels:
             schema_name = out._schema_names.get(record.schema_id, "")
-            out.channels[record.topic] = ChannelInfo(record.id, record.topic, record.message_encoding,
-                                                     dict(record.metadata), schema_name)
+            out.channels[record.topic] = ChannelInfo(id=record.id, topic=record.topic,
+                                                     message_encoding=record.message_encoding,
+                                                     metadata=dict(record.metadata), schema_name=schema_name)
             out._topic_by_id[record.id] = record.topic
     elif isinstance(record, Message):
         topic = out._topic_by_id.get(record.channel_id)

@@ -59,7 +59,7 @@ class _Simple:
                                       "the file was cut or altered; record the run again")) from None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RunStarted(_Simple):
     time_ns: int
     mode: str
@@ -98,7 +98,7 @@ def _as_written(value: FieldValue) -> JsonValue:
     return cast(JsonValue, value)  # a logged mutation's values are already in their tagged form
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MutationRecord:
     """A ``model.records.Mutation`` as the log holds it (``policy``/``action`` joined by '+' when stacked).
 
@@ -126,9 +126,9 @@ class MutationRecord:
     def of(cls, mutation: Mutation, time_ns: int) -> MutationRecord:
         """The record of a live mutation: its values in their tagged JSON form, as the log holds them."""
         body = mutation.to_json()
-        return cls(time_ns, mutation.policy, mutation.action, mutation.channel, mutation.message_index,
-                   tuple(change.tagged() for change in mutation.fields), mutation.testcase, mutation.consumers,
-                   mutation.time, body["detail"])
+        return cls(time_ns=time_ns, policy=mutation.policy, action=mutation.action, channel=mutation.channel,
+                   message_index=mutation.message_index, fields=tuple(change.tagged() for change in mutation.fields),
+                   testcase=mutation.testcase, consumers=mutation.consumers, time=mutation.time, detail=body["detail"])
 
     @staticmethod
     def logged(mutation: JsonObject, original_sequence: int | None, delivered_sequence: int | None) -> JsonObject:
@@ -150,14 +150,15 @@ class MutationRecord:
         """The record of its body (the mutations topic's has no ``kind``; its time is the message's,
         ``time_ns``); RecordError if a field change is not an object."""
         read = JsonFields(body)
-        return cls(time_ns or read.integer("time_ns"), read.text("policy"), read.text("action"),
-                   read.text("channel"), read.integer("message_index"),
-                   tuple(TaggedFieldChange.from_json(c, where=where) for c in read.objects("fields")),
-                   read.text("testcase"), read.texts("consumers"), read.number("time"), read.raw("detail"),
-                   read.optional_integer("original_sequence"), read.optional_integer("delivered_sequence"))
+        return cls(time_ns=time_ns or read.integer("time_ns"), policy=read.text("policy"), action=read.text("action"),
+                   channel=read.text("channel"), message_index=read.integer("message_index"),
+                   fields=tuple(TaggedFieldChange.from_json(c, where=where) for c in read.objects("fields")),
+                   testcase=read.text("testcase"), consumers=read.texts("consumers"), time=read.number("time"),
+                   detail=read.raw("detail"), original_sequence=read.optional_integer("original_sequence"),
+                   delivered_sequence=read.optional_integer("delivered_sequence"))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PolicyApplicationsRecord(_Simple):
     """What one policy of the run's test case did, logged once at the run's end.
 
@@ -180,7 +181,7 @@ class PolicyApplicationsRecord(_Simple):
     kind: ClassVar[str] = "policy_applications"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FlagRecord(_Simple):
     """A payload the recorder could not decode (forwarded untouched; logged raw on the flags topic)."""
     time_ns: int

@@ -24,7 +24,7 @@ NODE, PUBLISHER, SUBSCRIPTION, SERVICE, CLIENT = "NN", "MP", "MS", "SS", "SC"
 ENDPOINT_KINDS = (PUBLISHER, SUBSCRIPTION, SERVICE, CLIENT)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Entity:
     """One liveliness token, parsed."""
 
@@ -64,7 +64,7 @@ def parse_token(key: str) -> Entity | None:
     if not namespace.startswith("/"):
         namespace = "/" + namespace
     if kind == NODE:
-        return Entity(int(domain), zid, kind, namespace, demangle(node).strip("/"))
+        return Entity(domain_id=int(domain), zid=zid, kind=kind, namespace=namespace, node=demangle(node).strip("/"))
     if kind not in ENDPOINT_KINDS or len(parts) < 13:
         return None
     topic = demangle(parts[9])
@@ -72,5 +72,5 @@ def parse_token(key: str) -> Entity | None:
         return None  # an endpoint names its topic or service; without one it is not rmw_zenoh's
     if not topic.startswith("/"):
         topic = "/" + topic
-    return Entity(int(domain), zid, kind, namespace, demangle(node).strip("/"), topic, parts[10], parts[11],
-                  "/".join(parts[12:]))
+    return Entity(domain_id=int(domain), zid=zid, kind=kind, namespace=namespace, node=demangle(node).strip("/"),
+                  topic=topic, dds_type=parts[10], type_hash=parts[11], qos="/".join(parts[12:]))

@@ -209,14 +209,14 @@ def _referenced_name(desc: tuple) -> str | None:
 def _field_type(desc: tuple) -> FieldType:
     node, arg = desc
     if node == Nodetype.BASE:
-        return FieldType(PRIMITIVE_KINDS[arg[0]])
+        return FieldType(kind=PRIMITIVE_KINDS[arg[0]])
     if node == Nodetype.NAME:
-        return FieldType("struct", ref=arg)
+        return FieldType(kind="struct", ref=arg)
     (item_node, item_arg), size = arg
     fixed = node == Nodetype.ARRAY
     if item_node == Nodetype.BASE and item_arg[0] in BYTE_PRIMITIVES:
-        return FieldType("bytes")
-    return FieldType("array", items=_field_type((item_node, item_arg)),
+        return FieldType(kind="bytes")
+    return FieldType(kind="array", items=_field_type((item_node, item_arg)),
                      min_length=size if fixed else None, max_length=size if (fixed or size) else None)
 
 

@@ -1,15 +1,13 @@
 """Fuzzing campaigns: many generated test cases, each a fresh run of the SUT, findings bucketed.
 
-One concern per module:
+One concern per module (the case model, the journal and its rows are ``orchestration/journal/``, shared with
+``verify``):
 
-* ``model``: the campaign's model (a planned case, its outcome, a bucket's signature, the vocabularies as enums);
-* ``rows``: the journal's typed rows (a case, a bucket, a minimisation, module tests, a note, the settings);
 * ``payload``: what a pool gets for one case, and the pool interface the campaign drives;
 * ``runner``: the one adapter to the rest of the tool that runs a case (a session);
 * ``minimiser``: the one adapter that minimises a bucket's first failure;
 * ``worker``: a case in its own process (local pool) or on a Dask worker;
 * ``executors``: where cases run (a local process pool, or a Dask cluster);
-* ``journal``: the SQLite journal, the source of truth for resume, status and report;
 * ``signature``: a failure's signature, which groups failures into buckets;
 * ``cost``: what a run costs the machine (CPU of all its processes, CPU waited for, memory);
 * ``calibration``: how many runs at once, from those costs and the clean runs' timing (pure);

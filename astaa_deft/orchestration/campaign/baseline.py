@@ -15,9 +15,9 @@ from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.payload import CasePool
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.rows import CaseRow
 from astaa_deft.orchestration.campaign.known import known_findings
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, BASELINE_FINDING, CONTROL, MUTATED, BucketSignature, CaseOutcome, CaseStatus, PlannedCase, Timing,
 )
 from astaa_deft.orchestration.campaign.parts import CampaignParts
@@ -160,7 +160,8 @@ class Baseline(CampaignParts):
         """Baseline runs up to ``count``: run n has the grid's value (n-1) mod its size (every value in turn)."""
         for n in range(1, count + 1):
             params = {**self.grid[(n - 1) % len(self.grid)]}
-            self._plan(PlannedCase(f"b-{n:04d}", BASELINE, n, self.config.seed, params, None, "baseline"))
+            self._plan(PlannedCase(case_id=f"b-{n:04d}", kind=BASELINE, number=n, seed=self.config.seed, params=params,
+                                   testcase=None, strategy="baseline"))
 
     def _clean_failures_since_baseline(self) -> list[CaseOutcome]:
         """On resume: failing twins and cases that mutated nothing, as known baseline findings again."""

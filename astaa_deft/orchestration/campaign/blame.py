@@ -51,14 +51,13 @@ from astaa_deft.io.log.reader import LogContents, read_log
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE, root_cause_of
 
 BIN_SECONDS = 0.5
 NOISE_FACTOR = 2.0  # a number departs beyond this many times the largest spread seen without the mutation
 SCALE_SHARE = 0.05  # … and beyond this share of its scale
 MAX_STRING = 32  # longer strings are not compared (ids, free text)
 COUNT = "#count"
-MUTATED_VALUE = "mutated value"  # Blame.how: a plant carried the mutated value on; no module under test is to blame
-THE_MUTATED_VALUE = "the mutated value itself"  # what such a blame names as the root cause
 
 Features = dict[str, float]
 Series = dict[str, dict[int, Features]]  # channel → bin → features
@@ -73,7 +72,7 @@ class RunSeries:
     mutated: tuple[str, ...] = ()  # channels the run's mutations touched
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Departure:
     """A channel of the failing run that left its twins' range: in which bin, on which feature, how."""
 
@@ -84,7 +83,7 @@ class Departure:
     detail: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Blame:
     """The module to blame for a bucket and the chain that says why (JSON-able: the journal keeps it)."""
 
@@ -109,14 +108,6 @@ class Blame:
     def root_cause(self) -> str | None:
         """The root cause it names (:func:`root_cause_of`)."""
         return root_cause_of(self.module, self.how)
-
-
-def root_cause_of(module: str | None, how: str) -> str | None:
-    """The root cause a blame names, as bucket identity and the user see it: the module to blame, "the mutated
-    value itself" when a plant carried the value on, None when nothing says."""
-    if module is not None:
-        return module
-    return THE_MUTATED_VALUE if how == MUTATED_VALUE else None
 
 
 RANK = {"non-finite": 0, "silent": 1, "value": 2}
@@ -212,7 +203,8 @@ def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequenc
         there = [t.get(b, {COUNT: 0.0}) for t in theirs]
         counts = [f.get(COUNT, 0.0) for f in there]
         if here.get(COUNT, 0.0) == 0 and min(counts) >= 2:
-            return Departure(channel, b, COUNT, "silent", f"no message where the twins sent {min(counts):g}+")
+            return Departure(channel=channel, bin=b, feature=COUNT, how="silent",
+                             detail=f"no message where the twins sent {min(counts):g}+")
         if here.get(COUNT, 0.0) == 0:
             continue
         found: list[Departure] = []
@@ -222,10 +214,12 @@ def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequenc
             if key.endswith("#nonfinite"):
                 if value > 0 and all(f.get(key, 0.0) == 0 for f in there):
                     name = key.removesuffix("#nonfinite") or "value"
-                    found.append(Departure(channel, b, key, "non-finite", f"{name} not finite, finite in every twin"))
+                    found.append(Departure(channel=channel, bin=b, feature=key, how="non-finite",
+                                           detail=f"{name} not finite, finite in every twin"))
                 continue
             if "=" in key and key not in seen:  # a string value no run without the mutation ever had
-                found.append(Departure(channel, b, key, "value", f"{key}: a value the twins never had"))
+                found.append(Departure(channel=channel, bin=b, feature=key, how="value",
+                                       detail=f"{key}: a value the twins never had"))
                 continue
             values = [f[key] if key in f else (0.0 if _absent_is_zero(key) else None) for f in there]
             known = [v for v in values if v is not None]
@@ -236,8 +230,8 @@ def _first_departure(channel: str, mine: Mapping[int, Features], theirs: Sequenc
             if lo - tol <= value <= hi + tol:
                 pending.pop(key, None)
                 continue
-            departure = Departure(channel, b, key, "value",
-                                  f"{key} {value:.6g} where the twins had {lo:.6g}…{hi:.6g}")
+            departure = Departure(channel=channel, bin=b, feature=key, how="value",
+                                  detail=f"{key} {value:.6g} where the twins had {lo:.6g}…{hi:.6g}")
             if key in pending and pending[key].bin == b - 1:  # two bins in a row: not a drifting number's jitter
                 found.append(pending[key])
             else:
@@ -300,21 +294,26 @@ def blame(spec: Spec, failing: RunSeries, twins: Sequence[RunSeries], *, invaria
         at = (first_bin - (failing.first_mutation_bin or 0)) * BIN_SECONDS
         detail = f"{chosen.detail}, {at:g}–{at + BIN_SECONDS:g} s after the first mutation"
         if spec.is_plant(module):
-            return Blame(None, chosen.channel, MUTATED_VALUE, f"{_into_plant(spec, failing, module)} → {departed}",
-                         f"{detail}; no module under test departed before the plant {module}", len(twins))
-        return Blame(module, chosen.channel, chosen.how, f"{mutated} → {module} → {departed}", detail, len(twins))
+            return Blame(module=None, output=chosen.channel, how=MUTATED_VALUE,
+                         chain=f"{_into_plant(spec, failing, module)} → {departed}",
+                         detail=f"{detail}; no module under test departed before the plant {module}", twins=len(twins))
+        return Blame(module=module, output=chosen.channel, how=chosen.how, chain=f"{mutated} → {module} → {departed}",
+                     detail=detail, twins=len(twins))
     nothing = "no channel departed from the twins' range"
     if finding_module and spec.is_plant(finding_module):
         why = f"({invariant} names it; no output departed from the twins)"
         if any(finding_module in _consumers(spec, name) for name in failing.mutated):
-            return Blame(None, None, MUTATED_VALUE, f"{_into_plant(spec, failing, finding_module)} → {why}", nothing,
-                         len(twins))
-        return Blame(None, None, "none", f"{mutated} → ? → {invariant} (names {finding_module}, the plant)", nothing,
-                     len(twins))
+            return Blame(module=None, output=None, how=MUTATED_VALUE,
+                         chain=f"{_into_plant(spec, failing, finding_module)} → {why}", detail=nothing,
+                         twins=len(twins))
+        return Blame(module=None, output=None, how="none",
+                     chain=f"{mutated} → ? → {invariant} (names {finding_module}, the plant)", detail=nothing,
+                     twins=len(twins))
     if finding_module:
         chain = f"{mutated} → {finding_module} → ({invariant} names it; no output departed from the twins)"
-        return Blame(finding_module, None, "finding", chain, nothing, len(twins))
-    return Blame(None, None, "none", f"{mutated} → ? → {invariant}", nothing, len(twins))
+        return Blame(module=finding_module, output=None, how="finding", chain=chain, detail=nothing, twins=len(twins))
+    return Blame(module=None, output=None, how="none", chain=f"{mutated} → ? → {invariant}", detail=nothing,
+                 twins=len(twins))
 
 
 def _into_plant(spec: Spec, failing: RunSeries, plant: str) -> str:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 CORE_HEADROOM = 0.75  # share of the cores the runs may use: the campaign, the OS and jitter need the rest
 MEMORY_HEADROOM = 0.5  # share of the available memory the runs may use
@@ -123,17 +123,28 @@ class Raise:
     why: str
 
 
-def raised(share: RunShare, cores: int, memory_mb: float | None, *, most: int, load1: float, ours: float,
-           workers: int, ceiling: int | None) -> Raise:
+@dataclass(frozen=True, kw_only=True)
+class MachineNow:
+    """The machine as a raise judges it: its cores, its available memory (None: not known), its one-minute
+    load, and ``ours``, the part of that load the campaign's own runs make (the runs in flight × a run's
+    share); the rest is other work's."""
+
+    cores: int
+    memory_mb: float | None
+    load1: float
+    ours: float
+
+
+def raised(share: RunShare, machine: MachineNow, *, most: int, workers: int, ceiling: int | None) -> Raise:
     """One more run at once when the cores the other work leaves now hold more runs than go at once.
 
-    ``ours``: the load the campaign's own runs make (the runs in flight × a run's share); the rest of the
-    one-minute load is other work's. ``ceiling``: a count at which the runs' timing drifted (None: none) —
+    ``ceiling``: a count at which the runs' timing drifted (None: none) —
     never reached again while the other load has not fallen by CEILING_LOAD_DROP since (the caller lifts it).
     One step at a time: the twins' timing at the new count decides the next (as when lowering).
     """
+    cores, load1, ours = machine.cores, machine.load1, machine.ours
     other = max(0.0, load1 - ours)
-    fit = workers_for(share, cores, memory_mb, most=most, other_load=other)
+    fit = workers_for(share, cores, machine.memory_mb, most=most, other_load=other)
     if ceiling is not None:
         fit = min(fit, ceiling - 1)
     if fit <= workers:

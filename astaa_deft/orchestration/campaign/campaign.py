@@ -28,16 +28,16 @@ from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.params import check_grid, check_param_values, spread_choices
 from astaa_deft.engine.spec.loader import load_spec
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.payload import CasePool
-from astaa_deft.orchestration.campaign.rows import CampaignMeta
+from astaa_deft.orchestration.journal.rows import CampaignMeta
 from astaa_deft.orchestration.campaign.known import KnownFinding
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     CONFIRMING, CONTROL, MUTATED, RERUN, CaseOutcome, PlannedCase, TextEnum, Timing,
 )
 from astaa_deft.orchestration.campaign.strategies import STRATEGIES, Strategy
-from astaa_deft.orchestration.verify import records as verification
-from astaa_deft.orchestration.verify.history import fixed_buckets
+from astaa_deft.orchestration.journal import verifications as verification
+from astaa_deft.orchestration.journal.history import fixed_buckets
 from astaa_deft.orchestration.campaign.baseline import (
     HORIZON_SLACK, CampaignStopped, Baseline, derived_horizon, live_timing,
 )
@@ -120,7 +120,7 @@ class StopReason(TextEnum):
     INTERRUPTED = "interrupted"  # Ctrl-C: resume goes on from the journal
 
 
-@dataclass
+@dataclass(kw_only=True)
 class CampaignResult:
     cases_done: int
     failures: int
@@ -170,12 +170,14 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
     (``parts.py``), the hunt's loop here."""
 
     def __init__(self, config: CampaignConfig, journal: Journal,
-                 on_progress: Callable[[Campaign], None] = lambda c: None, say: Callable[[str], None] = print):
+                 on_progress: Callable[[Campaign], None] = lambda c: None, say: Callable[[str], None] = print, *,
+                 spec: Spec | None = None):
+        """``spec``: the spec at ``config.spec_path`` as the caller loaded and checked it (None: loaded here)."""
         self.config = config
         self.journal = journal
         self.on_progress = on_progress
         self.say = say
-        self.spec = load_spec(config.spec_path)
+        self.spec = spec if spec is not None else load_spec(config.spec_path)
         self.dictionary = load_dictionary(config.dictionaries)
         if config.strategy not in STRATEGIES:
             raise InputError(Problem("--strategy", None, None, f"unknown strategy '{config.strategy}'",
@@ -251,7 +253,8 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
         done = [r for r in self.journal.cases() if r.finished]
         failures = sum(1 for r in done if r.kind == MUTATED and r.verdict not in (Verdict.PASS, None, "?"))
         live = self.journal.buckets(include_merged=False)
-        return CampaignResult(len(done), failures, len(live), time.monotonic() - self.started, stopped,
+        return CampaignResult(cases_done=len(done), failures=failures, buckets=len(live),
+                              seconds=time.monotonic() - self.started, stopped=stopped,
                               bugs=sum(1 for b in live if b.is_bug))
 
     def _progress(self) -> None:
@@ -314,8 +317,8 @@ class Campaign(Baseline, Scheduling, Judging, MinimisationSlots, ModuleLevel):
     def _plan_mutated(self, number: int) -> PlannedCase:
         proposal = self.strategy.propose(number)
         params = self.grid[(number - 1) % len(self.grid)]
-        case = PlannedCase(f"c-{number:06d}", MUTATED, number, self.config.seed, params, proposal.testcase,
-                           self.config.strategy, proposal.parent)
+        case = PlannedCase(case_id=f"c-{number:06d}", kind=MUTATED, number=number, seed=self.config.seed, params=params,
+                           testcase=proposal.testcase, strategy=self.config.strategy, parent=proposal.parent)
         self._plan(case)
         return case
 

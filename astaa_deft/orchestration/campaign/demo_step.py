@@ -6,7 +6,7 @@ from pathlib import Path
 from collections.abc import Callable
 
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.report import write_report
 from astaa_deft.orchestration.campaign.standing import headline, standings
 

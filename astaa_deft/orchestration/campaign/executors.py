@@ -25,12 +25,12 @@ from astaa_deft.io import pipe_messages
 from astaa_deft.io.pipe_messages import FrameError, bytes_reader
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
 from astaa_deft.orchestration.campaign.zygote import Zygote, stop_group
 
 if TYPE_CHECKING:
-    from dask.distributed import Future as DaskFuture
+    from dask.distributed import Client as DaskClient, Future as DaskFuture
 
 CASE_TIMEOUT_MARGIN = 60.0  # seconds beyond the horizon before a case process is stopped
 
@@ -121,7 +121,7 @@ class LocalPool:
                                         timeout=payload.horizon + CASE_TIMEOUT_MARGIN)
         except subprocess.TimeoutExpired:
             stop_process(proc, grace=5.0)
-            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+            return CaseOutcome(status="error", verdict="?", summary="the case did not finish", error="timeout")
         finally:
             with self._lock:
                 self._procs.discard(proc)
@@ -134,7 +134,8 @@ class LocalPool:
             log = f"{log}\n{exc}"
             message = None
         if proc.returncode != 0 or message is None:
-            return CaseOutcome("error", "?", "the case process failed", error=log.strip()[-2000:])
+            return CaseOutcome(status="error", verdict="?", summary="the case process failed",
+                               error=log.strip()[-2000:])
         return message.outcome
 
     def _run_forked(self, pid: int, conn: socket.socket, payload: CasePayload) -> CaseOutcome:
@@ -153,16 +154,16 @@ class LocalPool:
             message = pipe_messages.receive(read, (OutcomeMessage,), source="the forked case's socket")
         except TimeoutError:
             stop_group(pid, grace=5.0)
-            return CaseOutcome("error", "?", "the case did not finish", error="timeout")
+            return CaseOutcome(status="error", verdict="?", summary="the case did not finish", error="timeout")
         except (OSError, FrameError) as exc:
             stop_group(pid, grace=5.0)
-            return CaseOutcome("error", "?", "the case process failed", error=str(exc))
+            return CaseOutcome(status="error", verdict="?", summary="the case process failed", error=str(exc))
         finally:
             conn.close()
             with self._lock:
                 self._forked.discard(pid)
         if message is None:
-            return CaseOutcome("error", "?", "the case process failed",
+            return CaseOutcome(status="error", verdict="?", summary="the case process failed",
                                error=tail(Path(payload.run_dir) / "case.log").strip()[-2000:])
         return message.outcome
 
@@ -213,12 +214,17 @@ def cluster_workers(address: str) -> int | None:
 
     try:
         with Client(address, timeout=CLUSTER_CONNECT_SECONDS) as client:
-            return len(client.scheduler_info().get("workers", {})) or None
+            return _workers_of(client) or None
     except (OSError, TimeoutError) as exc:
         raise InputError(Problem("--cluster", None, None, f"no Dask scheduler answers at {address} ({exc})",
                                  "start one (dask scheduler --host 127.0.0.1 --dashboard-address 127.0.0.1:0, "
                                  "then dask worker ADDRESS --host 127.0.0.1 --dashboard-address 127.0.0.1:0) "
                                  "or give local:K")) from None
+
+
+def _workers_of(client: DaskClient) -> int:
+    """The workers a Dask scheduler has now."""
+    return len(client.scheduler_info().get("workers", {}))
 
 
 class DaskPool:
@@ -238,7 +244,7 @@ class DaskPool:
             self.client = Client(self.cluster)
         else:
             self.client = Client(address)
-        self.workers = max(1, len(self.client.scheduler_info().get("workers", {})) or workers)
+        self.workers = max(1, _workers_of(self.client) or workers)
         self.futures: dict[DaskFuture, tuple[str, CasePayload]] = {}
 
     def submit(self, case_id: str, payload: JsonObject) -> None:
@@ -265,7 +271,8 @@ class DaskPool:
             try:
                 result = future.result()
             except Exception as exc:  # noqa: BLE001 - a task that failed on every retry
-                yield case_id, CaseOutcome("error", "?", "the case failed on the cluster", error=str(exc))
+                yield case_id, CaseOutcome(status="error", verdict="?", summary="the case failed on the cluster",
+                                           error=str(exc))
                 continue
             run_dir = Path(payload.run_dir)
             run_dir.mkdir(parents=True, exist_ok=True)

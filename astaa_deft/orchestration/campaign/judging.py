@@ -13,16 +13,16 @@ from pathlib import Path
 
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.blame import BlameUnavailable, blame_logs
-from astaa_deft.orchestration.campaign.journal import Bucket
-from astaa_deft.orchestration.campaign.rows import BlameRow, CaseRow, NewBucket
+from astaa_deft.orchestration.journal.journal import Bucket
+from astaa_deft.orchestration.journal.rows import BlameRow, CaseRow, NewBucket
 from astaa_deft.orchestration.campaign.known import judged
 from astaa_deft.orchestration.campaign.minimiser import Minimised
 from astaa_deft.orchestration.campaign.minimiser import summary as minimised_summary
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, BASELINE_FINDING, BUG, CONFIRMING, CONTROL, FLAKY, MUTATED, RERUN, BucketKind, BucketSignature,
     CaseOutcome, CaseStatus, FailureKey, PlannedCase,
 )
-from astaa_deft.orchestration.verify import records as verification
+from astaa_deft.orchestration.journal import verifications as verification
 from astaa_deft.orchestration.campaign.parts import CampaignParts
 
 
@@ -109,8 +109,8 @@ class Judging(CampaignParts):
         finding = sig.primary(outcome)
         family = signature.family
         invariant = finding.invariant if finding else "?"
-        self.journal.add_bucket(NewBucket(name, signature, outcome.verdict, invariant,
-                                          finding.module if finding else None, case_id,
+        self.journal.add_bucket(NewBucket(name=name, signature=signature, verdict=outcome.verdict, invariant=invariant,
+                                          module=finding.module if finding else None, first_case=case_id,
                                           without_mutation=kind == BASELINE_FINDING,
                                           after_cases=self.journal.finished_count() + 1, kind=kind))
         if kind == BASELINE_FINDING:
@@ -131,11 +131,12 @@ class Judging(CampaignParts):
         params = row.params
         for k in range(1, max(self.config.reruns, self._controls()) + 1):
             if k <= self.config.reruns:
-                cases.append(PlannedCase(f"r-{bucket}-{k}", RERUN, row.number, row.seed, params,
-                                         self._testcase(row), row.strategy, parent=bucket))
+                cases.append(PlannedCase(case_id=f"r-{bucket}-{k}", kind=RERUN, number=row.number, seed=row.seed,
+                                         params=params, testcase=self._testcase(row), strategy=row.strategy,
+                                         parent=bucket))
             if k <= self._controls():
-                cases.append(PlannedCase(f"t-{bucket}-{k}", CONTROL, row.number, row.seed, params, None,
-                                         row.strategy, parent=bucket))
+                cases.append(PlannedCase(case_id=f"t-{bucket}-{k}", kind=CONTROL, number=row.number, seed=row.seed,
+                                         params=params, testcase=None, strategy=row.strategy, parent=bucket))
         for case in cases:
             self._plan(case)
         return cases
@@ -185,8 +186,9 @@ class Judging(CampaignParts):
         identity = (None if found.root_cause is None else
                     f"{found.root_cause}|{found.wrong_output}|{sig.failure_signature(outcome)}|"
                     f"{sig.field_family(bucket.family)}")
-        self.journal.blamed(BlameRow(bucket.bucket, found.module, found.output, found.how, found.chain, found.detail,
-                                     found.twins, identity, replay=replayed[1] if replayed else None))
+        self.journal.blamed(BlameRow(bucket=bucket.bucket, module=found.module, output=found.output, how=found.how,
+                                     chain=found.chain, detail=found.detail, twins=found.twins, identity=identity,
+                                     replay=replayed[1] if replayed else None))
         self.say(f"  {bucket.bucket} blame: {found.root_cause or '?'} ({found.chain}; {found.detail})")
         if identity is None:
             return

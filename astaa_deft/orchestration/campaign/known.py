@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from astaa_deft.model.json import JsonObject
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 
 EARLIER_SECONDS = 1.0  # a violation this much earlier than every clean run's (and …)
 EARLIER_SHARE = 0.25  # … this share of the clean runs' earliest time) is earlier, not jitter
@@ -24,7 +24,7 @@ MORE_VIOLATING = 1.5  # violating messages beyond this many times the clean runs
 MORE_VIOLATING_SLACK = 5  # … this many more) is more often
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class KnownFinding:
     """An invariant the clean runs break: how early, how often, in how many of them."""
 
@@ -51,9 +51,10 @@ def known_findings(clean: list[CaseOutcome]) -> dict[str, KnownFinding]:
     for name in sorted({f.invariant for o in done for f in o.findings}):
         failing = [o for o in done if any(f.invariant == name for f in o.findings)]
         times = [f.at for o in failing for f in o.findings if f.invariant == name and f.at is not None]
-        out[name] = KnownFinding(name, len(failing), len(done), min(times) if times else None,
-                                 max(sum(1 for f in o.findings if f.invariant == name) for o in failing),
-                                 max(o.violating.get(name, 0) for o in failing))
+        out[name] = KnownFinding(invariant=name, failing_runs=len(failing), runs=len(done),
+                                 first_at=min(times) if times else None,
+                                 episodes=max(sum(1 for f in o.findings if f.invariant == name) for o in failing),
+                                 violating=max(o.violating.get(name, 0) for o in failing))
     return out
 
 

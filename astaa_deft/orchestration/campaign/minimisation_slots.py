@@ -13,9 +13,9 @@ from dataclasses import replace
 from pathlib import Path
 
 from astaa_deft.orchestration.campaign import signature as sig
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
-from astaa_deft.orchestration.campaign.rows import Minimisation
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.rows import Minimisation
 from astaa_deft.orchestration.campaign.minimiser import MinimiseLimits, Minimised, minimise_run
 from astaa_deft.orchestration.campaign.module_tests import (
     TestsVerdict, is_crash_bucket, replayable, run_module_tests,
@@ -127,9 +127,11 @@ class MinimisationSlots(CampaignParts):
             name = self._minimising.pop(future)
             result, tests_dir, verdict = future.result()
             status = "minimised" if result.exit_code == 0 else "not reproduced" if result.exit_code == 1 else "error"
-            self.journal.minimised(Minimisation(name, status, result.exit_code, result.minimal_xml, result.culprit,
-                                                str(result.out_dir), str(tests_dir) if tests_dir else None,
-                                                result.seconds, result.detail))
+            self.journal.minimised(Minimisation(bucket=name, status=status, exit_code=result.exit_code,
+                                                minimal_xml=result.minimal_xml, culprit=result.culprit,
+                                                out_dir=str(result.out_dir),
+                                                tests_dir=str(tests_dir) if tests_dir else None, seconds=result.seconds,
+                                                detail=result.detail))
             self.say(f"  {name} {status}: {result.culprit or '-'} ({result.seconds:.0f} s)")
             self._replay_confirms_blame(name, result)
             if tests_dir is not None and verdict is not None:

@@ -35,7 +35,7 @@ class MinimiseLimits:
     timeout: float = 900.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Minimised:
     """What a minimisation gave: the minimiser's exit code, the minimal test case, its culprit, its outputs."""
 
@@ -80,8 +80,9 @@ def minimise_run(log: Path, spec_path: Path, out_dir: Path, *, invariant: str | 
         text += f"\nminimisation stopped after {timeout:.0f} s"
     minimal = out_dir / MINIMAL_XML
     tests = out_dir / TESTS_DIR
-    return Minimised(code, minimal.read_text() if minimal.is_file() else None, _culprit(minimal), out_dir,
-                     tests if tests.is_dir() else None, time.monotonic() - started, text[-1500:])
+    return Minimised(exit_code=code, minimal_xml=minimal.read_text() if minimal.is_file() else None,
+                     culprit=_culprit(minimal), out_dir=out_dir, tests_dir=tests if tests.is_dir() else None,
+                     seconds=time.monotonic() - started, detail=text[-1500:])
 
 
 def _culprit(minimal: Path) -> str | None:

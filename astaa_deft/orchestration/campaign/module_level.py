@@ -54,10 +54,10 @@ from astaa_deft.io.log.reader import read_log
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus, PlannedCase
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, CaseStatus, PlannedCase
 from astaa_deft.orchestration.campaign.parts import CampaignParts
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.rows import CaseRow
 
 DIR_NAME = "module_level"
 STATE_FILE = "state.json"
@@ -217,8 +217,8 @@ def live_testcase(fault: StreamFault, case_id: str, *, seconds_after_anchor: flo
         action = Reorder()
     start = max(0.0, round(seconds_after_anchor - LEAD_SECONDS, 3))
     window = Window(start, None, anchor, 1 if anchor is not None else None)
-    policy = Policy("p1", action, channels=(fault.channel,), window=window, selection=Selection(limit=limit))
-    return TestCase(case_id, 0, description, (policy,))
+    policy = Policy(id="p1", action=action, channels=(fault.channel,), window=window, selection=Selection(limit=limit))
+    return TestCase(id=case_id, seed=0, description=description, policies=(policy,))
 
 
 class ModuleLevel(CampaignParts):
@@ -391,8 +391,9 @@ class ModuleLevel(CampaignParts):
                            f"({finding.verdict.module}: {finding.verdict.signature})")
             testcase = live_testcase(fault, f"tc-{case_id}", seconds_after_anchor=(times[fault.index] - origin) / 1e9,
                                      anchor=self.timing.anchor, description=description)
-            self._plan(PlannedCase(case_id, MUTATED, CONFIRM_NUMBER_BASE + k + 1, self.config.seed, dict(params),
-                                   testcase, STRATEGY, finding.name))
+            self._plan(PlannedCase(case_id=case_id, kind=MUTATED, number=CONFIRM_NUMBER_BASE + k + 1,
+                                   seed=self.config.seed, params=dict(params), testcase=testcase, strategy=STRATEGY,
+                                   parent=finding.name))
             confirmed.append(_with_finding(finding, case_id=case_id))
         return _with(state, findings=tuple(confirmed))
 

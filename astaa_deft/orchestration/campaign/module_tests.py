@@ -26,7 +26,7 @@ from pathlib import Path
 
 from astaa_deft.model.records import Verdict
 from astaa_deft.engine.bus import process_launch
-from astaa_deft.analysis.deft.export import MANIFEST, export_suite
+from astaa_deft.analysis.deft.export import MANIFEST, export_suite, oracles_of
 from astaa_deft.analysis.deft.extract import ExtractedFrame
 from astaa_deft.analysis.deft.validator import Comparison
 from astaa_deft.analysis.deft.workflow import ExtractReport, run_params
@@ -106,7 +106,7 @@ class _FailureFrameWriter:
 
     def __init__(self, tests_dir: Path, log: LogContents, spec: Spec, entry: ReplayModule) -> None:
         self.tests_dir, self.log, self.spec, self.entry = tests_dir, log, spec, entry
-        self.oracles = json.loads((tests_dir / MANIFEST).read_text()).get("oracles", [])
+        self.oracles = oracles_of(json.loads((tests_dir / MANIFEST).read_text()))
         self.params = run_params(log, spec)
 
     def __call__(self, trigger: LoggedMessage, kept: list[ExtractedFrame]) -> bool:
@@ -118,10 +118,9 @@ class _FailureFrameWriter:
                 if before:  # an input not heard from yet (a slow channel) is absent from the frame
                     inputs[name] = before[-1]
         index = max((f.index for f in kept), default=-1) + 1
-        failing = ExtractedFrame(index=index, output=None, trigger_time=trigger.log_time,
-                                 frame_time=trigger.log_time, inputs=inputs,
-                                 comparison=Comparison(math.inf, math.inf, 0, "failed cycle"), accepted=True,
-                                 candidates_tried=0, exact=False)
+        failing = ExtractedFrame(index=index, output=None, trigger_time=trigger.log_time, frame_time=trigger.log_time,
+            inputs=inputs, comparison=Comparison(distance=math.inf, max_error=math.inf, points=0, how="failed cycle"),
+            accepted=True, candidates_tried=0, exact=False)
         frames = sorted([*kept, failing], key=lambda f: f.trigger_time)
         export_suite(frames, self.spec, self.params, self.tests_dir, oracles=self.oracles, entry=entry)
         from astaa_deft.analysis.deft.suite import Suite

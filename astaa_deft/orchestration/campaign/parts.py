@@ -23,12 +23,12 @@ from typing import TYPE_CHECKING
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.known import KnownFinding
 from astaa_deft.orchestration.campaign.minimiser import Minimised
-from astaa_deft.orchestration.campaign.model import BucketKind, BucketSignature, CaseOutcome, PlannedCase, Timing
+from astaa_deft.orchestration.journal.model import BucketKind, BucketSignature, CaseOutcome, PlannedCase, Timing
 from astaa_deft.orchestration.campaign.payload import CasePool, read_testcase
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.rows import CaseRow
 from astaa_deft.orchestration.campaign.strategies import Strategy
 
 if TYPE_CHECKING:  # the campaign is assembled from the parts (campaign.py imports this module)

@@ -24,12 +24,7 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import TestCase, parse_testcase
 from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseKind, CaseOutcome, PlannedCase
-
-
-def testcase_text(testcase: TestCase | None) -> str | None:
-    """A test case's stored form (the journal's column, the payload's key); None for a clean run."""
-    return testcase.to_xml().decode() if testcase is not None else None
+from astaa_deft.orchestration.journal.model import CaseKind, CaseOutcome, PlannedCase, testcase_text
 
 
 def read_testcase(text: str | None, name: str, spec: Spec | None = None,
@@ -52,9 +47,9 @@ def _case_of(body: JsonObject) -> tuple[PlannedCase, str | None]:
     params, text, parent = body["params"], body["testcase_xml"], body["parent"]
     if not isinstance(params, dict) or not isinstance(text, (str, type(None))):
         raise ValueError(f"a planned case, not {body!r}")
-    case = PlannedCase(str(body["case_id"]), CaseKind(body["kind"]), int(_number(body["number"])),
-                       int(_number(body["seed"])), {str(k): str(v) for k, v in params.items()}, None,
-                       str(body["strategy"]), None if parent is None else str(parent))
+    case = PlannedCase(case_id=str(body["case_id"]), kind=CaseKind(body["kind"]), number=int(_number(body["number"])),
+                       seed=int(_number(body["seed"])), params={str(k): str(v) for k, v in params.items()},
+                       testcase=None, strategy=str(body["strategy"]), parent=None if parent is None else str(parent))
     return case, text
 
 
@@ -76,7 +71,7 @@ def _delays(value: JsonValue) -> dict[str, float]:
     return {str(module): _number(seconds) for module, seconds in value.items()}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CasePayload:
     """Everything a worker needs to run ``case``, nothing it must look up (paths absolute)."""
 

@@ -8,14 +8,14 @@ import time
 from dataclasses import dataclass
 from typing import TextIO
 
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import MUTATED
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import MUTATED
 
 PLAIN_EVERY_SECONDS = 10.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Snapshot:
     done: int
     planned: int | None
@@ -62,8 +62,8 @@ def snapshot(journal: Journal, planned: int | None, elapsed: float, at_once: int
     blames = journal.blames()
     alone = {name for name, blame in blames.items() if blame.how == MUTATED_VALUE}
     bugs = sum(1 for b in live if b.is_bug and b.bucket not in alone)
-    return Snapshot(done, planned, failures, len(live), running, elapsed, bugs, at_once, os.getloadavg()[0],
-                    os.cpu_count())
+    return Snapshot(done=done, planned=planned, failures=failures, buckets=len(live), running=running, elapsed=elapsed,
+                    bugs=bugs, at_once=at_once, load=os.getloadavg()[0], cores=os.cpu_count())
 
 
 class Progress:

@@ -34,9 +34,9 @@ from astaa_deft.model.records import Verdict
 from astaa_deft.io.output_place import Place, ready_dir, write_atomic, writing
 from astaa_deft.orchestration.campaign.campaign import REPLAY_TESTS_SUFFIX
 from astaa_deft.orchestration.campaign.module_level import status_lines as module_level_status
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
-from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus
-from astaa_deft.orchestration.campaign.rows import Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow
+from astaa_deft.orchestration.journal.journal import Journal, open_existing
+from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, CaseStatus
+from astaa_deft.orchestration.journal.rows import Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow
 from astaa_deft.orchestration.campaign.standing import CONFIRMED, Standing, headline, most_severe, standings
 
 if TYPE_CHECKING:  # matplotlib is imported when the plots are drawn, not with the module
@@ -170,7 +170,7 @@ def _rel(path: object, out: Path) -> str | None:
         return str(path)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _Cases:
     """The journal's cases as the report counts them."""
 
@@ -184,8 +184,10 @@ class _Cases:
     def of(cls, rows: list[CaseRow]) -> _Cases:
         done = [r for r in rows if r.finished]
         mutated = [r for r in done if r.kind == MUTATED]
-        return cls(done, mutated, [r for r in mutated if r.verdict not in (Verdict.PASS, "?", None)],
-                   [r for r in done if r.status == CaseStatus.ERROR], len([r for r in done if r.kind == BASELINE]))
+        return cls(done=done, mutated=mutated,
+                   failing=[r for r in mutated if r.verdict not in (Verdict.PASS, "?", None)],
+                   errors=[r for r in done if r.status == CaseStatus.ERROR],
+                   clean=len([r for r in done if r.kind == BASELINE]))
 
 
 def render(journal: Journal, out: Path) -> str:
@@ -214,7 +216,7 @@ def render(journal: Journal, out: Path) -> str:
         plots=_plots(journal, cases.done, buckets))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _VerifiedRow:
     """A bucket's row of the verification table: where it stands now, its history, every check."""
 
@@ -228,8 +230,8 @@ class _VerifiedRow:
 
 def _verification(journal: Journal) -> list[_VerifiedRow]:
     """Each verified bucket's latest check and history (``astaa-deft verify``); none: the section is left out."""
-    from astaa_deft.orchestration.verify.history import histories
-    from astaa_deft.orchestration.verify.records import verifications
+    from astaa_deft.orchestration.journal.history import histories
+    from astaa_deft.orchestration.journal.verifications import verifications
 
     rows = verifications(journal)
     out = []
@@ -237,8 +239,9 @@ def _verification(journal: Journal) -> list[_VerifiedRow]:
         latest = seen.latest
         if latest is None:
             continue
-        out.append(_VerifiedRow(name, str(latest.status), latest.revision, latest.stability, seen.describe(),
-                                [f"{r.revision}: {r.status} ({r.stability})" for r in rows if r.bucket == name]))
+        out.append(_VerifiedRow(bucket=name, status=str(latest.status), revision=latest.revision,
+                                stability=latest.stability, history=seen.describe(),
+                                checks=[f"{r.revision}: {r.status} ({r.stability})" for r in rows if r.bucket == name]))
     return out
 
 
@@ -269,7 +272,7 @@ class _Link:
     tests: ModuleTestsRow | None = None  # for "tests": whether they fail on the defect
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _BucketRow:
     """A bucket's row of the buckets table, and its test case's XML (minimal, or the first failing one)."""
 
@@ -296,10 +299,16 @@ def _bucket_table(journal: Journal, out: Path, buckets: list[Bucket],
     for b in buckets:
         fails, runs = journal.rate(b)
         standing = by_bucket.get(b.bucket)
-        rows.append(_bucket_rows(b, standing=standing, first=journal.case(b.first_case),
-                                 m=minimised.get(b.bucket), checked=checked.get(b.bucket),
-                                 rate=f"{fails}/{runs}" if runs else "-", out=out,
-                                 not_minimised=not_minimised_why(b, standing, minimising)))
+        first, m = journal.case(b.first_case), minimised.get(b.bucket)
+        minimal_xml = m.minimal_xml if m is not None else None  # else the first failing test case's XML, if any
+        xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
+        rows.append(_BucketRow(
+            bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
+            colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
+            family=[] if b.without_mutation else str(b.family).split("+"),
+            culprit=(m.culprit or m.status) if m is not None else None,
+            not_minimised=not_minimised_why(b, standing, minimising), rate=f"{fails}/{runs}" if runs else "-",
+            links=_links(first, m, checked.get(b.bucket), out), xml=str(xml), minimal=bool(minimal_xml)))
     return rows
 
 
@@ -313,19 +322,6 @@ def not_minimised_why(bucket: Bucket, standing: Standing | None, minimising: boo
         status = standing.status if standing is not None else bucket.kind
         return f"only reproduced buckets are minimised, and this one is {status}"
     return "the campaign ended before its turn (astaa-deft fuzz --resume minimises it)"
-
-
-def _bucket_rows(b: Bucket, *, standing: Standing | None, first: CaseRow | None, m: MinimisationRow | None,
-                 checked: ModuleTestsRow | None, rate: str, out: Path, not_minimised: str) -> _BucketRow:
-    """A bucket's row, with its minimal (or first failing) test case's XML when there is one."""
-    minimal_xml = m.minimal_xml if m is not None else None
-    xml = minimal_xml or ((first.testcase_xml or "") if first is not None else "")
-    return _BucketRow(
-        bucket=b, standing=standing, confirmed=standing is not None and standing.status == CONFIRMED,
-        colour=VERDICT_COLOURS.get(b.verdict, "#a00"),
-        family=[] if b.without_mutation else str(b.family).split("+"),
-        culprit=(m.culprit or m.status) if m is not None else None, not_minimised=not_minimised,
-        rate=rate, links=_links(first, m, checked, out), xml=str(xml), minimal=bool(minimal_xml))
 
 
 def _blames(journal: Journal) -> list[_BlameRow]:
@@ -347,7 +343,7 @@ def _blames(journal: Journal) -> list[_BlameRow]:
     return rows
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _BlameRow:
     """A confirmed bucket's row of the blame table."""
 

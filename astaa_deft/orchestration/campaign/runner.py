@@ -16,7 +16,7 @@ import math
 from collections.abc import Mapping
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import zenoh
@@ -39,8 +39,8 @@ from astaa_deft.engine.monitor.verdict import IMPLICIT
 from astaa_deft.engine.session import RunOptions, RunResult, RunView, run_session
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.cost import RunCost
-from astaa_deft.orchestration.campaign.model import CaseOutcome, ChannelRate, Finding
-from astaa_deft.orchestration.campaign.payload import testcase_text
+from astaa_deft.orchestration.journal.model import CaseOutcome, ChannelRate, Finding
+from astaa_deft.orchestration.journal.model import testcase_text
 
 POLL_SECONDS = 0.05
 LOG_NAME = "run.mcap"
@@ -57,25 +57,38 @@ def isolated(spec: Spec) -> Spec:
     return replace(spec, zenoh=replace(spec.zenoh, endpoints=tuple(endpoints)))
 
 
-def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *, horizon: float,
-             dictionary: Dictionary | None = None, settle: float | None = None,
-             warm_recorder: ChildProcess | None = None, known: frozenset[str] = frozenset(),
-             shutdown_delays: Mapping[str, float] | None = None) -> CaseOutcome:
-    """One fresh run of the SUT with ``testcase`` (None: clean) for at most ``horizon`` seconds.
+@dataclass(frozen=True, kw_only=True)
+class CaseLimits:
+    """When a case's run ends.
 
-    A mutated run ends at its first broken invariant, except those in
-    ``known`` (known baseline findings: the campaign judges them after the
-    run); a clean run (``testcase`` None) never ends at a violation: it runs
-    to the scenario's end, so it measures how long the SUT is live, and its
+    ``horizon``: seconds at most. ``known``: known baseline findings — a
+    mutated run ends at its first broken invariant except these (the
+    campaign judges them after the run). ``settle``: a mutated run ends this
+    many seconds after its test case can mutate no more (its last window
+    closed or its last one-message policy acted) — what the SUT does with a
+    bad message shows within seconds, and a run's remaining minutes would be
+    spent for nothing; None: it does not. ``shutdown_delays``: per module
+    whose exit ends the run, the seconds its exit may come after its last
+    message (learned from the baseline; the run's end is dated at that
+    message when it does).
+    """
+
+    horizon: float
+    settle: float | None = None
+    known: frozenset[str] = frozenset()
+    shutdown_delays: Mapping[str, float] | None = None
+
+
+def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *, limits: CaseLimits,
+             dictionary: Dictionary | None = None, warm_recorder: ChildProcess | None = None) -> CaseOutcome:
+    """One fresh run of the SUT with ``testcase`` (None: clean), ending as ``limits`` say.
+
+    A clean run (``testcase`` None) never ends at a violation: it runs to
+    the scenario's end, so it measures how long the SUT is live, and its
     channels' timing (rates, longest gaps), and its memory.
-    ``settle``: a mutated run ends this many seconds after its test case can
-    mutate no more (its last window closed or its last one-message policy
-    acted) — what the SUT does with a bad message shows within seconds, and
-    a run's remaining minutes would be spent for nothing.
     ``warm_recorder``: a recorder started ahead (session.bus_run.warm_recorder) for this run to take.
-    ``shutdown_delays``: per module whose exit ends the run, the seconds its exit may come after its last
-    message (learned from the baseline; the run's end is dated at that message when it does). A clean run's
-    outcome carries what its own ending module took (``shutdowns``), the baseline learns from those.
+    A clean run's outcome carries what its own ending module took (``shutdowns``), the baseline learns from
+    those.
     Every outcome carries the run's CPU seconds and wall seconds (:mod:`.cost`).
     Never raises for a run that does not start or is not observed to its end: the outcome says "error".
     """
@@ -84,35 +97,35 @@ def run_case(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / LOG_NAME
     options = replace(_run_options(spec, testcase, params, run_dir, dictionary=dictionary,
-                                   warm_recorder=warm_recorder), time_limit=horizon,
-                      shutdown_delays=dict(shutdown_delays or {}))
-    watches = _Watches(spec, testcase, settle, known)
+                                   warm_recorder=warm_recorder), time_limit=limits.horizon,
+                      shutdown_delays=dict(limits.shutdown_delays or {}))
+    watches = _Watches(spec, testcase, limits.settle, limits.known)
     try:
         # A crash ends the run as the spec's on_crash says (run_session applies it), as for `proxy`.
         result = run_session(isolated(spec), options, on_start=watches.on_start, stop_when=watches.stop_when)
     except InputError as exc:
         cost.stop()
-        return CaseOutcome("error", "?", "the run did not start", error="; ".join(str(p) for p in exc.problems),
-                           cpu=cost.cpu, wall=cost.wall)
+        return CaseOutcome(status="error", verdict="?", summary="the run did not start",
+                           error="; ".join(str(p) for p in exc.problems), cpu=cost.cpu, wall=cost.wall)
     cost.stop()
     reason = {"time limit": "horizon", SETTLED: "settled", VIOLATION: "violation"}.get(result.end_reason,
                                                                                       result.end_reason)
     if result.verdict is None or not result.observed or not result.complete:  # not fully observed: no Pass
-        return CaseOutcome("error", "?", "the run was not observed to its end", seconds=result.seconds,
-                           log_path=str(log_path), reason=reason,
-                           error="no verdict" if result.verdict is None else "the log was not finished",
-                           cpu=cost.cpu, wall=cost.wall)
+        return CaseOutcome(status="error", verdict="?", summary="the run was not observed to its end",
+                           seconds=result.seconds, log_path=str(log_path), reason=reason,
+                           error="no verdict" if result.verdict is None else "the log was not finished", cpu=cost.cpu,
+                           wall=cost.wall)
     if result.unjudged and result.verdict.klass == Verdict.PASS:  # messages no monitor could read: no Pass
-        return CaseOutcome("error", "?", "not every message was judged", seconds=result.seconds,
+        return CaseOutcome(status="error", verdict="?", summary="not every message was judged", seconds=result.seconds,
                            log_path=str(log_path), reason=reason, error=result.unjudged, cpu=cost.cpu, wall=cost.wall)
     timing = watches.timing
-    return CaseOutcome("done", result.verdict.klass, result.verdict.summary, watches.findings(result),
-                       result.seconds, str(log_path), reason, result.mutations,
-                       margins=watches.margins.margins(result.violations),
-                       first_seen=timing.seconds() if timing is not None else {},
-                       cpu=cost.cpu, cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
-                       timing=timing.channels_timing() if timing is not None else {},
-                       violating=watches.violating(), shutdowns=result.shutdowns if testcase is None else {})
+    return CaseOutcome(status="done", verdict=result.verdict.klass, summary=result.verdict.summary,
+                       findings=watches.findings(result), seconds=result.seconds, log_path=str(log_path), reason=reason,
+                       mutations=result.mutations, margins=watches.margins.margins(result.violations),
+                       first_seen=timing.seconds() if timing is not None else {}, cpu=cost.cpu,
+                       cpu_waited=round(cost.waited, 3), wall=cost.wall, rss_mb=round(cost.rss_mb, 1),
+                       timing=timing.channels_timing() if timing is not None else {}, violating=watches.violating(),
+                       shutdowns=result.shutdowns if testcase is None else {})
 
 
 def _run_options(spec: Spec, testcase: TestCase | None, params: dict[str, str], run_dir: Path, *,
@@ -166,13 +179,15 @@ class _Watches:
 
     def findings(self, result: RunResult) -> list[Finding]:
         """The run's violations, and each crashed module no violation names (an implicit Abort)."""
-        found = [Finding(v.invariant, v.crash, v.module, v.channel, v.detail, at=self._at(v.time_ns),
-                         severity=v.severity, signature=violation_signature(v)) for v in result.violations]
+        found = [Finding(invariant=v.invariant, crash=v.crash, module=v.module, channel=v.channel, detail=v.detail,
+                         at=self._at(v.time_ns), severity=v.severity,
+                         signature=violation_signature(v)) for v in result.violations]
         for exit_ in result.crashes:
             if not any(f.module == exit_.module for f in found):
                 said = signature_of_output(exit_.stderr_tail.splitlines(), exit_.signal)
-                found.append(Finding(IMPLICIT, Verdict.ABORT, exit_.module, None, exit_.describe(),
-                                     at=self._at(exit_.time_ns), signature=said.text() if said else ""))
+                found.append(Finding(invariant=IMPLICIT, crash=Verdict.ABORT, module=exit_.module, channel=None,
+                                     detail=exit_.describe(), at=self._at(exit_.time_ns),
+                                     signature=said.text() if said else ""))
         return found
 
     def violating(self) -> dict[str, int]:

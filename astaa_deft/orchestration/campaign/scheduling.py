@@ -14,13 +14,13 @@ from pathlib import Path
 
 from astaa_deft.orchestration.campaign.baseline import learning_shutdown_delays
 from astaa_deft.orchestration.campaign.calibration import (
-    CEILING_LOAD_DROP, DRIFT_TOLERANCE, RunShare, drift, fewer_after_drift, overloaded, raised, run_share,
+    CEILING_LOAD_DROP, DRIFT_TOLERANCE, MachineNow, RunShare, drift, fewer_after_drift, overloaded, raised, run_share,
     workers_for,
 )
 from astaa_deft.orchestration.campaign.cost import available_memory_mb
 from astaa_deft.orchestration.campaign.payload import CasePayload, CasePool
-from astaa_deft.orchestration.campaign.rows import CaseRow
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.rows import CaseRow
+from astaa_deft.orchestration.journal.model import (
     BASELINE, CONTROL, MUTATED, RERUN, CaseOutcome, CaseStatus, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.parts import CampaignParts
@@ -131,8 +131,9 @@ class Scheduling(CampaignParts):
 
     def _submit(self, pool: CasePool, case: PlannedCase) -> None:
         horizon = self.clean_horizon if case.kind in (BASELINE, CONTROL) else self.horizon
-        payload = CasePayload(str(self.config.spec_path.resolve()), case, str(self.case_dir(case.case_id)),
-                              horizon, tuple(str(p.resolve()) for p in self.config.dictionaries),
+        payload = CasePayload(spec=str(self.config.spec_path.resolve()), case=case,
+                              run_dir=str(self.case_dir(case.case_id)), horizon=horizon,
+                              dictionaries=tuple(str(p.resolve()) for p in self.config.dictionaries),
                               settle=self.config.settle if case.kind in (MUTATED, RERUN) else None,
                               known=tuple(sorted(self.known)),
                               shutdown_delays=learning_shutdown_delays(self.spec) if case.kind == BASELINE
@@ -161,8 +162,8 @@ class Scheduling(CampaignParts):
         ours = self._busy() * share.cores
         if self._ceiling is not None and load1 - ours < self._ceiling_other - CEILING_LOAD_DROP:
             self._ceiling = None  # the machine has more room than when the timing drifted
-        more = raised(share, self.cores, available_memory_mb(), most=self._most_workers(), load1=load1, ours=ours,
-                      workers=self.workers, ceiling=self._ceiling)
+        machine = MachineNow(cores=self.cores, memory_mb=available_memory_mb(), load1=load1, ours=ours)
+        more = raised(share, machine, most=self._most_workers(), workers=self.workers, ceiling=self._ceiling)
         if more.workers > self.workers:
             self._concurrency(more.workers, f"{more.why}; no unmutated twin's timing drifted at {self.workers}")
 

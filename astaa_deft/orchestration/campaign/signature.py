@@ -21,7 +21,7 @@ from astaa_deft.engine.monitor.verdict import ORDER
 from astaa_deft.model.records import Verdict
 from astaa_deft.engine.monitor.violation import SEVERITIES
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     NO_MODULE, NO_MUTATION, UNKNOWN, BucketSignature, CaseOutcome, FailureKey, Finding,
 )
 from astaa_deft.orchestration.campaign.originals import broken_on_originals

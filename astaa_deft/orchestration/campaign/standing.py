@@ -22,11 +22,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from astaa_deft.engine.monitor.violation import SEVERITIES
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
-from astaa_deft.orchestration.campaign.journal import Bucket, Journal
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
+from astaa_deft.orchestration.journal.journal import Bucket, Journal
 from astaa_deft.model.vocabulary import TextEnum
-from astaa_deft.orchestration.campaign.model import BucketKind
-from astaa_deft.orchestration.campaign.rows import CaseRow
+from astaa_deft.orchestration.journal.model import BucketKind
+from astaa_deft.orchestration.journal.rows import CaseRow
 from astaa_deft.orchestration.campaign.signature import primary
 
 
@@ -51,7 +51,7 @@ PENDING = BucketStatus.PENDING
 STATUS_ORDER = tuple(BucketStatus)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Standing:
     """A bucket with its status, the evidence behind it, its severity and its rate."""
 
@@ -123,7 +123,8 @@ def standings(journal: Journal) -> list[Standing]:
         blame = blames.get(bucket.bucket)
         status, why = bucket_status(bucket, failures, runs, row is not None and row.exit_code == 0,
                                     fault_alone=blame is not None and blame.how == MUTATED_VALUE)
-        out.append(Standing(bucket, status, why, _severity(journal.case(bucket.first_case)), failures, runs))
+        out.append(Standing(bucket=bucket, status=status, why=why, severity=_severity(journal.case(bucket.first_case)),
+                            failures=failures, runs=runs))
     return rank(out)
 
 

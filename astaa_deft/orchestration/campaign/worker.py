@@ -34,9 +34,9 @@ from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.session.bus_run import release_warm_recorder, warm_recorder
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.orchestration.campaign.forked import fork_recorder
-from astaa_deft.orchestration.campaign.model import CaseOutcome
+from astaa_deft.orchestration.journal.model import CaseOutcome
 from astaa_deft.orchestration.campaign.payload import CaseMessage, CasePayload, OutcomeMessage
-from astaa_deft.orchestration.campaign.runner import run_case
+from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
 
 
 @dataclass(frozen=True)
@@ -80,10 +80,11 @@ def execute(payload: CasePayload, preloaded: Preloaded | None = None,
             dictionary = load_dictionary([Path(p) for p in payload.dictionaries])
         testcase = payload.testcase(spec, dictionary)
     except InputError as exc:
-        return CaseOutcome("error", "?", "bad input", error="; ".join(map(str, exc.problems)))
-    return run_case(spec, testcase, case.params, Path(payload.run_dir), horizon=payload.horizon,
-                    dictionary=dictionary, settle=payload.settle, warm_recorder=warm_recorder,
-                    known=frozenset(payload.known), shutdown_delays=payload.shutdown_delays)
+        return CaseOutcome(status="error", verdict="?", summary="bad input", error="; ".join(map(str, exc.problems)))
+    limits = CaseLimits(horizon=payload.horizon, settle=payload.settle, known=frozenset(payload.known),
+                        shutdown_delays=payload.shutdown_delays)
+    return run_case(spec, testcase, case.params, Path(payload.run_dir), limits=limits, dictionary=dictionary,
+                    warm_recorder=warm_recorder)
 
 
 def stop_worker_profiler() -> bool:

@@ -22,7 +22,7 @@ from pathlib import Path
 from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import subdir_inside
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.orchestration.verify.model import FAILING_STATUSES, VerifyStatus
+from astaa_deft.orchestration.journal.checks import FAILING_STATUSES, VerifyStatus
 from astaa_deft.orchestration.verify.revision import describe, git
 from astaa_deft.orchestration.verify.workflow import (
     CampaignFindings, VerifyOptions, check_options, check_params, targets, verify_targets, VERIFY_DIR, _slug,
@@ -61,7 +61,7 @@ def search(n: int, fails: Callable[[int], bool]) -> Search:
     return Search(hi if asked[hi] != reference else None, reference, asked)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BisectResult:
     bucket: str
     good: str
@@ -136,7 +136,7 @@ def bisect_bucket(options: VerifyOptions, good: str, bad: str, build: str | None
         found = search(len(after), fails)
     finally:
         git(checkout, "checkout", "--quiet", start, what=f"git checkout {start}")
-    return BisectResult(bucket, good, bad, revisions, found, names)
+    return BisectResult(bucket=bucket, good=good, bad=bad, revisions=revisions, found=found, names=names)
 
 
 def _build(command: str, checkout: Path, revision: str) -> None:

@@ -26,7 +26,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import BinaryIO
 
-from astaa_deft.analysis.deft.export import FRAMES, MANIFEST, PYTEST_INI, PYTEST_INI_TEXT
+from astaa_deft.analysis.deft.export import FRAMES, MANIFEST, PYTEST_INI, PYTEST_INI_TEXT, oracles_of
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.io.statefile import StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
@@ -86,7 +86,7 @@ def suite_manifest(suite: Path) -> dict[str, object]:
 def has_oracles(suite: Path) -> bool:
     """Whether the suite holds oracle tests (the replayed module breaks the bucket's invariant)."""
     try:
-        return bool(suite_manifest(suite).get("oracles"))
+        return bool(oracles_of(suite_manifest(suite)))
     except InputError:
         return False
 

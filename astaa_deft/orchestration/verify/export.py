@@ -31,7 +31,7 @@ from astaa_deft.engine.bus import process_launch
 from astaa_deft.io.output_place import OutputError, Place, ready_dir, subdir_inside, write_atomic, writing
 from astaa_deft.model.data_names import python_name
 from astaa_deft.model.errors import Problem
-from astaa_deft.orchestration.campaign.blame import MUTATED_VALUE
+from astaa_deft.orchestration.journal.rows import MUTATED_VALUE
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_SETTLE, culprit_family
 from astaa_deft.orchestration.campaign.standing import FAULT_ALONE_WHY
 from astaa_deft.orchestration.verify.regress import MANIFEST, MARKERS
@@ -55,7 +55,7 @@ class ExportReport:
     skipped: list[str]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SuiteCheck:
     """The exported suite run once on the stack the campaign ran (its params): each test must fail there."""
 
@@ -82,15 +82,16 @@ def check_suite(out: Path, selection: str = "module", timeout: float = 3600.0) -
     try:
         done = process_launch.run(args, timeout=timeout, cwd=str(out.resolve()))
     except subprocess.TimeoutExpired:
-        return SuiteCheck(selection, [], [], f"pytest did not finish in {timeout:.0f} s", errors=["(timeout)"])
+        return SuiteCheck(selection=selection, failed=[], passed=[], detail=f"pytest did not finish in {timeout:.0f} s",
+                          errors=["(timeout)"])
     lines = (done.stdout or "").splitlines()
     failed = [line.split()[1] for line in lines if line.startswith("FAILED ") and len(line.split()) > 1]
     passed = [line.split()[1] for line in lines if line.startswith("PASSED ") and len(line.split()) > 1]
     errors = [line.split()[1] for line in lines if line.startswith("ERROR ") and len(line.split()) > 1]
     if done.returncode not in (0, 1) and not errors:
         errors = [f"pytest exit {done.returncode}"]
-    return SuiteCheck(selection, failed, passed, (lines[-1] if lines else (done.stderr or "").strip())[:300],
-                      errors=errors)
+    return SuiteCheck(selection=selection, failed=failed, passed=passed,
+                      detail=(lines[-1] if lines else (done.stderr or "").strip())[:300], errors=errors)
 
 
 def export_suite(campaign_dir: Path, out: Path, *, spec: Path | None = None,

@@ -37,6 +37,13 @@ class RegressBucket:
     module: str | None  # the module its finding named (None: none)
     params: dict[str, str]  # the campaign's params it failed with
 
+    @classmethod
+    def from_manifest(cls, entry: StateReader) -> RegressBucket:
+        """The bucket from its entry in regress.json (InputError naming the field when one is damaged)."""
+        return cls(entry.get("testcase").string(), entry.get("invariant").string(),
+                   entry.get("module").text(optional=True),
+                   entry.get("params").map(lambda value: value.string()))
+
 
 @dataclass(frozen=True)
 class RegressSuite:
@@ -66,10 +73,7 @@ class RegressSuite:
 
     def bucket(self, name: str) -> RegressBucket:
         """Bucket ``name`` as the manifest lists it (InputError if it does not, or a field is damaged)."""
-        entry = self._read().get("buckets").obj().get(name).obj()
-        return RegressBucket(entry.get("testcase").string(), entry.get("invariant").string(),
-                             entry.get("module").text(optional=True),
-                             entry.get("params").map(lambda value: value.string()))
+        return RegressBucket.from_manifest(self._read().get("buckets").obj().get(name).obj())
 
     def setting(self, name: str) -> float:
         """A number the campaign ran with (``horizon``, ``settle``: seconds)."""
@@ -91,15 +95,15 @@ def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
     from astaa_deft.engine.spec.loader import load_spec
     from astaa_deft.orchestration.campaign import signature as sig
     from astaa_deft.orchestration.campaign.known import from_json as known_from_json, judged
-    from astaa_deft.orchestration.campaign.runner import run_case
-    from astaa_deft.orchestration.verify.model import FailureWay
+    from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
+    from astaa_deft.orchestration.journal.checks import FailureWay
 
     entry = suite.bucket(name)
     spec = load_spec(suite.spec_path())
     testcase = load_testcase(suite.directory / entry.testcase)
     known = known_from_json(suite.known())
-    outcome = run_case(spec, testcase, suite.params_of(name), run_dir,
-                       horizon=suite.setting("horizon"), settle=suite.setting("settle"), known=frozenset(known))
+    limits = CaseLimits(horizon=suite.setting("horizon"), settle=suite.setting("settle"), known=frozenset(known))
+    outcome = run_case(spec, testcase, suite.params_of(name), run_dir, limits=limits)
     if outcome.status != "done":
         raise AssertionError(f"{name}: the run was not observed to its end ({outcome.summary}: {outcome.error})"
                              f" — no verdict; log in {run_dir}")

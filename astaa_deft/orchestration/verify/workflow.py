@@ -5,8 +5,8 @@ failing test case) runs live N times beside N unmutated twins — the same
 spec, params (``--param`` overriding the case's, as in ``proxy``), horizon,
 settle time, known baseline findings and runs at once as the campaign's,
 through the campaign's own case pool — and its module tests run once with
-the same params. ``model.classify`` decides fixed / still failing / changed /
-flaky; each check goes into the journal (``records.py``) with the stack's
+the same params. ``journal.checks.classify`` decides fixed / still failing / changed /
+flaky; each check goes into the journal (``orchestration/journal/verifications.py``) with the stack's
 revision. Runs go to ``DIR/verify/<revision>-<time>/``.
 """
 
@@ -29,18 +29,18 @@ from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign import signature as sig
 from astaa_deft.orchestration.campaign.baseline import learned_shutdown_delays
 from astaa_deft.orchestration.campaign.campaign import DEFAULT_HORIZON, DEFAULT_SETTLE, default_workers
-from astaa_deft.orchestration.campaign.journal import Journal, open_existing
+from astaa_deft.orchestration.journal.journal import Journal, open_existing
 from astaa_deft.orchestration.campaign.journal_spec import journal_spec
 from astaa_deft.orchestration.campaign.known import KnownFinding, judged, known_findings
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, CONTROL, MUTATED, RERUN, CaseOutcome, CaseStatus, PlannedCase,
 )
 from astaa_deft.orchestration.campaign.module_tests import is_crash_bucket, run_module_tests
 from astaa_deft.orchestration.campaign.payload import CasePayload, read_testcase
-from astaa_deft.orchestration.campaign.rows import Bucket
-from astaa_deft.orchestration.verify import records
+from astaa_deft.orchestration.journal.rows import Bucket
+from astaa_deft.orchestration.journal import verifications
 from astaa_deft.orchestration.verify.campaign_files import copy_module_suite, tests_dir_inside
-from astaa_deft.orchestration.verify.model import (
+from astaa_deft.orchestration.journal.checks import (
     FAILING_STATUSES, BucketCheck, FailureWay, Tally, VerifyStatus, classify, failure_keys,
 )
 from astaa_deft.orchestration.verify.revision import describe
@@ -51,7 +51,7 @@ EXIT_NOT_OBSERVED = 3
 
 
 MAX_LABEL_CHARS = 200  # a revision label (--label, git describe): one line the report shows
-MAX_PARAM_CHARS = 10_000  # a --param value: what the journal's reader takes back (journal_rows.MAX_PARAM)
+MAX_PARAM_CHARS = 10_000  # a --param value: what the journal's reader takes back (checked_rows.MAX_PARAM)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,7 +68,7 @@ class VerifyOptions:
     settle: float = DEFAULT_SETTLE
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Target:
     """A bucket to verify: what runs, with which params, and its module tests."""
 
@@ -102,7 +102,7 @@ class VerifyReport:
         return 0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CampaignFindings:
     """What verify reads of a campaign: its journal, spec, known baseline findings and settings."""
 
@@ -128,9 +128,10 @@ class CampaignFindings:
             else:
                 spec_path, loaded = journal_spec(journal.path, meta.spec, trusted=trust_journal_spec,
                                                  command=command, why="live runs and module tests")
-            return cls(journal, spec_path, loaded, _known(journal), meta.horizon or DEFAULT_HORIZON,
-                       workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)),
-                       learned_shutdown_delays(_baseline_runs(journal)))
+            return cls(journal=journal, spec_path=spec_path, spec=loaded, known=_known(journal),
+                       horizon=meta.horizon or DEFAULT_HORIZON,
+                       workers=workers or meta.workers or _ran_at_once(journal) or default_workers(len(loaded.modules)),
+                       shutdown_delays=learned_shutdown_delays(_baseline_runs(journal)))
         except BaseException:
             journal.close()
             raise
@@ -201,7 +202,8 @@ def targets(campaign: CampaignFindings, names: tuple[str, ...],
                                      field=f"module_tests[{bucket.bucket}].tests_dir")
         else:
             tests = None
-        chosen.append(Target(bucket, xml, {**first.params, **params}, minimal, tests))
+        chosen.append(Target(bucket=bucket, testcase_xml=xml, params={**first.params, **params}, minimal=minimal,
+                             tests_dir=tests))
     return chosen, skipped
 
 
@@ -289,12 +291,14 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
             for k in range(1, runs + 1):
                 for rerun in (True, False):
                     case_id = f"{'r' if rerun else 't'}-{target.bucket.bucket}-{k}"
-                    case = PlannedCase(case_id, RERUN if rerun else CONTROL, n, 0, target.params,
-                                       testcases[target.bucket.bucket] if rerun else None, "verify",
+                    case = PlannedCase(case_id=case_id, kind=RERUN if rerun else CONTROL, number=n, seed=0,
+                                       params=target.params,
+                                       testcase=testcases[target.bucket.bucket] if rerun else None, strategy="verify",
                                        parent=target.bucket.bucket)
-                    payload = CasePayload(str(campaign.spec_path.resolve()), case,
-                                          str((out_dir / target.bucket.bucket / case_id).resolve()), campaign.horizon,
-                                          tuple(str(p.resolve()) for p in options.dictionaries),
+                    payload = CasePayload(spec=str(campaign.spec_path.resolve()), case=case,
+                                          run_dir=str((out_dir / target.bucket.bucket / case_id).resolve()),
+                                          horizon=campaign.horizon,
+                                          dictionaries=tuple(str(p.resolve()) for p in options.dictionaries),
                                           settle=options.settle if rerun else None, known=tuple(sorted(campaign.known)),
                                           shutdown_delays=dict(campaign.shutdown_delays))
                     payloads[case_id] = (target, rerun)
@@ -313,9 +317,10 @@ def verify_targets(campaign: CampaignFindings, chosen: list[Target], options: Ve
         background = frozenset().union(*(failure_keys(o) for o in twins))
         rerun_tally, twin_tally = Tally.of(reruns, target.way, background), Tally.of(twins, target.way)
         module, detail = _module_tests(campaign, target, out_dir, options.params)
-        check = BucketCheck(target.bucket.bucket, revision, classify(rerun_tally, twin_tally), rerun_tally,
-                            twin_tally, module, detail, target.params, target.minimal)
-        records.record(campaign.journal, check)
+        check = BucketCheck(bucket=target.bucket.bucket, revision=revision, status=classify(rerun_tally, twin_tally),
+                            reruns=rerun_tally, twins=twin_tally, module_tests=module, module_detail=detail,
+                            params=target.params, minimal=target.minimal)
+        verifications.record(campaign.journal, check)
         say(f"  {check.describe()}")
         checks.append(check)
     return checks

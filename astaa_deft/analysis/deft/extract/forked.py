@@ -111,7 +111,8 @@ def _walk(run: Run, start: Candidate, expected: Expected, until_ns: int) -> Outc
         index += 1
     step_s = time.process_time() - started
     if replayed is None:
-        return Comparison(math.inf, math.inf, 0, "no answer"), False, step_s, tuple(walked)
+        return Comparison(distance=math.inf, max_error=math.inf, points=0,
+                          how="no answer"), False, step_s, tuple(walked)
     return (*judged(cfg, replayed, expected), step_s, tuple(walked))
 
 

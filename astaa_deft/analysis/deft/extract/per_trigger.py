@@ -159,10 +159,11 @@ def _answer_trigger(module: _TriggerModule, options: Sequence[dict[str, int]], *
         t3 = time.perf_counter()
         result.planner_seconds += t3 - t2
         if error is not None:
-            cmp = Comparison(math.inf, math.inf, 0, "error")
+            cmp = Comparison(distance=math.inf, max_error=math.inf, points=0, how="error")
         elif replayed is None:
-            cmp = Comparison(0.0, 0.0, 0, "both empty") if nothing_plausible else Comparison(
-                math.inf, math.inf, 0, "one empty")
+            cmp = Comparison(distance=0.0, max_error=0.0, points=0,
+                             how="both empty") if nothing_plausible else Comparison(
+                distance=math.inf, max_error=math.inf, points=0, how="one empty")
         else:
             cmp = compare_outputs(cfg, replayed, expected)
         result.validation_seconds += time.perf_counter() - t3

@@ -48,7 +48,7 @@ def recorded_cycle_s(recorded: Recorded, index: int) -> float:
     return max(median, (outputs[index].log_time - outputs[index - 1].log_time) * 1e-9)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Recorded:
     """The replayed module's recorded traffic: its inputs (decoded on demand, once) and outputs, in log order."""
 

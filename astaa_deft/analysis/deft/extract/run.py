@@ -61,12 +61,12 @@ class Run:
         self.previous = dict(cand.choice)
         recorded, cfg = self.recorded, self.cfg
         for silent in cand.silent:  # cycles that published nothing, stepped first: in the suite for their state
-            self.result.frames.append(ExtractedFrame(
-                index=len(self.result.frames), output=None,
+            self.result.frames.append(ExtractedFrame(index=len(self.result.frames), output=None,
                 trigger_time=recorded.streams[cfg.trigger].times[silent[cfg.trigger]],
                 frame_time=recorded.streams[cfg.trigger].times[silent[cfg.trigger]],
                 inputs={name: recorded.messages[name][idx] for name, idx in silent.items()},
-                comparison=Comparison(0.0, 0.0, 0, "silent"), accepted=False, candidates_tried=0, exact=False))
+                comparison=Comparison(distance=0.0, max_error=0.0, points=0, how="silent"), accepted=False,
+                candidates_tried=0, exact=False))
         self.result.frames.append(ExtractedFrame(
             index=len(self.result.frames), output=recorded.outputs[out_index],
             trigger_time=recorded.streams[cfg.trigger].times[cand.choice[cfg.trigger]], frame_time=cand.frame_time,

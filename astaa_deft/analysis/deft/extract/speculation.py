@@ -31,7 +31,7 @@ def _word(received: object) -> Word:
 IN_TURN = 2  # a cheap output's candidates stepped in turn at most (then a forked search, with time limits)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Speculation:
     """The runner's shadow (a copy one output behind, see fork_replay.shadow), or in a shadow what it follows."""
 

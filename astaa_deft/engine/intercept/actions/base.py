@@ -188,7 +188,7 @@ class MessageInfo:
     previous_message: Callable[[], dict]  # the previous real message, decoded; raises NotApplicable
 
 
-@dataclass
+@dataclass(kw_only=True)
 class PolicyContext:
     """What an action's runtime gets to work with during one run."""
 

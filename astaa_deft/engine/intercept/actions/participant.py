@@ -63,7 +63,7 @@ class Waypoint:
     y: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ParticipantPose:
     x: float
     y: float
@@ -76,7 +76,7 @@ class ParticipantPose:
         return math.hypot(self.vx, self.vy)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ParticipantDetail(ActionDetail):
     shown: ClassVar[tuple[str, ...]] = ("participant", "x", "y")
     participant: int | None = None
@@ -87,7 +87,7 @@ class ParticipantDetail(ActionDetail):
 
 
 @ACTIONS.register_class
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Participant(ActionConfig):
     """A participant: id, kind, pose (x, y, heading), size, and a motion (static, or a timed path).
 
@@ -142,16 +142,16 @@ class Participant(ActionConfig):
         """Where it is at ``t``: held before its start and after its last waypoint, straight lines between."""
         points = self.waypoints()
         if self.static or t <= points[0].t:
-            return ParticipantPose(self.x, self.y, self._heading_leaving(0), 0.0, 0.0)
+            return ParticipantPose(x=self.x, y=self.y, heading=self._heading_leaving(0), vx=0.0, vy=0.0)
         for a, b in zip(points, points[1:], strict=False):
             if t < b.t:
                 u = (t - a.t) / (b.t - a.t)
                 dt = b.t - a.t
                 vx, vy = (b.x - a.x) / dt, (b.y - a.y) / dt
                 heading = math.atan2(vy, vx) if (vx or vy) else self.heading
-                return ParticipantPose(a.x + u * (b.x - a.x), a.y + u * (b.y - a.y), heading, vx, vy)
+                return ParticipantPose(x=a.x + u * (b.x - a.x), y=a.y + u * (b.y - a.y), heading=heading, vx=vx, vy=vy)
         last = points[-1]
-        return ParticipantPose(last.x, last.y, self._heading_leaving(len(points) - 2), 0.0, 0.0)
+        return ParticipantPose(x=last.x, y=last.y, heading=self._heading_leaving(len(points) - 2), vx=0.0, vy=0.0)
 
     def _heading_leaving(self, index: int) -> float:
         points = self.waypoints()
@@ -179,9 +179,10 @@ class Participant(ActionConfig):
                                f"waypoint times must increase: t={decimal_text(after)} after t={decimal_text(before)}",
                                "give each <at> a later t than the one before (and than the participant's t)",
                                attribute="t")
-        return cls(int(required(element, "id")), element.get("kind", "vehicle"), float(required(element, "x")),
-                   float(required(element, "y")), float(element.get("heading", "0")),
-                   float(element.get("length", "4.6")), float(element.get("width", "1.9")), start, path)
+        return cls(id=int(required(element, "id")), kind=element.get("kind", "vehicle"),
+                   x=float(required(element, "x")), y=float(required(element, "y")),
+                   heading=float(element.get("heading", "0")), length=float(element.get("length", "4.6")),
+                   width=float(element.get("width", "1.9")), t=start, path=path)
 
     def write_xml(self, element: etree._Element) -> None:
         from lxml import etree as _etree
@@ -244,7 +245,7 @@ class TrajectoryMapping:
     step: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ChannelMapping:
     channel: str
     array: FieldPath
@@ -286,7 +287,7 @@ def _read_mapping(spec: Spec, item: ParticipantMappingSection, where: str) -> Ch
             _field_type(spec, channel.type, FieldPath.parse(f"{array}[*].{t.array}[*].{field_name}"),
                         f"{where}.trajectory.{attr}")
         trajectory = TrajectoryMapping(t.array, point_fields, t.horizon, t.step)
-    return ChannelMapping(item.channel, array, stamp, fields, trajectory)
+    return ChannelMapping(channel=item.channel, array=array, stamp=stamp, fields=fields, trajectory=trajectory)
 
 
 def _path(text: Any, where: str) -> FieldPath:
@@ -352,11 +353,11 @@ class ParticipantRuntime(ActionRuntime):
         element = render(self.config, mapping, t)
         array.append(element)
         pose = self.config.pose_at(t)
-        detail = ParticipantDetail(self.config.id, round(pose.x, 3), round(pose.y, 3), t)
+        detail = ParticipantDetail(participant=self.config.id, x=round(pose.x, 3), y=round(pose.y, 3), at=t)
         item.events.append(self.context.event("participant", info, item.consumers, detail=detail.to_json()))
         return [item]
 
     def _skip(self, item: Pending, info: MessageInfo, why: str) -> list[Pending]:
         item.events.append(self.context.event("participant", info, item.consumers,
-                                              detail=ParticipantDetail(self.config.id, skipped=why).to_json()))
+            detail=ParticipantDetail(participant=self.config.id, skipped=why).to_json()))
         return [item]

@@ -241,7 +241,7 @@ def _json_literal(text: str) -> FieldValue:
 
 # ---------------------------------------------------------------- applying to messages
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FieldPlan:
     """One assignment on one channel, resolved once before the run."""
 
@@ -278,7 +278,8 @@ def plan_fields(assignments: Sequence[Assignment], channel: Channel, context: Po
             value = wire_value(value, site.field_type, codec)
             skip = codec.carries(value)
         direct = path.is_concrete and value is not DYNAMIC and type(value) not in (dict, list)
-        plans.append(FieldPlan(path, site, source, value, skip, str(path), direct))
+        plans.append(FieldPlan(path=path, site=site, source=source, value=value, skip=skip, text=str(path),
+                               direct=direct))
     return tuple(plans)
 
 
@@ -342,8 +343,8 @@ def _apply_dynamic(message: dict, plan: FieldPlan, info: MessageInfo, *,
     for where, old in matches:
         parent_segments = where.segments[:-1]
         container = get(message, FieldPath._trusted(parent_segments))[0][1] if parent_segments else message
-        context = ValueContext(plan.site, old, container, where.segments[-1],  # type: ignore[arg-type]
-                               partial(_previous_at, info, where))
+        context = ValueContext(site=plan.site, current=old, container=container, key=where.segments[-1],  # type: ignore[arg-type]
+                               previous=partial(_previous_at, info, where))
         try:
             value = wire_value(plan.source.resolve(context), plan.site.field_type, info.codec)  # type: ignore[union-attr]
             reason = info.codec.carries(value)

@@ -57,7 +57,7 @@ DYNAMIC: Final = _Dynamic.TOKEN
 Dynamic = Literal[_Dynamic.TOKEN]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Entry:
     """One named value: a literal (``value``) or a derive rule (``rule``)."""
 

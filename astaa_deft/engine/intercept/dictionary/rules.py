@@ -64,7 +64,7 @@ def field_site(types: Mapping[str, MessageType], type_name: str, path: PathLike)
     return FieldSite(field_type, types[parent_type.ref])
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ValueContext:
     """What a derive rule may look at when mutating one concrete place of a message."""
 

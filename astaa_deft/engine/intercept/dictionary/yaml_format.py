@@ -77,11 +77,11 @@ class DictionaryFile:
                 self.src.at(node, f"the int group takes whole numbers, not {describe_value(value)}",
                             "write an integer (e.g. -1), or {value: ...} to send another value on purpose")
                 value = _REPORTED
-            return value if value is _REPORTED else Entry(group, name, value=value, origin=origin)
+            return value if value is _REPORTED else Entry(group=group, name=name, value=value, origin=origin)
         keys = set(node.value)
         if keys == {"value"}:
             value = self.plain(node.value["value"])
-            return value if value is _REPORTED else Entry(group, name, value=value, origin=origin)
+            return value if value is _REPORTED else Entry(group=group, name=name, value=value, origin=origin)
         if keys == {"repeat", "times"}:
             return self.repeat(group, name, node, origin)
         if keys == {"derive"}:
@@ -104,7 +104,7 @@ class DictionaryFile:
             self.src.at(times, f"'times' must be an integer giving at most {_MAX_REPEAT} characters or bytes",
                         "e.g. times: 8192")
             return _REPORTED
-        return Entry(group, name, value=unit.value * times.value, origin=origin)
+        return Entry(group=group, name=name, value=unit.value * times.value, origin=origin)
 
     def derive(self, group: str, name: str, node: Node, origin: str) -> Entry | Reported:
         rule = RULES.get(node.value) if isinstance(node.value, str) else None
@@ -117,7 +117,7 @@ class DictionaryFile:
             self.src.at(node, f"rule '{rule.name}' does not apply to the {group} group",
                         f"it applies to {', '.join(sorted(rule.kinds))} fields")
             return _REPORTED
-        return Entry(group, name, rule=rule.name, origin=origin)
+        return Entry(group=group, name=name, rule=rule.name, origin=origin)
 
     def plain(self, node: Node) -> FieldValue | Reported:
         """The node's value if it is plain data a codec can hold, else _REPORTED."""

@@ -43,7 +43,7 @@ SUSTAINED_MESSAGES = (5, 50)  # … or this many messages in a row
 HEADER_BOOKKEEPING = frozenset({"stamp", "timestamp", "seq", "sequence", "frame_id"})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Target:
     """A field a family may mutate, with the dictionary values it would put there.
 
@@ -60,7 +60,7 @@ class Target:
 Targets = dict[str, list[Target]]  # by channel name
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Sources:
     """What families find their targets in: the spec, the dictionary, and the shared finds.
 
@@ -159,7 +159,7 @@ def every_consumed_field(sources: Sources) -> Targets:
     found: Targets = {}
     for channel, path, _field_type in consumed_fields(sources):
         site = field_site(sources.spec.types, channel.type, path)
-        found.setdefault(channel.name, []).append(Target(channel, path, site, ()))
+        found.setdefault(channel.name, []).append(Target(channel=channel, path=path, site=site, values=()))
     return found
 
 
@@ -178,7 +178,8 @@ def entry_targets(sources: Sources, keys_of_kind: dict[str, Sequence[str]],
         entries = [dictionary.get(key) for key in keys if key in dictionary]
         usable, _skipped = dictionary.usable(site, get_codec(channel.encoding), entries)
         if usable:
-            found.setdefault(channel.name, []).append(Target(channel, path, site, tuple(usable)))
+            found.setdefault(channel.name,
+                             []).append(Target(channel=channel, path=path, site=site, values=tuple(usable)))
     return found
 
 
@@ -214,8 +215,8 @@ class Span:
 def one_policy(testcase_id: str, rng: random.Random, channel: str, action: ActionConfig, *, span: Span,
                description: str) -> TestCase:
     """A test case of one policy on ``channel`` over ``span``."""
-    policy = Policy("p1", action, channels=(channel,), window=span.window(), selection=span.selection)
-    return TestCase(testcase_id, rng.getrandbits(32), description, (policy,))
+    policy = Policy(id="p1", action=action, channels=(channel,), window=span.window(), selection=span.selection)
+    return TestCase(id=testcase_id, seed=rng.getrandbits(32), description=description, policies=(policy,))
 
 
 def set_testcase(testcase_id: str, rng: random.Random, channel: str, assignments: tuple[Assignment, ...], *,

@@ -38,7 +38,8 @@ class Siblings(FaultFamily):
             if before is None or _kind_group(before[1]) != _kind_group(field_type.kind):
                 continue
             site = field_site(sources.spec.types, channel.type, before[0])
-            found.setdefault(channel.name, []).append(Target(channel, before[0], site, (), partner=path))
+            found.setdefault(channel.name,
+                             []).append(Target(channel=channel, path=before[0], site=site, values=(), partner=path))
         return found
 
     def draw(self, testcase_id: str, rng: random.Random, targets: Targets, scene: Scene) -> TestCase:

@@ -47,7 +47,7 @@ def stamp_targets(spec: Spec, dictionary: Dictionary) -> list[Target]:
             faults = sequence_faults if field_type.kind in INT_KINDS else stamp_faults
             usable, _skipped = dictionary.usable(site, codec, faults)
             if usable:
-                found.append(Target(channel, path, site, tuple(usable)))
+                found.append(Target(channel=channel, path=path, site=site, values=tuple(usable)))
         targets.extend(sorted(found, key=lambda t: t.site.field_type.kind in INT_KINDS))  # stable: spec order
     return targets
 

@@ -32,7 +32,7 @@ class Selection:
     limit: int | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Policy:
     id: str
     action: ActionConfig
@@ -49,7 +49,7 @@ class Policy:
         return tuple(c for c in spec.channels if c.name in self.channels)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TestCase:
     __test__ = False  # not a pytest test class
 

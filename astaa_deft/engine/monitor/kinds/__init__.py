@@ -18,7 +18,7 @@ from astaa_deft.engine.monitor.base import Invariant
 from astaa_deft.model.registry import Registry
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Kind:
     """One invariant kind: its YAML keys, the reader of its entry and the maker of its monitor."""
 
@@ -34,7 +34,8 @@ class Kind:
                  parse: Callable, monitor: Callable) -> Kind:
         """Register the kind whose invariants are ``invariant_type`` (its ``kind`` is the name)."""
         name = invariant_type.kind
-        return KINDS.register(name, cls(name, keys, required, parse, monitor, invariant_type))
+        return KINDS.register(name,
+            cls(name=name, keys=keys, required=required, parse=parse, monitor=monitor, invariant_type=invariant_type))
 
 
 KINDS: Registry[Kind] = Registry("monitor kind", __name__)

@@ -44,7 +44,7 @@ DEFAULT_PERIOD = Fraction(1, 10)
 MIN_PERIOD, MAX_PERIOD = 0.001, 60.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Signal:
     name: str
     channel: str
@@ -142,12 +142,13 @@ def _signal(reader: InvariantReader, name: str, node: Node) -> Signal | None:
             reader.problem(v["field"], f"{what} reads one value; [*] is not allowed", "use an index, e.g. [0]")
             return None
         segments = path.segments
-        return Signal(name, channel.name, str(path), declared.kind == "bool",
-                      lambda message: follow(message, segments))
+        return Signal(name=name, channel=channel.name, source=str(path), is_bool=declared.kind == "bool",
+                      read=lambda message: follow(message, segments))
     compiled = reader.expression(v["expr"], channel.type, f"the expr of {what}", want=("number", "bool"))
     if compiled is None:
         return None
-    return Signal(name, channel.name, compiled.text, compiled.type.kind == "bool", compiled.evaluate)
+    return Signal(name=name, channel=channel.name, source=compiled.text, is_bool=compiled.type.kind == "bool",
+                  read=compiled.evaluate)
 
 
 def _signal_value(raw: Any, is_bool: bool) -> float | None:

@@ -16,8 +16,8 @@ from typing import ClassVar
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase, Timing
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome, PlannedCase, Timing
 from astaa_deft.model.registry import Registry
 
 

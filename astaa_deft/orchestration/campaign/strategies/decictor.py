@@ -29,8 +29,8 @@ from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Policy, TestCase
 from astaa_deft.model.records import Verdict
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome, Finding
-from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.journal.model import CaseOutcome, Finding
+from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy
 
 INVARIANT = "path_consistency"
@@ -49,10 +49,10 @@ def area_around(seed: RunObservation, lanes: tuple[Lane, ...]) -> Area:
 
 
 def scene_testcase(scene: Scene, case_id: str, seed: int, channel: str) -> TestCase:
-    policies = tuple(Policy(f"p{k + 1}", p, channels=(channel,)) for k, p in enumerate(scene.participants))
+    policies = tuple(Policy(id=f"p{k + 1}", action=p, channels=(channel,)) for k, p in enumerate(scene.participants))
     described = ", ".join(f"{p.kind} {p.id} at ({p.x:g}, {p.y:g})" + (" moving" if p.path else "")
                           for p in scene.participants) or "no participant (the seed)"
-    return TestCase(case_id, seed, f"decictor ({scene.operator}): {described}", policies)
+    return TestCase(id=case_id, seed=seed, description=f"decictor ({scene.operator}): {described}", policies=policies)
 
 
 def scene_of(testcase: TestCase) -> Scene:
@@ -132,7 +132,8 @@ class DecictorStrategy(Strategy):
         if not verdict.non_optimal:
             return outcome
         module = self.spec.planner.module if self.spec.planner is not None else None
-        finding = Finding(INVARIANT, CRASH, module, self.config.participants.channel, verdict.reason)
+        finding = Finding(invariant=INVARIANT, crash=CRASH, module=module, channel=self.config.participants.channel,
+                          detail=verdict.reason)
         verdict_class = CRASH if outcome.verdict == Verdict.PASS else outcome.verdict
         return replace(outcome, verdict=verdict_class, findings=[finding, *outcome.findings],
                        summary=f"{verdict.reason}; {outcome.summary}")

@@ -30,8 +30,8 @@ from astaa_deft.model.errors import InputError
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.analysis.decictor.search import Scene
 from astaa_deft.engine.intercept.actions.participant import Participant
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.rows import CaseRow, Minimisation
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.rows import CaseRow, Minimisation
 from astaa_deft.orchestration.campaign.payload import read_testcase
 from astaa_deft.orchestration.campaign.strategies.decictor import INVARIANT, scene_of
 
@@ -83,9 +83,10 @@ def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spe
         assert testcase is not None  # skipped above when the row holds none
         scene = scene_of(testcase)
         culprit = ", ".join(f"{p.kind} {p.id}" for p in scene.participants)
-        journal.minimised(Minimisation(bucket.bucket, status, 1 if status.endswith("(fail)") else 0,
-                                       row.testcase_xml, culprit, None, str(tests_dir), time.monotonic() - started,
-                                       detail))
+        journal.minimised(Minimisation(bucket=bucket.bucket, status=status,
+                                       exit_code=1 if status.endswith("(fail)") else 0, minimal_xml=row.testcase_xml,
+                                       culprit=culprit, out_dir=None, tests_dir=str(tests_dir),
+                                       seconds=time.monotonic() - started, detail=detail))
         say(f"  {status}: {detail[:160]}")
         sections.append(_section(strategy, bucket.bucket, row, log, scene=scene))
     page = out / PAGE

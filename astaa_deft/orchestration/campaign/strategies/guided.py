@@ -30,7 +30,7 @@ from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.dictionary import Dictionary
 from astaa_deft.engine.intercept.testcase import Selection, TestCase
 from astaa_deft.model.sut import Spec
-from astaa_deft.orchestration.campaign.model import CaseOutcome, PlannedCase
+from astaa_deft.orchestration.journal.model import CaseOutcome, PlannedCase
 from astaa_deft.orchestration.campaign.strategies.base import STRATEGIES, Proposal, Strategy, Timing
 from astaa_deft.orchestration.campaign.strategies.random import RandomStrategy
 
@@ -146,5 +146,6 @@ class GuidedStrategy(Strategy):
             end = round(start + rng.uniform(1.0, 5.0), 1)
             policies[index] = replace(policy, window=replace(policy.window, start=start, end=end),
                                       selection=rng.choice([Selection(), Selection(every=rng.choice([2, 5]))]))
-        return TestCase(f"tc-{number:06d}", rng.getrandbits(32), f"guided ({operator}) from {parent.id}: "
-                        + parent.description, tuple(policies))
+        return TestCase(id=f"tc-{number:06d}", seed=rng.getrandbits(32),
+                        description=f"guided ({operator}) from {parent.id}: "
++ parent.description, policies=tuple(policies))

@@ -40,9 +40,7 @@ class RandomStrategy(Strategy):
     name = "random"
 
     def __init__(self, spec: Spec, dictionary: Dictionary, seed: int, duration: float) -> None:
-        self.targets = gen.FaultTargets.of(spec, dictionary)  # InputError: nothing to mutate
-        self.by_channel = self.targets.by_family["single"]
-        self.stamps = self.targets.by_family.get("stamp", {})
+        self._target(gen.FaultTargets.of(spec, dictionary))  # InputError: nothing to mutate
         self.seed = seed
         self.timing = Timing(None, duration)
         self._rounds: dict[int, list[gen.Probe]] = {}
@@ -53,11 +51,16 @@ class RandomStrategy(Strategy):
 
     def leave_out(self, fields: Collection[tuple[str, str]]) -> int:
         """Fields no module reads leave every family's targets (a channel left with none leaves the family)."""
-        self.targets, left = gen.without_fields(self.targets, fields)
-        self.by_channel = self.targets.by_family["single"]
-        self.stamps = self.targets.by_family.get("stamp", {})
+        targets, left = gen.without_fields(self.targets, fields)
+        self._target(targets)
         self._rounds.clear()
         return left
+
+    def _target(self, targets: gen.FaultTargets) -> None:
+        """Draw from ``targets``: one-field faults by channel, and the stamp faults (none: the spec has none)."""
+        self.targets = targets
+        self.by_channel = targets.by_family["single"]
+        self.stamps = targets.by_family.get("stamp", {})
 
     @property
     def round_length(self) -> int:

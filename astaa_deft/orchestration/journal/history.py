@@ -12,11 +12,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from astaa_deft.orchestration.verify.model import FAILING_STATUSES, VerifyStatus
-from astaa_deft.orchestration.verify.records import VerificationRow
+from astaa_deft.orchestration.journal.checks import FAILING_STATUSES, VerifyStatus
+from astaa_deft.orchestration.journal.verifications import VerificationRow
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BucketHistory:
     bucket: str
     latest: VerificationRow | None  # the newest check (None: never verified)
@@ -61,7 +61,8 @@ def history(bucket: str, rows: Sequence[VerificationRow]) -> BucketHistory:
                 reopened.append(row.revision)
             fixed_on, was_fixed = None, False
     latest = next((r for r in reversed(rows) if r.bucket == bucket), None)
-    return BucketHistory(bucket, latest, tuple(failing), fixed_on, tuple(reopened))
+    return BucketHistory(bucket=bucket, latest=latest, failing_on=tuple(failing), fixed_on=fixed_on,
+                         reopened_on=tuple(reopened))
 
 
 def histories(rows: Sequence[VerificationRow]) -> dict[str, BucketHistory]:

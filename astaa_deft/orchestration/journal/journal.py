@@ -19,16 +19,16 @@ from pathlib import Path
 
 from astaa_deft.io.output_place import OutputError, link_refusal
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BASELINE, BASELINE_FINDING, BUG, CONTROL, RERUN, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus,
     FailureKey, PlannedCase,
 )
-from astaa_deft.orchestration.campaign.journal_rows import (
+from astaa_deft.orchestration.journal.checked_rows import (
     FIX, MAX_BUCKETS, blame_row, bucket_row, case_row, check_columns, meta_of, minimisation_row, module_tests_row,
     note_row,
 )
-from astaa_deft.orchestration.campaign.payload import testcase_text
-from astaa_deft.orchestration.campaign.rows import (
+from astaa_deft.orchestration.journal.model import testcase_text
+from astaa_deft.orchestration.journal.rows import (
     BlameRow, Bucket, CampaignMeta, CaseRow, Minimisation, MinimisationRow, ModuleTestsRow, NewBucket, NoteRow,
 )
 

@@ -105,7 +105,7 @@ class Timing:
     live: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlannedCase:
     """One run to make: everything a worker needs, nothing it must look up."""
 
@@ -119,7 +119,7 @@ class PlannedCase:
     parent: str | None = None  # guided: the corpus case this one mutates
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Finding:
     """One failure seen in a run: an invariant that broke or a module that died."""
 
@@ -142,7 +142,7 @@ class ChannelRate:
     max_gap: float
 
 
-@dataclass
+@dataclass(kw_only=True)
 class CaseOutcome:
     """What one run of a case gave (JSON-able: it crosses process and machine boundaries)."""
 
@@ -198,3 +198,8 @@ class CaseOutcome:
         klass = next(c for c in ORDER if any(f.crash == c for f in kept) or c is Verdict.PASS)
         return replace(self, verdict=klass if klass is not Verdict.PASS else self.verdict, findings=kept,
                        summary=self.summary + note)
+
+
+def testcase_text(testcase: TestCase | None) -> str | None:
+    """A test case's stored form (the journal's column, the payload's key); None for a clean run."""
+    return testcase.to_xml().decode() if testcase is not None else None

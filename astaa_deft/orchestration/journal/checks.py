@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from astaa_deft.model.vocabulary import TextEnum
-from astaa_deft.orchestration.campaign.model import NO_MODULE, CaseOutcome
+from astaa_deft.orchestration.journal.model import NO_MODULE, CaseOutcome
 
 
 class VerifyStatus(TextEnum):
@@ -54,7 +54,7 @@ class FailureWay:
                                       for f in outcome.findings)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Tally:
     """Runs of one kind (re-runs of the test case, or unmutated twins) and how they ended."""
 
@@ -71,8 +71,9 @@ class Tally:
         unmutated twins broke too: the machine's load, the stack's own flakiness) is not counted as failing."""
         same = [o for o in outcomes if way.shown_by(o)]
         other = [o for o in outcomes if o.failed and not way.shown_by(o) and not failure_keys(o) <= background]
-        return cls(len(outcomes), len(same), len(other), sum(1 for o in outcomes if o.status != "done"),
-                   other[0].summary[:200] if other else "")
+        return cls(runs=len(outcomes), same=len(same), other=len(other),
+                   unobserved=sum(1 for o in outcomes if o.status != "done"),
+                   other_how=other[0].summary[:200] if other else "")
 
 
 def failure_keys(outcome: CaseOutcome) -> frozenset[tuple[str, str]]:
@@ -94,7 +95,7 @@ def classify(reruns: Tally, twins: Tally) -> VerifyStatus:
     return VerifyStatus.FIXED
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BucketCheck:
     """One bucket verified against one revision of the stack."""
 

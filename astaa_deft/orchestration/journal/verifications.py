@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 from astaa_deft.io.output_place import OutputError
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.orchestration.campaign.journal import Journal
-from astaa_deft.orchestration.campaign.journal_rows import VERIFICATIONS, checked_columns
-from astaa_deft.orchestration.verify.model import BucketCheck, VerifyStatus
+from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.journal.checked_rows import VERIFICATIONS, checked_columns
+from astaa_deft.orchestration.journal.checks import BucketCheck, VerifyStatus
 
 TABLE = """
 CREATE TABLE IF NOT EXISTS verifications (
@@ -29,7 +29,7 @@ CREATE TABLE IF NOT EXISTS verifications (
 """
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class VerificationRow:
     """One check of a bucket as the journal holds it."""
 
@@ -107,7 +107,8 @@ def verifications(journal: Journal) -> list[VerificationRow]:
                                      f"verification of {r.text('bucket')[:60]} has an unknown status "
                                      f"'{r.text('status')[:60]}'",
                                      "open this journal with the astaa-deft version that wrote it")) from None
-        out.append(VerificationRow(r.text("bucket"), r.text("revision"), status, r.whole("failing"), r.whole("runs"),
-                                   r.whole("twin_failures"), r.whole("twins"), r.flag("module_tests"),
-                                   r.text("detail"), r.number("at")))
+        out.append(VerificationRow(bucket=r.text("bucket"), revision=r.text("revision"), status=status,
+                                   failing=r.whole("failing"), runs=r.whole("runs"),
+                                   twin_failures=r.whole("twin_failures"), twins=r.whole("twins"),
+                                   module_tests=r.flag("module_tests"), detail=r.text("detail"), at=r.number("at")))
     return out

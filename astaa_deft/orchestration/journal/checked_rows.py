@@ -29,8 +29,8 @@ from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.limits import MAX_PROCESSES, MAX_WINDOW_S
 from astaa_deft.model.json import JsonObject
 from astaa_deft.model.vocabulary import TextEnum
-from astaa_deft.orchestration.campaign.model import BucketKind, CaseKind, CaseOutcome, CaseStatus, Finding
-from astaa_deft.orchestration.campaign.rows import (
+from astaa_deft.orchestration.journal.model import BucketKind, CaseKind, CaseOutcome, CaseStatus, Finding
+from astaa_deft.orchestration.journal.rows import (
     BlameRow, Bucket, CampaignMeta, CaseRow, MinimisationRow, ModuleTestsRow, NoteRow,
 )
 

@@ -14,13 +14,25 @@ from typing import Any
 
 from astaa_deft.engine.intercept.testcase import TestCase
 from astaa_deft.model.json import JsonObject
-from astaa_deft.orchestration.campaign.blame import root_cause_of
-from astaa_deft.orchestration.campaign.model import (
+from astaa_deft.orchestration.journal.model import (
     BUG, BucketKind, BucketSignature, CaseKind, CaseOutcome, CaseStatus, PlannedCase, Timing,
 )
 
+# A blame's ``how`` when a plant carried the mutated value on (no module under test is to blame), and the root
+# cause such a blame names. Here, not in ``campaign/blame.py``: the journal's blame rows name it too.
+MUTATED_VALUE = "mutated value"
+THE_MUTATED_VALUE = "the mutated value itself"
 
-@dataclass(frozen=True)
+
+def root_cause_of(module: str | None, how: str) -> str | None:
+    """The root cause a blame names, as bucket identity and the user see it: the module to blame, "the mutated
+    value itself" when a plant carried the value on, None when nothing says."""
+    if module is not None:
+        return module
+    return THE_MUTATED_VALUE if how == MUTATED_VALUE else None
+
+
+@dataclass(frozen=True, kw_only=True)
 class CaseRow:
     """One case of the journal: what was planned, where it is, and what its run gave (once finished)."""
 
@@ -65,11 +77,11 @@ class CaseRow:
     def planned(self, testcase: TestCase | None) -> PlannedCase:
         """The case as it was planned (what a worker runs), with its test case read back from
         :attr:`testcase_xml` (``payload.read_testcase``: the row keeps the stored text)."""
-        return PlannedCase(self.case_id, self.kind, self.number, self.seed, self.params, testcase,
-                           self.strategy, self.parent)
+        return PlannedCase(case_id=self.case_id, kind=self.kind, number=self.number, seed=self.seed, params=self.params,
+                           testcase=testcase, strategy=self.strategy, parent=self.parent)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class NewBucket:
     """A bucket as the campaign opens it, on the failure of ``first_case`` (after ``after_cases`` cases)."""
 
@@ -84,7 +96,7 @@ class NewBucket:
     kind: BucketKind = BUG
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Bucket:
     """A bucket as the journal holds it: its failure, its counts, and what the campaign made of it."""
 
@@ -116,7 +128,7 @@ class Bucket:
         return self.kind == BUG
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Minimisation:
     """What minimising a bucket gave (``status``: "minimised", "not reproduced", "error", "running", or a
     strategy's own, e.g. decictor's "module tests (fail)")."""
@@ -132,7 +144,7 @@ class Minimisation:
     detail: str | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MinimisationRow(Minimisation):
     """A minimisation as the journal holds it: with when it started and ended."""
 
@@ -159,7 +171,7 @@ class NoteRow:
     text: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CampaignMeta:
     """The campaign's settings and calibration as the journal keeps them (None: not stored yet)."""
 
@@ -186,7 +198,7 @@ class CampaignMeta:
         return cls(**known, timing=Timing(**timing) if timing else None, overloaded_runs=tuple(runs or ()))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BlameRow:
     """A confirmed bucket's module to blame (``blame.Blame``) and its root-cause identity (None: none)."""
 
