@@ -250,9 +250,16 @@ class ModuleLevel(CampaignParts):
         from astaa_deft.analysis.deft.idle_cores import idle_cores
 
         seconds = self._module_level_seconds()
-        cores = idle_cores()  # the live pool waits meanwhile: what is idle now is the search's
+        if self._on_cluster():
+            from astaa_deft.orchestration.campaign.module_level_cluster import cluster_cores
+
+            cores = cluster_cores(str(self.config.cluster))
+            where = f"{cores} worker(s) of the cluster at {self.config.cluster}"
+        else:
+            cores = idle_cores()  # the live pool waits meanwhile: what is idle now is the search's
+            where = f"{cores} idle core(s) of {self.cores}"
         self.say(f"module level: replaying {', '.join(e.module for e in entries)} on their frames from"
-                 f" {log_path.name} ({seconds:.0f} s, {cores} idle core(s) of {self.cores})")
+                 f" {log_path.name} ({seconds:.0f} s, {where})")
         planned = [r.planned_at for r in self.journal.cases() if r.planned_at]
         began = time.time() - min(planned) if planned else 0.0
         state = _with(self._search(entries, skipped, log_path, seconds=seconds, cores=cores), started_after=began)
@@ -306,40 +313,33 @@ class ModuleLevel(CampaignParts):
         start, end, _first = self._window(log_path)
         per_module = max(1, cores // len(entries))  # every module at least one worker
         deadline = time.time() + seconds
-        workers = []
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        started = time.monotonic()
+        jobs = []
         for number, entry in enumerate(entries):
             for part in range(per_module):
                 name = _worker_name(number, part)  # the folder's own names: never a module name from the spec
-                job = {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
-                       "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
-                       "seed": self.config.seed, "window": [start, end], "part": part, "parts": per_module,
-                       "settle": self.config.settle,
-                       "deadline": deadline, "results": str(folder / f"{name}.jsonl"),
-                       "reads": str(folder / f"m{number}-reads.json") if part == 0 else None}
+                jobs.append((name, {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
+                                    "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
+                                    "seed": self.config.seed, "window": [start, end], "part": part,
+                                    "parts": per_module, "settle": self.config.settle, "deadline": deadline,
+                                    "results": str(folder / f"{name}.jsonl"),
+                                    "reads": str(folder / f"m{number}-reads.json") if part == 0 else None}))
                 (folder / f"{name}.jsonl").unlink(missing_ok=True)
-                job_path = folder / f"{name}.job.json"
-                job_path.write_text(json.dumps(job), encoding="utf-8")
-                with open(folder / f"{name}.log", "wb") as log:
-                    workers.append(process_launch.start(
-                        [*python_module("astaa_deft.orchestration.campaign.module_level_worker"), str(job_path)],
-                        stdout=log, stderr=subprocess.STDOUT))
-        try:
-            for worker in workers:
-                try:
-                    worker.wait(timeout=max(1.0, deadline + WORKER_GRACE - time.time()))
-                except subprocess.TimeoutExpired:
-                    stop_process(worker, grace=2.0)
-        finally:
-            for worker in workers:
-                if worker.poll() is None:
-                    stop_process(worker, grace=0.0)
+        started = time.monotonic()
+        if self._on_cluster():
+            from astaa_deft.orchestration.campaign.module_level_cluster import run_on_cluster
+
+            cpu = run_on_cluster(str(self.config.cluster), jobs, log_path=log_path, folder=folder,
+                                 deadline=deadline, grace=WORKER_GRACE)
+        else:
+            cpu = _run_locally(jobs, folder=folder, deadline=deadline)
         wall = time.monotonic() - started
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
         return self._collect(entries, skipped, folder=folder, log_path=log_path, per_module=per_module,
-                             cpu=cpu or wall * len(workers), wall=wall)
+                             cpu=cpu or wall * len(jobs), wall=wall)
+
+    def _on_cluster(self) -> bool:
+        """Module-level workers go to the Dask cluster of ``--cluster tcp://…``; with ``local:K`` (this machine's
+        processes anyway) they run as local processes of their own, K at once."""
+        return bool(self.config.cluster) and not str(self.config.cluster).startswith("local:")
 
     def _collect(self, entries: Sequence, skipped: list[str], *, folder: Path, log_path: Path, per_module: int,
                  cpu: float, wall: float) -> ModuleLevelState:
@@ -443,6 +443,32 @@ class ModuleLevel(CampaignParts):
                     f" ({left} generation target(s)): {shown}")
             self.journal.note("module-level", line)
             self.say(f"module level: {line}")
+
+
+def _run_locally(jobs: Sequence[tuple[str, Mapping[str, object]]], *, folder: Path, deadline: float) -> float:
+    """Each job in a worker process of its own on this machine, until the deadline (and its grace); their CPU
+    seconds. Every worker is stopped on the way out, an interrupt included."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    workers = []
+    try:
+        for name, job in jobs:
+            job_path = folder / f"{name}.job.json"
+            job_path.write_text(json.dumps(job), encoding="utf-8")
+            with open(folder / f"{name}.log", "wb") as log:
+                workers.append(process_launch.start(
+                    [*python_module("astaa_deft.orchestration.campaign.module_level_worker"), str(job_path)],
+                    stdout=log, stderr=subprocess.STDOUT))
+        for worker in workers:
+            try:
+                worker.wait(timeout=max(1.0, deadline + WORKER_GRACE - time.time()))
+            except subprocess.TimeoutExpired:
+                stop_process(worker, grace=2.0)
+    finally:
+        for worker in workers:
+            if worker.poll() is None:
+                stop_process(worker, grace=0.0)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def _worker_name(module_number: int, part: int) -> str:
