@@ -35,7 +35,7 @@ import resource
 import subprocess
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from astaa_deft.analysis.deft.module_search import ModuleVerdict
@@ -51,16 +51,15 @@ from astaa_deft.engine.intercept.actions.reorder import Reorder
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Window
 from astaa_deft.io.log.reader import read_log
-from astaa_deft.io.output_place import write_atomic
-from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.module_level_state import (
+    DIR_NAME, ModuleFinding, ModuleLevelState, read_state, write_state,
+)
 from astaa_deft.orchestration.campaign.model import BASELINE, MUTATED, CaseStatus, PlannedCase
 from astaa_deft.orchestration.campaign.parts import CampaignParts
 from astaa_deft.orchestration.campaign.rows import CaseRow
 
-DIR_NAME = "module_level"
-STATE_FILE = "state.json"
 STRATEGY = "module-level"  # the journal's strategy of a module-level finding's live case
 CONFIRM_NUMBER_BASE = 1_000_000_000  # live cases of findings: numbered apart from the strategy's cases
 BUDGET_SHARE = 0.25  # of a --budget, the module-level search's time box
@@ -68,116 +67,8 @@ DEFAULT_SECONDS = 120.0  # its time box without a --budget
 MIN_SECONDS = 10.0
 MAX_CONFIRMATIONS = 24  # live cases planned for findings (one per bucket, the first found first)
 WORKER_GRACE = 30.0  # s past the deadline before a worker is stopped (a step in native code, the field probes)
-MAX_STATE_BYTES = 64 << 20
 LEAD_SECONDS = 0.02
 LIVE_SHARE = 0.8  # a live window opens this long before the message the fault hit arrived
-
-
-@dataclass(frozen=True, kw_only=True)
-class ModuleFinding:
-    """One bucket of the module-level search: its first fault's verdict, how many faults failed its way."""
-
-    name: str  # "M001"
-    verdict: ModuleVerdict
-    count: int
-    found_after: float  # s from the search's start
-    case_id: str | None = None  # its live case (None: not planned, the confirmations' cap reached)
-    tests: str | None = None  # its DeFT module test's folder, relative to the campaign directory
-    tests_fail: bool | None = None  # the test fails on the defect, as it should (None: not checked)
-
-    def to_json(self) -> JsonObject:
-        return {"name": self.name, "verdict": self.verdict.to_json(), "count": self.count,
-                "found_after": round(self.found_after, 3), "case_id": self.case_id, "tests": self.tests,
-                "tests_fail": self.tests_fail}
-
-    @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> ModuleFinding:
-        verdict, count, after = data["verdict"], data.get("count", 1), data.get("found_after", 0.0)
-        case_id, tests, fails = data.get("case_id"), data.get("tests"), data.get("tests_fail")
-        if not isinstance(verdict, Mapping):
-            raise ValueError("a finding's verdict is an object")
-        return cls(name=str(data["name"]), verdict=ModuleVerdict.from_json(verdict),
-                   count=count if isinstance(count, int) else 1,
-                   found_after=float(after) if isinstance(after, (int, float)) else 0.0,
-                   case_id=None if case_id is None else str(case_id), tests=None if tests is None else str(tests),
-                   tests_fail=fails if isinstance(fails, bool) else None)
-
-
-@dataclass(frozen=True, kw_only=True)
-class ModuleLevelState:
-    """What the module-level search did (``state.json``)."""
-
-    modules: tuple[str, ...] = ()  # the modules replayed
-    skipped: tuple[str, ...] = ()  # why a module of the spec was not (no factory, its setup failed)
-    log: str | None = None  # the clean baseline log the frames came from
-    cases: int = 0  # faults replayed
-    core_seconds: float = 0.0  # CPU of the workers
-    wall_seconds: float = 0.0
-    findings: tuple[ModuleFinding, ...] = ()
-    failing: int = 0  # faults whose replay failed (all buckets)
-    reads: tuple[FieldReads, ...] = ()
-    unread: tuple[tuple[str, str], ...] = ()  # fields live generation leaves out
-    per_module: Mapping[str, int] = field(default_factory=dict)  # faults replayed per module
-    started_after: float = 0.0  # s from the campaign's first planned case to the search's start
-
-    def to_json(self) -> JsonObject:
-        return {"version": 1, "modules": list(self.modules), "skipped": list(self.skipped), "log": self.log,
-                "cases": self.cases, "core_seconds": round(self.core_seconds, 3),
-                "wall_seconds": round(self.wall_seconds, 3), "failing": self.failing,
-                "findings": [f.to_json() for f in self.findings], "reads": [r.to_json() for r in self.reads],
-                "unread": [list(p) for p in self.unread], "per_module": dict(self.per_module),
-                "started_after": round(self.started_after, 3)}
-
-    @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> ModuleLevelState:
-        def strings(key: str) -> tuple[str, ...]:
-            value = data.get(key, [])
-            return tuple(str(v) for v in value) if isinstance(value, list) else ()
-
-        def number(key: str) -> float:
-            value = data.get(key, 0)
-            return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else 0.0
-
-        findings, reads, unread = data.get("findings", []), data.get("reads", []), data.get("unread", [])
-        per_module = data.get("per_module", {})
-        log = data.get("log")
-        return cls(modules=strings("modules"), skipped=strings("skipped"), log=None if log is None else str(log),
-                   cases=int(number("cases")), core_seconds=number("core_seconds"),
-                   wall_seconds=number("wall_seconds"), failing=int(number("failing")),
-                   findings=tuple(ModuleFinding.from_json(f) for f in findings if isinstance(f, Mapping))
-                   if isinstance(findings, list) else (),
-                   reads=tuple(FieldReads.from_json(r) for r in reads if isinstance(r, Mapping))
-                   if isinstance(reads, list) else (),
-                   unread=tuple((str(p[0]), str(p[1])) for p in unread if isinstance(p, list) and len(p) == 2)
-                   if isinstance(unread, list) else (),
-                   per_module={str(k): int(v) for k, v in per_module.items() if isinstance(v, int)}
-                   if isinstance(per_module, dict) else {}, started_after=number("started_after"))
-
-
-def state_path(out: Path) -> Path:
-    return out / DIR_NAME / STATE_FILE
-
-
-def read_state(out: Path) -> ModuleLevelState | None:
-    """The module-level search's state in campaign directory ``out`` (None: it did not run there)."""
-    from astaa_deft.io.statefile import load_json
-    from astaa_deft.model.errors import InputError, Problem
-
-    path = state_path(out)
-    if not path.is_file():
-        return None
-    fix = "move the module_level folder away (the campaign then searches at module level again), or give another" \
-          " campaign directory (-o)"
-    if path.is_symlink() or path.stat().st_size > MAX_STATE_BYTES:
-        raise InputError(Problem(str(path), None, None, "is a link or larger than the tool writes", fix))
-    data = load_json(path.read_bytes(), str(path), "state", fix, max_chars=MAX_STATE_BYTES)
-    try:
-        if not isinstance(data, Mapping):
-            raise ValueError("not an object")
-        return ModuleLevelState.from_json(data)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(Problem(str(path), None, None, f"is not the module-level search's state ({exc})",
-                                 fix)) from None
 
 
 def replayed_entries(spec: Spec) -> tuple[list, list[str]]:
@@ -227,8 +118,11 @@ class ModuleLevel(CampaignParts):
     def _module_level(self) -> None:
         out = self.config.out
         stored = read_state(out)
-        if stored is not None:  # resumed: searched already; its live cases are in the journal
+        if stored is not None and stored.complete:  # resumed: searched already; its live cases are in the journal
             self._leave_out(stored.unread, announce=False)
+            return
+        if stored is not None and stored.log is not None:  # interrupted after the search: finish what it decided
+            self._finish(stored, Path(stored.log), dict(stored.params))
             return
         if not self.config.module_level:
             return
@@ -264,10 +158,18 @@ class ModuleLevel(CampaignParts):
         began = time.time() - min(planned) if planned else 0.0
         state = _with(self._search(entries, skipped, log_path, seconds=seconds, cores=cores), started_after=began)
         unread = fields_nothing_reads({c.name: tuple(c.consumers) for c in self.spec.channels}, state.reads)
-        state = _with(state, unread=tuple(unread))
+        self._finish(_with(state, unread=tuple(unread), params=dict(params)), log_path, params)
+
+    def _finish(self, state: ModuleLevelState, log_path: Path, params: dict[str, str]) -> None:
+        """Plan the findings' live cases, write their module tests, say what the search found. The state is
+        written before each step and marked complete after the last, so an interrupt anywhere leaves the journal
+        and the state agreeing, and a resume does only what is left (a live case already planned is kept)."""
+        out = self.config.out
+        write_state(out, state)
         state = self._confirm(state, log_path, params)
-        state = self._write_module_tests(state, log_path)
-        write_atomic(state_path(out), json.dumps(state.to_json(), indent=1) + "\n")
+        write_state(out, state)
+        state = _with(self._write_module_tests(state, log_path), complete=True)
+        write_state(out, state)
         self._leave_out(state.unread, announce=True)
         for line in summary_lines(state, self.journal):
             self.journal.note("module-level", line)
@@ -376,6 +278,7 @@ class ModuleLevel(CampaignParts):
         log = read_log(log_path)
         _start, _end, first = self._window(log_path)
         origin = first if first is not None else 0
+        planned = {r.case_id for r in self.journal.cases(MUTATED)}
         confirmed = []
         for k, finding in enumerate(state.findings):
             if k >= MAX_CONFIRMATIONS:
@@ -389,6 +292,9 @@ class ModuleLevel(CampaignParts):
             case_id = f"m-{k + 1:04d}"
             description = (f"module-level {finding.name}: {fault.describe()} "
                            f"({finding.verdict.module}: {finding.verdict.signature})")
+            if case_id in planned:  # planned before an interrupt: the same finding, the same case
+                confirmed.append(_with_finding(finding, case_id=case_id))
+                continue
             testcase = live_testcase(fault, f"tc-{case_id}", seconds_after_anchor=(times[fault.index] - origin) / 1e9,
                                      anchor=self.timing.anchor, description=description)
             self._plan(PlannedCase(case_id, MUTATED, CONFIRM_NUMBER_BASE + k + 1, self.config.seed, dict(params),
