@@ -53,6 +53,7 @@ from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Wi
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.campaign.journal import Journal
+from astaa_deft.orchestration.campaign.level_split import LevelMeasure, Split, decide_split
 from astaa_deft.orchestration.campaign.module_level_state import (
     DIR_NAME, ModuleFinding, ModuleLevelState, read_state, write_state,
 )
@@ -62,9 +63,10 @@ from astaa_deft.orchestration.campaign.rows import CaseRow
 
 STRATEGY = "module-level"  # the journal's strategy of a module-level finding's live case
 CONFIRM_NUMBER_BASE = 1_000_000_000  # live cases of findings: numbered apart from the strategy's cases
-BUDGET_SHARE = 0.25  # of a --budget, the module-level search's time box
+PROBE_SHARE = 0.05  # of a --budget, the search's first round: what it measures decides the rest (level_split)
 DEFAULT_SECONDS = 120.0  # its time box without a --budget
 MIN_SECONDS = 10.0
+MIN_ROUND_SECONDS = 5.0  # a second round shorter than this is not started
 MAX_CONFIRMATIONS = 24  # live cases planned for findings (one per bucket, the first found first)
 WORKER_GRACE = 30.0  # s past the deadline before a worker is stopped (a step in native code, the field probes)
 LEAD_SECONDS = 0.02
@@ -176,12 +178,30 @@ class ModuleLevel(CampaignParts):
             self.say(f"module level: {line}")
 
     def _module_level_seconds(self) -> float:
+        """The first round's time box: the user's, else a probe of the budget (the split decides the rest after
+        it), else the default."""
         if self.config.module_level_seconds is not None:
             return self.config.module_level_seconds
         if self.config.budget is not None:
             left = self.config.budget - (time.monotonic() - self.started)
-            return max(MIN_SECONDS, min(BUDGET_SHARE * self.config.budget, left * BUDGET_SHARE * 2))
+            return max(MIN_SECONDS, min(PROBE_SHARE * self.config.budget, left / 2))
         return DEFAULT_SECONDS
+
+    def _split(self, state: ModuleLevelState) -> Split | None:
+        """The budget's split from the first round and the live runs so far (None: no --budget to split, or the
+        user gave the search's seconds)."""
+        if self.config.budget is None or self.config.module_level_seconds is not None:
+            return None
+        runs = [r for r in self.journal.cases() if r.finished and r.cpu and r.strategy != STRATEGY]
+        live_cases = [r for r in runs if r.kind == MUTATED]
+        live = live_figures(self.journal)
+        module = LevelMeasure(cases=state.cases, cost=state.core_seconds / max(1, state.cases),
+                              findings=len(state.findings))
+        # a live case's cost: its runs' so far (the baseline's clean runs before the hunt began)
+        cost = sum(r.cpu or 0.0 for r in runs) / len(runs) if runs else self.clean_horizon
+        return decide_split(module=module, live=LevelMeasure(cases=len(live_cases), cost=cost,
+                                                             findings=live.findings),
+                            budget=self.config.budget)
 
     def _clean_baseline_log(self) -> tuple[Path, dict[str, str]] | None:
         """A clean baseline run's log (its run failed nothing) and its params; the first such."""
@@ -214,29 +234,52 @@ class ModuleLevel(CampaignParts):
         folder.mkdir(parents=True, exist_ok=True)
         start, end, _first = self._window(log_path)
         per_module = max(1, cores // len(entries))  # every module at least one worker
-        deadline = time.time() + seconds
-        jobs = []
+        jobs: list[tuple[str, dict[str, object]]] = []
         for number, entry in enumerate(entries):
             for part in range(per_module):
                 name = _worker_name(number, part)  # the folder's own names: never a module name from the spec
                 jobs.append((name, {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
                                     "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
                                     "seed": self.config.seed, "window": [start, end], "part": part,
-                                    "parts": per_module, "settle": self.config.settle, "deadline": deadline,
+                                    "parts": per_module, "settle": self.config.settle, "after": -1,
                                     "results": str(folder / f"{name}.jsonl"),
                                     "reads": str(folder / f"m{number}-reads.json") if part == 0 else None}))
                 (folder / f"{name}.jsonl").unlink(missing_ok=True)
         started = time.monotonic()
+        cpu = self._round(jobs, log_path=log_path, folder=folder, seconds=seconds)
+
+        def collected() -> ModuleLevelState:
+            return self._collect(entries, skipped, folder=folder, log_path=log_path, per_module=per_module,
+                                 cpu=cpu or (time.monotonic() - started) * len(jobs), wall=time.monotonic() - started)
+
+        state = collected()
+        split = self._split(state)
+        if split is None:
+            return state
+        more = min(split.seconds - (time.monotonic() - started),
+                   self.config.budget - (time.monotonic() - self.started) - split.seconds)  # type: ignore[operator]
+        exhausted = all(_exhausted(folder / f"{name}.jsonl") for name, _job in jobs)
+        line = split.why + (": the plan is exhausted" if exhausted else
+                            f": {more:.0f} s more" if more >= MIN_ROUND_SECONDS else ": no second round")
+        self.journal.note("module-level", line)
+        self.say(f"module level: {line}")
+        if more >= MIN_ROUND_SECONDS and not exhausted:  # the plan goes on where each worker stopped
+            cpu += self._round([(name, {**job, "reads": None, "after": _last_done(folder / f"{name}.jsonl")})
+                                for name, job in jobs], log_path=log_path, folder=folder, seconds=more)
+            state = collected()
+        return _with(state, split=split)
+
+    def _round(self, jobs: list[tuple[str, dict[str, object]]], *, log_path: Path, folder: Path,
+               seconds: float) -> float:
+        """One round of the workers (results appended to each job's file); their CPU seconds."""
+        deadline = time.time() + seconds
+        jobs = [(name, {**job, "deadline": deadline}) for name, job in jobs]
         if self._on_cluster():
             from astaa_deft.orchestration.campaign.module_level_cluster import run_on_cluster
 
-            cpu = run_on_cluster(str(self.config.cluster), jobs, log_path=log_path, folder=folder,
-                                 deadline=deadline, grace=WORKER_GRACE)
-        else:
-            cpu = _run_locally(jobs, folder=folder, deadline=deadline)
-        wall = time.monotonic() - started
-        return self._collect(entries, skipped, folder=folder, log_path=log_path, per_module=per_module,
-                             cpu=cpu or wall * len(jobs), wall=wall)
+            return run_on_cluster(str(self.config.cluster), jobs, log_path=log_path, folder=folder,
+                                  deadline=deadline, grace=WORKER_GRACE)
+        return _run_locally(jobs, folder=folder, deadline=deadline)
 
     def _on_cluster(self) -> bool:
         """Module-level workers go to the Dask cluster of ``--cluster tcp://…``; with ``local:K`` (this machine's
@@ -375,6 +418,17 @@ def _run_locally(jobs: Sequence[tuple[str, Mapping[str, object]]], *, folder: Pa
                 stop_process(worker, grace=0.0)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def _last_done(path: Path) -> int:
+    """The last fault of the plan a worker's results file shows done (-1: none)."""
+    return max((int(line["n"]) for line in _lines(path) if "n" in line), default=-1)
+
+
+def _exhausted(path: Path) -> bool:
+    """Whether the worker went through its whole share of the plan (its last round ended before its deadline)."""
+    ends = [line for line in _lines(path) if "done" in line]
+    return bool(ends) and ends[-1]["exhausted"] is True
 
 
 def _worker_name(module_number: int, part: int) -> str:
@@ -519,6 +573,8 @@ def status_lines(out: Path, journal: Journal) -> list[str]:
         return []
     module, live = level_figures(state, journal)
     lines = [module.line(), live.line()]
+    if state.split is not None:
+        lines.append(f"split: {state.split.why}")
     if module.per_core_hour and live.per_core_hour:
         lines.append(f"module level runs {module.per_core_hour / live.per_core_hour:,.0f}× the live cases per"
                      f" core-hour")

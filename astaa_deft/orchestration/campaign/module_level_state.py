@@ -20,6 +20,7 @@ from astaa_deft.io.output_place import write_atomic
 from astaa_deft.io.statefile import MAX_NAME, StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
+from astaa_deft.orchestration.campaign.level_split import LevelMeasure, Split
 
 DIR_NAME = "module_level"
 STATE_FILE = "state.json"
@@ -65,6 +66,7 @@ class ModuleLevelState:
     started_after: float = 0.0  # s from the campaign's first planned case to the search's start
     params: Mapping[str, str] = field(default_factory=dict)  # the clean run's params (its findings' live cases')
     complete: bool = False  # its live cases planned and module tests written (else a resume finishes them)
+    split: Split | None = None  # the budget's split the first round's measurements decided (None: no --budget)
 
     def to_json(self) -> JsonObject:
         return {"version": 1, "modules": list(self.modules), "skipped": list(self.skipped), "log": self.log,
@@ -73,7 +75,7 @@ class ModuleLevelState:
                 "findings": [f.to_json() for f in self.findings], "reads": [r.to_json() for r in self.reads],
                 "unread": [list(p) for p in self.unread], "per_module": dict(self.per_module),
                 "started_after": round(self.started_after, 3), "params": dict(self.params),
-                "complete": self.complete}
+                "complete": self.complete, "split": None if self.split is None else self.split.to_json()}
 
 
 def state_path(out: Path) -> Path:
@@ -99,9 +101,9 @@ def read_state(out: Path) -> ModuleLevelState | None:
 
 def read_state_value(r: StateReader) -> ModuleLevelState:
     (version, modules, skipped, log, cases, core, wall, failing, findings, reads, unread, per_module, started,
-     params, complete) = r.fields("version", "modules", "skipped", "log", "cases", "core_seconds", "wall_seconds",
-                                  "failing", "findings", "reads", "unread", "per_module", "started_after", "params",
-                                  "complete")
+     params, complete, split) = r.fields("version", "modules", "skipped", "log", "cases", "core_seconds",
+                                         "wall_seconds", "failing", "findings", "reads", "unread", "per_module",
+                                         "started_after", "params", "complete", "split")
     version.whole(1, 1)
     return ModuleLevelState(
         modules=tuple(_names(modules)), skipped=tuple(_texts(skipped)), log=log.text(optional=True),
@@ -110,7 +112,19 @@ def read_state_value(r: StateReader) -> ModuleLevelState:
         unread=_pairs(unread), per_module=per_module.map(lambda v: v.whole(), MAX_LIST), started_after=started.real(0),
         # written by every search since it plans its live cases in steps; a file without them was written whole
         params=params.map(lambda v: v.string()) if params.present else {},
-        complete=bool(complete.flag()) if complete.present else True)
+        complete=bool(complete.flag()) if complete.present else True,
+        split=None if split.value is None else read_split(split))
+
+
+def read_split(r: StateReader) -> Split:
+    share, seconds, module, live = r.fields("share", "seconds", "module", "live")
+    return Split(share=share.real(0, 1), seconds=seconds.real(0), module=read_measure(module),
+                 live=read_measure(live))
+
+
+def read_measure(r: StateReader) -> LevelMeasure:
+    cases, cost, findings = r.fields("cases", "cost", "findings")
+    return LevelMeasure(cases=cases.whole(), cost=cost.real(0), findings=findings.whole())
 
 
 def read_finding(r: StateReader) -> ModuleFinding:
