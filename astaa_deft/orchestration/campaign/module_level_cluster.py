@@ -79,8 +79,9 @@ def cluster_cores(address: str) -> int:
 
 def run_on_cluster(address: str, jobs: Sequence[tuple[str, Mapping[str, object]]], *, log_path: Path,
                    folder: Path, deadline: float, grace: float) -> float:
-    """Run ``jobs`` ((name, job) of :mod:`.module_level`) on the cluster at ``address``; write each one's results
-    and reads where the job names them in ``folder`` (as a local worker does); the CPU seconds they took."""
+    """Run ``jobs`` ((name, job) of :mod:`.module_level`) on the cluster at ``address``; append each one's results
+    to its file in ``folder`` and write its reads where the job names them (as a local worker does); the CPU
+    seconds they took."""
     from dask.distributed import Client, Event, wait
 
     log = log_path.read_bytes()
@@ -111,10 +112,11 @@ def run_on_cluster(address: str, jobs: Sequence[tuple[str, Mapping[str, object]]
             try:
                 result = future.result()
             except Exception as exc:  # noqa: BLE001 - a task that failed on every retry: its module's error
-                (folder / f"{name}.jsonl").write_text(
-                    json.dumps({"error": f"on the cluster: {type(exc).__name__}: {exc}"}) + "\n", encoding="utf-8")
+                with open(folder / f"{name}.jsonl", "a", encoding="utf-8") as results:
+                    results.write(json.dumps({"error": f"on the cluster: {type(exc).__name__}: {exc}"}) + "\n")
                 continue
-            (folder / f"{name}.jsonl").write_text(str(result["results"]), encoding="utf-8")
+            with open(folder / f"{name}.jsonl", "a", encoding="utf-8") as results:  # after an earlier round's
+                results.write(str(result["results"]))
             (folder / f"{name}.log").write_text(str(result["log"]), encoding="utf-8")
             reads = by_name[name]["reads"]
             if reads and result["reads"]:
