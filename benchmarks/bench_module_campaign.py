@@ -4,7 +4,7 @@
                                                [--params k=v ...] [--keep DIR]
 
 Runs ``astaa-deft fuzz`` as a user would (defaults; the module-level search on,
-its time box a quarter of the budget unless ``--module-seconds``), then reads
+its share of the budget decided by measurement unless ``--module-seconds``), then reads
 the campaign's journal and its module-level state and prints, per level
 (module / live): cases run, CPU seconds, cases per core-hour, findings,
 confirmations, time to first find — and the ratio of the two rates. Every

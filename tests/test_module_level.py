@@ -224,7 +224,7 @@ def test_without_module_level_the_campaign_runs_live_as_before(tmp_path):
 
 def test_a_damaged_state_file_is_one_input_error_naming_it(tmp_path):
     from astaa_deft.model.errors import InputError
-    from astaa_deft.orchestration.campaign.module_level import ModuleLevelState, state_path
+    from astaa_deft.orchestration.campaign.module_level_state import ModuleLevelState, state_path
 
     path = state_path(tmp_path)
     path.parent.mkdir()

@@ -84,7 +84,8 @@ def add_fuzz_parser(subparsers: SubParsers) -> None:
                          " under generated faults, each finding confirmed live) before the live hunt (default: "
                          "the search runs when the spec can replay a module)")
     bounded(fz, "--module-level-seconds", WINDOW_SECONDS, default=None,
-            help="seconds the module-level search may take (default: a quarter of --budget, else 120)")
+            help="seconds the module-level search may take (default: its share of --budget, decided from what"
+                 " a first round and the live runs measured; else 120)")
     bounded(fz, "--minimise-timeout", WINDOW_SECONDS, default=300.0,
             help="seconds one bucket's minimisation may take (it holds a worker slot)")
     fz.add_argument("--resume", action="store_true", help="continue the campaign in -o, with --spec: your spec "

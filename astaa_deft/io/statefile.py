@@ -92,8 +92,8 @@ class StateReader:
     """One value of a state file, at ``field`` of ``file``: read as a given type, or an InputError with ``fix``.
 
     ``StateReader(file, value, fix, field=...).obj()`` checks the value is an object; ``get(name)`` steps into a field
-    (a missing one reads as absent: ``present``), ``integer``, ``number``, ``text``, ``flag``, ``items``,
-    ``entries`` read it.
+    (a missing one reads as absent: ``present``; ``fields(*names)`` several), ``integer``, ``number``, ``text``,
+    ``flag``, ``items``, ``entries`` read it.
     """
 
     __slots__ = ("file", "value", "fix", "field", "present")
@@ -131,6 +131,12 @@ class StateReader:
         assert isinstance(self.value, dict)
         return StateReader(self.file, self.value.get(name), self.fix, field=self._child(name),
                            present=name in self.value)
+
+    def fields(self, *names: str) -> tuple[StateReader, ...]:
+        """The fields ``names`` of this object, checked to be one, in that order (each as :meth:`get`): a
+        record's decoder names its fields once."""
+        self.obj()
+        return tuple(self.get(name) for name in names)
 
     def has(self, name: str) -> bool:
         return isinstance(self.value, dict) and name in self.value

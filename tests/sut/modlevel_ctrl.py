@@ -6,13 +6,7 @@ message fault: a reorder or a delay; stamps are brittle, so no value fault write
 """
 
 import argparse
-import json
 import math
-import os
-import queue
-import signal
-import sys
-import traceback
 
 
 class Ctrl:
@@ -37,32 +31,14 @@ class Ctrl:
 
 
 def main():
-    import zenoh
+    from node_loop import serve  # beside this file (the script's folder is first on sys.path)
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--defects", default="1")
     args = ap.parse_args()
-    inbox = queue.Queue()
-    signal.signal(signal.SIGTERM, lambda *_: inbox.put(None))
-    session = zenoh.open(zenoh.Config.from_env())
-    pub = session.declare_publisher("ml/command")
-    session.declare_subscriber("ml/state", lambda sample: inbox.put(sample.payload.to_bytes()))
-    print("modlevel ctrl ready", flush=True)
     ctrl = Ctrl(args.defects)
-    while True:
-        payload = inbox.get()
-        if payload is None:
-            break
-        try:
-            message = json.loads(payload)
-            out = ctrl.step({"state": message})
-        except Exception:  # a seeded defect: its traceback, then exit at once
-            traceback.print_exc()
-            sys.stderr.flush()
-            os._exit(1)
-        if out is not None:
-            pub.put(json.dumps(out).encode())
-    session.close()
+    serve(listen="ml/state", publish="ml/command", ready="modlevel ctrl ready",
+          step=lambda message: ctrl.step({"state": message}))
 
 
 if __name__ == "__main__":

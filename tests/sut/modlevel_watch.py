@@ -4,13 +4,7 @@ with --defects 1, dies on a command past 1e6 (a value fault on ``command.u``); t
 """
 
 import argparse
-import json
 import math
-import os
-import queue
-import signal
-import sys
-import traceback
 
 
 class Watch:
@@ -31,30 +25,14 @@ class Watch:
 
 
 def main():
-    import zenoh
+    from node_loop import serve  # beside this file (the script's folder is first on sys.path)
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--defects", default="1")
     args = ap.parse_args()
-    inbox = queue.Queue()
-    signal.signal(signal.SIGTERM, lambda *_: inbox.put(None))
-    session = zenoh.open(zenoh.Config.from_env())
-    pub = session.declare_publisher("ml/health")
-    session.declare_subscriber("ml/command", lambda sample: inbox.put(sample.payload.to_bytes()))
-    print("modlevel watch ready", flush=True)
     watch = Watch(args.defects)
-    while True:
-        payload = inbox.get()
-        if payload is None:
-            break
-        try:
-            out = watch.step({"command": json.loads(payload)})
-        except Exception:  # a seeded defect: its traceback, then exit at once
-            traceback.print_exc()
-            sys.stderr.flush()
-            os._exit(1)
-        pub.put(json.dumps(out).encode())
-    session.close()
+    serve(listen="ml/command", publish="ml/health", ready="modlevel watch ready",
+          step=lambda message: watch.step({"command": message}))
 
 
 if __name__ == "__main__":

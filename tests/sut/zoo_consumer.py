@@ -26,13 +26,7 @@ raises in the main thread: the traceback names it and the process exits 1.
 """
 
 import argparse
-import json
 import math
-import os
-import queue
-import signal
-import sys
-import traceback
 
 SPEED_TABLE = [0.1 * k for k in range(10)]
 
@@ -130,33 +124,13 @@ class Consumer:
 
 
 def main():
-    import zenoh  # here: tests import this file for its checks alone
+    from node_loop import serve  # beside this file (the script's folder is first on sys.path)
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--defects", default="1")
     args = ap.parse_args()
-    inbox = queue.Queue()
-    signal.signal(signal.SIGTERM, lambda *_: inbox.put(None))
-    session = zenoh.open(zenoh.Config.from_env())
-    session.declare_subscriber("zoo/state", lambda sample: inbox.put(sample.payload.to_bytes()))
-    print("zoo consumer ready", flush=True)
     consumer = Consumer(args.defects == "1")
-    while True:
-        payload = inbox.get()
-        if payload is None:
-            break
-        try:
-            message = json.loads(payload)
-        except ValueError:
-            continue
-        if isinstance(message, dict):
-            try:
-                consumer.handle(message)
-            except Exception:  # a seeded defect: its traceback, then exit at once (an open session holds a normal exit)
-                traceback.print_exc()
-                sys.stderr.flush()
-                os._exit(1)
-    session.close()
+    serve(listen="zoo/state", ready="zoo consumer ready", step=consumer.handle)
 
 
 if __name__ == "__main__":

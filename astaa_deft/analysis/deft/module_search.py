@@ -28,12 +28,12 @@ interrupt a step); the campaign runs benches in worker processes of its own.
 from __future__ import annotations
 
 import json
-import pickle
 import time
 import traceback
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
+from astaa_deft.analysis.deft.baseline_walk import BaselineWalk
 from astaa_deft.analysis.deft.replay import ReplayPlanner, StepHang, make_planner, within_limit
 from astaa_deft.analysis.deft.stream_faults import (
     PERTURBATIONS, FaultKind, FaultNotApplicable, FieldReads, Frame, Received, StreamFault, apply_fault,
@@ -177,28 +177,18 @@ class ModuleBench:
         started = time.perf_counter()
         self.frames = self.frames_of(self.streams)
         self.keys = [frame_key(f) for f in self.frames]
-        self._pickled = True
-        self.snapshots: dict[int, object] = {}
-        self.outputs: list[DecodedMessage | None] = []
-        self.error: str | None = None  # the baseline replay itself raised or hung here (no fault can be judged past)
         stride = max(SNAPSHOT_EVERY, len(self.frames) // MAX_SNAPSHOTS + 1)
         planner = self.fresh()
-        try:
-            for k, frame in enumerate(self.frames):
-                if k % stride == 0:
-                    self.snapshots[k] = self._snapshot(planner)
-                if frame is None:
-                    self.outputs.append(None)
-                    continue
-                try:
-                    self.outputs.append(self.step(planner, frame))
-                except Exception as exc:  # StepHang included
-                    self.error = f"frame {k}: {type(exc).__name__}: {exc}"
-                    self.frames = self.frames[:k]
-                    self.keys = self.keys[:k]
-                    break
+        try:  # past a frame the unmutated replay fails on, no fault can be judged: the frames end there
+            self.walk = BaselineWalk(self.frames, planner, self.step, stride=stride, pad=False)
         finally:
             planner.close()
+        self.outputs: list[DecodedMessage | None] = self.walk.outputs
+        self.error: str | None = None  # the baseline replay itself raised or hung here (no fault can be judged past)
+        if self.walk.error_frame is not None:
+            self.error = f"frame {self.walk.error_frame}: {self.walk.error}"
+            self.frames = self.frames[:self.walk.error_frame]
+            self.keys = self.keys[:self.walk.error_frame]
         self.baseline_seconds = time.perf_counter() - started
         self.known: set[str] = set()
         self.known = self._baseline_violations()  # invariants the unmutated replay breaks: not a fault's finding
@@ -222,24 +212,11 @@ class ModuleBench:
             return frame[self.entry.trigger].time_ns
         return self.output_times[k]
 
-    def _snapshot(self, planner: ReplayPlanner) -> object:
-        state = planner.snapshot()
-        if self._pickled:
-            try:
-                return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
-            except Exception:  # not picklable: deep copies, no convergence check
-                self._pickled = False
-                self.snapshots = {k: pickle.loads(v) for k, v in self.snapshots.items()}  # type: ignore[arg-type]
-        return state
-
     def restore(self, k: int) -> ReplayPlanner:
         """A module in the baseline's state just before frame ``k``."""
-        import copy
-
-        s = max(i for i in self.snapshots if i <= k)
+        s, state = self.walk.state(k)
         planner = self.fresh()
-        state = self.snapshots[s]
-        planner.restore(pickle.loads(state) if self._pickled else copy.deepcopy(state))  # type: ignore[arg-type]
+        planner.restore(state)
         for i in range(s, k):
             frame = self.frames[i]
             if frame is not None:
@@ -247,12 +224,7 @@ class ModuleBench:
         return planner
 
     def _converged(self, planner: ReplayPlanner, k: int) -> bool:
-        if not self._pickled or k not in self.snapshots:
-            return False
-        try:
-            return pickle.dumps(planner.snapshot(), protocol=pickle.HIGHEST_PROTOCOL) == self.snapshots[k]
-        except Exception:
-            return False
+        return self.walk.converged(planner, k)
 
     def _baseline_violations(self) -> set[str]:
         monitors = MonitorSet(self.judged, self.start_ns)

@@ -103,8 +103,10 @@ class _Starter:
         """The starter thread (None until the first start)."""
         return self._thread
 
-    def call(self, job: Callable[[], ResultT]) -> ResultT:
-        """``job()`` run in the starter thread; its result, or its exception raised here."""
+    def call(self, job: Callable[[], ResultT], undo: Callable[[ResultT], object] | None = None) -> ResultT:
+        """``job()`` run in the starter thread; its result, or its exception raised here. Interrupted while
+        waiting (Ctrl-C, SIGTERM as one), the job still finishes in the starter: ``undo`` then gets its result
+        (the child it started is stopped, never left running unowned) before the interrupt goes on."""
         with self._lock:
             if self._thread is None:
                 self._thread = threading.Thread(target=self._serve, name="process-starter", daemon=True)
@@ -121,7 +123,13 @@ class _Starter:
                 future.set_exception(exc)
 
         self._jobs.put(run)
-        return future.result()
+        try:
+            return future.result()
+        except BaseException:
+            if undo is not None:
+                with contextlib.suppress(BaseException):  # the job's own error: nothing to undo
+                    undo(future.result())  # waits for the job, then undoes it
+            raise
 
     def _serve(self) -> None:
         while True:
@@ -167,20 +175,24 @@ def start(argv: Sequence[str], *, cwd: str | None = None, env: Mapping[str, str]
     if not die_with_tool:
         return _starter.call(lambda: subprocess.Popen(
             argv, cwd=cwd, env=env, stdin=stdin, stdout=stdout, stderr=stderr, text=text,
-            pass_fds=tuple(pass_fds), start_new_session=True))
+            pass_fds=tuple(pass_fds), start_new_session=True), undo=_kill_started)
     report_read, report_write = os.pipe()
     try:
         wrapped = [sys.executable, "-I", "-S", "-c", _WRAPPER, str(os.getpid()), str(int(death_signal)),
                    str(report_write), *argv]
         process: subprocess.Popen = _starter.call(lambda: subprocess.Popen(
             wrapped, cwd=cwd, env=env, stdin=stdin, stdout=stdout, stderr=stderr, text=text,
-            pass_fds=(*pass_fds, report_write), start_new_session=True))
+            pass_fds=(*pass_fds, report_write), start_new_session=True), undo=_kill_started)
         process.args = argv  # what the caller started, in messages and TimeoutExpired
         os.close(report_write)
         report_write = -1
         with os.fdopen(report_read, "rb") as report:
             report_read = -1
-            failure = report.read()  # empty once the command runs (the fd closes on exec) or the wrapper died
+            try:
+                failure = report.read()  # empty once the command runs (the fd closes on exec) or the wrapper died
+            except BaseException:  # interrupted while it starts: the caller never gets it, so it is stopped here
+                _kill_started(process)
+                raise
     finally:
         for fd in (report_read, report_write):
             if fd >= 0:
@@ -190,6 +202,13 @@ def start(argv: Sequence[str], *, cwd: str | None = None, env: Mapping[str, str]
         code = int(failure)
         raise OSError(code, os.strerror(code), argv[0])
     return process
+
+
+def _kill_started(process: subprocess.Popen) -> None:
+    """Stop a child :func:`start` started but could not hand over (its caller was interrupted): its group."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
 
 
 def run(argv: Sequence[str], *, timeout: float | None, cwd: str | None = None,

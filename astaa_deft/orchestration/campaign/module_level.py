@@ -35,7 +35,7 @@ import resource
 import subprocess
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from astaa_deft.analysis.deft.module_search import ModuleVerdict
@@ -51,133 +51,26 @@ from astaa_deft.engine.intercept.actions.reorder import Reorder
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Window
 from astaa_deft.io.log.reader import read_log
-from astaa_deft.io.output_place import write_atomic
-from astaa_deft.model.json import JsonObject
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.journal.journal import Journal
+from astaa_deft.orchestration.campaign.level_split import LevelMeasure, Split, decide_split
+from astaa_deft.orchestration.campaign.module_level_state import (
+    DIR_NAME, ModuleFinding, ModuleLevelState, read_state, write_state,
+)
 from astaa_deft.orchestration.journal.model import BASELINE, MUTATED, CaseStatus, PlannedCase
 from astaa_deft.orchestration.campaign.parts import CampaignParts
 from astaa_deft.orchestration.journal.rows import CaseRow
 
-DIR_NAME = "module_level"
-STATE_FILE = "state.json"
 STRATEGY = "module-level"  # the journal's strategy of a module-level finding's live case
 CONFIRM_NUMBER_BASE = 1_000_000_000  # live cases of findings: numbered apart from the strategy's cases
-BUDGET_SHARE = 0.25  # of a --budget, the module-level search's time box
+PROBE_SHARE = 0.05  # of a --budget, the search's first round: what it measures decides the rest (level_split)
 DEFAULT_SECONDS = 120.0  # its time box without a --budget
 MIN_SECONDS = 10.0
+MIN_ROUND_SECONDS = 5.0  # a second round shorter than this is not started
 MAX_CONFIRMATIONS = 24  # live cases planned for findings (one per bucket, the first found first)
 WORKER_GRACE = 30.0  # s past the deadline before a worker is stopped (a step in native code, the field probes)
-MAX_STATE_BYTES = 64 << 20
 LEAD_SECONDS = 0.02
 LIVE_SHARE = 0.8  # a live window opens this long before the message the fault hit arrived
-
-
-@dataclass(frozen=True, kw_only=True)
-class ModuleFinding:
-    """One bucket of the module-level search: its first fault's verdict, how many faults failed its way."""
-
-    name: str  # "M001"
-    verdict: ModuleVerdict
-    count: int
-    found_after: float  # s from the search's start
-    case_id: str | None = None  # its live case (None: not planned, the confirmations' cap reached)
-    tests: str | None = None  # its DeFT module test's folder, relative to the campaign directory
-    tests_fail: bool | None = None  # the test fails on the defect, as it should (None: not checked)
-
-    def to_json(self) -> JsonObject:
-        return {"name": self.name, "verdict": self.verdict.to_json(), "count": self.count,
-                "found_after": round(self.found_after, 3), "case_id": self.case_id, "tests": self.tests,
-                "tests_fail": self.tests_fail}
-
-    @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> ModuleFinding:
-        verdict, count, after = data["verdict"], data.get("count", 1), data.get("found_after", 0.0)
-        case_id, tests, fails = data.get("case_id"), data.get("tests"), data.get("tests_fail")
-        if not isinstance(verdict, Mapping):
-            raise ValueError("a finding's verdict is an object")
-        return cls(name=str(data["name"]), verdict=ModuleVerdict.from_json(verdict),
-                   count=count if isinstance(count, int) else 1,
-                   found_after=float(after) if isinstance(after, (int, float)) else 0.0,
-                   case_id=None if case_id is None else str(case_id), tests=None if tests is None else str(tests),
-                   tests_fail=fails if isinstance(fails, bool) else None)
-
-
-@dataclass(frozen=True, kw_only=True)
-class ModuleLevelState:
-    """What the module-level search did (``state.json``)."""
-
-    modules: tuple[str, ...] = ()  # the modules replayed
-    skipped: tuple[str, ...] = ()  # why a module of the spec was not (no factory, its setup failed)
-    log: str | None = None  # the clean baseline log the frames came from
-    cases: int = 0  # faults replayed
-    core_seconds: float = 0.0  # CPU of the workers
-    wall_seconds: float = 0.0
-    findings: tuple[ModuleFinding, ...] = ()
-    failing: int = 0  # faults whose replay failed (all buckets)
-    reads: tuple[FieldReads, ...] = ()
-    unread: tuple[tuple[str, str], ...] = ()  # fields live generation leaves out
-    per_module: Mapping[str, int] = field(default_factory=dict)  # faults replayed per module
-    started_after: float = 0.0  # s from the campaign's first planned case to the search's start
-
-    def to_json(self) -> JsonObject:
-        return {"version": 1, "modules": list(self.modules), "skipped": list(self.skipped), "log": self.log,
-                "cases": self.cases, "core_seconds": round(self.core_seconds, 3),
-                "wall_seconds": round(self.wall_seconds, 3), "failing": self.failing,
-                "findings": [f.to_json() for f in self.findings], "reads": [r.to_json() for r in self.reads],
-                "unread": [list(p) for p in self.unread], "per_module": dict(self.per_module),
-                "started_after": round(self.started_after, 3)}
-
-    @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> ModuleLevelState:
-        def strings(key: str) -> tuple[str, ...]:
-            value = data.get(key, [])
-            return tuple(str(v) for v in value) if isinstance(value, list) else ()
-
-        def number(key: str) -> float:
-            value = data.get(key, 0)
-            return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else 0.0
-
-        findings, reads, unread = data.get("findings", []), data.get("reads", []), data.get("unread", [])
-        per_module = data.get("per_module", {})
-        log = data.get("log")
-        return cls(modules=strings("modules"), skipped=strings("skipped"), log=None if log is None else str(log),
-                   cases=int(number("cases")), core_seconds=number("core_seconds"),
-                   wall_seconds=number("wall_seconds"), failing=int(number("failing")),
-                   findings=tuple(ModuleFinding.from_json(f) for f in findings if isinstance(f, Mapping))
-                   if isinstance(findings, list) else (),
-                   reads=tuple(FieldReads.from_json(r) for r in reads if isinstance(r, Mapping))
-                   if isinstance(reads, list) else (),
-                   unread=tuple((str(p[0]), str(p[1])) for p in unread if isinstance(p, list) and len(p) == 2)
-                   if isinstance(unread, list) else (),
-                   per_module={str(k): int(v) for k, v in per_module.items() if isinstance(v, int)}
-                   if isinstance(per_module, dict) else {}, started_after=number("started_after"))
-
-
-def state_path(out: Path) -> Path:
-    return out / DIR_NAME / STATE_FILE
-
-
-def read_state(out: Path) -> ModuleLevelState | None:
-    """The module-level search's state in campaign directory ``out`` (None: it did not run there)."""
-    from astaa_deft.io.statefile import load_json
-    from astaa_deft.model.errors import InputError, Problem
-
-    path = state_path(out)
-    if not path.is_file():
-        return None
-    fix = "move the module_level folder away (the campaign then searches at module level again), or give another" \
-          " campaign directory (-o)"
-    if path.is_symlink() or path.stat().st_size > MAX_STATE_BYTES:
-        raise InputError(Problem(str(path), None, None, "is a link or larger than the tool writes", fix))
-    data = load_json(path.read_bytes(), str(path), "state", fix, max_chars=MAX_STATE_BYTES)
-    try:
-        if not isinstance(data, Mapping):
-            raise ValueError("not an object")
-        return ModuleLevelState.from_json(data)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(Problem(str(path), None, None, f"is not the module-level search's state ({exc})",
-                                 fix)) from None
 
 
 def replayed_entries(spec: Spec) -> tuple[list, list[str]]:
@@ -227,8 +120,11 @@ class ModuleLevel(CampaignParts):
     def _module_level(self) -> None:
         out = self.config.out
         stored = read_state(out)
-        if stored is not None:  # resumed: searched already; its live cases are in the journal
+        if stored is not None and stored.complete:  # resumed: searched already; its live cases are in the journal
             self._leave_out(stored.unread, announce=False)
+            return
+        if stored is not None and stored.log is not None:  # interrupted after the search: finish what it decided
+            self._finish(stored, Path(stored.log), dict(stored.params))
             return
         if not self.config.module_level:
             return
@@ -250,29 +146,62 @@ class ModuleLevel(CampaignParts):
         from astaa_deft.analysis.deft.idle_cores import idle_cores
 
         seconds = self._module_level_seconds()
-        cores = idle_cores()  # the live pool waits meanwhile: what is idle now is the search's
+        if self._on_cluster():
+            from astaa_deft.orchestration.campaign.module_level_cluster import cluster_cores
+
+            cores = cluster_cores(str(self.config.cluster))
+            where = f"{cores} worker(s) of the cluster at {self.config.cluster}"
+        else:
+            cores = idle_cores()  # the live pool waits meanwhile: what is idle now is the search's
+            where = f"{cores} idle core(s) of {self.cores}"
         self.say(f"module level: replaying {', '.join(e.module for e in entries)} on their frames from"
-                 f" {log_path.name} ({seconds:.0f} s, {cores} idle core(s) of {self.cores})")
+                 f" {log_path.name} ({seconds:.0f} s, {where})")
         planned = [r.planned_at for r in self.journal.cases() if r.planned_at]
         began = time.time() - min(planned) if planned else 0.0
         state = _with(self._search(entries, skipped, log_path, seconds=seconds, cores=cores), started_after=began)
         unread = fields_nothing_reads({c.name: tuple(c.consumers) for c in self.spec.channels}, state.reads)
-        state = _with(state, unread=tuple(unread))
+        self._finish(_with(state, unread=tuple(unread), params=dict(params)), log_path, params)
+
+    def _finish(self, state: ModuleLevelState, log_path: Path, params: dict[str, str]) -> None:
+        """Plan the findings' live cases, write their module tests, say what the search found. The state is
+        written before each step and marked complete after the last, so an interrupt anywhere leaves the journal
+        and the state agreeing, and a resume does only what is left (a live case already planned is kept)."""
+        out = self.config.out
+        write_state(out, state)
         state = self._confirm(state, log_path, params)
-        state = self._write_module_tests(state, log_path)
-        write_atomic(state_path(out), json.dumps(state.to_json(), indent=1) + "\n")
+        write_state(out, state)
+        state = _with(self._write_module_tests(state, log_path), complete=True)
+        write_state(out, state)
         self._leave_out(state.unread, announce=True)
         for line in summary_lines(state, self.journal):
             self.journal.note("module-level", line)
             self.say(f"module level: {line}")
 
     def _module_level_seconds(self) -> float:
+        """The first round's time box: the user's, else a probe of the budget (the split decides the rest after
+        it), else the default."""
         if self.config.module_level_seconds is not None:
             return self.config.module_level_seconds
         if self.config.budget is not None:
             left = self.config.budget - (time.monotonic() - self.started)
-            return max(MIN_SECONDS, min(BUDGET_SHARE * self.config.budget, left * BUDGET_SHARE * 2))
+            return max(MIN_SECONDS, min(PROBE_SHARE * self.config.budget, left / 2))
         return DEFAULT_SECONDS
+
+    def _split(self, state: ModuleLevelState) -> Split | None:
+        """The budget's split from the first round and the live runs so far (None: no --budget to split, or the
+        user gave the search's seconds)."""
+        if self.config.budget is None or self.config.module_level_seconds is not None:
+            return None
+        runs = [r for r in self.journal.cases() if r.finished and r.cpu and r.strategy != STRATEGY]
+        live_cases = [r for r in runs if r.kind == MUTATED]
+        live = live_figures(self.journal)
+        module = LevelMeasure(cases=state.cases, cost=state.core_seconds / max(1, state.cases),
+                              findings=len(state.findings))
+        # a live case's cost: its runs' so far (the baseline's clean runs before the hunt began)
+        cost = sum(r.cpu or 0.0 for r in runs) / len(runs) if runs else self.clean_horizon
+        return decide_split(module=module, live=LevelMeasure(cases=len(live_cases), cost=cost,
+                                                             findings=live.findings),
+                            budget=self.config.budget)
 
     def _clean_baseline_log(self) -> tuple[Path, dict[str, str]] | None:
         """A clean baseline run's log (its run failed nothing) and its params; the first such."""
@@ -305,41 +234,57 @@ class ModuleLevel(CampaignParts):
         folder.mkdir(parents=True, exist_ok=True)
         start, end, _first = self._window(log_path)
         per_module = max(1, cores // len(entries))  # every module at least one worker
-        deadline = time.time() + seconds
-        workers = []
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        started = time.monotonic()
+        jobs: list[tuple[str, dict[str, object]]] = []
         for number, entry in enumerate(entries):
             for part in range(per_module):
                 name = _worker_name(number, part)  # the folder's own names: never a module name from the spec
-                job = {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
-                       "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
-                       "seed": self.config.seed, "window": [start, end], "part": part, "parts": per_module,
-                       "settle": self.config.settle,
-                       "deadline": deadline, "results": str(folder / f"{name}.jsonl"),
-                       "reads": str(folder / f"m{number}-reads.json") if part == 0 else None}
+                jobs.append((name, {"spec": str(self.config.spec_path.resolve()), "log": str(log_path.resolve()),
+                                    "module": entry.module, "dictionaries": [str(p) for p in self.config.dictionaries],
+                                    "seed": self.config.seed, "window": [start, end], "part": part,
+                                    "parts": per_module, "settle": self.config.settle, "after": -1,
+                                    "results": str(folder / f"{name}.jsonl"),
+                                    "reads": str(folder / f"m{number}-reads.json") if part == 0 else None}))
                 (folder / f"{name}.jsonl").unlink(missing_ok=True)
-                job_path = folder / f"{name}.job.json"
-                job_path.write_text(json.dumps(job), encoding="utf-8")
-                with open(folder / f"{name}.log", "wb") as log:
-                    workers.append(process_launch.start(
-                        [*python_module("astaa_deft.orchestration.campaign.module_level_worker"), str(job_path)],
-                        stdout=log, stderr=subprocess.STDOUT))
-        try:
-            for worker in workers:
-                try:
-                    worker.wait(timeout=max(1.0, deadline + WORKER_GRACE - time.time()))
-                except subprocess.TimeoutExpired:
-                    stop_process(worker, grace=2.0)
-        finally:
-            for worker in workers:
-                if worker.poll() is None:
-                    stop_process(worker, grace=0.0)
-        wall = time.monotonic() - started
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-        return self._collect(entries, skipped, folder=folder, log_path=log_path, per_module=per_module,
-                             cpu=cpu or wall * len(workers), wall=wall)
+        started = time.monotonic()
+        cpu = self._round(jobs, log_path=log_path, folder=folder, seconds=seconds)
+
+        def collected() -> ModuleLevelState:
+            return self._collect(entries, skipped, folder=folder, log_path=log_path, per_module=per_module,
+                                 cpu=cpu or (time.monotonic() - started) * len(jobs), wall=time.monotonic() - started)
+
+        state = collected()
+        split = self._split(state)
+        if split is None:
+            return state
+        more = min(split.seconds - (time.monotonic() - started),
+                   self.config.budget - (time.monotonic() - self.started) - split.seconds)  # type: ignore[operator]
+        exhausted = all(_exhausted(folder / f"{name}.jsonl") for name, _job in jobs)
+        line = split.why + (": the plan is exhausted" if exhausted else
+                            f": {more:.0f} s more" if more >= MIN_ROUND_SECONDS else ": no second round")
+        self.journal.note("module-level", line)
+        self.say(f"module level: {line}")
+        if more >= MIN_ROUND_SECONDS and not exhausted:  # the plan goes on where each worker stopped
+            cpu += self._round([(name, {**job, "reads": None, "after": _last_done(folder / f"{name}.jsonl")})
+                                for name, job in jobs], log_path=log_path, folder=folder, seconds=more)
+            state = collected()
+        return _with(state, split=split)
+
+    def _round(self, jobs: list[tuple[str, dict[str, object]]], *, log_path: Path, folder: Path,
+               seconds: float) -> float:
+        """One round of the workers (results appended to each job's file); their CPU seconds."""
+        deadline = time.time() + seconds
+        jobs = [(name, {**job, "deadline": deadline}) for name, job in jobs]
+        if self._on_cluster():
+            from astaa_deft.orchestration.campaign.module_level_cluster import run_on_cluster
+
+            return run_on_cluster(str(self.config.cluster), jobs, log_path=log_path, folder=folder,
+                                  deadline=deadline, grace=WORKER_GRACE)
+        return _run_locally(jobs, folder=folder, deadline=deadline)
+
+    def _on_cluster(self) -> bool:
+        """Module-level workers go to the Dask cluster of ``--cluster tcp://…``; with ``local:K`` (this machine's
+        processes anyway) they run as local processes of their own, K at once."""
+        return bool(self.config.cluster) and not str(self.config.cluster).startswith("local:")
 
     def _collect(self, entries: Sequence, skipped: list[str], *, folder: Path, log_path: Path, per_module: int,
                  cpu: float, wall: float) -> ModuleLevelState:
@@ -376,6 +321,7 @@ class ModuleLevel(CampaignParts):
         log = read_log(log_path)
         _start, _end, first = self._window(log_path)
         origin = first if first is not None else 0
+        planned = {r.case_id for r in self.journal.cases(MUTATED)}
         confirmed = []
         for k, finding in enumerate(state.findings):
             if k >= MAX_CONFIRMATIONS:
@@ -389,6 +335,9 @@ class ModuleLevel(CampaignParts):
             case_id = f"m-{k + 1:04d}"
             description = (f"module-level {finding.name}: {fault.describe()} "
                            f"({finding.verdict.module}: {finding.verdict.signature})")
+            if case_id in planned:  # planned before an interrupt: the same finding, the same case
+                confirmed.append(_with_finding(finding, case_id=case_id))
+                continue
             testcase = live_testcase(fault, f"tc-{case_id}", seconds_after_anchor=(times[fault.index] - origin) / 1e9,
                                      anchor=self.timing.anchor, description=description)
             self._plan(PlannedCase(case_id=case_id, kind=MUTATED, number=CONFIRM_NUMBER_BASE + k + 1,
@@ -444,6 +393,43 @@ class ModuleLevel(CampaignParts):
                     f" ({left} generation target(s)): {shown}")
             self.journal.note("module-level", line)
             self.say(f"module level: {line}")
+
+
+def _run_locally(jobs: Sequence[tuple[str, Mapping[str, object]]], *, folder: Path, deadline: float) -> float:
+    """Each job in a worker process of its own on this machine, until the deadline (and its grace); their CPU
+    seconds. Every worker is stopped on the way out, an interrupt included."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    workers = []
+    try:
+        for name, job in jobs:
+            job_path = folder / f"{name}.job.json"
+            job_path.write_text(json.dumps(job), encoding="utf-8")
+            with open(folder / f"{name}.log", "wb") as log:
+                workers.append(process_launch.start(
+                    [*python_module("astaa_deft.orchestration.campaign.module_level_worker"), str(job_path)],
+                    stdout=log, stderr=subprocess.STDOUT))
+        for worker in workers:
+            try:
+                worker.wait(timeout=max(1.0, deadline + WORKER_GRACE - time.time()))
+            except subprocess.TimeoutExpired:
+                stop_process(worker, grace=2.0)
+    finally:
+        for worker in workers:
+            if worker.poll() is None:
+                stop_process(worker, grace=0.0)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def _last_done(path: Path) -> int:
+    """The last fault of the plan a worker's results file shows done (-1: none)."""
+    return max((int(line["n"]) for line in _lines(path) if "n" in line), default=-1)
+
+
+def _exhausted(path: Path) -> bool:
+    """Whether the worker went through its whole share of the plan (its last round ended before its deadline)."""
+    ends = [line for line in _lines(path) if "done" in line]
+    return bool(ends) and ends[-1]["exhausted"] is True
 
 
 def _worker_name(module_number: int, part: int) -> str:
@@ -588,6 +574,8 @@ def status_lines(out: Path, journal: Journal) -> list[str]:
         return []
     module, live = level_figures(state, journal)
     lines = [module.line(), live.line()]
+    if state.split is not None:
+        lines.append(f"split: {state.split.why}")
     if module.per_core_hour and live.per_core_hour:
         lines.append(f"module level runs {module.per_core_hour / live.per_core_hour:,.0f}× the live cases per"
                      f" core-hour")

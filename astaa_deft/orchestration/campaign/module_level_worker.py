@@ -4,8 +4,8 @@
 the job (written by :mod:`.module_level`) names the user's spec file, a clean
 baseline log, one module of the spec that can be replayed in process, the
 dictionaries, the campaign's seed, the live window, this worker's share of
-the plan (``part`` of ``parts``) and a deadline. The worker builds the
-module's :class:`~astaa_deft.analysis.deft.module_search.ModuleBench` once,
+the plan (``part`` of ``parts``; ``after``: the last fault an earlier round
+did) and a deadline. The worker builds the module's :class:`~astaa_deft.analysis.deft.module_search.ModuleBench` once,
 plans the module's faults (:func:`~astaa_deft.analysis.deft.fault_plan.plan_faults`),
 and replays its share in plan order until the deadline, appending one JSON
 line per fault to the job's ``results`` file (flushed: a worker stopped at
@@ -86,10 +86,13 @@ def run(job: dict) -> int:
             reads = bench.field_reads(first_frame=0, budget_s=max(1.0, (deadline - time.time()) / 3))
             Path(job["reads"]).write_text(json.dumps(reads.to_json()) + "\n", encoding="utf-8")
         first_of: set[tuple[str, str, str]] = set()  # buckets this worker found: their first fault minimised
+        after = int(job["after"])  # a later round goes on past the faults an earlier one did
+        exhausted = True
         for number, fault in enumerate(faults):
-            if number % parts != part:
+            if number % parts != part or number <= after:
                 continue
             if time.time() >= deadline:
+                exhausted = False
                 break
             verdict = bench.run(fault)
             if verdict.failed and verdict.bucket_key not in first_of:
@@ -97,7 +100,7 @@ def run(job: dict) -> int:
                 verdict = bench.minimised(verdict)
             if verdict.applicable:
                 write({"n": number, "verdict": verdict.to_json()})
-        write({"done": True})
+        write({"done": True, "exhausted": exhausted})
     return 0
 
 
