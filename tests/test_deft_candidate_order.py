@@ -21,10 +21,7 @@ import pytest
 from astaa_deft.analysis.deft.extract import IN_TURN, Speculation, extract, search_note
 from astaa_deft.analysis.deft.extract.speculation import step_in_turn
 from astaa_deft.analysis.deft.fork_replay import ForkedSearch, can_fork, run_supervised
-from astaa_deft.analysis.deft.extract.forked import with_ways_of
-from astaa_deft.analysis.deft.frames import (
-    SYNCED, Candidate, OutputContext, Stream, candidates, costly_candidates, read_times, synced,
-)
+from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, read_times
 from astaa_deft.analysis.deft.frames.read_at import AT_OUTPUT, AT_PREVIOUS, AT_START
 from astaa_deft.analysis.deft.frames.rules.after import AFTER
 from astaa_deft.analysis.deft.frames.rules.as_logged import AS_LOGGED
@@ -175,74 +172,6 @@ def test_a_slow_module_that_ended_a_cycle_with_a_trigger_waiting_read_its_next_i
     assert idle[0] == (output, AT_OUTPUT)
     # A first output: no previous one to read at.
     assert read_times(streams, "a", {}, output_ns=first_output) == [(first_output, AT_OUTPUT)]
-
-
-def test_a_synchroniser_on_stamps_pairs_the_trigger_with_the_nearest_stamp_it_had():
-    # oldest_sync_noisy: a queue answering old triggers, its other inputs paired by header stamp (c at 1 Hz).
-    # The frame of trigger 3 (stamp 0.3 s) pairs b by stamp, not by arrival, and c 1 (stamp 1.0 s, logged at
-    # 1.02 s) only if it had come by then. Before: 8 of 42 outputs got the right frame, then 42 of 42.
-    a = Stream("a", [k * 100 * MS for k in range(12)])
-    b = Stream("b", [k * 100 * MS + 13 * MS for k in range(12)])
-    c = Stream("c", [20 * MS, 1_020 * MS])
-    stamps: dict[str, list[float | None]] = {"a": [k * 0.1 for k in range(12)], "b": [k * 0.1 for k in range(12)],
-                                             "c": [0.0, 1.0]}
-
-    def ctx(previous: dict[str, int]) -> OutputContext:
-        return OutputContext(streams={"a": a, "b": b, "c": c}, trigger="a", output_ns=1_100 * MS, previous=previous,
-                             lookback_ns=0, stamp_of=lambda name, index: stamps[name][index])
-
-    before_c1 = synced(ctx({"a": 2, "b": 1, "c": 0}), 3, until_ns=1_000 * MS, rules={AFTER})
-    assert before_c1 is not None and before_c1.choice == {"a": 3, "b": 3, "c": 0}
-    assert before_c1.patterns == {(AFTER, SYNCED)}  # learned with the trigger's rule
-    later = synced(ctx({"a": 8}), 9, until_ns=1_100 * MS, rules={OLDEST})
-    assert later is not None and later.choice == {"a": 9, "b": 9, "c": 1}
-    # Never older than the previous frame's message; a tie goes to the newer; an input without a stamped
-    # message is left out; a trigger without a stamp has no such frame, nor a context that reads no stamps.
-    assert synced(ctx({"b": 5}), 3, until_ns=1_000 * MS, rules=()).choice["b"] == 5  # type: ignore[union-attr]
-    stamps["a"][3], stamps["b"][3], stamps["b"][4] = 0.5, 0.25, 0.75  # b 3 and b 4 a quarter second off
-    assert synced(ctx({}), 3, until_ns=450 * MS, rules=()).choice["b"] == 4  # type: ignore[union-attr]
-    stamps["c"] = [None, None]
-    assert "c" not in synced(ctx({}), 3, until_ns=1_100 * MS, rules=()).choice  # type: ignore[union-attr]
-    stamps["a"][3] = None
-    assert synced(ctx({}), 3, until_ns=1_000 * MS, rules=()) is None
-    assert synced(replace(ctx({}), stamp_of=None), 4, until_ns=1_000 * MS, rules=()) is None
-
-
-def test_frames_synced_on_stamps_come_only_where_wrong_frames_cost_a_step_and_once_the_run_shows_them():
-    a = Stream("a", [k * 100 * MS for k in range(6)])
-    b = Stream("b", [k * 100 * MS + 60 * MS for k in range(6)])  # b k logged 60 ms after a k, stamped with it
-    ctx = OutputContext(streams={"a": a, "b": b}, trigger="a", output_ns=590 * MS, previous={"a": 3, "b": 3},
-                        lookback_ns=0, previous_output_ns=390 * MS, stamp_of=lambda name, index: index * 0.1)
-    plain = candidates(ctx)
-    assert all(p[1] != SYNCED for c in plain for p in c.patterns)  # a cheap output's candidates: none synced
-    costly = costly_candidates(ctx, plain)
-    stamped = [c for c in costly if any(p[1] == SYNCED for p in c.patterns)]
-    assert {"a": 4, "b": 4} in [c.choice for c in stamped]  # trigger 4 with b 4 (its stamp), logged after it
-    memory = SearchMemory()
-    # No sign of a synchroniser yet: the frames only stamps name wait, and no candidate ranks by a synced way.
-    options, _ = memory.order(costly, expensive=True, first=False, trigger="a")
-    assert all(p[1] != SYNCED for c in options for p in c.patterns)
-    kept = next(c for c in costly if c.choice == {"a": 4, "b": 4})
-    memory.learn(kept, expensive=True)  # a kept frame stamps named and no trigger's own frame did
-    assert memory.stamps == 1
-    options, _ = memory.order(costly, expensive=True, first=False, trigger="a")
-    order = [c.choice for c in options]
-    assert any(p[1] == SYNCED for p in options[0].patterns)  # the synced ways won, and rank first now
-    assert order.index({"a": 4, "b": 4}) < order.index({"a": 5, "b": 4})  # before the newest's own frame
-
-
-def test_a_frame_the_walk_won_teaches_the_rules_that_name_it_too():
-    # oldest_sync_noisy: the plain walk won the outputs "after 4" named too (a queue three deep); learned from
-    # the walk's wins, "after 4" comes among the tries of the output after a trigger the full queue dropped.
-    walk = Candidate(frame_time=100 * MS, choice={"a": 7, "b": 3}, patterns=frozenset({("plain walk", ())}),
-                     walk=True)
-    named = Candidate(frame_time=100 * MS, choice={"a": 7, "b": 3},
-                      patterns=frozenset({("after 4", (("b", 0),)), (OLDEST, (("b", 0),))}))
-    other = Candidate(frame_time=150 * MS, choice={"a": 8, "b": 3}, patterns=frozenset({(NEWEST, (("b", 0),))}))
-    kept = with_ways_of(walk, [other, named])
-    assert kept.walk and kept.choice == walk.choice
-    assert kept.patterns == walk.patterns | named.patterns
-    assert with_ways_of(walk, [other]) is walk
 
 
 def test_a_first_output_the_search_widens_reaches_back_to_the_logs_first_triggers():

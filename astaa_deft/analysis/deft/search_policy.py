@@ -23,10 +23,10 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Hashable, Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Protocol, TypeVar
 
-from astaa_deft.analysis.deft.frames import SYNCED, Candidate, first_output_ways, ways_where
+from astaa_deft.analysis.deft.frames import Candidate, first_output_ways, ways_where
 
 
 class HasPatterns(Protocol):
@@ -74,28 +74,6 @@ class WinningPatterns:
         if by_rule:
             return sorted(candidates, key=lambda c: (self.score(c), self.rule_score(c)), reverse=True)
         return sorted(candidates, key=self.score, reverse=True)  # sorted() is stable
-
-
-def _synced(pattern: Hashable) -> bool:
-    """A way of a frame synced on stamps: (trigger rule, frames.SYNCED)."""
-    return isinstance(pattern, tuple) and len(pattern) == 2 and pattern[1] == SYNCED
-
-
-def _own_frame(pattern: Hashable) -> bool:
-    """A way naming a trigger's own frame: every other input as it stood at the trigger (offsets all 0)."""
-    return (isinstance(pattern, tuple) and len(pattern) == 2 and isinstance(pattern[1], tuple) and bool(pattern[1])
-            and pattern[1] != SYNCED and all(offset == 0 for _, offset in pattern[1]))
-
-
-def _synced_only(candidate: Candidate) -> bool:
-    return bool(candidate.patterns) and all(_synced(p) for p in candidate.patterns)
-
-
-def _unsynced(candidate: Candidate) -> Candidate:
-    """The candidate without its synced ways (they would rank it by wins they shared with the trigger's own)."""
-    if not any(_synced(p) for p in candidate.patterns):
-        return candidate
-    return replace(candidate, patterns=frozenset(p for p in candidate.patterns if not _synced(p)))
 
 
 def _rule(pattern: Hashable) -> Hashable:
@@ -240,11 +218,6 @@ class SearchMemory:
     winning: WinningPatterns = field(default_factory=WinningPatterns)
     winning_expensive: WinningPatterns = field(default_factory=WinningPatterns)
     budget: StepBudget = field(default_factory=StepBudget)
-    # Outputs whose kept frame a synchroniser on stamps named and the trigger's own frame did not, less those
-    # the reverse: frames synced on stamps are tried only while this is positive. A synced frame is most often
-    # the trigger's own frame as well, and learned with it; tried on every module it came second where the first
-    # missed (drop_latched, drop_several_slow1hz: +10-14 % of the time; the OMPL stack: 145 → 162 steps).
-    stamps: int = 0
 
     def order(self, generic: Sequence[Candidate], *, expensive: bool, first: bool, trigger: str | None = None
               ) -> tuple[list[Candidate], bool]:
@@ -252,8 +225,6 @@ class SearchMemory:
         ``EXPENSIVE_TRIES`` (:func:`nearest_first`, ranked by the expensive outputs' ways and rules; at most
         ``PER_TRIGGER`` of one ``trigger`` message while others are left out), else all, ranked by every
         output's ways; a ``first`` output's first plannable trigger first."""
-        if self.stamps <= 0:  # no sign of a synchroniser on stamps yet: its frames and ways wait
-            generic = [_unsynced(c) for c in generic if not _synced_only(c)]
         if expensive:
             options = self.winning_expensive.rank(nearest_first(generic), by_rule=True)
         else:
@@ -270,7 +241,5 @@ class SearchMemory:
         self.winning.record(kept)
         if expensive:
             self.winning_expensive.record(kept)
-        synced, own = any(_synced(p) for p in kept.patterns), any(_own_frame(p) for p in kept.patterns)
-        self.stamps += int(synced and not own) - int(own and not synced)
         if step_s is not None:
             self.budget.record(step_s, window_s, expensive)

@@ -6,7 +6,6 @@ import copy
 import functools
 import math
 import time
-from dataclasses import replace
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
@@ -46,7 +45,7 @@ def decide_forked(run: Run, out_index: int, options: list[Candidate], expected: 
     # A frame within floating-point noise (forked copies of a module not bit-stable across a fork) teaches
     # the search as a reproduced one does: it is the right frame, the suite's own run confirms it.
     if within or judged.comparison.distance <= NEAR_MISS_M:
-                  run.memory.learn(with_ways_of(cand, run.found), step_s, window, expensive)
+                  run.memory.learn(cand, step_s, window, expensive)
                   run.last_step_s = step_s
                   run.misses_in_row = 0
     else:
@@ -54,16 +53,6 @@ def decide_forked(run: Run, out_index: int, options: list[Candidate], expected: 
     run.keep(out_index, cand, judged)
     if 0.0 < judged.comparison.distance <= NEAR_MISS_M and result.copies_differ is None:
                   _measure_copies(run, cand, full_limit)
-
-
-def with_ways_of(kept: Candidate, generic: Sequence[Candidate]) -> Candidate:
-    """``kept`` carrying also the ways of every candidate of ``generic`` with its frame: a frame the plain walk
-    reached (or the previous frame again, or a declared one) is one that trigger rules name too, and those rules
-    won the output as well. (oldest_sync_noisy: the walk won every output 'after 4' named too — the first
-    trigger after the output four before, a queue three deep — and 'after 4' alone named the next one, after
-    the full queue had dropped a trigger; learned from the walk's wins it comes among the tries.)"""
-    ways = frozenset().union(*(c.patterns for c in generic if dict(c.choice) == dict(kept.choice)))
-    return replace(kept, patterns=kept.patterns | ways) if ways - kept.patterns else kept
 
 
 def _measure_copies(run: Run, cand: Candidate, limit_s: float) -> None:

@@ -22,9 +22,7 @@ from astaa_deft.analysis.deft.extract.run import Run
 from astaa_deft.analysis.deft.fork_replay import (
     ForkedSearch,
 )
-from astaa_deft.analysis.deft.frames import (
-    Candidate, OutputContext, Stream, candidates, costly_candidates, plain_walk, read_times,
-)
+from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, plain_walk, read_times
 from astaa_deft.analysis.deft.replay import ReplayPlanner, trajectory_points
 from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, nearest_first
 from astaa_deft.analysis.deft.validator import Comparison
@@ -92,8 +90,6 @@ def _extract_output(run: Run, out_index: int, before: Decided | None) -> None:
     # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
-    if expensive:  # the rules made for outputs whose wrong frames cost a step (a synchroniser on stamps)
-        generic = costly_candidates(_context(run, out_index), generic)
     first = not run.previous and planner.can_snapshot
     options, capped = run.memory.order(generic, expensive=expensive, first=first, trigger=cfg.trigger)
     if first and expensive:
@@ -125,7 +121,6 @@ def _extract_output(run: Run, out_index: int, before: Decided | None) -> None:
             return
         run.keep(out_index, *kept)
         return
-    run.found = generic
     decide_forked(run, out_index, options, expected, capped=capped, window=window, expensive=expensive)
 
 
@@ -167,8 +162,7 @@ def _context(run: Run, out_index: int) -> OutputContext:
         lookback_ns=int(cfg.lookback_ms * 1e6),
         previous_output_ns=outputs[out_index - 1].log_time + skew if out_index else None, read_at=read_at,
         module_started_in_log=recorded.module_started_in_log, skew_ns=skew,
-        earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])],
-        stamp_of=recorded.stamp)
+        earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
 
 
 def _put_first(run: Run, out_index: int, options: list[Candidate], expected: Expected, *,

@@ -14,14 +14,12 @@ from dataclasses import dataclass, field
 from itertools import pairwise
 
 from astaa_deft.analysis.deft.frames import Candidate, Stream
-from astaa_deft.analysis.deft.replay import seconds
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import Codec, DecodeError
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents, LoggedMessage
 from astaa_deft.model.errors import InputError, Problem
-from astaa_deft.model.fields import get
 from astaa_deft.model.json import DecodedMessage
 from astaa_deft.model.sut import Spec
 
@@ -116,16 +114,6 @@ class Recorded:
         decode)."""
         read = self.fresh if fresh else self.decode
         return {name: read(name, idx) for name, idx in choice.items()}
-
-    def stamp(self, name: str, idx: int) -> float | None:
-        """Message ``idx`` of input ``name``: its header.stamp in seconds, or None (no stamp, or it does not
-        decode)."""
-        message = self.decode(name, idx)
-        found = get(message, "header.stamp") if isinstance(message, Mapping) else None
-        try:
-            return seconds(found[0][1]) if found else None
-        except (KeyError, TypeError, ValueError):
-            return None
 
     def decode(self, name: str, idx: int) -> DecodedMessage | None:
         """Message ``idx`` of input ``name`` decoded, or None if it does not decode."""

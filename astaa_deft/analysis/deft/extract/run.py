@@ -33,9 +33,6 @@ class Run:
     memory: SearchMemory = field(default_factory=SearchMemory)  # how earlier kept frames were derived, their time
     speculation: Speculation = field(default_factory=lambda: Speculation())
     last_step_s: float | None = None  # the CPU time of the last accepted step: a cycle's measured cost
-    # The output being decided: its candidates from the log alone (a kept frame teaches every way of theirs that
-    # names it, see forked.with_ways_of).
-    found: list[Candidate] = field(default_factory=list)
     misses_in_row: int = 0  # outputs kept just before this one that no candidate reproduced (forked search)
     # The suite's own run done by the replay (see SuiteRun): ``born`` is the process that made ``planner``
     # fresh and stepped it on every frame kept, in order (None: no such process — the caller runs the suite).

@@ -35,7 +35,6 @@ from collections.abc import Sequence
 from astaa_deft.analysis.deft.frames.context import FIRST_OUTPUT_TRIGGERS, OutputContext
 from astaa_deft.analysis.deft.frames.per_trigger import trigger_candidates, trigger_frame
 from astaa_deft.analysis.deft.frames.read_at import frame_read_at, read_times
-from astaa_deft.analysis.deft.frames.rules.stamps import SYNCED, synced
 from astaa_deft.analysis.deft.frames.rule import (
     FRAME_RULES, FrameRule, Trigger, first_output_ways, ordered, ways_where,
 )
@@ -56,17 +55,7 @@ def candidates(ctx: OutputContext) -> list[Candidate]:
         found += frames_of_trigger(ctx.streams, ctx.trigger, index, ctx.output_ns, previous=ctx.previous,
                                    lookback_ns=ctx.lookback_ns, ways=ways)
     found += [c for rule in rules if rule.frame is not None and (c := rule.frame(ctx)) is not None]
-    found += [c for rule in rules if rule.of_found is not None and not rule.costly_only
-              for c in rule.of_found(ctx, found)]
     return merged(found)
-
-
-def costly_candidates(ctx: OutputContext, found: Sequence[Candidate]) -> list[Candidate]:
-    """``found`` (the output's :func:`candidates`) and the frames of the rules made only for an output whose
-    wrong frames cost a planner step (``FrameRule.costly_only``, e.g. a synchroniser on stamps)."""
-    more = [c for rule in ordered() if rule.of_found is not None and rule.costly_only
-            for c in rule.of_found(ctx, found)]
-    return merged([*found, *more]) if more else list(found)
 
 
 def placed_triggers(ctx: OutputContext, rules: Sequence[FrameRule] | None = None) -> dict[int, set[str]]:
@@ -87,8 +76,7 @@ def placed_triggers(ctx: OutputContext, rules: Sequence[FrameRule] | None = None
 
 
 __all__ = [
-    "FIRST_OUTPUT_TRIGGERS", "FRAME_RULES", "SYNCED", "Candidate", "FrameRule", "OutputContext", "Pattern", "Stream",
-    "Trigger", "candidates", "costly_candidates", "first_output_ways", "frame_at", "frame_read_at", "merged",
-    "newest_at_or_before", "placed_triggers", "plain_walk", "read_times", "synced", "trigger_candidates",
-    "trigger_frame", "ways_where",
+    "FIRST_OUTPUT_TRIGGERS", "FRAME_RULES", "Candidate", "FrameRule", "OutputContext", "Pattern", "Stream", "Trigger",
+    "candidates", "first_output_ways", "frame_at", "frame_read_at", "merged", "newest_at_or_before",
+    "placed_triggers", "plain_walk", "read_times", "trigger_candidates", "trigger_frame", "ways_where",
 ]

@@ -11,7 +11,7 @@ them.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -39,8 +39,6 @@ class OutputContext:
     logged, newest first. ``read_at``: (time, way) of frames read at a time,
     tried first (see :mod:`.read_at`). ``module_started_in_log``: the log
     began before the module's first trigger (the tool started the run).
-    ``stamp_of(channel, index)``: that message's header.stamp in seconds
-    (None: it has none; the field None: stamps are not read).
     ``first_reach``: how many triggers back from the newest a first output
     may answer (FIRST_OUTPUT_TRIGGERS unless the search widens it).
     """
@@ -55,7 +53,6 @@ class OutputContext:
     module_started_in_log: bool = False
     skew_ns: int = 0
     earlier_outputs_ns: Sequence[int] = ()
-    stamp_of: Callable[[str, int], float | None] | None = None
     first_reach: int = FIRST_OUTPUT_TRIGGERS
 
     @property

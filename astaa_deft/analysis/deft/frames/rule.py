@@ -18,7 +18,7 @@ learned yet, tries this rule's frames first, by rank).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from astaa_deft.analysis.deft.frames.context import OutputContext
@@ -40,9 +40,7 @@ class FrameRule:
     ``triggers(ctx)``: the triggers it places, in order; ``names_rest(ctx)``:
     the way given, at this rule's turn, to every trigger placed so far that
     no rule named; ``frame(ctx)``: a whole frame, tried after every
-    trigger's frames; ``of_found(ctx, found)``: frames made from the
-    candidates the other rules found (``costly_only``: only for an output
-    whose wrong frames cost a planner step). A rule with no hook names a way derived elsewhere
+    trigger's frames. A rule with no hook names a way derived elsewhere
     (frames read at a time, the plain walk), registered for its traits.
     """
 
@@ -51,10 +49,6 @@ class FrameRule:
     triggers: Callable[[OutputContext], Iterable[Trigger]] | None = None
     names_rest: Callable[[OutputContext], str] | None = None
     frame: Callable[[OutputContext], Candidate | None] | None = None
-    # Frames built from the other rules' candidates (e.g. each of their triggers paired otherwise), added by
-    # ``costly_candidates`` where a wrong frame costs a planner step when ``costly_only``.
-    of_found: Callable[[OutputContext, Sequence[Candidate]], Iterable[Candidate]] | None = None
-    costly_only: bool = False
     ways: tuple[str, ...] = ()  # every way its frames may carry (empty: just its name)
     likely: bool = False  # a way a module follows, not merely a trigger between (search_policy.nearest_first)
     first_output: int | None = None  # rank among the frames a first output tries first (search_policy)
