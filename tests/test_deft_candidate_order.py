@@ -174,6 +174,17 @@ def test_a_slow_module_that_ended_a_cycle_with_a_trigger_waiting_read_its_next_i
     assert read_times(streams, "a", {}, output_ns=first_output) == [(first_output, AT_OUTPUT)]
 
 
+def test_a_first_output_the_search_widens_reaches_back_to_the_logs_first_triggers():
+    # timer_heavy_noisy under load: its first cycle (a timer tick after trigger 3) ended 900 ms after the first
+    # trigger, 14 triggers after it; a first output's usual reach (10 back from the newest) left it out.
+    a = Stream("a", [k * 50 * MS for k in range(18)])
+    b = Stream("b", [k * 100 * MS + 13 * MS for k in range(9)])
+    ctx = OutputContext(streams={"a": a, "b": b}, trigger="a", output_ns=899 * MS, previous={}, lookback_ns=0,
+                        module_started_in_log=True)
+    assert {"a": 3, "b": 1} not in [c.choice for c in candidates(ctx)]
+    assert {"a": 3, "b": 1} in [c.choice for c in candidates(replace(ctx, first_reach=40))]
+
+
 def test_an_expensive_outputs_tries_are_not_all_one_triggers():
     # Eight frames of one trigger (other inputs' offsets) ranked first left the next trigger's likeliest out.
     same = [Candidate(frame_time=0, choice={"a": 7, "b": k},

@@ -24,7 +24,7 @@ from astaa_deft.analysis.deft.fork_replay import (
 )
 from astaa_deft.analysis.deft.frames import Candidate, OutputContext, Stream, candidates, plain_walk, read_times
 from astaa_deft.analysis.deft.replay import ReplayPlanner, trajectory_points
-from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES
+from astaa_deft.analysis.deft.search_policy import EXPENSIVE_TRIES, nearest_first
 from astaa_deft.analysis.deft.validator import Comparison
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.io.codecs.base import DecodeError
@@ -38,6 +38,8 @@ from astaa_deft.model.sut import Spec
 SPECULATE_MAX_WINDOW_S = 0.05
 
 
+FIRST_OUTPUT_TRIES = 32  # a run's first expensive output tries up to this many candidates (_first_output_widened)
+FIRST_OUTPUT_REACH = 40  # … of the triggers up to this many back from its newest
 DEEP_MISSES = 4  # outputs in a row not reproduced after which only the likeliest candidate is stepped
 NARROWING = 2  # … before that, each output not reproduced divides the candidates tried by 2 ** NARROWING
 
@@ -88,8 +90,10 @@ def _extract_output(run: Run, out_index: int, before: Decided | None) -> None:
     # An expensive output (forked search, a recorded window past a cheap cycle's): every wrong frame costs
     # a planner step, so the frames nearest their trigger come first and only the first few are tried.
     expensive = run.search is not None and window > SPECULATE_MAX_WINDOW_S
-    options, capped = run.memory.order(generic, expensive=expensive, first=not run.previous and planner.can_snapshot,
-                                       trigger=cfg.trigger)
+    first = not run.previous and planner.can_snapshot
+    options, capped = run.memory.order(generic, expensive=expensive, first=first, trigger=cfg.trigger)
+    if first and expensive:
+        options, capped = _first_output_widened(run, out_index, options)
     if run.misses_in_row and run.search is not None:
         # Outputs in a row not reproduced: the module's state has most likely left the recorded one (a warm
         # start carries the first error on), and no frame will reproduce the next. The search narrows (8, 2,
@@ -122,6 +126,29 @@ def _extract_output(run: Run, out_index: int, before: Decided | None) -> None:
 
 def _generic_candidates(run: Run, out_index: int) -> list[Candidate]:
     """The output's candidate frames from the log alone, most likely first (:func:`.frames.candidates`)."""
+    return candidates(_context(run, out_index))
+
+
+def _first_output_widened(run: Run, out_index: int, likeliest: list[Candidate]) -> tuple[list[Candidate], bool]:
+    """A run's first expensive output: its likeliest candidates, then up to FIRST_OUTPUT_TRIES in all of every
+    trigger since the log's first (FIRST_OUTPUT_REACH back), frames at their trigger's own time first.
+
+    Nothing is learned yet, and a module carrying its state (a warm start) carries a miss here into every output
+    after it; the others are stepped only while none of the likeliest reproduces it (a search stops at the first
+    that settles it). timer_heavy_noisy under load: its first cycle (a timer tick between two triggers) ended
+    900 ms after the first trigger, its frame 14 triggers before the newest — out of a first output's usual reach.
+    """
+    ctx = replace(_context(run, out_index), first_reach=FIRST_OUTPUT_REACH)
+    tried = [dict(c.choice) for c in likeliest]
+    wider = [c for c in nearest_first(candidates(ctx)) if dict(c.choice) not in tried]
+    wider.sort(key=lambda c: min((max((abs(offset) for _, offset in offsets), default=0)
+                                  for _, offsets in c.patterns), default=0))  # sorted() is stable
+    options = likeliest + wider[:max(0, FIRST_OUTPUT_TRIES - len(likeliest))]
+    return options, len(wider) > FIRST_OUTPUT_TRIES - len(likeliest)
+
+
+def _context(run: Run, out_index: int) -> OutputContext:
+    """What the frame rules know of output ``out_index`` (:class:`.frames.OutputContext`)."""
     cfg, recorded = run.cfg, run.recorded
     outputs, skew = recorded.outputs, int(cfg.skew_ms * 1e6)
     output = outputs[out_index]
@@ -130,12 +157,12 @@ def _generic_candidates(run: Run, out_index: int) -> list[Candidate]:
     read_at = read_times(recorded.streams, cfg.trigger, run.previous, output_ns=output.log_time,
                          previous_output_ns=outputs[out_index - 1].log_time if out_index else None,
                          step_ns=None if run.last_step_s is None else int(run.last_step_s * 1e9))
-    return candidates(OutputContext(
+    return OutputContext(
         streams=recorded.streams, trigger=cfg.trigger, output_ns=output.log_time + skew, previous=run.previous,
         lookback_ns=int(cfg.lookback_ms * 1e6),
         previous_output_ns=outputs[out_index - 1].log_time + skew if out_index else None, read_at=read_at,
         module_started_in_log=recorded.module_started_in_log, skew_ns=skew,
-        earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])]))
+        earlier_outputs_ns=[o.log_time for o in reversed(outputs[max(0, out_index - 4):out_index - 1])])
 
 
 def _put_first(run: Run, out_index: int, options: list[Candidate], expected: Expected, *,

@@ -39,6 +39,8 @@ class OutputContext:
     logged, newest first. ``read_at``: (time, way) of frames read at a time,
     tried first (see :mod:`.read_at`). ``module_started_in_log``: the log
     began before the module's first trigger (the tool started the run).
+    ``first_reach``: how many triggers back from the newest a first output
+    may answer (FIRST_OUTPUT_TRIGGERS unless the search widens it).
     """
 
     streams: Mapping[str, Stream]
@@ -51,6 +53,7 @@ class OutputContext:
     module_started_in_log: bool = False
     skew_ns: int = 0
     earlier_outputs_ns: Sequence[int] = ()
+    first_reach: int = FIRST_OUTPUT_TRIGGERS
 
     @property
     def trigger_times(self) -> Sequence[int]:
@@ -69,10 +72,10 @@ class OutputContext:
     @cached_property
     def oldest(self) -> int:
         """The oldest trigger the output may answer: the first after the previous frame's; for a first output
-        one of the FIRST_OUTPUT_TRIGGERS before the newest."""
+        one of the ``first_reach`` before the newest."""
         if self.has_previous:
             return self.previous[self.trigger] + 1
-        return max(0, self.newest - FIRST_OUTPUT_TRIGGERS + 1)
+        return max(0, self.newest - self.first_reach + 1)
 
     def within(self, index: int) -> bool:
         """``index`` is one of the triggers the output may answer (oldest to newest)."""
