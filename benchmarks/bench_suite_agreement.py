@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import re
 import shutil
 import subprocess
@@ -48,7 +49,7 @@ def record(tmp: Path, goal_x: str) -> Path:
 def pytest_counts(suite: Path) -> tuple[int, int, str]:
     """(passed, failed or errored, pytest's last line) of plain pytest on the written suite, a fresh process."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
+    res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                           str(suite)], capture_output=True, text=True, timeout=600, cwd=suite.parent, env=env)
     last = next((line for line in reversed(res.stdout.splitlines()) if line.strip()), res.stderr[-200:])
     passed = sum(int(n) for n in re.findall(r"(\d+) passed", last))
@@ -59,6 +60,8 @@ def pytest_counts(suite: Path) -> tuple[int, int, str]:
 
 
 def main() -> None:
+    # SIGTERM ends the run as Ctrl-C does: the loops this script started are stopped on the way out.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=200, help="extractions, each checked by pytest (default 200)")
     ap.add_argument("--loops", type=int, default=2, help="CPU-bound loops beside the runs (default 2)")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -50,6 +51,8 @@ def loaded_run(pytest_args: list[str], loops: int) -> tuple[int, float, str, flo
 
 
 def main() -> None:
+    # SIGTERM ends the run as Ctrl-C does: the loops this script started are stopped on the way out.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     argv = sys.argv[1:]
     pytest_args = argv[argv.index("--") + 1:] if "--" in argv else []
     mine = argv[:argv.index("--")] if "--" in argv else argv
