@@ -45,6 +45,8 @@ def test_more_findings_at_the_same_cost_never_lower_the_share():
     assert shares == sorted(shares)
 
 
+@pytest.mark.slow
+@pytest.mark.promise  # a whole --budget 90 campaign: the split's pure rule is judged above in the default run
 def test_a_budgeted_campaign_decides_the_split_from_its_first_round_and_says_why(tmp_path: Path):
     from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
     from astaa_deft.orchestration.journal.journal import Journal

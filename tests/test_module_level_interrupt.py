@@ -89,7 +89,10 @@ def _interrupted(out: Path, sig: signal.Signals, ready) -> tuple[int, str, list[
     return cmd.returncode, printed + err, seen, workers
 
 
-@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+# SIGINT in the default run; SIGTERM (the same path, its own exit code) and the interrupt after the search are
+# whole campaigns of a minute each: `-m slow`, and CI's promise subset.
+@pytest.mark.parametrize("sig, code", [
+    (signal.SIGINT, 130), pytest.param(signal.SIGTERM, 143, marks=[pytest.mark.slow, pytest.mark.promise])])
 def test_an_interrupted_search_stops_its_workers_and_a_resume_searches_again(tmp_path: Path, sig, code):
     out = tmp_path / "campaign"
     # interrupted while the workers replay (each one has written a result line)
@@ -114,6 +117,8 @@ def test_an_interrupted_search_stops_its_workers_and_a_resume_searches_again(tmp
     assert set(cases) == {f["case_id"] for f in state["findings"]} and set(cases.values()) == {"done"}
 
 
+@pytest.mark.slow
+@pytest.mark.promise
 def test_an_interrupt_after_the_search_keeps_what_it_decided_and_a_resume_finishes_it(tmp_path: Path):
     out = tmp_path / "campaign"
     state_file = out / "module_level" / "state.json"
