@@ -28,21 +28,16 @@ import time
 from pathlib import Path
 
 from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
+from bench_third_party import SPEC, drive  # this folder is on sys.path when a benchmark runs
 
-ROOT = Path(__file__).resolve().parent.parent
-STACK = ROOT / "examples" / "ompl_stack"
-SPEC = STACK / "spec.yaml"
 LOOP = "while True: pass"
 
 
 def record(tmp: Path, goal_x: str) -> Path:
-    """One clean run of the OMPL stack through the star, recorded."""
-    log = tmp / "clean.mcap"
-    res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "proxy", "--spec", str(SPEC), "--record",
-                          str(log), "--run-dir", str(tmp / "run"), "--param", f"goal_x={goal_x}",
-                          "--param", f"truth={tmp / 'truth.json'}"], capture_output=True, text=True, timeout=300)
-    if res.returncode != 0 or not log.exists():
-        sys.exit(f"the clean run did not pass (exit {res.returncode}):\n{res.stdout[-2000:]}{res.stderr[-2000:]}")
+    """One clean run of the OMPL stack through the star, recorded (bench_third_party's run, no parked car)."""
+    log, truth, _ = drive(tmp, "clean", 0, goal_x)
+    if truth.get("code") != 0:
+        sys.exit(f"the clean run did not pass as the simulator says: {truth}")
     return log
 
 
