@@ -30,7 +30,8 @@ from pathlib import Path
 from astaa_deft.analysis.deft.workflow import ExtractOptions, extract_module_tests
 from bench_third_party import SPEC, drive  # this folder is on sys.path when a benchmark runs
 
-LOOP = "while True: pass"
+# A loop ignores Ctrl-C (the terminal sends it to the whole group): this script stops it by its pid on the way out.
+LOOP = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\nwhile True: pass"
 
 
 def record(tmp: Path, goal_x: str) -> Path:
@@ -95,4 +96,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except KeyboardInterrupt:  # Ctrl-C: the loops are stopped on the way out; no traceback
+        sys.exit(130)
