@@ -39,7 +39,7 @@ def drive(tmp: Path, name: str, *params: str) -> Path:
     return log
 
 
-def tests_written(out: Path) -> int:
+def checked_frames(out: Path) -> int:
     """The module tests on disk: frames with a check (a frame kept only for the module's state has none)."""
     try:
         return sum(1 for f in json.loads((out / "deft.json").read_text())["frames"] if f["check"])
@@ -79,7 +79,7 @@ def test_an_extraction_stopped_by_timeout_leaves_the_decided_tests_and_a_summary
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 600
-        while tests_written(out) == 0 and proc.poll() is None and time.monotonic() < deadline:
+        while checked_frames(out) == 0 and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)
         assert proc.poll() is None, "the extraction ended before it could be stopped"
         proc.send_signal(signal.SIGTERM)
@@ -93,7 +93,7 @@ def test_an_extraction_stopped_by_timeout_leaves_the_decided_tests_and_a_summary
     summary = [line for line in stdout.splitlines() if line.startswith("interrupted after ")]
     assert summary and "--resume" in summary[0], stdout
     assert any(line.startswith("extract: ") and " outputs" in line for line in stderr.splitlines()), stderr
-    written = tests_written(out)
+    written = checked_frames(out)
     assert written >= 1 and (out / STATE).is_file() and (out / "frames.mcap").is_file()
     decided = json.loads((out / STATE).read_text())["decided"]
     assert written == sum(1 for d in decided if d.get("accepted"))
@@ -120,14 +120,14 @@ def test_resume_goes_on_after_the_outputs_decided_before(light_log, tmp_path):
 
     first = extract_module_tests(light_log, SPEC, out, progress=stop)
     assert first.interrupted and len(first.extraction.frames) == stop_after - 1
-    assert tests_written(out) == first.accepted and (out / STATE).is_file()
+    assert checked_frames(out) == first.accepted and (out / STATE).is_file()
 
     resumed = extract_module_tests(light_log, SPEC, out, ExtractOptions(resume=True))
     assert not resumed.interrupted and resumed.resumed == stop_after - 1
     ex = resumed.extraction
     assert ex.accepted_at(0.0) == ex.outputs and not ex.skipped  # every output, as in one go
     assert [f.inputs for f in ex.frames[:stop_after - 1]] == [f.inputs for f in first.extraction.frames]
-    assert tests_written(out) == ex.outputs and not (out / STATE).exists()
+    assert checked_frames(out) == ex.outputs and not (out / STATE).exists()
 
 
 def test_resume_without_an_interrupted_extraction_is_a_clear_error(light_log, tmp_path):

@@ -25,6 +25,8 @@ from astaa_deft.io.log.reader import read_log
 from astaa_deft.model.errors import InputError
 from astaa_deft.model.sut import Spec
 
+from stack_timing import unexplained
+
 TICKS = Path(__file__).parent / "sut" / "ticks.yaml"
 T0 = 1_700_000_000_000_000_000
 PAIR_BY_SEQ = "pair_by: header.seq"
@@ -110,8 +112,10 @@ def _live(tmp_path: Path, clearance: float):
 
 def test_live_a_tick_published_apart_and_paired_gives_no_collision_and_by_bus_time_an_unsure_one(tmp_path):
     result, log = _live(tmp_path, 0.1)
-    assert [v.invariant for v in result.violations] == [], [v.detail for v in result.violations]
     contents = read_log(log)
+    # No finding but a deadline the controller's own publish stamps show it missed (a loaded machine can
+    # really hold it silent past control_gap's 0.2 s).
+    assert unexplained(result.violations, contents, load_spec(TICKS)) == []
     for how in ("seq", "time"):
         assert [v for v in check_log(contents, spec_declaring(how)).violations if v.invariant == "no_collision"] \
             == [], how
