@@ -87,6 +87,8 @@ def test_the_state_defect_needs_the_state_and_the_spec_replays_the_module(tmp_pa
     assert replayable(spec, "module") and not replayable(spec, "producer") and not replayable(spec, None)
 
 
+@pytest.mark.slow  # ~1 min: a whole campaign with its baseline; the member's own replay stays in the default run
+@pytest.mark.promise
 def test_a_state_defect_reached_through_a_slow_channel_gets_module_tests_that_fail_on_it(tmp_path):
     stack = write_member(SLOW_STATE, tmp_path / "stack")
     found = run_campaign(stack, tmp_path / "campaign", cases=[nan_case("c")], reruns=1)

@@ -31,6 +31,8 @@ def _task_prefixes(dask_scheduler) -> list[str]:
     return list(dask_scheduler.task_prefixes)
 
 
+@pytest.mark.slow  # ~1 min: a whole campaign on a LocalCluster; the cluster's campaign path stays in the default run
+@pytest.mark.promise  # (test_campaign_cluster.py)
 def test_module_level_replays_run_on_the_cluster_and_find_every_seeded_defect(tmp_path: Path):
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                            dashboard_address=None)
