@@ -4,6 +4,7 @@ the machine's load.
     python benchmarks/loaded_suite.py                        # the default run, two loops, once
     python benchmarks/loaded_suite.py --repeat 3             # three runs in a row
     python benchmarks/loaded_suite.py --loops 0              # the same, quiet (the time to compare with)
+    python benchmarks/loaded_suite.py --repeat 3 --keep DIR  # each run's whole output in DIR/run-N.txt
     python benchmarks/loaded_suite.py -- tests/test_deft_demo.py -k lockstep -n 0   # a selection
 
 Starts ``--loops`` Python processes that spin (``while True: pass``) for the
@@ -30,9 +31,9 @@ ROOT = Path(__file__).resolve().parent.parent
 LOOP = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\nwhile True: pass"
 
 
-def loaded_run(pytest_args: list[str], loops: int) -> tuple[int, float, str, float, float]:
+def loaded_run(pytest_args: list[str], loops: int, keep: Path | None = None) -> tuple[int, float, str, float, float]:
     """One pytest run with ``loops`` spinning processes beside it: (exit code, seconds, last line, load before,
-    load after)."""
+    load after). With ``keep``, pytest's whole output is written there (a failure's detail)."""
     before = os.getloadavg()[0]
     spinners = [subprocess.Popen([sys.executable, "-c", LOOP]) for _ in range(loops)]
     started = time.monotonic()
@@ -44,6 +45,8 @@ def loaded_run(pytest_args: list[str], loops: int) -> tuple[int, float, str, flo
             spinner.kill()
             spinner.wait()
     seconds = time.monotonic() - started
+    if keep is not None:
+        keep.write_text(run.stdout + run.stderr)
     lines = [line for line in run.stdout.splitlines() if line.strip()]
     failures = [line for line in lines if line.startswith(("FAILED", "ERROR"))]
     for line in failures:
@@ -60,10 +63,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--loops", type=int, default=2, help="CPU-bound loops beside each run (default 2)")
     ap.add_argument("--repeat", type=int, default=1, help="runs in a row (default 1)")
+    ap.add_argument("--keep", type=Path, help="write each run's whole pytest output to DIR/run-N.txt")
     args = ap.parse_args(mine)
+    if args.keep:
+        args.keep.mkdir(parents=True, exist_ok=True)
     results = []
     for n in range(1, args.repeat + 1):
-        code, seconds, last, before, after = loaded_run(pytest_args, args.loops)
+        keep = args.keep / f"run-{n}.txt" if args.keep else None
+        code, seconds, last, before, after = loaded_run(pytest_args, args.loops, keep)
         minutes, rest = divmod(round(seconds), 60)
         print(f"run {n}: {last} — {minutes} min {rest:02d} s, {args.loops} loops, load {before:.1f} → {after:.1f}",
               flush=True)

@@ -7,15 +7,19 @@ message fault: a reorder or a delay; stamps are brittle, so no value fault write
 
 import argparse
 import math
+import time
 
 
 class Ctrl:
-    def __init__(self, defects="1"):
+    def __init__(self, defects="1", step_ms="0"):
         self.defects = str(defects) == "1"
+        self.step_s = float(step_ms) / 1000.0  # a replayed step's cost (modlevel.yaml's step_ms)
         self.last_stamp = None
         self.integral = 0.0
 
     def step(self, frame):
+        if self.step_s:
+            time.sleep(self.step_s)
         state = frame["state"]
         stamp = state["header"]["stamp"]
         if self.last_stamp is not None and stamp < self.last_stamp:

@@ -5,14 +5,18 @@ with --defects 1, dies on a command past 1e6 (a value fault on ``command.u``); t
 
 import argparse
 import math
+import time
 
 
 class Watch:
-    def __init__(self, defects="1"):
+    def __init__(self, defects="1", step_ms="0"):
         self.defects = str(defects) == "1"
+        self.step_s = float(step_ms) / 1000.0  # a replayed step's cost (modlevel.yaml's step_ms)
         self.count = 0
 
     def step(self, frame):
+        if self.step_s:
+            time.sleep(self.step_s)
         u = frame["command"]["u"]
         if not (isinstance(u, (int, float)) and math.isfinite(u)):
             return {"count": self.count, "level": -1}
