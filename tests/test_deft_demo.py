@@ -125,7 +125,9 @@ def test_truncated_log_is_extracted_up_to_the_cut(recorded, tmp_path):
     log = read_log(cut)
     assert log.warnings
     ex = extract(log, spec, make_planner(spec, PARAMS))
-    assert ex.outputs > 0 and ex.accepted_at(0.0) >= 0.95 * ex.outputs
+    # At least what a plain replay of the cut log reproduces (its own floor: how many of the planner's frames a
+    # loaded recording holds is the recording's doing).
+    assert ex.outputs > 0 and ex.accepted_at(0.0) >= plain_floor(demo_spec_path(), None, cut, params=PARAMS).count
     res = subprocess.run([sys.executable, "-m", "astaa_deft.cli", "extract", str(cut), "--spec",
                           str(demo_spec_path()), "-o", str(tmp_path / "o")], capture_output=True, text=True)
     assert res.returncode == 0 and "warning" in res.stdout and "Traceback" not in res.stderr
