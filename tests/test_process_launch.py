@@ -148,6 +148,19 @@ def test_the_fork_guard_raises_while_a_second_thread_runs():
         other.join()
 
 
+def test_a_fork_waits_for_a_thread_that_is_ending():
+    # A closed Zenoh session's callback thread ends a moment after the close (later on a loaded machine): the
+    # fork waits for it rather than refusing, and forks alone. (Native threads let be, as a forked replay
+    # does: this test process has its own.)
+    ending = threading.Thread(target=lambda: threading.Event().wait(0.3), name="an-ending-thread")
+    ending.start()
+    pid = process_launch.guarded_fork("a test fork", native_threads_ok=True)
+    if pid == 0:
+        os._exit(7)
+    assert not ending.is_alive()
+    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 7
+
+
 FORK_AFTER = textwrap.dedent("""
     import os, sys
     from astaa_deft.engine.bus import process_launch

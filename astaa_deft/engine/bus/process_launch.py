@@ -50,6 +50,9 @@ from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.engine.bus.processes import stop_process
 
 PR_SET_PDEATHSIG = 1
+# How long a fork waits for other Python threads to end before it refuses: a Zenoh session's callback thread
+# ends soon after its session closes, later on a loaded machine; a thread that runs on is refused after it.
+THREADS_ENDING_WAIT_S = 2.0
 
 # The wrapper (run as ``python -I -S -c``: no site, no environment, no current directory; only the standard
 # library): arm the parent-death signal, make sure the parent is still the one that started us — if it died
@@ -271,6 +274,11 @@ def ensure_fork_safe(what: str, *, native_threads_ok: bool = False) -> None:
     if not hasattr(os, "fork"):
         raise UnsafeFork(f"{what}: this system cannot fork")
     others = _other_python_threads()
+    if others:  # a thread on its way out (a closed Zenoh session's callback thread) may end in a moment
+        deadline = time.monotonic() + THREADS_ENDING_WAIT_S
+        for thread in others:
+            thread.join(max(0.0, deadline - time.monotonic()))
+        others = _other_python_threads()
     native = foreign_threads()
     if others or (native and not native_threads_ok):
         names = ", ".join(t.name for t in others)
