@@ -146,6 +146,16 @@ def plain_floor(spec_path: Path, module: str | None, log_path: Path, *, params: 
     return Floor(len(outputs), reproduced, way, steps, reading - minus_seconds, {r[2]: r[0] for r in results})
 
 
+def _step(planner: Any, frame: dict[str, Any]) -> Any:
+    """The module's answer to ``frame``; None when it raises on it. A factory may need an input the log holds
+    only later (the OMPL planner takes no frame without the ego's state; its node never plans before one came):
+    that plain replay answers nothing there and goes on, the most the floor can grant it."""
+    try:
+        return planner.step(frame)
+    except Exception:  # noqa: BLE001 - whatever a third-party module raises on a frame it cannot take
+        return None
+
+
 def _at_trigger(planner: Any, trigger: str, played: _Played) -> tuple[list[Any], int]:
     newest: dict[str, Any] = {}
     answers: list[Any] = []
@@ -154,7 +164,7 @@ def _at_trigger(planner: Any, trigger: str, played: _Played) -> tuple[list[Any],
         newest[name] = message
         if name == trigger and len(answers) < len(played.outputs):
             steps += 1
-            answer = planner.step(dict(newest))
+            answer = _step(planner, dict(newest))
             if answer is not None:
                 answers.append(answer)
     return answers, steps
@@ -172,7 +182,7 @@ def _at_output(planner: Any, trigger: str, played: _Played) -> tuple[list[Any], 
             answers.append(None)
             continue
         steps += 1
-        answers.append(planner.step(dict(newest)))
+        answers.append(_step(planner, dict(newest)))
     return answers, steps
 
 
@@ -191,7 +201,7 @@ def _output_trigger(planner: Any, trigger: str, played: _Played) -> tuple[list[A
             answers.append(None)
             continue
         steps += 1
-        answers.append(planner.step(dict(at_trigger)))
+        answers.append(_step(planner, dict(at_trigger)))
     return answers, steps
 
 
