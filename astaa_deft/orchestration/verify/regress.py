@@ -40,9 +40,9 @@ class RegressBucket:
     @classmethod
     def from_manifest(cls, entry: StateReader) -> RegressBucket:
         """The bucket from its entry in regress.json (InputError naming the field when one is damaged)."""
-        return cls(entry.get("testcase").string(), entry.get("invariant").string(),
-                   entry.get("module").text(optional=True),
-                   entry.get("params").map(lambda value: value.string()))
+        testcase, invariant, module, params = entry.fields("testcase", "invariant", "module", "params")
+        return cls(testcase.string(), invariant.string(), module.text(optional=True),
+                   params.map(lambda value: value.string()))
 
 
 @dataclass(frozen=True)
@@ -68,12 +68,14 @@ class RegressSuite:
         """--spec, else the campaign's spec where it was, else the copy in the suite."""
         if self.spec is not None:
             return self.spec
-        original = Path(self._read().get("spec").string())
-        return original if original.is_file() else self.directory / self._read().get("spec_copy").string()
+        spec, copy = self._read().fields("spec", "spec_copy")
+        original = Path(spec.string())
+        return original if original.is_file() else self.directory / copy.string()
 
     def bucket(self, name: str) -> RegressBucket:
         """Bucket ``name`` as the manifest lists it (InputError if it does not, or a field is damaged)."""
-        return RegressBucket.from_manifest(self._read().get("buckets").obj().get(name).obj())
+        (buckets,) = self._read().fields("buckets")
+        return RegressBucket.from_manifest(buckets.obj().get(name).obj())
 
     def setting(self, name: str) -> float:
         """A number the campaign ran with (``horizon``, ``settle``: seconds)."""
@@ -81,7 +83,7 @@ class RegressSuite:
 
     def known(self) -> JsonObject:
         """The campaign's known findings, as ``known.from_json`` reads them ({} if none)."""
-        known = self._read().get("known")
+        (known,) = self._read().fields("known")
         return known.json_object() if known.value is not None else {}
 
     def params_of(self, name: str) -> dict[str, str]:
