@@ -23,6 +23,7 @@ from astaa_deft.engine.intercept import generate as gen
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log.reader import read_log
+from astaa_deft.io.statefile import StateReader
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.report import render
@@ -92,8 +93,19 @@ def test_field_families_fold_fields_to_their_object_and_message_faults_to_the_ch
 def test_a_fault_survives_its_json_form_with_a_nan():
     fault = StreamFault(channel="a", kind=FaultKind.HOLD, index=3, path="v", value=math.nan, value_ref="@f.nan",
                         count=4)
-    back = StreamFault.from_json(fault.to_json())
+    back = StreamFault.from_json(StateReader("fault", fault.to_json(), ""))
     assert math.isnan(back.value) and back.count == 4 and back.value_ref == "@f.nan"  # type: ignore[arg-type]
+
+
+def test_a_damaged_verdict_a_worker_wrote_is_one_input_error_naming_its_file_and_field():
+    from astaa_deft.analysis.deft.module_search import ModuleVerdict
+    from astaa_deft.model.errors import InputError
+
+    verdict = ModuleVerdict(module="m", fault=StreamFault(channel="a", kind=FaultKind.DROP, index=2), steps=4)
+    assert ModuleVerdict.from_json(StateReader("w0.jsonl", verdict.to_json(), "")) == verdict
+    damaged = {**verdict.to_json(), "fault": {**verdict.fault.to_json(), "index": "2"}}
+    with pytest.raises(InputError, match=r"w0\.jsonl.*field 'verdict\.fault\.index' must be a whole number"):
+        ModuleVerdict.from_json(StateReader("w0.jsonl", damaged, "", field="verdict"))
 
 
 def test_only_fields_every_consumer_leaves_unread_are_left_out():

@@ -72,12 +72,12 @@ BYTES_PER_OUTPUT = 16_384  # far above what one decided output takes in the stat
 
 
 def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Decided:
-    item.obj()
-    item.get("output").whole(position, position)  # in order from the first
-    if item.has("skipped"):
-        return Decided(output_index=position, frame=None, choice=None,
-                       skipped=item.get("skipped").string(MAX_SKIPPED_TEXT))
-    choice = item.get("choice")
+    (output, skipped, choice, comparison, trigger, frame_time, accepted, tried, exact) = item.fields(
+        "output", "skipped", "choice", "comparison", "trigger_time_ns", "frame_time_ns", "accepted",
+        "candidates_tried", "exact")
+    output.whole(position, position)  # in order from the first
+    if skipped.present:
+        return Decided(output_index=position, frame=None, choice=None, skipped=skipped.string(MAX_SKIPPED_TEXT))
     picks: dict[str, int] = {}
     for name, index in choice.entries(max_items=1000):
         if shape is not None and name not in shape.inputs:
@@ -87,16 +87,12 @@ def _decided_of(item: StateReader, position: int, shape: LogShape | None) -> Dec
     if lacking or not picks:  # a decided frame holds a message of every input
         choice.fail(f"lacks the input{'s' if len(lacking) > 1 else ''} {', '.join(lacking)}" if lacking
                     else "is empty (a frame has a message of every input)")
-    comparison = item.get("comparison").obj()
+    distance, max_error, points, how = comparison.fields("distance", "max_error", "points", "how")
     frame = ExtractedFrame(
-        index=0, output=None, trigger_time=item.get("trigger_time_ns").whole(),
-        frame_time=item.get("frame_time_ns").whole(), inputs={},
-        comparison=Comparison(distance=comparison.get("distance").real(0.0, infinite=True),
-                              max_error=comparison.get("max_error").real(0.0, infinite=True),
-                              points=comparison.get("points").whole(),
-                              how=comparison.get("how").string(100)),
-        accepted=bool(item.get("accepted").flag()), candidates_tried=item.get("candidates_tried").whole(),
-        exact=bool(item.get("exact").flag()))
+        index=0, output=None, trigger_time=trigger.whole(), frame_time=frame_time.whole(), inputs={},
+        comparison=Comparison(distance=distance.real(0.0, infinite=True), max_error=max_error.real(0.0, infinite=True),
+                              points=points.whole(), how=how.string(100)),
+        accepted=bool(accepted.flag()), candidates_tried=tried.whole(), exact=bool(exact.flag()))
     return Decided(output_index=position, frame=frame, choice=picks)
 
 
@@ -116,20 +112,19 @@ def read_state(out_dir: Path, expected: Mapping[str, JsonValue], shape: LogShape
     if len(text) > most_bytes:
         raise InputError(Problem(str(path), None, None, f"is {len(text):,} bytes: an extraction of this log writes "
                                  f"at most {most_bytes:,}", fix))
-    state = StateReader(str(path), load_json(text, str(path), "", fix, max_chars=most_bytes), fix).obj()
-    version = state.get("version")
+    state = StateReader(str(path), load_json(text, str(path), "", fix, max_chars=most_bytes), fix)
+    version, extraction, outputs, decided = state.fields("version", "extraction", "outputs", "decided")
     if version.value != STATE_VERSION:
         version.fail(f"is {str(version.value)[:40]}: this version of astaa-deft reads state version {STATE_VERSION}"
                      " only")
-    was = state.get("extraction").obj()
-    for key, value in expected.items():
-        if was.get(key).value != value:
+    for (key, value), was in zip(expected.items(), extraction.fields(*expected), strict=True):
+        if was.value != value:
             raise InputError(Problem(str(path), None, None, f"it was an extraction with {key} "
-                                     f"{str(was.get(key).value)[:200]!r}, not {value!r}",
+                                     f"{str(was.value)[:200]!r}, not {value!r}",
                                      f"resume with the same log, spec, --module and --threshold, or {fix}"))
     most = shape.outputs if shape is not None else MAX_INT
-    state.get("outputs").whole(0, MAX_INT)
-    return [_decided_of(item, n, shape) for n, item in enumerate(state.get("decided").items(most))]
+    outputs.whole(0, MAX_INT)
+    return [_decided_of(item, n, shape) for n, item in enumerate(decided.items(most))]
 
 
 class Checkpoint:

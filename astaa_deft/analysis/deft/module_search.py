@@ -48,6 +48,7 @@ from astaa_deft.io.codecs import get_codec
 from astaa_deft.io.codecs.base import DecodeError
 from astaa_deft.io.log import records as rec
 from astaa_deft.io.log.reader import LogContents
+from astaa_deft.io.statefile import MAX_NAME, StateReader
 from astaa_deft.model.json import DecodedMessage, JsonObject
 from astaa_deft.model.replay_module import ReplayModule, StepExceptions
 from astaa_deft.model.sut import Spec
@@ -107,19 +108,16 @@ class ModuleVerdict:
                 "seconds": round(self.seconds, 6), "applicable": self.applicable}
 
     @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> ModuleVerdict:
-        fault = data["fault"]
-        if not isinstance(fault, Mapping):
-            raise ValueError("a verdict's fault is an object")
-        kind, frame, steps, seconds = data.get("kind"), data.get("frame"), data.get("steps", 0), data.get("seconds", 0)
-        invariant, error = data.get("invariant"), data.get("error")
-        return cls(module=str(data["module"]), fault=StreamFault.from_json(fault),
-                   kind=None if kind is None else FindingKind(str(kind)),
-                   invariant=None if invariant is None else str(invariant), error=None if error is None else str(error),
-                   detail=str(data.get("detail", "")), frame=frame if isinstance(frame, int) else None,
-                   steps=steps if isinstance(steps, int) else 0,
-                   seconds=float(seconds) if isinstance(seconds, (int, float)) else 0.0,
-                   applicable=bool(data.get("applicable", True)))
+    def from_json(cls, r: StateReader) -> ModuleVerdict:
+        """The verdict as ``to_json`` wrote it (InputError naming the file and the field when one is damaged)."""
+        module, fault, kind, invariant, error, detail, frame, steps, seconds, applicable = r.fields(
+            "module", "fault", "kind", "invariant", "error", "detail", "frame", "steps", "seconds", "applicable")
+        found = kind.text(choices=tuple(k.value for k in FindingKind), optional=True)
+        return cls(module=module.string(MAX_NAME), fault=StreamFault.from_json(fault),
+                   kind=None if found is None else FindingKind(found),
+                   invariant=invariant.text(MAX_NAME, optional=True), error=error.text(optional=True),
+                   detail=detail.string(), frame=frame.integer(optional=True), steps=steps.whole(),
+                   seconds=seconds.real(0), applicable=bool(applicable.flag()))
 
 
 def judged_invariants(spec: Spec, entry: ReplayModule) -> Spec:

@@ -24,10 +24,13 @@ from dataclasses import dataclass, field, replace
 from astaa_deft.analysis.deft.frames import (
     OutputContext, Stream, candidates, frame_at, newest_at_or_before, trigger_frame,
 )
+from astaa_deft.io.statefile import MAX_NAME, StateReader
 from astaa_deft.model.errors import AstaaDeftError
 from astaa_deft.model.fields import FieldPath, FieldPathError, set_field
 from astaa_deft.model.json import DecodedMessage, FieldValue, JsonObject, JsonValue
 from astaa_deft.model.vocabulary import TextEnum
+
+MAX_LIST = 1_000_000  # items of a list a decoder reads back: far more than a search writes
 
 DUPLICATE_GAP_NS = 1_000_000  # a copy arrives this long after the real message (the engine sends it next)
 REORDER_GAP_NS = 1_000_000  # a reordered message arrives this long after the one that overtook it
@@ -83,16 +86,20 @@ class StreamFault:
                 "delay_ms": self.delay_ms}
 
     @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> StreamFault:
+    def from_json(cls, r: StateReader) -> StreamFault:
+        """The fault as ``to_json`` wrote it (InputError naming the file and the field when one is damaged)."""
         from astaa_deft.model.tagged import from_tagged
 
-        path, ref = data.get("path"), data.get("value_ref")
-        index, count, delay = data["index"], data.get("count", 1), data.get("delay_ms", 0.0)
-        if not isinstance(index, int) or not isinstance(count, int) or not isinstance(delay, (int, float)):
-            raise ValueError(f"a stream fault's index, count and delay are numbers: {data!r}")
-        return cls(channel=str(data["channel"]), kind=FaultKind(str(data["kind"])), index=index,
-                   path=None if path is None else str(path), value=from_tagged(data.get("value")),  # type: ignore[arg-type]
-                   value_ref=None if ref is None else str(ref), count=count, delay_ms=float(delay))
+        channel, kind, index, path, value, value_ref, count, delay = r.fields(
+            "channel", "kind", "index", "path", "value", "value_ref", "count", "delay_ms")
+        try:
+            decoded = from_tagged(value.value)  # type: ignore[arg-type]
+        except (TypeError, ValueError) as exc:
+            value.fail(f"is not a field value ({exc})")
+        kinds = tuple(k.value for k in FaultKind)
+        return cls(channel=channel.string(MAX_NAME), kind=FaultKind(kind.string(choices=kinds)), index=index.whole(),
+                   path=path.text(MAX_NAME, optional=True), value=decoded,
+                   value_ref=value_ref.text(MAX_NAME, optional=True), count=count.whole(1), delay_ms=delay.real(0))
 
 
 def _tagged(value: FieldValue) -> JsonValue:
@@ -351,17 +358,24 @@ class FieldReads:
                 "probed_frames": self.probed_frames, "seconds": round(self.seconds, 3), "notes": list(self.notes)}
 
     @classmethod
-    def from_json(cls, data: Mapping[str, object]) -> FieldReads:
-        def pairs(value: object) -> tuple[tuple[str, str], ...]:
-            if not isinstance(value, list):
-                raise ValueError("a list of [channel, field] pairs")
-            return tuple((str(p[0]), str(p[1])) for p in value if isinstance(p, list) and len(p) == 2)
+    def from_json(cls, r: StateReader) -> FieldReads:
+        """The reads as ``to_json`` wrote them (InputError naming the file and the field when one is damaged)."""
+        module, read, unread, frames, seconds, notes = r.fields(
+            "module", "read", "unread", "probed_frames", "seconds", "notes")
+        return cls(module=module.string(MAX_NAME), read=field_pairs(read), unread=field_pairs(unread),
+                   probed_frames=frames.whole(), seconds=seconds.real(0),
+                   notes=tuple(notes.each(lambda v: v.string(), MAX_LIST)))
 
-        frames, seconds, notes = data.get("probed_frames", 0), data.get("seconds", 0.0), data.get("notes", [])
-        return cls(module=str(data["module"]), read=pairs(data["read"]), unread=pairs(data["unread"]),
-                   probed_frames=frames if isinstance(frames, int) else 0,
-                   seconds=float(seconds) if isinstance(seconds, (int, float)) else 0.0,
-                   notes=tuple(str(n) for n in notes) if isinstance(notes, list) else ())
+
+def field_pairs(r: StateReader) -> tuple[tuple[str, str], ...]:
+    """A list of [channel, field] pairs, as ``FieldReads.to_json`` writes them."""
+    def pair(v: StateReader) -> tuple[str, str]:
+        parts = v.each(lambda part: part.string(MAX_NAME), 2)
+        if len(parts) != 2:
+            v.fail("must be a [channel, field] pair")
+        return parts[0], parts[1]
+
+    return tuple(r.each(pair, MAX_LIST))
 
 
 def fields_nothing_reads(consumers: Mapping[str, Sequence[str]], reads: Sequence[FieldReads]

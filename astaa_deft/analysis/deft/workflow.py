@@ -1,6 +1,6 @@
 """DeFT extraction as one library call: a recorded run in, deterministic planner module tests out.
 
-``extract_module_tests(log_path, spec_path, out_dir, …)`` reads the run,
+``extract_module_tests(log_path, spec, out_dir, …)`` reads the run,
 replays the planner over the frames it reconstructs (:func:`.extract.extract`),
 writes the accepted frames as a pytest suite (:func:`.export.export_suite`)
 with oracle tests for a collision the run saw, and returns what it found.
@@ -77,11 +77,12 @@ class ExtractOptions:
     resume: bool = False  # continue an interrupted extraction into the same output directory
 
 
-def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOptions = ExtractOptions(),
+def extract_module_tests(log_path: Path, spec: Spec | Path, out_dir: Path, options: ExtractOptions = ExtractOptions(),
                          *, progress: Callable[[int, int], None] = lambda done, total: None,
                          notice: Callable[[str], None] = lambda line: None) -> ExtractReport:
     """Extract and write the module tests of one run (InputError on bad input).
 
+    ``spec`` is the spec as its command loaded it (read once per command) or the path of its file (read here).
     ``out_dir`` is checked before the log is read (OutputError: a file in the
     way, not writable, no room, no usable temporary directory); a write that
     fails later raises OutputError too.
@@ -100,7 +101,8 @@ def extract_module_tests(log_path: Path, spec_path: Path, out_dir: Path, options
     threshold, module, jobs, resume = options.threshold, options.module, options.jobs, options.resume
     place = Place(out_dir, "-o")
     ready_dir(place, temp=True)
-    spec = load_spec(spec_path)
+    spec_path = (spec.path or Path(spec.name)) if isinstance(spec, Spec) else Path(spec)
+    spec = spec if isinstance(spec, Spec) else load_spec(spec)
     module = _module_named(module, spec, spec_path)
     entry = replay_module_of(spec, module)
     _check_ground_truth(options.ground_truth, spec_path, spec=spec, output=entry.output)  # before the work

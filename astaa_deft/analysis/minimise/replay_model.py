@@ -162,9 +162,11 @@ class ReplayModel:
     and :meth:`replay` (what the orchestrating process needs), not for :meth:`run`.
     """
 
-    def __init__(self, setup: ReplaySetup, baseline: bool = True) -> None:
+    def __init__(self, setup: ReplaySetup, baseline: bool = True, *, spec: Spec | None = None) -> None:
         log = read_log(setup.log_path)
-        spec = with_typed_invariants(load_spec_for(log, setup.spec_path, trust_log_spec=setup.trust_log_spec))
+        # ``spec``: setup.spec_path's, as this process loaded it already (a worker loads its own)
+        spec = with_typed_invariants(spec if spec is not None else
+                                     load_spec_for(log, setup.spec_path, trust_log_spec=setup.trust_log_spec))
         if setup.module is not None:
             entry: ReplayModule | None = replay_module_of(spec, setup.module, setup.output)
             why_not = _why_not(spec, entry, setup.invariant, setup.failure_module) if entry else None

@@ -78,6 +78,7 @@ class MinimiseOptions:
     # Without spec_path: run what the log's own spec names (module commands, replay factories). Off, the
     # workflow refuses and lists them: a log is data (docs/minimise.md, "Logs are data").
     trust_log_spec: bool = False
+    spec: Spec | None = None  # spec_path's spec as the calling command loaded it (None: read here, once)
 
     def check(self) -> None:
         """InputError naming the option when a value makes no sense."""
@@ -224,6 +225,8 @@ def _spec_of(log: LogContents, options: MinimiseOptions, say: Progress, scratch:
     """(the spec, as a file): ``--spec``'s, or the one stored in the log (when trusted) written to ``scratch``:
     live runs (their recorder) and replays need it as a file."""
     spec_path = options.spec_path
+    if options.spec is not None and spec_path is not None:
+        return with_typed_invariants(options.spec), spec_path
     spec = with_typed_invariants(load_spec_for(log, str(spec_path) if spec_path else None,
                                                trust_log_spec=options.trust_log_spec))
     if spec.path is None:
@@ -261,7 +264,7 @@ def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
         say(f"{what}: {pool.workers} worker process(es), one replay of the run in "
             f"{pool.baseline_seconds:.2f} s, per-test timeout {pool.timeout:.0f} s")
         tester = DeftTester(pool)
-        model = ReplayModel(setup, baseline=False)
+        model = ReplayModel(setup, baseline=False, spec=job.spec)  # the spec this command loaded
         try:
             result = minimise_replay(tester, model, failure, pool.workers, say=say, max_tests=options.max_tests)
         except NotReproducible as exc:

@@ -32,6 +32,7 @@ from astaa_deft.cli.commands.proxy import EXIT_NOT_OBSERVED, run_bus
 
 if TYPE_CHECKING:
     from astaa_deft.cli.arguments import SubParsers
+    from astaa_deft.model.sut import Spec
 
 DEFAULT_TIME_LIMIT = 40.0
 
@@ -83,6 +84,7 @@ class DriveOptions:
     duration: float | None = None  # seconds (None: DEFAULT_TIME_LIMIT)
     policy: Path | None = None  # an ASTAA test case rewriting live messages
     stop_on_violation: bool = False
+    spec: Spec | None = None  # the demo's spec as the command loaded it (None: loaded here)
 
 
 def drive(options: DriveOptions) -> tuple[RunResult, StatusWatch]:
@@ -93,7 +95,7 @@ def drive(options: DriveOptions) -> tuple[RunResult, StatusWatch]:
     from astaa_deft.engine.intercept import load_interceptor
     from astaa_deft.engine.spec.loader import load_spec
 
-    spec = load_spec(demo_spec_path())
+    spec = options.spec if options.spec is not None else load_spec(demo_spec_path())
     params = {"scenario": options.scenario, "defects": "on" if options.defects else "off"}
     policy = options.policy
     interceptor = load_interceptor(policy, spec) if policy is not None else None
@@ -169,11 +171,14 @@ def run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     """`demo`: record, extract DeFT tests and run them, intercept live, minimise, fuzz. 0 if every step did its
     job, 1 if one did not, 130 (Ctrl-C) or 143 (SIGTERM) when stopped: the step under way ends as its command
     does on a stop, and no later step starts."""
+    from astaa_deft.engine.spec.loader import load_spec
+
     place = Place(out_dir.resolve(), "--out")
     out_dir = ready_dir(place, temp=True)
+    spec = load_spec(demo_spec_path())  # once for the tour: each step takes it as loaded here
     with writing(place):
         _start_fresh(out_dir)
-        return _run_all(scenario, out_dir, command_line)
+        return _run_all(scenario, out_dir, command_line, spec)
 
 
 def _start_fresh(out_dir: Path) -> None:
@@ -205,19 +210,18 @@ def _stopped(step: str, out_dir: Path) -> int | None:
     return interrupted_exit_code()
 
 
-def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
+def _run_all(scenario: str, out_dir: Path, command_line: list[str], spec: Spec) -> int:
     from astaa_deft.engine.bus import process_launch
     from astaa_deft.analysis.deft.workflow import ExtractOptions
     from astaa_deft.cli.commands.console import forget_stop, stop_as_interrupt
     from astaa_deft.cli.commands.extract import extract
 
-    spec_path = demo_spec_path()
     problems: list[str] = []
     forget_stop()
 
     say(f"== 1/5 record: the demo stack drives '{scenario}' through the star proxy ==")
     clean_log = out_dir / "clean.mcap"
-    outcome, watch = drive(DriveOptions(scenario=scenario, record=clean_log, command_line=command_line))
+    outcome, watch = drive(DriveOptions(scenario=scenario, record=clean_log, command_line=command_line, spec=spec))
     summarise(outcome, watch)
     if (code := _stopped("step 1 (record)", out_dir)) is not None:
         return code
@@ -227,7 +231,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say("")
     say("== 2/5 DeFT: deterministic planner tests from that record ==")
     tests_dir = out_dir / "planner-tests"
-    extract(clean_log, spec_path, tests_dir, ExtractOptions(ground_truth="debug.inputs"))
+    extract(clean_log, spec, tests_dir, ExtractOptions(ground_truth="debug.inputs"))
     if (code := _stopped("step 2 (DeFT extraction)", out_dir)) is not None:
         return code
     say(f"$ pytest {tests_dir.relative_to(Path.cwd()) if tests_dir.is_relative_to(Path.cwd()) else tests_dir}")
@@ -247,7 +251,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say(policy.read_text().split("<description>")[1].split("</description>")[0].strip())
     attack_log = out_dir / "intercepted.mcap"
     outcome, watch = drive(DriveOptions(scenario=scenario, record=attack_log, command_line=command_line, policy=policy,
-                                        duration=20.0))
+                                        duration=20.0, spec=spec))
     summarise(outcome, watch)
     if (code := _stopped("step 3 (live interception)", out_dir)) is not None:
         return code
@@ -260,7 +264,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     say("== 4/5 minimise: which mutations cause that failure? ==")
     try:
         with stop_as_interrupt():
-            minimised = minimise_step(attack_log, spec_path, out_dir / "minimised")
+            minimised = minimise_step(attack_log, spec, out_dir / "minimised")
     except KeyboardInterrupt:
         minimised = 130
     if (code := _stopped("step 4 (minimise)", out_dir)) is not None:
@@ -273,7 +277,7 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     from astaa_deft.orchestration.campaign.demo_step import campaign_step
 
     with stop_as_interrupt():  # SIGTERM stops the campaign as Ctrl-C does: its journal and report stay readable
-        found = campaign_step(spec_path, out_dir / "campaign", say)
+        found = campaign_step(demo_spec_path(), out_dir / "campaign", say, spec=spec)
     if (code := _stopped("step 5 (fuzz)", out_dir)) is not None:
         return code
     if found == 0:
@@ -287,10 +291,11 @@ def _run_all(scenario: str, out_dir: Path, command_line: list[str]) -> int:
     return 1 if problems else 0
 
 
-def minimise_step(log: Path, spec: Path, out_dir: Path) -> int:
+def minimise_step(log: Path, spec: Spec, out_dir: Path) -> int:
     """Step 4 of the demo: minimise the intercepted run's failure into ``out_dir``; the command's exit code."""
     from astaa_deft.analysis.minimise.workflow import MinimiseOptions
     from astaa_deft.cli.commands.minimise import minimise
 
     # One live confirmation of the minimised test case keeps the demo short; the CLI defaults to 3.
-    return minimise(log, out_dir, MinimiseOptions(spec_path=spec, repeats=1, parallel=2, live_only=False, confirm=1))
+    return minimise(log, out_dir, MinimiseOptions(spec_path=spec.path or demo_spec_path(), spec=spec, repeats=1,
+                                                  parallel=2, live_only=False, confirm=1))

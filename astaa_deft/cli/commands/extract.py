@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from astaa_deft.analysis.deft.extract import Extraction
     from astaa_deft.analysis.deft.workflow import ExtractOptions
     from astaa_deft.cli.arguments import SubParsers
+    from astaa_deft.model.sut import Spec
 
 
 def add_parser(subparsers: SubParsers) -> None:
@@ -74,8 +75,9 @@ def summary_table(ex: Extraction, thresholds: Sequence[float] | None = None, mod
     return "\n".join(lines)
 
 
-def extract(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOptions) -> int:
-    """DeFT module tests of the run at ``log_path`` written to ``out_dir``, with progress and a summary.
+def extract(log_path: Path, spec: Spec | Path, out_dir: Path, options: ExtractOptions) -> int:
+    """DeFT module tests of the run at ``log_path`` written to ``out_dir``, with progress and a summary;
+    ``spec`` as the command loaded it, or its file (read once, by the extraction).
 
     Returns 0 when tests were written, 1 when none could be, 130 when interrupted (Ctrl-C, SIGTERM; what was
     decided is kept for ``resume``). Raises InputError on bad input, OutputError when ``out_dir`` cannot
@@ -84,11 +86,14 @@ def extract(log_path: Path, spec_path: Path, out_dir: Path, options: ExtractOpti
     from astaa_deft.analysis.deft.extract import near_miss_note, search_note
     from astaa_deft.analysis.deft.workflow import extract_module_tests
 
+    from astaa_deft.model.sut import Spec
+
     threshold, module, ground_truth = options.threshold, options.module, options.ground_truth
+    spec_path = (spec.path or spec.name) if isinstance(spec, Spec) else spec
     progress = CountProgress("extract", "outputs")
     try:
         with stop_as_interrupt():
-            report = extract_module_tests(log_path, spec_path, out_dir, options, progress=progress, notice=say)
+            report = extract_module_tests(log_path, spec, out_dir, options, progress=progress, notice=say)
     finally:
         progress.close()
     if report.resumed:

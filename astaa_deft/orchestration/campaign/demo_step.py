@@ -9,6 +9,7 @@ from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignConfig
 from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.report import write_report
 from astaa_deft.orchestration.campaign.standing import headline, standings
+from astaa_deft.model.sut import Spec
 
 # A seed whose first five generated cases reorder localization (seeded defect 4), empty trajectory.points
 # (defect 3) and set routing.speed_limit non-finite (defect 1): a short campaign that shows finds without
@@ -20,16 +21,17 @@ DEMO_HORIZON = 6.0
 
 
 def campaign_step(spec_path: Path, out_dir: Path, say: Callable[[str], None] = print,
-                  cases: int = DEMO_CASES, *, seed: int = DEMO_SEED) -> int:
+                  cases: int = DEMO_CASES, *, seed: int = DEMO_SEED, spec: Spec | None = None) -> int:
     """Run the short campaign into ``out_dir``; the number of buckets it found (its report is written).
 
     Prints the headline — confirmed bugs by severity, apart from buckets where the fault alone breaks the
-    invariant (no module under test involved) and the unconfirmed and flaky ones — and each bucket's line."""
+    invariant (no module under test involved) and the unconfirmed and flaky ones — and each bucket's line.
+    ``spec``: ``spec_path``'s spec as the calling command loaded it (None: the campaign loads it)."""
     config = CampaignConfig(spec_path=spec_path, out=out_dir, cases=cases, seed=seed, horizon=DEMO_HORIZON,
                             baseline_runs=1, reruns=1, minimise=False)
     journal = Journal(out_dir)
     try:
-        result = Campaign(config, journal, say=say).run()
+        result = Campaign(config, journal, say=say, spec=spec).run()
         ranked = standings(journal)
     finally:
         journal.close()

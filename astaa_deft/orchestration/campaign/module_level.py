@@ -51,6 +51,7 @@ from astaa_deft.engine.intercept.actions.reorder import Reorder
 from astaa_deft.engine.intercept.actions.set import Assignment, Set
 from astaa_deft.engine.intercept.testcase import Policy, Selection, TestCase, Window
 from astaa_deft.io.log.reader import read_log
+from astaa_deft.io.statefile import StateReader, load_json
 from astaa_deft.model.sut import Spec
 from astaa_deft.orchestration.journal.journal import Journal
 from astaa_deft.orchestration.campaign.level_split import LevelMeasure, Split, decide_split
@@ -70,6 +71,8 @@ MIN_ROUND_SECONDS = 5.0  # a second round shorter than this is not started
 MAX_CONFIRMATIONS = 24  # live cases planned for findings (one per bucket, the first found first)
 WORKER_GRACE = 30.0  # s past the deadline before a worker is stopped (a step in native code, the field probes)
 LEAD_SECONDS = 0.02
+WORKER_FIX = ("a module-level worker wrote what this version does not read: run the campaign again with one"
+              " astaa-deft installed on every worker")
 LIVE_SHARE = 0.8  # a live window opens this long before the message the fault hit arrived
 
 
@@ -295,19 +298,23 @@ class ModuleLevel(CampaignParts):
             ok = False
             counts[entry.module] = 0
             for part in range(per_module):
-                for line in _lines(folder / f"{_worker_name(number, part)}.jsonl"):
+                worker_file = folder / f"{_worker_name(number, part)}.jsonl"
+                for line in _lines(worker_file):
                     if "error" in line:
                         skipped.append(f"{entry.module}: its replay could not start: {str(line['error'])[:300]}")
                     elif "setup" in line:
                         ok = True
-                    elif "verdict" in line and isinstance(line["verdict"], Mapping):
-                        verdicts.append((int(line.get("n", 0)), ModuleVerdict.from_json(line["verdict"])))
+                    elif "verdict" in line:
+                        n, verdict = StateReader(str(worker_file), line, WORKER_FIX).fields(
+                            "n", "verdict")
+                        verdicts.append((n.whole() if n.present else 0, ModuleVerdict.from_json(verdict)))
                         counts[entry.module] += 1
             if ok:
                 modules.append(entry.module)
             reads_file = folder / f"m{number}-reads.json"
             if reads_file.is_file():
-                reads.append(FieldReads.from_json(json.loads(reads_file.read_text(encoding="utf-8"))))
+                reads.append(FieldReads.from_json(StateReader(
+                    str(reads_file), load_json(reads_file.read_bytes(), str(reads_file), "", WORKER_FIX), WORKER_FIX)))
         findings = bucket_findings([v for _n, v in verdicts])
         return ModuleLevelState(modules=tuple(modules), skipped=tuple(dict.fromkeys(skipped)), log=str(log_path),
                                 cases=len(verdicts), core_seconds=cpu, wall_seconds=wall,

@@ -14,8 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from astaa_deft.analysis.deft.module_search import FindingKind, ModuleVerdict
-from astaa_deft.analysis.deft.stream_faults import FaultKind, FieldReads, StreamFault
+from astaa_deft.analysis.deft.module_search import ModuleVerdict
+from astaa_deft.analysis.deft.stream_faults import FieldReads, field_pairs
 from astaa_deft.io.output_place import write_atomic
 from astaa_deft.io.statefile import MAX_NAME, StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
@@ -108,8 +108,9 @@ def read_state_value(r: StateReader) -> ModuleLevelState:
     return ModuleLevelState(
         modules=tuple(_names(modules)), skipped=tuple(_texts(skipped)), log=log.text(optional=True),
         cases=cases.whole(), core_seconds=core.real(0), wall_seconds=wall.real(0), failing=failing.whole(),
-        findings=tuple(findings.each(read_finding, MAX_LIST)), reads=tuple(reads.each(read_field_reads, MAX_LIST)),
-        unread=_pairs(unread), per_module=per_module.map(lambda v: v.whole(), MAX_LIST), started_after=started.real(0),
+        findings=tuple(findings.each(read_finding, MAX_LIST)), reads=tuple(reads.each(FieldReads.from_json, MAX_LIST)),
+        unread=field_pairs(unread), per_module=per_module.map(lambda v: v.whole(), MAX_LIST),
+        started_after=started.real(0),
         # written by every search since it plans its live cases in steps; a file without them was written whole
         params=params.map(lambda v: v.string()) if params.present else {},
         complete=bool(complete.flag()) if complete.present else True,
@@ -130,43 +131,9 @@ def read_measure(r: StateReader) -> LevelMeasure:
 def read_finding(r: StateReader) -> ModuleFinding:
     name, verdict, count, after, case_id, tests, fails = r.fields(
         "name", "verdict", "count", "found_after", "case_id", "tests", "tests_fail")
-    return ModuleFinding(name=name.string(MAX_NAME), verdict=read_verdict(verdict), count=count.whole(1),
+    return ModuleFinding(name=name.string(MAX_NAME), verdict=ModuleVerdict.from_json(verdict), count=count.whole(1),
                          found_after=after.real(0), case_id=case_id.text(MAX_NAME, optional=True),
                          tests=tests.text(optional=True), tests_fail=fails.flag(optional=True))
-
-
-def read_verdict(r: StateReader) -> ModuleVerdict:
-    module, fault, kind, invariant, error, detail, frame, steps, seconds, applicable = r.fields(
-        "module", "fault", "kind", "invariant", "error", "detail", "frame", "steps", "seconds", "applicable")
-    found = kind.text(choices=tuple(k.value for k in FindingKind), optional=True)
-    return ModuleVerdict(module=module.string(MAX_NAME), fault=read_fault(fault),
-                         kind=None if found is None else FindingKind(found),
-                         invariant=invariant.text(MAX_NAME, optional=True), error=error.text(optional=True),
-                         detail=detail.string(), frame=frame.integer(optional=True), steps=steps.whole(),
-                         seconds=seconds.real(0), applicable=bool(applicable.flag()))
-
-
-def read_fault(r: StateReader) -> StreamFault:
-    from astaa_deft.model.tagged import from_tagged
-
-    channel, kind, index, path, value, value_ref, count, delay = r.fields(
-        "channel", "kind", "index", "path", "value", "value_ref", "count", "delay_ms")
-    try:
-        decoded = from_tagged(value.value)  # type: ignore[arg-type]
-    except (TypeError, ValueError) as exc:
-        value.fail(f"is not a field value ({exc})")
-    return StreamFault(channel=channel.string(MAX_NAME),
-                       kind=FaultKind(kind.string(choices=tuple(k.value for k in FaultKind))), index=index.whole(),
-                       path=path.text(MAX_NAME, optional=True), value=decoded,
-                       value_ref=value_ref.text(MAX_NAME, optional=True), count=count.whole(1),
-                       delay_ms=delay.real(0))
-
-
-def read_field_reads(r: StateReader) -> FieldReads:
-    module, read, unread, frames, seconds, notes = r.fields(
-        "module", "read", "unread", "probed_frames", "seconds", "notes")
-    return FieldReads(module=module.string(MAX_NAME), read=_pairs(read), unread=_pairs(unread),
-                      probed_frames=frames.whole(), seconds=seconds.real(0), notes=tuple(_texts(notes)))
 
 
 def _names(r: StateReader) -> list[str]:
@@ -175,16 +142,6 @@ def _names(r: StateReader) -> list[str]:
 
 def _texts(r: StateReader) -> list[str]:
     return r.each(lambda v: v.string(), MAX_LIST)
-
-
-def _pairs(r: StateReader) -> tuple[tuple[str, str], ...]:
-    def pair(v: StateReader) -> tuple[str, str]:
-        parts = v.each(lambda part: part.string(MAX_NAME), 2)
-        if len(parts) != 2:
-            v.fail("must be a [channel, field] pair")
-        return parts[0], parts[1]
-
-    return tuple(r.each(pair, MAX_LIST))
 
 
 __all__ = ["DIR_NAME", "ModuleFinding", "ModuleLevelState", "read_state", "state_path", "write_state"]

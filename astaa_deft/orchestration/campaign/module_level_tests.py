@@ -36,6 +36,7 @@ from astaa_deft.analysis.deft.stream_faults import StreamFault
 from astaa_deft.analysis.deft.workflow import run_params
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log.reader import read_log
+from astaa_deft.io.statefile import StateReader
 
 SPEC = {spec!r}
 LOG = {log!r}
@@ -48,7 +49,8 @@ def test_module_handles_the_fault():
     spec = load_spec(Path(SPEC))
     log = read_log(Path(LOG))
     bench = ModuleBench(spec, replay_module_of(spec, MODULE), log, run_params(log, spec))
-    verdict = bench.run(StreamFault.from_json(FAULT))
+    verdict = bench.run(StreamFault.from_json(StateReader(__file__, FAULT, "export the module-level tests again",
+                                                          field="FAULT")))
     assert verdict.applicable, verdict.detail
     assert not verdict.failed, (f"{{MODULE}} under {{verdict.fault.describe()}}: {{verdict.signature}}:"
                                 f" {{verdict.detail}}")

@@ -53,7 +53,7 @@ def build(log: Path, spec_path: Path, tests_dir: Path, *, verdict: str, invarian
 
     spec = load_spec(spec_path)
     try:
-        report = extract_module_tests(log, spec_path, tests_dir, ExtractOptions(jobs=1, module=module))
+        report = extract_module_tests(log, spec, tests_dir, ExtractOptions(jobs=1, module=module))
     except AstaaDeftError as exc:
         return PlannerTests(0, False, str(exc))
     # A crash bucket's test is the failing cycle's frame, after every frame found (stepped for the state they

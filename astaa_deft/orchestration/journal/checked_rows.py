@@ -186,9 +186,10 @@ def _only(r: StateReader, names: tuple[str, ...]) -> None:
 
 def _channel_rate(r: StateReader) -> None:
     _only(r, ("count", "rate", "max_gap"))
-    r.get("count").whole()
-    r.get("rate").real(0.0, infinite=True)
-    r.get("max_gap").real(0.0, infinite=True)
+    count, rate, max_gap = r.fields("count", "rate", "max_gap")
+    count.whole()
+    rate.real(0.0, infinite=True)
+    max_gap.real(0.0, infinite=True)
 
 
 _OUTCOME: dict[str, Read] = {
@@ -352,8 +353,9 @@ def _timing(r: StateReader) -> Any:
     if r.value is None:
         return None
     _only(r, ("anchor", "live"))
-    r.get("anchor").text(1000, optional=True)
-    r.get("live").real(0.0)
+    anchor, live = r.fields("anchor", "live")
+    anchor.text(1000, optional=True)
+    live.real(0.0)
     return r.value
 
 
@@ -381,10 +383,9 @@ def meta_of(file: str, rows: Iterable[sqlite3.Row]) -> CampaignMeta:
         if read is not None:
             read(StateReader(file, value, FIX, field=field))
         values[str(key)] = value
-    if values.get("calibrated") is None:
-        values.pop("calibrated", None)
-    if values.get("overloaded_runs") is None:
-        values.pop("overloaded_runs", None)
+    for optional in ("calibrated", "overloaded_runs"):  # null as absent: the record's default
+        if values.get(optional) is None:
+            values.pop(optional, None)
     return CampaignMeta.from_json(values)
 
 

@@ -12,13 +12,18 @@ that was not observed to its end. Module tests are the bucket's DeFT suites
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
 from astaa_deft.io.statefile import StateReader, load_json
 from astaa_deft.model.errors import InputError, Problem
 from astaa_deft.model.json import JsonObject
+
+if TYPE_CHECKING:
+    from astaa_deft.model.sut import Spec
 
 MANIFEST = "regress.json"
 LIVE_MARK = "live"
@@ -40,9 +45,9 @@ class RegressBucket:
     @classmethod
     def from_manifest(cls, entry: StateReader) -> RegressBucket:
         """The bucket from its entry in regress.json (InputError naming the field when one is damaged)."""
-        return cls(entry.get("testcase").string(), entry.get("invariant").string(),
-                   entry.get("module").text(optional=True),
-                   entry.get("params").map(lambda value: value.string()))
+        testcase, invariant, module, params = entry.fields("testcase", "invariant", "module", "params")
+        return cls(testcase.string(), invariant.string(), module.text(optional=True),
+                   params.map(lambda value: value.string()))
 
 
 @dataclass(frozen=True)
@@ -68,12 +73,21 @@ class RegressSuite:
         """--spec, else the campaign's spec where it was, else the copy in the suite."""
         if self.spec is not None:
             return self.spec
-        original = Path(self._read().get("spec").string())
-        return original if original.is_file() else self.directory / self._read().get("spec_copy").string()
+        spec, copy = self._read().fields("spec", "spec_copy")
+        original = Path(spec.string())
+        return original if original.is_file() else self.directory / copy.string()
+
+    @cached_property
+    def loaded_spec(self) -> Spec:
+        """The spec of :meth:`spec_path`, read once for the pytest session (every bucket's run shares it)."""
+        from astaa_deft.engine.spec.loader import load_spec
+
+        return load_spec(self.spec_path())
 
     def bucket(self, name: str) -> RegressBucket:
         """Bucket ``name`` as the manifest lists it (InputError if it does not, or a field is damaged)."""
-        return RegressBucket.from_manifest(self._read().get("buckets").obj().get(name).obj())
+        (buckets,) = self._read().fields("buckets")
+        return RegressBucket.from_manifest(buckets.obj().get(name).obj())
 
     def setting(self, name: str) -> float:
         """A number the campaign ran with (``horizon``, ``settle``: seconds)."""
@@ -81,7 +95,7 @@ class RegressSuite:
 
     def known(self) -> JsonObject:
         """The campaign's known findings, as ``known.from_json`` reads them ({} if none)."""
-        known = self._read().get("known")
+        (known,) = self._read().fields("known")
         return known.json_object() if known.value is not None else {}
 
     def params_of(self, name: str) -> dict[str, str]:
@@ -92,14 +106,13 @@ def live_failure(suite: RegressSuite, name: str, run_dir: Path) -> str | None:
     """Run bucket ``name``'s minimal test case once, live: how it failed its bucket's way (None: it did not).
     Raises AssertionError when the run was not observed to its end (no verdict is given about it)."""
     from astaa_deft.engine.intercept.testcase import load_testcase
-    from astaa_deft.engine.spec.loader import load_spec
     from astaa_deft.orchestration.campaign import signature as sig
     from astaa_deft.orchestration.campaign.known import from_json as known_from_json, judged
     from astaa_deft.orchestration.campaign.runner import CaseLimits, run_case
     from astaa_deft.orchestration.journal.checks import FailureWay
 
     entry = suite.bucket(name)
-    spec = load_spec(suite.spec_path())
+    spec = suite.loaded_spec
     testcase = load_testcase(suite.directory / entry.testcase)
     known = known_from_json(suite.known())
     limits = CaseLimits(horizon=suite.setting("horizon"), settle=suite.setting("settle"), known=frozenset(known))

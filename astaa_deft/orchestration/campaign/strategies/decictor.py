@@ -142,7 +142,7 @@ class DecictorStrategy(Strategy):
     def finish(self, journal: Journal, out: Path, spec_path: Path, say: Callable[[str], None]) -> None:
         from astaa_deft.orchestration.campaign.strategies.decictor_export import export_findings
 
-        export_findings(self, journal, out, spec_path, say=say)
+        export_findings(self, journal, out, say=say)
 
 
 @STRATEGIES.register_class

@@ -51,8 +51,7 @@ def seed_plan_ends(strategy: DecictorStrategy, log_path: Path) -> list[tuple[flo
     return end_points(messages, cfg.trajectory)
 
 
-def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spec_path: Path,
-                    *, say: Callable[[str], None]) -> None:
+def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, *, say: Callable[[str], None]) -> None:
     """Each path-consistency bucket of ``journal`` as DeFT module tests under ``out/tests`` (journalled as the
     bucket's minimisation), and ``out/decictor.html``: seed vs mutated paths. Nothing without a seed run."""
     buckets = [b for b in journal.buckets(include_merged=False) if b.invariant == INVARIANT]
@@ -71,7 +70,7 @@ def export_findings(strategy: DecictorStrategy, journal: Journal, out: Path, spe
             shutil.rmtree(tests_dir)
         say(f"decictor: module tests for {bucket.bucket} ({bucket.first_case}) …")
         try:
-            report = extract_module_tests(log, spec_path, tests_dir)
+            report = extract_module_tests(log, strategy.spec, tests_dir)  # the campaign's spec, loaded once
             write_consistency_test(tests_dir, seed_ends, strategy.lanes, note=f"seed: {strategy.seed_log}")
             problem = check_suite(tests_dir, overrides="")
             status = "module tests (fail)" if problem else "module tests (pass: not reproduced)"
