@@ -94,8 +94,10 @@ def test_a_named_invariant_that_needs_no_mutation_stops_there(run, tmp_path, cap
     assert "nothing to minimise" in capsys.readouterr().out
 
 
-def test_when_every_failure_tried_needs_no_mutation_the_report_is_the_first_ones(run, tmp_path):
-    # The same stack, its NaN check swapped for a bound its own answers break too (u stays below 0).
+@pytest.mark.parametrize("live_only", [False, True], ids=["replay", "live"])
+def test_when_every_failure_tried_needs_no_mutation_the_report_is_the_first_ones(run, tmp_path, live_only):
+    # The same stack, its NaN check swapped for a bound its own answers break too (u stays below 0); live,
+    # each failure costs its reproduction run and the run with no mutation.
     stack = tmp_path / "stack"
     stack.mkdir()
     for script in ("modlevel_ctrl.py", "modlevel_source.py", "node_loop.py"):
@@ -103,7 +105,7 @@ def test_when_every_failure_tried_needs_no_mutation_the_report_is_the_first_ones
     spec = stack / "ramp_limit.yaml"
     spec.write_text(SPEC_PATH.read_text().replace("field: u, finite: true}", "field: u, min: 0.0}").replace(
         "{name: finite_u,", "{name: u_positive,"))
-    report = minimise_log(run, tmp_path / "out", MinimiseOptions(spec_path=spec, confirm=0))
+    report = minimise_log(run, tmp_path / "out", MinimiseOptions(spec_path=spec, confirm=0, live_only=live_only))
     assert not report.reproduced and not report.complete
     assert report.summary["failure"]["invariant"] in {"u_limit", "u_positive"}
     other = ({"u_limit", "u_positive"} - {report.summary["failure"]["invariant"]}).pop()
