@@ -16,7 +16,7 @@
 This module only orchestrates: it turns subsets into tester calls and ddmin
 results into a :class:`Minimisation`. The algorithm is :mod:`.ddmin`'s, the
 verdicts are the testers'. Which failure to minimise and which tester can
-judge it are decided here too (:func:`find_failure`, :func:`choose_tester`).
+judge it are decided here too (:func:`find_failures`, :func:`choose_tester`).
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from astaa_deft.engine.monitor import check_log, with_typed_invariants
 from astaa_deft.engine.monitor.base import ReplayJudges
 from astaa_deft.engine.monitor.kinds import invariant_class
 from astaa_deft.engine.monitor.verdict import IMPLICIT
+from astaa_deft.model.records import Violation
 from astaa_deft.model.sut import Spec
 from astaa_deft.engine.spec.replay_section import ReplayModule
 from astaa_deft.analysis.minimise.failure import Failure
@@ -45,7 +46,14 @@ from astaa_deft.analysis.minimise.replay_tester import DeftTester
 
 
 def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure:
-    """The first violation of ``invariant`` (or the first of all) in the log (InputError if none).
+    """The first violation of ``invariant`` (or the first of all) in the log (InputError if none)."""
+    return find_failures(log, spec, invariant)[0]
+
+
+def find_failures(log: LogContents, spec: Spec, invariant: str | None, *, most: int = 1) -> list[Failure]:
+    """The failures to minimise, in time order (InputError if none): ``invariant``'s first violation; without
+    one, the first violation of each distinct invariant broken in the run (a crash no invariant named
+    counts as one), at most ``most`` of them.
 
     The log is judged again by the spec's monitors, as ``astaa-deft check``
     does, rather than trusting the violation events the online monitors
@@ -65,14 +73,16 @@ def find_failure(log: LogContents, spec: Spec, invariant: str | None) -> Failure
             broken = sorted({v.invariant for v in found})
             raise InputError(Problem(str(log.path), None, None, f"invariant '{invariant}' never broke in this run",
                                      f"broken in it: {', '.join(broken)}" if broken else "nothing broke in it"))
-        found = chosen
+        found, most = chosen, 1
     if not found:
         raise InputError(Problem(str(log.path), None, None, "the run did not fail: no invariant broke, "
                                  "no module crashed", "minimise a log whose run failed (astaa-deft check LOG)"))
-    first = found[0]
-    at_s = ((first.time_ns or start_ns) - start_ns) / 1e9
-    return Failure(invariant=first.invariant, kind=first.invariant_kind, module=first.module, channel=first.channel,
-                   at=at_s, detail=first.detail, crash=first.crash)
+    firsts: dict[str, Violation] = {}  # each invariant's first violation, in time order
+    for v in found:
+        firsts.setdefault(v.invariant, v)
+    return [Failure(invariant=v.invariant, kind=v.invariant_kind, module=v.module, channel=v.channel,
+                    at=((v.time_ns or start_ns) - start_ns) / 1e9, detail=v.detail, crash=v.crash)
+            for v in list(firsts.values())[:most]]
 
 
 class TesterKind(TextEnum):

@@ -7,6 +7,12 @@ failure is in the planner's output, else with whole-system re-runs
 (docs/minimise.md). The minimal test case is then run live ``confirm``
 times to check it reproduces the failure through the proxy.
 
+Without a named invariant, a failure that happens without any of the
+mutations (a deadline a loaded machine missed, a bound the stack breaks by
+itself) is not what the mutations caused: the minimisation goes on to the
+run's next failure — the first violation of the next invariant broken, in
+time order — up to FAILURES_TRIED of them, each with its own tester.
+
 This module owns the policy: which tester, the live fallback when the
 replay does not reproduce the failure, the reproduction check (flaky or
 not), the confirmation runs and the verdict. It prints nothing: progress
@@ -54,12 +60,16 @@ from astaa_deft.analysis.minimise.replay_pool import ReplayPool, ReplayUnavailab
 from astaa_deft.analysis.minimise.replay_tester import DeftTester, default_setup
 from astaa_deft.analysis.minimise.restrict import restricted_testcase
 from astaa_deft.analysis.minimise.stages import (
-    Failure, Minimisation, TesterChoice, TesterKind, choose_tester, find_failure, minimise_live, minimise_replay,
+    Failure, Minimisation, TesterChoice, TesterKind, choose_tester, find_failures, minimise_live, minimise_replay,
 )
 from astaa_deft.model.json import JsonObject, JsonValue
 from astaa_deft.model.sut import Spec
 
 FLAKY_CHECK_RUNS = 3  # live runs of the full test case before calling a failure not reproducible
+# Failures tried in turn without --invariant while each happens without any of the mutations. Each try
+# costs a replay's start or two whole-system runs; a run with more failures the mutations do not cause
+# is one its stack or machine fails by itself, reported so rather than searched on.
+FAILURES_TRIED = 3
 
 Progress = Callable[[str], None]
 
@@ -67,7 +77,7 @@ Progress = Callable[[str], None]
 @dataclass(frozen=True, kw_only=True)
 class MinimiseOptions:
     spec_path: Path | None = None  # None: the spec stored in the log
-    invariant: str | None = None  # the failure to keep (None: the run's first violation)
+    invariant: str | None = None  # the failure to keep (None: the run's first violation the mutations cause)
     repeats: int = 1  # whole-SUT re-runs per test when no replay applies
     parallel: int = 2  # tests run at once where the replay allows
     live_only: bool = False  # always re-run the whole SUT
@@ -138,10 +148,11 @@ class _Job:
     spec_path: Path | None  # the spec as a file (the log's own, written to scratch, if it came from the log)
     mlog: MutationLog
     failure: Failure
+    later: tuple[Failure, ...]  # the run's next failures (no --invariant): tried when this one needs no mutation
     choice: TesterChoice
     params: dict[str, str]  # the spec's params, the run's own over them
     original: TestCase | None  # the logged test case
-    notes: list[str] = field(default_factory=list)  # for the summary: why the tester changed
+    notes: list[str] = field(default_factory=list)  # for the summary: why the failure or the tester changed
     model: ReplayModel | None = None  # the replay's model, when the replay minimised
     replays: int = 0
     replay_hits: int = 0
@@ -159,6 +170,33 @@ class _Job:
 def _minimise(log_path: Path, out_dir: Path, options: MinimiseOptions, say: Progress,
               *, scratch: Path) -> MinimiseReport:
     job = _read_failing_run(log_path, out_dir, options, say, scratch=scratch)
+    unneeded: list[tuple[Failure, FailsWithoutItems]] = []  # the failures tried that need no mutation
+    while True:
+        try:
+            return _minimise_failure(job)
+        except FailsWithoutItems as exc:
+            unneeded.append((job.failure, exc))
+            if not job.later:
+                return _no_mutation_needed(job, unneeded)
+            job = _next_failure(job)
+
+
+def _next_failure(job: _Job) -> _Job:
+    """The job for the run's next failure, once ``job``'s happens without any of the mutations."""
+    failure, *later = job.later
+    note = (f"{job.failure.invariant} at +{job.failure.at:.2f} s happens without any of the mutations: "
+            f"minimising the run's next failure, {failure.describe()}")
+    choice = choose_tester(job.spec, failure, job.options.live_only)
+    job.say(f"note: {note}")
+    job.say(f"tester: {choice.tester.value} ({choice.why})")
+    return replace(job, failure=failure, later=tuple(later), choice=choice, notes=[*job.notes, note], model=None,
+                   replays=0, replay_hits=0)
+
+
+def _minimise_failure(job: _Job) -> MinimiseReport:
+    """Minimise ``job``'s failure with its tester, confirm and write the result (FailsWithoutItems when the
+    failure happens without any of the mutations)."""
+    say, options = job.say, job.options
     minimised: Minimisation | None = None
     if job.choice.tester == TesterKind.REPLAY:
         in_replay = _minimise_in_replay(job)
@@ -202,7 +240,7 @@ def _read_failing_run(log_path: Path, out_dir: Path, options: MinimiseOptions, s
                   else f"its {mlog.noop} mutation event(s) changed nothing")
         raise InputError(Problem(str(log_path), None, None, f"the log holds no mutations: {reason}",
                                  "minimise a run that was intercepted"))
-    failure = find_failure(log, spec, options.invariant)
+    failure, *later = find_failures(log, spec, options.invariant, most=FAILURES_TRIED)
     prepare_directory(out_dir)
     choice = choose_tester(spec, failure, options.live_only)
     recorded_params = run_params(log)
@@ -217,7 +255,7 @@ def _read_failing_run(log_path: Path, out_dir: Path, options: MinimiseOptions, s
         say(f"pinned mutations count from the first '{anchor}' message on (the stack is live then)")
     say(f"tester: {choice.tester.value} ({choice.why})")
     return _Job(log_path=log_path, out_dir=out_dir, options=options, say=say, scratch=scratch, started=started, log=log,
-                spec=spec, spec_path=spec_path, mlog=mlog, failure=failure, choice=choice,
+                spec=spec, spec_path=spec_path, mlog=mlog, failure=failure, later=tuple(later), choice=choice,
                 params={**spec.params, **recorded_params}, original=original)
 
 
@@ -245,7 +283,8 @@ def _spec_of(log: LogContents, options: MinimiseOptions, say: Progress, scratch:
 
 def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
     """The minimisation with the module replay; None: it cannot replay or reproduce the failure, and the job
-    falls back to live runs; a report when the minimisation stops here."""
+    falls back to live runs; a report when the minimisation stops here (FailsWithoutItems: the failure
+    happens without any of the mutations: raised)."""
     entry, failure, options, say = job.choice.entry, job.failure, job.options, job.say
     assert entry is not None
     setup = default_setup(job.log_path, job.spec_path, failure.invariant)
@@ -276,15 +315,14 @@ def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
                                   f"re-runs instead", "the replay does not reproduce it")
             job.replays, job.replay_hits = tester.runs, tester.hits
             return None
-        except FailsWithoutItems as exc:
-            return _no_mutation_needed(job.out_dir, failure, exc, job.started, log_path=job.log_path)
         job.model, job.replays, job.replay_hits = model, tester.runs, tester.hits
         return result
 
 
 def _minimise_live(job: _Job, live: LiveTester) -> Minimisation | MinimiseReport:
     """The minimisation with whole-system re-runs, after checking the full test case reproduces the failure;
-    a report when the minimisation stops here."""
+    a report when the minimisation stops here (FailsWithoutItems: the failure happens without any of the
+    mutations: raised)."""
     failure, options = job.failure, job.options
     full, repeats_used = reproduce(live, job.mlog.mutations, failure, options.repeats, say=job.say)
     if full is None:
@@ -292,11 +330,8 @@ def _minimise_live(job: _Job, live: LiveTester) -> Minimisation | MinimiseReport
             f"the failure ({failure.invariant}) did not reproduce in {live.runs} live re-run(s) of the full "
             f"test case: nothing to minimise (a rare flaky failure? try --repeats N)", notes=job.notes)
     live.repeats = repeats_used
-    try:
-        return minimise_live(live, job.mlog.mutations, failure, full, say=job.say, max_tests=options.max_tests,
-                             jobs=options.jobs)
-    except FailsWithoutItems as exc:
-        return _no_mutation_needed(job.out_dir, failure, exc, job.started, log_path=job.log_path)
+    return minimise_live(live, job.mlog.mutations, failure, full, say=job.say, max_tests=options.max_tests,
+                         jobs=options.jobs)
 
 
 def _confirm_and_write(job: _Job, live: LiveTester, result: Minimisation) -> MinimiseReport:
@@ -426,10 +461,15 @@ def verdict(result: Minimisation, confirmation: Confirmation) -> tuple[str, bool
     return "the minimal test case did not reproduce the failure in its confirmation runs", False
 
 
-def _no_mutation_needed(out_dir: Path, failure: Failure, exc: Exception, started: float,
-                        *, log_path: Path) -> MinimiseReport:
-    return _stopped(out_dir, failure, started, log_path,
-                    message=f"the failure happens without any of the mutations ({exc}): nothing to minimise")
+def _no_mutation_needed(job: _Job, unneeded: Sequence[tuple[Failure, FailsWithoutItems]]) -> MinimiseReport:
+    """The report when every failure tried happens without any of the mutations: the first one's, naming
+    the others."""
+    (failure, exc), others = unneeded[0], unneeded[1:]
+    message = f"the failure happens without any of the mutations ({exc}): nothing to minimise"
+    if others:
+        message += ("; so do the run's next failures tried: "
+                    + ", ".join(f"{f.invariant} at +{f.at:.2f} s" for f, _ in others))
+    return _stopped(job.out_dir, failure, job.started, job.log_path, message=message)
 
 
 def _stopped(out_dir: Path, failure: Failure, started: float, log_path: Path, *, message: str,

@@ -37,7 +37,9 @@ def add_parser(subparsers: SubParsers) -> None:
     trust.add_argument("--trust-log-spec", action="store_true",
                        help="run the module commands and replay factories the spec stored in the log names "
                             "(default: off — minimise lists them and stops: a log is data)")
-    mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation)")
+    mini.add_argument("--invariant", help="the failure to keep (default: the run's first violation the mutations "
+                                           "cause: one that happens without any of them gives way to the next "
+                                           "invariant broken, up to 3 tried)")
     mini.add_argument("-o", "--out", type=Path, required=True, help="directory for the minimised test case and tests")
     bounded(mini, "--repeats", REPEATS, default=1, help="whole-SUT re-runs per test when no replay applies")
     bounded(mini, "--parallel", PROCESSES, default=2, help="tests run at once where the replay allows")
