@@ -122,6 +122,7 @@ def run_module(
         return 2
     except Exception:
         traceback.print_exc()
+        sys.stdout.flush()
         sys.stderr.flush()
         os._exit(1)
     finally:
