@@ -15,6 +15,7 @@ import os
 import queue
 import signal
 import sys
+import traceback
 from typing import Any
 from collections.abc import Callable
 
@@ -100,8 +101,12 @@ def run_module(
 ) -> int:
     """Parse the command line, open the session, run ``main`` until a signal; the exit code.
 
-    An exception from ``main`` is not caught: it prints its traceback and the
-    process exits non-zero, which is what a crash must look like to the tool.
+    An exception from ``main`` is a crash: it prints its traceback and the
+    process exits with code 1 at once, which is what a crash must look like to
+    the tool. It does not close the session on the way down: a crashing node
+    (a segfault) closes nothing, and a graceful close can take longer than a
+    deadline on a loaded machine, so the exit would come after the silence it
+    caused and the run would read as a hang.
     """
     args = parse_args(f"python -m astaa_deft.demo.{name}", description, argv)
     install_shutdown_handlers()
@@ -115,6 +120,11 @@ def run_module(
     except ConfigError as exc:
         log(name, str(exc))
         return 2
+    except Exception:
+        traceback.print_exc()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(1)
     finally:
         if session is not None:
             session.close()
