@@ -11,8 +11,6 @@ set, no process left.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import random
@@ -26,8 +24,9 @@ from pathlib import Path
 import psutil
 import pytest
 
-from astaa_deft.cli.program import main
 from astaa_deft.orchestration.verify.revision import describe
+
+from cli_in_process import run_in_process
 from test_verify import STEADY, run_campaign
 
 SUT = Path(__file__).parent / "sut"
@@ -67,13 +66,7 @@ def cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
 def in_process(*args: str) -> tuple[int, str]:
     """The command run in this process (the family below runs hundreds): exit code and stderr. A traceback
     escaping ``main`` fails the test; argparse's own usage errors exit 2."""
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            code = main(list(args))
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    return code, err.getvalue()
+    return run_in_process(*args)
 
 
 def tree(root: Path, *, skip: tuple[Path, ...] = ()) -> set[str]:

@@ -11,8 +11,6 @@ without mutations, fuzz without its hunt) is counted up to where it stops.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -21,10 +19,11 @@ import pytest
 
 from zoo import by_name, short, write_member
 
-from astaa_deft.cli.program import main
 from astaa_deft.demo.bundled import demo_policy_path, demo_spec_path
 from astaa_deft.engine.spec import loader
 from astaa_deft.orchestration.campaign.campaign import Campaign, CampaignResult, StopReason
+
+from cli_in_process import run_in_process
 
 PINNED = Path(__file__).parent / "data" / "extraction_pins" / "mpc" / "run.mcap"
 STEADY = Path(__file__).parent / "sut" / "steady.yaml"
@@ -47,13 +46,8 @@ def loads(monkeypatch: pytest.MonkeyPatch) -> Callable[..., tuple[int, list[str]
                 monkeypatch.setattr(module, "load_spec", counting)
         monkeypatch.setattr(loader, "load_spec", counting)
         seen.clear()
-        err = io.StringIO()
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            try:
-                code = main(list(argv))
-            except SystemExit as exc:
-                code = int(exc.code or 0)
-        return code, list(seen), err.getvalue()
+        code, err = run_in_process(*argv)
+        return code, list(seen), err
 
     return run
 
