@@ -89,7 +89,7 @@ def extract_per_trigger(log: LogContents, spec: Spec, planner: ReplayPlanner, *,
             except DecodeError as exc:
                 result.warnings.append(f"output {next_output}: recorded output does not decode ({exc})")
         nothing_plausible = output is None or t_index + 1 >= len(times) or not answered_in_turn(
-            times, t_index, outputs, next_output)
+            times, t_index, outputs, next_output, skew_ns=int(cfg.skew_ms * 1e6))
         t1 = time.perf_counter()
         options = trigger_candidates(streams, cfg.trigger, t_index, previous, lookback_ns=int(cfg.lookback_ms * 1e6),
                                      answered_at=output.log_time if output is not None else None,
@@ -178,7 +178,8 @@ def _answer_trigger(module: _TriggerModule, options: Sequence[dict[str, int]], *
     return best
 
 
-def answered_in_turn(times: Sequence[int], t_index: int, outputs: list[LoggedMessage], next_output: int) -> bool:
+def answered_in_turn(times: Sequence[int], t_index: int, outputs: list[LoggedMessage], next_output: int, *,
+                     skew_ns: int = 0) -> bool:
     """Is the trigger at ``t_index`` answered by the next of the outputs not paired yet?
 
     A module answers its triggers in order. The outputs logged within one
@@ -186,9 +187,17 @@ def answered_in_turn(times: Sequence[int], t_index: int, outputs: list[LoggedMes
     are: one, normally; several when the module worked off a backlog (seen
     under load: control answered three queued localizations at once when its
     first trajectory came). A trigger before those got no answer.
+
+    A trigger logged up to ``skew_ns`` after the output may have reached the
+    module before it: the recorder and the module each see their own arrival
+    order (seen under load: control's first command logged 0.04 ms before the
+    localization it answered). Such a trigger counts as one before the output,
+    so the trigger before it may have got no answer: the frame as plainly
+    replayed (the module, still without a trajectory, answering nothing) is
+    then within reach, and is tried first, as for any frame.
     """
     first = outputs[next_output].log_time
-    newest = bisect_right(times, first) - 1  # the newest trigger at or before the first pending output
+    newest = bisect_right(times, first + skew_ns) - 1  # the newest trigger that may have come before it
     if newest <= t_index:
         return True
     end = times[newest + 1] if newest + 1 < len(times) else math.inf
