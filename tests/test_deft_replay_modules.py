@@ -34,10 +34,13 @@ from astaa_deft.engine.spec.loader import load_spec
 
 SPEC_TEXT = SPEC_PATH.read_text()
 ENTRY = SPEC_TEXT[SPEC_TEXT.index("replay:\n  modules:"):SPEC_TEXT.index("\n# Decictor")]
-# Seeded defect 3: one empty trajectory crashes control (anchored to control's first command, so the
-# stack is driving when it hits, however late it started).
+# Seeded defect 3: an empty trajectory crashes control (anchored to control's first command, so the
+# stack is driving when it hits, however late it started). Five in a row: control steps on the newest
+# trajectory when a localization comes, and on a loaded machine one empty plan can be overtaken by the
+# next before control reads it (the run then did not fail). The first one control reads crashes it, so the
+# failure still minimises to one mutation.
 CRASH = """<policy id="culprit"><channel>trajectory</channel>
-  <window from="1"><after channel="command" message="1"/></window><select limit="1"/>
+  <window from="1"><after channel="command" message="1"/></window><select limit="5"/>
   <set><field path="points" value="dict:array.empty"/></set></policy>"""
 
 
