@@ -4,7 +4,8 @@ the machine's load.
     python benchmarks/loaded_suite.py                        # the default run, two loops, once
     python benchmarks/loaded_suite.py --repeat 3             # three runs in a row
     python benchmarks/loaded_suite.py --loops 0              # the same, quiet (the time to compare with)
-    python benchmarks/loaded_suite.py --repeat 3 --keep DIR  # each run's whole output in DIR/run-N.txt
+    python benchmarks/loaded_suite.py --repeat 3 --keep DIR  # each run's whole output in DIR/run-N.txt, its
+                                                             # tests' files (logs, suites) in DIR/tmp-N
     python benchmarks/loaded_suite.py -- tests/test_deft_demo.py -k lockstep -n 0   # a selection
 
 Starts ``--loops`` Python processes that spin (``while True: pass``) for the
@@ -63,14 +64,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--loops", type=int, default=2, help="CPU-bound loops beside each run (default 2)")
     ap.add_argument("--repeat", type=int, default=1, help="runs in a row (default 1)")
-    ap.add_argument("--keep", type=Path, help="write each run's whole pytest output to DIR/run-N.txt")
+    ap.add_argument("--keep", type=Path, help="write each run's whole pytest output to DIR/run-N.txt and keep its "
+                    "tests' temporary files (their recordings) in DIR/tmp-N")
     args = ap.parse_args(mine)
     if args.keep:
         args.keep.mkdir(parents=True, exist_ok=True)
     results = []
     for n in range(1, args.repeat + 1):
         keep = args.keep / f"run-{n}.txt" if args.keep else None
-        code, seconds, last, before, after = loaded_run(pytest_args, args.loops, keep)
+        # pytest keeps only its last three runs' temporary folders: a failure's recording is kept apart.
+        basetemp = [f"--basetemp={(args.keep / f'tmp-{n}').resolve()}"] if args.keep else []
+        code, seconds, last, before, after = loaded_run([*basetemp, *pytest_args], args.loops, keep)
         minutes, rest = divmod(round(seconds), 60)
         print(f"run {n}: {last} — {minutes} min {rest:02d} s, {args.loops} loops, load {before:.1f} → {after:.1f}",
               flush=True)
