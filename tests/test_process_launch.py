@@ -197,6 +197,49 @@ def test_a_single_threaded_process_forks_also_after_starting_a_child_and_one_wit
     assert done.stdout.splitlines() == expected, done.stderr[-2000:]
 
 
+# A Zenoh session and publisher nobody closed, left in a reference cycle (garbage the collector has not
+# reached yet), then a fork: the child and its own forked child collect garbage. Collected there, their
+# finalisers would wait forever for the Zenoh runtime's threads, which a forked process does not have.
+FORK_WITH_ZENOH_GARBAGE = textwrap.dedent("""
+    import gc, os, signal, sys, time
+    from astaa_deft.engine.bus import process_launch
+    from astaa_deft.engine.bus import zenoh_config as zc
+
+    def ended(pid, within_s=20.0):  # the child's exit code, or "hung" (then it is killed)
+        deadline = time.monotonic() + within_s
+        while time.monotonic() < deadline:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                return os.waitstatus_to_exitcode(status)
+            time.sleep(0.05)
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        return "hung"
+
+    session = zc.open_session(zc.config_dict(mode="peer", listen=[zc.loopback_endpoint()]))
+    holder = {"publisher": session.declare_publisher("fork/garbage"), "session": session}
+    holder["self"] = holder
+    del holder, session
+    child = process_launch.guarded_fork("a test fork", native_threads_ok=True)
+    if child == 0:
+        grandchild = process_launch.guarded_fork("a test fork")
+        if grandchild == 0:
+            gc.collect()
+            os._exit(7)
+        gc.collect()
+        os._exit(7 if ended(grandchild) == 7 else 1)
+    print("child", ended(child), flush=True)
+    print("parent collects", gc.collect() > 0, flush=True)
+""")
+
+
+@needs_linux
+def test_a_forked_child_never_runs_the_finaliser_of_a_zenoh_session_its_parent_left_as_garbage():
+    done = subprocess.run([*python_module("astaa_deft")[:-2], "-c", FORK_WITH_ZENOH_GARBAGE], capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert done.stdout.splitlines() == ["child 7", "parent collects True"], done.stderr[-2000:]
+
+
 SESSION_CHILD = textwrap.dedent("""
     import os, sys
     from astaa_deft.engine.bus import process_launch

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import gc
 import os
 import signal
 import subprocess
@@ -288,11 +289,35 @@ def ensure_fork_safe(what: str, *, native_threads_ok: bool = False) -> None:
                          + "; fork before starting threads or a Zenoh session, or start a process instead")
 
 
+# True in a forked child: what its parent had when it forked stays frozen here for good (guarded_fork).
+_inherited_frozen = False
+
+
 def guarded_fork(what: str, *, native_threads_ok: bool = False) -> int:
-    """``os.fork()`` after :func:`ensure_fork_safe` (same arguments); 0 in the child, its pid in the parent."""
+    """``os.fork()`` after :func:`ensure_fork_safe` (same arguments); 0 in the child, its pid in the parent.
+
+    The child never collects what its parent had when it forked: the garbage among it may be a Zenoh
+    session or subscriber nobody closed, whose finaliser waits for the Zenoh runtime's threads — which a
+    forked child does not have, so it would wait forever. So everything is frozen (``gc.freeze``) across the
+    fork, and thawed again only in a process that was not itself forked: a forked child that forks collects
+    its own garbage first and keeps the rest frozen, since a thaw would hand its parent's garbage to the
+    collector too.
+    """
+    global _inherited_frozen
     with _starter.working:  # no child being started meanwhile
         ensure_fork_safe(what, native_threads_ok=native_threads_ok)
-        return os.fork()
+        if _inherited_frozen:
+            gc.collect()  # this process's own garbage only: its parent's is frozen
+        gc.freeze()
+        pid = -1
+        try:
+            pid = os.fork()
+        finally:
+            if pid == 0:
+                _inherited_frozen = True
+            elif not _inherited_frozen:
+                gc.unfreeze()
+        return pid
 
 
 def die_with_parent(parent: int, sig: signal.Signals = signal.SIGTERM) -> None:
