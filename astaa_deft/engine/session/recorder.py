@@ -3,7 +3,8 @@
 It runs apart from the proxy because writing MCAP in the forwarding process
 adds millisecond latency spikes (GIL); here it only costs a core. It stops
 cleanly (``finish()``) on SIGTERM/SIGINT and when the tool that started it
-dies, so the log it leaves is complete unless the recorder itself is killed.
+dies — then first reading what was still on its way to it, until the bus is
+quiet — so the log it leaves is complete unless the recorder itself is killed.
 
 Started by the session as ``python -m astaa_deft.engine.session.recorder ARGS``
 with the spec's text on stdin (the session's spec, not a file to re-read:
@@ -73,6 +74,10 @@ _EVENT_ENCODER = json.JSONEncoder(default=str)
 TOOL_GONE_WAIT_SECONDS = 2.0  # an unannounced stop: how long to wait for the dying tool to show
 CAUGHT_UP = "caught up"  # stdout line: the run_stopped event arrived, so did every message before it
 SHUTDOWN_LIMIT_SECONDS = 20.0
+# An unannounced stop (the tool died): the messages on their way to us are still read, until none came for
+# QUIET_SECONDS (at most BACKLOG_LIMIT_SECONDS): a loaded recorder may be a second behind the consumers.
+QUIET_SECONDS = 0.25
+BACKLOG_LIMIT_SECONDS = 5.0
 
 
 # -- what the subscriber callbacks queue for the writing thread -----------------------------------
@@ -158,8 +163,9 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
     q: queue.SimpleQueue[QueueItem | _Stop] = queue.SimpleQueue()
     counts = {channel.name: 0 for _, channel in topology.recorded_keys(spec, args.mode)}
     run_stopped: list[bool] = []  # the tool's orderly stop announced itself
+    arrived = [0]  # messages received (the callbacks count them; a lost count between threads is harmless)
     session = zc.open_session(zc.config_dict(mode="client", connect=args.connect))
-    subscribers = _subscribe(session, spec, args, writer, q=q, run_stopped=run_stopped)
+    subscribers = _subscribe(session, spec, args, writer, q=q, run_stopped=run_stopped, arrived=arrived)
     twins = ViewableTwins(writer, {ch.name: ch for ch in spec.channels if ch.encoding == "json"})
     write_thread = threading.Thread(target=_drain_or_exit, args=(args.out, q, _Sink(writer, counts, twins)),
                                     daemon=True)
@@ -168,6 +174,8 @@ def main(argv: list[str] | None = None, parsed: dict[tuple[str, str], object] | 
 
     while not stopping:
         time.sleep(0.05)
+    if not run_stopped:  # no orderly end: what the tool forwarded before it died may still be on its way
+        _read_backlog(arrived)
     _finish(subscribers, q, write_thread, writer, lost=lambda: _tool_lost(tool_pid, announced=bool(run_stopped)),
             counts=counts)
     return 0  # not reached: _finish exits the process
@@ -205,7 +213,8 @@ def _open_log(args: argparse.Namespace, spec: Spec) -> LogWriter:
 
 
 def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, writer: LogWriter, *,  # noqa: PLR0913
-               q: queue.SimpleQueue[QueueItem | _Stop], run_stopped: list[bool]) -> list[zenoh.Subscriber]:
+               q: queue.SimpleQueue[QueueItem | _Stop], run_stopped: list[bool],
+               arrived: list[int]) -> list[zenoh.Subscriber]:
     """Subscribers for the recorded channels, the tool's events and undeclared keys, each queueing for ``q``.
 
     Creates the log's channels in the order logs have always had them: each
@@ -226,6 +235,7 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
                                         mutations=mutations_cid)
 
             def on_intercepted(sample: zenoh.Sample, target: InterceptedChannel = target) -> None:
+                arrived[0] += 1
                 q.put(InterceptedBatch(time.time_ns(), target, sample.payload.to_bytes()))
 
             subscribers.append(session.declare_subscriber(topology.intercepted_key(channel.key), on_intercepted))
@@ -234,12 +244,14 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
 
         def on_sample(sample: zenoh.Sample, *, cid: int = cid, codec: Codec = codec, name: str = channel.name,
                       ros2: bool = ros2) -> None:  # the keywords: this channel's, bound now (Zenoh passes the sample)
+            arrived[0] += 1
             q.put(BusMessage(time.time_ns(), cid, codec, name, sample.payload.to_bytes(),
                              _source_time(sample) if ros2 else sample.timestamp))
 
         subscribers.append(session.declare_subscriber(key_expr, on_sample))
 
     def on_tool_event(sample: zenoh.Sample) -> None:
+        arrived[0] += 1
         data = sample.payload.to_bytes()
         q.put(BusMessage(time.time_ns(), writer.events_channel, None, "", data, None))
         if b'"run_stopped"' in data:
@@ -249,6 +261,7 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
             _report(CAUGHT_UP)
 
     def on_undeclared(sample: zenoh.Sample) -> None:
+        arrived[0] += 1
         key = str(sample.key_expr)[len(topology.UNDECLARED_PREFIX) + 1:]
         q.put(UndeclaredMessage(time.time_ns(), key, str(sample.encoding), sample.payload.to_bytes(),
                                 sample.timestamp))
@@ -256,6 +269,22 @@ def _subscribe(session: zenoh.Session, spec: Spec, args: argparse.Namespace, wri
     subscribers.append(session.declare_subscriber(topology.EVENTS_KEY, on_tool_event))
     subscribers.append(session.declare_subscriber(f"{topology.UNDECLARED_PREFIX}/**", on_undeclared))
     return subscribers
+
+
+def _read_backlog(arrived: list[int]) -> None:
+    """Go on receiving until no message came for QUIET_SECONDS, or for BACKLOG_LIMIT_SECONDS in all.
+
+    A tool killed outright announces no end: the messages it had forwarded to
+    the consumers reach a loaded recorder up to a second later (its link's
+    socket buffers), and every message a consumer got belongs in the log.
+    """
+    deadline = time.monotonic() + BACKLOG_LIMIT_SECONDS
+    seen = arrived[0]
+    while time.monotonic() < deadline:
+        time.sleep(QUIET_SECONDS)
+        if arrived[0] == seen:
+            return
+        seen = arrived[0]
 
 
 def _finish(subscribers: list[zenoh.Subscriber], q: queue.SimpleQueue[QueueItem | _Stop],  # noqa: PLR0913
