@@ -20,11 +20,17 @@ from astaa_deft.cli.commands.demo import demo_spec_path
 from astaa_deft.engine.intercept.dictionary import load_dictionary
 from astaa_deft.engine.intercept.testcase import parse_testcase
 from astaa_deft.engine.spec.loader import load_spec
+from astaa_deft.engine.monitor import check_log
+from astaa_deft.io.log.reader import read_log
+from stack_timing import unexplained
 
 NAN_LIMIT = b"""<testcase id="nan-limit" seed="1"><description>defect 1</description>
   <policy id="p1"><channel>routing</channel><window from="0.5"><after channel="command" message="1"/></window>
     <set><field path="speed_limit" value="dict:float.nan"/></set></policy>
 </testcase>"""
+
+
+ATTEMPTS = 3  # runs of the case that may end, before the defect is judged, on a deadline the stack missed
 
 
 def _bucket(name: str, module: str) -> Bucket:
@@ -37,9 +43,17 @@ def test_a_planner_caused_bucket_gets_deft_module_tests_that_fail_on_it(tmp_path
     spec = load_spec(demo_spec_path())
     dictionary = load_dictionary()
     testcase = parse_testcase(NAN_LIMIT, "nan-limit", spec, dictionary)
-    outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / "case",
-                       limits=CaseLimits(horizon=8.0), dictionary=dictionary)
-    assert outcome.status == "done" and outcome.mutations > 0, outcome
+    for attempt in range(ATTEMPTS):
+        outcome = run_case(spec, testcase, {"scenario": "lane_follow", "defects": "on"}, tmp_path / f"case{attempt}",
+                           limits=CaseLimits(horizon=8.0), dictionary=dictionary)
+        assert outcome.status == "done" and outcome.mutations > 0, outcome
+        if any(f.invariant == "planned_speed" for f in outcome.findings):
+            break
+        # On a loaded machine a module can really miss its deadline before the overspeed plan is judged, and the
+        # case ends there: only such a miss, shown by the module's own publish stamps, may stand in for the
+        # finding (a true finding of a run that never got to the defect); then the next run tries again.
+        log = read_log(Path(outcome.log_path))
+        assert unexplained(check_log(log, spec).violations, log, spec) == [], outcome
     assert any(f.invariant == "planned_speed" for f in outcome.findings), outcome  # the overspeed plan was seen
     monkeypatch.chdir(tmp_path)
     out = Path("campaign")  # relative, as `fuzz -o campaign/` gives it
