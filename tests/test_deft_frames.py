@@ -144,6 +144,25 @@ def test_a_trigger_logged_just_after_an_output_may_be_the_one_it_answers():
     assert answered_in_turn(triggers, 1, first, 0, skew_ns=MS // 100)
 
 
+def test_a_timer_module_that_planned_twice_on_one_trigger_gets_that_trigger_proposed_again():
+    # A planner on a timer planned at 150 ms and again at 250 ms on the obstacles of 100 ms; new obstacles were
+    # logged at 290 ms, within the recorder's skew (50 ms) after the second plan. Every trigger rule starts
+    # after the previous frame's (100 ms) and "as logged" takes the newest within the skew (290 ms): only the
+    # frame at the newest trigger logged by the output itself is the one the module used, as a plain replay.
+    s = streams(trigger=[0, 100, 290], pose=[95, 240, 285])
+    skew = 50 * MS
+    c = candidates(OutputContext(streams=s, trigger="trigger", output_ns=250 * MS + skew, previous={"trigger": 1,
+                                 "pose": 0}, lookback_ns=0, previous_output_ns=150 * MS + skew, skew_ns=skew))
+    by_output = [x for x in c if any(rule == "as logged by the output" for rule, _ in x.patterns)]
+    assert [dict(x.choice) for x in by_output] == [{"trigger": 1, "pose": 0}]
+    assert c[-1] is by_output[0]  # a plain replay's frame, tried last
+    assert all(x.choice["trigger"] == 2 for x in c[:-1])
+    # Without a trigger in the skew, "as logged" already is that frame: no second copy of it.
+    c = candidates(OutputContext(streams=s, trigger="trigger", output_ns=250 * MS, previous={"trigger": 1,
+                                 "pose": 0}, lookback_ns=0, previous_output_ns=150 * MS, skew_ns=0))
+    assert not any(rule == "as logged by the output" for x in c for rule, _ in x.patterns)
+
+
 # -- the frame rules' extension point ----------------------------------------------------------------------------
 
 
@@ -154,7 +173,7 @@ def test_every_module_of_the_rules_package_registers_its_rule_on_the_registry():
                   for rule in FRAME_RULES.values() if rule.triggers is not None or rule.frame is not None}
     assert registered == modules  # each rule module is on the registry, and nothing else places a trigger
     assert {"newest", "cycle end", "busy", "after", "oldest", "between", "first", "first heard",
-            "as logged"} <= set(FRAME_RULES.names())
+            "as logged", "as logged by the output"} <= set(FRAME_RULES.names())
 
 
 def test_a_rule_registered_on_the_registry_places_its_trigger_and_is_gone_once_taken_out():
