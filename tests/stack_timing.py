@@ -38,3 +38,25 @@ def made_by_the_stack(violation: Violation, log: LogContents, spec: Spec) -> boo
 def unexplained(violations: list[Violation] | tuple[Violation, ...], log: LogContents, spec: Spec) -> list[str]:
     """The violations of a clean run the stack's own timing does not account for (each as 'invariant: detail')."""
     return [f"{v.invariant}: {v.detail}" for v in violations if not made_by_the_stack(v, log, spec)]
+
+
+def overtaken_before_read(log: LogContents, spec: Spec, *, read_on: str) -> bool:
+    """Whether each mutated message of the run was followed on its channel by the next one before any message of
+    ``read_on`` came: a consumer that uses only the newest message it has whenever ``read_on`` speaks (demo control
+    reads the newest trajectory at each localization) then never saw a mutated one — a loaded machine's bursts do
+    that. False for a run without mutations."""
+    from astaa_deft.analysis.minimise.mutations import read_mutations  # the tool's own reading of the records
+
+    mutations = read_mutations(log, spec).mutations
+    if not mutations:
+        return False
+    reads = sorted(m.log_time for m in log.on(spec.channel(read_on).key))
+    for mutation in mutations:
+        delivered = mutation.delivered_time_ns
+        if delivered is None:
+            continue
+        later = [m.log_time for m in log.on(spec.channel(mutation.channel).key) if m.log_time > delivered]
+        upto = min(later) if later else None
+        if any(delivered < t and (upto is None or t <= upto) for t in reads):
+            return False
+    return True

@@ -66,12 +66,13 @@ def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass
         outcome, _ = drive(DriveOptions(scenario="lane_follow", defects=True, passive=False, record=log,
                                         command_line=[], policy=demo_policy_path(policy), duration=30.0,
                                         stop_on_violation=True))
-        if outcome.mutations:
+        if outcome.mutations and (outcome.verdict.first is None or outcome.verdict.first.invariant in invariants):
             break
-        # Ended before the test case's window opened: on a loaded machine a module can really miss its deadline
-        # while the stack starts, and --stop-on-violation ends the run there. Only such a miss, shown by the
-        # module's own publish stamps, may end it that early (a true finding of a run that never reached the
-        # defect); then the next run tries again.
+        # Ended before the test case's window opened, or before the defect was judged: on a loaded machine a
+        # module can really miss its deadline (while the stack starts, or while the mutated messages flow), and
+        # --stop-on-violation ends the run there. Only such a miss, shown by the module's own publish stamps,
+        # may end it that early (a true finding of a run that never got to the defect); then the next run
+        # tries again.
         assert outcome.violations and unexplained(outcome.violations, read_log(log), spec) == [], (
             outcome.verdict.summary, outcome.end_reason)
     # Each example test case fires once its consumer is driving (anchored to the stack's own messages, not

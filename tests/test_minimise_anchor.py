@@ -61,7 +61,8 @@ def test_a_pinned_mutation_hits_the_same_live_message_when_the_stack_starts_late
     assert choose_anchor(log, mlog, None) == "ack"  # else the channel that started last
     pinned = pin_to_anchor(mlog, log, "ack").mutations
     assert pinned[0].pin is not None and pinned[0].pin.channel == "ack"
-    assert _acks(first[0]) >= 5  # hit inside the live run
+    assert _acks(first[0]) >= 1  # hit inside the live run: the clock had heard the responder (0.3 s after its
+    # first acknowledgement; how many more came by then is the responder's pace, which load slows)
     assert _acks_routed_before(first[0], tmp_path / "original.mcap", spec) == pinned[0].pin.message
 
     # The stack now starts three seconds later: ~150 more ticks before the first acknowledgement (a loaded
