@@ -9,7 +9,10 @@ A test of a subset of mutations (:meth:`ReplayModel.run`)
 2. takes, for every recorded planner output, its most likely frame — the
    first candidate of :func:`astaa_deft.analysis.deft.frames.candidates`, with the
    same never-older-than-the-previous-frame rule as extraction (the output
-   times are the recorded ones: the replay is open-loop);
+   times are the recorded ones: the replay is open-loop; an output is paired
+   with the trigger before its log time, or — ``output_clock`` "published",
+   for a recording whose outputs were logged in bursts — before its
+   publisher's stamp plus the skew);
 3. replays the planner (``planner.replay.factory``, in-process) over the
    frames in order and feeds its outputs, at the recorded outputs' times, to
    a :class:`~astaa_deft.engine.monitor.MonitorSet` holding only that invariant;
@@ -209,6 +212,8 @@ class ReplayModel:
             self.outputs = [m for m in self.outputs if m.publish_time <= failed_at]
             self.end_ns = min(self.end_ns, self.outputs[-1].log_time if self.outputs else failed_at)
         self.lookback_ns = int(self.cfg.lookback_ms * 1e6)
+        self.output_clock = setup.output_clock
+        self._skew_ns = int(self.cfg.skew_ms * 1e6)
         self._codecs = {name: get_codec(spec.channel(name).encoding) for name in self.cfg.inputs}
         self._decoded: dict[Hashable, DecodedMessage | None] = {}  # by Delivered.key
         self.baseline: Baseline | None = Baseline(self) if baseline else None
@@ -252,7 +257,8 @@ class ReplayModel:
         previous: dict[str, int] = {}
         out: list[Frame | None] = []
         for index, output in enumerate(self.outputs):
-            t_index = newest_at_or_before(trigger_times, output.log_time)
+            output_ns = self.paired_at(output)
+            t_index = newest_at_or_before(trigger_times, output_ns)
             if t_index < 0:
                 out.append(None)
                 continue
@@ -260,7 +266,7 @@ class ReplayModel:
             choice = frame_at(streams, trigger, t_index, t_t, previous)
             frame_time = t_t
             if choice is None:  # the trigger time does not work: the candidate search decides
-                options = candidates(OutputContext(streams=streams, trigger=trigger, output_ns=output.log_time,
+                options = candidates(OutputContext(streams=streams, trigger=trigger, output_ns=output_ns,
                                                    previous=previous, lookback_ns=self.lookback_ns))
                 if not options:
                     out.append(None)
@@ -270,6 +276,17 @@ class ReplayModel:
             out.append(Frame(index, tuple((name, usable[name][i]) for name, i in sorted(choice.items())),
                              frame_time, t_t))
         return out
+
+    def paired_at(self, output: LoggedMessage) -> int:
+        """The time an output is paired with its trigger at: its log time, or (``output_clock`` "published")
+        its publisher's stamp plus the recorder's skew, never past its log time."""
+        if self.output_clock == "published":
+            return min(output.log_time, output.publish_time + self._skew_ns)
+        return output.log_time
+
+    def late_outputs(self) -> int:
+        """Outputs logged more than the skew after their publisher stamped them (a loaded recorder's bursts)."""
+        return sum(1 for m in self.outputs if m.log_time - m.publish_time > self._skew_ns)
 
     def frame_message(self, frame: Frame) -> dict[str, DecodedMessage]:
         """The module's input for ``frame``: channel → decoded message (a frame holds decodable inputs only)."""

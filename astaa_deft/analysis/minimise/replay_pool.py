@@ -89,7 +89,7 @@ class SetupMessage:
             log_path=str(data["log_path"]), spec_path=_optional_str(data["spec_path"]),
             invariant=str(data["invariant"]), module=_optional_str(data["module"]),
             output=_optional_str(data["output"]), failure_module=_optional_str(data["failure_module"]),
-            trust_log_spec=bool(data["trust_log_spec"])))
+            trust_log_spec=bool(data["trust_log_spec"]), output_clock=str(data["output_clock"])))
 
 
 @dataclass(frozen=True)

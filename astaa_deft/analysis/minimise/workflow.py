@@ -55,7 +55,7 @@ from astaa_deft.analysis.minimise.output import (
     write_summary,
     write_testcase_file,
 )
-from astaa_deft.analysis.minimise.replay_model import ReplayModel, load_spec_for, run_params
+from astaa_deft.analysis.minimise.replay_model import ReplayModel, ReplaySetup, load_spec_for, run_params
 from astaa_deft.analysis.minimise.replay_pool import ReplayPool, ReplayUnavailable
 from astaa_deft.analysis.minimise.replay_tester import DeftTester, default_setup
 from astaa_deft.analysis.minimise.restrict import restricted_testcase
@@ -285,12 +285,20 @@ def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
     """The minimisation with the module replay; None: it cannot replay or reproduce the failure, and the job
     falls back to live runs; a report when the minimisation stops here (FailsWithoutItems: the failure
     happens without any of the mutations: raised)."""
-    entry, failure, options, say = job.choice.entry, job.failure, job.options, job.say
+    entry, failure, options = job.choice.entry, job.failure, job.options
     assert entry is not None
     setup = default_setup(job.log_path, job.spec_path, failure.invariant)
     if entry.where != "planner":
         setup = replace(setup, module=entry.module, output=entry.output, failure_module=failure.module)
     workers = max(1, min(options.parallel, os.cpu_count() or 1))
+    return _replay_with(job, setup, workers)
+
+
+def _replay_with(job: _Job, setup: ReplaySetup, workers: int) -> Minimisation | MinimiseReport | None:
+    """:func:`_minimise_in_replay` on ``setup`` (its outputs paired by their log times, or then by their
+    publishers' stamps)."""
+    entry, failure, options, say = job.choice.entry, job.failure, job.options, job.say
+    assert entry is not None
     try:
         pool = ReplayPool(setup, workers=workers)  # starts the workers: their baseline replay is done
     except ReplayUnavailable as exc:
@@ -307,16 +315,26 @@ def _minimise_in_replay(job: _Job) -> Minimisation | MinimiseReport | None:
         try:
             result = minimise_replay(tester, model, failure, pool.workers, say=say, max_tests=options.max_tests)
         except NotReproducible as exc:
-            if not options.live_fallback:
+            job.replays, job.replay_hits = job.replays + tester.runs, job.replay_hits + tester.hits
+            late = model.late_outputs() if setup.output_clock == "log" else 0
+            if late:  # a loaded recorder logged outputs in bursts: pair them by their publishers' stamps
+                say(f"note: the {what} does not reproduce the failure with the outputs paired by their log times "
+                    f"({exc}); {late} of {len(model.outputs)} outputs were logged more than "
+                    f"{model.cfg.skew_ms:g} ms after their publisher stamped them: paired by those stamps instead")
+                retry = replace(setup, output_clock="published")
+            elif not options.live_fallback:
                 return job.stopped(
                     f"the failure ({failure.invariant}) does not reproduce in the planner replay: {exc} "
                     f"(whole-system re-runs were not tried: --no-live-fallback)")
-            job.fall_back_to_live(f"the planner replay does not reproduce the failure ({exc}); whole-system "
-                                  f"re-runs instead", "the replay does not reproduce it")
-            job.replays, job.replay_hits = tester.runs, tester.hits
-            return None
-        job.model, job.replays, job.replay_hits = model, tester.runs, tester.hits
-        return result
+            else:
+                job.fall_back_to_live(f"the planner replay does not reproduce the failure ({exc}); whole-system "
+                                      f"re-runs instead", "the replay does not reproduce it")
+                return None
+        else:
+            job.model = model
+            job.replays, job.replay_hits = job.replays + tester.runs, job.replay_hits + tester.hits
+            return result
+    return _replay_with(job, retry, workers)  # this pool's workers are gone by now
 
 
 def _minimise_live(job: _Job, live: LiveTester) -> Minimisation | MinimiseReport:
