@@ -43,11 +43,12 @@ def test_campaign_finds_buckets_reruns_and_reports(tmp_path: Path):
                     "--horizon", "6", "--workers", "3", "--baseline", "1", "--reruns", "1", "--no-minimise",
                     "--no-module-level")  # the live cases alone (tests/test_module_level.py: the module level)
         # Control reads the newest trajectory whenever a localization comes: on a loaded machine the next
-        # trajectory can come first, and the empty one is never read (the case or its re-run then passes,
-        # rightly). Only a run whose own log shows that may be tried again.
-        logs = [out / "cases" / case / "run.mcap" for case in ("c-000001", "r-B001-1")]
-        if not any(overtaken_before_read(read_log(log), spec, read_on="localization") for log in logs
-                   if log.is_file()):
+        # trajectory can come first, or control stall until it has, and the empty one is never read (the case
+        # or its re-run then passes, rightly). Only a run whose own log shows that may be tried again.
+        verdicts = dict(rows(out, "SELECT case_id, verdict FROM cases"))
+        if not any(verdicts.get(case) == "Pass" and overtaken_before_read(
+                read_log(out / "cases" / case / "run.mcap"), spec, read_on="localization", answered_on="command")
+                for case in ("c-000001", "r-B001-1")):
             break
     assert done.returncode == 1, done.stdout + done.stderr  # a finding
     cases = dict(rows(out, "SELECT case_id, status FROM cases"))

@@ -18,10 +18,13 @@ from astaa_deft.cli.commands.demo import DriveOptions, demo_policy_path, demo_sp
 from astaa_deft.io.log.reader import read_log
 from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.spec.loader import load_spec
-from stack_timing import unexplained
+from stack_timing import overtaken_before_read, unexplained
 
 REPEATS = int(os.environ.get("ASTAA_DEFT_REPEATS", "1"))
 ATTEMPTS = 3  # runs of a seeded defect's test case that may end, before it fires, on a deadline the stack missed
+# Test cases on a channel whose consumer reads only the newest message when another channel speaks (demo control
+# takes the newest trajectory at each localization): a loaded machine can deliver the next message first.
+READ_NEWEST = {"demo_empty_trajectory.xml": ("localization", "command")}  # (read at, answered on)
 CLEAN = ["lane_follow", *(pytest.param(name, marks=[pytest.mark.slow, pytest.mark.promise])
                           for name in ("static_obstacle", "cut_in", "red_light"))]
 
@@ -66,6 +69,9 @@ def test_each_seeded_defect_gets_its_class_and_invariant(tmp_path, policy, klass
         outcome, _ = drive(DriveOptions(scenario="lane_follow", defects=True, passive=False, record=log,
                                         command_line=[], policy=demo_policy_path(policy), duration=30.0,
                                         stop_on_violation=True))
+        if policy in READ_NEWEST and outcome.mutations and outcome.verdict.first is None and overtaken_before_read(
+                read_log(log), spec, read_on=READ_NEWEST[policy][0], answered_on=READ_NEWEST[policy][1]):
+            continue  # every mutated message was overtaken before its consumer read one (the run's log shows it)
         if outcome.mutations and (outcome.verdict.first is None or outcome.verdict.first.invariant in invariants):
             break
         # Ended before the test case's window opened, or before the defect was judged: on a loaded machine a
