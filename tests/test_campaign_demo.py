@@ -11,13 +11,14 @@ import time
 from pathlib import Path
 
 from astaa_deft.cli.commands.demo import demo_spec_path
+from astaa_deft.engine.monitor import check_log
 from astaa_deft.engine.spec.loader import load_spec
 from astaa_deft.io.log.reader import read_log
-from stack_timing import overtaken_before_read
+from stack_timing import overtaken_before_read, unexplained
 
-# Seed 25: generated case 1 empties trajectory.points (seeded defect 3: control crashes);
-# case 2 sets a non-finite steering value (the simulator ignores it; the finding on the mutated channel
-# itself is not counted).
+# Seed 25: generated case 1 empties trajectory.points (seeded defect 3: control crashes); case 2 (a non-finite
+# steering value the simulator ignores, or — its window fitted to the baseline's live phase, which load moves —
+# another harmless field) is no bug.
 FINDING_SEED = "25"
 ATTEMPTS = 3  # campaigns whose empty trajectory a loaded machine's next one may overtake before control reads it
 
@@ -52,12 +53,19 @@ def test_campaign_finds_buckets_reruns_and_reports(tmp_path: Path):
             break
     assert done.returncode == 1, done.stdout + done.stderr  # a finding
     cases = dict(rows(out, "SELECT case_id, status FROM cases"))
+    # Another bucket only from a deadline a loaded machine made the stack miss (its own stamps show it), which its
+    # re-run does not repeat: never a bug.
+    others = rows(out, "SELECT bucket, kind, first_case FROM buckets WHERE bucket != 'B001'")
+    for other, other_kind, first_case in others:
+        other_log = read_log(out / "cases" / first_case / "run.mcap")
+        assert other_kind != "bug" and unexplained(check_log(other_log, spec).violations, other_log, spec) == [], (
+            other, other_kind)
     # the failing case re-run once and its unmutated twin (same params, no test case) once
     assert cases == {"b-0001": "done", "c-000001": "done", "c-000002": "done", "r-B001-1": "done",
-                     "t-B001-1": "done"}
+                     "t-B001-1": "done", **{f"{run}-{other}-1": "done" for other, _, _ in others for run in "rt"}}
     (bucket, verdict, invariant, module, family, first, without, reruns, fails, kind, controls, control_fails), = rows(
         out, "SELECT bucket, verdict, invariant, module, family, first_case, without_mutation, reruns,"
-             " rerun_failures, kind, controls, control_failures FROM buckets")
+             " rerun_failures, kind, controls, control_failures FROM buckets WHERE bucket = 'B001'")
     assert (bucket, verdict, module, family, first, without) == ("B001", "Abort", "control", "trajectory:points:set",
                                                                  "c-000001", 0)
     # Seeded defect 3 is deterministic (control indexes the empty trajectory): the re-run reproduces it, and

@@ -29,6 +29,7 @@ from astaa_deft.orchestration.campaign.baseline import (
     LEARNING_SHUTDOWN_DELAY, learned_shutdown_delays, learning_shutdown_delays,
 )
 from astaa_deft.orchestration.journal.model import CaseOutcome
+from stack_timing import unexplained
 
 TICKS = Path(__file__).parent / "sut" / "ticks.yaml"
 LOAD = "while True: pass"  # one core kept busy
@@ -64,14 +65,18 @@ def _findings_at_the_end(result, log: Path) -> list[str]:
 def test_the_end_is_dated_at_the_ending_modules_last_message_and_no_deadline_breaks_after_it(tmp_path):
     result, log = _run(tmp_path, "one")
     assert result.end_reason == "scenario over"
-    assert [v.detail for v in result.violations] == [] and result.verdict.klass == "Pass", result.verdict.summary
+    assert _findings_at_the_end(result, log) == [], result.verdict.summary
+    # A stall mid-run that the controller's own stamps show (a loaded machine's) is a true finding of that run.
+    assert unexplained(result.violations, read_log(log), load_spec(TICKS)) == [], result.verdict.summary
+    if not result.violations:
+        assert result.verdict.klass == "Pass", result.verdict.summary
     contents, end, exit_, last_tick = _ends(log)
     # the simulator's last message, not when the tool noticed its exit (and not its exit, which came later)
     assert end.time_ns == last_tick < exit_.time_ns <= last_tick + SHUTDOWN_GRACE_NS
     stopping = contents.records(rec.RunStopping)[0].time_ns
     assert stopping > end.time_ns
     offline = check_log(contents, load_spec(TICKS))
-    assert offline.end_ns == end.time_ns and offline.verdict.klass == "Pass", offline.verdict.summary
+    assert offline.end_ns == end.time_ns and offline.verdict.klass == result.verdict.klass, offline.verdict.summary
 
 
 def test_an_exit_later_than_the_shutdown_delay_ends_the_run_at_the_exit_itself(tmp_path):
