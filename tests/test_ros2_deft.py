@@ -128,20 +128,24 @@ def test_minimise_on_the_ros2_log_narrows_to_the_nan_by_planner_replay(failing_r
     assert "set on odom" in culprit and "pose.pose.position.x:" in culprit and culprit.split("→")[1].startswith(" nan")
 
 
-# A failing run of this stack recorded beside two CPU-bound loops (load 7): the recorder logged the planner's
-# plans in bursts, 47 of 60 more than 5 ms after the planner stamped them, the NaN plan 93 ms after (past four
-# more odometry messages). Paired by log times, the NaN plan's frame held a later, finite odometry.
-LOADED_RECORDING = Path(__file__).parent / "data" / "loaded_recordings" / "ros2_nan_odom_bursts.mcap"
+# Failing runs of this stack recorded beside two CPU-bound loops (load 7–8): the recorder logged the planner's
+# plans in bursts, most more than 5 ms after the planner stamped them — the NaN plan 93 ms late, past four more
+# odometry messages; or 131 ms late from a stalled planner, stamped 0.6 ms before the next odometry was logged.
+# Paired by log times, the NaN plan's frame held a later, finite odometry.
+LOADED_RECORDINGS = Path(__file__).parent / "data" / "loaded_recordings"
 
 
-def test_minimise_pairs_the_plans_of_a_loaded_recording_by_their_stamps_and_keeps_the_replay(tmp_path):
+@pytest.mark.parametrize("recording,late", [("ros2_nan_odom_bursts.mcap", 47),
+                                            ("ros2_nan_odom_stalled_planner.mcap", 43)])
+def test_minimise_pairs_the_plans_of_a_loaded_recording_by_their_stamps_and_keeps_the_replay(tmp_path, recording,
+                                                                                            late):
     log = tmp_path / "run.mcap"
-    log.write_bytes(LOADED_RECORDING.read_bytes())
+    log.write_bytes((LOADED_RECORDINGS / recording).read_bytes())
     out = tmp_path / "minimal"
     done = _cli("minimise", str(log), "--spec", str(SPEC), "--invariant", "finite_plan", "-o", str(out),
                 "--confirm", "0")
     assert done.returncode == 0, done.stdout + done.stderr
-    assert "47 of 60 outputs were logged more than 5 ms after their publisher stamped them" in done.stdout
+    assert f"{late} of 60 outputs were logged more than 5 ms after their publisher stamped them" in done.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["tester"] == "replay" and summary["mutations"] == {"before": 21, "after": 1}, summary
     assert summary["culprit_events"][0]["channel"] == "odom" and summary["culprit_events"][0]["message_index"] == 60

@@ -45,8 +45,8 @@ class ReplaySetup:
     output: str | None = None  # its output (a module may have one entry per output)
     failure_module: str | None = None  # the module the failure names (a crash is judged for it only)
     trust_log_spec: bool = False  # the user let the log's own spec run (--trust-log-spec)
-    # Which trigger an output answered, by its log time ("log") or by its publisher's stamp plus the skew
-    # ("published": a loaded recorder logs outputs in bursts, long after they were published).
+    # Which trigger an output answered, by its log time ("log") or by its publisher's stamp ("published": a
+    # loaded recorder logs outputs in bursts, long after they were published).
     output_clock: str = "log"
 
 
