@@ -40,27 +40,26 @@ def unexplained(violations: list[Violation] | tuple[Violation, ...], log: LogCon
     return [f"{v.invariant}: {v.detail}" for v in violations if not made_by_the_stack(v, log, spec)]
 
 
-def overtaken_before_read(log: LogContents, spec: Spec, *, read_on: str, answered_on: str | None = None) -> bool:
-    """Whether no mutated message of the run can have been read: each was followed on its channel by the next one
-    before a message of ``read_on`` came — or, with ``answered_on`` (the consumer's output), before the consumer
-    answered one. A consumer that uses only the newest message it has whenever ``read_on`` speaks (demo control
-    reads the newest trajectory at each localization) then never saw a mutated one; a loaded machine's bursts,
-    or a consumer it stalls, do that. False for a run without mutations."""
+def overtaken_before_read(log: LogContents, spec: Spec, *, read_on: str, answered_on: str) -> bool:
+    """Whether no mutated message of the run can have been read: after each, the next one on its channel came
+    before the consumer answered (on ``answered_on``, by its own stamps) a message of ``read_on``. A consumer
+    that uses only the newest message it has whenever ``read_on`` speaks (demo control reads the newest
+    trajectory at each localization) then never saw a mutated one; a loaded machine's bursts, or a consumer it
+    stalls, do that. False for a run without mutations."""
     from astaa_deft.analysis.minimise.mutations import read_mutations  # the tool's own reading of the records
 
     mutations = read_mutations(log, spec).mutations
     if not mutations:
         return False
     reads = sorted((m.log_time, m.publish_time) for m in log.on(spec.channel(read_on).key))
-    answers = (sorted(m.publish_time for m in log.on(spec.channel(answered_on).key))
-               if answered_on is not None else None)
+    answers = sorted(m.publish_time for m in log.on(spec.channel(answered_on).key))
     for mutation in mutations:
         delivered = mutation.delivered_time_ns
         if delivered is None:
             continue
-        later = [m.log_time for m in log.on(spec.channel(mutation.channel).key) if m.log_time > delivered]
-        upto = min(later) if later else None
+        upto = min((m.log_time for m in log.on(spec.channel(mutation.channel).key) if m.log_time > delivered),
+                   default=None)
         window = [published for logged, published in reads if delivered < logged and (upto is None or logged <= upto)]
-        if window and (answers is None or any(window[0] < a and (upto is None or a <= upto) for a in answers)):
+        if window and any(window[0] < a and (upto is None or a <= upto) for a in answers):
             return False
     return True
