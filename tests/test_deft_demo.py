@@ -84,6 +84,34 @@ def test_lockstep_replay_with_the_planner_process(recorded):
     assert ex.accepted_at(0.0) > 0
 
 
+def test_a_lockstep_replay_refuses_messages_another_session_put_on_its_private_router(recorded):
+    """A process left from an earlier run can reconnect to a port the OS gave out again and publish on the
+    module's inputs: the replay must say its outputs cannot be trusted, not answer on mixed inputs."""
+    import json
+    import time
+
+    from astaa_deft.engine.bus import zenoh_config as zc
+
+    spec, path = recorded
+    log = read_log(path)
+    frame = {name: json.loads(m.data) for name, m in extract(log, spec, make_planner(spec, PARAMS))
+             .frames[5].inputs.items()}
+    planner = make_planner(spec, PARAMS, prefer_process=True)
+    stranger = zc.open_session(zc.config_dict(mode="client", connect=[planner.endpoint]))
+    try:
+        assert planner.step(frame) is not None  # alone on its router, it answers
+        stranger.put(spec.channel("localization").key, json.dumps(frame["localization"]))
+        deadline = time.monotonic() + 10.0
+        while planner._arrived["localization"] <= planner._published["localization"]:
+            assert time.monotonic() < deadline, "the stranger's message never reached the router"
+            time.sleep(0.01)
+        with pytest.raises(InputError, match="another session joined it"):
+            planner.step(frame)
+    finally:
+        stranger.close()
+        planner.close()
+
+
 def test_exported_suite_passes_under_pytest_without_the_log(recorded, tmp_path):
     spec, path = recorded
     copy = tmp_path / "run.mcap"

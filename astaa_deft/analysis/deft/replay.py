@@ -225,6 +225,15 @@ class LockstepPlanner:
         self._pubs = {name: self.session.declare_publisher(spec.channel(name).key,
                                                            congestion_control=zenoh.CongestionControl.BLOCK)
                       for name in planner.inputs}
+        # The router is private, but a port is only free until someone takes it: a process
+        # left from an earlier run can reconnect to a port the OS handed out again and publish
+        # on the module's inputs. Our own puts reach these counters too (local delivery), so
+        # more arrivals than puts on a key are another session's messages.
+        self._published = dict.fromkeys(planner.inputs, 0)
+        self._arrived = dict.fromkeys(planner.inputs, 0)
+        self._watchers = [self.session.declare_subscriber(spec.channel(name).key, self._counter(name))
+                          for name in planner.inputs]
+        self.endpoint = endpoint
         with open(self.log_path, "wb") as log:
             self.proc = process_launch.start(argv, env={**_env(), "ZENOH_CONFIG": str(config)}, stdout=log,
                                              stderr=subprocess.STDOUT)
@@ -245,11 +254,31 @@ class LockstepPlanner:
             time.sleep(0.05)
         raise InputError("the planner process never subscribed to its trigger channel")
 
+    def _counter(self, name: str) -> Callable[[object], None]:
+        def arrived(_sample: object) -> None:
+            self._arrived[name] += 1
+        return arrived
+
+    def _publish(self, name: str, message: DecodedMessage) -> None:
+        self._published[name] += 1
+        self._pubs[name].put(json.dumps(message))
+
+    def _check_private(self) -> None:
+        foreign = sorted(name for name in self._arrived if self._arrived[name] > self._published[name])
+        if foreign or not self.outputs.empty():
+            what = (f"messages on {', '.join(foreign)} that the replay did not send" if foreign
+                    else "an output the replay did not ask for")
+            raise InputError(f"the replay's private Zenoh router ({self.endpoint}) got {what}: another "
+                             "session joined it (a process left from an earlier run, on a port the OS gave out "
+                             "again), or the module answers one trigger twice; its outputs cannot be trusted, "
+                             "run the replay again")
+
     def step(self, frame: Mapping[str, DecodedMessage]) -> DecodedMessage | None:
+        self._check_private()
         changed = False
         for name, message in frame.items():
             if name != self.planner.trigger and self._sent.get(name) != message:
-                self._pubs[name].put(json.dumps(message))
+                self._publish(name, message)
                 self._sent[name] = message
                 changed = True
         if changed:
@@ -258,10 +287,11 @@ class LockstepPlanner:
             # module (the longer it takes to answer), the longer the wait.
             time.sleep(min(SETTLE_MAX, max(SETTLE_SECONDS, 2.0 * statistics.median(self._latencies))))
         sent = time.monotonic()
-        self._pubs[self.planner.trigger].put(json.dumps(frame[self.planner.trigger]))
+        self._publish(self.planner.trigger, frame[self.planner.trigger])
         try:
             output = json.loads(self.outputs.get(timeout=OUTPUT_TIMEOUT))
             self._latencies.append(time.monotonic() - sent)
+            self._check_private()
             return output
         except queue.Empty:
             raise InputError(f"the planner process gave no output within {OUTPUT_TIMEOUT:g} s:\n"
@@ -276,6 +306,8 @@ class LockstepPlanner:
     def close(self) -> None:
         stop_process(self.proc, grace=5.0)
         self._sub.undeclare()
+        for watcher in self._watchers:
+            watcher.undeclare()
         self.session.close()
         self._dir.cleanup()
 
