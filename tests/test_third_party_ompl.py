@@ -117,10 +117,12 @@ def test_clean_run_through_the_star_passes_as_the_simulator_says(clean_run):
 
 
 def test_extraction_reproduces_its_recordings_outputs_exactly_and_writes_tests_that_pass(clean_run):
-    """Fork-exact replay of native state: every output a plain replay of this very recording reproduces, and
-    more, each field for field. On a quiet machine that is every output (benchmarks/bench_third_party.py:
-    120/120); a loaded machine's planner may read its inputs at a time no candidate frame holds (90 of 91 on a
-    log recorded at load 5, the same whatever the load beside the extraction; its plain-replay floor 65)."""
+    """Fork-exact replay of native state: every output a plain replay of this very recording reproduces field
+    for field, DeFT reproduces field for field too, and more. On a quiet machine that is every output, each
+    field for field (benchmarks/bench_third_party.py: 120/120); a loaded machine's planner may read its inputs at
+    a time no candidate frame holds (90 of 91 on a log recorded at load 5; its plain-replay floor 65). Then an
+    older frame may give the same path re-timed (the planner kept its plan): accepted at θ = 0, as the
+    trajectory's distance defines it, and never in place of a field-for-field one a plain replay finds."""
     tmp, _, log, _ = clean_run
     out = tmp / "module_tests"
     report = extract_module_tests(log, SPEC, out, ExtractOptions(jobs=2))
@@ -128,13 +130,21 @@ def test_extraction_reproduces_its_recordings_outputs_exactly_and_writes_tests_t
     plans = sorted(read_log(log).on("ompl/plan"), key=lambda m: m.log_time)
     assert ex.outputs == len(plans) > 20 and not ex.skipped
     floor = plain_floor(SPEC, None, log, params={"goal_x": GOAL_X})
-    kept = {output_key(f.output) for f in ex.frames if f.comparison.distance <= 0.0 and f.output is not None}
+    # pytest's own run of the suite has the last word (docs/deft.md): a frame the forked copies reproduced that
+    # a process of its own does not (this planner is not bit-stable across a fork: 1 in 8 quiet runs, one frame)
+    # is named an extraction defect and tests nothing. The floor is judged on what that run confirms.
+    unchecked = {failure.index for failure in report.suite_failures}
+    exact = {output_key(f.output) for f in ex.frames
+             if f.accepted and f.exact and f.output is not None and f.index not in unchecked}
     lost = [n for n, (m, plain) in enumerate(zip(plans, floor.reproduced, strict=True))
-            if plain and output_key(m) not in kept]
-    print(f"θ = 0: {ex.accepted_at(0.0)} of {ex.outputs}; a plain replay: {floor.count}")
-    assert lost == [] and ex.accepted_at(0.0) >= floor.count
-    assert all(f.exact for f in ex.frames if f.accepted)  # the replayed message equals the recorded one
-    assert report.accepted == ex.accepted_at(0.0)
+            if plain and output_key(m) not in exact]
+    retimed = [(f.index, f.comparison.how) for f in ex.frames if f.accepted and not f.exact]
+    print(f"θ = 0: {ex.accepted_at(0.0)} of {ex.outputs} ({len(exact)} field for field, the same path re-timed: "
+          f"{retimed}); confirmed by the suite's run: {report.accepted} ({report.suite_failures}); a plain "
+          f"replay: {floor.count}")
+    assert lost == [] and report.accepted >= floor.count
+    assert all(how == "interpolated" for _, how in retimed)  # not field for field: the same points in time
+    assert report.accepted == ex.accepted_at(0.0) - len(unchecked & {f.index for f in ex.frames if f.accepted})
     # The module tests replay from a fresh planner in a fresh process, found beside the spec (no PYTHONPATH).
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(out)],
